@@ -1,0 +1,52 @@
+"""ivobs: guaranteed interval state estimation for linear systems.
+
+Given a model, bounds on disturbances and noise, the inputs and the measurements, every method
+returns at each step a box that is certain to contain the true state.
+
+>>> import ivobs
+>>> sc = ivobs.scenarios.get("servo-motor")
+>>> traj = sc.simulate()
+>>> est = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0)   # doctest: +SKIP
+>>> res = est.run(traj.u, traj.y)                                       # doctest: +SKIP
+"""
+
+from . import linalg, scenarios
+from .errors import DesignError, InconsistentDataError, IvobsError
+from .estimators import Design, Estimator, make_estimator, methods
+from .model import LinearSystem
+from .result import Estimate
+from .sets import Box, Zonotope, image_bounds
+from .simulate import (
+    Trajectory,
+    disturbance,
+    simulate,
+    sinusoidal_disturbance,
+    uniform_disturbance,
+    vertex_disturbance,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Box",
+    "Design",
+    "DesignError",
+    "Estimate",
+    "Estimator",
+    "InconsistentDataError",
+    "IvobsError",
+    "LinearSystem",
+    "Trajectory",
+    "Zonotope",
+    "__version__",
+    "disturbance",
+    "image_bounds",
+    "linalg",
+    "make_estimator",
+    "methods",
+    "scenarios",
+    "simulate",
+    "sinusoidal_disturbance",
+    "uniform_disturbance",
+    "vertex_disturbance",
+]

@@ -1,0 +1,30 @@
+"""Exceptions raised by ivobs.
+
+Every rejected input raises a subclass of :class:`IvobsError` (itself a ``ValueError``) whose
+message names the argument, what was expected, what was received, and what to do about it.
+"""
+
+from __future__ import annotations
+
+
+class IvobsError(ValueError):
+    """Bad input to ivobs: the message names the argument, the expectation and what came."""
+
+
+class DesignError(IvobsError):
+    """An offline design could not be met (infeasible LMI, no nonnegative ``A - LC``, ...).
+
+    The message says which condition failed and, where there is one, what to try instead.
+    """
+
+
+class InconsistentDataError(IvobsError):
+    """Measurements that no state, disturbance and initial condition of the model can explain.
+
+    Under the model's assumptions this is a fault (sensor, actuator or model), never a reason to
+    return an empty or inverted box. ``step`` is the first step at which it was detected.
+    """
+
+    def __init__(self, message: str, step: int | None = None):
+        super().__init__(message)
+        self.step = step

@@ -1,0 +1,352 @@
+"""The estimator protocol shared by every method (scikit-learn's idea: one interface).
+
+Subclasses implement the method; the base class owns validation, the online state, the
+offline loop, missing samples bookkeeping, inconsistency reporting and outward rounding.
+
+A subclass provides
+
+* ``__init__(sys, x0=None, *, <its design options>, **base_options)``: validate, design offline
+  (no time loop), set ``self.design`` (a :class:`Design` dataclass with the papers' symbols) and
+  ``self.valid_from``; then call nothing else.
+* ``_initial_state() -> dict``: the online state at step 0 (numpy arrays / numbers only).
+* ``_step(state, k, u_k, y_k, t_k) -> (lo, hi)``: advance one step in place and return the
+  bounds of ``x[k]`` from ``u[0..k]``, ``y[0..k]``. ``y_k`` may contain NaN (missing components:
+  predict without them). On a measurement that contradicts the model, set
+  ``state["_inconsistent"] = True`` and predict without it.
+* optionally ``_run(u, y, t) -> (lo, hi) | None``: the whole record at once (vectorised; batch
+  ``(B, T, n)`` inputs allowed). Return ``None`` to fall back to the loop (e.g. missing samples).
+
+Soundness under floating point: every returned bound is widened outwards by
+``ROUNDING * (1 + |bound|)`` (:data:`ROUNDING` ``= 1e-10``) so that rounding in the recursions
+cannot place a true state on the wrong side of a bound. This is a documented safety margin, not
+interval arithmetic with directed rounding.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import time
+import warnings
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._validate import as_float_array, as_signal, as_vector
+from ..errors import InconsistentDataError, IvobsError
+from ..model import LinearSystem
+from ..result import Estimate
+from ..sets import Box
+
+__all__ = ["ROUNDING", "VECTOR_MIN_STEPS", "Design", "Estimator", "check_x0"]
+
+ROUNDING = 1e-10
+"""Relative outward widening of every bound (covers floating-point rounding)."""
+
+VECTOR_MIN_STEPS = 2000
+"""``run()`` uses a method's vectorised path from this many steps on (or for batches); shorter
+records use the same loop as ``step()``, so ``run()`` and ``step()`` agree bit for bit there."""
+
+
+@dataclass(frozen=True)
+class Design:
+    """What an estimator designed offline. Subclasses add fields named as in the papers
+    (``L``, ``gamma``, ``T``, ``S``, ``R``, ``s``, ...)."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
+    """Validate the prior box on ``x[0]``."""
+    if x0 is None:
+        if required:
+            raise IvobsError(
+                f"x0: the {who} method needs a prior box on the initial state, "
+                "e.g. x0=ivobs.Box(x0_lo, x0_hi)"
+            )
+        return None
+    if not isinstance(x0, Box):
+        raise IvobsError(
+            f"x0: expected an ivobs.Box (a prior box on x[0]), got {type(x0).__name__}; "
+            "wrap bounds as ivobs.Box(lo, hi)"
+        )
+    if x0.is_time_varying or x0.dim != nx:
+        raise IvobsError(f"x0: expected a constant Box of dimension {nx}, got {x0!r}")
+    if not x0.is_bounded:
+        raise IvobsError(f"x0: the {who} method needs finite prior bounds, got {x0!r}")
+    return x0
+
+
+def outward(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Widen bounds by the rounding margin (NaN stays NaN)."""
+    with np.errstate(invalid="ignore"):
+        mag = np.maximum(np.abs(lo), np.abs(hi))
+        m = ROUNDING * (1.0 + mag)
+    return lo - m, hi + m
+
+
+class Estimator:
+    """Base class of all guaranteed estimators (see the module docstring for the contract)."""
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    reference: ClassVar[str] = ""
+    supports_continuous: ClassVar[bool] = False
+    supports_time_varying: ClassVar[bool] = False
+    needs_x0: ClassVar[bool] = True
+
+    def __init__(self, sys: LinearSystem, x0: Box | None = None, *, on_inconsistent: str = "warn"):
+        if not isinstance(sys, LinearSystem):
+            raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
+        if sys.is_continuous and not self.supports_continuous:
+            raise IvobsError(
+                f"sys: the {self.name} method is for discrete-time systems; this one is "
+                "continuous-time (dt=0). Use 'kkl', or sys.discretize(Ts)"
+            )
+        if sys.is_time_varying and not self.supports_time_varying:
+            raise IvobsError(
+                f"sys: the {self.name} method needs a time-invariant system; this one has "
+                "time-varying matrices. Use 'fixed-time', 'kkl' or 'exact'"
+            )
+        if on_inconsistent not in ("warn", "raise", "ignore"):
+            raise IvobsError(
+                f"on_inconsistent: expected 'warn', 'raise' or 'ignore', got {on_inconsistent!r}"
+            )
+        self.sys = sys
+        self.x0 = check_x0(x0, sys.nx, self.name, self.needs_x0)
+        self.on_inconsistent = on_inconsistent
+        self.design: Design = Design()
+        self.valid_from: int = 0
+        self._state: dict[str, Any] | None = None
+
+    # -- to implement ---------------------------------------------------------------------
+    def _initial_state(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _step(
+        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _run(
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        return None
+
+    # -- online ---------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Return to step 0 (before the first measurement)."""
+        self._state = self._initial_state()
+        self._state["k"] = 0
+
+    @property
+    def k(self) -> int:
+        """Number of steps processed online so far."""
+        return 0 if self._state is None else int(self._state["k"])
+
+    def step(self, u_k: Any = None, y_k: Any = None, t: float | None = None) -> Box:
+        """Process ``u[k]``, ``y[k]`` and return the box of ``x[k]`` (NaN box before
+        ``valid_from``). ``y_k`` may hold NaN for missing components; ``None`` means the whole
+        measurement is missing. Continuous-time methods need the sample time ``t``."""
+        if self._state is None:
+            self.reset()
+        assert self._state is not None
+        u_k = self._check_u_k(u_k)
+        y_k = self._check_y_k(y_k)
+        t_k = self._check_t_k(t)
+        k = int(self._state["k"])
+        lo, hi = self._step(self._state, k, u_k, y_k, t_k)
+        self._state["k"] = k + 1
+        if self._state.pop("_inconsistent", False):
+            self._report_inconsistent([k])
+        if k < self.valid_from:
+            return Box.unknown(self.sys.nx)
+        lo, hi = outward(np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
+        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
+            raise IvobsError(f"{self.name}: produced NaN bounds at step {k} (a bug; please report)")
+        return Box._trusted(lo, hi)
+
+    def _check_u_k(self, u_k: Any) -> np.ndarray:
+        if u_k is None:
+            if self.sys.nu:
+                raise IvobsError(f"u_k: expected {self.sys.nu} input value(s), got None")
+            return np.zeros(0)
+        return as_vector("u_k", u_k, self.sys.nu)
+
+    def _check_y_k(self, y_k: Any) -> np.ndarray:
+        if y_k is None:
+            return np.full(self.sys.ny, np.nan)
+        arr = as_float_array("y_k", y_k).ravel()
+        if arr.shape[0] != self.sys.ny:
+            raise IvobsError(
+                f"y_k: expected {self.sys.ny} measurement value(s), got {arr.shape[0]}"
+            )
+        if np.any(np.isinf(arr)):
+            raise IvobsError("y_k: infinite measurement; use NaN for a missing sample")
+        return arr
+
+    def _check_t_k(self, t: Any) -> float | None:
+        if self.sys.is_continuous:
+            if t is None:
+                raise IvobsError("t: continuous-time estimation needs the sample time of each step")
+            return float(t)
+        return None if t is None else float(t)
+
+    # -- offline --------------------------------------------------------------------------
+    def run(
+        self, u: Any = None, y: Any = None, *, t: Any = None, vectorize: bool | None = None
+    ) -> Estimate:
+        """Bounds for a whole record: ``u`` ``(T, nu)``, ``y`` ``(T, ny)`` (NaN = missing), or a
+        batch ``(B, T, ·)``. Does not touch the online state. ``vectorize=None`` picks the
+        vectorised path for long records and batches (see :data:`VECTOR_MIN_STEPS`)."""
+        y = as_signal("y", y, self.sys.ny, allow_nan=True)
+        T = y.shape[-2]
+        u = as_signal("u", u, self.sys.nu, T)
+        if u.ndim == 3 or y.ndim == 3:
+            B = (u if u.ndim == 3 else y).shape[0]
+            if u.ndim == 3 and y.ndim == 3 and u.shape[0] != y.shape[0]:
+                raise IvobsError(f"u, y: batch sizes differ ({u.shape[0]} and {y.shape[0]})")
+            u = np.broadcast_to(u, (B, T, self.sys.nu)) if u.ndim == 2 else u
+            y = np.broadcast_to(y, (B, T, self.sys.ny)) if y.ndim == 2 else y
+        t_arr = self._check_t(t, T)
+        start = time.perf_counter()
+        out = None
+        if vectorize is None:
+            vectorize = T >= VECTOR_MIN_STEPS or y.ndim == 3
+        if vectorize:
+            out = self._run(u, y, t_arr)
+        inconsistent = np.zeros(y.shape[:-1], dtype=bool)
+        if out is None:
+            if y.ndim == 3:
+                los, his = [], []
+                for b in range(y.shape[0]):
+                    lo_b, hi_b, inc_b = self._loop(u[b], y[b], t_arr)
+                    los.append(lo_b)
+                    his.append(hi_b)
+                    inconsistent[b] = inc_b
+                lo, hi = np.stack(los), np.stack(his)
+            else:
+                lo, hi, inconsistent = self._loop(u, y, t_arr)
+        else:
+            lo, hi = out
+        lo, hi = outward(np.array(lo, dtype=float), np.array(hi, dtype=float))
+        lo[..., : self.valid_from, :] = np.nan
+        hi[..., : self.valid_from, :] = np.nan
+        bad = np.isnan(lo[..., self.valid_from :, :]) | np.isnan(hi[..., self.valid_from :, :])
+        if np.any(bad):
+            k = int(np.argwhere(bad)[0][-2]) + self.valid_from
+            raise IvobsError(f"{self.name}: produced NaN bounds at step {k} (a bug; please report)")
+        if np.any(inconsistent):
+            self._report_inconsistent(sorted(set(np.argwhere(inconsistent)[:, -1].tolist())))
+        return Estimate(
+            lower=lo,
+            upper=hi,
+            valid_from=self.valid_from,
+            method=self.name,
+            t=t_arr,
+            missing=np.any(np.isnan(y), axis=-1),
+            inconsistent=inconsistent,
+            info={"run_time": time.perf_counter() - start},
+        )
+
+    def _loop(
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        T = y.shape[0]
+        state = self._initial_state()
+        state["k"] = 0
+        lo = np.empty((T, self.sys.nx))
+        hi = np.empty((T, self.sys.nx))
+        inc = np.zeros(T, dtype=bool)
+        for k in range(T):
+            lo[k], hi[k] = self._step(state, k, u[k], y[k], None if t is None else float(t[k]))
+            state["k"] = k + 1
+            inc[k] = bool(state.pop("_inconsistent", False))
+        return lo, hi, inc
+
+    def _check_t(self, t: Any, T: int) -> np.ndarray | None:
+        if t is None:
+            if self.sys.is_continuous:
+                raise IvobsError("t: continuous-time estimation needs the sample times t (T,)")
+            return None
+        t_arr = as_float_array("t", t).ravel()
+        if t_arr.shape[0] != T or np.any(~np.isfinite(t_arr)) or np.any(np.diff(t_arr) <= 0):
+            raise IvobsError(f"t: expected {T} finite, strictly increasing sample times")
+        return t_arr
+
+    def _report_inconsistent(self, steps: list[int]) -> None:
+        if self.on_inconsistent == "ignore" or not steps:
+            return
+        msg = (
+            f"{self.name}: the measurement at step(s) {steps[:10]}"
+            f"{' ...' if len(steps) > 10 else ''} "
+            "is inconsistent with the model and the bounds (a fault under the model's "
+            "assumptions); the estimator predicted without it"
+        )
+        if self.on_inconsistent == "raise":
+            raise InconsistentDataError(msg, step=steps[0])
+        warnings.warn(msg, stacklevel=3)
+
+    # -- persistence ----------------------------------------------------------------------
+    def _fingerprint(self) -> str:
+        parts = [self.name, str(self.sys.nx), str(self.sys.nu), str(self.sys.ny)]
+        for key, val in self.design.as_dict().items():
+            if isinstance(val, np.ndarray):
+                parts.append(key + np.array2string(val, precision=12))
+            elif isinstance(val, (int, float, str)):
+                parts.append(f"{key}={val}")
+        return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
+
+    def state(self) -> dict[str, Any]:
+        """The online state as a JSON-serialisable dict (see :meth:`restore`)."""
+        st = self._state if self._state is not None else {**self._initial_state(), "k": 0}
+        data = {}
+        for key, val in st.items():
+            if isinstance(val, np.ndarray):
+                data[key] = {"array": val.tolist(), "shape": list(val.shape)}
+            elif isinstance(val, (np.floating, np.integer, np.bool_)):
+                data[key] = val.item()
+            else:
+                data[key] = val
+        return {"method": self.name, "fingerprint": self._fingerprint(), "state": data}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a state saved by :meth:`state` (same method and design)."""
+        if not isinstance(state, dict) or "state" not in state:
+            raise IvobsError("state: expected the dict returned by Estimator.state()")
+        if state.get("method") != self.name or state.get("fingerprint") != self._fingerprint():
+            raise IvobsError(
+                f"state: saved by method {state.get('method')!r} with another design; it can only "
+                f"be restored into the same method ({self.name!r}) with the same design"
+            )
+        ref = self._initial_state()
+        st: dict[str, Any] = {}
+        for key, val in state["state"].items():
+            if isinstance(val, dict) and "array" in val:
+                st[key] = np.array(val["array"], dtype=float).reshape(val["shape"])
+            else:
+                st[key] = val
+        missing = set(ref) - set(st)
+        if missing:
+            raise IvobsError(f"state: missing entries {sorted(missing)}")
+        self._state = st
+
+    # -- helpers for subclasses ------------------------------------------------------------
+    @classmethod
+    def options(cls) -> list[str]:
+        """Names of the keyword options this method accepts."""
+        names: list[str] = []
+        for klass in cls.__mro__:
+            if "__init__" in vars(klass):
+                sig = inspect.signature(vars(klass)["__init__"])
+                for p in sig.parameters.values():
+                    if p.kind is p.KEYWORD_ONLY and p.name not in names:
+                        names.append(p.name)
+        return names
+
+    def __repr__(self) -> str:
+        return (
+            f"<{type(self).__name__} {self.name!r} nx={self.sys.nx} valid_from={self.valid_from}>"
+        )

@@ -1,0 +1,413 @@
+"""The one model of ivobs and its validation.
+
+::
+
+    x[k+1] = A x[k] + B u[k] + E d[k]          d[k] ∈ d   (unknown, bounded)
+    y[k]   = C x[k] + D u[k] + F d[k]
+
+One disturbance vector ``d`` enters both equations (paper 001 is exactly this: ``E = D1``,
+``F = D2``). Paper 002's separate process disturbance ``w`` and noise ``v`` are ``d = [w; v]``,
+``E = [E 0]``, ``F = [0 F]``: see :meth:`LinearSystem.from_process_measurement`. Paper 003 writes
+``b(t)`` for ``B u + E d`` with interval bounds; paper 004 writes ``(F, H, D, W)`` for
+``(A, C, E, F)`` with ``u`` already multiplied by ``B``. The full mapping is in
+``docs/notation.md``.
+
+``dt=True`` or ``dt > 0`` is discrete time, ``dt=0`` continuous time (python-control's
+convention): then ``x' = A x + B u + E d``. Matrices may be callables of the step ``k`` (of the
+time ``t`` in continuous time) or stacked arrays ``(T, rows, cols)``: the system is then
+time-varying. The bounds ``d`` may be a :class:`~ivobs.Box`, a box whose bounds are arrays over the
+steps, or a callable ``(k, y_k) -> Box`` (bounds computed from the measurement, paper 003
+Remark 1 and its Hénon example).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from . import linalg
+from ._validate import as_float_array, as_matrix, check_finite
+from .errors import IvobsError
+from .sets import Box
+
+__all__ = ["LinearSystem"]
+
+MatrixLike = Any  # array_like, (T, r, c) stacked array, or callable k -> array_like
+BoundsLike = Box | Callable[[Any, Any], Box] | None
+
+
+class _Matrix:
+    """A constant, stacked or callable matrix with a checked shape."""
+
+    __slots__ = ("const", "fn", "name", "shape", "stack", "vector")
+
+    def __init__(
+        self, name: str, value: MatrixLike, rows: int | None, cols: int | None, vector: str
+    ):
+        self.name, self.vector = name, vector
+        self.const: np.ndarray | None = None
+        self.stack: np.ndarray | None = None
+        self.fn: Callable[[Any], Any] | None = None
+        if callable(value):
+            self.fn = value
+            try:
+                first = value(0)
+            except Exception as exc:  # the user's function failed: say which and where
+                raise IvobsError(f"{name}: calling {name}(0) failed: {exc!r}") from None
+            m = as_matrix(f"{name}(0)", first, rows, cols, vector=vector)
+            self.shape = m.shape
+        else:
+            arr = as_float_array(name, value)
+            if arr.ndim == 3:
+                check_finite(name, arr)
+                if (rows is not None and arr.shape[1] != rows) or (
+                    cols is not None and arr.shape[2] != cols
+                ):
+                    raise IvobsError(
+                        f"{name}: expected stacked matrices of shape (T, {rows}, {cols}), "
+                        f"got {arr.shape}"
+                    )
+                self.stack = arr
+                self.shape = arr.shape[1:]
+            else:
+                self.const = as_matrix(name, arr, rows, cols, vector=vector)
+                self.shape = self.const.shape
+
+    @property
+    def is_constant(self) -> bool:
+        return self.const is not None
+
+    def at(self, k: Any) -> np.ndarray:
+        if self.const is not None:
+            return self.const
+        if self.stack is not None:
+            ki = int(k)
+            if not 0 <= ki < self.stack.shape[0]:
+                raise IvobsError(
+                    f"{self.name}: step {ki} is beyond the {self.stack.shape[0]} stacked matrices"
+                )
+            return self.stack[ki]
+        assert self.fn is not None
+        return as_matrix(f"{self.name}({k})", self.fn(k), *self.shape, vector=self.vector)
+
+    def public(self) -> Any:
+        if self.const is not None:
+            return self.const
+        return self.stack if self.stack is not None else self.fn
+
+
+class LinearSystem:
+    """``x+ = A x + B u + E d``, ``y = C x + D u + F d``, ``d ∈ d``.
+
+    Parameters
+    ----------
+    A : (nx, nx) array, stacked ``(T, nx, nx)`` array, or callable ``k -> (nx, nx)``
+    B : (nx, nu), optional (no known input when omitted)
+    C : (ny, nx), required
+    D : (ny, nu), optional (zero)
+    E : (nx, nd), optional; requires ``d``
+    F : (ny, nd), optional; requires ``d``
+    d : Box of dimension ``nd`` (constant or with ``(T, nd)`` bounds), or callable
+        ``(k, y_k) -> Box``. Required when ``E`` or ``F`` is given, and one of them must be given
+        when ``d`` is.
+    dt : ``True`` or a sampling period ``> 0`` for discrete time, ``0`` for continuous time.
+
+    Raises
+    ------
+    IvobsError
+        Non-finite matrices, shape mismatches, ``lo > hi`` in the bounds, a disturbance matrix
+        without bounds (or bounds without a matrix), an invalid ``dt``.
+    """
+
+    def __init__(
+        self,
+        A: MatrixLike,
+        B: MatrixLike = None,
+        C: MatrixLike = None,
+        D: MatrixLike = None,
+        E: MatrixLike = None,
+        F: MatrixLike = None,
+        d: BoundsLike = None,
+        dt: bool | float = True,
+    ):
+        self.dt = self._check_dt(dt)
+        self._A = _Matrix("A", A, None, None, "col")
+        nx = self._A.shape[0]
+        if self._A.shape != (nx, nx):
+            raise IvobsError(f"A: expected a square matrix, got shape {self._A.shape}")
+        if C is None:
+            raise IvobsError("C: the output matrix is required (y = C x + D u + F d)")
+        self._C = _Matrix("C", C, None, nx, "row")
+        ny = self._C.shape[0]
+        self._B = _Matrix("B", np.zeros((nx, 0)) if B is None else B, nx, None, "col")
+        nu = self._B.shape[1]
+        self._D = _Matrix("D", np.zeros((ny, nu)) if D is None else D, ny, nu, "col")
+        self._d, nd = self._check_bounds(d, E, F)
+        self._E = _Matrix("E", np.zeros((nx, nd)) if E is None else E, nx, nd, "col")
+        self._F = _Matrix("F", np.zeros((ny, nd)) if F is None else F, ny, nd, "row")
+        if self._E.shape[1] != self._F.shape[1]:
+            raise IvobsError(
+                f"E and F: both act on the same disturbance d, so they need the same number of "
+                f"columns; got E {self._E.shape} and F {self._F.shape}"
+            )
+        self.nx, self.nu, self.ny = nx, nu, ny
+        self.nd = self._E.shape[1]
+        if isinstance(self._d, Box) and self._d.dim != self.nd:
+            raise IvobsError(
+                f"d: expected a Box of dimension {self.nd} (columns of E and F), got {self._d.dim}"
+            )
+
+    # -- validation helpers ---------------------------------------------------------------
+    @staticmethod
+    def _check_dt(dt: Any) -> bool | float:
+        if dt is True:
+            return True
+        if dt is None or isinstance(dt, (str, bool)):
+            raise IvobsError(
+                f"dt: expected True or a period > 0 (discrete time) or 0 (continuous), got {dt!r}"
+            )
+        try:
+            val = float(dt)
+        except (TypeError, ValueError):
+            raise IvobsError(f"dt: expected a number or True, got {dt!r}") from None
+        if not np.isfinite(val) or val < 0:
+            raise IvobsError(f"dt: expected True, a period > 0, or 0; got {dt!r}")
+        return val
+
+    @staticmethod
+    def _check_bounds(d: Any, E: Any, F: Any) -> tuple[BoundsLike, int]:
+        if d is None:
+            if E is not None or F is not None:
+                which = "E" if E is not None else "F"
+                raise IvobsError(
+                    f"{which}: a disturbance matrix was given without bounds d; pass "
+                    "d=ivobs.Box(d_lo, d_hi) (the method needs to know how large d can be)"
+                )
+            return None, 0
+        if E is None and F is None:
+            raise IvobsError(
+                "d: bounds were given but neither E nor F says where the disturbance enters; "
+                "pass E (state equation) and/or F (output equation)"
+            )
+        if isinstance(d, Box):
+            if not d.is_bounded:
+                raise IvobsError("d: disturbance bounds must be finite")
+            return d, d.dim
+        if callable(d):
+            ref = E if E is not None else F
+            if callable(ref):
+                ref = ref(0)
+            arr = np.asarray(ref, dtype=float)
+            nd = arr.shape[-1] if arr.ndim >= 2 else (1 if E is not None else arr.shape[0])
+            return d, nd
+        raise IvobsError(
+            f"d: expected an ivobs.Box or a callable (k, y_k) -> Box, got {type(d).__name__}; "
+            "for symmetric bounds |d| <= r use ivobs.Box.symmetric(r)"
+        )
+
+    # -- public accessors -------------------------------------------------------------------
+    A = property(lambda self: self._A.public(), doc="State matrix (array, stack or callable).")
+    B = property(lambda self: self._B.public(), doc="Input matrix.")
+    C = property(lambda self: self._C.public(), doc="Output matrix.")
+    D = property(lambda self: self._D.public(), doc="Feedthrough matrix.")
+    E = property(lambda self: self._E.public(), doc="Disturbance matrix, state equation.")
+    F = property(lambda self: self._F.public(), doc="Disturbance matrix, output equation.")
+
+    @property
+    def d(self) -> BoundsLike:
+        """The disturbance bounds as given (Box, time-varying Box, callable, or None)."""
+        return self._d
+
+    @property
+    def is_continuous(self) -> bool:
+        """``dt == 0``."""
+        return self.dt is not True and self.dt == 0
+
+    @property
+    def is_discrete(self) -> bool:
+        return not self.is_continuous
+
+    @property
+    def sampling_period(self) -> float:
+        """The sampling period (1 for ``dt=True``, 0 in continuous time)."""
+        return 1.0 if self.dt is True else float(self.dt)
+
+    @property
+    def is_time_varying(self) -> bool:
+        """True when any matrix is a callable or a stack."""
+        return not all(m.is_constant for m in self._mats())
+
+    @property
+    def has_constant_bounds(self) -> bool:
+        """True when ``d`` is absent or a constant Box."""
+        return self._d is None or (isinstance(self._d, Box) and not self._d.is_time_varying)
+
+    def _mats(self) -> tuple[_Matrix, ...]:
+        return (self._A, self._B, self._C, self._D, self._E, self._F)
+
+    def A_at(self, k: Any) -> np.ndarray:
+        """``A`` at step ``k`` (time ``t`` in continuous time)."""
+        return self._A.at(k)
+
+    def B_at(self, k: Any) -> np.ndarray:
+        return self._B.at(k)
+
+    def C_at(self, k: Any) -> np.ndarray:
+        return self._C.at(k)
+
+    def D_at(self, k: Any) -> np.ndarray:
+        return self._D.at(k)
+
+    def E_at(self, k: Any) -> np.ndarray:
+        return self._E.at(k)
+
+    def F_at(self, k: Any) -> np.ndarray:
+        return self._F.at(k)
+
+    def matrices_at(self, k: Any) -> tuple[np.ndarray, ...]:
+        """``(A, B, C, D, E, F)`` at step ``k``."""
+        return tuple(m.at(k) for m in self._mats())
+
+    def d_at(self, k: Any, y: Any = None) -> Box:
+        """Bounds of ``d[k]``. A callable ``d`` receives ``(k, y_k)`` (``y_k`` may hold NaN for a
+        missing sample, or be None when no measurement is available)."""
+        if self._d is None:
+            return Box._trusted(np.zeros(0), np.zeros(0))
+        if isinstance(self._d, Box):
+            return self._d.at(int(k)) if self._d.is_time_varying else self._d
+        try:
+            box = self._d(k, y)
+        except IvobsError:
+            raise
+        except Exception as exc:
+            raise IvobsError(f"d: calling d({k}, y) failed: {exc!r}") from None
+        if not isinstance(box, Box) or box.dim != self.nd or box.is_time_varying:
+            raise IvobsError(
+                f"d: the callable must return an ivobs.Box of dimension {self.nd}, got {box!r}"
+            )
+        if not box.is_bounded:
+            raise IvobsError(f"d({k}, y): returned unbounded disturbance bounds {box!r}")
+        return box
+
+    # -- structural facts ---------------------------------------------------------------
+    def _require_lti(self, what: str) -> None:
+        if self.is_time_varying:
+            raise IvobsError(f"{what}: defined for time-invariant systems; evaluate at a step")
+
+    def observability_rank(self) -> int:
+        """Rank of ``[C; CA; ...; CA^(nx-1)]`` (time-invariant systems)."""
+        self._require_lti("observability_rank")
+        return linalg.observability_rank(self.A, self.C)
+
+    def is_observable(self) -> bool:
+        """Whether ``(A, C)`` is observable (time-invariant systems)."""
+        return self.observability_rank() == self.nx
+
+    def observability_indices(self) -> list[int]:
+        """Observability indices ``m_i`` per output (:func:`ivobs.linalg.observability_indices`)."""
+        self._require_lti("observability_indices")
+        return linalg.observability_indices(self.A, self.C)
+
+    def is_stable(self) -> bool:
+        """Schur (discrete) or Hurwitz (continuous) stability of ``A`` (time-invariant)."""
+        self._require_lti("is_stable")
+        return linalg.is_hurwitz(self.A) if self.is_continuous else linalg.is_schur(self.A)
+
+    # -- constructors and conversions ---------------------------------------------------
+    @classmethod
+    def from_process_measurement(
+        cls,
+        A: MatrixLike,
+        B: MatrixLike,
+        C: MatrixLike,
+        E: MatrixLike,
+        F: MatrixLike,
+        w: Box | Any,
+        v: Box | Any,
+        D: MatrixLike = None,
+        dt: bool | float = True,
+    ) -> LinearSystem:
+        """Paper 002's form ``x+ = Ax + Bu + E w``, ``y = Cx + Du + F v`` with ``w ∈ w``, ``v ∈ v``.
+
+        Builds ``d = [w; v]``, ``E_d = [E 0]``, ``F_d = [0 F]``. ``w`` and ``v`` are boxes, or
+        vectors ``w̄``, ``v̄`` meaning ``|w| <= w̄``, ``|v| <= v̄`` (002 eq. 9).
+        """
+        wb = w if isinstance(w, Box) else Box.symmetric(as_float_array("w", w).ravel())
+        vb = v if isinstance(v, Box) else Box.symmetric(as_float_array("v", v).ravel())
+        Ew = as_matrix("E", E, None, wb.dim)
+        Fv = as_matrix("F", F, None, vb.dim)
+        nx, ny = Ew.shape[0], Fv.shape[0]
+        E_d = np.hstack([Ew, np.zeros((nx, vb.dim))])
+        F_d = np.hstack([np.zeros((ny, wb.dim)), Fv])
+        d = Box(np.concatenate([wb.lo, vb.lo]), np.concatenate([wb.hi, vb.hi]))
+        return cls(A, B, C, D=D, E=E_d, F=F_d, d=d, dt=dt)
+
+    @classmethod
+    def from_statespace(
+        cls, ss: Any, E: MatrixLike = None, F: MatrixLike = None, d: BoundsLike = None
+    ) -> LinearSystem:
+        """From a ``control.StateSpace`` (python-control) plus disturbance data."""
+        try:
+            A, B, C, D = (np.asarray(getattr(ss, k), dtype=float) for k in "ABCD")
+        except AttributeError:
+            raise IvobsError(
+                f"ss: expected a control.StateSpace (with A, B, C, D), got {type(ss).__name__}"
+            ) from None
+        dt = getattr(ss, "dt", True)
+        if dt is None:
+            raise IvobsError(
+                "ss.dt: python-control's unspecified timebase (None); set dt=0 (continuous) or "
+                "dt=True / a period (discrete)"
+            )
+        return cls(A, B, C, D=D, E=E, F=F, d=d, dt=dt)
+
+    def to_statespace(self) -> Any:
+        """A ``control.StateSpace`` with inputs ``[u; d]`` (needs python-control)."""
+        try:
+            import control
+        except ImportError:
+            raise IvobsError(
+                "to_statespace: python-control is not installed; pip install 'ivobs[control]'"
+            ) from None
+        self._require_lti("to_statespace")
+        return control.ss(
+            self.A, np.hstack([self.B, self.E]), self.C, np.hstack([self.D, self.F]), self.dt
+        )
+
+    def discretize(self, Ts: float) -> LinearSystem:
+        """Exact discretisation for inputs and disturbances held constant over each period.
+
+        ``A_d = e^{A Ts}``, ``[B_d E_d] = ∫_0^Ts e^{A s} ds [B E]`` (zero-order hold). The bounds
+        stay valid only under that hold assumption (a disturbance that varies inside a period is
+        not covered); time-invariant continuous-time systems only.
+        """
+        from scipy.linalg import expm
+
+        if not self.is_continuous:
+            raise IvobsError("discretize: the system is already discrete-time")
+        self._require_lti("discretize")
+        if not (isinstance(Ts, (int, float)) and Ts > 0):
+            raise IvobsError(f"Ts: expected a sampling period > 0, got {Ts!r}")
+        n, m = self.nx, self.nu + self.nd
+        M = np.zeros((n + m, n + m))
+        M[:n, :n] = self.A
+        M[:n, n:] = np.hstack([self.B, self.E])
+        Md = expm(M * Ts)
+        Ad, BE = Md[:n, :n], Md[:n, n:]
+        return LinearSystem(
+            Ad,
+            BE[:, : self.nu],
+            self.C,
+            D=self.D,
+            E=BE[:, self.nu :] if self.nd else None,
+            F=self.F if self.nd else None,
+            d=self._d,
+            dt=float(Ts),
+        )
+
+    def __repr__(self) -> str:
+        kind = "continuous" if self.is_continuous else "discrete"
+        tv = ", time-varying" if self.is_time_varying else ""
+        return f"LinearSystem({kind}{tv}, nx={self.nx}, nu={self.nu}, ny={self.ny}, nd={self.nd})"

@@ -1,0 +1,93 @@
+"""Figures: bands of one or several estimates over the true trajectory (the papers' figures)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .errors import IvobsError
+from .result import Estimate
+
+__all__ = ["plot_estimates", "save_figure"]
+
+_STYLES = ["-", "--", "-.", ":"]
+
+
+def plot_estimates(
+    estimates: Mapping[str, Estimate] | Sequence[Estimate],
+    truth: Any = None,
+    states: Sequence[int] | None = None,
+    axes: Any = None,
+    *,
+    t: Any = None,
+    state_names: Sequence[str] | None = None,
+    title: str | None = None,
+    fill: bool | None = None,
+) -> Any:
+    """One panel per state: each method's lower/upper bounds, and the truth as dots.
+
+    Returns the matplotlib figure. ``states`` selects state indices (all by default).
+    """
+    import matplotlib.pyplot as plt
+
+    if not isinstance(estimates, Mapping):
+        estimates = {e.method or f"estimate {i}": e for i, e in enumerate(estimates)}
+    if not estimates:
+        raise IvobsError("plot_estimates: nothing to plot")
+    first = next(iter(estimates.values()))
+    if first.is_batch:
+        raise IvobsError("plot_estimates: batch estimates cannot be plotted; pick one stream")
+    nx, T = first.nx, first.T
+    states = list(range(nx)) if states is None else [int(s) for s in states]
+    if t is None:
+        t = first.t if first.t is not None else np.arange(T)
+    t = np.asarray(t, dtype=float)
+    if axes is None:
+        fig, axes = plt.subplots(
+            len(states), 1, figsize=(8, 2.4 * len(states) + 0.6), sharex=True, squeeze=False
+        )
+        axes = axes[:, 0]
+    else:
+        axes = np.atleast_1d(axes)
+        fig = axes[0].figure
+    fill = len(estimates) == 1 if fill is None else fill
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, (ax, i) in enumerate(zip(axes, states)):
+        for m, (name, est) in enumerate(estimates.items()):
+            c = colors[m % len(colors)]
+            ls = _STYLES[m % len(_STYLES)]
+            if fill:
+                ax.fill_between(
+                    t,
+                    est.lower[:, i],
+                    est.upper[:, i],
+                    color=c,
+                    alpha=0.25,
+                    label=name if j == 0 else None,
+                    step=None,
+                )
+            else:
+                ax.plot(t, est.upper[:, i], ls, color=c, lw=1.2, label=name if j == 0 else None)
+                ax.plot(t, est.lower[:, i], ls, color=c, lw=1.2)
+        if truth is not None:
+            x = np.asarray(truth, dtype=float)
+            ax.plot(t, x[:, i], "k.", ms=3, label="true state" if j == 0 else None)
+        label = state_names[i] if state_names is not None else f"$x_{{{i + 1}}}$"
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("t" if first.t is not None else "step k")
+    axes[0].legend(loc="best", fontsize=8, ncol=min(4, len(estimates) + 1))
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def save_figure(fig: Any, path: str) -> None:
+    """Save and close a figure."""
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

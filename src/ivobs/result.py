@@ -1,0 +1,232 @@
+"""``Estimate``: guaranteed bounds over time, with the metrics users compare methods by.
+
+Time convention (all methods): ``lower[k], upper[k]`` bound ``x[k]`` using ``u[0..k]`` and
+``y[0..k]`` at most. Rows before ``valid_from`` are NaN: the method makes no claim there
+(fixed-time estimators need ``s + 1`` measurements, time-varying KKL observers a left-invertible
+transformation). A batch of streams has bounds of shape ``(B, T, nx)``.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import IvobsError
+from .sets import Box
+
+__all__ = ["Estimate"]
+
+
+@dataclass
+class Estimate:
+    """Bounds ``lower <= x[k] <= upper`` for every step ``k >= valid_from``.
+
+    Attributes
+    ----------
+    lower, upper : (T, nx) or (B, T, nx) arrays (NaN before ``valid_from``)
+    valid_from : first step with a guaranteed box
+    method : name of the method that produced it
+    t : sample times (optional)
+    missing : (T,) bool, steps where (part of) the measurement was missing (NaN) and predicted over
+    inconsistent : (T,) bool, steps where the measurement contradicted the model and bounds
+        (a fault under the model's assumptions); the method then predicted without it
+    info : free-form extras (design time, run time, ...)
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    valid_from: int = 0
+    method: str = ""
+    t: np.ndarray | None = None
+    missing: np.ndarray | None = None
+    inconsistent: np.ndarray | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.lower = np.asarray(self.lower, dtype=float)
+        self.upper = np.asarray(self.upper, dtype=float)
+        if self.lower.shape != self.upper.shape or self.lower.ndim not in (2, 3):
+            raise IvobsError(
+                f"Estimate: lower and upper must share a (T, nx) or (B, T, nx) shape, got "
+                f"{self.lower.shape} and {self.upper.shape}"
+            )
+        T = self.T
+        if self.missing is None:
+            self.missing = np.zeros(T, dtype=bool)
+        if self.inconsistent is None:
+            self.inconsistent = np.zeros(T, dtype=bool)
+
+    # -- shape ---------------------------------------------------------------------------
+    @property
+    def T(self) -> int:
+        """Number of steps."""
+        return int(self.lower.shape[-2])
+
+    @property
+    def nx(self) -> int:
+        return int(self.lower.shape[-1])
+
+    @property
+    def is_batch(self) -> bool:
+        return self.lower.ndim == 3
+
+    def __len__(self) -> int:
+        return self.T
+
+    # -- metrics -------------------------------------------------------------------------
+    @property
+    def width(self) -> np.ndarray:
+        """``upper - lower`` (NaN before ``valid_from``)."""
+        return self.upper - self.lower
+
+    @property
+    def valid(self) -> np.ndarray:
+        """``(T,)`` bool: steps with a guaranteed box."""
+        return np.arange(self.T) >= self.valid_from
+
+    def box(self, k: int) -> Box:
+        """The box at step ``k`` (``Box.unknown`` before ``valid_from``)."""
+        if self.is_batch:
+            raise IvobsError("box: not available for a batch estimate; index lower/upper")
+        if k < self.valid_from:
+            return Box.unknown(self.nx)
+        return Box._trusted(self.lower[k].copy(), self.upper[k].copy())
+
+    def contains(self, x: Any, tol: float = 0.0) -> np.ndarray:
+        """``(T,)`` (or ``(B, T)``) bool: whether each true state lies in its box.
+
+        Steps before ``valid_from`` count as contained (no claim is made there); a NaN bound at
+        or after ``valid_from`` counts as not containing.
+        """
+        x = np.asarray(x, dtype=float)
+        if x.shape != self.lower.shape:
+            raise IvobsError(f"contains: expected x of shape {self.lower.shape}, got {x.shape}")
+        ok = np.all((x >= self.lower - tol) & (x <= self.upper + tol), axis=-1)
+        ok[..., : self.valid_from] = True
+        return ok
+
+    def mean_width(self, burn_in: int = 0) -> np.ndarray:
+        """Mean width per state over steps ``>= max(valid_from, burn_in)`` (shape ``(nx,)``)."""
+        start = max(self.valid_from, int(burn_in))
+        if start >= self.T:
+            raise IvobsError(f"mean_width: no valid step at or after {start} (T = {self.T})")
+        w = self.width[..., start:, :]
+        return w.reshape(-1, self.nx).mean(axis=0)
+
+    def tightness_ratio(self, reference: Estimate, burn_in: int = 0) -> np.ndarray:
+        """Mean width per state divided by the reference's (e.g. the ``exact`` hull): ``>= 1``
+        for any guaranteed method when the reference is the exact hull."""
+        if reference.lower.shape != self.lower.shape:
+            raise IvobsError("tightness_ratio: the two estimates have different shapes")
+        start = max(self.valid_from, reference.valid_from, int(burn_in))
+        w = self.width[..., start:, :].reshape(-1, self.nx).mean(axis=0)
+        wr = reference.width[..., start:, :].reshape(-1, self.nx).mean(axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(wr > 0, w / wr, np.where(w > 0, np.inf, 1.0))
+
+    # -- files ---------------------------------------------------------------------------
+    def to_csv(self, path: str | os.PathLike[str]) -> None:
+        """Write ``k, lower_1.., upper_1..`` (and ``t``) with full precision, atomically."""
+        if self.is_batch:
+            raise IvobsError("to_csv: batch estimates are not written as CSV; save lower/upper")
+        path = Path(path)
+        cols = ["k"] + (["t"] if self.t is not None else [])
+        cols += [f"lower_{i + 1}" for i in range(self.nx)] + [
+            f"upper_{i + 1}" for i in range(self.nx)
+        ]
+        cols += ["missing", "inconsistent"]
+        k = np.arange(self.T)
+        parts = [k[:, None]] + ([np.asarray(self.t)[:, None]] if self.t is not None else [])
+        parts += [self.lower, self.upper, self.missing[:, None], self.inconsistent[:, None]]
+        data = np.hstack([np.asarray(p, dtype=float) for p in parts])
+        header = (
+            f"# ivobs estimate\n# method: {self.method}\n# valid_from: {self.valid_from}\n"
+            + ",".join(cols)
+        )
+        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "w") as fh:
+                fh.write(header + "\n")
+                for row in data:
+                    fh.write(",".join(_fmt(v) for v in row) + "\n")
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+
+    @classmethod
+    def from_csv(cls, path: str | os.PathLike[str]) -> Estimate:
+        """Read what :meth:`to_csv` wrote."""
+        meta: dict[str, str] = {}
+        path = Path(path)
+        if not path.exists():
+            raise IvobsError(f"from_csv: no such file {str(path)!r}")
+        with open(path) as fh:
+            lines = fh.read().splitlines()
+        body = []
+        for line in lines:
+            if line.startswith("#"):
+                if ":" in line:
+                    key, val = line[1:].split(":", 1)
+                    meta[key.strip()] = val.strip()
+            elif line.strip():
+                body.append(line)
+        if not body or not body[0].startswith("k"):
+            raise IvobsError(
+                f"from_csv: {str(path)!r} is not an ivobs estimate (no 'k,...' header)"
+            )
+        cols = body[0].split(",")
+        try:
+            data = np.array([[float(v) for v in r.split(",")] for r in body[1:]]).reshape(
+                -1, len(cols)
+            )
+        except ValueError as exc:
+            raise IvobsError(f"from_csv: malformed row in {str(path)!r}: {exc}") from None
+        lo_idx = [i for i, c in enumerate(cols) if c.startswith("lower_")]
+        hi_idx = [i for i, c in enumerate(cols) if c.startswith("upper_")]
+        t = data[:, cols.index("t")] if "t" in cols else None
+        return cls(
+            lower=data[:, lo_idx],
+            upper=data[:, hi_idx],
+            valid_from=int(meta.get("valid_from", 0)),
+            method=meta.get("method", ""),
+            t=t,
+            missing=data[:, cols.index("missing")].astype(bool) if "missing" in cols else None,
+            inconsistent=(
+                data[:, cols.index("inconsistent")].astype(bool) if "inconsistent" in cols else None
+            ),
+        )
+
+    def equals(self, other: Estimate) -> bool:
+        """Same bounds (NaN equal to NaN), same ``valid_from`` and method."""
+        return (
+            self.valid_from == other.valid_from
+            and self.method == other.method
+            and np.array_equal(self.lower, other.lower, equal_nan=True)
+            and np.array_equal(self.upper, other.upper, equal_nan=True)
+        )
+
+    # -- figures -------------------------------------------------------------------------
+    def plot(self, truth: Any = None, states: Any = None, ax: Any = None, **kwargs: Any) -> Any:
+        """Bands per state (and the true trajectory when given); returns the figure."""
+        from .plot import plot_estimates
+
+        return plot_estimates(
+            {self.method or "estimate": self}, truth=truth, states=states, axes=ax, **kwargs
+        )
+
+    def __repr__(self) -> str:
+        shape = "x".join(str(s) for s in self.lower.shape)
+        return f"Estimate(method={self.method!r}, shape={shape}, valid_from={self.valid_from})"
+
+
+def _fmt(v: float) -> str:
+    if np.isnan(v):
+        return "nan"
+    return repr(float(v))
