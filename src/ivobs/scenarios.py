@@ -566,3 +566,6 @@ def _kkl_ltv_dt(horizon: int = 30) -> Scenario:
         notes="initial state (1, 0.5) and prior box [-2, 2]^2 chosen by ivobs (the paper gives "
         "none); F_k has an eigenvalue 1.2, so the state grows: horizon 30",
     )
+
+
+from . import scenarios_cora  # noqa: E402,F401  (registers the CORA benchmark scenarios)
