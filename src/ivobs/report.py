@@ -76,7 +76,8 @@ def compare(
             res.error = f"{type(exc).__name__}: {exc}"
             out.append(res)
             continue
-        res.contains = bool(np.all(res.estimate.contains(traj.x)))
+        if not np.isnan(traj.x).all():  # CORA's 2-D record stores no state
+            res.contains = bool(np.all(res.estimate.contains(traj.x)))
         if burn < res.estimate.T:
             res.mean_width = res.estimate.mean_width(burn)
         out.append(res)
@@ -113,6 +114,7 @@ def markdown_table(
         if ref is not None:
             ratio = np.mean(r.mean_width / np.where(ref.mean_width > 0, ref.mean_width, np.nan))
             cells.append(f"{ratio:.3f}")
-        cells += ["yes" if r.contains else "**NO**", f"{r.design_time:.3f}", f"{r.run_time:.4f}"]
+        seen = {True: "yes", False: "**NO**", None: "n/a"}[r.contains]
+        cells += [seen, f"{r.design_time:.3f}", f"{r.run_time:.4f}"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
