@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 import ivobs
-from ivobs import Box, IvobsError, LinearSystem
-from ivobs import linalg
+from ivobs import Box, IvobsError, LinearSystem, linalg
 
 A = np.array([[0.5, 0.1], [0.0, 0.3]])
 C = np.array([[1.0, 0.0]])
@@ -155,3 +154,21 @@ def test_discretize_is_exact_for_held_signals():
 def test_repr():
     assert "nx=2" in repr(LinearSystem(A, C=C))
     assert isinstance(ivobs.LinearSystem(A, C=C), LinearSystem)
+
+
+def test_sparse_matrices_are_kept_sparse_with_dense_views_on_demand():
+    import scipy.sparse as sp
+
+    n = 500
+    A = sp.diags([np.full(n - 1, 0.2), np.full(n, 0.5), np.full(n - 1, 0.2)], [-1, 0, 1])
+    C = sp.csr_matrix((np.ones(2), ([0, 1], [10, 400])), shape=(2, n))
+    s = LinearSystem(A, C=C, E=sp.eye(n), d=Box(-0.01 * np.ones(n), 0.01 * np.ones(n)))
+    assert s.is_sparse and s.nx == n and s.nd == n and s.ny == 2
+    assert sp.issparse(s.sparse("A")) and s.sparse("A").nnz == 3 * n - 2
+    np.testing.assert_array_equal(s.A, A.toarray())  # dense view for methods without sparsity
+    assert sp.issparse(s.sparse("C"))
+    with pytest.raises(IvobsError, match=r"E: expected shape \(500, 400\), got \(400, 400\)"):
+        LinearSystem(A, C=C, E=sp.eye(400), d=Box(np.zeros(400), np.zeros(400)))
+    bad = sp.csr_matrix(([np.inf], ([0], [0])), shape=(n, n))
+    with pytest.raises(IvobsError, match="finite numbers in the sparse matrix"):
+        LinearSystem(bad, C=C)

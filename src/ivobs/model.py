@@ -41,7 +41,7 @@ BoundsLike = Box | Callable[[Any, Any], Box] | None
 class _Matrix:
     """A constant, stacked or callable matrix with a checked shape."""
 
-    __slots__ = ("const", "fn", "name", "shape", "stack", "vector")
+    __slots__ = ("_dense", "const", "fn", "name", "shape", "sp", "stack", "vector")
 
     def __init__(
         self, name: str, value: MatrixLike, rows: int | None, cols: int | None, vector: str
@@ -50,7 +50,10 @@ class _Matrix:
         self.const: np.ndarray | None = None
         self.stack: np.ndarray | None = None
         self.fn: Callable[[Any], Any] | None = None
-        if callable(value):
+        self.sp: Any = None
+        if _issparse(value):
+            self._init_sparse(value, rows, cols)
+        elif callable(value):
             self.fn = value
             try:
                 first = value(0)
@@ -75,12 +78,27 @@ class _Matrix:
                 self.const = as_matrix(name, arr, rows, cols, vector=vector)
                 self.shape = self.const.shape
 
+    def _init_sparse(self, value: Any, rows: int | None, cols: int | None) -> None:
+        sp = value.tocsr().astype(float)
+        if not np.all(np.isfinite(sp.data)):
+            raise IvobsError(f"{self.name}: expected finite numbers in the sparse matrix")
+        if (rows is not None and sp.shape[0] != rows) or (cols is not None and sp.shape[1] != cols):
+            raise IvobsError(
+                f"{self.name}: expected shape ({rows if rows is not None else 'any'}, "
+                f"{cols if cols is not None else 'any'}), got {sp.shape}"
+            )
+        self.sp = sp
+        self.shape = sp.shape
+
     @property
     def is_constant(self) -> bool:
-        return self.const is not None
+        return self.const is not None or self.sp is not None
 
     def at(self, k: Any) -> np.ndarray:
         if self.const is not None:
+            return self.const
+        if self.sp is not None:  # dense view on demand (methods that do not exploit sparsity)
+            self.const = self.sp.toarray()
             return self.const
         if self.stack is not None:
             ki = int(k)
@@ -93,9 +111,17 @@ class _Matrix:
         return as_matrix(f"{self.name}({k})", self.fn(k), *self.shape, vector=self.vector)
 
     def public(self) -> Any:
-        if self.const is not None:
-            return self.const
+        if self.const is not None or self.sp is not None:
+            return self.at(0)
         return self.stack if self.stack is not None else self.fn
+
+
+def _issparse(value: Any) -> bool:
+    try:
+        from scipy.sparse import issparse
+    except ImportError:  # pragma: no cover
+        return False
+    return bool(issparse(value))
 
 
 class LinearSystem:
@@ -134,7 +160,7 @@ class LinearSystem:
     ):
         self.dt = self._check_dt(dt)
         self._A = _Matrix("A", A, None, None, "col")
-        nx = self._A.shape[0]
+        nx = int(self._A.shape[0])
         if self._A.shape != (nx, nx):
             raise IvobsError(f"A: expected a square matrix, got shape {self._A.shape}")
         if C is None:
@@ -199,6 +225,8 @@ class LinearSystem:
             ref = E if E is not None else F
             if callable(ref):
                 ref = ref(0)
+            if _issparse(ref):
+                return d, int(ref.shape[1])
             arr = np.asarray(ref, dtype=float)
             nd = arr.shape[-1] if arr.ndim >= 2 else (1 if E is not None else arr.shape[0])
             return d, nd
@@ -243,6 +271,27 @@ class LinearSystem:
     def has_constant_bounds(self) -> bool:
         """True when ``d`` is absent or a constant Box."""
         return self._d is None or (isinstance(self._d, Box) and not self._d.is_time_varying)
+
+    @property
+    def is_sparse(self) -> bool:
+        """True when ``A`` was given as a ``scipy.sparse`` matrix (large systems)."""
+        return self._A.sp is not None
+
+    def sparse(self, name: str) -> Any:
+        """``A``, ``B``, ``C``, ``D``, ``E`` or ``F`` as a ``scipy.sparse`` CSR matrix
+        (converted when given dense; time-invariant systems only). Methods that exploit sparsity
+        use this; ``sys.A`` etc. give dense arrays (built on first access)."""
+        from scipy.sparse import csr_matrix
+
+        mats = dict(zip("ABCDEF", self._mats()))
+        if name not in mats:
+            raise IvobsError(f"name: expected one of A, B, C, D, E, F, got {name!r}")
+        m = mats[name]
+        if m.sp is not None:
+            return m.sp
+        if not m.is_constant:
+            raise IvobsError(f"sparse: {name} is time-varying")
+        return csr_matrix(m.at(0))
 
     def _mats(self) -> tuple[_Matrix, ...]:
         return (self._A, self._B, self._C, self._D, self._E, self._F)
