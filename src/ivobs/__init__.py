@@ -10,10 +10,12 @@ returns at each step a box that is certain to contain the true state.
 >>> res = est.run(traj.u, traj.y)                                       # doctest: +SKIP
 """
 
-from . import linalg, scenarios
+from . import io, linalg, monitor, scenarios
 from .errors import DesignError, InconsistentDataError, IvobsError
 from .estimators import Design, Estimator, make_estimator, methods
+from .io import equal_systems, load_system, save_system
 from .model import LinearSystem
+from .monitor import Monitor, MonitorStep
 from .result import Estimate
 from .sets import Box, Zonotope, image_bounds
 from .simulate import (
@@ -36,14 +38,21 @@ __all__ = [
     "InconsistentDataError",
     "IvobsError",
     "LinearSystem",
+    "Monitor",
+    "MonitorStep",
     "Trajectory",
     "Zonotope",
     "__version__",
     "disturbance",
+    "equal_systems",
     "image_bounds",
+    "io",
     "linalg",
+    "load_system",
     "make_estimator",
     "methods",
+    "monitor",
+    "save_system",
     "scenarios",
     "simulate",
     "sinusoidal_disturbance",

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -24,7 +25,15 @@ from .model import LinearSystem
 from .sets import Box
 from .simulate import Trajectory, disturbance, simulate
 
-__all__ = ["Scenario", "get", "names", "register_scenario"]
+__all__ = [
+    "Scenario",
+    "get",
+    "henon_bounds",
+    "kkl_ltv_A",
+    "names",
+    "pendulum_A",
+    "register_scenario",
+]
 
 DisturbanceFactory = Callable[[str, Any, int], Any]
 
@@ -48,6 +57,12 @@ class Scenario:
     _disturbance: DisturbanceFactory | None = None
     _u_fn: Callable[[float], np.ndarray] | None = None
     recorded: Trajectory | None = None
+
+    @property
+    def u_fn(self) -> Callable[[float], np.ndarray] | None:
+        """Continuous time: the known input as a function of ``t`` (between samples too), when
+        the scenario defines one (``u`` holds its samples on the grid ``t``)."""
+        return self._u_fn
 
     @property
     def d(self) -> Any:
@@ -316,25 +331,23 @@ def _efimov_planar(horizon: int = 50) -> Scenario:
     )
 
 
-def _henon_bounds(a_lo: float, a_hi: float, V: float, delta: float) -> Callable[[Any, Any], Box]:
+def henon_bounds(k: Any, y: Any, *, a_lo: float, a_hi: float, V: float, delta: float) -> Box:
     """Bounds of (b, v) with b = 1 - a x1^2 + d from the measurement y = x1 + v (003 Remark 1).
 
     ``x1 ∈ [y - V, y + V]`` so ``x1^2 ∈ [max(0, |y| - V)^2, (|y| + V)^2]``. The paper prints
     ``(|y| - V)^2`` for the lower end, which is unsound when ``|y| < V`` (then ``x1`` may be 0).
+    A module-level function (bound to its parameters with ``functools.partial``) so that system
+    files can name it: ``d = { python = "ivobs.scenarios:henon_bounds", params = {...} }``.
     """
-
-    def bounds(k: Any, y: Any) -> Box:
-        y0 = np.nan if y is None else float(np.ravel(y)[0])
-        if np.isnan(y0):
-            raise IvobsError(
-                "henon: the nonlinear term is bounded from the measurement y[k], which is missing "
-                f"at step {k}; this scenario cannot predict through a missing sample"
-            )
-        sq_lo = max(0.0, abs(y0) - V) ** 2
-        sq_hi = (abs(y0) + V) ** 2
-        return Box([1.0 - a_hi * sq_hi - delta, -V], [1.0 - a_lo * sq_lo + delta, V])
-
-    return bounds
+    y0 = np.nan if y is None else float(np.ravel(y)[0])
+    if np.isnan(y0):
+        raise IvobsError(
+            "henon: the nonlinear term is bounded from the measurement y[k], which is missing "
+            f"at step {k}; this scenario cannot predict through a missing sample"
+        )
+    sq_lo = max(0.0, abs(y0) - V) ** 2
+    sq_hi = (abs(y0) + V) ** 2
+    return Box([1.0 - a_hi * sq_hi - delta, -V], [1.0 - a_lo * sq_lo + delta, V])
 
 
 @register_scenario("henon", "003 §IV.B: Hénon map, uncertain a(t), bounds from y (Remark 1)")
@@ -346,7 +359,8 @@ def _henon(horizon: int = 200) -> Scenario:
     # d = (b, v), b = 1 - a(t) x1^2 + d(t) enters through r = (1, 0); v is the output noise
     E = np.array([[1.0, 0.0], [0.0, 0.0]])
     F = np.array([[0.0, 1.0]])
-    sys = LinearSystem(A, None, C, E=E, F=F, d=_henon_bounds(a_lo, a_hi, V, delta))
+    bounds = partial(henon_bounds, a_lo=a_lo, a_hi=a_hi, V=V, delta=delta)
+    sys = LinearSystem(A, None, C, E=E, F=F, d=bounds)
 
     def factory(kind: str, seed: Any, T: int) -> Any:
         rng = np.random.default_rng(seed)
@@ -480,17 +494,20 @@ def _kkl_random8(
     )
 
 
+def pendulum_A(t: float, *, L0: float, L1: float, omega: float) -> np.ndarray:
+    """``A(t) = [[0, 1], [-g / L(t), -c]]``, ``L(t) = L0 + L1 sin(ωt)``, ``g = 9.8``, ``c = 1``
+    (004 Example 2; module-level so that system files can name it)."""
+    c, g = 1.0, 9.8
+    return np.array([[0.0, 1.0], [-g / (L0 + L1 * np.sin(omega * t)), -c]])
+
+
 @register_scenario("pendulum", "004 Ex. 2: pendulum with varying length (continuous-time LTV)")
 def _pendulum(
     t_final: float = 15.0, dt: float = 0.01, L0: float = 1.0, L1: float = 0.5, omega: float = 1.0
 ) -> Scenario:
     if not 0 < L1 < L0:
         raise IvobsError(f"L0, L1: expected 0 < L1 < L0, got L0={L0}, L1={L1}")
-    c, g = 1.0, 9.8
-
-    def A_t(tt: float) -> np.ndarray:
-        return np.array([[0.0, 1.0], [-g / (L0 + L1 * np.sin(omega * tt)), -c]])
-
+    A_t = partial(pendulum_A, L0=L0, L1=L1, omega=omega)
     E = np.hstack([np.eye(2), np.zeros((2, 1))])
     F = np.array([[0.0, 0.0, 1.0]])
     bounds = Box([-0.04, -0.04, -0.02], [0.04, 0.04, 0.02])
@@ -532,17 +549,25 @@ def _pendulum(
     )
 
 
+def kkl_ltv_A(k: int) -> np.ndarray:
+    """``F_k = [[1.2, -1 + 0.5 cos k], [0, 0.5 + 0.2 sin k]]`` (004 Example 3; module-level so
+    that system files can name it)."""
+    return np.array([[1.2, -1.0 + 0.5 * np.cos(k)], [0.0, 0.5 + 0.2 * np.sin(k)]])
+
+
 @register_scenario("kkl-ltv-dt", "004 Ex. 3: discrete-time LTV system, F_k with cos/sin entries")
 def _kkl_ltv_dt(horizon: int = 30) -> Scenario:
     T = _check_horizon(horizon)
 
-    def A_k(k: int) -> np.ndarray:
-        return np.array([[1.2, -1.0 + 0.5 * np.cos(k)], [0.0, 0.5 + 0.2 * np.sin(k)]])
-
     E = np.hstack([np.eye(2), np.zeros((2, 1))])
     F = np.array([[0.0, 0.0, 1.0]])
     sys = LinearSystem(
-        A_k, None, np.array([[1.0, 0.0]]), E=E, F=F, d=Box([-0.1, -0.1, -0.02], [0.1, 0.1, 0.02])
+        kkl_ltv_A,
+        None,
+        np.array([[1.0, 0.0]]),
+        E=E,
+        F=F,
+        d=Box([-0.1, -0.1, -0.02], [0.1, 0.1, 0.02]),
     )
     k = np.arange(T)
     d_paper = np.column_stack([0.1 * np.sin(2 * k), -0.1 * np.sin(2 * k), 0.02 * np.cos(20 * k)])

@@ -13,8 +13,11 @@ A subclass provides
   bounds of ``x[k]`` from ``u[0..k]``, ``y[0..k]``. ``y_k`` may contain NaN (missing components:
   predict without them). On a measurement that contradicts the model, set
   ``state["_inconsistent"] = True`` and predict without it.
-* optionally ``_run(u, y, t) -> (lo, hi) | None``: the whole record at once (vectorised; batch
-  ``(B, T, n)`` inputs allowed). Return ``None`` to fall back to the loop (e.g. missing samples).
+* optionally ``_run(u, y, t) -> (lo, hi) | (lo, hi, inconsistent) | None``: the whole record
+  at once (vectorised; batch ``(B, T, n)`` inputs allowed), as *fresh* arrays the base class may
+  modify in place; ``inconsistent`` is a ``(..., T)`` bool array of steps whose measurement was
+  found inconsistent (and not used). Return ``None`` to fall back to the loop (e.g. missing
+  samples).
 
 Soundness under floating point: every returned bound is widened outwards by
 ``ROUNDING * (1 + |bound|)`` (:data:`ROUNDING` ``= 1e-10``) so that rounding in the recursions
@@ -24,6 +27,7 @@ interval arithmetic with directed rounding.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import inspect
 import time
@@ -80,11 +84,22 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
 
 
 def outward(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Widen bounds by the rounding margin (NaN stays NaN)."""
+    """Widen bounds by the rounding margin (NaN stays NaN), in place: pass arrays you own."""
     with np.errstate(invalid="ignore"):
-        mag = np.maximum(np.abs(lo), np.abs(hi))
-        m = ROUNDING * (1.0 + mag)
-    return lo - m, hi + m
+        m = np.abs(lo)
+        np.maximum(m, np.abs(hi), out=m)
+        m *= ROUNDING
+        m += ROUNDING
+        lo -= m
+        hi += m
+    return lo, hi
+
+
+def _owned(a: Any) -> np.ndarray:
+    """A float array safe to modify in place (copies only read-only or foreign-typed input)."""
+    if isinstance(a, np.ndarray) and a.dtype == float and a.flags.writeable and a.flags.owndata:
+        return a
+    return np.array(a, dtype=float)
 
 
 class Estimator:
@@ -119,6 +134,8 @@ class Estimator:
         self.on_inconsistent = on_inconsistent
         self.design: Design = Design()
         self.valid_from: int = 0
+        self.last_inconsistent: bool = False
+        """Whether the measurement of the last ``step()`` was found inconsistent (not used)."""
         self._state: dict[str, Any] | None = None
 
     # -- to implement ---------------------------------------------------------------------
@@ -159,14 +176,28 @@ class Estimator:
         k = int(self._state["k"])
         lo, hi = self._step(self._state, k, u_k, y_k, t_k)
         self._state["k"] = k + 1
-        if self._state.pop("_inconsistent", False):
+        self.last_inconsistent = bool(self._state.pop("_inconsistent", False))
+        if self.last_inconsistent:
             self._report_inconsistent([k])
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
-        lo, hi = outward(np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
+        lo, hi = outward(np.array(lo, dtype=float), np.array(hi, dtype=float))
         if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
             raise IvobsError(f"{self.name}: produced NaN bounds at step {k} (a bug; please report)")
         return Box._trusted(lo, hi)
+
+    def predict(self, u_k: Any = None, t: float | None = None) -> Box:
+        """The box the next :meth:`step` would return for ``x[k]`` if ``y[k]`` were missing,
+        without changing the online state (a step on a copy of the state)."""
+        if self._state is None:
+            self.reset()
+        saved = _copy_state(self._state)
+        flag = self.last_inconsistent
+        try:
+            return self.step(u_k, None, t)
+        finally:
+            self._state = saved
+            self.last_inconsistent = flag
 
     def _check_u_k(self, u_k: Any) -> np.ndarray:
         if u_k is None:
@@ -196,11 +227,18 @@ class Estimator:
 
     # -- offline --------------------------------------------------------------------------
     def run(
-        self, u: Any = None, y: Any = None, *, t: Any = None, vectorize: bool | None = None
+        self,
+        u: Any = None,
+        y: Any = None,
+        *,
+        t: Any = None,
+        vectorize: bool | None = None,
+        progress: bool | None = False,
     ) -> Estimate:
         """Bounds for a whole record: ``u`` ``(T, nu)``, ``y`` ``(T, ny)`` (NaN = missing), or a
         batch ``(B, T, ·)``. Does not touch the online state. ``vectorize=None`` picks the
-        vectorised path for long records and batches (see :data:`VECTOR_MIN_STEPS`)."""
+        vectorised path for long records and batches (see :data:`VECTOR_MIN_STEPS`).
+        ``progress``: draw a progress bar for the step-by-step path (``None``: on a terminal)."""
         y = as_signal("y", y, self.sys.ny, allow_nan=True)
         T = y.shape[-2]
         u = as_signal("u", u, self.sys.nu, T)
@@ -219,25 +257,32 @@ class Estimator:
             out = self._run(u, y, t_arr)
         inconsistent = np.zeros(y.shape[:-1], dtype=bool)
         if out is None:
-            if y.ndim == 3:
-                los, his = [], []
-                for b in range(y.shape[0]):
-                    lo_b, hi_b, inc_b = self._loop(u[b], y[b], t_arr)
-                    los.append(lo_b)
-                    his.append(hi_b)
-                    inconsistent[b] = inc_b
-                lo, hi = np.stack(los), np.stack(his)
-            else:
-                lo, hi, inconsistent = self._loop(u, y, t_arr)
+            from .._progress import Progress
+
+            with Progress(int(np.prod(y.shape[:-1])), self.name, enabled=progress) as bar:
+                if y.ndim == 3:
+                    los, his = [], []
+                    for b in range(y.shape[0]):
+                        lo_b, hi_b, inc_b = self._loop(u[b], y[b], t_arr, bar)
+                        los.append(lo_b)
+                        his.append(hi_b)
+                        inconsistent[b] = inc_b
+                    lo, hi = np.stack(los), np.stack(his)
+                else:
+                    lo, hi, inconsistent = self._loop(u, y, t_arr, bar)
         else:
-            lo, hi = out
-        lo, hi = outward(np.array(lo, dtype=float), np.array(hi, dtype=float))
-        lo[..., : self.valid_from, :] = np.nan
-        hi[..., : self.valid_from, :] = np.nan
-        bad = np.isnan(lo[..., self.valid_from :, :]) | np.isnan(hi[..., self.valid_from :, :])
-        if np.any(bad):
-            k = int(np.argwhere(bad)[0][-2]) + self.valid_from
-            raise IvobsError(f"{self.name}: produced NaN bounds at step {k} (a bug; please report)")
+            lo, hi = out[0], out[1]
+            if len(out) == 3 and out[2] is not None:
+                inconsistent = np.asarray(out[2], dtype=bool).reshape(y.shape[:-1])
+        lo, hi = outward(_owned(lo), _owned(hi))
+        vf = self.valid_from
+        lo[..., :vf, :] = np.nan
+        hi[..., :vf, :] = np.nan
+        if not np.isfinite(np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])):
+            bad = ~(np.isfinite(lo[..., vf:, :]) & np.isfinite(hi[..., vf:, :]))
+            k = int(np.argwhere(bad)[0][-2]) + vf
+            raise IvobsError(f"{self.name}: produced non-finite bounds at step {k} (a bug; "
+                             "please report)")
         if np.any(inconsistent):
             self._report_inconsistent(sorted(set(np.argwhere(inconsistent)[:, -1].tolist())))
         return Estimate(
@@ -252,7 +297,7 @@ class Estimator:
         )
 
     def _loop(
-        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, bar: Any = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         T = y.shape[0]
         state = self._initial_state()
@@ -264,6 +309,8 @@ class Estimator:
             lo[k], hi[k] = self._step(state, k, u[k], y[k], None if t is None else float(t[k]))
             state["k"] = k + 1
             inc[k] = bool(state.pop("_inconsistent", False))
+            if bar is not None:
+                bar.update()
         return lo, hi, inc
 
     def _check_t(self, t: Any, T: int) -> np.ndarray | None:
@@ -293,9 +340,10 @@ class Estimator:
     def _fingerprint(self) -> str:
         parts = [self.name, str(self.sys.nx), str(self.sys.nu), str(self.sys.ny)]
         for key, val in self.design.as_dict().items():
-            if isinstance(val, np.ndarray):
+            # numbers only: provenance strings (how a gain was obtained) do not change the state
+            if isinstance(val, np.ndarray) and val.dtype.kind in "fiub":
                 parts.append(key + np.array2string(val, precision=12))
-            elif isinstance(val, (int, float, str)):
+            elif isinstance(val, (int, float)):
                 parts.append(f"{key}={val}")
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
@@ -350,3 +398,20 @@ class Estimator:
         return (
             f"<{type(self).__name__} {self.name!r} nx={self.sys.nx} valid_from={self.valid_from}>"
         )
+
+
+def _copy_state(state: Any) -> Any:
+    """A deep copy of an online state (fast path for the usual dict of arrays and numbers)."""
+    if isinstance(state, dict):
+        return {k: _copy_state(v) for k, v in state.items()}
+    if isinstance(state, list):
+        return [_copy_state(v) for v in state]
+    if isinstance(state, np.ndarray):
+        return state.copy()
+    if isinstance(state, (int, float, str, bool, type(None), np.generic)):
+        return state
+    try:
+        return copy.deepcopy(state)
+    except TypeError as exc:
+        raise IvobsError(f"predict: this method's online state cannot be copied ({exc})") from None
+

@@ -1,0 +1,85 @@
+"""Speed of the KKL / Sylvester observers (method ``kkl``, paper 004).
+
+Prints steps per second for
+
+* DT LTI ``run()`` on a 200,000-step servo-motor record (target: >= 1e6 steps/s);
+* a batch of 10,000 servo-motor streams x 1,000 steps (target: < 2 s);
+* DT LTI online ``step()``;
+* DT LTV ``run()`` (Example 3, per-step loop);
+* CT LTI (Example 1, 8 states) and CT LTV (pendulum) ``run()`` on a dt = 0.01 grid;
+* the offline design time (default target with gradient refinement).
+
+Usage: ``python benchmarks/bench_kkl.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+import ivobs
+
+
+def _best(fn, repeat: int = 3) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def main(quick: bool = False) -> None:
+    T = 20_000 if quick else 200_000
+    sc = ivobs.scenarios.get("servo-motor", horizon=T)
+    tr = sc.simulate()
+    t0 = time.perf_counter()
+    est = ivobs.make_estimator("kkl", sc.system, x0=sc.x0)
+    design = time.perf_counter() - t0
+    est.run(tr.u[:5000], tr.y[:5000])  # warm-up (imports)
+    res = est.run(tr.u, tr.y)
+    assert res.contains(tr.x).all()
+    dt = _best(lambda: est.run(tr.u, tr.y))
+    print(f"design (servo, tuned target)            {design * 1e3:8.1f} ms")
+    print(f"DT LTI run, servo {T:>7d} steps          {T / dt:12.3e} steps/s  ({dt * 1e3:.1f} ms)")
+
+    B, K = (1000, 1000) if quick else (10_000, 1000)
+    rng = np.random.default_rng(0)
+    U = np.broadcast_to(tr.u[:K], (B, K, 1))
+    Y = tr.y[:K] + 0.01 * rng.uniform(-1, 1, (B, K, 2))
+    dt = _best(lambda: est.run(U, Y, vectorize=True), repeat=2)
+    print(f"DT LTI batch {B} x {K}                 {B * K / dt:12.3e} steps/s  ({dt:.2f} s)")
+
+    n = 2000
+    est.reset()
+    t0 = time.perf_counter()
+    for k in range(n):
+        est.step(tr.u[k], tr.y[k])
+    dt = time.perf_counter() - t0
+    print(f"DT LTI step()                           {n / dt:12.3e} steps/s")
+
+    ex3 = ivobs.scenarios.get("kkl-ltv-dt", horizon=200)
+    u3 = np.zeros((200, 0))
+    y3 = ivobs.simulate(
+        ex3.system, ex3.x_true0, u3, ivobs.vertex_disturbance(ex3.system.d, 200, seed=0)
+    ).y
+    dt = _best(lambda: ivobs.make_estimator("kkl", ex3.system).run(u3, y3))
+    print(f"DT LTV run (Example 3, 200 steps)       {200 / dt:12.3e} steps/s")
+
+    ct = ivobs.scenarios.get("kkl-random8", continuous=True, t_final=2.0 if quick else 10.0)
+    trc = ct.simulate()
+    estc = ivobs.make_estimator("kkl", ct.system, x0=ct.x0)
+    dt = _best(lambda: estc.run(trc.u, trc.y, t=trc.t), repeat=1)
+    print(f"CT LTI run (Example 1, {trc.T} samples)    {trc.T / dt:12.3e} steps/s")
+
+    pend = ivobs.scenarios.get("pendulum", t_final=2.0 if quick else 15.0)
+    trp = pend.simulate()
+    estp = ivobs.make_estimator("kkl", pend.system, x0=pend.x0)
+    dt = _best(lambda: estp.run(trp.u, trp.y, t=trp.t), repeat=1)
+    print(f"CT LTV run (pendulum, {trp.T} samples)     {trp.T / dt:12.3e} steps/s")
+
+
+if __name__ == "__main__":
+    main(quick="--quick" in sys.argv)

@@ -1,0 +1,92 @@
+"""Speed of the `reachability` and `zonotope` estimators (paper 002) on the servo motor.
+
+Prints steps/s for: one long record (vectorised `run`), a batch of streams, and the online
+`step()` loop (also the loop path of `run`, used with missing samples or time-varying bounds).
+Targets for `reachability`: >= 1,000,000 steps/s on a 200,000-step record; 10,000 streams x
+1,000 steps in < 2 s. Run: ``python benchmarks/bench_reachability.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+import ivobs
+
+
+def _best(fn: Callable[[], object], repeat: int = 3) -> float:
+    """Best wall time of ``repeat`` calls (its CPU time is kept in ``_best.cpu``)."""
+    times = []
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        times.append((time.perf_counter() - t0, time.process_time() - c0))
+    wall, _best.cpu = min(times)
+    return wall
+
+
+def batch_record(sc: ivobs.scenarios.Scenario, B: int, T: int, seed: int = 0):
+    """``B`` streams: random x0 in the prior box, vertex disturbances (vectorised simulation)."""
+    s = sc.system
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(sc.x0.lo, sc.x0.hi, size=(B, s.nx))
+    d = np.where(rng.integers(0, 2, size=(B, T, s.nd)) == 1, s.d.hi, s.d.lo)
+    u = np.broadcast_to(sc.u[:1], (B, T, s.nu))
+    X = np.empty((B, T, s.nx))
+    for k in range(T):
+        X[:, k] = x
+        x = x @ s.A.T + u[:, k] @ s.B.T + d[:, k] @ s.E.T
+    Y = X @ s.C.T + u @ s.D.T + d @ s.F.T
+    return u, Y, X
+
+
+def main(quick: bool = False) -> None:
+    T_long = 20_000 if quick else 200_000
+    B, T_b = (1_000, 1_000) if quick else (10_000, 1_000)
+    T_step = 2_000
+    sc = ivobs.scenarios.get("servo-motor", horizon=max(T_long, T_b))
+    tr = sc.simulate("vertex", seed=0)
+    U, Y, X = batch_record(sc, B, T_b)
+    s = sc.system
+    print(f"servo motor (002 Example 1): nx={s.nx}, ny={s.ny}, nd={s.nd}")
+    if hasattr(os, "getloadavg"):  # wall times on a shared machine: compare with CPU times
+        print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+    rng = np.random.default_rng(1)
+    y_miss = tr.y[:T_step].copy()
+    y_miss[rng.random(T_step) < 0.1] = np.nan
+    for method in ("reachability", "zonotope"):
+        t0 = time.perf_counter()
+        est = ivobs.make_estimator(method, s, x0=sc.x0)
+        print(f"{method:>12}: design (H∞ LMI, 002 problem (20)) {time.perf_counter() - t0:.3f} s")
+        assert est.run(tr.u, tr.y).contains(tr.x).all()
+        t = _best(lambda est=est: est.run(tr.u, tr.y))
+        print(
+            f"{method:>12}: {T_long} steps, vectorised run: {T_long / t:>12,.0f} steps/s "
+            f"(CPU time: {T_long / _best.cpu:,.0f} steps/s)"
+        )
+        res = est.run(U, Y)
+        assert res.contains(X).all() and not res.inconsistent.any()
+        t = _best(lambda est=est: est.run(U, Y), repeat=2)
+        verdict = "OK" if t < 2 else "SLOW"
+        print(
+            f"{method:>12}: batch {B} x {T_b}: {t:.3f} s, CPU {_best.cpu:.3f} s "
+            f"({verdict} vs 2 s target)"
+        )
+
+        def online(est=est) -> None:
+            est.reset()
+            for k in range(T_step):
+                est.step(tr.u[k], tr.y[k])
+
+        t = _best(online, repeat=2)
+        print(f"{method:>12}: step() loop: {T_step / t:>12,.0f} steps/s")
+        t = _best(lambda est=est, y=y_miss: est.run(tr.u[:T_step], y), repeat=2)
+        print(f"{method:>12}: run() with 10% missing samples (loop): {T_step / t:>12,.0f} steps/s")
+
+
+if __name__ == "__main__":
+    main(quick="--quick" in sys.argv)

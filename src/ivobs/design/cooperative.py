@@ -1,0 +1,347 @@
+"""Gains for cooperative interval observers: ``A − LC`` nonnegative, or ``|A − LC|`` Schur.
+
+Papers: Tang et al., IEEE TAC 2019 (``seeds/002_b3ef…``), Section V.A, Theorem 4, LMI (41);
+Efimov et al. (``seeds/003_f19a…``), Theorem 1 (Assumption 2), Theorem 3 and Corollary 1,
+LMIs (7)–(8).
+
+Notation: ``D = A − LC`` (003's ``D``), ``G = E − LF`` (how ``d`` enters the estimation error),
+``Δ = d_hi − d_lo`` (widths of the disturbance box).
+
+* :func:`nonnegative_gain` — LMI (41) of 002 (= LMIs (7)–(8) of 003): diagonal ``P ≻ 0``,
+  ``[[P, PA − YC], [(PA − YC)ᵀ, P]] ≻ 0``, ``PA − YC ≥ 0``, ``L = P⁻¹Y``. Since ``P`` is diagonal
+  and positive, ``PA − YC = PD ≥ 0`` iff ``D ≥ 0``, and the Schur complement is
+  ``P − DᵀPD ≻ 0``. For a nonnegative ``D`` a diagonal Lyapunov matrix exists iff ``D`` is Schur
+  (a classical fact on positive systems), so the LMI is feasible iff *some* ``L`` makes ``D``
+  nonnegative and Schur: an infeasible LMI means no such gain exists (002 Example 2,
+  003 §IV.A). ivobs maximises the margin ``μ`` in ``[[P, PD], [·, P]] ⪰ μ I`` with ``P ⪯ I``
+  (the paper states a feasibility problem; the margin makes the answer well defined).
+* :func:`abs_schur_gain` — a gain with ``ρ(|A − LC|) < 1`` (the stability condition of 003's
+  observer (5): the bounds' radius obeys ``r+ = |D| r + …``). ``ρ(|D|) <= s`` whenever
+  ``|D| v <= s v`` for some ``v > 0``; for a fixed ``v`` this is a linear program in ``(L, s)``
+  (auxiliary ``T >= ±D``). The LP alternates with ``v ←`` Perron vector of ``|D|``; ``s`` never
+  increases.
+* :func:`refine_width` — the tightness objective ivobs adds (documented, not in the papers): for
+  constant bounds the bounds' width obeys ``w+ = |D| w + |G| Δ``, whose fixed point
+  ``w∞ = (I − |D|)⁻¹ |G| Δ`` is the steady-state width. Given the current ``w∞ = w_j``, any
+  gain with ``|D'| w_j + |G'| Δ <= w_j`` (linear in ``L`` through ``T_D >= ±D'``,
+  ``T_G >= ±G'``) has ``w∞' <= w_j`` componentwise (the iteration from ``w_j`` decreases
+  monotonically). Each LP picks such a gain minimising the one-step image, then ``w_{j+1} = w∞'``.
+  For ``interval`` the constraint ``D' >= 0`` is kept (then ``|D'| = D'``).
+
+Nothing here loops over time; LPs go to HiGHS (``scipy.optimize.linprog``), LMIs to CVXPY
+(:func:`ivobs.design._lmi.solve`). Every result is checked on the numbers it returns.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linprog
+
+from ..errors import DesignError
+from ._lmi import check_size, solve, sym
+
+__all__ = [
+    "NONNEG_TOL",
+    "abs_schur_gain",
+    "check_abs_schur",
+    "check_nonnegative_schur",
+    "fixed_radius",
+    "nonnegative_gain",
+    "refine_width",
+    "steady_width",
+]
+
+NONNEG_TOL = 1e-9
+"""Entries of ``A − LC`` above ``−NONNEG_TOL·max(1, max|A|)`` count as nonnegative (solver
+round-off). The estimators propagate with the ``D⁺/D⁻`` split, so such entries stay sound."""
+
+_MU_MIN = 1e-7  # LMI (41) margin below which the LMI is considered infeasible
+_L_BOUND = 1e6  # box on the gain entries in the LPs (keeps HiGHS away from unbounded rays)
+
+
+def spectral_radius(M: np.ndarray) -> float:
+    return 0.0 if M.size == 0 else float(np.max(np.abs(np.linalg.eigvals(M))))
+
+
+def steady_width(D: np.ndarray, G: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """``w∞ = (I − |D|)⁻¹ |G| Δ``: steady-state width of the bounds of observers (3)/(5) of 003
+    for constant bounds (``inf`` where ``|D|`` is not Schur)."""
+    Dabs = np.abs(D)
+    n = D.shape[0]
+    if spectral_radius(Dabs) >= 1.0:
+        return np.full(n, np.inf)
+    return np.linalg.solve(np.eye(n) - Dabs, np.abs(G) @ delta)
+
+
+def _structural_obstruction(A: np.ndarray, C: np.ndarray) -> str:
+    """An entry of ``A − LC`` that is negative for every ``L`` (its column of ``C`` is zero)."""
+    zero_cols = np.flatnonzero(~np.any(C != 0.0, axis=0))
+    for j in zero_cols:
+        for i in range(A.shape[0]):
+            if A[i, j] < 0:
+                return (
+                    f"; entry ({i + 1}, {j + 1}) of A − LC equals A[{i + 1}, {j + 1}] = "
+                    f"{A[i, j]:g} < 0 for every L (column {j + 1} of C is zero)"
+                )
+    return ""
+
+
+def fixed_radius(A: np.ndarray, C: np.ndarray) -> float:
+    """A lower bound of ``ρ(|A − LC|)`` over all ``L``: the columns ``Z`` where ``C`` is zero are
+    not touched by ``L``, so ``|A − LC|`` contains the principal block ``|A[Z, Z]|`` and (Perron–
+    Frobenius monotonicity) ``ρ(|A − LC|) >= ρ(|A[Z, Z]|)``."""
+    Z = np.flatnonzero(~np.any(C != 0.0, axis=0))
+    return spectral_radius(np.abs(A[np.ix_(Z, Z)])) if Z.size else 0.0
+
+
+def check_nonnegative_schur(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> np.ndarray:
+    """Return ``D = A − LC`` or raise :class:`DesignError` naming the negative entry or the
+    spectral radius (002 Theorem 4 / 003 Assumption 2)."""
+    D = A - L @ C
+    tol = NONNEG_TOL * max(1.0, float(np.max(np.abs(A), initial=0.0)))
+    if np.any(D < -tol):
+        i, j = np.unravel_index(int(np.argmin(D)), D.shape)
+        raise DesignError(
+            f"{who}: A − LC is not nonnegative: entry ({i + 1}, {j + 1}) = {D[i, j]:.6g} < 0 "
+            "(002 Theorem 4 / 003 Assumption 2.B need A − LC >= 0); use 'interval-split' or "
+            "'interval-transformed' with this gain"
+        )
+    rho = spectral_radius(D)
+    if rho >= 1.0:
+        raise DesignError(
+            f"{who}: A − LC is not Schur: spectral radius {rho:.6g} >= 1 (003 Assumption 2.A)"
+        )
+    return D
+
+
+def check_abs_schur(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> np.ndarray:
+    """Return ``D = A − LC`` or raise :class:`DesignError` when ``|D| = D⁺ + D⁻`` is not Schur
+    (the stability condition of 003 Theorem 3)."""
+    D = A - L @ C
+    rho = spectral_radius(np.abs(D))
+    if rho >= 1.0:
+        raise DesignError(
+            f"{who}: |A − LC| = D⁺ + D⁻ is not Schur: spectral radius {rho:.6g} >= 1 "
+            f"(003 Theorem 3; ρ(A − LC) = {spectral_radius(D):.4g}); the bounds would diverge"
+        )
+    return D
+
+
+# -- LMI (41) ---------------------------------------------------------------------------------
+def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.ndarray:
+    """Gain ``L`` with ``A − LC`` nonnegative and Schur from LMI (41) of 002 (LMIs (7)–(8) of
+    003), maximising the margin ``μ`` (see the module docstring). Raises :class:`DesignError`
+    when no such gain exists."""
+    import cvxpy as cp
+
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    n, p = A.shape[0], C.shape[0]
+    check_size(n, f"{who}: LMI (41)")
+    reason = _structural_obstruction(A, C)
+    if reason:
+        raise DesignError(
+            f"{who}: no gain L makes A − LC nonnegative and Schur{reason} (LMI (41) of 002 is "
+            "infeasible); use 'interval-split' or 'interval-transformed'"
+        )
+    pvec = cp.Variable(n)
+    Y = cp.Variable((n, p))
+    mu = cp.Variable()
+    P = cp.diag(pvec)
+    X = P @ A - Y @ C
+    big = cp.bmat([[P, X], [X.T, P]])
+    cons = [sym(big) >> mu * np.eye(2 * n), X >= 0, pvec <= 1.0, mu <= 1.0]
+    prob = cp.Problem(cp.Maximize(mu), cons)
+    solve(prob, f"{who}: LMI (41) (A − LC nonnegative and Schur)")
+    mu_val = float(mu.value)
+    if mu_val <= _MU_MIN:
+        raise DesignError(
+            f"{who}: no gain L makes A − LC nonnegative and Schur: LMI (41) of 002 is "
+            f"infeasible (best margin μ = {mu_val:.3g}); use 'interval-split' or "
+            "'interval-transformed'"
+        )
+    L = np.linalg.solve(np.diag(pvec.value), Y.value)
+    check_nonnegative_schur(A, C, L, who)
+    return L
+
+
+# -- LPs ------------------------------------------------------------------------------------
+class _LP:
+    """Column layout of the LPs: ``L`` (n·p, row-major), then auxiliary blocks."""
+
+    def __init__(self, n: int, p: int, blocks: dict[str, int]):
+        self.n, self.p = n, p
+        self.offset: dict[str, int] = {"L": 0}
+        size = n * p
+        for name, cols in blocks.items():
+            self.offset[name] = size
+            size += cols
+        self.size = size
+
+    def lin_D(self, A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``D_ij = A_ij − Σ_l L_il C_lj`` as rows ``(coef, const)`` for ``vec(D)`` row-major."""
+        n, p = self.n, self.p
+        coef = np.zeros((n * n, self.size))
+        for i in range(n):
+            for j in range(n):
+                coef[i * n + j, i * p : (i + 1) * p] = -C[:, j]
+        return coef, A.ravel().copy()
+
+    def lin_G(self, E: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``G_ij = E_ij − Σ_l L_il F_lj`` (``vec(G)`` row-major)."""
+        n, p = self.n, self.p
+        m = E.shape[1]
+        coef = np.zeros((n * m, self.size))
+        for i in range(n):
+            for j in range(m):
+                coef[i * m + j, i * p : (i + 1) * p] = -F[:, j]
+        return coef, E.ravel().copy()
+
+    def aux(self, name: str, rows: int) -> np.ndarray:
+        coef = np.zeros((rows, self.size))
+        coef[:, self.offset[name] : self.offset[name] + rows] = np.eye(rows)
+        return coef
+
+    def gain(self, x: np.ndarray) -> np.ndarray:
+        return x[: self.n * self.p].reshape(self.n, self.p)
+
+
+def _abs_bound_rows(
+    lin: tuple[np.ndarray, np.ndarray], aux: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``T >= M`` and ``T >= −M`` as ``A_ub x <= b_ub`` (``M = coef x + const``)."""
+    coef, const = lin
+    return np.vstack([coef - aux, -coef - aux]), np.concatenate([-const, const])
+
+
+def _solve_lp(
+    c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, bounds: list[tuple[Any, Any]]
+) -> np.ndarray | None:
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
+    return res.x if res.status == 0 else None
+
+
+def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """min s s.t. T v <= s v, T >= ±(A − LC): ``ρ(|A − LC|) <= s``."""
+    n, p = A.shape[0], C.shape[0]
+    lp = _LP(n, p, {"T": n * n, "s": 1})
+    A1, b1 = _abs_bound_rows(lp.lin_D(A, C), lp.aux("T", n * n))
+    # (T v)_i − s v_i <= 0
+    A2 = np.zeros((n, lp.size))
+    for i in range(n):
+        A2[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = v
+        A2[i, lp.offset["s"]] = -v[i]
+    c = np.zeros(lp.size)
+    c[lp.offset["s"]] = 1.0
+    # tie-break among optimal gains: the smallest |A − LC| v (degenerate optima otherwise stall
+    # the alternation, e.g. 003's planar example at ρ = 0.7 instead of 0.5)
+    c[lp.offset["T"] : lp.offset["T"] + n * n] = 1e-6 * np.tile(v, n) / v.sum()
+    bounds = [(-_L_BOUND, _L_BOUND)] * (n * p) + [(0, None)] * (n * n) + [(0, None)]
+    x = _solve_lp(c, np.vstack([A1, A2]), np.concatenate([b1, np.zeros(n)]), bounds)
+    if x is None:
+        return None
+    return lp.gain(x), float(x[lp.offset["s"]])
+
+
+def _perron_vector(M: np.ndarray) -> np.ndarray:
+    """Positive right Perron vector of a nonnegative matrix (regularised for reducible ones)."""
+    n = M.shape[0]
+    Mr = M + 1e-9 * max(1.0, float(M.max(initial=0.0))) * np.ones((n, n))
+    w, V = np.linalg.eig(Mr)
+    v = np.abs(np.real(V[:, int(np.argmax(np.real(w)))]))
+    v = v / v.max()
+    return np.maximum(v, 1e-8)
+
+
+def abs_schur_gain(
+    A: np.ndarray, C: np.ndarray, L0: np.ndarray | None = None, iters: int = 30
+) -> tuple[np.ndarray, float]:
+    """Gain minimising (locally) ``ρ(|A − LC|)`` by the alternating LP of the module docstring.
+
+    Starts from ``v = 1`` and, if given, from the Perron vector of ``|A − L0 C|``. Returns
+    ``(L, ρ(|A − LC|))``; the caller decides whether ``ρ < 1`` is good enough.
+    """
+    n, p = A.shape[0], C.shape[0]
+    starts = [np.ones(n)]
+    if L0 is not None:
+        starts.append(_perron_vector(np.abs(A - L0 @ C)))
+    best_L = np.zeros((n, p)) if L0 is None else L0
+    best_rho = spectral_radius(np.abs(A - best_L @ C))
+    for v in starts:
+        prev = np.inf
+        for _ in range(iters):
+            out = _margin_lp(A, C, v)
+            if out is None:
+                break
+            L, _s = out
+            Dabs = np.abs(A - L @ C)
+            rho = spectral_radius(Dabs)
+            if rho < best_rho:
+                best_L, best_rho = L, rho
+            if rho > prev - 1e-9:
+                break
+            prev = rho
+            v = _perron_vector(Dabs)
+    return best_L, best_rho
+
+
+def refine_width(
+    A: np.ndarray,
+    C: np.ndarray,
+    E: np.ndarray,
+    F: np.ndarray,
+    delta: np.ndarray,
+    L0: np.ndarray,
+    *,
+    nonnegative: bool,
+    iters: int = 30,
+) -> np.ndarray:
+    """Decrease the steady-state width ``(I − |D|)⁻¹ |G| Δ`` from a stable start ``L0``
+    (module docstring). ``nonnegative=True`` keeps ``A − LC >= 0`` (observer (3)/(36));
+    otherwise only ``|A − LC|`` Schur is kept (observer (5)). Never returns a gain whose
+    steady-state width is larger (componentwise) than ``L0``'s."""
+    n, p = A.shape[0], C.shape[0]
+    m = E.shape[1]
+    delta = np.asarray(delta, dtype=float)
+    L = np.asarray(L0, dtype=float)
+    w = steady_width(A - L @ C, E - L @ F, delta)
+    if m == 0 or not np.all(np.isfinite(w)) or not np.any(delta > 0):
+        return L
+    lp = _LP(n, p, {"T": n * n, "TG": n * m})
+    D_lin = lp.lin_D(A, C)
+    G_rows, G_b = _abs_bound_rows(lp.lin_G(E, F), lp.aux("TG", n * m))
+    if nonnegative:  # D >= 0 and T = D: T − D = 0 expressed as two inequalities
+        coef, const = D_lin
+        aux = lp.aux("T", n * n)
+        D_rows = np.vstack([coef - aux, aux - coef, -coef])
+        D_b = np.concatenate([-const, const, const])
+    else:
+        D_rows, D_b = _abs_bound_rows(D_lin, lp.aux("T", n * n))
+    bounds = [(-_L_BOUND, _L_BOUND)] * (n * p) + [(0, None)] * (n * n + n * m)
+    for _ in range(iters):
+        # one-step image  T w + TG Δ  (row i), constrained <= w, objective Σ_i image_i / w_i
+        img = np.zeros((n, lp.size))
+        for i in range(n):
+            img[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = w
+            img[i, lp.offset["TG"] + i * m : lp.offset["TG"] + (i + 1) * m] = delta
+        scale = 1.0 / np.maximum(w, 1e-12 * max(1.0, float(w.max())))
+        c = scale @ img
+        x = _solve_lp(c, np.vstack([D_rows, G_rows, img]), np.concatenate([D_b, G_b, w]), bounds)
+        if x is None:
+            break
+        L_new = lp.gain(x)
+        D_new = A - L_new @ C
+        if nonnegative and np.any(D_new < -NONNEG_TOL * max(1.0, float(np.abs(A).max()))):
+            break
+        w_new = steady_width(D_new, E - L_new @ F, delta)
+        if not np.all(np.isfinite(w_new)) or spectral_radius(np.abs(D_new)) >= 1.0 - 1e-9:
+            break
+        if np.any(w_new > w * (1 + 1e-9) + 1e-15):
+            break
+        gain = float(np.sum((w - w_new) * scale))
+        L, w = L_new, w_new
+        if gain < 1e-6:
+            break
+    return L

@@ -1,0 +1,131 @@
+"""H∞ observer gain by an LMI (paper 002, Tang et al., IEEE TAC 2019, Theorem 1, problem (20)).
+
+For the Luenberger observer ``x̂+ = A x̂ + B u + L (y - C x̂ - D u)`` the estimation error
+``e = x - x̂`` of the model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` obeys
+
+    e+ = (A - L C) e + (E - L F) d = A_e e + B_e d                                 (002 eq. 15)
+
+(ivobs' one correlated disturbance ``d``; paper 002's ``d = [w; v]``, ``E = [E 0]``,
+``F = [0 F]`` gives ``B_e = [E  -LF]``, its eq. (15)). Theorem 1: if ``P ≻ 0`` and ``Y`` satisfy
+
+    [ I - P           *         * ]
+    [ 0          -γ² I_nd       * ]  ≺ 0                                           (002 eq. 16)
+    [ PA - YC     PE - YF      -P ]
+
+then with ``L = P⁻¹ Y`` the error system is stable and ``‖(zI - A_e)⁻¹ B_e‖∞ < γ`` (the
+``(2, 3)`` block ``PE - YF = P B_e`` is (16)'s ``[PE  -YF]`` in the paper's split form). The gain
+minimises ``γ²`` subject to (16) (problem (20)). The strict inequality is imposed with a small
+margin (``≼ -margin I``); the returned gain is then checked: ``A - LC`` must be Schur.
+
+Without a disturbance (``nd = 0``) ``γ`` plays no role; the LMI then only asks
+``V(e+) - V(e) < -|e|²`` for ``V = eᵀPe``, and ``trace(P)`` (which bounds ``Σ_k |e_k|²`` from
+``e_0``) is minimised instead; ``gamma`` is returned as 0.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_matrix
+from ..errors import DesignError
+from ..linalg import spectral_radius
+from ._lmi import check_size, solve, sym
+
+__all__ = ["check_gain", "hinf_gain", "observer_gain"]
+
+MARGIN = 1e-8
+"""Default margin of the strict LMI (16): the block matrix is required ``≼ -MARGIN I``."""
+
+
+def hinf_gain(
+    A: Any, C: Any, E: Any, F: Any, *, margin: float = MARGIN
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Observer gain minimising the H∞ norm from ``d`` to ``e`` (002 Theorem 1, problem (20)).
+
+    Parameters
+    ----------
+    A : (nx, nx), C : (ny, nx), E : (nx, nd), F : (ny, nd)
+        The model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` (``B``, ``D`` play no role).
+    margin : float
+        The strict inequality (16) is imposed as ``≼ -margin I``.
+
+    Returns
+    -------
+    L : (nx, ny) gain ``P⁻¹ Y``
+    gamma : the attained ``γ`` (``‖(zI - (A - LC))⁻¹ (E - LF)‖∞ < γ``)
+    P : (nx, nx) the Lyapunov matrix (``P ≻ I``)
+
+    Raises
+    ------
+    DesignError
+        The LMI has no solution (e.g. ``(A, C)`` not detectable), the solver is inaccurate, or
+        the extracted ``A - LC`` is not Schur (the message gives its spectral radius).
+    """
+    import cvxpy as cp
+
+    A = as_matrix("A", A)
+    nx = A.shape[0]
+    if A.shape != (nx, nx):
+        raise DesignError(f"A: expected a square matrix, got shape {A.shape}")
+    C = as_matrix("C", C, None, nx, vector="row")
+    ny = C.shape[0]
+    E = as_matrix("E", E, nx, None)
+    nd = E.shape[1]
+    F = as_matrix("F", F, ny, nd, vector="row")
+    check_size(nx, "hinf_gain (002 LMI (16))")
+    margin = float(margin)
+
+    P = cp.Variable((nx, nx), symmetric=True)
+    Y = cp.Variable((nx, ny))
+    g = cp.Variable(nonneg=True)  # γ²
+    I = np.eye(nx)
+    blocks = [[I - P, np.zeros((nx, nd)), (P @ A - Y @ C).T]]
+    blocks.append([np.zeros((nd, nx)), -g * np.eye(nd), (P @ E - Y @ F).T])
+    blocks.append([P @ A - Y @ C, P @ E - Y @ F, -P])
+    if nd == 0:
+        blocks = [
+            [b for j, b in enumerate(row) if j != 1] for i, row in enumerate(blocks) if i != 1
+        ]
+    lmi = sym(cp.bmat(blocks))
+    size = 2 * nx + nd
+    cons = [lmi << -margin * np.eye(size)]
+    objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P))
+    solve(cp.Problem(objective, cons), "hinf_gain: problem (20) of paper 002 (LMI (16))")
+
+    Pv = np.asarray(P.value, dtype=float)
+    Pv = 0.5 * (Pv + Pv.T)
+    L = np.linalg.solve(Pv, np.asarray(Y.value, dtype=float))
+    check_gain(A, C, L, "hinf_gain: the solver's gain L = P⁻¹Y")
+    gamma = float(np.sqrt(max(float(g.value), 0.0))) if nd else 0.0
+    return L, gamma, Pv
+
+
+def check_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> float:
+    """Return the spectral radius of ``A - LC``; raise :class:`DesignError` unless ``< 1``."""
+    rho = spectral_radius(A - L @ C)
+    if not rho < 1.0:
+        raise DesignError(
+            f"{who}: A - LC is not Schur stable (spectral radius {rho:.6g} >= 1); the error "
+            "e+ = (A - LC) e + (E - LF) d would not stay bounded. Pass a stabilising gain, or "
+            "omit L to design the H∞ gain of paper 002 (Theorem 1)"
+        )
+    return rho
+
+
+def observer_gain(
+    sys: Any, L: Any, who: str
+) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
+    """The gain of a Luenberger-type estimator: the user's ``L`` (checked) or the H∞ design.
+
+    Returns ``(L, gamma, P, spectral radius of A - LC)``; ``gamma`` and ``P`` are None for a
+    user gain. ``sys`` is a time-invariant :class:`~ivobs.LinearSystem`.
+    """
+    A, _, C, _, E, F = sys.matrices_at(0)
+    if L is None:
+        Lm, gamma, P = hinf_gain(A, C, E, F)
+        return Lm, gamma, P, spectral_radius(A - Lm @ C)
+    Lm = as_matrix("L", L, sys.nx, sys.ny)
+    rho = check_gain(A, C, Lm, f"L ({who})")
+    return Lm, None, None, rho

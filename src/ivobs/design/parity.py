@@ -1,0 +1,324 @@
+"""Parity-space design of the fixed-time estimator (paper 001, Wang et al., IFAC 2020).
+
+For ``x[k+1] = A x + B v + E d``, ``y = C x + D v + F d`` with invertible ``A``, the backward
+propagation (001 eqs. 4-5), with ``Ã = A⁻¹``, ``B̃ = -A⁻¹B``, ``Ẽ = -A⁻¹E``, stacks the last
+``s + 1`` outputs ``𝐲_k = [y_k; …; y_{k-s}]`` as (001 eq. 6)::
+
+    𝐲_k = Mx x_k + Mu 𝐮_k + Md 𝐝_k,     𝐮_k = [u_k; …; u_{k-s}],  𝐝_k = [d_k; …; d_{k-s}]
+
+    Mx = [C; C Ã; …; C Ã^s]
+    Mu block (i, j) = C Ã^{i-j} B̃  (1 <= j <= i),  + D on the diagonal (i = j, also i = j = 0)
+    Md block (i, j) = C Ã^{i-j} Ẽ  (1 <= j <= i),  + F on the diagonal
+
+(the paper has ``D = 0``; ``D u_{k-i}`` enters row block ``i`` directly). Any ``T`` with
+``T Mx = I`` (eq. 8) gives ``x̂_k = T(𝐲_k - Mu 𝐮_k) = x_k + T Md 𝐝_k`` (eqs. 7, 9); the
+general solution is ``T = Mx† + S Mx⊥`` (Lemma 1, Lemma 2), and Theorem 1 (eq. 13) gives the
+one minimising ``‖T Md‖_F``.
+
+Time-varying systems (001 Remark 4): :func:`stack_window` takes the matrices of each step of the
+window. Non-invertible ``A`` (001 Remark 1): :func:`invertible_injection` finds ``L`` with
+``A - LC`` invertible; ``L y`` then enters as a known input. No loops over time here: a window
+has ``s + 1`` steps, and that is all these functions see.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import DesignError, IvobsError
+
+__all__ = [
+    "SINGULAR_RCOND",
+    "OptimalT",
+    "general_T",
+    "invertible_injection",
+    "optimal_T",
+    "pinv_perp",
+    "stack_matrices",
+    "stack_window",
+    "width_optimal_T",
+]
+
+SINGULAR_RCOND = 1e-8
+"""``A`` counts as non-invertible when ``σ_min(A) <= SINGULAR_RCOND · max(1, σ_max(A))``."""
+
+_EPS = np.finfo(float).eps
+
+
+def _rcond(M: np.ndarray) -> float:
+    if M.size == 0:
+        return 1.0
+    sv = np.linalg.svd(M, compute_uv=False)
+    return float(sv[-1] / max(1.0, sv[0]))
+
+
+def is_invertible(A: np.ndarray) -> bool:
+    """``σ_min(A) > SINGULAR_RCOND · max(1, σ_max(A))`` (the test that triggers Remark 1)."""
+    return _rcond(np.asarray(A, dtype=float)) > SINGULAR_RCOND
+
+
+def stack_window(
+    mats: Sequence[tuple[np.ndarray, ...]],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stacked matrices ``(Mx, Mu, Md)`` of 001 eq. (6) for one window of ``s + 1`` steps.
+
+    ``mats[i] = (A, B, C, D, E, F)`` at step ``k - i`` for ``i = 0 … s`` (most recent first);
+    ``A`` at step ``k`` itself is not used. Time-varying form (Remark 4): with
+    ``Ψ(k-i, k) = A_{k-i}⁻¹ ⋯ A_{k-1}⁻¹``,
+
+    * row block ``i`` of ``Mx`` is ``C_{k-i} Ψ(k-i, k)``,
+    * block ``(i, j)`` of ``Mu`` (``1 <= j <= i``) is ``-C_{k-i} Ψ(k-i, k-j+1) B_{k-j}``, plus
+      ``D_{k-i}`` when ``j = i``; likewise ``Md`` with ``E`` and ``F``.
+
+    For constant matrices these are ``C Ã^i``, ``C Ã^{i-j} B̃`` and ``C Ã^{i-j} Ẽ`` (eq. 5-6).
+    Raises :class:`DesignError` if an ``A`` of the window is not invertible.
+    """
+    s = len(mats) - 1
+    _, B0, C0, _, E0, _ = mats[0]
+    nx, nu, ny, nd = B0.shape[0], B0.shape[1], C0.shape[0], E0.shape[1]
+    Mx = np.zeros(((s + 1) * ny, nx))
+    Mu = np.zeros(((s + 1) * ny, (s + 1) * nu))
+    Md = np.zeros(((s + 1) * ny, (s + 1) * nd))
+    P = np.eye(nx)  # Ψ(k-i, k)
+    RB: list[np.ndarray] = []  # Ψ(k-i, k-j+1) B_{k-j}, j = 1..i
+    RE: list[np.ndarray] = []
+    for i, (_, _, C, D, _, F) in enumerate(mats):
+        if i > 0:
+            A_prev, B_prev, _, _, E_prev, _ = mats[i]  # matrices at step k-i
+            if not is_invertible(A_prev):
+                raise DesignError(
+                    f"A at lag {i} of the window is not invertible (reciprocal condition number "
+                    f"{_rcond(A_prev):.1e}); the backward propagation (001 eq. 4) needs A⁻¹: "
+                    "use an output injection L (001 Remark 1)"
+                )
+            Ainv = np.linalg.inv(A_prev)
+            P = Ainv @ P
+            RB = [Ainv @ M for M in RB] + [Ainv @ B_prev]
+            RE = [Ainv @ M for M in RE] + [Ainv @ E_prev]
+        r = slice(i * ny, (i + 1) * ny)
+        Mx[r] = C @ P
+        for j in range(1, i + 1):
+            Mu[r, j * nu : (j + 1) * nu] = -C @ RB[j - 1]
+            Md[r, j * nd : (j + 1) * nd] = -C @ RE[j - 1]
+        Mu[r, i * nu : (i + 1) * nu] += D
+        Md[r, i * nd : (i + 1) * nd] += F
+    return Mx, Mu, Md
+
+
+def stack_matrices(
+    A: Any, B: Any, C: Any, D: Any = None, E: Any = None, F: Any = None, *, s: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(Mx, Mu, Md)`` of 001 eq. (6) for a time-invariant system (``D``, ``E``, ``F`` default
+    to zero blocks of the right size)."""
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    nx, ny = A.shape[0], C.shape[0]
+    B = np.zeros((nx, 0)) if B is None else np.asarray(B, dtype=float).reshape(nx, -1)
+    nu = B.shape[1]
+    D = np.zeros((ny, nu)) if D is None else np.asarray(D, dtype=float).reshape(ny, nu)
+    if E is None and F is None:
+        E, F = np.zeros((nx, 0)), np.zeros((ny, 0))
+    elif E is None:
+        F = np.asarray(F, dtype=float).reshape(ny, -1)
+        E = np.zeros((nx, F.shape[1]))
+    else:
+        E = np.asarray(E, dtype=float).reshape(nx, -1)
+        F = np.zeros((ny, E.shape[1])) if F is None else np.asarray(F, dtype=float)
+    if int(s) < 0:
+        raise IvobsError(f"s: expected an integer >= 0, got {s}")
+    return stack_window([(A, B, C, D, E, F)] * (int(s) + 1))
+
+
+def pinv_perp(Mx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """``(Mx†, Mx⊥, N, rank)``: ``Mx† = (MxᵀMx)⁻¹Mxᵀ``, ``Mx⊥ = I - Mx Mx†`` (001 Notation),
+    and ``N`` an orthonormal basis of the left null space (``N Mx = 0``, ``NᵀN = Mx⊥``).
+
+    From one SVD ``Mx = U Σ Vᵀ``: ``Mx† = V Σ⁻¹ U₁ᵀ`` and ``Mx⊥ = U₂ U₂ᵀ`` (exactly symmetric
+    and idempotent up to rounding, unlike ``I - Mx Mx†`` formed by subtraction). ``rank`` counts
+    singular values above ``max(m, n) · ε · σ_max``; ``Mx†`` is only meaningful at full column
+    rank (checked by the callers).
+    """
+    m, n = Mx.shape
+    U, sv, Vt = np.linalg.svd(Mx, full_matrices=True)
+    tol = max(m, n) * _EPS * (sv[0] if sv.size else 0.0)
+    rank = int(np.sum(sv > tol))
+    r = min(rank, n)
+    with np.errstate(divide="ignore"):
+        inv = np.where(sv[:r] > 0, 1.0 / sv[:r], 0.0)
+    Mx_pinv = (Vt[:r].T * inv) @ U[:, :r].T
+    U2 = U[:, r:]
+    return Mx_pinv, U2 @ U2.T, U2.T.copy(), rank
+
+
+@dataclass(frozen=True)
+class OptimalT:
+    """Theorem 1 of 001: ``T``, and the quantities of eq. (13)."""
+
+    T: np.ndarray
+    Mx_pinv: np.ndarray
+    Mx_perp: np.ndarray
+    U1: np.ndarray
+    S1: np.ndarray
+    V1: np.ndarray
+    rank: int
+
+
+def _check_full_rank(Mx: np.ndarray, rank: int) -> None:
+    nx = Mx.shape[1]
+    if rank < nx:
+        raise DesignError(
+            f"T Mx = I (001 eq. 8) has no solution: the stacked observability matrix Mx has rank "
+            f"{rank} < nx = {nx}; the window must observe the state (001 Lemma 2: observable "
+            "(A, C) and s >= nx - 1)"
+        )
+
+
+def optimal_T(Mx: Any, Md: Any, W: Any = None) -> OptimalT:
+    """``T`` minimising ``‖T Md W‖_F`` subject to ``T Mx = I`` (001 Theorem 1, eq. 13).
+
+    ``T = Mx† - Mx† Md V1ᵀ S1⁻¹ U1ᵀ Mx⊥`` with ``Mx⊥ Md = U1 S1 V1`` the compact SVD
+    (eq. 17). The paper's criterion is ``W = I`` (the default); ``W`` (a nonnegative vector, the
+    bound radii per column of ``Md``) weighs the disturbance by its size.
+
+    Rank decision: ``‖Mx⊥‖₂ = 1``, so the rounding level of the computed ``Mx⊥ Md`` is about
+    ``ε ‖Md‖₂``; singular values at or below ``10 · max(m, n) · ε · ‖Md‖₂`` are rounding, not
+    signal, and are dropped. Keeping one would divide by it and blow up ``T``; dropping a genuine
+    one only forfeits optimality, never ``T Mx = I`` (any ``X`` in ``Mx† + X Mx⊥`` satisfies it).
+    The result is verified: ``T Mx = I`` to rounding and ``‖T Md‖ <= ‖Mx† Md‖`` (the ``S = 0``
+    solution), else :class:`DesignError`.
+    """
+    Mx = np.asarray(Mx, dtype=float)
+    Md = np.asarray(Md, dtype=float)
+    m = Mx.shape[0]
+    Mx_pinv, Mx_perp, N, rank = pinv_perp(Mx)
+    _check_full_rank(Mx, rank)
+    Mdw = Md if W is None else Md * np.asarray(W, dtype=float)[None, :]
+    if Mdw.shape[1] == 0 or N.shape[0] == 0:
+        empty = np.zeros((m, 0))
+        return OptimalT(
+            Mx_pinv, Mx_pinv, Mx_perp, empty, np.zeros((0, 0)), np.zeros((0, Mdw.shape[1])), 0
+        )
+    # Mx⊥ Md = Nᵀ (N Md): the SVD of the small factor N Md carries the same singular values.
+    Uh, sv, V = np.linalg.svd(N @ Mdw, full_matrices=False)
+    md_norm = float(np.linalg.norm(Mdw, 2))
+    tol = 10.0 * max(m, Mdw.shape[1]) * _EPS * md_norm
+    r = int(np.sum(sv > tol))
+    U1 = N.T @ Uh[:, :r]
+    S1 = np.diag(sv[:r])
+    V1 = V[:r]
+    T = Mx_pinv - (Mx_pinv @ Mdw @ V1.T / sv[:r]) @ U1.T @ Mx_perp
+    _verify(T, Mx, Mdw, Mx_pinv)
+    return OptimalT(T, Mx_pinv, Mx_perp, U1, S1, V1, r)
+
+
+def _verify(T: np.ndarray, Mx: np.ndarray, Mdw: np.ndarray, Mx_pinv: np.ndarray) -> None:
+    nx = Mx.shape[1]
+    cond = np.linalg.cond(Mx)
+    resid = float(np.max(np.abs(T @ Mx - np.eye(nx))))
+    if not resid <= 1e-8 * max(1.0, cond):
+        raise DesignError(
+            f"optimal T: T Mx = I (001 eq. 8) holds only to {resid:.1e} (cond(Mx) = {cond:.1e}); "
+            "the stacked matrices are too ill-conditioned: reduce s or rescale the states"
+        )
+    base = float(np.linalg.norm(Mx_pinv @ Mdw))
+    if not float(np.linalg.norm(T @ Mdw)) <= base * (1 + 1e-8) + 1e-12:
+        raise DesignError(
+            "optimal T: ‖T Md‖_F exceeds that of T = Mx† (001 Theorem 1 violated by rounding); "
+            "the stacked matrices are too ill-conditioned: reduce s or rescale the states"
+        )
+
+
+def general_T(Mx: Any, S: Any) -> np.ndarray:
+    """The general solution ``T = Mx† + S Mx⊥`` of ``T Mx = I`` (001 Lemma 1, Lemma 2)."""
+    Mx = np.asarray(Mx, dtype=float)
+    Mx_pinv, Mx_perp, _, rank = pinv_perp(Mx)
+    _check_full_rank(Mx, rank)
+    S = np.asarray(S, dtype=float)
+    if S.shape != (Mx.shape[1], Mx.shape[0]):
+        raise IvobsError(
+            f"S: expected shape ({Mx.shape[1]}, {Mx.shape[0]}) (nx, (s+1)·ny), got {S.shape}"
+        )
+    return Mx_pinv + S @ Mx_perp
+
+
+def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
+    """``T`` minimising each box width of eq. (11), ``Σ_j |(T Md Wd)_ij|``, s.t. ``T Mx = I``.
+
+    Not in paper 001 (whose Theorem 1 minimises ``‖T Md‖_F``): one linear program per state
+    (HiGHS), ``min Σ a`` s.t. ``-a <= (Md W)ᵀ t_i <= a``, ``Mxᵀ t_i = e_i``. The LP solution
+    satisfies ``T Mx = I`` only to the solver's tolerance, so it is projected back,
+    ``T ← T + (I - T Mx) Mx†``, which restores ``T Mx = I`` to rounding.
+    """
+    from scipy.optimize import linprog
+
+    Mx = np.asarray(Mx, dtype=float)
+    Md = np.asarray(Md, dtype=float)
+    Mx_pinv, _, _, rank = pinv_perp(Mx)
+    _check_full_rank(Mx, rank)
+    P = Md if W is None else Md * np.asarray(W, dtype=float)[None, :]
+    m, nx = Mx.shape
+    p = P.shape[1]
+    if p == 0:
+        return Mx_pinv
+    c = np.concatenate([np.zeros(m), np.ones(p)])
+    A_ub = np.block([[P.T, -np.eye(p)], [-P.T, -np.eye(p)]])
+    A_eq = np.hstack([Mx.T, np.zeros((nx, p))])
+    bounds = [(None, None)] * m + [(0, None)] * p
+    T = np.empty((nx, m))
+    for i in range(nx):
+        res = linprog(
+            c,
+            A_ub=A_ub,
+            b_ub=np.zeros(2 * p),
+            A_eq=A_eq,
+            b_eq=np.eye(nx)[i],
+            bounds=bounds,
+            method="highs",
+        )
+        if res.status != 0:
+            raise DesignError(
+                f"width-optimal T: the linear program for state {i} failed ({res.message})"
+            )
+        T[i] = res.x[:m]
+    T = T + (np.eye(nx) - T @ Mx) @ Mx_pinv
+    return T
+
+
+def invertible_injection(A: Any, C: Any) -> np.ndarray:
+    """A gain ``L`` with ``A - LC`` invertible (001 Remark 1), by pole placement.
+
+    The poles of ``A - LC`` are placed at distinct real values ``0.5 … 0.9`` (nonzero, so the
+    matrix is invertible; moderate, so ``(A - LC)⁻¹`` stays well-conditioned) with
+    :func:`scipy.signal.place_poles` on the dual pair ``(Aᵀ, C_rᵀ)``, ``C_r`` an orthonormal
+    basis of the rows of ``C`` (place_poles needs full column rank). Output injection keeps
+    ``(A - LC, C)`` observable whenever ``(A, C)`` is. Raises :class:`DesignError` when the
+    placement fails (unobservable pair) or the result is not invertible.
+    """
+    from scipy.signal import place_poles
+
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    nx = A.shape[0]
+    U, sv, Vt = np.linalg.svd(C, full_matrices=False)
+    r = int(np.sum(sv > max(C.shape) * _EPS * (sv[0] if sv.size else 0.0)))
+    if r == 0:
+        raise DesignError("output injection (001 Remark 1): C = 0, no gain can change A")
+    Cr = sv[:r, None] * Vt[:r]  # C = U_r C_r
+    poles = np.linspace(0.5, 0.9, nx) if nx > 1 else np.array([0.7])
+    try:
+        Lr = place_poles(A.T, Cr.T, poles).gain_matrix.T
+    except Exception as exc:  # scipy raises ValueError/LinAlgError with its own wording
+        raise DesignError(
+            f"output injection (001 Remark 1): could not place the poles of A - LC at "
+            f"{np.round(poles, 3).tolist()} ({exc}); pass an explicit L"
+        ) from None
+    L = Lr @ U[:, :r].T
+    if not is_invertible(A - L @ C):
+        raise DesignError(
+            "output injection (001 Remark 1): A - LC is still not invertible; pass an explicit L"
+        )
+    return L

@@ -1,0 +1,383 @@
+"""Intersection of several guaranteed estimates (and of the measurement strip).
+
+If every member ``m`` returns a box ``[lo_m, hi_m]`` certain to contain ``x[k]``, so does
+
+::
+
+    lower_k = max_m lo_m,    upper_k = min_m hi_m,
+
+which is never wider than the best member in any component. Members are other ivobs methods run
+side by side on the same data; a member ignores nothing and gains nothing from the others (each
+keeps its own recursion), so the result is as sound as the weakest assumption among them.
+
+**Measurement strip.** A row ``r`` of ``C`` with a single nonzero entry ``c`` (state ``i``
+measured directly, possibly scaled) gives ``c x_i = y_r - D_r u - F_r d`` with ``d`` in its box,
+hence by Lemma 1 (003/004, :func:`ivobs.image_bounds`)::
+
+    x_i ∈ (y_r - D_r u - [F_r⁺ d_lo - F_r⁻ d_hi, F_r⁺ d_hi - F_r⁻ d_lo]) / c
+
+(the ends swapped when ``c < 0``). This box is intersected as well (option ``strip``).
+
+**Inconsistent data.** An empty intersection means two guaranteed enclosures of the same state
+do not meet: the data contradict the model and the bounds (a fault). The step is reported
+(``on_inconsistent``), and the box returned is the *hull of the members' boxes* (the strip left
+out, as it is what a faulty sample corrupts first): each member handled the fault by its own
+rules (e.g. ``exact`` predicts without the sample), so the hull contains the state as long as one
+member's enclosure does, and it is never empty or inverted. Steps a member itself reports as
+inconsistent are reported too.
+
+Data used: the union of what the members use (``u[0..k]``, ``y[0..k]`` at most, each member
+its own prior ``x0``); the strip uses ``u[k]``, ``y[k]``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import DesignError, IvobsError
+from ..model import LinearSystem
+from ..sets import Box, image_bounds
+from . import _REGISTRY, get, make_estimator, register
+from .base import ROUNDING, Design, Estimator
+
+__all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
+
+DEFAULT_METHODS = ("reachability", "zonotope", "strip", "fixed-time", "interval-split", "kkl")
+"""Members tried when ``methods`` is not given (fast methods with complementary designs); those
+not registered, not applicable to the system, or whose design fails are skipped."""
+
+
+@dataclass(frozen=True)
+class IntersectDesign(Design):
+    """``methods``: the members' names; ``strip_rows``: rows of ``C`` that pin a state (used when
+    ``strip`` is on; time-invariant ``C``); ``skipped``: default members left out, with why."""
+
+    methods: tuple[str, ...]
+    strip: bool
+    strip_rows: tuple[int, ...]
+    skipped: tuple[str, ...] = ()
+
+
+def _pinning_rows(C: np.ndarray) -> list[tuple[int, int, float]]:
+    """``(row, state, coefficient)`` for the rows of ``C`` with exactly one nonzero entry."""
+    out = []
+    for r, row in enumerate(C):
+        nz = np.flatnonzero(row)
+        if nz.size == 1:
+            out.append((r, int(nz[0]), float(row[nz[0]])))
+    return out
+
+
+@register
+class Intersect(Estimator):
+    """Intersection of the boxes of several guaranteed estimators, step by step.
+
+    Parameters
+    ----------
+    sys : LinearSystem
+    x0 : Box, prior on ``x[0]`` passed to the members built by name (optional if none needs it)
+    methods : list of method names, ``(name, options)`` pairs, or :class:`Estimator` instances
+        (built for the same system). Default: :data:`DEFAULT_METHODS` that can be designed for
+        ``sys`` (skipped ones are listed in ``design.skipped``).
+    strip : also intersect with the measurement strip of the rows of ``C`` that pin a state
+    on_inconsistent : 'warn', 'raise' or 'ignore' (empty intersection, or a member's report)
+
+    ``valid_from`` is the earliest member's; before a member's own ``valid_from`` it is ignored.
+    See the module docstring for what is returned when the data are inconsistent.
+    """
+
+    name = "intersect"
+    summary = "intersection of several guaranteed estimates (and the measurement strip)"
+    reference = "intersection of guaranteed enclosures; strip by Lemma 1 (003/004)"
+    supports_continuous = True
+    supports_time_varying = True
+    needs_x0 = False
+
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None = None,
+        *,
+        methods: Any = None,
+        strip: bool = True,
+        on_inconsistent: str = "warn",
+    ):
+        super().__init__(sys, x0, on_inconsistent=on_inconsistent)
+        if not isinstance(strip, (bool, np.bool_)):
+            raise IvobsError(f"strip: expected True or False, got {strip!r}")
+        if methods is None:
+            self.members, skipped = self._default_members()
+        else:
+            self.members, skipped = self._explicit_members(methods), []
+        rows = _pinning_rows(sys.C_at(0)) if not sys.is_time_varying else []
+        self.design = IntersectDesign(
+            methods=tuple(m.name for m in self.members),
+            strip=bool(strip),
+            strip_rows=tuple(r for r, _, _ in rows),
+            skipped=tuple(skipped),
+        )
+        self._strip_rows = rows
+        self.valid_from = min(m.valid_from for m in self.members)
+
+    # -- members --------------------------------------------------------------------------
+    def _default_members(self) -> tuple[list[Estimator], list[str]]:
+        members: list[Estimator] = []
+        skipped: list[str] = []
+        for name in DEFAULT_METHODS:
+            if name not in _REGISTRY:
+                continue
+            cls = _REGISTRY[name]
+            reason = self._not_applicable(cls)
+            if reason is None:
+                try:
+                    members.append(make_estimator(name, self.sys, self.x0))
+                    continue
+                except IvobsError as exc:  # DesignError, or a structural condition not met
+                    reason = str(exc)
+            skipped.append(f"{name}: {reason}")
+        if not members:
+            raise DesignError(
+                "methods: none of the default members could be designed for this system ("
+                + "; ".join(skipped or ["no default method is registered"])
+                + "); pass methods=[...] explicitly, e.g. methods=['exact']"
+            )
+        return members, skipped
+
+    def _not_applicable(self, cls: type[Estimator]) -> str | None:
+        if self.sys.is_continuous and not cls.supports_continuous:
+            return "discrete-time systems only"
+        if self.sys.is_time_varying and not cls.supports_time_varying:
+            return "time-invariant systems only"
+        if cls.needs_x0 and self.x0 is None:
+            return "needs a prior box x0"
+        return None
+
+    def _explicit_members(self, methods: Any) -> list[Estimator]:
+        if isinstance(methods, (str, Estimator)) or not isinstance(methods, (list, tuple)):
+            raise IvobsError(
+                "methods: expected a list of method names, (name, options) pairs or Estimator "
+                f"instances, got {methods!r}"
+            )
+        if not methods:
+            raise IvobsError("methods: expected at least one member, got an empty list")
+        members = []
+        for i, spec in enumerate(methods):
+            if isinstance(spec, Estimator):
+                self._check_instance(i, spec)
+                members.append(spec)
+            elif isinstance(spec, str):
+                members.append(make_estimator(spec, self.sys, self.x0))
+            elif (
+                isinstance(spec, (list, tuple))
+                and len(spec) == 2
+                and isinstance(spec[0], str)
+                and isinstance(spec[1], dict)
+            ):
+                options = dict(spec[1])
+                x0 = options.pop("x0", self.x0)
+                get(spec[0])  # a clear error for an unknown name
+                members.append(make_estimator(spec[0], self.sys, x0, **options))
+            else:
+                raise IvobsError(
+                    f"methods[{i}]: expected a method name, a (name, options dict) pair or an "
+                    f"Estimator instance, got {spec!r}"
+                )
+        return members
+
+    def _check_instance(self, i: int, est: Estimator) -> None:
+        s, o = self.sys, est.sys
+        if (o.nx, o.nu, o.ny) != (s.nx, s.nu, s.ny) or o.is_continuous != s.is_continuous:
+            raise IvobsError(
+                f"methods[{i}]: the {est.name!r} estimator was built for a system with "
+                f"(nx, nu, ny) = ({o.nx}, {o.nu}, {o.ny}); this one has ({s.nx}, {s.nu}, {s.ny}). "
+                "Members must estimate the same plant"
+            )
+
+    # -- the strip ------------------------------------------------------------------------
+    def _strip_box(
+        self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the pinned states from ``y[k]`` alone (±inf elsewhere)."""
+        nx = self.sys.nx
+        lo, hi = np.full(nx, -np.inf), np.full(nx, np.inf)
+        if not self.design.strip:
+            return lo, hi
+        # matrices are functions of the time in continuous time, of the step otherwise
+        _, _, C, D, _, F = self.sys.matrices_at(t_k if self.sys.is_continuous else k)
+        rows = self._strip_rows if not self.sys.is_time_varying else _pinning_rows(C)
+        rows = [row for row in rows if not np.isnan(y_k[row[0]])]
+        if not rows:
+            return lo, hi
+        d = self.sys.d_at(k, y_k)
+        for r, i, c in rows:
+            f_lo, f_hi = image_bounds(F[r : r + 1], d.lo, d.hi)
+            v = y_k[r] - D[r] @ u_k
+            a, b = (v - f_hi[0]) / c, (v - f_lo[0]) / c
+            lo[i] = max(lo[i], min(a, b))
+            hi[i] = min(hi[i], max(a, b))
+        return lo, hi
+
+    def _strip_run(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The strip over a whole record (constant system and bounds), or None."""
+        nx = self.sys.nx
+        shape = (*y.shape[:-1], nx)
+        lo, hi = np.full(shape, -np.inf), np.full(shape, np.inf)
+        if not self.design.strip or not self._strip_rows:
+            return lo, hi
+        if self.sys.is_time_varying or not self.sys.has_constant_bounds:
+            return None
+        _, _, _, D, _, F = self.sys.matrices_at(0)
+        d = self.sys.d_at(0, None)
+        for r, i, c in self._strip_rows:
+            f_lo, f_hi = image_bounds(F[r : r + 1], d.lo, d.hi)
+            v = y[..., r] - u @ D[r]
+            a, b = (v - f_hi[0]) / c, (v - f_lo[0]) / c
+            with np.errstate(invalid="ignore"):  # NaN (missing) stays NaN: no information
+                lo_r, hi_r = np.minimum(a, b), np.maximum(a, b)
+            lo[..., i] = np.fmax(lo[..., i], lo_r)
+            hi[..., i] = np.fmin(hi[..., i], hi_r)
+        return lo, hi
+
+    # -- combining ------------------------------------------------------------------------
+    @staticmethod
+    def _combine(
+        los: np.ndarray, his: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Intersect the members' boxes (NaN rows = not yet valid: ignored) and the strip.
+
+        Returns ``(lo, hi, empty)`` over the leading axes; where ``empty``, the hull of the
+        members' boxes instead (see the module docstring). Crossings within the rounding margin
+        are rounding, not faults: the bounds are swapped there.
+        """
+        lo = np.fmax(np.fmax.reduce(los, axis=0), s_lo)
+        hi = np.fmin(np.fmin.reduce(his, axis=0), s_hi)
+        with np.errstate(invalid="ignore"):
+            tol = 4 * ROUNDING * (1.0 + np.maximum(np.abs(lo), np.abs(hi)))
+            cross = lo > hi
+            empty = np.any(lo > hi + tol, axis=-1)
+        lo, hi = np.where(cross, hi, lo), np.where(cross, lo, hi)
+        if np.any(empty):
+            hull_lo = np.fmin.reduce(los, axis=0)
+            hull_hi = np.fmax.reduce(his, axis=0)
+            lo = np.where(empty[..., None], hull_lo, lo)
+            hi = np.where(empty[..., None], hull_hi, hi)
+        return lo, hi, empty
+
+    # -- online ---------------------------------------------------------------------------
+    def _initial_state(self) -> dict[str, Any]:
+        return {"members": [{**m._initial_state(), "k": 0} for m in self.members]}
+
+    def _step(
+        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        nx = self.sys.nx
+        los, his = [], []
+        flagged = False
+        for m, ms in zip(self.members, state["members"]):
+            lo, hi = m._step(ms, k, u_k, y_k, t_k)
+            ms["k"] = k + 1
+            flagged |= bool(ms.pop("_inconsistent", False))
+            valid = k >= m.valid_from
+            los.append(np.asarray(lo, dtype=float) if valid else np.full(nx, np.nan))
+            his.append(np.asarray(hi, dtype=float) if valid else np.full(nx, np.nan))
+        if k < self.valid_from:
+            lo_s = hi_s = np.full(nx, np.nan)
+        else:
+            lo_s, hi_s = self._strip_box(k, u_k, y_k, t_k)
+        lo, hi, empty = self._combine(np.array(los), np.array(his), lo_s, hi_s)
+        if flagged or bool(empty):
+            state["_inconsistent"] = True
+        return lo, hi
+
+    # -- offline --------------------------------------------------------------------------
+    def _run(
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Members' own (vectorised where they have it) runs, intersected. Falls back to the
+        loop (returns None) when anything needs reporting: a member's inconsistency, an empty
+        intersection, or a strip that depends on the step."""
+        strip = self._strip_run(u, y)
+        if strip is None:
+            return None
+        los, his = [], []
+        for m in self.members:
+            out = self._member_raw(m, u, y, t)
+            if out is None:
+                return None
+            lo, hi = out
+            lo[..., : m.valid_from, :] = np.nan
+            hi[..., : m.valid_from, :] = np.nan
+            los.append(lo)
+            his.append(hi)
+        lo, hi, empty = self._combine(np.array(los), np.array(his), *strip)
+        if np.any(empty):
+            return None
+        return lo, hi
+
+    @staticmethod
+    def _member_raw(
+        m: Estimator, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """A member's bounds before outward rounding (the intersection is rounded once)."""
+        out = m._run(u, y, t)
+        if out is not None:
+            return np.array(out[0], dtype=float), np.array(out[1], dtype=float)
+        if y.ndim == 2:
+            lo, hi, inc = m._loop(u, y, t)
+            return None if np.any(inc) else (lo, hi)
+        los, his = [], []
+        for b in range(y.shape[0]):
+            lo, hi, inc = m._loop(u[b], y[b], t)
+            if np.any(inc):
+                return None
+            los.append(lo)
+            his.append(hi)
+        return np.stack(los), np.stack(his)
+
+    # -- persistence ----------------------------------------------------------------------
+    def _fingerprint(self) -> str:
+        parts = [self.name, str(self.design.strip)] + [m._fingerprint() for m in self.members]
+        return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
+
+    def state(self) -> dict[str, Any]:
+        """The online state (JSON-serialisable): the members' states, nested."""
+        st = self._state if self._state is not None else {**self._initial_state(), "k": 0}
+        members = []
+        for m, ms in zip(self.members, st["members"]):
+            saved = m._state
+            m._state = ms
+            try:
+                members.append(m.state())
+            finally:
+                m._state = saved
+        return {
+            "method": self.name,
+            "fingerprint": self._fingerprint(),
+            "state": {"k": int(st["k"]), "members": members},
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from a state saved by :meth:`state` (same members, same designs)."""
+        if not isinstance(state, dict) or not isinstance(state.get("state"), dict):
+            raise IvobsError("state: expected the dict returned by Estimator.state()")
+        if state.get("method") != self.name or state.get("fingerprint") != self._fingerprint():
+            raise IvobsError(
+                f"state: saved by method {state.get('method')!r} with other members or designs; "
+                f"it can only be restored into the same {self.name!r} estimator"
+            )
+        saved = state["state"].get("members")
+        if not isinstance(saved, list) or len(saved) != len(self.members):
+            raise IvobsError(f"state: expected the states of {len(self.members)} members")
+        states = []
+        for m, s in zip(self.members, saved):
+            previous = m._state
+            try:
+                m.restore(s)
+                states.append(m._state)
+            finally:
+                m._state = previous
+        self._state = {"members": states, "k": int(state["state"]["k"])}

@@ -1,0 +1,127 @@
+"""Gains for cooperative interval observers (ivobs.design.cooperative): LMI (41) of paper 002 /
+LMIs (7)-(8) of 003, the LP for |A - LC| Schur, the width refinement and the checks."""
+
+import numpy as np
+import pytest
+
+from ivobs import DesignError, scenarios
+from ivobs.design.cooperative import (
+    abs_schur_gain,
+    check_abs_schur,
+    check_nonnegative_schur,
+    nonnegative_gain,
+    refine_width,
+    steady_width,
+)
+
+
+def mats(name):
+    sc = scenarios.get(name)
+    A, _, C, _, E, F = sc.system.matrices_at(0)
+    return sc, A, C, E, F, sc.system.d.hi - sc.system.d.lo
+
+
+def rho(M):
+    return np.max(np.abs(np.linalg.eigvals(M)))
+
+
+def test_lmi41_is_feasible_on_the_servo_motor():
+    sc, A, C, *_ = mats("servo-motor")
+    L = nonnegative_gain(A, C)
+    D = A - L @ C
+    assert D.min() >= -1e-9
+    # column 3 of C is zero, so A[3, 3] = 0.9995 stays on the diagonal: ρ >= 0.9995
+    assert 0.9995 - 1e-9 <= rho(D) < 1.0
+    # the paper's L2 (also from LMI (41)) passes the same check
+    check_nonnegative_schur(A, C, sc.reference["L2"], "interval")
+
+
+@pytest.mark.parametrize(
+    "name, entry", [("tang-example2", r"entry \(2, 1\)"), ("efimov-planar", r"entry \(1, 2\)")]
+)
+def test_no_nonnegative_gain_exists_for_the_papers_counterexamples(name, entry):
+    _, A, C, *_ = mats(name)
+    with pytest.raises(DesignError, match=entry + r".*for every L.*LMI \(41\)"):
+        nonnegative_gain(A, C)
+
+
+def test_lmi41_infeasible_without_a_structural_reason():
+    # A − LC >= 0 is possible (column 1 of C is zero but A[:, 0] >= 0), Schur is not: A[1,1] = 1.2
+    A = np.array([[1.2, 0.3], [0.4, 0.5]])
+    C = np.array([[0.0, 1.0]])
+    with pytest.raises(DesignError, match=r"LMI \(41\) of 002 is infeasible \(best margin"):
+        nonnegative_gain(A, C)
+
+
+def test_check_messages_name_the_entry_and_the_spectral_radius():
+    A = np.array([[0.5, -0.2], [0.1, 0.3]])
+    C = np.array([[1.0, 0.0]])
+    with pytest.raises(DesignError, match=r"not nonnegative: entry \(1, 2\) = -0.2"):
+        check_nonnegative_schur(A, C, np.zeros((2, 1)), "interval")
+    with pytest.raises(DesignError, match=r"not Schur: spectral radius 1.1"):
+        check_nonnegative_schur(np.array([[1.1]]), np.array([[0.0]]), np.zeros((1, 1)), "x")
+    # |A − LC| = [[0.5, 0.2], [0.1, 0.3]]: Schur; |[[0.9, -0.9], [0.9, 0.9]]|: radius 1.8
+    check_abs_schur(A, C, np.zeros((2, 1)), "interval-split")
+    msg = r"\|A − LC\| = D⁺ \+ D⁻ is not Schur: spectral radius 1.8"
+    with pytest.raises(DesignError, match=msg):
+        check_abs_schur(np.array([[0.9, -0.9], [0.9, 0.9]]), C, np.zeros((2, 1)), "split")
+
+
+def test_margin_lp_finds_the_optimum_of_the_planar_example():
+    """003 §IV.A: |A − LC| = [[|0.3 − l1|, 0.7], [|0.6 − l2|, 0.5]] has ρ >= 0.5 for every L
+    (its entry (2, 2) is fixed); L = (0.3, 0.6) attains it (the paper's gain)."""
+    _, A, C, *_ = mats("efimov-planar")
+    L, r = abs_schur_gain(A, C)
+    assert r == pytest.approx(0.5, abs=1e-7)
+    assert rho(np.abs(A - L @ C)) == pytest.approx(r, abs=1e-12)
+    assert np.sort(np.abs(np.linalg.eigvals(np.abs(A - np.array([[0.3], [0.6]]) @ C)))) == (
+        pytest.approx([0.0, 0.5])
+    )
+
+
+def test_margin_lp_reports_failure_as_a_radius():
+    # tang-example2: entry (1, 1) of |A − LC| is A[1, 1] = 1 for every L
+    _, A, C, *_ = mats("tang-example2")
+    _, r = abs_schur_gain(A, C)
+    assert r >= 1.0 - 1e-12
+
+
+def test_steady_width_is_the_limit_of_the_bounds_recursion():
+    _, A, C, E, F, delta = mats("efimov-planar")
+    L = np.array([[0.3], [0.6]])
+    D, G = A - L @ C, E - L @ F
+    w = np.array([4.0, 4.0])
+    for _ in range(200):
+        w = np.abs(D) @ w + np.abs(G) @ delta
+    np.testing.assert_allclose(steady_width(D, G, delta), w, rtol=1e-12)
+    # |G| Δ = (1 + 0.3·0.2, 1 + 0.6·0.2); w2 = 1.12 / 0.5, w1 = 0.7 w2 + 1.06
+    np.testing.assert_allclose(w, [0.7 * 2.24 + 1.06, 2.24], rtol=1e-12)
+    assert np.all(np.isinf(steady_width(np.array([[1.0]]), np.ones((1, 1)), np.ones(1))))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_refinement_never_widens_and_keeps_the_structure(seed):
+    rng = np.random.default_rng(seed)
+    n, p, m = 3, 2, 4
+    A = rng.uniform(0, 1, (n, n))
+    A *= 0.95 / rho(A)
+    C = rng.normal(size=(p, n))
+    E, F = rng.normal(size=(n, m)) * 0.3, rng.normal(size=(p, m)) * 0.1
+    delta = rng.uniform(0.2, 1.0, m)
+    L0 = np.zeros((n, p))  # A >= 0 and Schur: a valid start for both observers
+    w0 = steady_width(A, E, delta)
+    for nonneg in (True, False):
+        L = refine_width(A, C, E, F, delta, L0, nonnegative=nonneg)
+        D = A - L @ C
+        w = steady_width(D, E - L @ F, delta)
+        assert np.all(w <= w0 * (1 + 1e-9))
+        assert rho(np.abs(D)) < 1.0
+        if nonneg:
+            assert D.min() >= -1e-9
+    # on the servo motor the refinement improves LMI (41)'s gain in every state
+    _, A, C, E, F, delta = mats("servo-motor")
+    L_lmi = nonnegative_gain(A, C)
+    L = refine_width(A, C, E, F, delta, L_lmi, nonnegative=True)
+    w_lmi = steady_width(A - L_lmi @ C, E - L_lmi @ F, delta)
+    w_ref = steady_width(A - L @ C, E - L @ F, delta)
+    assert np.all(w_ref <= w_lmi * (1 + 1e-9)) and w_ref.sum() < 0.999 * w_lmi.sum()

@@ -1,0 +1,305 @@
+"""The intersection of several guaranteed estimators (and of the measurement strip): never wider
+than a member, sound, nested state, vectorised path, faults. Members that are not registered
+(yet) are skipped."""
+
+import json
+import warnings
+from functools import cache
+
+import numpy as np
+import pytest
+
+import ivobs
+from ivobs import Box, IvobsError, LinearSystem, image_bounds, scenarios
+from ivobs.estimators import Estimator
+from ivobs.estimators.intersect import DEFAULT_METHODS
+from ivobs.testing import adversarial_run, assert_contains, random_system
+
+RTOL = 1e-12  # "contained in a member": up to the rounding margin of a crossing
+
+
+class OpenLoop(Estimator):
+    """x[k+1] ∈ A[x[k]] + B u[k] + E[d[k]]: ignores the measurements (a wide member)."""
+
+    name = "open-loop-test"
+
+    def __init__(self, sys, x0=None, *, start=0, on_inconsistent="warn"):
+        super().__init__(sys, x0, on_inconsistent=on_inconsistent)
+        self.valid_from = start
+
+    def _initial_state(self):
+        return {"lo": self.x0.lo.copy(), "hi": self.x0.hi.copy()}
+
+    def _step(self, state, k, u_k, y_k, t_k):
+        lo, hi = state["lo"].copy(), state["hi"].copy()
+        A, B, _, _, E, _ = self.sys.matrices_at(k)
+        d = self.sys.d_at(k, y_k)
+        a_lo, a_hi = image_bounds(A, lo, hi)
+        e_lo, e_hi = image_bounds(E, d.lo, d.hi)
+        state["lo"], state["hi"] = a_lo + B @ u_k + e_lo, a_hi + B @ u_k + e_hi
+        return lo, hi
+
+
+def need(*names):
+    missing = [n for n in names if n not in ivobs.methods()]
+    if missing:
+        pytest.skip(f"method(s) not registered yet: {missing}")
+
+
+def intersect(sys, x0, **options):
+    return ivobs.make_estimator("intersect", sys, x0=x0, **options)
+
+
+def assert_within(res, member, k0=None):
+    """``res`` ⊆ ``member`` at every step where the member is valid."""
+    k0 = member.valid_from if k0 is None else k0
+    tol = RTOL * (1 + np.abs(member.upper[..., k0:, :]))
+    assert np.all(res.lower[..., k0:, :] >= member.lower[..., k0:, :] - tol)
+    assert np.all(res.upper[..., k0:, :] <= member.upper[..., k0:, :] + tol)
+
+
+# -- never wider than a member, sound ------------------------------------------------------
+@cache
+def _servo_default():
+    sc = scenarios.get("servo-motor", horizon=60)
+    est = intersect(sc.system, sc.x0)
+    return sc, est, sc.simulate("vertex", seed=3)
+
+
+def servo_default():
+    if not set(DEFAULT_METHODS) & set(ivobs.methods()):
+        pytest.skip("none of the default members is registered yet")
+    return _servo_default()
+
+
+def test_default_members_are_intersected_soundly():
+    _, est, tr = servo_default()
+    assert est.design.methods == tuple(m.name for m in est.members) and est.members
+    assert est.valid_from == min(m.valid_from for m in est.members)
+    res = est.run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    widths = []
+    for m in est.members:
+        r = m.run(tr.u, tr.y)
+        assert_contains(r, tr.x)
+        assert_within(res, r)
+        widths.append(r.mean_width(10))
+    # never wider than the best member, component by component
+    assert np.all(res.mean_width(10) <= np.min(widths, axis=0) + 1e-12)
+
+
+def test_exact_members_and_windows():
+    sys = random_system(3, nx=3, ny=1, nu=1, symmetric_bounds=False)
+    x0 = Box(-np.ones(3), np.ones(3))
+    tr = adversarial_run(sys, x0, 25, seed=1)
+    est = intersect(sys, x0, methods=["exact", ("exact", {"window": 3, "progress": False})])
+    res = est.run(tr.u, tr.y)
+    full = ivobs.make_estimator("exact", sys, x0=x0).run(tr.u, tr.y)
+    win = ivobs.make_estimator("exact", sys, x0=x0, window=3).run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    assert_within(res, full)
+    assert_within(res, win)
+    # exact is the tightest: the intersection is the exact hull (to rounding)
+    np.testing.assert_allclose(res.lower, full.lower, atol=1e-9)
+    np.testing.assert_allclose(res.upper, full.upper, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_random_systems_with_vertex_disturbances(seed):
+    need("fixed-time")
+    sys = random_system(seed, nx=3, ny=2, nu=1, feedthrough=seed == 1,
+                        invertible=seed != 2, symmetric_bounds=seed != 0)  # fmt: skip
+    x0 = Box(-np.ones(3), np.ones(3))
+    tr = adversarial_run(sys, x0, 60, seed=seed)
+    members = [OpenLoop(sys, x0), "fixed-time", ("exact", {"window": 2})]
+    est = intersect(sys, x0, methods=members)
+    res = est.run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    for m in est.members:
+        assert_within(res, m.run(tr.u, tr.y))
+
+
+def test_valid_from_is_the_earliest_member_and_late_members_are_ignored():
+    sys = random_system(4, nx=2, ny=1, nu=1)
+    x0 = Box(-np.ones(2), np.ones(2))
+    tr = adversarial_run(sys, x0, 12, seed=0)
+    late, early = OpenLoop(sys, x0, start=5), OpenLoop(sys, Box(-2 * np.ones(2), 2 * np.ones(2)))
+    est = intersect(sys, x0, methods=[late, early], strip=False)
+    assert est.valid_from == 0
+    res = est.run(tr.u, tr.y)
+    r_early, r_late = early.run(tr.u, tr.y), late.run(tr.u, tr.y)
+    np.testing.assert_array_equal(res.lower[:5], r_early.lower[:5])  # NaN rows of `late` ignored
+    assert_within(res, r_late)
+    assert np.all(res.width[5:] <= r_late.width[5:])
+
+
+# -- the measurement strip -----------------------------------------------------------------
+def strip_system():
+    """x in R^3; y1 = -2 x1 + noise, y2 = x2 + x3 (not a pinning row), y3 = 0.5 x3 + D u."""
+    A = np.array([[0.9, 0.2, 0.0], [0.0, 0.8, 0.1], [0.1, 0.0, 0.7]])
+    C = np.array([[-2.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 0.5]])
+    F = np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.05]])
+    D = np.array([[0.0], [0.0], [0.3]])
+    E = 0.1 * np.eye(3)
+    d = Box([-1.0, -1.0, -0.5], [1.0, 1.0, 1.5])
+    return LinearSystem(A, np.ones((3, 1)), C, D=D, E=E, F=F, d=d), Box(-np.ones(3), np.ones(3))
+
+
+def test_strip_gives_the_measurement_box():
+    sys, x0 = strip_system()
+    tr = adversarial_run(sys, x0, 30, seed=2)
+    wide = OpenLoop(sys, Box(-100 * np.ones(3), 100 * np.ones(3)))
+    est = intersect(sys, x0, methods=[wide])
+    assert est.design.strip_rows == (0, 2)
+    res = est.run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    # x1 = (y1 - 0.1 d1) / -2,  x3 = (y3 - 0.3 u - 0.05 d3) / 0.5
+    x1 = np.sort(np.stack([(tr.y[:, 0] - 0.1) / -2, (tr.y[:, 0] + 0.1) / -2]), axis=0)
+    x3 = np.stack([(tr.y[:, 2] - 0.3 * tr.u[:, 0] - 0.075) / 0.5,
+                   (tr.y[:, 2] - 0.3 * tr.u[:, 0] + 0.025) / 0.5])  # fmt: skip
+    np.testing.assert_allclose(res.lower[:, 0], x1[0], atol=1e-9)
+    np.testing.assert_allclose(res.upper[:, 0], x1[1], atol=1e-9)
+    np.testing.assert_allclose(res.lower[:, 2], x3[0], atol=1e-9)
+    np.testing.assert_allclose(res.upper[:, 2], x3[1], atol=1e-9)
+    off = intersect(sys, x0, methods=[wide], strip=False).run(tr.u, tr.y)
+    assert np.all(off.width[:, 0] > 10)  # without the strip: the wide member alone
+    np.testing.assert_array_equal(res.lower[:, 1], off.lower[:, 1])  # x2 is not pinned
+
+
+def test_strip_with_identity_C_and_missing_components():
+    A = np.array([[0.5, 0.3], [-0.2, 0.6]])
+    sys = LinearSystem(A, None, np.eye(2), E=np.eye(2) * 0.1, F=np.eye(2) * 0.2,
+                       d=Box.symmetric([1.0, 1.0]))  # fmt: skip
+    x0 = Box([-5.0, -5.0], [5.0, 5.0])
+    tr = adversarial_run(sys, x0, 20, seed=1)
+    y = tr.y.copy()
+    y[3, 1] = np.nan
+    res = intersect(sys, x0, methods=[OpenLoop(sys, x0)]).run(tr.u, y)
+    assert_contains(res, tr.x)
+    np.testing.assert_allclose(res.lower[4:], y[4:] - 0.2, atol=1e-9)
+    np.testing.assert_allclose(res.upper[4:], y[4:] + 0.2, atol=1e-9)
+    assert res.width[3, 1] > 0.4 + 1e-6  # the missing component is predicted
+    np.testing.assert_allclose(res.lower[3, 0], y[3, 0] - 0.2, atol=1e-9)
+
+
+# -- vectorised path, batches, online, persistence -------------------------------------------
+def test_vectorised_run_and_batches_match_the_loop():
+    need("reachability")
+    sc = scenarios.get("servo-motor", horizon=50)
+    est = intersect(sc.system, sc.x0, methods=["reachability", OpenLoop(sc.system, sc.x0)])
+    trs = [sc.simulate("vertex", seed=s) for s in range(3)]
+    loop = [est.run(tr.u, tr.y) for tr in trs]
+    vec = est.run(trs[0].u, trs[0].y, vectorize=True)
+    np.testing.assert_allclose(vec.lower, loop[0].lower, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(vec.upper, loop[0].upper, rtol=1e-9, atol=1e-12)
+    batch = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]))
+    assert batch.lower.shape == (3, 50, 3)
+    for b in range(3):
+        np.testing.assert_allclose(batch.lower[b], loop[b].lower, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(batch.upper[b], loop[b].upper, rtol=1e-9, atol=1e-12)
+    est.reset()
+    for k in range(50):
+        box = est.step(trs[0].u[k], trs[0].y[k])
+        assert np.array_equal(box.lo, loop[0].lower[k]) and np.array_equal(box.hi, loop[0].upper[k])
+
+
+def test_state_and_restore_nest_the_members():
+    sys = random_system(5, nx=3, ny=2, nu=1)
+    x0 = Box(-np.ones(3), np.ones(3))
+    tr = adversarial_run(sys, x0, 16, seed=4)
+
+    def build():
+        return intersect(sys, x0, methods=[("exact", {"window": 4}), OpenLoop(sys, x0)])
+
+    ref = build().run(tr.u, tr.y)
+    est = build()
+    for k in range(8):
+        est.step(tr.u[k], tr.y[k])
+    saved = json.loads(json.dumps(est.state()))
+    assert [s["method"] for s in saved["state"]["members"]] == ["exact", "open-loop-test"]
+    other = build()
+    other.restore(saved)
+    assert other.k == 8
+    rest = np.array([other.step(tr.u[k], tr.y[k]).hi for k in range(8, 16)])
+    np.testing.assert_allclose(rest, ref.upper[8:], atol=1e-8)
+    with pytest.raises(IvobsError, match="other members"):
+        intersect(sys, x0, methods=[OpenLoop(sys, x0)]).restore(saved)
+
+
+# -- faults --------------------------------------------------------------------------------
+def test_empty_intersection_is_flagged_and_returns_the_members_hull():
+    sys, x0 = strip_system()
+    tr = adversarial_run(sys, x0, 20, seed=5)
+    y = tr.y.copy()
+    y[12, 0] += 40.0  # a fault on the sensor that pins x1
+    member = OpenLoop(sys, x0)
+    est = intersect(sys, x0, methods=[member])
+    with pytest.warns(UserWarning, match=r"step\(s\) \[12\]"):
+        res = est.run(tr.u, y)
+    assert res.inconsistent.tolist() == [k == 12 for k in range(20)]
+    assert np.all(res.lower <= res.upper)
+    alone = member.run(tr.u, y)
+    np.testing.assert_array_equal(res.lower[12], alone.lower[12])
+    np.testing.assert_array_equal(res.upper[12], alone.upper[12])
+    assert_contains(res, tr.x)
+    with pytest.raises(ivobs.InconsistentDataError):
+        intersect(sys, x0, methods=[member], on_inconsistent="raise").run(tr.u, y)
+
+
+def test_a_members_report_is_passed_on():
+    sys = random_system(7, nx=3, ny=2, nu=1)
+    x0 = Box(-np.ones(3), np.ones(3))
+    tr = adversarial_run(sys, x0, 16, seed=3)
+    y = tr.y.copy()
+    y[9, 1] += 50.0
+    est = intersect(sys, x0, methods=["exact"], strip=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = est.run(tr.u, y)
+    assert res.inconsistent[9] and res.inconsistent.sum() == 1
+    assert any("intersect" in str(w.message) for w in caught)
+    assert_contains(res, tr.x)
+
+
+# -- construction --------------------------------------------------------------------------
+def test_bad_member_specifications():
+    sys = random_system(0, nx=2, ny=1, nu=1)
+    x0 = Box(-np.ones(2), np.ones(2))
+    with pytest.raises(IvobsError, match="unknown method"):
+        intersect(sys, x0, methods=["no-such-method"])
+    with pytest.raises(IvobsError, match="methods"):
+        intersect(sys, x0, methods="exact")
+    with pytest.raises(IvobsError, match="at least one"):
+        intersect(sys, x0, methods=[])
+    with pytest.raises(IvobsError, match=r"methods\[0\]"):
+        intersect(sys, x0, methods=[("exact", 3)])
+    other = random_system(0, nx=3, ny=1, nu=1)
+    with pytest.raises(IvobsError, match="same plant"):
+        intersect(sys, x0, methods=[OpenLoop(other, Box(-np.ones(3), np.ones(3)))])
+    with pytest.raises(IvobsError, match="strip"):
+        intersect(sys, x0, methods=["exact"], strip="yes")
+    with pytest.raises(IvobsError, match="does not accept"):
+        intersect(sys, x0, methods=[("exact", {"gain": 1})])
+
+
+def test_default_members_skip_what_cannot_be_designed():
+    sc, est, _ = servo_default()
+    candidates = [m for m in DEFAULT_METHODS if m in ivobs.methods()]
+    assert len(est.members) + len(est.design.skipped) == len(candidates)
+    # without a prior box, members that need one are skipped, with the reason
+    if any(not ivobs.estimators.get(m).needs_x0 for m in candidates):
+        no_x0 = intersect(sc.system, None)
+        assert no_x0.members and all(not m.needs_x0 for m in no_x0.members)
+        for name in candidates:
+            if ivobs.estimators.get(name).needs_x0:
+                assert any(s.startswith(f"{name}: ") and "x0" in s for s in no_x0.design.skipped)
+    # a continuous-time system: only members that support it
+    ct = LinearSystem([[-1.0, 0.5], [0.0, -2.0]], None, [[1.0, 0.0]], E=[[0.1], [0.1]],
+                      F=[[0.0]], d=Box.symmetric([1.0]), dt=0)  # fmt: skip
+    if any(ivobs.estimators.get(m).supports_continuous for m in candidates):
+        est_ct = intersect(ct, Box(-np.ones(2), np.ones(2)))
+        assert all(m.supports_continuous for m in est_ct.members)
+        assert any("discrete-time" in s for s in est_ct.design.skipped)
+    else:
+        with pytest.raises(ivobs.DesignError, match="methods="):
+            intersect(ct, Box(-np.ones(2), np.ones(2)))

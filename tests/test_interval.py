@@ -1,0 +1,437 @@
+"""The interval-observer family: `interval` (002 eq. 36 / 003 eq. 3), `interval-transformed`
+(002 Theorem 5 / 003 Theorem 2) and `interval-split` (003 Theorem 3): the papers' examples,
+soundness under vertex disturbances at every step, step/run/vectorised agreement, missing
+samples, batches, the ordering theorems 7-8 of 002 and the error messages."""
+
+import json
+import warnings
+from functools import cache
+
+import numpy as np
+import pytest
+
+import ivobs
+from ivobs import Box, DesignError, IvobsError, LinearSystem, scenarios
+from ivobs.testing import adversarial_run, assert_contains, random_system
+
+FAMILY = ("interval", "interval-split", "interval-transformed")
+POLES = {2: [0.2, 0.5], 3: [0.15, 0.4, 0.6], 4: [0.1, 0.3, 0.5, 0.7]}
+
+
+def build_servo(method):
+    sc = scenarios.get("servo-motor", horizon=300)
+    opts = {"L": sc.reference["L2"]} if method == "interval" else {}
+    if method == "interval-transformed":
+        opts = {"poles": POLES[3]}
+    return sc, ivobs.make_estimator(method, sc.system, x0=sc.x0, **opts)
+
+
+@cache
+def servo(method):
+    return build_servo(method)
+
+
+def check_paths(est, tr, rtol=1e-9):
+    """Sound at every step on the loop and the vectorised path, which agree."""
+    loop = est.run(tr.u, tr.y, vectorize=False)
+    vec = est.run(tr.u, tr.y, vectorize=True)
+    assert_contains(loop, tr.x)
+    assert_contains(vec, tr.x)
+    scale = 1.0 + np.abs(loop.upper) + np.abs(loop.lower)
+    assert np.max(np.abs(vec.upper - loop.upper) / scale) < rtol
+    assert np.max(np.abs(vec.lower - loop.lower) / scale) < rtol
+    return loop
+
+
+# -- paper examples -------------------------------------------------------------------------------
+def test_servo_with_the_papers_lmi41_gain():
+    """002 Example 1: L2 from LMI (41) makes A − L2 C nonnegative with ρ ≈ 0.99977."""
+    sc, est = servo("interval")
+    assert est.design.D.min() >= 0
+    assert est.design.spectral_radius == pytest.approx(0.99977, abs=5e-6)
+    for kind in ("paper", "vertex"):
+        tr = sc.simulate(kind, seed=3)
+        res = check_paths(est, tr)
+        assert np.all(np.isfinite(res.lower))
+    # the interval observer is a cooperative special case of the split one: same numbers
+    split = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, L=sc.reference["L2"])
+    res_s = split.run(tr.u, tr.y)
+    np.testing.assert_array_equal(res_s.upper, res.upper)
+
+
+def test_servo_default_gain_beats_the_papers_gain():
+    """LMI (41) is feasible on the servo motor; ivobs' width refinement keeps A − LC >= 0 and
+    gives a smaller steady-state width than the paper's L2 in every state."""
+    sc = scenarios.get("servo-motor", horizon=200)
+    est = ivobs.make_estimator("interval", sc.system, x0=sc.x0)
+    assert est.design.gain == "lmi+width" and est.design.D.min() >= -1e-9
+    _, paper = servo("interval")
+    assert np.all(est.design.steady_width < paper.design.steady_width)
+    # A[3,3] = 0.9995 sits in the unmeasured column: 0.0808 / (1 − 0.9995) bounds w3 from below
+    assert est.design.steady_width[2] > 0.0808 / 0.0005
+    tr = sc.simulate("vertex", seed=0)
+    res, ref = check_paths(est, tr), paper.run(tr.u, tr.y)
+    assert np.all(res.width[-1] < ref.width[-1])
+    lmi = ivobs.make_estimator("interval", sc.system, x0=sc.x0, gain="lmi")
+    assert lmi.design.gain == "lmi" and np.all(lmi.design.steady_width >= est.design.steady_width)
+
+
+@pytest.mark.parametrize("name", ["tang-example2", "efimov-planar"])
+def test_no_cooperative_gain_for_the_papers_counterexamples(name):
+    sc = scenarios.get(name)
+    with pytest.raises(DesignError, match=r"no gain L makes A − LC nonnegative and Schur"):
+        ivobs.make_estimator("interval", sc.system, x0=sc.x0)
+
+
+def test_tang_example2_has_no_split_observer_either():
+    sc = scenarios.get("tang-example2")
+    msg = r"best spectral radius of \|A − LC\| found is 1 .*no gain can do better than 1"
+    with pytest.raises(DesignError, match=msg):
+        ivobs.make_estimator("interval-split", sc.system, x0=sc.x0)
+
+
+def test_tang_example2_transformed_with_the_papers_design():
+    sc = scenarios.get("tang-example2", horizon=200)
+    ref = sc.reference
+    est = ivobs.make_estimator(
+        "interval-transformed",
+        sc.system,
+        x0=sc.x0,
+        L=ref["L"],
+        R=ref["R"],
+        e1=ref["e1"],
+        e2=ref["e2"],
+    )
+    np.testing.assert_allclose(est.design.S, ref["S"], atol=2.2e-3)  # see test_similarity
+    np.testing.assert_allclose(np.sort(est.design.poles.real), [0.000153, 0.325947], atol=1e-6)
+    for kind in ("paper", "vertex"):
+        check_paths(est, sc.simulate(kind, seed=1))
+
+
+def test_planar_example_split_observer_with_the_papers_gain():
+    """003 §IV.A: L = (0.3, 0.6) gives λ(D) = {0, −0.5}, λ(|D|) = {0, 0.5}."""
+    sc = scenarios.get("efimov-planar", horizon=150)
+    est = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, L=sc.reference["L"])
+    assert est.design.spectral_radius == pytest.approx(0.5, abs=1e-12)
+    np.testing.assert_allclose(
+        np.sort(np.linalg.eigvals(est.design.D).real), [-0.5, 0.0], atol=1e-12
+    )
+    tr = sc.simulate()  # the paper's state-dependent δb(t, x)
+    res = est.run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    # the width converges to (I − |D|)⁻¹ |E − LF| Δ = (2.628, 2.24) (ρ = 0.5: fast)
+    np.testing.assert_allclose(res.width[-1], est.design.steady_width, rtol=1e-9)
+    np.testing.assert_allclose(est.design.steady_width, [0.7 * 2.24 + 1.06, 2.24], rtol=1e-12)
+    check_paths(est, sc.simulate("vertex", seed=4))
+    # the default design finds the same spectral radius
+    auto = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, gain="margin")
+    assert auto.design.spectral_radius == pytest.approx(0.5, abs=1e-7)
+
+
+def test_planar_example_transformed_default_design():
+    """The default design of `interval-transformed` succeeds where the paper's R is invalid, and
+    is not much looser than the split observer (the paper: 'a similar performance')."""
+    sc = scenarios.get("efimov-planar", horizon=150)
+    est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0)
+    assert est.design.gain == "search" and est.design.R.min() >= -1e-9
+    assert est.design.spectral_radius < 1
+    split = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, L=sc.reference["L"])
+    assert est.design.steady_width.sum() < 2 * split.design.steady_width.sum()
+    tr = sc.simulate("vertex", seed=5)
+    check_paths(est, tr)
+
+
+@pytest.mark.parametrize("method", ["interval", "interval-split"])
+def test_henon_bounds_from_measurements_long_vertex_run(method):
+    """003 §IV.B (Remark 1): b(t) bounded from y(t); the paper's L = (−0.1, 0.1) for Theorem 1;
+    adversarial a(t), d(t), v(t) on their vertices for 1500 steps."""
+    sc = scenarios.get("henon", horizon=1500)
+    L = sc.reference["L"]
+    est = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=L)
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(est.design.D).real), [-0.4, 0.5])
+    for seed in (0, 1):
+        tr = sc.simulate("vertex", seed=seed)
+        res = est.run(tr.u, tr.y)  # callable bounds: the loop
+        assert_contains(res, tr.x)
+        assert np.all(res.width[100:] < 2.0) and np.all(res.mean_width(100) < 1.0)
+    auto = ivobs.make_estimator(method, sc.system, x0=sc.x0)
+    res_auto = auto.run(tr.u, tr.y)
+    assert_contains(res_auto, tr.x)
+    assert np.all(res_auto.mean_width(100) < res.mean_width(100))  # ivobs' gain is tighter
+
+
+# -- random systems, vertex disturbances, every step --------------------------------------------
+def cooperative_system(seed):
+    """Random systems that admit A − LC >= 0 Schur: C invertible (ny = nx; odd seeds, with
+    feedthrough, some with singular A), or A >= 0 and Schur with one output (even seeds)."""
+    rng = np.random.default_rng(seed)
+    if seed % 2:
+        return random_system(
+            seed,
+            nx=2,
+            ny=2,
+            nu=1,
+            symmetric_bounds=bool(seed % 3),
+            feedthrough=True,
+            invertible=seed % 4 != 1,
+        )
+    n = int(rng.integers(2, 5))
+    A = rng.uniform(0, 1, (n, n)) * (rng.random((n, n)) < 0.7)
+    A *= rng.uniform(0.5, 0.98) / max(np.max(np.abs(np.linalg.eigvals(A))), 1e-3)
+    C = rng.normal(size=(1, n))
+    r = rng.uniform(0.1, 1.0, n + 1)
+    c = rng.uniform(-0.5, 0.5, n + 1) * r
+    return LinearSystem(
+        A,
+        rng.normal(size=(n, 1)),
+        C,
+        D=rng.normal(size=(1, 1)),
+        E=rng.normal(size=(n, n + 1)) * 0.3,
+        F=rng.normal(size=(1, n + 1)) * 0.1,
+        d=Box(c - r, c + r),
+    )
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_interval_random_systems_vertex_disturbances(seed):
+    sys = cooperative_system(seed)
+    x0 = Box(-np.ones(sys.nx), np.ones(sys.nx))
+    est = ivobs.make_estimator("interval", sys, x0=x0)
+    assert est.design.D.min() >= -1e-9
+    check_paths(est, adversarial_run(sys, x0, 120, seed=seed))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_split_and_transformed_random_systems_vertex_disturbances(seed):
+    kw = dict(
+        nx=2 + seed % 3,
+        ny=1 + seed % 2,
+        nu=1,
+        invertible=seed % 3 != 0,
+        symmetric_bounds=seed % 2 == 0,
+        feedthrough=seed % 4 == 1,
+    )
+    sys = random_system(100 + seed, **kw)
+    x0 = Box(-np.ones(sys.nx), 2 * np.ones(sys.nx))
+    tr = adversarial_run(sys, x0, 120, seed=seed, hold=1 + seed % 3)
+    est = ivobs.make_estimator("interval-transformed", sys, x0=x0, poles=POLES[sys.nx])
+    check_paths(est, tr)
+    try:
+        split = ivobs.make_estimator("interval-split", sys, x0=x0)
+    except DesignError as exc:
+        assert "spectral radius of |A − LC|" in str(exc)
+        return
+    assert split.design.spectral_radius < 1
+    check_paths(split, tr)
+
+
+def test_split_design_succeeds_on_most_random_systems():
+    ok = 0
+    for seed in range(12):
+        try:
+            ivobs.make_estimator(
+                "interval-split",
+                random_system(200 + seed, nx=3, ny=2),
+                x0=Box(-np.ones(3), np.ones(3)),
+            )
+            ok += 1
+        except DesignError:
+            pass
+    assert ok >= 6
+
+
+def test_time_varying_bounds_vectorised_equals_loop():
+    sys0 = random_system(7, nx=2, ny=2, nu=1)
+    T = 80
+    k = np.arange(T)[:, None]
+    r = (0.5 + 0.4 * np.sin(0.1 * k)) * np.ones((1, sys0.nd))
+    sys = LinearSystem(sys0.A, sys0.B, sys0.C, E=sys0.E, F=sys0.F, d=Box(-r, r))
+    x0 = Box(-np.ones(2), np.ones(2))
+    tr = adversarial_run(sys, x0, T, seed=2)
+    for method in FAMILY:
+        opts = {"poles": POLES[2]} if method == "interval-transformed" else {}
+        est = ivobs.make_estimator(method, sys, x0=x0, **opts)
+        check_paths(est, tr)
+
+
+# -- protocol: step, state, batches, missing samples ---------------------------------------------
+@pytest.mark.parametrize("method", FAMILY)
+def test_step_reproduces_run_and_state_restores(method):
+    sc, est = servo(method)
+    tr = sc.simulate("vertex", seed=8)
+    res = est.run(tr.u[:60], tr.y[:60])
+    est.reset()
+    for k in range(30):
+        box = est.step(tr.u[k], tr.y[k])
+        np.testing.assert_array_equal(box.lo, res.lower[k])
+        np.testing.assert_array_equal(box.hi, res.upper[k])
+    saved = json.loads(json.dumps(est.state()))
+    other = build_servo(method)[1]  # designed again: same options, same design
+    other.restore(saved)
+    for k in range(30, 60):
+        np.testing.assert_allclose(other.step(tr.u[k], tr.y[k]).hi, res.upper[k], rtol=1e-12)
+
+
+@pytest.mark.parametrize("method", FAMILY)
+def test_batches_equal_single_runs(method):
+    sc, est = servo(method)
+    trs = [sc.simulate("vertex", seed=s) for s in (1, 2, 3)]
+    U = np.stack([t.u[:200] for t in trs])
+    Y = np.stack([t.y[:200] for t in trs])
+    X = np.stack([t.x[:200] for t in trs])
+    res = est.run(U, Y)  # batches take the vectorised path
+    assert res.lower.shape == (3, 200, 3)
+    assert res.contains(X).all()
+    for b in range(3):
+        single = est.run(trs[b].u[:200], trs[b].y[:200], vectorize=False)
+        np.testing.assert_allclose(res.upper[b], single.upper, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(res.lower[b], single.lower, rtol=1e-10, atol=1e-12)
+    Y[1, 50] = np.nan  # a missing sample: the loop, per stream
+    res_m = est.run(U, Y)
+    assert res.contains(X).all() and np.isfinite(res_m.upper).all()
+
+
+@pytest.mark.parametrize("method", FAMILY)
+def test_missing_samples_random_and_gap(method):
+    sc, est = servo(method)
+    tr = sc.simulate("vertex", seed=21)
+    rng = np.random.default_rng(0)
+    y = tr.y.copy()
+    y[rng.random(tr.T) < 0.1] = np.nan
+    y[rng.random(y.shape) < 0.1] = np.nan
+    y[100:120] = np.nan
+    res = est.run(tr.u, y)
+    assert_contains(res, tr.x)
+    assert np.all(np.isfinite(res.upper))
+    full = est.run(tr.u, tr.y)
+    assert np.all(res.width[119] > full.width[119])
+    # in the gap the prediction is the model's: x+ ∈ A[x] + B u + E[d] (gain zero)
+    A, B, _, _, E, _ = sc.system.matrices_at(0)
+    k = 110
+    lo, hi = ivobs.image_bounds(A, res.lower[k], res.upper[k])
+    elo, ehi = ivobs.image_bounds(E, sc.system.d.lo, sc.system.d.hi)
+    if method != "interval-transformed":  # (its box is the image of the z box, not of this one)
+        np.testing.assert_allclose(res.upper[k + 1], hi + B @ tr.u[k] + ehi, rtol=1e-9)
+        np.testing.assert_allclose(res.lower[k + 1], lo + B @ tr.u[k] + elo, rtol=1e-9)
+
+
+def test_missing_component_breaks_nonnegativity_and_stays_sound():
+    """Servo, L2: dropping the speed sensor leaves A − L2[:, :1] C with negative entries; the
+    D⁺/D⁻ step keeps the box sound."""
+    sc, est = servo("interval")
+    L = sc.reference["L2"].copy()
+    L[:, 1] = 0
+    A, _, C, *_ = sc.system.matrices_at(0)
+    assert (A - L @ C).min() < 0
+    for seed in range(3):
+        tr = sc.simulate("vertex", seed=seed)
+        y = tr.y.copy()
+        y[::2, 1] = np.nan
+        assert_contains(est.run(tr.u, y), tr.x)
+
+
+def test_inconsistent_measurement_is_reported_and_ignored():
+    sc, est = servo("interval-split")
+    tr = sc.simulate("vertex", seed=2)
+    y = tr.y.copy()
+    y[40, 0] += 3.0  # a sensor fault
+    with pytest.warns(UserWarning, match=r"step\(s\) \[40\] is inconsistent"):
+        res = est.run(tr.u, y, vectorize=True)
+    assert res.inconsistent[40] and res.inconsistent.sum() == 1
+    y2 = y.copy()
+    y2[40] = np.nan
+    np.testing.assert_array_equal(est.run(tr.u, y2).upper, res.upper)
+    with pytest.raises(ivobs.InconsistentDataError):
+        ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, on_inconsistent="raise").run(
+            tr.u, y
+        )
+
+
+# -- ordering theorems 7 and 8 of paper 002 -----------------------------------------------------
+def _reachability(sys, x0, L):
+    if "reachability" not in ivobs.methods():
+        pytest.skip("the reachability method is not available")
+    return ivobs.make_estimator("reachability", sys, x0=x0, L=L)
+
+
+def test_theorem7_reachability_inside_interval_with_the_same_gain():
+    sc, est = servo("interval")
+    reach = _reachability(sc.system, sc.x0, sc.reference["L2"])
+    tr = sc.simulate("vertex", seed=6)
+    a, b = est.run(tr.u, tr.y), reach.run(tr.u, tr.y)
+    tol = 1e-8 * (1 + np.abs(a.upper))
+    assert np.all(b.upper <= a.upper + tol) and np.all(b.lower >= a.lower - tol)
+
+
+def test_theorem8_reachability_inside_transformed_with_the_same_gain():
+    sc = scenarios.get("tang-example2", horizon=100)
+    ref = sc.reference
+    est = ivobs.make_estimator(
+        "interval-transformed",
+        sc.system,
+        x0=sc.x0,
+        L=ref["L"],
+        R=ref["R"],
+        e1=ref["e1"],
+        e2=ref["e2"],
+    )
+    reach = _reachability(sc.system, sc.x0, ref["L"])
+    tr = sc.simulate("vertex", seed=7)
+    a, b = est.run(tr.u, tr.y), reach.run(tr.u, tr.y)
+    tol = 1e-8 * (1 + np.abs(a.upper))
+    assert np.all(b.upper <= a.upper + tol) and np.all(b.lower >= a.lower - tol)
+    assert a.mean_width(20).sum() > 2 * b.mean_width(20).sum()  # 002 Fig. 4: much looser
+
+
+# -- bad input ------------------------------------------------------------------------------------
+def test_bad_inputs_name_the_argument():
+    sc = scenarios.get("servo-motor")
+    sys, x0 = sc.system, sc.x0
+    with pytest.raises(IvobsError, match=r"L: expected shape \(3, 2\)"):
+        ivobs.make_estimator("interval", sys, x0=x0, L=np.ones((2, 2)))
+    with pytest.raises(IvobsError, match="gain: expected 'lmi' or 'width'"):
+        ivobs.make_estimator("interval", sys, x0=x0, gain="fast")
+    with pytest.raises(IvobsError, match="gain: expected 'width', 'margin' or 'lmi'"):
+        ivobs.make_estimator("interval-split", sys, x0=x0, gain="fast")
+    with pytest.raises(IvobsError, match="x0: the interval method needs a prior box"):
+        ivobs.make_estimator("interval", sys)
+    with pytest.raises(IvobsError, match="L, poles: give the gain L or the poles"):
+        ivobs.make_estimator(
+            "interval-transformed", sys, x0=x0, L=sc.reference["L1"], poles=POLES[3]
+        )
+    with pytest.raises(IvobsError, match="e1, e2: they only serve to compute S"):
+        ivobs.make_estimator("interval-transformed", sys, x0=x0, S=np.eye(3), e1=np.ones(3))
+    with pytest.raises(IvobsError, match=r"poles: expected values inside"):
+        ivobs.make_estimator("interval-transformed", sys, x0=x0, poles=[0.2, 0.5, 1.5])
+    with pytest.raises(DesignError, match=r"A − LC is not nonnegative: entry \(3, 2\) = -1.381"):
+        ivobs.make_estimator("interval", sys, x0=x0, L=sc.reference["L1"])
+    with pytest.raises(DesignError, match=r"\|A − LC\| = D⁺ \+ D⁻ is not Schur: spectral radius"):
+        ivobs.make_estimator("interval-split", sys, x0=x0, L=np.zeros((3, 2)))
+    with pytest.raises(DesignError, match=r"S \(A − LC\) S⁻¹ is not nonnegative"):
+        ivobs.make_estimator("interval-transformed", sys, x0=x0, L=sc.reference["L1"], S=np.eye(3))
+    with pytest.raises(DesignError, match="S is singular"):
+        ivobs.make_estimator(
+            "interval-transformed", sys, x0=x0, L=sc.reference["L2"], S=np.zeros((3, 3))
+        )
+    with pytest.raises(DesignError, match="S does not transform A − LC into R"):
+        ivobs.make_estimator(
+            "interval-transformed", sys, x0=x0, L=sc.reference["L2"], S=np.eye(3), R=np.eye(3) * 0.5
+        )
+    ct = LinearSystem(-np.eye(2), None, np.eye(2), dt=0)
+    with pytest.raises(IvobsError, match="discrete-time"):
+        ivobs.make_estimator("interval-split", ct, x0=Box(-np.ones(2), np.ones(2)))
+
+
+def test_given_S_and_R_from_a_nonnegative_gain():
+    """With L2 (A − L2 C >= 0) S = I is a valid transformation: the transformed observer then
+    equals the interval observer (after step 0, where both return x0)."""
+    sc, est = servo("interval")
+    tr_ = ivobs.make_estimator(
+        "interval-transformed", sc.system, x0=sc.x0, L=sc.reference["L2"], S=np.eye(3)
+    )
+    assert tr_.design.e1 is None and tr_.design.gain == "given"
+    tr = sc.simulate("vertex", seed=9)
+    np.testing.assert_allclose(tr_.run(tr.u, tr.y).upper, est.run(tr.u, tr.y).upper, rtol=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tr_.run(tr.u, tr.y, vectorize=True)

@@ -1,0 +1,458 @@
+"""The KKL / Sylvester interval observers of paper 004 (method ``kkl``)."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import ivobs
+from ivobs import Box, DesignError, IvobsError, LinearSystem, make_estimator, simulate
+from ivobs.testing import adversarial_run, assert_contains, random_system
+
+
+def _missing(y, seed, frac=0.1, gap=(30, 50)):
+    rng = np.random.default_rng(seed)
+    y = y.copy()
+    y[rng.random(y.shape[0]) < frac] = np.nan
+    y[gap[0] : gap[1]] = np.nan
+    y[gap[1] + 3, 0] = np.nan  # one component only
+    return y
+
+
+def _ltv_system(seed, nx=3, ny=1, nu=1, symmetric=True):
+    """A random discrete-time LTV system with invertible A[k] (004 Assumption 3)."""
+    rng = np.random.default_rng(seed)
+    base = random_system(rng, nx=nx, ny=ny, nu=nu, rho=1.05, symmetric_bounds=symmetric)
+    A0, A1 = base.A, 0.3 * rng.normal(size=(nx, nx))
+
+    def A_k(k):
+        return A0 + np.sin(0.7 * k) * A1
+
+    return LinearSystem(A_k, base.B, base.C, E=base.E, F=base.F, d=base.d)
+
+
+# ---------------------------------------------------------------- Example 3 (DT LTV) ----------
+def test_example3_design_and_valid_from_k_star_2():
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    est = make_estimator("kkl", sc.system, x0=sc.x0)
+    ref = sc.reference
+    assert est.valid_from == ref["k_star"] == 2
+    np.testing.assert_array_equal(est.design.A_z, ref["gamma"] * ref["A_tilde"])
+    np.testing.assert_array_equal(est.design.B_z, ref["B_tilde"])
+    assert est.design.gamma == 1.0 and est.design.indices == (2,) and est.design.n_z == 2
+    assert not np.any(est.design.T)  # T0 = 0: z[0] = 0 exactly
+    res = est.run(sc.u, sc.simulate().y)
+    assert np.isnan(res.lower[:2]).all() and np.isfinite(res.lower[2:]).all()
+
+
+@pytest.mark.parametrize("kind", ["paper", "vertex", "vertex2", "zero"])
+def test_example3_bounds_contain_the_truth(kind):
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    if kind.startswith("vertex"):
+        d = ivobs.vertex_disturbance(sc.system.d, sc.horizon, seed=len(kind))
+        tr = simulate(sc.system, sc.x_true0, sc.u, d)
+    else:
+        tr = sc.simulate(kind)
+    res = make_estimator("kkl", sc.system, x0=sc.x0).run(sc.u, tr.y)
+    assert_contains(res, tr.x)
+    assert res.contains(tr.x).all() and np.all(res.width[2:] > 0)
+
+
+def test_example3_needs_no_prior_with_T0_zero():
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    tr = sc.simulate()
+    with_prior = make_estimator("kkl", sc.system, x0=sc.x0).run(sc.u, tr.y)
+    without = make_estimator("kkl", sc.system).run(sc.u, tr.y)
+    assert without.valid_from == 2
+    np.testing.assert_array_equal(with_prior.lower[2:], without.lower[2:])
+
+
+def test_example3_sylvester_T0_uses_the_prior_from_step_0():
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    tr = sc.simulate()
+    est = make_estimator("kkl", sc.system, x0=sc.x0, T0="sylvester")
+    res = est.run(sc.u, tr.y)
+    assert est.valid_from == 0 and res.contains(tr.x).all()
+    np.testing.assert_allclose(res.lower[0], sc.x0.lo, rtol=1e-9)  # (15.c-d) ∩ prior at k = 0
+    with pytest.raises(IvobsError, match="x0: the kkl method needs a prior box"):
+        make_estimator("kkl", sc.system, T0="sylvester")
+
+
+def test_example3_smaller_gamma_and_explicit_target():
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    tr = sc.simulate("vertex", seed=3)
+    est = make_estimator("kkl", sc.system, A_z=np.diag([0.3, 0.6]), B_z=[[1.0], [2.0]], gamma=0.5)
+    np.testing.assert_allclose(est.design.A_z, np.diag([0.15, 0.3]))
+    assert est.run(sc.u, tr.y).contains(tr.x).all()
+
+
+# ------------------------------------------------------------- Example 1, DT (random8) -------
+@pytest.fixture(scope="module")
+def random8():
+    sc = ivobs.scenarios.get("kkl-random8", horizon=400)
+    return sc, make_estimator("kkl", sc.system, x0=sc.x0)
+
+
+def test_random8_contains_the_truth_and_reaches_the_predicted_width(random8):
+    sc, est = random8
+    for tr in (sc.simulate(), sc.simulate("vertex", seed=1)):
+        res = est.run(sc.u, tr.y)
+        assert_contains(res, tr.x)
+        # the width does not depend on the data: it converges to the closed form
+        np.testing.assert_allclose(res.width[-1], est.design.predicted_width, rtol=1e-6)
+        assert np.all(res.width[1:20].max(axis=0) > 1.3 * res.width[-1])  # shrinks to that level
+    assert est.design.tuned and est.design.cond_T < 1e3
+
+
+def test_random8_without_disturbance_width_tends_to_zero(random8):
+    sc, _ = random8
+    s = sc.system
+    quiet = LinearSystem(s.A, s.B, s.C, E=s.E, F=s.F, d=Box(np.zeros(3), np.zeros(3)))
+    tr = simulate(quiet, sc.x_true0, sc.u, np.zeros((sc.horizon, 3)))
+    est = make_estimator("kkl", quiet, x0=sc.x0)
+    res = est.run(sc.u, tr.y)
+    assert res.contains(tr.x).all()
+    assert np.all(est.design.predicted_width == 0)
+    w = res.width.max(axis=1)
+    assert w[0] > 1 and w[-1] < 1e-8 * (1 + np.abs(tr.x).max())  # Proposition 1, last claim
+    assert np.all(np.diff(w[5:]) <= 1e-12)
+
+
+def test_random8_observer_6_in_x_coordinates_gives_the_same_bounds(random8):
+    sc, est = random8
+    tr = sc.simulate()
+    x_est = make_estimator(
+        "kkl",
+        sc.system,
+        x0=sc.x0,
+        A_z=est.design.A_z,
+        B_z=est.design.B_z,
+        T=est.design.T,
+        coordinates="x",
+    )
+    rz, rx = est.run(sc.u, tr.y), x_est.run(sc.u, tr.y)
+    np.testing.assert_allclose(rx.lower, rz.lower, rtol=1e-8, atol=1e-8)
+    assert rx.contains(tr.x).all()
+    vx = x_est.run(sc.u, tr.y, vectorize=True)
+    np.testing.assert_allclose(vx.lower, rx.lower, rtol=1e-9, atol=1e-9)
+
+
+# ------------------------------------------------------------------ protocol --------------------
+def test_step_equals_run_and_vectorised_path_agrees():
+    sc = ivobs.scenarios.get("servo-motor", horizon=300)
+    tr = sc.simulate("vertex", seed=2)
+    est = make_estimator("kkl", sc.system, x0=sc.x0)
+    res = est.run(tr.u, tr.y, vectorize=False)
+    est.reset()
+    for k in range(tr.T):
+        box = est.step(tr.u[k], tr.y[k])
+        np.testing.assert_array_equal(box.lo, res.lower[k])
+        np.testing.assert_array_equal(box.hi, res.upper[k])
+    vec = est.run(tr.u, tr.y, vectorize=True)
+    scale = 1 + np.abs(res.lower)
+    assert np.max(np.abs(vec.lower - res.lower) / scale) < 1e-9
+    assert np.max(np.abs(vec.upper - res.upper) / scale) < 1e-9
+
+
+def test_non_diagonal_target_uses_the_doubling_scan_and_agrees_with_the_loop():
+    sc = ivobs.scenarios.get("servo-motor", horizon=400)
+    tr = sc.simulate("vertex", seed=6)
+    Az = np.array([[0.3, 0.1, 0.0], [0.0, 0.4, 0.1], [0.05, 0.0, 0.5]])  # nonnegative, Schur
+    Bz = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    est = make_estimator("kkl", sc.system, x0=sc.x0, A_z=Az, B_z=Bz)
+    loop, vec = est.run(tr.u, tr.y, vectorize=False), est.run(tr.u, tr.y, vectorize=True)
+    np.testing.assert_allclose(vec.lower, loop.lower, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(vec.upper, loop.upper, rtol=1e-9, atol=1e-12)
+    assert vec.contains(tr.x).all()
+
+
+def test_time_varying_bounds_vectorised_and_loop_agree():
+    sc = ivobs.scenarios.get("servo-motor")
+    s = sc.system
+    T = 300
+    scale = 1.0 + 0.5 * np.sin(0.05 * np.arange(T))[:, None]
+    dbox = Box(s.d.lo * scale, s.d.hi * scale)
+    sys_tv = LinearSystem(s.A, s.B, s.C, E=s.E, F=s.F, d=dbox)
+    tr = simulate(sys_tv, sc.x_true0, np.full((T, 1), 2.0), ivobs.vertex_disturbance(dbox, T, 3))
+    est = make_estimator("kkl", sys_tv, x0=sc.x0)
+    loop, vec = est.run(tr.u, tr.y, vectorize=False), est.run(tr.u, tr.y, vectorize=True)
+    assert loop.contains(tr.x).all() and vec.contains(tr.x).all()
+    np.testing.assert_allclose(vec.upper, loop.upper, rtol=1e-9, atol=1e-12)
+
+
+def test_batches_equal_single_runs():
+    sc = ivobs.scenarios.get("servo-motor", horizon=200)
+    trs = [sc.simulate("vertex", seed=s) for s in range(3)]
+    est = make_estimator("kkl", sc.system, x0=sc.x0)
+    res = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]))
+    assert res.lower.shape == (3, 200, 3)
+    assert res.contains(np.stack([t.x for t in trs])).all()
+    for b, tr in enumerate(trs):
+        single = est.run(tr.u, tr.y)
+        np.testing.assert_allclose(res.lower[b], single.lower, rtol=1e-9, atol=1e-12)
+
+
+def test_state_restore_continues_identically():
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    tr = sc.simulate()
+    est = make_estimator("kkl", sc.system, x0=sc.x0)
+    est.reset()
+    for k in range(10):
+        est.step(None, tr.y[k])
+    saved = json.loads(json.dumps(est.state()))
+    rest = [est.step(None, tr.y[k]) for k in range(10, 30)]
+    other = make_estimator("kkl", sc.system, x0=sc.x0)
+    other.restore(saved)
+    for k, box in zip(range(10, 30), rest):
+        np.testing.assert_array_equal(other.step(None, tr.y[k]).lo, box.lo)
+
+
+# ------------------------------------------------------------------ property tests -------------
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(
+    seed=st.integers(0, 10_000),
+    nx=st.integers(2, 4),
+    ny=st.integers(1, 2),
+    invertible=st.booleans(),
+    symmetric=st.booleans(),
+    feedthrough=st.booleans(),
+    unstable=st.booleans(),
+)
+def test_lti_random_systems_vertex_disturbances(
+    seed, nx, ny, invertible, symmetric, feedthrough, unstable
+):
+    sys = random_system(
+        seed,
+        nx=nx,
+        ny=ny,
+        nu=1,
+        rho=1.1 if unstable else 0.9,
+        invertible=invertible,
+        symmetric_bounds=symmetric,
+        feedthrough=feedthrough,
+    )
+    x0 = Box(-np.ones(nx), np.ones(nx))
+    tr = adversarial_run(sys, x0, 60, seed=seed)
+    est = make_estimator("kkl", sys, x0=x0)
+    res = est.run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    est.reset()
+    for k in (0, 1, 2):
+        box = est.step(tr.u[k], tr.y[k])
+        np.testing.assert_array_equal(box.lo, res.lower[k])
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(
+    seed=st.integers(0, 10_000),
+    nx=st.integers(2, 3),
+    ny=st.integers(1, 2),
+    symmetric=st.booleans(),
+    T0=st.sampled_from(["zero", "sylvester"]),
+)
+def test_ltv_random_systems_vertex_disturbances(seed, nx, ny, symmetric, T0):
+    sys = _ltv_system(seed, nx=nx, ny=ny, symmetric=symmetric)
+    x0 = Box(-np.ones(nx), np.ones(nx))
+    tr = adversarial_run(sys, x0, 40, seed=seed)
+    est = make_estimator("kkl", sys, x0=x0, T0=T0)
+    res = est.run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    assert np.isfinite(res.lower[est.valid_from :]).all()
+    assert est.valid_from <= nx + 1
+
+
+# ------------------------------------------------------------------ missing samples ------------
+def test_missing_samples_lti():
+    sc = ivobs.scenarios.get("kkl-random8", horizon=200)
+    tr = sc.simulate("vertex", seed=4)
+    y = _missing(tr.y, 4)
+    est = make_estimator("kkl", sc.system, x0=sc.x0)
+    res = est.run(sc.u, y)
+    assert_contains(res, tr.x)
+    assert np.isfinite(res.lower).all() and res.missing.sum() > 20
+    full = est.run(sc.u, tr.y)
+    assert res.width[49].sum() > full.width[49].sum()  # the gap widens the boxes
+    est.reset()
+    for k in range(60):
+        np.testing.assert_array_equal(est.step(sc.u[k], y[k]).lo, res.lower[k])
+
+
+def test_missing_samples_ltv():
+    sc = ivobs.scenarios.get("kkl-ltv-dt", horizon=60)
+    tr = simulate(sc.system, sc.x_true0, sc.u, ivobs.vertex_disturbance(sc.system.d, 60, seed=5))
+    y = _missing(tr.y, 5, gap=(20, 40))
+    y[1] = np.nan  # before T[k] is left-invertible: bounded through the open-loop box
+    res = make_estimator("kkl", sc.system, x0=sc.x0).run(sc.u, y)
+    assert_contains(res, tr.x)
+    assert np.isfinite(res.lower[2:]).all()
+    with pytest.raises(IvobsError, match="pass x0"):
+        make_estimator("kkl", sc.system).run(sc.u, y)
+
+
+def test_inconsistent_measurement_is_reported_and_not_used():
+    sc = ivobs.scenarios.get("servo-motor", horizon=3000)
+    tr = sc.simulate()
+    y = tr.y.copy()
+    y[2500, 1] += 5.0  # a sensor fault
+    est = make_estimator("kkl", sc.system, x0=sc.x0)
+    with pytest.warns(UserWarning, match=r"step\(s\) \[2500\]"):
+        res = est.run(sc.u, y)
+    assert res.inconsistent[2500] and res.inconsistent.sum() == 1
+    assert res.contains(tr.x).all()
+
+
+def test_bounds_computed_from_the_measurement_henon():
+    sc = ivobs.scenarios.get("henon", horizon=150)
+    tr = sc.simulate()
+    res = make_estimator("kkl", sc.system, x0=sc.x0).run(sc.u, tr.y)
+    assert_contains(res, tr.x)
+
+
+# ------------------------------------------------------------------ continuous time -------------
+def _pendulum_u(t):
+    return np.array([0.15 * np.sin(3 * t)])  # the known input of Example 2, between samples too
+
+
+def test_pendulum_contains_the_truth_on_the_fine_grid():
+    sc = ivobs.scenarios.get("pendulum", t_final=5.0)
+    tr = sc.simulate()
+    est = make_estimator("kkl", sc.system, x0=sc.x0, input_hold=_pendulum_u)
+    assert est.valid_from == 0 and est.design.ell == 2.0
+    np.testing.assert_array_equal(est.design.A_z, np.diag([-2.0, -4.0]))
+    res = est.run(tr.u, tr.y, t=tr.t)
+    assert_contains(res, tr.x)
+    w = res.width[200:]
+    assert np.all(w.mean(axis=0) < 0.5 * res.width[0])  # contracts from the prior box
+
+
+def test_pendulum_missing_samples_and_step():
+    sc = ivobs.scenarios.get("pendulum", t_final=2.0)
+    tr = sc.simulate("vertex", seed=1)
+    y = _missing(tr.y, 7, gap=(60, 80))
+    est = make_estimator("kkl", sc.system, x0=sc.x0, input_hold=_pendulum_u)
+    res = est.run(tr.u, y, t=tr.t)
+    assert_contains(res, tr.x)
+    assert np.isfinite(res.lower).all()
+    est.reset()
+    for k in range(5):
+        np.testing.assert_array_equal(est.step(tr.u[k], y[k], t=tr.t[k]).hi, res.upper[k])
+    with pytest.raises(IvobsError, match="t: continuous-time estimation needs"):
+        est.run(tr.u, y)
+
+
+@pytest.mark.parametrize("kind", ["paper", "vertex"])
+def test_example1_continuous_contains_the_truth_on_the_fine_grid(kind):
+    sc = ivobs.scenarios.get("kkl-random8", continuous=True, t_final=4.0)
+    tr = sc.simulate(kind, seed=2)
+    est = make_estimator("kkl", sc.system, x0=sc.x0, tune=False)
+    assert ivobs.linalg.is_metzler(est.design.A_z) and ivobs.linalg.is_hurwitz(est.design.A_z)
+    np.testing.assert_allclose(
+        est.design.T @ sc.system.A,
+        est.design.A_z @ est.design.T + est.design.B_z @ sc.system.C,
+        atol=1e-9,
+    )
+    res = est.run(tr.u, tr.y, t=tr.t)
+    assert_contains(res, tr.x)
+    # the sampled-data observer reaches about the closed-form steady width of observer (3)
+    ratio = res.width[-1] / est.design.predicted_width
+    assert np.all((ratio > 0.5) & (ratio < 1.2))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_continuous_random_systems_vertex_disturbances(seed):
+    dt_sys = random_system(seed, nx=3, ny=2, nu=1, feedthrough=True, symmetric_bounds=False)
+    sys = LinearSystem(
+        2.0 * (dt_sys.A - np.eye(3)),
+        dt_sys.B,
+        dt_sys.C,
+        D=dt_sys.D,
+        E=dt_sys.E,
+        F=dt_sys.F,
+        d=dt_sys.d,
+        dt=0,
+    )  # Hurwitz
+    x0 = Box(-np.ones(3), np.ones(3))
+    t = np.arange(120) * 0.05
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(120, 1))
+    d = ivobs.vertex_disturbance(sys.d, 120, seed=seed)
+    tr = simulate(sys, x0.hi * np.sign(rng.normal(size=3)), u, d, t=t)  # u, d held (ZOH)
+    est = make_estimator("kkl", sys, x0=x0)
+    res = est.run(u, tr.y, t=t)
+    assert_contains(res, tr.x)
+    saved = None
+    est.reset()
+    for k in range(60):
+        box = est.step(u[k], tr.y[k], t=t[k])
+        if k == 29:
+            saved = json.loads(json.dumps(est.state()))
+    other = make_estimator("kkl", sys, x0=x0)
+    other.restore(saved)
+    for k in range(30, 60):
+        box = other.step(u[k], tr.y[k], t=t[k])
+        np.testing.assert_array_equal(box.lo, res.lower[k])
+
+
+def test_continuous_lti_without_disturbance_converges_to_zero_width():
+    A = np.array([[0.0, 1.0], [-2.0, -0.3]])
+    sys = LinearSystem(A, np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]), dt=0)
+    t = np.arange(0, 8.0, 0.02)
+    u = np.sin(t)[:, None]
+    tr = simulate(sys, [0.5, -0.2], u, t=t)
+    res = make_estimator("kkl", sys, x0=Box([-1, -1], [1, 1])).run(u, tr.y, t=t)
+    assert res.contains(tr.x).all()
+    assert res.width[-1].max() < 1e-6
+
+
+# ------------------------------------------------------------------ errors ---------------------
+def test_errors_name_the_argument():
+    sc = ivobs.scenarios.get("servo-motor")
+    s = sc.system
+    with pytest.raises(IvobsError, match="x0: the kkl method needs a prior box"):
+        make_estimator("kkl", s)
+    with pytest.raises(IvobsError, match="gamma: the factor of"):
+        make_estimator("kkl", s, x0=sc.x0, gamma=0.5)
+    with pytest.raises(IvobsError, match="T0: only for time-varying"):
+        make_estimator("kkl", s, x0=sc.x0, T0="zero")
+    with pytest.raises(IvobsError, match="A_z, B_z: give both"):
+        make_estimator("kkl", s, x0=sc.x0, A_z=np.eye(3) * 0.5)
+    with pytest.raises(DesignError, match="nonnegative"):
+        make_estimator(
+            "kkl", s, x0=sc.x0, A_z=[[0.1, -0.05, 0], [0, 0.2, 0], [0, 0, 0.3]], B_z=np.ones((3, 2))
+        )
+    with pytest.raises(DesignError, match=r"does not solve T A = A_z T \+ B_z C"):
+        make_estimator(
+            "kkl", s, x0=sc.x0, A_z=np.diag([0.1, 0.2, 0.3]), B_z=np.ones((3, 2)), T=np.eye(3)
+        )
+    with pytest.raises(DesignError, match=r"cond\(T\) = .* > max_cond"):
+        make_estimator(
+            "kkl", s, x0=sc.x0, A_z=np.diag([0.1, 0.2, 0.3]), B_z=np.ones((3, 2)), max_cond=1.5
+        )
+    with pytest.raises(IvobsError, match="coordinates"):
+        make_estimator("kkl", ivobs.scenarios.get("kkl-ltv-dt").system, coordinates="x")
+    unobs = LinearSystem(np.diag([0.5, 0.2]), C=[[1.0, 0.0]])
+    with pytest.raises(DesignError, match="not observable: rank 1 of 2"):
+        make_estimator("kkl", unobs, x0=Box([-1, -1], [1, 1]))
+    pend = ivobs.scenarios.get("pendulum")
+    with pytest.raises(IvobsError, match="T0: 'zero' is not available in continuous time"):
+        make_estimator("kkl", pend.system, x0=pend.x0, T0="zero")
+    with pytest.raises(IvobsError, match="input_hold"):
+        make_estimator("kkl", pend.system, x0=pend.x0, input_hold="cubic")
+
+
+def test_singular_A_k_in_time_varying_discrete_time():
+    sys = LinearSystem(
+        lambda k: np.array([[1.0, 1.0], [0.0, 0.0 if k == 1 else 0.5]]), C=[[1.0, 0.0]]
+    )
+    with pytest.raises(DesignError, match=r"A\[1\] is singular"):
+        make_estimator("kkl", sys, x0=Box([-1, -1], [1, 1]), T0="zero")
+
+
+def test_warning_free_on_clean_data():
+    sc = ivobs.scenarios.get("kkl-ltv-dt")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make_estimator("kkl", sc.system, x0=sc.x0).run(sc.u, sc.simulate().y)
