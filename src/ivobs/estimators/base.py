@@ -48,6 +48,9 @@ __all__ = ["ROUNDING", "VECTOR_MIN_STEPS", "Design", "Estimator", "check_x0"]
 ROUNDING = 1e-10
 """Relative outward widening of every bound (covers floating-point rounding)."""
 
+BATCH_CHUNK = 2_000_000
+"""Batches are processed in chunks of about this many floats per signal (cache-sized)."""
+
 VECTOR_MIN_STEPS = 2000
 """``run()`` uses a method's vectorised path from this many steps on (or for batches); shorter
 records use the same loop as ``step()``, so ``run()`` and ``step()`` agree bit for bit there."""
@@ -96,8 +99,9 @@ def outward(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _owned(a: Any) -> np.ndarray:
-    """A float array safe to modify in place (copies only read-only or foreign-typed input)."""
-    if isinstance(a, np.ndarray) and a.dtype == float and a.flags.writeable and a.flags.owndata:
+    """A float array safe to modify in place: ``_run`` returns fresh arrays (or views of
+    fresh arrays), so only read-only or foreign-typed results are copied."""
+    if isinstance(a, np.ndarray) and a.dtype == float and a.flags.writeable:
         return a
     return np.array(a, dtype=float)
 
@@ -250,39 +254,29 @@ class Estimator:
             y = np.broadcast_to(y, (B, T, self.sys.ny)) if y.ndim == 2 else y
         t_arr = self._check_t(t, T)
         start = time.perf_counter()
-        out = None
         if vectorize is None:
             vectorize = T >= VECTOR_MIN_STEPS or y.ndim == 3
-        if vectorize:
-            out = self._run(u, y, t_arr)
-        inconsistent = np.zeros(y.shape[:-1], dtype=bool)
-        if out is None:
-            from .._progress import Progress
+        from .._progress import Progress
 
-            with Progress(int(np.prod(y.shape[:-1])), self.name, enabled=progress) as bar:
-                if y.ndim == 3:
-                    los, his = [], []
-                    for b in range(y.shape[0]):
-                        lo_b, hi_b, inc_b = self._loop(u[b], y[b], t_arr, bar)
-                        los.append(lo_b)
-                        his.append(hi_b)
-                        inconsistent[b] = inc_b
-                    lo, hi = np.stack(los), np.stack(his)
-                else:
-                    lo, hi, inconsistent = self._loop(u, y, t_arr, bar)
-        else:
-            lo, hi = out[0], out[1]
-            if len(out) == 3 and out[2] is not None:
-                inconsistent = np.asarray(out[2], dtype=bool).reshape(y.shape[:-1])
-        lo, hi = outward(_owned(lo), _owned(hi))
-        vf = self.valid_from
-        lo[..., :vf, :] = np.nan
-        hi[..., :vf, :] = np.nan
-        if not np.isfinite(np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])):
-            bad = ~(np.isfinite(lo[..., vf:, :]) & np.isfinite(hi[..., vf:, :]))
-            k = int(np.argwhere(bad)[0][-2]) + vf
-            raise IvobsError(f"{self.name}: produced non-finite bounds at step {k} (a bug; "
-                             "please report)")
+        with Progress(int(np.prod(y.shape[:-1])), self.name, enabled=progress) as bar:
+            if y.ndim == 3:
+                # streams in cache-sized chunks written into one output: large fresh temporaries
+                # cost more in page faults than the arithmetic itself
+                B, nx = y.shape[0], self.sys.nx
+                lo = np.empty((B, T, nx))
+                hi = np.empty((B, T, nx))
+                inconsistent = np.zeros((B, T), dtype=bool)
+                size = T * max(nx, self.sys.ny, self.sys.nu, 1)
+                chunk = max(1, BATCH_CHUNK // size)
+                for b0 in range(0, B, chunk):
+                    sl = slice(b0, min(B, b0 + chunk))
+                    lo[sl], hi[sl], inconsistent[sl] = self._block(u[sl], y[sl], t_arr,
+                                                                   vectorize, bar)
+                    self._finalize(lo[sl], hi[sl])
+            else:
+                lo, hi, inconsistent = self._block(u, y, t_arr, vectorize, bar)
+                lo, hi = _owned(lo), _owned(hi)
+                self._finalize(lo, hi)
         if np.any(inconsistent):
             self._report_inconsistent(sorted(set(np.argwhere(inconsistent)[:, -1].tolist())))
         return Estimate(
@@ -295,6 +289,36 @@ class Estimator:
             inconsistent=inconsistent,
             info={"run_time": time.perf_counter() - start},
         )
+
+    def _block(
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, vectorize: bool, bar: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``_run`` (vectorised) or the loop, for one record or a chunk of streams."""
+        out = self._run(u, y, t) if vectorize else None
+        if out is not None:
+            inc = np.zeros(y.shape[:-1], dtype=bool)
+            if len(out) == 3 and out[2] is not None:
+                inc = np.asarray(out[2], dtype=bool).reshape(y.shape[:-1])
+            if bar is not None:
+                bar.update(int(np.prod(y.shape[:-1])))
+            return out[0], out[1], inc
+        if y.ndim == 2:
+            return self._loop(u, y, t, bar)
+        parts = [self._loop(u[b], y[b], t, bar) for b in range(y.shape[0])]
+        return tuple(np.stack(p) for p in zip(*parts))  # type: ignore[return-value]
+
+    def _finalize(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """In place: outward rounding, NaN before ``valid_from``, no non-finite bound after."""
+        outward(lo, hi)
+        vf = self.valid_from
+        lo[..., :vf, :] = np.nan
+        hi[..., :vf, :] = np.nan
+        if not np.isfinite(np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])):
+            bad = ~(np.isfinite(lo[..., vf:, :]) & np.isfinite(hi[..., vf:, :]))
+            k = int(np.argwhere(bad)[0][-2]) + vf
+            raise IvobsError(
+                f"{self.name}: produced non-finite bounds at step {k} (a bug; please report)"
+            )
 
     def _loop(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, bar: Any = None
