@@ -25,10 +25,13 @@ def plot_estimates(
     state_names: Sequence[str] | None = None,
     title: str | None = None,
     fill: bool | None = None,
+    relative: bool = False,
 ) -> Any:
     """One panel per state: each method's lower/upper bounds, and the truth as dots.
 
     Returns the matplotlib figure. ``states`` selects state indices (all by default).
+    ``relative=True`` plots ``bound - truth`` (the error bands around zero): readable when the
+    state itself moves far more than the bands are wide.
     """
     import matplotlib.pyplot as plt
 
@@ -53,28 +56,28 @@ def plot_estimates(
         axes = np.atleast_1d(axes)
         fig = axes[0].figure
     fill = len(estimates) == 1 if fill is None else fill
+    x = None if truth is None else np.asarray(truth, dtype=float)
+    if relative and x is None:
+        raise IvobsError("plot_estimates: relative=True needs the truth")
+    shift = x if relative else 0.0
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for j, (ax, i) in enumerate(zip(axes, states)):
         for m, (name, est) in enumerate(estimates.items()):
             c = colors[m % len(colors)]
             ls = _STYLES[m % len(_STYLES)]
+            lo, hi = (est.lower - shift)[:, i], (est.upper - shift)[:, i]
+            label_m = name if j == 0 else None
             if fill:
-                ax.fill_between(
-                    t,
-                    est.lower[:, i],
-                    est.upper[:, i],
-                    color=c,
-                    alpha=0.25,
-                    label=name if j == 0 else None,
-                    step=None,
-                )
+                ax.fill_between(t, lo, hi, color=c, alpha=0.25, label=label_m)
             else:
-                ax.plot(t, est.upper[:, i], ls, color=c, lw=1.2, label=name if j == 0 else None)
-                ax.plot(t, est.lower[:, i], ls, color=c, lw=1.2)
-        if truth is not None:
-            x = np.asarray(truth, dtype=float)
-            ax.plot(t, x[:, i], "k.", ms=3, label="true state" if j == 0 else None)
+                ax.plot(t, hi, ls, color=c, lw=1.2, label=label_m)
+                ax.plot(t, lo, ls, color=c, lw=1.2)
+        if x is not None:
+            ax.plot(t, x[:, i] - (x[:, i] if relative else 0.0), "k.", ms=3,
+                    label="true state" if j == 0 else None)
         label = state_names[i] if state_names is not None else f"$x_{{{i + 1}}}$"
+        if relative:
+            label = f"bounds − {label}"
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel("t" if first.t is not None else "step k")

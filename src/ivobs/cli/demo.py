@@ -52,7 +52,8 @@ def main(args: argparse.Namespace) -> int:
             truth=traj.x,
             t=traj.t,
             state_names=sc.state_names,
-            title=f"{sc.name}: guaranteed bounds",
+            title=f"{sc.name}: guaranteed bounds minus the true state",
+            relative=True,
         )
         path = os.path.join(args.out, f"{sc.name}.png")
         save_figure(fig, path)
