@@ -1,0 +1,192 @@
+"""ConstrainedZonotope: exact operations, LP interval hull, emptiness, reduction (Scott 2016)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import ivobs
+from ivobs.czonotope import ConstrainedZonotope, eliminate_constraints, reduce_generators
+
+
+def vertices(z: ConstrainedZonotope) -> np.ndarray:
+    """Vertices of a small constrained zonotope by enumeration (no LP): a vertex of
+    ``{ξ ∈ [-1, 1]^m : A ξ = b}`` has ``m - nc`` coordinates at ``±1`` (A of full row rank)."""
+    m, nc = z.num_generators, z.num_constraints
+    pts = []
+    for fixed in itertools.combinations(range(m), m - nc):
+        free = [j for j in range(m) if j not in fixed]
+        for signs in itertools.product([-1.0, 1.0], repeat=m - nc):
+            xi = np.zeros(m)
+            xi[list(fixed)] = signs
+            rhs = z.b - z.A[:, list(fixed)] @ np.array(signs)
+            sol = np.linalg.solve(z.A[:, free], rhs) if nc else np.zeros(0)
+            if np.all(np.abs(sol) <= 1 + 1e-12):
+                xi[free] = sol
+                pts.append(z.c + z.G @ xi)
+    return np.array(pts)
+
+
+def random_cz(rng: np.random.Generator, n: int = 2, m: int = 6, nc: int = 2) -> ConstrainedZonotope:
+    G = rng.normal(size=(n, m))
+    A = rng.normal(size=(nc, m))
+    b = A @ rng.uniform(-0.8, 0.8, m)  # a feasible ξ exists: nonempty
+    return ConstrainedZonotope(rng.normal(size=n), G, A, b)
+
+
+def test_hull_of_a_known_set() -> None:
+    # {[0,0] + G ξ : -2 ξ1 + ξ2 - ξ3 = 2}: ξ3 = -2 ξ1 + ξ2 - 2 forces ξ1 <= 0.5(ξ2 - 1)
+    z = ConstrainedZonotope([0, 0], [[1, 0, 1], [1, 2, -1]], [[-2, 1, -1]], [2])
+    box = z.interval_hull()
+    np.testing.assert_allclose(box.lo, [-2.0, -2.0], atol=1e-9)
+    np.testing.assert_allclose(box.hi, [0.0, 3.0], atol=1e-9)
+    assert not z.is_empty()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_hull_equals_vertex_enumeration_and_is_never_inside_it(seed: int) -> None:
+    z = random_cz(np.random.default_rng(seed), n=3, m=6, nc=2)
+    v = vertices(z)
+    box = z.interval_hull()
+    assert np.all(box.lo <= v.min(axis=0) + 1e-12)  # certified bounds: never cut the set
+    assert np.all(box.hi >= v.max(axis=0) - 1e-12)
+    np.testing.assert_allclose(box.lo, v.min(axis=0), atol=1e-7)
+    np.testing.assert_allclose(box.hi, v.max(axis=0), atol=1e-7)
+
+
+def test_linear_map_minkowski_sum_and_translation() -> None:
+    rng = np.random.default_rng(3)
+    z1, z2 = random_cz(rng), random_cz(rng)
+    M = rng.normal(size=(2, 2))
+    v1, v2 = vertices(z1), vertices(z2)
+    s = z1 + z2
+    assert s.num_generators == 12 and s.num_constraints == 4
+    for p in v1[:3]:
+        for q in v2[:3]:
+            assert s.contains(p + q)
+    mz = M @ z1
+    assert all(mz.contains(M @ p) for p in v1)
+    box = (z1 + np.array([1.0, -2.0])).interval_hull()
+    np.testing.assert_allclose(box.lo, v1.min(axis=0) + np.array([1.0, -2.0]), atol=1e-7)
+    # sum with a box and a zonotope
+    zb = z1 + ivobs.Box([-1.0, 0.0], [1.0, 0.0])
+    np.testing.assert_allclose(
+        zb.interval_hull().hi, v1.max(axis=0) + np.array([1.0, 0.0]), atol=1e-7
+    )
+    zz = z1 + ivobs.Zonotope([0.0, 0.0], [[1.0], [1.0]])
+    np.testing.assert_allclose(zz.interval_hull().hi, v1.max(axis=0) + 1, atol=1e-7)
+
+
+def test_intersection_with_box_strip_and_hyperplane() -> None:
+    sq = ConstrainedZonotope.from_box(ivobs.Box([-1.0, -1.0], [1.0, 1.0]))
+    # the strip |x1 + x2 - 1.5| <= 0.1 cuts the corner of the square
+    st = sq.intersect_strip([1.0, 1.0], 1.5, 0.1)
+    np.testing.assert_allclose(st.interval_hull().lo, [0.4, 0.4], atol=1e-8)
+    np.testing.assert_allclose(st.interval_hull().hi, [1.0, 1.0], atol=1e-8)
+    hp = sq.intersect_hyperplane([1.0, -1.0], 1.0)  # x1 - x2 = 1
+    np.testing.assert_allclose(hp.interval_hull().lo, [0.0, -1.0], atol=1e-8)
+    np.testing.assert_allclose(hp.interval_hull().hi, [1.0, 0.0], atol=1e-8)
+    other = ivobs.Box([0.5, -3.0], [3.0, 0.2])
+    both = sq.intersect(other)
+    np.testing.assert_allclose(both.interval_hull().lo, [0.5, -1.0], atol=1e-8)
+    np.testing.assert_allclose(both.interval_hull().hi, [1.0, 0.2], atol=1e-8)
+    # generalised intersection {z : R z ∈ Y}: x1 + x2 in [1.9, 3] leaves the corner (1, 1)
+    corner = sq.intersect(ivobs.Box([1.9], [3.0]), R=[[1.0, 1.0]])
+    np.testing.assert_allclose(corner.interval_hull().lo, [0.9, 0.9], atol=1e-8)
+
+
+def test_emptiness_is_detected_and_reported() -> None:
+    sq = ConstrainedZonotope.from_box(ivobs.Box([0.0, 0.0], [1.0, 1.0]))
+    far = sq.intersect(ivobs.Box([2.0, 0.0], [3.0, 1.0]))
+    assert far.is_empty()
+    with pytest.raises(ivobs.InconsistentDataError):
+        far.interval_hull()
+    with pytest.raises(ivobs.InconsistentDataError):
+        far.reduce(max_constraints=0)
+    touching = sq.intersect(ivobs.Box([1.0, 0.0], [3.0, 1.0]))  # a segment: not empty
+    assert not touching.is_empty()
+    np.testing.assert_allclose(touching.interval_hull().lo, [1.0, 0.0], atol=1e-7)
+
+
+def test_contains() -> None:
+    z = ConstrainedZonotope([0, 0], [[1, 0, 1], [1, 2, -1]], [[-2, 1, -1]], [2])
+    assert z.contains([-1.0, 0.0])
+    assert not z.contains([0.0, -2.0])  # in the zonotope, cut by the constraint
+    assert ivobs.Zonotope([0, 0], [[1, 0, 1], [1, 2, -1]]).contains([0.0, -2.0])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_reduction_contains_the_original(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    z = random_cz(rng, n=3, m=14, nc=5)
+    box = z.interval_hull()
+    red = z.reduce(max_generators=9, max_constraints=2)
+    assert red.num_constraints <= 2 and red.num_generators <= 9
+    rbox = red.interval_hull()
+    assert np.all(rbox.lo <= box.lo + 1e-9) and np.all(rbox.hi >= box.hi - 1e-9)
+    for p in z.sample(15, rng):
+        assert red.contains(p, tol=1e-7)
+    # each stage alone is sound, and the generator stage keeps the constraints
+    c, G, A, b = reduce_generators(z.c, z.G, z.A, z.b, 8)
+    assert G.shape[1] <= 8 and A.shape[0] == 5
+    assert all(ConstrainedZonotope(c, G, A, b).contains(p, tol=1e-7) for p in z.sample(5, rng))
+    out = eliminate_constraints(z.c, z.G, z.A, z.b, 0)
+    assert out is not None and out[2].shape[0] == 0
+    assert all(ConstrainedZonotope(*out).contains(p, tol=1e-7) for p in z.sample(5, rng))
+
+
+def test_redundant_constraint_is_eliminated_exactly() -> None:
+    # x = ξ1 + ξ2 with ξ3 = 0.1 ξ1: the bound |ξ3| <= 1 is redundant, elimination is exact
+    z = ConstrainedZonotope([0.0], [[1.0, 1.0, 0.0]], [[0.1, 0.0, -1.0]], [0.0])
+    red = z.reduce(max_constraints=0)
+    assert red.num_constraints == 0
+    np.testing.assert_allclose(red.interval_hull().lo, [-2.0], atol=1e-12)
+    np.testing.assert_allclose(red.interval_hull().hi, [2.0], atol=1e-12)
+
+
+def test_rescale_keeps_the_set() -> None:
+    z = random_cz(np.random.default_rng(7), n=2, m=5, nc=2)
+    r = z.rescale()
+    np.testing.assert_allclose(r.interval_hull().lo, z.interval_hull().lo, atol=1e-8)
+    np.testing.assert_allclose(r.interval_hull().hi, z.interval_hull().hi, atol=1e-8)
+
+
+def test_to_zonotope_encloses() -> None:
+    z = random_cz(np.random.default_rng(9), n=2, m=6, nc=2)
+    zz = z.to_zonotope()
+    assert isinstance(zz, ivobs.Zonotope)
+    assert all(zz.contains(p) for p in vertices(z))
+
+
+def test_bad_input_names_the_argument() -> None:
+    with pytest.raises(ivobs.IvobsError, match="generators"):
+        ConstrainedZonotope([0, 0], [[1, 2, 3]])
+    with pytest.raises(ivobs.IvobsError, match="A and b"):
+        ConstrainedZonotope([0], [[1.0]], A=[[1.0]])
+    with pytest.raises(ivobs.IvobsError, match="one column per generator"):
+        ConstrainedZonotope([0], [[1.0, 2.0]], A=[[1.0]], b=[0.0])
+    with pytest.raises(ivobs.IvobsError, match="sigma"):
+        ConstrainedZonotope([0], [[1.0]]).intersect_strip([1.0], 0.0, -1.0)
+    with pytest.raises(ivobs.IvobsError, match="max_constraints"):
+        ConstrainedZonotope([0], [[1.0]]).reduce(max_constraints=-1)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_certificates_follow_the_reduction(seed: int) -> None:
+    """The certificates of the hull bounds are transformed with the set: their objectives stay
+    the rows of ±G, and the bounds they certify stay valid (below the LP optimum) after every
+    elimination."""
+    from ivobs.czonotope import hull_certificates
+
+    z = random_cz(np.random.default_rng(200 + seed), n=3, m=14, nc=6)
+    lo, hi, cert = hull_certificates(z.c, z.G, z.A, z.b)
+    out = eliminate_constraints(z.c, z.G, z.A, z.b, 2, cert)
+    assert out is not None
+    c, G, A, b = out
+    np.testing.assert_allclose(cert.D, np.vstack([G, -G]), atol=1e-9)
+    bound = cert.mu @ b - np.abs(cert.D - cert.mu @ A).sum(axis=1)
+    red = ConstrainedZonotope(c, G, A, b).interval_hull()
+    assert np.all(c + bound[:3] <= red.lo + 1e-9) and np.all(c - bound[3:] >= red.hi - 1e-9)
+    assert np.all(red.lo <= lo + 1e-9) and np.all(red.hi >= hi - 1e-9)
