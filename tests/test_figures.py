@@ -1,0 +1,133 @@
+"""The papers' figures (``ivobs.figures``, ``ivobs figures``): files written, checks that can fail,
+and the numbers behind 002 Fig. 5 (Theorem 8)."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+import ivobs
+from ivobs import figures
+from ivobs.cli import main as cli_main
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _assert_png(path, min_bytes=15_000):
+    data = path.read_bytes()
+    assert data[:8] == PNG
+    assert len(data) > min_bytes, f"{path.name}: only {len(data)} bytes"
+
+
+def test_generate_paper001_writes_both_figures(tmp_path):
+    paths = figures.generate(tmp_path / "out", papers=["001"])
+    assert [p.name for p in paths] == ["paper001_fig1.png", "paper001_fig2.png"]
+    for p in paths:
+        _assert_png(p)
+
+
+def test_cli_writes_figures_and_rejects_unknown_papers(tmp_path, capsys):
+    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "1"]) == 0
+    assert "2 figure(s)" in capsys.readouterr().out
+    _assert_png(tmp_path / "paper001_fig2.png")
+    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "001,007"]) == 2
+    assert "007" in capsys.readouterr().err
+    assert cli_main(["figures", "--out", str(tmp_path), "--paper", ","]) == 2
+
+
+def test_every_paper_has_its_figures():
+    stems = [s.stem for s in figures.figure_specs()]
+    assert stems == [
+        "paper001_fig1",
+        "paper001_fig2",
+        "paper002_fig1",
+        "paper002_fig2",
+        "paper002_fig3",
+        "paper002_fig4",
+        "paper002_fig5",
+        "paper003_fig1",
+        "paper003_fig2",
+        "paper004_fig1_ct",
+        "paper004_fig1_dt",
+        "paper004_fig4",
+        "paper004_fig5",
+    ]
+    assert [s.stem for s in figures.figure_specs("paper003")] == stems[7:9]
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: figures.paper002_fig2(horizon=30),
+        lambda: figures.paper002_fig4(horizon=15),
+        lambda: figures.paper003_fig2(horizon=40),
+        lambda: figures.paper004_fig4(t_final=2.0, dt=0.05),
+        lambda: figures.paper004_fig5(horizon=12),
+    ],
+    ids=["002-fig2", "002-fig4", "003-fig2", "004-fig4", "004-fig5"],
+)
+def test_short_figures_render(tmp_path, make):
+    fig = make()
+    path = tmp_path / "f.png"
+    fig.savefig(path, dpi=60)
+    plt.close(fig)
+    _assert_png(path, 8_000)
+
+
+def test_containment_check_raises_on_a_missed_state():
+    sc = ivobs.scenarios.get("dinh2019", horizon=20)
+    traj = sc.simulate("paper")
+    res = ivobs.make_estimator("fixed-time", sc.system, s=2).run(traj.u, traj.y)
+    figures._check("ok", res, traj.x)  # the real truth passes
+    x = traj.x.copy()
+    x[7, 1] = res.upper[7, 1] + 1e-6
+    with pytest.raises(figures.FigureCheckError, match=r"first at \(7,\)"):
+        figures._check("shifted", res, x)
+
+
+def test_error_sets_of_paper002_fig5():
+    """Theorem 8 on Example 2 at k = 40: Box(Ω_k) ⊆ Box(P̃), samples in Ω_k, S of eq. (48)."""
+    s = figures.error_sets(k=40, runs=200, seed=1)
+    # S from the paper's R, e1, e2 by (48) reproduces its printed S
+    ref = ivobs.scenarios.get("tang-example2").reference
+    np.testing.assert_allclose(s.S, ref["S"], atol=5e-4)
+    # Algorithm 1's box is the interval hull of the zonotope Ω_k (symmetric: d, x0 centred)
+    hull = s.omega.interval_hull()
+    np.testing.assert_allclose(s.box_reach.hi, hull.hi, atol=1e-9)
+    np.testing.assert_allclose(s.box_reach.hi, [0.7421, 0.5461], atol=1e-4)
+    np.testing.assert_allclose(s.box_transformed.hi, [2.3155, 1.4333], atol=1e-4)
+    # Theorem 8 / (80): much wider, and P̃'s hull is the transformed box (79)
+    assert np.all(s.box_transformed.hi > 2.5 * s.box_reach.hi)
+    pts = s.parallelotope()
+    np.testing.assert_allclose(pts.max(axis=0), s.box_transformed.hi, atol=1e-9)
+    # the samples are inside Ω_k (and fill a good part of it)
+    assert figures._in_planar_zonotope(s.omega, s.samples).all()
+    assert np.all(np.abs(s.samples).max(axis=0) > 0.4 * s.box_reach.hi)
+    assert s.samples.shape == (200, 2)
+
+
+def test_zonotope_polygon():
+    # generators (1, 0), (0, 1), (1, 1): a hexagon
+    Z = ivobs.Zonotope([1.0, -1.0], np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 1.0]]))
+    P = figures.zonotope_polygon(Z)
+    assert P.shape == (6, 2)
+    x, y = P[:, 0], P[:, 1]
+    area = 0.5 * (x @ np.roll(y, -1) - y @ np.roll(x, -1))
+    assert area == pytest.approx(12.0)  # 4 Σ_{i<j} |det(g_i, g_j)| = 4 * (1 + 1 + 1)
+    box = Z.interval_hull()
+    np.testing.assert_allclose(P.min(axis=0), box.lo)
+    np.testing.assert_allclose(P.max(axis=0), box.hi)
+    # random zonotope: every sample inside, every vertex on the boundary (a support point)
+    rng = np.random.default_rng(3)
+    Z = ivobs.Zonotope(rng.normal(size=2), rng.normal(size=(2, 7)))
+    assert figures._in_planar_zonotope(Z, Z.sample(500, rng)).all()
+    P = figures.zonotope_polygon(Z)
+    assert figures._in_planar_zonotope(Z, P).all()
+    assert not figures._in_planar_zonotope(Z, Z.center + 1.01 * (P - Z.center)).any()
+    with pytest.raises(ivobs.IvobsError, match="planar"):
+        figures.zonotope_polygon(ivobs.Zonotope(np.zeros(3), np.eye(3)))
