@@ -438,7 +438,7 @@ def _same_method(a: str, b: str) -> bool:
     return a.strip().lower().replace("_", "-") == b.strip().lower().replace("_", "-")
 
 
-class _Lines:
+class KeyLines:
     """Line numbers of the keys of a TOML text (for semantic errors: tomllib has no positions)."""
 
     _HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(#.*)?$")
@@ -482,7 +482,7 @@ class _Reader:
 
     def __init__(self, text: str, source: str, base_dir: Path):
         self.source, self.base_dir = source, base_dir
-        self.lines = _Lines(text)
+        self.lines = KeyLines(text)
         try:
             self.doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:

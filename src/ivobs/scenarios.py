@@ -119,6 +119,15 @@ def names() -> list[str]:
     return list(_BUILDERS)
 
 
+def options(name: str) -> list[str]:
+    """Keyword options the scenario ``name`` accepts (e.g. ``horizon``, ``seed``)."""
+    import inspect
+
+    if name not in _BUILDERS:
+        raise IvobsError(f"scenario: unknown scenario {name!r}; known: {', '.join(names())}")
+    return list(inspect.signature(_BUILDERS[name][0]).parameters)
+
+
 def summaries() -> dict[str, str]:
     """``name -> one-line description``."""
     return {k: v[1] for k, v in _BUILDERS.items()}

@@ -1,0 +1,124 @@
+"""``ivobs campaign SPEC.toml``: a grid of scenarios × methods × options × seeds.
+
+Runs on local processes by default, or on a Dask distributed cluster with ``--scheduler``.
+Results go to one CSV table, one line per job as it finishes; running the same command again
+resumes (jobs already in the table are skipped). A summary (mean width over seeds with a 95 %
+confidence half-width, containment, times) is printed at the end. See ``docs/campaign.md``.
+
+Exit status: 0; 1 when a box missed the true state or a job raised an unexpected error
+(``status = error``; a method that declines a system is ``failed`` and expected); 2 on a bad spec.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "campaign",
+        help="run a grid of scenarios x methods x seeds (local processes or a Dask cluster)",
+        description="Run every job of a campaign spec (TOML: scenarios, methods, options grids, "
+        "seeds) and append one row per job to a CSV table. Interrupted campaigns resume: jobs "
+        "already in the table are not recomputed. See docs/campaign.md.",
+    )
+    p.add_argument("spec", metavar="SPEC.toml", help="campaign spec")
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="Dask scheduler address (e.g. tcp://10.0.0.5:8786); needs ivobs[cluster]",
+    )
+    p.add_argument(
+        "--workers",
+        "-j",
+        type=int,
+        metavar="N",
+        help="local processes (default: number of CPUs; 0: run in this process)",
+    )
+    p.add_argument("--output", "-o", metavar="FILE", help="results table (default: the spec's)")
+    p.add_argument("--summary", metavar="FILE", help="also write the summary as Markdown")
+    p.add_argument("--limit", type=int, metavar="N", help="run at most N new jobs, then stop")
+    p.add_argument(
+        "--retry-errors",
+        action="store_true",
+        help="rerun jobs recorded with status 'error' (unexpected exceptions, lost workers)",
+    )
+    p.add_argument(
+        "--dry-run", action="store_true", help="count the jobs (total, done, to run) and stop"
+    )
+    p.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="progress bar (default: on a terminal only)",
+    )
+    p.add_argument("--quiet", "-q", action="store_true", help="no summary table")
+    return p
+
+
+def main(args: argparse.Namespace) -> int:
+    from .. import campaign
+
+    spec = campaign.load_spec(args.spec)
+    if args.summary:
+        spec.summary = Path(args.summary)
+    output = Path(args.output) if args.output else spec.output
+    jobs = spec.jobs()
+    title = f"campaign {spec.name!r}" if spec.name else f"campaign {args.spec}"
+    if args.dry_run:
+        done = set()
+        if output.is_file():
+            done = {r["job_id"] for r in campaign.read_results(output)}
+        n_done = sum(j.id in done for j in jobs)
+        print(
+            f"{title}: {len(jobs)} jobs = {len(spec.scenarios)} scenarios x "
+            f"{len(spec.disturbances)} disturbances x {len(jobs) // _per_cell(spec)} method "
+            f"settings x {len(spec.seeds)} seeds; {n_done} already in {output}, "
+            f"{len(jobs) - n_done} to run"
+        )
+        return 0
+    try:
+        res = campaign.run_campaign(
+            spec,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            output=output,
+            limit=args.limit,
+            retry_errors=args.retry_errors,
+            progress=args.progress,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"\nivobs: interrupted; the finished jobs are in {output}: run the same command "
+            "again to resume",
+            file=sys.stderr,
+        )
+        raise
+    failed, errors = res.count("failed"), res.count("error")
+    where = f" on {res.engine}" if res.ran else ""
+    print(
+        f"# {title}: {res.total} jobs, {res.skipped} already done, {res.ran} run now{where} in "
+        f"{res.wall_time:.1f} s; {failed} failed, {errors} errors -> {res.output}"
+    )
+    if not res.complete:
+        print(f"# {res.total - len(res.rows)} jobs left: run the same command again to resume")
+    if not args.quiet:
+        print()
+        print(res.summary())
+    if spec.summary is not None:
+        print(f"\nsummary: {spec.summary}")
+    for r in res.violations:
+        print(
+            f"ivobs: SOUNDNESS VIOLATION: job {r['job_id']} ({r['method']} on {r['scenario']}, "
+            f"seed {r['seed']}): a box missed the true state",
+            file=sys.stderr,
+        )
+    return 1 if res.violations or errors else 0
+
+
+def _per_cell(spec: Any) -> int:
+    """Jobs per scenario × disturbance × method setting: the seeds."""
+    return len(spec.scenarios) * len(spec.disturbances) * len(spec.seeds)
