@@ -25,6 +25,17 @@ CSV file, or a Python callable), the prior box on ``x[0]``, and a method with it
     [method]
     name = "interval-split"
 
+A sparse matrix (``scipy.sparse``, large systems) is written as a table of its nonzero entries
+(0-based indices, in row-major order)::
+
+    [system.A]
+    shape = [2000, 2000]
+    rows = [0, 0, 1, 1, 1, ...]
+    cols = [0, 1, 0, 1, 2, ...]
+    values = [0.19, 0.4, 0.4, 0.19, 0.4, ...]
+
+and read back as a ``scipy.sparse`` CSR matrix (``docs/scale.md``).
+
 Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line and the key.
 The full format is documented in ``docs/operating.md``.
 
@@ -221,9 +232,19 @@ def equal_systems(a: LinearSystem, b: LinearSystem) -> bool:
         return False
     if (a.nx, a.nu, a.ny, a.nd) != (b.nx, b.nu, b.ny, b.nd):
         return False
-    if not all(_same_value(getattr(a, m), getattr(b, m)) for m in _MATRICES):
-        return False
+    for m in _MATRICES:
+        sa, sb = _sparse_of(a, m), _sparse_of(b, m)
+        if sa is not None and sb is not None:  # compared without building dense views
+            if sa.shape != sb.shape or (sa != sb).nnz:
+                return False
+        elif not _same_value(getattr(a, m), getattr(b, m)):
+            return False
     return _same_value(a.d, b.d)
+
+
+def _sparse_of(system: LinearSystem, m: str) -> Any:
+    """The ``scipy.sparse`` matrix ``m`` of ``system`` when it was given sparse, else None."""
+    return getattr(getattr(system, f"_{m}", None), "sp", None)
 
 
 # ============================================================================================
@@ -288,6 +309,27 @@ def _matrix_value(name: str, m: Any) -> str:
     return _value(np.asarray(m, dtype=float))
 
 
+def _sparse_lines(sp: Any) -> list[str]:
+    """``shape``, ``rows``, ``cols``, ``values`` of a sparse matrix (row-major, 0-based)."""
+    csr = sp.tocsr()
+    csr.sum_duplicates()
+    csr.sort_indices()
+    rows = np.repeat(np.arange(csr.shape[0]), np.diff(csr.indptr))
+
+    def listing(values: list[str]) -> str:
+        if len(values) <= 12:
+            return "[" + ", ".join(values) + "]"
+        lines = [", ".join(values[i : i + 12]) for i in range(0, len(values), 12)]
+        return "[\n" + ",\n".join("    " + ln for ln in lines) + ",\n]"
+
+    return [
+        f"shape = [{csr.shape[0]}, {csr.shape[1]}]",
+        "rows = " + listing([str(int(i)) for i in rows]),
+        "cols = " + listing([str(int(j)) for j in csr.indices]),
+        "values = " + listing([_scalar(float(v)) for v in csr.data]),
+    ]
+
+
 def dumps_system(
     system: Any,
     *,
@@ -313,9 +355,16 @@ def dumps_system(
         out.append(f"description = {_scalar(description)}")
     out += ["", "[system]", f"dt = {_scalar(system.dt)}"]
     skip = {"B": system.nu == 0, "D": system.nu == 0, "E": system.nd == 0, "F": system.nd == 0}
+    sparse_tables = []
     for m in _MATRICES:
-        if not skip.get(m, False):
+        if skip.get(m, False):
+            continue
+        sp = _sparse_of(system, m)
+        if sp is not None:  # a sub-table, after the other keys of [system]
+            sparse_tables += ["", f"[system.{m}]", *_sparse_lines(sp)]
+        else:
             out.append(f"{m} = {_matrix_value(m, getattr(system, m))}")
+    out += sparse_tables
     if system.nd:
         out += ["", "[disturbance]"]
         d = system.d
@@ -551,6 +600,8 @@ class _Reader:
 
     def matrix(self, key: tuple[str, ...], value: Any) -> Any:
         if isinstance(value, dict):
+            if "python" not in value and ("shape" in value or "values" in value):
+                return self.sparse(key, value)
             return self.python(key, value)
         arr = self.numbers(key, value, (2, 3))
         bad = ~np.isfinite(arr)
@@ -558,6 +609,60 @@ class _Reader:
             idx = "".join(f"[{int(i)}]" for i in np.argwhere(bad)[0])
             raise self.fail(key, f"entry {idx} is {arr[bad][0]}; matrices must be finite")
         return arr
+
+    def sparse(self, key: tuple[str, ...], spec: dict[str, Any]) -> Any:
+        """A sparse matrix from ``shape``, ``rows``, ``cols``, ``values`` (0-based indices)."""
+        from scipy.sparse import coo_matrix
+
+        unknown = sorted(set(spec) - {"shape", "rows", "cols", "values"})
+        if unknown:
+            raise self.fail(
+                (*key, unknown[0]),
+                "unknown key; a sparse matrix is given as shape = [rows, cols] and the lists "
+                "rows, cols, values of its nonzero entries (0-based indices)",
+            )
+        for part in ("shape", "rows", "cols", "values"):
+            if part not in spec:
+                raise self.fail(key, f"sparse matrix: missing {part} = [...]")
+        shape = spec["shape"]
+        if (
+            not isinstance(shape, list)
+            or len(shape) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in shape)
+        ):
+            raise self.fail(
+                (*key, "shape"), f"expected [rows, cols] (integers >= 0), got {shape!r}"
+            )
+        idx = {}
+        for part, limit in (("rows", shape[0]), ("cols", shape[1])):
+            vals = spec[part]
+            if not isinstance(vals, list) or not all(
+                isinstance(v, int) and not isinstance(v, bool) for v in vals
+            ):
+                raise self.fail((*key, part), "expected a list of integer indices")
+            arr = np.array(vals, dtype=np.int64)
+            bad = (arr < 0) | (arr >= limit)
+            if np.any(bad):
+                raise self.fail(
+                    (*key, part),
+                    f"index {int(arr[bad][0])} is outside 0..{limit - 1} (0-based indices)",
+                )
+            idx[part] = arr
+        values = self.numbers((*key, "values"), spec["values"], (1,))
+        if not np.all(np.isfinite(values)):
+            raise self.fail((*key, "values"), "matrices must be finite")
+        if not (len(idx["rows"]) == len(idx["cols"]) == len(values)):
+            raise self.fail(
+                key,
+                f"sparse matrix: rows, cols and values have different lengths "
+                f"({len(idx['rows'])}, {len(idx['cols'])}, {len(values)})",
+            )
+        flat = idx["rows"] * max(shape[1], 1) + idx["cols"]
+        if np.unique(flat).size != flat.size:
+            raise self.fail(key, "sparse matrix: an entry (row, col) is given twice")
+        m = coo_matrix((values, (idx["rows"], idx["cols"])), shape=tuple(shape)).tocsr()
+        m.sort_indices()
+        return m
 
     def python(self, key: tuple[str, ...], spec: dict[str, Any]) -> Any:
         unknown = sorted(set(spec) - {"python", "params"})
@@ -646,7 +751,7 @@ class _Reader:
                 what = "state matrix" if m == "A" else "output matrix"
                 raise self.fail(("system",), f"missing matrix {m} (the {what})")
         mats = {m: self.matrix(("system", m), sysd[m]) for m in _MATRICES if m in sysd}
-        arrays = {m: v for m, v in mats.items() if isinstance(v, np.ndarray)}
+        arrays = {m: v for m, v in mats.items() if not callable(v)}  # dense or sparse
 
         def dims(m: str) -> tuple[int, ...] | None:
             return tuple(arrays[m].shape[-2:]) if m in arrays else None

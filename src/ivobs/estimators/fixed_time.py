@@ -20,7 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from .._recursion import LinearFilter, is_shared, scratch, within_band
 from .._validate import as_int, as_matrix
+from ..design._lmi import MAX_LMI_STATES
 from ..design.parity import (
     general_T,
     invertible_injection,
@@ -193,6 +195,13 @@ class FixedTimeEstimator(Estimator):
     ):
         super().__init__(sys, x0, on_inconsistent=on_inconsistent)
         nx, ny = sys.nx, sys.ny
+        if nx > MAX_LMI_STATES:
+            raise DesignError(
+                f"{self.name}: the window needs s + 1 >= nx samples, so the stacked matrices of "
+                f"001 eq. (6) have O(nx^2 ny) entries and every step O(nx^2 ny) work; this does "
+                f"not scale to nx = {nx} > {MAX_LMI_STATES} states; use 'interval' or "
+                "'interval-split' with a gain L=... for large sparse systems (docs/scale.md)"
+            )
         self.s = self._check_s(s, nx)
         self._tv = sys.is_time_varying
         self._criterion = criterion
@@ -660,13 +669,24 @@ class FixedTimeEstimator(Estimator):
         if sys.nd and not isinstance(sys.d, Box):
             return None
         lead, T = y.shape[:-2], y.shape[-2]
-        u3 = u.reshape(-1, T, sys.nu)
+        if not T:
+            return None  # an empty record: the loop
         y3 = y.reshape(-1, T, sys.ny)
+        u3 = u.reshape(int(np.prod(u.shape[:-2])), T, sys.nu)  # (also for nu = 0)
         miss = np.isnan(y3)
         any_miss = bool(miss.any())
         if self._tv and any_miss:
             return None
         Bn = y3.shape[0]
+        if T > s and not self._tv and not any_miss and self._const_bounds:
+            fast = self._windows_filter(u3, y3)
+            if fast is not None:
+                lo, hi, incons = fast
+                if incons.any():  # predicted from the previous box, in time order (as the loop)
+                    dlo, dhi = self._bounds_rows(T)
+                    none = np.zeros_like(incons)
+                    self._fill_predictions(incons.copy(), none, incons, u3, miss, dlo, dhi, lo, hi)
+                return lo.reshape(*lead, T, nx), hi.reshape(*lead, T, nx), incons.reshape(*lead, T)
         lo = np.full((Bn, T, nx), np.nan)
         hi = np.full_like(lo, np.nan)
         need = np.zeros((Bn, T), dtype=bool)
@@ -700,6 +720,86 @@ class FixedTimeEstimator(Estimator):
             if need.any() or pats.any():
                 self._fill_predictions(need, pats & ~need, incons, u3, miss, dlo, dhi, lo, hi)
         return lo.reshape(*lead, T, nx), hi.reshape(*lead, T, nx), incons.reshape(*lead, T)
+
+    def _window_filter(self, kern: _Kernel) -> tuple[LinearFilter, np.ndarray]:
+        """Eqs. (7), (11) and the parity residual for complete windows as one linear filter of
+        ``(u, y, ‖w‖_∞)``: the window ``z_(k-1) .. z_(k-s)`` is the state of a shift register
+        (``z = [u; y; c]``), the outputs are ``x̂ ∓ (|T Md| 𝐫 + γ_i ‖w‖_∞)`` (the bounds,
+        :meth:`_finish`) and ``ρ`` (the residual). Cached."""
+        hit = self.__dict__.get("_wfilt")
+        if hit is not None:
+            return hit
+        assert kern.GQ is not None and kern.HP is not None and kern.rad_coef is not None
+        s, nu, ny, nz, nx = self.s, self.sys.nu, self.sys.ny, self._nz, self.sys.nx
+        n = s * nz
+        M = np.zeros((n, n))
+        for i in range(1, s):  # block i of x[k+1] is block i-1 of x[k]
+            M[i * nz : (i + 1) * nz, (i - 1) * nz : i * nz] = np.eye(nz)
+        Wz = np.eye(n, nz)  # z_k enters block 0 (s = 0: no state)
+        G0, Gs = kern.GQ[:, :nz], kern.GQ[:, nz:]
+        cols_u, cols_y = slice(0, nu), slice(nu, nu + ny)
+        g = None
+        hc = np.zeros(G0.shape[0])
+        if self._nc:
+            box = self.sys.d
+            assert isinstance(box, Box)
+            c = box.center
+            g = Wz[:, nu + ny :] @ c
+            hc = G0[:, nu + ny :] @ c
+        rhp = kern.HP @ np.tile(self.sys.d.radius if self.sys.nd else np.zeros(0), s + 1)
+        rc = kern.rad_coef[:, None]
+        H = [Gs[:nx], Gs[:nx], Gs[nx:]]
+        J = [
+            [G0[:nx, cols_u], G0[:nx, cols_y], -rc],
+            [G0[:nx, cols_u], G0[:nx, cols_y], rc],
+            [G0[nx:, cols_u], G0[nx:, cols_y], None],
+        ]
+        h = [hc[:nx] - rhp[:nx], hc[:nx] + rhp[:nx], hc[nx:]]
+        W = [Wz[:, cols_u], Wz[:, cols_y], np.zeros((n, 1))]
+        filt = LinearFilter(M, W, H, J, g=g, h=h, block=min(64, max(8, s + 1)))
+        self.__dict__["_wfilt"] = (filt, rhp[nx:] * (1.0 + 1e-9) + 1e-9)
+        return self.__dict__["_wfilt"]
+
+    def _windows_filter(
+        self, u3: np.ndarray, y3: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Time-invariant, constant bounds, no missing sample: every window of the record (or
+        batch ``(B, T, ·)``) by :meth:`_window_filter`; rows before ``s`` are NaN. Returns
+        ``(lo, hi, inconsistent)`` or None when the complete window has no kernel."""
+        s, T = self.s, y3.shape[1]
+        kern = self._kernel(s, np.zeros((s + 1, self.sys.ny), dtype=bool))
+        if not kern.ok:
+            return None
+        filt, thr = self._window_filter(kern)
+        # ‖w_k‖_∞ over the window z_k .. z_(k-s), z = [u; y; c]: column maxima, then lags
+        zmax = np.abs(y3[..., 0], out=scratch(self, "zmax", y3.shape[:2]))
+        for j in range(1, y3.shape[-1]):
+            np.maximum(zmax, np.abs(y3[..., j]), out=zmax)
+        shared_u = is_shared(u3, 1)
+        umax = np.max(np.abs(u3[0] if shared_u else u3), axis=-1, initial=0.0)
+        np.maximum(zmax, umax, out=zmax)
+        if self._nc:
+            box = self.sys.d
+            assert isinstance(box, Box)
+            np.maximum(zmax, float(np.max(np.abs(box.center))), out=zmax)
+        wmax = scratch(self, "wmax", y3.shape[:2])
+        wmax[...] = zmax
+        for i in range(1, s + 1):
+            np.maximum(wmax[:, i:], zmax[:, : T - i], out=wmax[:, i:])
+        lo, hi, rho = filt.run([u3, y3, wmax[..., None]], temp=[2])
+        inc = np.zeros(y3.shape[:2], dtype=bool)
+        band = self.__dict__.get("_band")
+        if band is None or band.shape[0] != T:  # (T, nρ): rows before s (no window) ignored
+            band = np.empty((T, thr.shape[0]))
+            band[:s], band[s:] = np.inf, thr
+            self.__dict__["_band"] = band
+        if rho.shape[-1] and not within_band(rho, None, band):
+            assert kern.tol_coef is not None
+            over = np.abs(rho[:, s:]) - wmax[:, s:, None] * kern.tol_coef > thr
+            inc[:, s:] = over.any(axis=-1)
+        lo[:, :s] = np.nan
+        hi[:, :s] = np.nan
+        return lo, hi, inc
 
     def _chunks(self, Bn: int, T: int) -> list[tuple[int, int, int, int]]:
         """``(b0, b1, k0, k1)``: streams ``b0:b1``, windows ending at ``k0:k1``, about

@@ -51,8 +51,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .._recursion import (
+    LinearFilter,
+    SplitFilter,
+    csr_accumulate,
+    matrix_product,
+    redo_streams,
+    within_band,
+)
 from .._validate import as_matrix, as_vector
+from ..design._lmi import MAX_LMI_STATES
 from ..design.cooperative import (
+    NONNEG_TOL,
     abs_schur_gain,
     check_abs_schur,
     check_nonnegative_schur,
@@ -149,6 +159,16 @@ class _StepMatrices:
     Gn: np.ndarray  # (S (E − L_k F))⁻
 
 
+def _bad_streams(res: np.ndarray, rad: np.ndarray, y: np.ndarray) -> Any:
+    """The loop's test ``|res| <= rad + tol`` (:meth:`_CooperativeObserver._consistent`) over
+    a record or a batch: None when it passes; for a batch the ``(B,)`` mask of streams that
+    fail; True when the single record fails (the caller falls back to its loop)."""
+    fail = np.abs(res) > rad + CONSISTENCY_TOL * (1.0 + np.abs(y) + 2.0 * rad)
+    if not fail.any():
+        return None
+    return fail.reshape(fail.shape[0], -1).any(axis=1) if y.ndim == 3 else True
+
+
 def _hull(
     Mp: np.ndarray, Mn: np.ndarray, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -169,47 +189,83 @@ def design_delta(sys: LinearSystem) -> np.ndarray:
     return np.ones(sys.nd)
 
 
-def _time_recursion(M: np.ndarray, v: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``x[0] = x0``, ``x[k+1] = M x[k] + v[k]`` along axis 0 of ``v`` (``(T, n)`` or time-major
-    ``(T, B, n)``); returns ``(T + 1, …)``.
+@dataclass(frozen=True)
+class _SparseStep:
+    """One step of a sparse system (``S = I``): the stacked matrix acting on ``[z̄; z̲]``."""
 
-    A batch runs a loop over time on contiguous ``(B, n)`` slices. One long record is cut into
-    ``nb`` blocks of ``K ≈ √T`` steps: the zero-state responses inside all blocks advance together
-    (``K`` vectorised steps), the block starts follow ``s_{b+1} = M^K s_b + z_b`` (``nb`` small
-    steps), then ``x[bK + j] = M^j s_b + z_b[j]``: about three passes over the data instead of
-    ``log2 T`` (the doubling scan of :func:`ivobs._recursion.affine_recursion`); same values up
-    to round-off (sums in another order)."""
-    T = v.shape[0]
-    out = np.empty((T + 1, *v.shape[1:]))
-    out[0] = x0
-    MT = M.T
-    if v.ndim == 3 or T < 64:
-        for k in range(T):
-            out[k + 1] = out[k] @ MT + v[k]
-        return out
-    n = v.shape[1]
-    K = int(np.sqrt(T))
-    nb = -(-T // K)
-    vp = np.zeros((nb * K, n))
-    vp[:T] = v
-    vp = vp.reshape(nb, K, n)
-    Z = np.empty((K + 1, nb, n))  # Z[j, b] = Σ_{i<j} M^(j-1-i) v[bK + i]
-    Z[0] = 0.0
-    for j in range(K):
-        Z[j + 1] = Z[j] @ MT + vp[:, j]
-    MK_T = np.linalg.matrix_power(M, K).T
-    S = np.empty((nb + 1, n))  # block starts x[bK]
-    S[0] = x0
-    for b in range(nb):
-        S[b + 1] = S[b] @ MK_T + Z[K, b]
-    P = np.empty((K, n, n))  # P[j] = (M^j)ᵀ
-    P[0] = np.eye(n)
-    for j in range(1, K):
-        P[j] = P[j - 1] @ MT
-    X = S[None, :nb] @ P + Z[:K]  # (K, nb, n): X[j, b] = x[bK + j]
-    X = X.transpose(1, 0, 2).reshape(nb * K, n)
-    out[1:] = np.concatenate([X[1:], S[nb:]])[:T]
-    return out
+    S2: Any  # CSR [[Q⁺, −Q⁻], [−Q⁻, Q⁺]], Q = A − L_k C: one sparse product per step
+    K: Any  # CSC [[L_k, B_z], [L_k, B_z]]: the known inputs [y; u] of both bounds
+    Bz: np.ndarray
+    Lz: np.ndarray
+    Gz: np.ndarray
+    Gp: np.ndarray
+    Gn: np.ndarray
+
+
+MAX_DENSE_DESIGN = MAX_LMI_STATES
+"""Above this many states the dense design steps of this module (LMI (41), the width and margin
+linear programs, similarity transforms) are refused with a :class:`~ivobs.DesignError`: pass a
+gain ``L=`` (checked sparsely for ``scipy.sparse`` systems)."""
+
+
+_SCALES = (
+    "pass a gain L=... to 'interval' or 'interval-split' (checked with sparse algebra when A is "
+    "scipy.sparse, one sparse product per step; e.g. ivobs.scenarios.heat_gain for heat-1d; "
+    "docs/scale.md)"
+)
+
+
+def check_design_size(sys: LinearSystem, who: str, step: str) -> None:
+    """:class:`DesignError` when a dense design step would run on more than
+    :data:`MAX_DENSE_DESIGN` states, pointing to what scales."""
+    if sys.nx > MAX_DENSE_DESIGN:
+        raise DesignError(
+            f"{who}: {step} is a dense design step (O(nx^2) variables or O(nx^3) work) and does "
+            f"not scale to nx = {sys.nx} > {MAX_DENSE_DESIGN} states; {_SCALES}"
+        )
+
+
+def sparse_radius(P: Any) -> float:
+    """Spectral radius of a sparse nonnegative matrix: ARPACK (Perron root, the largest in
+    modulus), or the smaller of the largest row and column sums (an upper bound, Perron–
+    Frobenius) when ARPACK does not converge. Small matrices: dense eigenvalues."""
+    n = P.shape[0]
+    if n <= MAX_DENSE_DESIGN:
+        return spectral_radius(P.toarray())
+    from scipy.sparse.linalg import ArpackNoConvergence, eigs
+
+    bound = float(min(abs(P).sum(axis=1).max(), abs(P).sum(axis=0).max()))
+    try:
+        val = eigs(P, k=1, which="LM", tol=1e-8, ncv=min(n - 1, 40), return_eigenvectors=False)
+    except ArpackNoConvergence:
+        return bound
+    return min(float(np.abs(val[0])), bound)
+
+
+def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: bool) -> Any:
+    """``D = A − LC`` as a sparse matrix, checked as :func:`check_nonnegative_schur` /
+    :func:`check_abs_schur` do, without dense algebra (``scipy.sparse`` systems)."""
+    from scipy.sparse import csr_matrix
+
+    A = sys.sparse("A")
+    D = (A - csr_matrix(L) @ sys.sparse("C")).tocsr()
+    D.eliminate_zeros()
+    if nonnegative:
+        tol = NONNEG_TOL * max(1.0, float(abs(A).max()) if A.nnz else 0.0)
+        if D.nnz and D.data.min() < -tol:
+            coo = D.tocoo()
+            j = int(np.argmin(coo.data))
+            raise DesignError(
+                f"{who}: A − LC is not nonnegative: entry ({coo.row[j] + 1}, {coo.col[j] + 1}) = "
+                f"{coo.data[j]:.6g} < 0 (002 Theorem 4 / 003 Assumption 2.B need A − LC >= 0); "
+                "use 'interval-split' or 'interval-transformed' with this gain"
+            )
+    rho = sparse_radius(abs(D))
+    if rho >= 1.0:
+        what = "A − LC is not Schur" if nonnegative else "|A − LC| = D⁺ + D⁻ is not Schur"
+        ref = "003 Assumption 2.A" if nonnegative else "003 Theorem 3"
+        raise DesignError(f"{who}: {what}: spectral radius {rho:.6g} >= 1 ({ref})")
+    return D
 
 
 class _CooperativeObserver(Estimator):
@@ -220,7 +276,11 @@ class _CooperativeObserver(Estimator):
     _Si: np.ndarray | None = None
 
     def _setup(self, L: np.ndarray, S: np.ndarray | None = None) -> None:
-        A, B, C, Du, E, F = self.sys.matrices_at(0)
+        sys = self.sys
+        # sparse A (large systems, S = I): one sparse product of the stacked system per step
+        self._sparse = sys.is_sparse and S is None
+        A = None if self._sparse else sys.A_at(0)
+        B, C, Du, E, F = (sys.B_at(0), sys.C_at(0), sys.D_at(0), sys.E_at(0), sys.F_at(0))
         self._A, self._B, self._C, self._Du, self._E, self._F = A, B, C, Du, E, F
         self._L = L
         self._S = S
@@ -228,27 +288,57 @@ class _CooperativeObserver(Estimator):
         self._Si_pm = None if S is None else (pos(self._Si), neg(self._Si))
         self._C_pm = (pos(C), neg(C))
         self._F_pm = (pos(F), neg(F))
-        self._cache: dict[bytes, _StepMatrices] = {}
+        self._cache: dict[bytes, Any] = {}
+        self._g_cache: dict[bytes, np.ndarray] = {}
+        if self._sparse:  # Lemma 1 for C on the few states it reads (point sensors)
+            Cc = sys.sparse("C").tocoo()
+            Rp = np.zeros((Cc.nnz, sys.ny))
+            Rn = np.zeros((Cc.nnz, sys.ny))
+            Rp[np.arange(Cc.nnz), Cc.row] = np.maximum(Cc.data, 0.0)
+            Rn[np.arange(Cc.nnz), Cc.row] = np.maximum(-Cc.data, 0.0)
+            # centre/radius form: C c = ½ (x̲ + x̄)[cols] (Rp − Rn), |C| r = ½ (x̄ − x̲)[cols] |R|
+            self._C_gather = (Cc.col.astype(np.intp), 0.5 * (Rp - Rn), 0.5 * (Rp + Rn))
+            # the same on the stacked state [z̄; z̲]: [C c, |C| r] = z[cols2] @ R2
+            Rs, Ra = self._C_gather[1:]
+            self._C_stacked = (
+                np.concatenate([Cc.col, sys.nx + Cc.col]).astype(np.intp),
+                np.block([[Rs, Ra], [Rs, -Ra]]),
+            )
         self.valid_from = 0
 
-    def _matrices(self, observed: np.ndarray) -> _StepMatrices:
+    def _matrices(self, observed: np.ndarray) -> Any:
         key = observed.tobytes()
         if key not in self._cache:
             Lk = self._L * observed[None, :]
-            Q = self._A - Lk @ self._C
             Bz = self._B - Lk @ self._Du
             Gz = self._E - Lk @ self._F
+            if self._sparse:
+                self._cache[key] = self._sparse_step(Lk, Bz, Gz)
+                return self._cache[key]
+            Q = self._A - Lk @ self._C
             if self._S is not None:
                 Q = self._S @ Q @ self._Si
                 Bz, Lk, Gz = self._S @ Bz, self._S @ Lk, self._S @ Gz
             self._cache[key] = _StepMatrices(pos(Q), neg(Q), Bz, Lk, Gz, pos(Gz), neg(Gz))
         return self._cache[key]
 
+    def _sparse_step(self, Lk: np.ndarray, Bz: np.ndarray, Gz: np.ndarray) -> _SparseStep:
+        from scipy.sparse import bmat, csc_matrix, csr_matrix
+
+        Q = (self.sys.sparse("A") - csr_matrix(Lk) @ self.sys.sparse("C")).tocsr()
+        Qp, Qn = Q.maximum(0).tocsr(), (-Q).maximum(0).tocsr()
+        S2 = bmat([[Qp, -Qn], [-Qn, Qp]], format="csr")
+        S2.eliminate_zeros()
+        K = csc_matrix(np.vstack([np.hstack([Lk, Bz])] * 2))  # few columns: CSC
+        return _SparseStep(S2, K, Bz, Lk, Gz, pos(Gz), neg(Gz))
+
     def _initial_state(self) -> dict[str, Any]:
         assert self.x0 is not None
         lo, hi = self.x0.lo.copy(), self.x0.hi.copy()
         if self._S is not None:
             lo, hi = image_bounds(self._S, lo, hi)  # 002 (42a-b)
+        if self.__dict__.get("_sparse"):  # one stacked vector [z̄; z̲]
+            return {"z": np.concatenate([hi, lo])}
         return {"lo": lo, "hi": hi}
 
     def _to_x(self, k: int, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -270,17 +360,54 @@ class _CooperativeObserver(Estimator):
         dbox: Box,
     ) -> bool:
         """``y`` (observed components) ∈ ``C[lo, hi] + D_u u + F[d]`` up to round-off."""
+        if self._sparse:
+            return self._consistent_sparse(lo, hi, u, y, obs, dbox)
         plo, phi = _hull(*self._C_pm, lo, hi)
-        flo, fhi = _hull(*self._F_pm, dbox.lo, dbox.hi)
+        if self.sys.has_constant_bounds:  # Lemma 1 of F on the bounds, once
+            f = self.__dict__.get("_f_const")
+            if f is None:
+                f = self.__dict__["_f_const"] = _hull(*self._F_pm, dbox.lo, dbox.hi)
+            flo, fhi = f
+        else:
+            flo, fhi = _hull(*self._F_pm, dbox.lo, dbox.hi)
         du = self._Du @ u
         plo, phi = plo + du + flo, phi + du + fhi
         tol = CONSISTENCY_TOL * (1.0 + np.abs(y) + (phi - plo))  # NaN (missing) compares False
         bad = ((y < plo - tol) | (y > phi + tol)) & obs
         return not bool(np.any(bad))
 
+    def _consistent_sparse(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        u: np.ndarray,
+        y: np.ndarray,
+        obs: np.ndarray,
+        dbox: Box,
+    ) -> bool:
+        """:meth:`_consistent` in centre/radius form on the few states ``C`` reads (sparse
+        systems): ``|y − C c − D_u u − F c_d| <= |C| r + |F| r_d`` up to round-off."""
+        cols, Rs, Ra = self._C_gather
+        clo, chi = lo[cols], hi[cols]
+        yc = (clo + chi) @ Rs
+        yr = (chi - clo) @ Ra
+        if u.shape[0]:
+            yc += self._Du @ u
+        fd = self._f_mid(dbox)
+        yc += fd[0]
+        yr += fd[1]
+        dev = np.abs(y - yc)
+        dev -= yr
+        if not (dev > 0.0).any():  # NaN (missing) compares False
+            return True
+        tol = CONSISTENCY_TOL * (1.0 + np.abs(y) + 2.0 * yr)
+        return not bool(np.any((dev > tol) & obs))
+
     def _step(
         self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> tuple[np.ndarray, np.ndarray]:
+        if self._sparse:
+            return self._step_sparse(state, k, u_k, y_k)
         zlo, zhi = state["lo"], state["hi"]
         xlo, xhi = self._to_x(k, zlo, zhi)
         obs = ~np.isnan(y_k)
@@ -295,20 +422,190 @@ class _CooperativeObserver(Estimator):
         state["lo"] = m.Qp @ zlo - m.Qn @ zhi + known + glo
         return xlo, xhi
 
+    def _step_sparse(
+        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_step` for sparse ``A`` (``S = I``): ``[z̄; z̲]+ = S2 [z̄; z̲] + K [y; u] + v``
+        with the stacked CSR matrix ``S2 = [[Q⁺, −Q⁻], [−Q⁻, Q⁺]]``, ``K = [[L_k, B_z];
+        [L_k, B_z]]`` (sparse) and ``v = [ḡ; g̲]``: two compiled sparse products per step
+        (:func:`~ivobs._recursion.csr_accumulate`)."""
+        z = state["z"]
+        n = z.shape[0] // 2
+        obs = y_k == y_k  # not NaN
+        full = bool(obs.all())
+        const = self.sys.has_constant_bounds
+        dbox = self.sys.d if const and self.sys.nd else self.sys.d_at(k, y_k)
+        if full and not self._consistent_stacked(z, u_k, y_k, dbox):
+            full = False
+            obs = np.zeros_like(obs)
+            state["_inconsistent"] = True
+        elif not full and obs.any():
+            if not self._consistent(z[n:], z[:n], u_k, y_k, obs, dbox):
+                state["_inconsistent"] = True
+                obs = np.zeros_like(obs)
+        fast = self.__dict__.get("_fast") if full and const else None
+        if fast is None:
+            m = self._matrices(obs)
+            fast = (m, self._input_bounds(m, obs, dbox))
+            if full and const:
+                self.__dict__["_fast"] = fast
+        m, v = fast
+        nz = v.copy()
+        csr_accumulate(m.S2, z, nz)
+        csr_accumulate(m.K, np.concatenate([y_k if full else np.where(obs, y_k, 0.0), u_k]), nz)
+        state["z"] = nz
+        return z[n:], z[:n]
+
+    def _consistent_stacked(self, z: np.ndarray, u: np.ndarray, y: np.ndarray, dbox: Box) -> bool:
+        """:meth:`_consistent_sparse` for a complete ``y`` on the stacked state."""
+        cols2, R2 = self._C_stacked
+        ny = y.shape[0]
+        p = z[cols2] @ R2  # [C c, |C| r]
+        fd = self._f_mid(dbox)
+        yc = p[:ny] + fd[0]
+        if u.shape[0]:
+            yc += self._Du @ u
+        yr = p[ny:] + fd[1]
+        dev = np.abs(y - yc)
+        if not (dev > yr).any():
+            return True
+        tol = CONSISTENCY_TOL * (1.0 + np.abs(y) + 2.0 * yr)
+        return not bool(np.any(dev - yr > tol))
+
+    def _f_mid(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
+        """Centre and radius of ``F d`` over the bounds (cached for constant bounds)."""
+        const = self.sys.has_constant_bounds
+        fd = self.__dict__.get("_f_mid_c") if const else None
+        if fd is None:
+            flo, fhi = _hull(*self._F_pm, dbox.lo, dbox.hi)
+            fd = (0.5 * (flo + fhi), 0.5 * (fhi - flo))
+            if const:
+                self.__dict__["_f_mid_c"] = fd
+        return fd
+
+    def _input_bounds(self, m: Any, obs: np.ndarray, dbox: Box) -> np.ndarray:
+        """``[ḡ; g̲]`` (Lemma 1 of ``G_k = E − L_k F`` on the bounds of ``d``), cached per
+        missing pattern when the bounds are constant."""
+        const = self.sys.has_constant_bounds
+        key = obs.tobytes()
+        hit = self._g_cache.get(key) if const else None
+        if hit is None:
+            glo, ghi = _hull(m.Gp, m.Gn, dbox.lo, dbox.hi)
+            hit = np.concatenate([ghi, glo])
+            if const:
+                self._g_cache[key] = hit
+        return hit
+
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Midpoint and radius recursions (module docstring), time-major; ``None`` (loop) for
-        callable bounds, missing samples, time-varying bounds shorter than the record, or an
-        inconsistent measurement (the loop reports it and predicts without it)."""
+        """Midpoint and radius recursions (module docstring); ``None`` (loop) for callable
+        bounds, missing samples, time-varying bounds shorter than the record, or an
+        inconsistent measurement (the loop reports it and predicts without it).
+
+        The midpoint ``c+ = Q c + S L y + S(B − L D_u) u + gc`` and the innovation
+        ``y − C S⁻¹ c − D_u u − fc`` are outputs of one :class:`~ivobs._recursion.SplitFilter`
+        pass; the radius ``r+ = |Q| r + gr`` does not depend on the data (computed once per
+        record length, shared by the streams of a batch)."""
         box = self.sys.d
         T = y.shape[-2]
-        if box is not None and not isinstance(box, Box):
-            return None
+        if not T or (box is not None and not isinstance(box, Box)):
+            return None  # (an empty record: the loop)
         if box is not None and box.is_time_varying and box.lo.shape[0] < T:
             return None
         if np.isnan(y).any():
             return None
+        if self._sparse:
+            return self._run_sparse(u, y, T)
+        vec = self._vector_terms(T)
+        filt, rad, yrad, gsig, fsig = vec
+        nx = self.sys.nx
+        hi = np.empty((*y.shape[:-1], nx))
+        sig = [y, u] if gsig is None else [y, u, gsig, fsig]
+        (xc, innov), shared = filt.run(sig, x0=self._centre0(), out=[hi, None], temp=[1])
+        s_x, s_i = (None, None) if shared is None else shared
+        if self._Si is not None:  # 002 (42): the prior box itself at k = 0
+            assert self.x0 is not None
+            row0 = self.x0.center - (0.0 if s_x is None else s_x[0])
+            xc[..., 0, :] = row0
+            inn0 = y[..., 0, :] - self.x0.center @ self._C.T - u[..., 0, :] @ self._Du.T
+            inn0 -= self._fc0 + (0.0 if s_i is None else s_i[0])
+            innov[..., 0, :] = inn0
+        # the loop's test is |res| <= pr + tol(|y|, pr); without |y| the band is narrower, so
+        # passing it decides without touching y again
+        bad = None
+        if not within_band(innov, s_i, yrad + CONSISTENCY_TOL * (1.0 + 2.0 * yrad)):
+            bad = _bad_streams(innov if s_i is None else innov + s_i, yrad, y)
+            if bad is True:
+                return None
+        del innov
+        lo = np.empty_like(hi)
+        if s_x is None:
+            np.subtract(xc, rad, out=lo)
+            xc += rad
+        else:
+            np.add(xc, s_x - rad, out=lo)
+            xc += s_x + rad
+        if bad is not None:  # only the streams with an inconsistent measurement by the loop
+            return redo_streams(self, u, y, t, lo, xc, bad)
+        return lo, xc
+
+    def _run_sparse(
+        self, u: np.ndarray, y: np.ndarray, T: int
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Sparse ``A``: the bounds themselves, ``[z̄; z̲]+ = S2 [z̄; z̲] + v[k]``, one sparse
+        product per step with every input term ``v`` precomputed by one matrix product
+        (:class:`~ivobs._recursion.LinearFilter`, loop form); then the consistency of ``y``."""
+        box = self.sys.d
+        n, ny = self.sys.nx, self.sys.ny
+        m = self._matrices(np.ones(ny, dtype=bool))
+        if box is None:
+            glo = ghi = np.zeros(n)
+            flo = fhi = np.zeros(ny)
+        else:
+            dlo, dhi = (box.lo[:T], box.hi[:T]) if box.is_time_varying else (box.lo, box.hi)
+            glo, ghi = image_bounds(m.Gz, dlo, dhi)
+            flo, fhi = image_bounds(self._F, dlo, dhi)
+        two = np.vstack
+        W = [two([m.Lz, m.Lz]), two([m.Bz, m.Bz])]
+        sig = [y, u]
+        g = None
+        if glo.ndim == 2:  # time-varying bounds: one more (shared) input
+            W.append(np.eye(2 * n))
+            sig.append(np.broadcast_to(np.hstack([ghi, glo]), (*y.shape[:-2], T, 2 * n)))
+        else:
+            g = np.concatenate([ghi, glo])
+        filt = LinearFilter(m.S2, W, [], g=g)
+        lead = y.shape[:-2]
+        sig = [np.broadcast_to(a, (*lead, *a.shape[-2:])) for a in sig]
+        X = filt.states(sig, x0=self._initial_state()["z"])
+        hi, lo = X[..., :n], X[..., n:]
+        # consistency of y[k] with C[x̲_k, x̄_k] + D_u u + F[d] (the loop's test), on the few
+        # states C reads
+        cols, Rs, Ra = self._C_gather
+        clo, chi = lo[..., cols], hi[..., cols]
+        yc = (clo + chi) @ Rs
+        yc += matrix_product(u, self._Du.T) + 0.5 * (flo + fhi)
+        yr = (chi - clo) @ Ra + 0.5 * (fhi - flo)
+        bad = _bad_streams(y - yc, yr, y)
+        if bad is True:
+            return None
+        if bad is not None and bad.any():
+            return redo_streams(self, u, y, None, lo, hi, bad)
+        return lo, hi
+
+    def _centre0(self) -> np.ndarray:
+        z0 = self._initial_state()
+        return 0.5 * (z0["lo"] + z0["hi"])
+
+    def _vector_terms(self, T: int) -> tuple[Any, ...]:
+        """What the vectorised path needs for a record of ``T`` steps (cached): the filter, the
+        radius ``(T, nx)`` in ``x`` coordinates, the output band radius ``|C| r + fr`` and,
+        for time-varying bounds, the known-input signals ``gc`` and ``fc``."""
+        cached = self.__dict__.get("_vec")
+        if cached is not None and cached[0] == T:
+            return cached[1]
+        box = self.sys.d
         n, ny = self.sys.nx, self.sys.ny
         m = self._matrices(np.ones(ny, dtype=bool))
         if box is None:
@@ -320,62 +617,58 @@ class _CooperativeObserver(Estimator):
             flo, fhi = image_bounds(self._F, dlo, dhi)
         gc, gr = 0.5 * (glo + ghi), 0.5 * (ghi - glo)
         fc, fr = 0.5 * (flo + fhi), 0.5 * (fhi - flo)
-        batched = y.ndim == 3
-        # time-major views: the recursions then run over contiguous (B, n) slices
-        yt = y.transpose(1, 0, 2) if batched else y
-
-        def per_step(a: np.ndarray) -> np.ndarray:  # (T, k) bounds against (T, B, k) data
-            return a[:, None, :] if (batched and a.ndim == 2) else a
-
-        def times(sig: np.ndarray, M: np.ndarray, steps: int) -> np.ndarray | float:
-            """``sig[:steps] @ Mᵀ`` time-major, once for a batch sharing its input (stride 0)."""
-            if not M.size or not np.any(M):
-                return 0.0
-            if batched and sig.strides[0] == 0:
-                return (sig[0, :steps] @ M.T)[:, None, :]
-            return (sig.transpose(1, 0, 2) if batched else sig)[:steps] @ M.T
-
-        v = yt[: T - 1] @ m.Lz.T
-        v += times(u, m.Bz, T - 1) + per_step(gc[: T - 1] if gc.ndim == 2 else gc)
+        Q = m.Qp - m.Qn
+        H = np.eye(n) if self._Si is None else self._Si
+        tv = gc.ndim == 2
+        W = [m.Lz, m.Bz] + ([np.eye(n), np.zeros((n, ny))] if tv else [])
+        J = [[None] * len(W), [np.eye(ny), -self._Du] + ([None, -np.eye(ny)] if tv else [])]
+        filt = SplitFilter(
+            Q, W, [H, -self._C @ H], J, g=None if tv else gc, h=[None, None if tv else -fc]
+        )
         z0 = self._initial_state()
-        c = _time_recursion(m.Qp - m.Qn, v, 0.5 * (z0["lo"] + z0["hi"]))
-        del v
-        rin = np.broadcast_to(gr[: T - 1] if gr.ndim == 2 else gr, (T - 1, n))
-        r = _time_recursion(m.Qp + m.Qn, rin, 0.5 * (z0["hi"] - z0["lo"]))
+        r0 = 0.5 * (z0["hi"] - z0["lo"])
+        if tv:
+            rad = LinearFilter(m.Qp + m.Qn, [np.eye(n)], [np.abs(H)]).run([gr], x0=r0)[0]
+        else:
+            rad = LinearFilter(m.Qp + m.Qn, [], [np.abs(H)], g=gr).run([], T=T, x0=r0)[0]
         if self._Si is not None:
             assert self.x0 is not None
-            c = c @ self._Si.T
-            r = r @ np.abs(self._Si).T
-            c[0] = self.x0.center
-            r[0] = self.x0.radius
-        # consistency of every measurement with the box it was used with (see _consistent;
-        # in a batch the round-off slack uses the largest |y| of the whole batch)
-        res = c @ self._C.T
-        res -= yt
-        res += times(u, self._Du, T) + per_step(fc)
-        np.abs(res, out=res)
-        pr = r @ np.abs(self._C).T + fr
-        ymax = max(float(np.max(y)), -float(np.min(y))) if batched else np.abs(yt)
-        slack = pr + CONSISTENCY_TOL * (1.0 + ymax + 2.0 * pr)
-        if np.any(res > per_step(slack)):
-            return None
-        del res
-        r_t = per_step(r)
-        lo = c - r_t
-        hi = c  # c is no longer needed: reuse its memory
-        hi += r_t
-        if batched:
-            return lo.transpose(1, 0, 2), hi.transpose(1, 0, 2)
-        return lo, hi
+            rad[0] = self.x0.radius
+        yrad = rad @ np.abs(self._C).T + fr
+        self._fc0 = fc[0] if tv else fc
+        terms = (filt, rad, yrad, gc if tv else None, fc if tv else None)
+        self.__dict__["_vec"] = (T, terms)
+        return terms
 
     # -- shared design helpers ------------------------------------------------------------
     def _check_gain(self, L: Any) -> np.ndarray:
         return as_matrix("L", L, self.sys.nx, self.sys.ny, vector="col")
 
-    def _steady(self, D: np.ndarray, L: np.ndarray) -> np.ndarray | None:
+    def _steady(self, D: Any, L: np.ndarray) -> np.ndarray | None:
         if self.sys.nd and not isinstance(self.sys.d, Box):
             return None
-        return steady_width(D, self._E - L @ self._F, design_delta(self.sys))
+        G = self._E - L @ self._F
+        if self._sparse:  # (I − |D|)⁻¹ |G| Δ by a sparse solve
+            from scipy.sparse import identity
+            from scipy.sparse.linalg import spsolve
+
+            M = (identity(D.shape[0], format="csc") - abs(D)).tocsc()
+            return np.atleast_1d(spsolve(M, np.abs(G) @ design_delta(self.sys)))
+        return steady_width(D, G, design_delta(self.sys))
+
+    def _given_gain(self, L: Any, nonnegative: bool) -> tuple[np.ndarray, Any, float]:
+        """A user's gain, checked (sparse algebra for sparse systems): ``(L, D, ρ)`` with ``ρ``
+        the spectral radius of ``D`` (``nonnegative``) or of ``|D|``."""
+        L = self._check_gain(L)
+        if self.sys.is_sparse:
+            D = sparse_gain_check(self.sys, L, self.name, nonnegative)
+            return L, D, sparse_radius(abs(D))
+        A, C = self.sys.A_at(0), self.sys.C_at(0)
+        if nonnegative:
+            D = check_nonnegative_schur(A, C, L, self.name)
+            return L, D, spectral_radius(D)
+        D = check_abs_schur(A, C, L, self.name)
+        return L, D, spectral_radius(np.abs(D))
 
 
 @register
@@ -417,23 +710,23 @@ class IntervalObserver(_CooperativeObserver):
         **base_options: Any,
     ):
         super().__init__(sys, x0, **base_options)
-        A, _, C, _, E, F = sys.matrices_at(0)
         if L is None:
             if gain not in ("lmi", "width"):
                 raise IvobsError(f"gain: expected 'lmi' or 'width', got {gain!r}")
+            check_design_size(sys, self.name, f"the gain design gain={gain!r} (LMI (41))")
+            A, _, C, _, E, F = sys.matrices_at(0)
             L = nonnegative_gain(A, C, self.name)
             if gain == "width":
                 L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
                 gain = "lmi+width"
         else:
-            L = self._check_gain(L)
             gain = "given"
-        D = check_nonnegative_schur(A, C, L, self.name)
+        L, D, rho = self._given_gain(L, nonnegative=True)
         self._setup(L)
         self.design = IntervalDesign(
             L=L,
             D=D,
-            spectral_radius=spectral_radius(D),
+            spectral_radius=rho,
             gain=gain,
             steady_width=self._steady(D, L),
         )
@@ -476,10 +769,12 @@ class SplitIntervalObserver(_CooperativeObserver):
         **base_options: Any,
     ):
         super().__init__(sys, x0, **base_options)
-        A, _, C, _, E, F = sys.matrices_at(0)
         if L is None:
             if gain not in ("lmi", "margin", "width"):
                 raise IvobsError(f"gain: expected 'width', 'margin' or 'lmi', got {gain!r}")
+            what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
+            check_design_size(sys, self.name, f"the gain design gain={gain!r} ({what})")
+            A, _, C, _, E, F = sys.matrices_at(0)
             if gain == "lmi":
                 L = nonnegative_gain(A, C, self.name)
             else:
@@ -500,14 +795,13 @@ class SplitIntervalObserver(_CooperativeObserver):
                 if gain == "width":
                     L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=False)
         else:
-            L = self._check_gain(L)
             gain = "given"
-        D = check_abs_schur(A, C, L, self.name)
+        L, D, rho = self._given_gain(L, nonnegative=False)
         self._setup(L)
         self.design = SplitDesign(
             L=L,
             D=D,
-            spectral_radius=spectral_radius(np.abs(D)),
+            spectral_radius=rho,
             gain=gain,
             steady_width=self._steady(D, L),
         )
@@ -563,6 +857,9 @@ class TransformedIntervalObserver(_CooperativeObserver):
         **base_options: Any,
     ):
         super().__init__(sys, x0, **base_options)
+        # every step here (pole placement, the realisation R, S by eq. (48), the dense n x n
+        # transform used at every step) is dense
+        check_design_size(sys, self.name, "the similarity transform (002 eq. 48)")
         A, _, C, _, E, F = sys.matrices_at(0)
         n, who = sys.nx, self.name
         delta = design_delta(sys)

@@ -73,8 +73,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._recursion import affine_recursion
+from .._recursion import (
+    LinearFilter,
+    SplitFilter,
+    matrix_product,
+    redo_streams,
+    scratch,
+    within_band,
+)
 from .._validate import as_matrix, as_vector
+from ..design._lmi import MAX_LMI_STATES
 from ..design.sylvester import (
     block_target,
     check_target,
@@ -309,6 +317,13 @@ class KKL(Estimator):
     def _design_lti(self, A_z: Any, B_z: Any, T: Any, tune: bool) -> KKLDesign:
         sys = self.sys
         self._x0_required("z[0] is bounded from x[0] by (3.b)")
+        if A_z is None and sys.nx > MAX_LMI_STATES:
+            raise DesignError(
+                f"kkl: the default target search solves many dense Sylvester equations (4) "
+                f"(O(nx^3) each) and does not scale to nx = {sys.nx} > {MAX_LMI_STATES} states; "
+                "give the target A_z, B_z (one solve), or use 'interval' / 'interval-split' "
+                "with a gain L=... for large sparse systems (docs/scale.md)"
+            )
         A, C, E, F = sys.A, sys.C, sys.E, sys.F
         if not is_observable(A, C):
             from ..linalg import observability_rank
@@ -848,67 +863,115 @@ class KKL(Estimator):
 
         ``c = (z̄ + z̲)/2`` follows ``c+ = A_z c + B_z y + (TB - B_zD) u + (ḡ + g̲)/2`` and the radius
         ``r+ = A_z r + (ḡ - g̲)/2`` does not depend on the data (one recursion for a whole batch).
-        Observer (6) (``coordinates="x"``) runs the same in ``x̂`` with ``A - LC``.
+        Observer (6) (``coordinates="x"``) runs the same in ``x̂`` with ``A - LC``. The centre
+        ``x = T⁺ c``, ``c`` itself (for the recovery margin) and the innovation
+        ``y - C T⁺ c - D u - F d_c`` are outputs of one :class:`~ivobs._recursion.SplitFilter`
+        pass.
         """
-        if self._mode != "dt-lti" or np.isnan(y).any():
-            return None
+        if self._mode != "dt-lti" or not y.shape[-2] or np.isnan(y).any():
+            return None  # (an empty record: the loop)
         if self.sys.d is not None and not isinstance(self.sys.d, Box):
             return None  # bounds computed from y (callable): the loop evaluates them per step
         Tn = y.shape[-2]
         d = self.sys.d
+        if isinstance(d, Box) and d.is_time_varying and d.lo.shape[0] < Tn:
+            return None  # the loop raises the informative error
+        filt, xr0, yr0, gsig, fsig, c0 = self._vector_terms(Tn)
+        _, _, C, D, _, F = self._mats
+        nx = self.sys.nx
+        hi = np.empty((*y.shape[:-1], nx))
+        sig = [y, u] if gsig is None else [y, u, gsig, fsig]
+        (xc, zc, innov), shared = filt.run(sig, x0=c0, out=[hi, None, None], temp=[1, 2])
+        s_x, s_z, s_i = (None, None, None) if shared is None else shared
+        # consistency of y[k], k >= 1, with the band of the box at k (row 0: below, from the box
+        # intersected with the prior, as in the loop); the data-free band is the narrower one
+        band = yr0[1:] + 1e-9 * (1.0 + yr0[1:])  # the test below without |yc| (narrower)
+        fail = None
+        if not within_band(innov[..., 1:, :], None if s_i is None else s_i[1:], band):
+            full = (innov if s_i is None else innov + s_i)[..., 1:, :]
+            yc = y[..., 1:, :] - full
+            fail = np.abs(full) > yr0[1:] + 1e-9 * (1.0 + np.abs(yc) + yr0[1:])
+        del innov
+        # radius: data-free part + recovery margin |c| (16 (n_z + n_x) ε cond(T)) |T⁺|
+        if s_z is not None:
+            zc += s_z
+        np.abs(zc, out=zc)
+        xr = matrix_product(zc, self._margin.T, out=scratch(self, "xr", hi.shape))
+        del zc
+        lo = np.empty_like(hi)
+        if s_x is None:
+            np.subtract(xc, xr0, out=lo)
+            xc += xr0
+        else:
+            np.add(xc, s_x - xr0, out=lo)
+            xc += s_x + xr0
+        lo -= xr
+        xc += xr
+        lo[..., 0, :], xc[..., 0, :] = self._first_box(lo[..., 0, :], xc[..., 0, :])
+        dc0, dr0 = (0.5 * (self._dlo0 + self._dhi0), 0.5 * (self._dhi0 - self._dlo0))
+        c0b, r0b = 0.5 * (lo[..., 0, :] + xc[..., 0, :]), 0.5 * (xc[..., 0, :] - lo[..., 0, :])
+        yc0 = c0b @ C.T + u[..., 0, :] @ D.T + F @ dc0
+        yr0b = r0b @ np.abs(C).T + np.abs(F) @ dr0
+        fail0 = np.abs(y[..., 0, :] - yc0) > yr0b + 1e-9 * (1.0 + np.abs(yc0) + yr0b)
+        if not fail0.any() and (fail is None or not fail.any()):
+            return lo, xc
+        if y.ndim != 3:
+            return None  # the loop reports the step and predicts without it
+        bad = fail0.any(axis=-1)
+        if fail is not None:
+            bad |= fail.any(axis=(-2, -1))
+        return redo_streams(self, u, y, t, lo, xc, bad)
+
+    def _vector_terms(self, Tn: int) -> tuple[Any, ...]:
+        """The filter and the data-free terms of the vectorised path for ``Tn`` steps (cached):
+        ``xr0 = |T⁺| r + margin``-part of the radius, ``yr0 = |C| xr0 + |F| d_r`` (the output
+        band), the time-varying known inputs ``g_c``, ``F d_c`` (or None) and ``c[0]``."""
+        cached = self.__dict__.get("_vec")
+        if cached is not None and cached[0] == Tn:
+            return cached[1]
+        d = self.sys.d
         if isinstance(d, Box) and d.is_time_varying:
-            if d.lo.shape[0] < Tn:
-                return None  # the loop raises the informative error
             dlo, dhi = d.lo[:Tn], d.hi[:Tn]
         else:
             dd = self.sys.d_at(0)
             dlo, dhi = dd.lo, dd.hi
+        tv = dlo.ndim == 2
+        self._dlo0, self._dhi0 = (dlo[0], dhi[0]) if tv else (dlo, dhi)
         glo, ghi = image_bounds(self._G, dlo, dhi)
         gc, gr = 0.5 * (glo + ghi), 0.5 * (ghi - glo)
         assert self.x0 is not None
         z0lo, z0hi = image_bounds(self.design.T, self.x0.lo, self.x0.hi)
         c0, r0 = 0.5 * (z0lo + z0hi), 0.5 * (z0hi - z0lo)
-        gr = np.broadcast_to(gr, (Tn, gr.shape[-1]))
         P, Tm = self._tr.P, self.design.T
-        if self.coordinates == "x":
-            zr = _linear_recursion(self._Mx, gr @ P.T, P @ r0) @ Tm.T
-        else:
-            zr = _linear_recursion(self._Az, gr, r0)
-        xr0 = zr @ (np.abs(P) + self._margin).T  # data-free part of the x radius
         _, _, C, D, _, F = self._mats
+        ny, nz = self.sys.ny, self.design.n_z
         fc, fr = 0.5 * (dlo + dhi) @ F.T, 0.5 * (dhi - dlo) @ np.abs(F).T
-        fc0, fr0 = (fc, fr) if fc.ndim == 1 else (fc[0], fr[0])
+        if self.coordinates == "x":  # observer (6) in x̂, z = T x̂
+            M, Win, Hz, x0 = self._Mx, P, Tm, P @ c0
+        else:
+            M, Win, Hz, x0 = self._Az, np.eye(nz), np.eye(nz), c0
+        Hx = P @ Hz
+        W = [Win @ self._Bz, Win @ self._Lu] + ([Win, np.zeros((Win.shape[0], ny))] if tv else [])
+        nsig = len(W)
+        J = [[None] * nsig, [None] * nsig, [np.eye(ny), -D] + ([None, -np.eye(ny)] if tv else [])]
+        filt = SplitFilter(
+            M,
+            W,
+            [Hx, Hz, -C @ Hx],
+            J,
+            g=None if tv else Win @ gc,
+            h=[None, None, None if tv else -fc],
+        )
+        if tv:
+            rf = LinearFilter(M, [Win], [Hz])
+            zr = rf.run([gr], x0=Win @ r0)[0]
+        else:
+            zr = LinearFilter(M, [], [Hz], g=Win @ gr).run([], T=Tn, x0=Win @ r0)[0]
+        xr0 = zr @ (np.abs(P) + self._margin).T  # data-free part of the x radius
         yr0 = xr0 @ np.abs(C).T + fr  # data-free half-width of the output band
-        lo, hi = np.empty((*y.shape[:-1], self.sys.nx)), np.empty((*y.shape[:-1], self.sys.nx))
-        # chunks of streams small enough to stay in cache (the work is memory-bound)
-        step = max(1, 262144 // max(Tn, 1))
-        for b0 in range(0, 1 if y.ndim == 2 else y.shape[0], step):
-            sl = (Ellipsis,) if y.ndim == 2 else (slice(b0, b0 + step),)
-            yb, ub = y[sl], u[sl]
-            w = yb @ self._Bz.T
-            w += ub @ self._Lu.T + gc
-            if self.coordinates == "x":
-                zc = _linear_recursion(self._Mx, w @ P.T, P @ c0) @ Tm.T
-            else:
-                zc = _linear_recursion(self._Az, w, c0)
-            xc = zc @ P.T
-            xr = np.abs(zc) @ self._margin.T
-            xr += xr0
-            lb, hb = lo[sl], hi[sl]
-            np.subtract(xc, xr, out=lb)
-            np.add(xc, xr, out=hb)
-            lb[..., 0, :], hb[..., 0, :] = self._first_box(lb[..., 0, :], hb[..., 0, :])
-            # a measurement outside the predicted output band needs the loop (reported, unused);
-            # the band of row 0 is that of the box intersected with the prior, as in the loop
-            yc = xc @ C.T
-            yc += ub @ D.T + fc
-            yr = np.broadcast_to(yr0, yc.shape).copy()
-            c0b, r0b = 0.5 * (lb[..., 0, :] + hb[..., 0, :]), 0.5 * (hb[..., 0, :] - lb[..., 0, :])
-            yc[..., 0, :] = c0b @ C.T + ub[..., 0, :] @ D.T + fc0
-            yr[..., 0, :] = r0b @ np.abs(C).T + fr0
-            if np.any(np.abs(yb - yc) > yr + 1e-9 * (1.0 + np.abs(yc) + yr)):
-                return None
-        return lo, hi
+        terms = (filt, xr0, yr0, gc if tv else None, fc if tv else None, x0)
+        self.__dict__["_vec"] = (Tn, terms)
+        return terms
 
 
 def _accessor(M: Any) -> Callable[[float], np.ndarray]:
@@ -917,30 +980,3 @@ def _accessor(M: Any) -> Callable[[float], np.ndarray]:
         return lambda t: np.asarray(M(t), dtype=float)
     Mc = np.asarray(M, dtype=float)
     return lambda t: Mc
-
-
-def _linear_recursion(M: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """``x[0] = x0``, ``x[k+1] = M x[k] + w[k]``: rows ``0 .. T-1`` (``w`` is ``(..., T, n)``).
-
-    Diagonal ``M`` (the default targets): one first-order filter per component
-    (``scipy.signal.lfilter``, sequential in C: several times faster than a doubling scan here;
-    short records loop over time instead of importing it). Other ``M``: :func:`affine_recursion`.
-    """
-    Tn, n = w.shape[-2], w.shape[-1]
-    if np.count_nonzero(M - np.diag(np.diag(M))):
-        return affine_recursion(M, w, x0)[..., :Tn, :]
-    a = np.diag(M)
-    out = np.empty(w.shape)
-    out[..., 0, :] = x0
-    if Tn <= 256:
-        out[..., 1:, :] = w[..., : Tn - 1, :]
-        for k in range(1, Tn):
-            out[..., k, :] += a * out[..., k - 1, :]
-        return out
-    from scipy.signal import lfilter
-
-    x0b = np.broadcast_to(x0, (*w.shape[:-2], n))
-    for i in range(n):
-        zi = (a[i] * x0b[..., i])[..., None]
-        out[..., 1:, i] = lfilter([1.0], [1.0, -a[i]], w[..., : Tn - 1, i], axis=-1, zi=zi)[0]
-    return out

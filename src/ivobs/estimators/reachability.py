@@ -12,9 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from .._recursion import affine_recursion
+from .._recursion import SplitFilter, redo_streams, within_band
 from .._validate import as_int
+from ..design._lmi import MAX_LMI_STATES
 from ..design.hinf import observer_gain
+from ..errors import DesignError
 from ..model import LinearSystem
 from ..sets import Box
 from . import register
@@ -125,6 +127,13 @@ class Reachability(Estimator):
         **base: Any,
     ):
         super().__init__(sys, x0, **base)
+        if sys.nx > MAX_LMI_STATES:
+            raise DesignError(
+                f"{self.name}: the exact interval hull of the error's reachable set propagates "
+                f"nx x (nx + nd) matrices (O(nx^3) work per step) and does not scale to nx = "
+                f"{sys.nx} > {MAX_LMI_STATES} states; use 'interval' or 'interval-split' with a "
+                "gain L=... (sparse A: one sparse product per step; docs/scale.md)"
+            )
         K = None if memory is None else as_int("memory", memory, 1)
         Lm, gamma, P, rho = observer_gain(sys, L, self.name)
         self._mats = sys.matrices_at(0)
@@ -234,19 +243,46 @@ class Reachability(Estimator):
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        if not self.sys.has_constant_bounds or np.isnan(y).any():
-            return None
+        if not self.sys.has_constant_bounds or not y.shape[-2] or np.isnan(y).any():
+            return None  # (an empty record: the loop)
         assert self._const is not None
         c, r = self._const
-        rho = radius_sequence(self._M, np.diag(self._h0), self._G * r, y.shape[-2])
-        yrad = rho @ self._absC.T + self._absF @ r  # |C| ρ + |F| r: consistency of y
-        return observer_bounds(self._M, self._mats, self.design.L, c, self._xc, u, y, rho, yrad)
+        T = y.shape[-2]
+        cached = self.__dict__.get("_vec")
+        if cached is None or cached[0] != T:
+            rho = radius_sequence(self._M, np.diag(self._h0), self._G * r, T)
+            yrad = rho @ self._absC.T + self._absF @ r  # |C| ρ + |F| r: consistency of y
+            filt = (
+                cached[3]
+                if cached is not None
+                else observer_filter(self._M, self._mats, self.design.L, c)
+            )
+            cached = self.__dict__["_vec"] = (T, rho, yrad, filt)
+        _, rho, yrad, filt = cached
+        out = observer_bounds(
+            self._M, self._mats, self.design.L, c, self._xc, u, y, rho, yrad, filt, streams=True
+        )
+        if out is None or len(out) == 2:
+            return out
+        return redo_streams(self, u, y, t, *out)
 
 
-def _lin(X: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """``X @ M.T`` over the last axis of a ``(..., n)`` array, as one 2-D BLAS product."""
-    out = X.reshape(-1, X.shape[-1]) @ M.T
-    return out.reshape(*X.shape[:-1], M.shape[0])
+def observer_filter(
+    M: np.ndarray, mats: tuple[np.ndarray, ...], L: np.ndarray, c: np.ndarray
+) -> SplitFilter:
+    """The observer of 002 eqs. (10)/(34a) as a linear filter of ``(y, u)``: state ``x̂``
+    (``x̂+ = M x̂ + L y + (B - L D) u + (E - L F) c``), outputs ``x̂`` and the innovation
+    ``y - C x̂ - D u - F c``."""
+    _, B, C, D, E, F = mats
+    ny = C.shape[0]
+    return SplitFilter(
+        M,
+        [L, B - L @ D],
+        [np.eye(M.shape[0]), -C],
+        [[None, None], [np.eye(ny), -D]],
+        g=(E - L @ F) @ c,
+        h=[None, -(F @ c)],
+    )
 
 
 def observer_bounds(
@@ -259,60 +295,42 @@ def observer_bounds(
     y: np.ndarray,
     rad: np.ndarray,
     yrad: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray] | None:
+    filt: SplitFilter | None = None,
+    streams: bool = False,
+) -> tuple[np.ndarray, ...] | None:
     """``x̂[k] ∓ rad[k]`` over a record ``(T, ·)`` or a batch ``(B, T, ·)``, with
     ``x̂+ = M x̂ + (B - L D) u + L y + (E - L F) c`` (002 eqs. 10 / 34a), ``x̂[0] = x0``;
     ``None`` when some ``|y - C x̂ - D u - F c| > yrad`` (inconsistent data: the caller falls
     back to its loop, which reports the step). ``rad`` ``(T, nx)`` and ``yrad`` ``(T, ny)`` are
-    data-independent. Batches are processed in groups of streams so that the temporaries stay
-    small (cache- and allocation-friendly)."""
-    if y.ndim == 2:
-        return _observer_bounds(M, mats, L, c, x0, u, y, rad, yrad)
-    nB, T = y.shape[:2]
+    data-independent. One pass of :class:`ivobs._recursion.SplitFilter` (``filt``, from
+    :func:`observer_filter`): the part of ``x̂`` shared by a batch's streams (``x0``, ``c``, a
+    common input) is folded into the offsets ``shared ∓ rad``. With ``streams=True`` a batch
+    with inconsistent streams gives ``(lo, hi, bad)``, ``bad`` the streams to redo (loop)."""
+    if filt is None:
+        filt = observer_filter(M, mats, L, c)
     nx = M.shape[0]
-    lo, hi = np.empty((nB, T, nx)), np.empty((nB, T, nx))
-    group = max(1, _CHUNK // ((T + 1) * max(nx, y.shape[-1], 1)))
-    for s in range(0, nB, group):
-        part = slice(s, s + group)
-        out = (lo[part], hi[part])
-        if _observer_bounds(M, mats, L, c, x0, u[part], y[part], rad, yrad, out) is None:
-            return None
-    return lo, hi
-
-
-def _observer_bounds(
-    M: np.ndarray,
-    mats: tuple[np.ndarray, ...],
-    L: np.ndarray,
-    c: np.ndarray,
-    x0: np.ndarray,
-    u: np.ndarray,
-    y: np.ndarray,
-    rad: np.ndarray,
-    yrad: np.ndarray,
-    out: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    _, B, C, D, E, F = mats
-    T = y.shape[-2]
-    v = _lin(y, L)
-    if u.shape[-1]:
-        v += _lin(u, B - L @ D)
-    v += (E - L @ F) @ c
-    X = affine_recursion(M, v, x0)  # x̂[0..T]
-    innov = y - _lin(X, C)[..., :T, :]
-    if u.shape[-1] and D.any():
-        innov -= _lin(u, D)
-    innov -= F @ c
-    if not consistent(innov, yrad, y, None):
-        return None
-    xh = X[..., :T, :]
-    if out is not None:
-        np.subtract(xh, rad, out=out[0])
-        np.add(xh, rad, out=out[1])
-        return out
-    lo = xh - rad
-    xh += rad  # in place: X is ours
-    return lo, xh
+    hi = np.empty((*y.shape[:-1], nx))
+    (xh, innov), shared = filt.run([y, u], x0=x0, out=[hi, None], temp=[1])
+    s_x, s_i = (None, None) if shared is None else shared
+    # consistent() allows 1e-9 (1 + |innov| + |y| + yrad) of excess: a narrower band first
+    bad = None
+    if not within_band(innov, s_i, yrad + 1e-9 * (1.0 + yrad)):
+        if s_i is not None:
+            innov = innov + s_i
+        fail = inconsistent_steps(innov, yrad, y)
+        if fail.any():
+            if not streams or y.ndim != 3:
+                return None
+            bad = fail.any(axis=-1)
+    del innov
+    lo = np.empty_like(hi)
+    if s_x is None:
+        np.subtract(xh, rad, out=lo)
+        xh += rad
+    else:
+        np.add(xh, s_x - rad, out=lo)
+        xh += s_x + rad
+    return (lo, xh) if bad is None else (lo, xh, bad)
 
 
 def radius_sequence(M: np.ndarray, H0: np.ndarray, GR: np.ndarray, T: int) -> np.ndarray:
@@ -358,6 +376,13 @@ def gain_without(
     A, _, C, _, E, F = mats
     Lk = L * obs
     return Lk, A - Lk @ C, E - Lk @ F
+
+
+def inconsistent_steps(innov: np.ndarray, bound: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``(..., T)`` mask of the steps :func:`consistent` rejects (complete measurements)."""
+    excess = np.abs(innov) - bound
+    tol = 1e-9 * (1.0 + np.abs(innov) + np.abs(y) + bound)
+    return (excess > tol).any(axis=-1)
 
 
 def consistent(innov: np.ndarray, bound: np.ndarray, y: np.ndarray, obs: np.ndarray | None) -> bool:
