@@ -140,10 +140,6 @@ def test_exact_does_not_flag_valid_data_as_inconsistent():
     assert not res.inconsistent.any()
 
 
-@pytest.mark.xfail(strict=True, reason="A6: intersect rounds outward once, with a margin relative "
-                   "to the *intersected* box; a member's rounding error is relative to its own, "
-                   "larger bounds (here reachability's c + r of a prior [-2e8, 0.71]): "
-                   "x[0] outside by 1.5e-8")
 def test_intersect_margin_covers_each_members_rounding():
     lo1, hi1 = -199999999.80468366, 0.7128333002200049
     sys = LinearSystem([[0.5, 0.2], [0.0, 0.6]], C=np.eye(2), E=0.1 * np.eye(2),
@@ -163,10 +159,6 @@ _FEEDTHROUGH_FAILS = ["reachability", "zonotope", "interval", "interval-split",
                       "intersect"]
 
 
-@pytest.mark.xfail(strict=True, reason="A7: the base margin 1e-10 (1 + |bound|) ignores the "
-                   "rounding of the data terms: with |D u| = 1e8 and |x| <= 1 the innovation "
-                   "y - D u loses ~1e-8 (y itself is rounded to eps |y|); only fixed-time, whose "
-                   "margin scales with the window's |w|, stays sound")
 @pytest.mark.parametrize("method", _FEEDTHROUGH_FAILS)
 def test_large_feedthrough_rounding(method):
     sys = LinearSystem([[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]],
@@ -300,8 +292,6 @@ def test_empty_record_vectorised(method):
     assert res.lower.shape == (0, 2)
 
 
-@pytest.mark.xfail(strict=True, reason="E2: complex measurements are cast to float with a "
-                   "ComplexWarning (imaginary part dropped) instead of being rejected")
 def test_complex_measurements_are_rejected():
     sys, x0, tr = _small()
     est = ivobs.make_estimator("reachability", sys, x0=x0)
@@ -311,7 +301,6 @@ def test_complex_measurements_are_rejected():
             est.run(tr.u, tr.y + 1j)
 
 
-@pytest.mark.xfail(strict=True, reason="E3: step(t='a') raises a raw ValueError from float()")
 def test_step_bad_time_is_an_ivobs_error():
     sys, x0, tr = _small()
     est = ivobs.make_estimator("reachability", sys, x0=x0)
@@ -319,8 +308,6 @@ def test_step_bad_time_is_an_ivobs_error():
         est.step(tr.u[0], tr.y[0], t="a")
 
 
-@pytest.mark.xfail(strict=True, reason="E4: restore() of a state with an array of the wrong shape "
-                   "raises a raw ValueError from reshape")
 def test_restore_of_a_tampered_state_is_an_ivobs_error():
     sys, x0, _tr = _small()
     est = ivobs.make_estimator("reachability", sys, x0=x0)
@@ -330,8 +317,6 @@ def test_restore_of_a_tampered_state_is_an_ivobs_error():
         est.restore(st)
 
 
-@pytest.mark.xfail(strict=True, reason="E5: intersect.restore() of a state without its step count "
-                   "raises KeyError('k')")
 def test_intersect_restore_missing_entry_is_an_ivobs_error():
     sys, x0, _tr = _small()
     est = ivobs.make_estimator("intersect", sys, x0=x0)

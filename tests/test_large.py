@@ -186,7 +186,8 @@ def test_sparse_gain_checks():
         ("reachability", {"L": "heat"}, "interval hull"),
         ("kkl", {}, "Sylvester"),
         ("fixed-time", {}, "stacked matrices"),
-        ("zonotope", {}, "dense LMI"),
+        ("zonotope", {}, "generator matrix"),
+        ("zonotope", {"L": "heat"}, "generator matrix"),
     ],
 )
 def test_dense_design_steps_refuse_large_systems(method, options, step):
@@ -197,5 +198,4 @@ def test_dense_design_steps_refuse_large_systems(method, options, step):
         ivobs.make_estimator(method, sc.system, x0=sc.x0, **options)
     msg = str(err.value)
     assert f"nx = {MAX_LMI_STATES + 1} > {MAX_LMI_STATES}" in msg and "L=" in msg
-    if method != "zonotope":  # (the LMI helper's message is shared with other methods)
-        assert "'interval'" in msg or "interval-split" in msg
+    assert "'interval'" in msg or "interval-split" in msg

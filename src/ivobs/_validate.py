@@ -21,6 +21,11 @@ def as_float_array(name: str, value: Any) -> np.ndarray:
     """Convert to a float array or raise an error naming ``name``."""
     if callable(value):
         raise IvobsError(f"{name}: expected an array, got a callable {value!r}")
+    if np.iscomplexobj(value):
+        raise IvobsError(
+            f"{name}: expected real numbers, got complex values (the imaginary part would be "
+            "dropped silently); pass the real part explicitly if that is what you mean"
+        )
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:

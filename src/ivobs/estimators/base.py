@@ -19,10 +19,15 @@ A subclass provides
   found inconsistent (and not used). Return ``None`` to fall back to the loop (e.g. missing
   samples).
 
-Soundness under floating point: every returned bound is widened outwards by
-``ROUNDING * (1 + |bound|)`` (:data:`ROUNDING` ``= 1e-10``) so that rounding in the recursions
-cannot place a true state on the wrong side of a bound. This is a documented safety margin, not
-interval arithmetic with directed rounding.
+Soundness under floating point: every returned bound of ``x[k]`` is widened outwards by
+``ROUNDING * (1 + |bound| + s_k)`` (:data:`ROUNDING` ``= 1e-10``, about ``4.5e5`` units of
+rounding ``eps``), where ``s_k`` is the *data scale*: the largest magnitude of a data term seen up
+to step ``k`` (``|y_j|``, ``|B| |u_j|``, ``|D| |u_j|``, ``|E| |d_j|``, ``|F| |d_j|``, ``j <= k``).
+A recursion that combines terms of size ``s`` loses about ``eps s`` per operation, amplified by
+the gain of the error dynamics; the margin covers amplifications up to ``~1e5`` relative to the
+largest quantity involved, the bounds *and* the data (a measurement ``y = 1e8`` carrying a state
+of size 1 is only known to ``eps 1e8``). This is a documented safety margin, not interval
+arithmetic with directed rounding.
 """
 
 from __future__ import annotations
@@ -86,16 +91,51 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
-def outward(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Widen bounds by the rounding margin (NaN stays NaN), in place: pass arrays you own."""
+def outward(
+    lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Widen bounds by the rounding margin ``ROUNDING (1 + max(|lo|, |hi|) + scale)`` (NaN
+    stays NaN), in place: pass arrays you own. ``scale``: the data scale per step, shaped like
+    the bounds without their last axis (see the module docstring).
+
+    Works through cache-sized slabs of rows with two reused buffers: on a long record of a
+    large system, whole-array temporaries cost more in page faults than the arithmetic."""
+    n = lo.shape[-1] if lo.ndim else 1
+    flat = lo.ndim == 2 or (lo.flags.c_contiguous and hi.flags.c_contiguous)  # rows: views
+    if lo.size <= _SLAB or not flat or n == 0 or lo.shape != hi.shape:
+        with np.errstate(invalid="ignore"):
+            m = np.maximum(np.abs(lo), np.abs(hi))
+            if scale is not None:
+                m += np.asarray(scale)[..., None] if np.ndim(scale) else scale
+            m *= ROUNDING
+            m += ROUNDING
+            lo -= m
+            hi += m
+        return lo, hi
+    L, H = lo.reshape(-1, n), hi.reshape(-1, n)
+    rows = L.shape[0]
+    # the part of the margin that does not depend on the bound: ROUNDING (1 + s) per row
+    base = ROUNDING * (1.0 + (0.0 if scale is None else np.asarray(scale, dtype=float)))
+    S = np.broadcast_to(base, lo.shape[:-1]).reshape(-1, 1)
+    step = max(1, _SLAB // n)
+    m = np.empty((min(step, rows), n))
+    t = np.empty_like(m)
     with np.errstate(invalid="ignore"):
-        m = np.abs(lo)
-        np.maximum(m, np.abs(hi), out=m)
-        m *= ROUNDING
-        m += ROUNDING
-        lo -= m
-        hi += m
+        for r0 in range(0, rows, step):
+            r1 = min(rows, r0 + step)
+            mm, tt = m[: r1 - r0], t[: r1 - r0]
+            np.abs(L[r0:r1], out=mm)
+            np.abs(H[r0:r1], out=tt)
+            np.maximum(mm, tt, out=mm)
+            mm *= ROUNDING
+            mm += S[r0:r1]
+            L[r0:r1] -= mm
+            H[r0:r1] += mm
     return lo, hi
+
+
+_SLAB = 1 << 15
+"""Elements per slab of :func:`outward`."""
 
 
 def _owned(a: Any) -> np.ndarray:
@@ -115,6 +155,10 @@ class Estimator:
     supports_continuous: ClassVar[bool] = False
     supports_time_varying: ClassVar[bool] = False
     needs_x0: ClassVar[bool] = True
+    rounds_itself: ClassVar[bool] = False
+    """True for methods that apply the rounding margin themselves (``intersect``: its members'
+    boxes are rounded before they are intersected, which needs no arithmetic). The online data
+    scale ``s_k`` is then in ``state["_scale"]`` when ``_step`` runs."""
 
     def __init__(self, sys: LinearSystem, x0: Box | None = None, *, on_inconsistent: str = "warn"):
         if not isinstance(sys, LinearSystem):
@@ -178,6 +222,8 @@ class Estimator:
         y_k = self._check_y_k(y_k)
         t_k = self._check_t_k(t)
         k = int(self._state["k"])
+        scale = max(float(self._state.get("_scale", 0.0)), self._step_scale(k, u_k, y_k, t_k))
+        self._state["_scale"] = scale
         lo, hi = self._step(self._state, k, u_k, y_k, t_k)
         self._state["k"] = k + 1
         self.last_inconsistent = bool(self._state.pop("_inconsistent", False))
@@ -185,7 +231,9 @@ class Estimator:
             self._report_inconsistent([k])
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
-        lo, hi = outward(np.array(lo, dtype=float), np.array(hi, dtype=float))
+        lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
+        if not self.rounds_itself:
+            outward(lo, hi, scale)
         if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
             raise IvobsError(f"{self.name}: produced NaN bounds at step {k} (a bug; please report)")
         return Box._trusted(lo, hi)
@@ -223,11 +271,73 @@ class Estimator:
         return arr
 
     def _check_t_k(self, t: Any) -> float | None:
-        if self.sys.is_continuous:
-            if t is None:
+        if t is None:
+            if self.sys.is_continuous:
                 raise IvobsError("t: continuous-time estimation needs the sample time of each step")
-            return float(t)
-        return None if t is None else float(t)
+            return None
+        arr = as_float_array("t", t)
+        if arr.size != 1 or not np.isfinite(arr).all():
+            raise IvobsError(f"t: expected one finite sample time, got {t!r}")
+        return float(arr.reshape(()))
+
+    # -- data scale of the rounding margin (module docstring) ---------------------------
+    def _scale_terms(self, k: Any) -> tuple[np.ndarray, float]:
+        """``(g, c)`` at step (or time) ``k``: ``g_j |u_j|`` bounds the input terms of input
+        ``j`` (``g_j`` the largest entry of column ``j`` of ``|B|`` and ``|D|``), ``c`` the
+        disturbance terms ``|E| |d|``, ``|F| |d|`` (0 for bounds computed from ``y``)."""
+        cache = self.__dict__.get("_scale_cache")
+        if cache is not None:
+            return cache
+        sys = self.sys
+        _A, B, _C, D, E, F = sys.matrices_at(k)
+        g = np.max(np.abs(np.vstack([B, D])), axis=0) if sys.nu else np.zeros(0)
+        c = 0.0
+        dbox = getattr(sys, "_d", None)
+        if sys.nd and isinstance(dbox, Box):
+            box = sys.d_at(int(k) if sys.is_discrete else 0)
+            md = np.maximum(np.abs(box.lo), np.abs(box.hi))
+            c = float(max(np.max(np.abs(E) @ md, initial=0.0), np.max(np.abs(F) @ md, initial=0.0)))
+        out = (g, c)
+        if not sys.is_time_varying and sys.has_constant_bounds:
+            self._scale_cache = out
+        return out
+
+    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
+        """The magnitude of the data terms of one step (its running maximum is ``s_k``)."""
+        g, c = self._scale_terms(k if t_k is None else t_k)
+        a = c
+        if y_k.size:
+            m = np.fmax.reduce(np.abs(y_k))
+            if m == m:  # not all missing
+                a = max(a, float(m))
+        if u_k.size:
+            a = max(a, float(np.max(np.abs(u_k) * g)))
+        return a
+
+    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
+        """``s_k`` over a record or batch, ``(..., T)``: the running maximum of
+        :meth:`_step_scale` (the same numbers as the online path)."""
+        T = y.shape[-2]
+        a = np.zeros(y.shape[:-1])
+        for i in range(y.shape[-1]):  # columns: a reduction over a short last axis is slow
+            np.fmax(a, np.abs(y[..., i]), out=a)  # fmax: a missing sample (NaN) counts as 0
+        sys = self.sys
+        steady = not sys.is_time_varying and sys.has_constant_bounds
+        if steady:
+            g, c = self._scale_terms(0 if t is None else t[0])
+            G, cs = g, np.full(T, c)
+        else:
+            terms = [self._scale_terms(k if t is None else t[k]) for k in range(T)]
+            G = np.array([gc[0] for gc in terms]).reshape(T, sys.nu)
+            cs = np.array([gc[1] for gc in terms])
+        if sys.nu:
+            if u.ndim == 3 and u.strides[0] == 0:
+                au = np.max(np.abs(u[0]) * G, axis=-1)  # one input for the whole batch
+            else:
+                au = np.max(np.abs(u) * G, axis=-1)
+            np.maximum(a, au, out=a)
+        np.maximum(a, cs, out=a)
+        return np.maximum.accumulate(a, axis=-1)
 
     # -- offline --------------------------------------------------------------------------
     def run(
@@ -272,11 +382,11 @@ class Estimator:
                     sl = slice(b0, min(B, b0 + chunk))
                     lo[sl], hi[sl], inconsistent[sl] = self._block(u[sl], y[sl], t_arr,
                                                                    vectorize, bar)
-                    self._finalize(lo[sl], hi[sl])
+                    self._finalize(lo[sl], hi[sl], self._data_scale(u[sl], y[sl], t_arr))
             else:
                 lo, hi, inconsistent = self._block(u, y, t_arr, vectorize, bar)
                 lo, hi = _owned(lo), _owned(hi)
-                self._finalize(lo, hi)
+                self._finalize(lo, hi, self._data_scale(u, y, t_arr))
         if np.any(inconsistent):
             self._report_inconsistent(sorted(set(np.argwhere(inconsistent)[:, -1].tolist())))
         return Estimate(
@@ -307,9 +417,13 @@ class Estimator:
         parts = [self._loop(u[b], y[b], t, bar) for b in range(y.shape[0])]
         return tuple(np.stack(p) for p in zip(*parts))  # type: ignore[return-value]
 
-    def _finalize(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """In place: outward rounding, NaN before ``valid_from``, no non-finite bound after."""
-        outward(lo, hi)
+    def _finalize(
+        self, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None
+    ) -> None:
+        """In place: outward rounding (``scale``: the data scale ``s_k``, ``(..., T)``), NaN
+        before ``valid_from``, no non-finite bound after."""
+        if not self.rounds_itself:
+            outward(lo, hi, scale)
         vf = self.valid_from
         lo[..., :vf, :] = np.nan
         hi[..., :vf, :] = np.nan
@@ -330,6 +444,10 @@ class Estimator:
         hi = np.empty((T, self.sys.nx))
         inc = np.zeros(T, dtype=bool)
         for k in range(T):
+            if self.rounds_itself:
+                t_k = None if t is None else float(t[k])
+                state["_scale"] = max(state.get("_scale", 0.0),
+                                      self._step_scale(k, u[k], y[k], t_k))
             lo[k], hi[k] = self._step(state, k, u[k], y[k], None if t is None else float(t[k]))
             state["k"] = k + 1
             inc[k] = bool(state.pop("_inconsistent", False))
@@ -397,7 +515,13 @@ class Estimator:
         st: dict[str, Any] = {}
         for key, val in state["state"].items():
             if isinstance(val, dict) and "array" in val:
-                st[key] = np.array(val["array"], dtype=float).reshape(val["shape"])
+                try:
+                    st[key] = np.array(val["array"], dtype=float).reshape(val["shape"])
+                except (TypeError, ValueError, KeyError) as exc:
+                    raise IvobsError(
+                        f"state: entry {key!r} is not a valid saved array ({exc}); the state "
+                        "was altered or is not from Estimator.state()"
+                    ) from None
             else:
                 st[key] = val
         missing = set(ref) - set(st)

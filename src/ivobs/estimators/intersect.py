@@ -42,7 +42,7 @@ from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
 from . import _REGISTRY, get, make_estimator, register
-from .base import ROUNDING, Design, Estimator
+from .base import ROUNDING, Design, Estimator, outward
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -96,6 +96,7 @@ class Intersect(Estimator):
     supports_continuous = True
     supports_time_varying = True
     needs_x0 = False
+    rounds_itself = True  # members rounded before intersecting (base.outward)
 
     def __init__(
         self,
@@ -275,6 +276,7 @@ class Intersect(Estimator):
         self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> tuple[np.ndarray, np.ndarray]:
         nx = self.sys.nx
+        scale = float(state.get("_scale", 0.0))
         los, his = [], []
         flagged = False
         for m, ms in zip(self.members, state["members"]):
@@ -282,12 +284,14 @@ class Intersect(Estimator):
             ms["k"] = k + 1
             flagged |= bool(ms.pop("_inconsistent", False))
             valid = k >= m.valid_from
+            if valid:  # each member rounded by its own margin (base.outward; audit A6)
+                lo, hi = outward(np.array(lo, dtype=float), np.array(hi, dtype=float), scale)
             los.append(np.asarray(lo, dtype=float) if valid else np.full(nx, np.nan))
             his.append(np.asarray(hi, dtype=float) if valid else np.full(nx, np.nan))
         if k < self.valid_from:
             lo_s = hi_s = np.full(nx, np.nan)
         else:
-            lo_s, hi_s = self._strip_box(k, u_k, y_k, t_k)
+            lo_s, hi_s = outward(*self._strip_box(k, u_k, y_k, t_k), scale)
         lo, hi, empty = self._combine(np.array(los), np.array(his), lo_s, hi_s)
         if flagged or bool(empty):
             state["_inconsistent"] = True
@@ -303,12 +307,14 @@ class Intersect(Estimator):
         strip = self._strip_run(u, y)
         if strip is None:
             return None
+        scale = self._data_scale(u, y, t)
+        strip = outward(*strip, scale)
         los, his = [], []
         for m in self.members:
             out = self._member_raw(m, u, y, t)
             if out is None:
                 return None
-            lo, hi = out
+            lo, hi = outward(*out, scale)  # each member rounded by its own margin
             lo[..., : m.valid_from, :] = np.nan
             hi[..., : m.valid_from, :] = np.nan
             los.append(lo)
@@ -322,7 +328,7 @@ class Intersect(Estimator):
     def _member_raw(
         m: Estimator, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        """A member's bounds before outward rounding (the intersection is rounded once)."""
+        """A member's raw bounds (fresh arrays; the caller rounds them outward)."""
         out = m._run(u, y, t)
         if out is not None:
             return np.array(out[0], dtype=float), np.array(out[1], dtype=float)
@@ -357,7 +363,11 @@ class Intersect(Estimator):
         return {
             "method": self.name,
             "fingerprint": self._fingerprint(),
-            "state": {"k": int(st["k"]), "members": members},
+            "state": {
+                "k": int(st["k"]),
+                "_scale": float(st.get("_scale", 0.0)),
+                "members": members,
+            },
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -368,6 +378,13 @@ class Intersect(Estimator):
             raise IvobsError(
                 f"state: saved by method {state.get('method')!r} with other members or designs; "
                 f"it can only be restored into the same {self.name!r} estimator"
+            )
+        k = state["state"].get("k")
+        scale = state["state"].get("_scale", 0.0)
+        if not isinstance(k, int) or k < 0 or not isinstance(scale, (int, float)):
+            raise IvobsError(
+                "state: expected a step count 'k' (integer >= 0) and a data scale; the state "
+                "was altered or is not from Estimator.state()"
             )
         saved = state["state"].get("members")
         if not isinstance(saved, list) or len(saved) != len(self.members):
@@ -380,4 +397,4 @@ class Intersect(Estimator):
                 states.append(m._state)
             finally:
                 m._state = previous
-        self._state = {"members": states, "k": int(state["state"]["k"])}
+        self._state = {"members": states, "k": k, "_scale": float(scale)}

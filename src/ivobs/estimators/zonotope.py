@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
+from ..design._lmi import MAX_LMI_STATES
 from ..design.hinf import observer_gain
 from ..errors import DesignError, IvobsError
 from ..linalg import spectral_radius
@@ -104,6 +105,13 @@ class ZonotopeEstimator(Estimator):
     ):
         super().__init__(sys, x0, **base)
         nx = sys.nx
+        if nx > MAX_LMI_STATES:
+            raise DesignError(
+                f"{self.name}: every step multiplies an nx x q generator matrix (q >= nx) and "
+                f"sorts its columns (O(nx^3) work per step); this does not scale to nx = {nx} > "
+                f"{MAX_LMI_STATES} states; use 'interval' or 'interval-split' with a gain L=... "
+                "(sparse A: one sparse product per step; docs/scale.md)"
+            )
         q = ORDER_PER_STATE * nx if order is None else as_int("order", order)
         if q < nx:
             raise IvobsError(f"order: expected q >= nx = {nx} generators (002 Remark 2), got {q}")
