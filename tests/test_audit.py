@@ -49,9 +49,6 @@ def test_fixed_time_vectorised_run_without_inputs():
     assert np.isfinite(res.lower[1:]).all()
 
 
-@pytest.mark.xfail(strict=True, reason="A2: fixed-time with s = 0 keeps one ring slot, so the "
-                   "prediction through a missing sample uses u[k] and d-bounds[k] (the slot was "
-                   "just overwritten) instead of u[k-1], d[k-1]: unsound box")
 def test_fixed_time_s0_predicts_a_missing_sample_with_the_previous_input():
     sys = LinearSystem([[-0.999]], [[1.0]], [[-2.0]], E=[[0.5]], F=[[0.0]], d=Box([0.6], [0.6]))
     T = 8
@@ -65,9 +62,6 @@ def test_fixed_time_s0_predicts_a_missing_sample_with_the_previous_input():
     assert res.contains(tr.x).all()
 
 
-@pytest.mark.xfail(strict=True, reason="A3: fixed-time accepts A with rcond ~1e-7 as invertible "
-                   "(SINGULAR_RCOND = 1e-8); Mx = [C; C A^-1; C A^-2] has cond 1e14 and the "
-                   "computed T misses T Mx = I by 1e-2: random vertex runs leave the box")
 def test_fixed_time_nearly_singular_A():
     A = np.array([[0.12609559714027987, 0.32010332880987175, -1.0651677453570858],
                   [-0.05129062982893862, -0.1007573188128995, -0.7896390780376499],
@@ -88,10 +82,6 @@ def test_fixed_time_nearly_singular_A():
     assert res.contains(tr.x)[res.valid_from:].all()  # x[7] leaves the box by 2.9
 
 
-@pytest.mark.xfail(strict=True, reason="A3b: fixed-time with a singular A uses an output "
-                   "injection (001 Remark 1); the one chosen here has |L| = 156, and the rounding "
-                   "of the stacked matrices of A - LC (not in the margin, which only covers the "
-                   "window product and T Mx - I) puts x[128] outside by 4.1e-6 (|x| = 200)")
 def test_fixed_time_output_injection_rounding():
     base = random_system(44, nx=3, ny=1, nu=1, invertible=False, rho=0.99)
     A, B, C, _, E, F = base.matrices_at(0)
@@ -107,10 +97,6 @@ def test_fixed_time_output_injection_rounding():
     assert res.contains(tr.x)[res.valid_from:].all()
 
 
-@pytest.mark.xfail(strict=True, reason="A4: exact's 'safe' dual bound lam'b + sum min(r l, r u) "
-                   "is evaluated in floating point without an error term; with large multipliers "
-                   "the rounding exceeds the margin, the too-tight box becomes a variable bound of "
-                   "the next LPs and the error compounds (x[10] outside by 264)")
 def test_exact_safe_bound_rounding_compounds():
     sys = LinearSystem([[1.02]], C=[[-2.0]], E=[[0.5654947821624227, -0.4344598025301682]],
                        F=[[-0.02959681857860406, -0.06036165972136037]],
@@ -127,10 +113,6 @@ def test_exact_safe_bound_rounding_compounds():
         assert other.contains(tr.x)[other.valid_from:].all()
 
 
-@pytest.mark.xfail(strict=True, raises=ivobs.InconsistentDataError,
-                   reason="A5: exact keeps the prior x0 unwidened in the LP and HiGHS uses "
-                   "absolute tolerances; a noise-free measurement of a state on the prior's edge "
-                   "(large magnitude) is declared infeasible: valid data reported as a fault")
 def test_exact_does_not_flag_valid_data_as_inconsistent():
     c = 0.528973903776374
     x0 = Box([8214304519.280842], [8214304526.113711])
@@ -177,10 +159,6 @@ def test_large_feedthrough_fixed_time_is_sound():
     assert ivobs.make_estimator("fixed-time", sys).run(tr.u, tr.y).contains(tr.x).all()
 
 
-@pytest.mark.xfail(strict=True, reason="A8: with zero-width bounds the width objective of "
-                   "gain='width' is degenerate and interval-split returns L = [-999999.1, 1e6]; "
-                   "with one sensor missing |A - L_k C| = 1e6 amplifies the rounding: x[3] outside "
-                   "by 3.5e-6, and every later sample is then reported inconsistent")
 def test_interval_split_degenerate_width_gain_with_missing_component():
     sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]],
                        d=Box([0.5], [0.5]))
@@ -194,11 +172,6 @@ def test_interval_split_degenerate_width_gain_with_missing_component():
     assert res.contains(tr.x).all() and not res.inconsistent.any()
 
 
-@pytest.mark.xfail(strict=True, reason="A8: two noise-free sensors of one state (F = 0, a common "
-                   "redundant layout): the width objective does not depend on the part of L in the "
-                   "left null space of C, so gain='width' returns L = [-999999.1, 1e6]; with one "
-                   "sensor missing |A - L_k C| = 1e6 and the width goes 0.2 -> 2e5 -> 2e11 -> 2e17 "
-                   "(reachability: 0.35)")
 @pytest.mark.parametrize("method", ["interval", "interval-split"])
 def test_interval_gain_with_redundant_noise_free_sensors(method):
     sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.0], [0.0]],
@@ -213,10 +186,6 @@ def test_interval_gain_with_redundant_noise_free_sensors(method):
     assert np.max(res.width) < 10.0
 
 
-@pytest.mark.xfail(strict=True, raises=ivobs.DesignError, reason="A9: continuous-time kkl "
-                   "integrates T(t) (dT/dt = A_z T - T A between samples); the default target has "
-                   "a mode (-1.15) slower than the plant's fastest (-3.51), so that flow is "
-                   "unstable and the run dies mid-record (t ~ 151 s, whatever the sampling period)")
 def test_kkl_continuous_time_long_record():
     sys = LinearSystem([[-1.92, 1.36], [1.22, -2.46]], None, [[-0.53, 0.57]],
                        E=0.1 * np.eye(2), F=np.zeros((1, 2)), d=Box.symmetric([1.0, 1.0]), dt=0)
@@ -241,11 +210,6 @@ def test_batch_with_time_varying_bounds(method):
     assert res.contains(np.array([tr.x for tr in trs])).all()
 
 
-@pytest.mark.xfail(strict=True, reason="A11: strip intersects with sigma = 0 hyperplanes (in the "
-                   "joint (x, d) space); once the zonotope is thin along h, "
-                   "lambda* = H H'h / h'H H'h is huge and the rounding of y (eps |y|) moves "
-                   "the set off the true state: "
-                   "x[25] outside by 0.22 (|x| ~ 3e4), later samples reported inconsistent")
 def test_strip_rounding_when_the_measurements_pin_the_state():
     sys = LinearSystem([[1.57, 1.41], [-0.59, -0.34]], None, [[-0.53, 0.57], [-0.06, 0.75]],
                        E=[[-0.92], [0.78]], F=[[-0.02], [0.14]], d=Box([-1.0], [1.0]))
@@ -257,10 +221,6 @@ def test_strip_rounding_when_the_measurements_pin_the_state():
     assert res.contains(tr.x).all()
 
 
-@pytest.mark.xfail(strict=True, reason="A12: constrained-zonotope reports valid data as "
-                   "inconsistent (steps 4, 5, 6, ... of this admissible record; a raise with "
-                   "on_inconsistent='raise'): HiGHS declares the updated set's LP infeasible "
-                   "(the pre-checks _clean_rows / _drop_implied pass); |x| ~ 1e5, ny > nd")
 def test_constrained_zonotope_does_not_flag_valid_data():
     sys = LinearSystem([[1.57, 1.41], [-0.59, -0.34]], None, [[-0.53, 0.57], [-0.06, 0.75]],
                        E=[[-0.92], [0.78]], F=[[-0.02], [0.14]], d=Box([-1.0], [1.0]))
@@ -326,7 +286,6 @@ def test_intersect_restore_missing_entry_is_an_ivobs_error():
         est.restore(st)
 
 
-@pytest.mark.xfail(strict=True, reason="E6: kkl(max_cond='x') raises a raw ValueError from float()")
 def test_kkl_non_numeric_option_is_an_ivobs_error():
     sys, x0, _ = _small()
     with pytest.raises(IvobsError, match="max_cond"):

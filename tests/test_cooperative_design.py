@@ -4,12 +4,14 @@ LMIs (7)-(8) of 003, the LP for |A - LC| Schur, the width refinement and the che
 import numpy as np
 import pytest
 
-from ivobs import DesignError, scenarios
+from ivobs import Box, DesignError, scenarios
 from ivobs.design.cooperative import (
     abs_schur_gain,
     check_abs_schur,
     check_nonnegative_schur,
+    missing_radius,
     nonnegative_gain,
+    output_weights,
     refine_width,
     steady_width,
 )
@@ -125,3 +127,74 @@ def test_refinement_never_widens_and_keeps_the_structure(seed):
     w_lmi = steady_width(A - L_lmi @ C, E - L_lmi @ F, delta)
     w_ref = steady_width(A - L @ C, E - L @ F, delta)
     assert np.all(w_ref <= w_lmi * (1 + 1e-9)) and w_ref.sum() < 0.999 * w_lmi.sum()
+
+
+# -- audit A8: the smallest gain among the optimal ones --------------------------------------------
+A8_A, A8_C = np.array([[0.9]]), np.array([[1.0], [1.0]])  # two sensors of one state
+
+
+def test_a8_margin_lp_returns_the_smallest_gain_with_redundant_outputs():
+    """ρ(|A − LC|) = |0.9 − l1 − l2| is 0 on a whole line of gains: HiGHS used to return the
+    vertex (−999999.1, 10⁶) of the |L| <= 1e6 box; the second stage picks (0.45, 0.45)."""
+    L, r = abs_schur_gain(A8_A, A8_C)
+    assert r < 1e-9
+    np.testing.assert_allclose(L, [[0.45, 0.45]], atol=1e-9)
+    np.testing.assert_allclose(missing_radius(A8_A, A8_C, L), [0.45, 0.45], atol=1e-9)
+
+
+@pytest.mark.parametrize("nonnegative", [True, False])
+def test_a8_width_refinement_returns_the_smallest_gain_with_noise_free_outputs(nonnegative):
+    """F = 0: the width (I − |D|)⁻¹|E|Δ does not depend on the part of L with LC = 0."""
+    E, F, delta = np.array([[0.1]]), np.zeros((2, 1)), np.array([2.0])
+    L = refine_width(A8_A, A8_C, E, F, delta, np.array([[0.3, 0.3]]), nonnegative=nonnegative)
+    np.testing.assert_allclose(L, [[0.45, 0.45]], atol=1e-9)
+    np.testing.assert_allclose(steady_width(A8_A - L @ A8_C, E, delta), [0.2], rtol=1e-9)
+
+
+def test_a8_output_weights_make_the_gain_scale_invariant():
+    """Sensor 2 reads 1000 x: the gain's column 2 shrinks by 1000, L C is the same."""
+    C = np.array([[1.0], [1000.0]])
+    np.testing.assert_allclose(output_weights(C), [1.0, 1000.0])
+    L, _ = abs_schur_gain(A8_A, C)
+    np.testing.assert_allclose(L, [[0.45, 0.45e-3]], atol=1e-9)
+
+
+def test_a8_refinement_keeps_single_output_gaps_bounded():
+    """Sensor 1 sees the disturbance (F = 1e-3): G = E − LF vanishes only for l1 = 100, and
+    then l2 = 0.9 − 100 and a gap of either sensor multiplies the width by ~100 per step. The
+    start gain rides out both gaps, so the refinement stops before that gain."""
+    E, F, delta = np.array([[0.1]]), np.array([[1e-3], [0.0]]), np.array([2.0])
+    L0 = np.array([[0.45, 0.45]])
+    for nonneg in (True, False):
+        L = refine_width(A8_A, A8_C, E, F, delta, L0, nonnegative=nonneg)
+        assert np.all(missing_radius(A8_A, A8_C, L) < 1.0)
+        w0 = steady_width(A8_A - L0 @ A8_C, E - L0 @ F, delta)
+        assert np.all(steady_width(A8_A - L @ A8_C, E - L @ F, delta) <= w0 * (1 + 1e-9))
+
+
+@pytest.mark.parametrize(
+    "name, L_expected",
+    [
+        ("servo-motor", [[1.0, 0.1], [0.0, 0.8495], [0.0, -0.0357]]),
+        ("efimov-planar", [[0.3], [0.6]]),
+        ("henon", [[0.0], [0.3]]),
+    ],
+)
+def test_a8_second_stage_keeps_the_papers_optimal_gains(name, L_expected):
+    """Where the LP optimum is a single gain the second stage does not move it (1e-12 slack)."""
+    sc = scenarios.get(name)
+    A, _, C, _, E, F = sc.system.matrices_at(0)
+    d = sc.system.d
+    delta = d.hi - d.lo if isinstance(d, Box) else np.ones(E.shape[1])  # Hénon: callable bounds
+    L, _ = abs_schur_gain(A, C)
+    L = refine_width(A, C, E, F, delta, L, nonnegative=False)
+    np.testing.assert_allclose(L, L_expected, atol=1e-10)
+
+
+def test_a8_missing_radius():
+    """Servo motor: without sensor 1 the first state (an integrator) is unobserved."""
+    _, A, C, *_ = mats("servo-motor")
+    L = np.array([[1.0, 0.1], [0.0, 0.8495], [0.0, -0.0357]])
+    r = missing_radius(A, C, L)
+    assert r[0] == pytest.approx(1.0, abs=1e-12)
+    assert r[1] == pytest.approx(rho(np.abs(A - L * [1.0, 0.0] @ C)), rel=1e-12) and r[1] > 1

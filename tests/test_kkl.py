@@ -407,6 +407,160 @@ def test_continuous_lti_without_disturbance_converges_to_zero_width():
     assert res.width[-1].max() < 1e-6
 
 
+# ------------------------------------------------------- A9: the flow of T in continuous time --
+def _audit_a9_system():
+    # the system of tests/test_audit.py (A9): plant modes -0.874 and -3.506
+    return LinearSystem(
+        [[-1.92, 1.36], [1.22, -2.46]], None, [[-0.53, 0.57]],
+        E=0.1 * np.eye(2), F=np.zeros((1, 2)), d=Box.symmetric([1.0, 1.0]), dt=0,
+    )  # fmt: skip
+
+
+def _min_re(M):
+    return float(np.min(np.linalg.eigvals(M).real))
+
+
+def _max_re(M):
+    return float(np.max(np.linalg.eigvals(M).real))
+
+
+@pytest.mark.parametrize("h", [1.0, 0.05])
+def test_a9_default_target_is_faster_than_the_plant_and_long_records_run(h):
+    sys = _audit_a9_system()
+    x0 = Box(-np.ones(2), np.ones(2))
+    est = make_estimator("kkl", sys, x0=x0)
+    # the flow rule with its margin: max Re eig(A_z) <= min Re eig(A) - 0.05 max(1, rho(A))
+    rho = max(1.0, float(np.max(np.abs(np.linalg.eigvals(sys.A)))))
+    assert _max_re(est.design.A_z) <= _min_re(sys.A) - 0.05 * rho + 1e-12
+    t = np.arange(0.0, 200.0 if h == 1.0 else 40.0, h)  # before: DesignError at t ~ 150 s
+    d = ivobs.vertex_disturbance(sys.d, t.size, seed=1)
+    tr = simulate(sys, [0.3, -0.2], None, d, t=t)
+    res = est.run(None, tr.y, t=t)
+    assert_contains(res, tr.x)
+    assert np.all(np.isfinite(res.lower)) and np.max(res.width[t.size // 2 :]) < 2.0
+
+
+def test_a9_user_target_with_an_unstable_flow_is_refused_at_construction():
+    sys = _audit_a9_system()
+    x0 = Box(-np.ones(2), np.ones(2))
+    with pytest.raises(DesignError, match=r"flow dT/dt = A_z T - T A .*unstable.*-1\.15.*-3\.50"):
+        make_estimator("kkl", sys, x0=x0, A_z=np.diag([-1.15, -5.0]), B_z=np.ones((2, 1)))
+    est = make_estimator("kkl", sys, x0=x0, A_z=np.diag([-4.0, -5.0]), B_z=np.ones((2, 1)))
+    assert _max_re(est.design.A_z) < _min_re(sys.A)
+
+
+def test_a9_time_varying_flow_rule_at_t0_and_default_ell():
+    pend = ivobs.scenarios.get("pendulum", t_final=1.0)
+    with pytest.raises(DesignError, match=r"ell: the flow .*A frozen at t = 0.*unstable"):
+        make_estimator("kkl", pend.system, x0=pend.x0, ell=0.3)  # -0.3 > -0.5 = Re eig(A(0))
+    assert make_estimator("kkl", pend.system, x0=pend.x0).design.ell == 2.0  # Example 2
+
+    def A_t(t):
+        return np.array([[0.0, 1.0], [-20.0 - np.sin(t), -12.0]])  # modes about -2 and -10
+
+    fast = LinearSystem(A_t, None, [[1.0, 0.0]], dt=0)
+    est = make_estimator("kkl", fast, x0=Box(-np.ones(2), np.ones(2)))
+    assert est.design.ell > 10.0  # raised above 2 so that the flow is stable at t = 0
+    assert _max_re(est.design.A_z) < _min_re(A_t(0.0))
+    t = np.arange(0.0, 5.0, 0.1)
+    tr = simulate(fast, [0.5, -0.5], None, t=t)
+    assert_contains(est.run(None, tr.y, t=t), tr.x)
+
+
+def test_a9_regular_grid_keeps_T_constant_at_the_sampled_sylvester_solution():
+    from scipy.linalg import expm, solve_sylvester
+
+    sys = _audit_a9_system()
+    x0 = Box(-np.ones(2), np.ones(2))
+    est = make_estimator("kkl", sys, x0=x0, A_z=np.diag([-6.0, -8.0]), B_z=np.ones((2, 1)))
+    Az, Bz, C = est.design.A_z, est.design.B_z, sys.C
+    h, n = 0.1, 150
+    eA = expm(sys.A * h)
+    Th = solve_sylvester(-expm(Az * h), eA, h * Bz @ C @ eA)  # T_h e^{Ah} = e^{A_z h} T_h + ...
+    t = np.arange(n) * h
+    tr = simulate(sys, [0.3, -0.2], None, ivobs.vertex_disturbance(sys.d, n, seed=2), t=t)
+    y = tr.y.copy()
+    y[50:53] = np.nan  # moves T off T_h; it comes back and is re-anchored
+    est.reset()
+    Ts = {}
+    for k in range(n):
+        est.step(None, y[k], t=t[k])
+        if k in (1, 2, 49, 52, 140, 149):
+            Ts[k] = np.array(est.state()["state"]["T"]["array"])
+    np.testing.assert_allclose(Ts[1], Th, rtol=1e-12, atol=1e-14)
+    for k in (2, 49, 140, 149):  # nothing propagated: the very same matrix at every sample
+        np.testing.assert_array_equal(Ts[k], Ts[1])
+    assert not np.allclose(Ts[52], Th, rtol=1e-3)
+    res = est.run(None, y, t=t)
+    assert_contains(res, tr.x)
+
+
+def test_a9_long_gap_predicts_with_the_model_instead_of_raising():
+    # T(t) decays during a gap; fast rows come back as h b_i C (parallel for one output): T is
+    # not left-invertible at t = 24 (the code before the fix raised DesignError there)
+    A = np.array([[0.37, 0.72, 1.62], [-1.21, -1.0, -1.32], [-0.11, 1.0, -0.4]])
+    sys = LinearSystem(
+        A, None, [[0.5, -1.91, 0.15]], E=0.1 * np.eye(3), F=np.zeros((1, 3)),
+        d=Box.symmetric(np.ones(3)), dt=0,
+    )  # fmt: skip
+    x0 = Box(-np.ones(3), np.ones(3))
+    t = np.arange(400) * 0.1
+    tr = simulate(sys, [1.0, -1.0, 1.0], None, ivobs.vertex_disturbance(sys.d, 400, seed=3), t=t)
+    y = tr.y.copy()
+    y[200:240] = np.nan
+    kw = {"A_z": np.diag([-1.0, -6.0, -30.0]), "B_z": np.ones((3, 1))}
+    res = make_estimator("kkl", sys, x0=x0, **kw).run(None, y, t=t)
+    assert_contains(res, tr.x)
+    assert np.all(np.isfinite(res.upper)) and np.max(res.width) < 30.0
+    assert np.max(res.width[-50:]) < 1.0  # back to the observer's width after the gap
+
+
+def test_a9_sampling_period_too_long_for_the_target_is_a_design_error_at_the_first_interval():
+    sys = _audit_a9_system()
+    x0 = Box(-np.ones(2), np.ones(2))
+    est = make_estimator("kkl", sys, x0=x0, A_z=np.diag([-60.0, -80.0]), B_z=np.ones((2, 1)))
+    t = np.arange(10) * 1.0  # e^(-60) = 0: both rows of T_h are h b_i C, parallel
+    y = simulate(sys, [0.1, 0.1], None, t=t).y
+    with pytest.raises(DesignError, match=r"sampling period h = 1: .*cond .* > max_cond"):
+        est.run(None, y, t=t)
+    est.run(None, y[:1], t=t[:1])  # a single sample needs no interval
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10**6))
+def test_a9_continuous_random_systems_switching_inside_intervals(seed):
+    """Random CT plants (stable, marginal, slightly unstable), regular or jittered grids,
+    vertex disturbances switching 4x per sampling interval, 10 % missing and a gap: the box
+    contains the state at every sample and the run never raises."""
+    rng = np.random.default_rng(seed)
+    nx, ny, nu = int(rng.integers(1, 4)), int(rng.integers(1, 3)), int(rng.integers(0, 2))
+    base = random_system(rng, nx=nx, ny=ny, nu=nu, rho=None, feedthrough=True)
+    top = rng.choice([-1.0, -0.1, 0.0, 0.02])
+    A = base.A - (_max_re(base.A) - top) * np.eye(nx)
+    sys = LinearSystem(A, base.B, base.C, D=base.D, E=base.E, F=base.F, d=base.d, dt=0)
+    h, m, n = float(rng.choice([0.05, 0.2, 0.5])), 4, 120
+    hs = h * (rng.uniform(0.6, 1.4, n - 1) if rng.random() < 0.4 else np.ones(n - 1))
+    t = np.concatenate([[0.0], np.cumsum(hs)])
+    fine = np.concatenate([np.linspace(t[k], t[k + 1], m + 1)[:-1] for k in range(n - 1)])
+    fine = np.append(fine, t[-1])
+    u = rng.normal(size=(n, nu))
+    x0 = Box(-np.ones(nx), np.ones(nx))
+    tr = simulate(
+        sys, np.where(rng.random(nx) < 0.5, -1.0, 1.0), np.repeat(u, m, axis=0)[: fine.size],
+        ivobs.vertex_disturbance(sys.d, fine.size, seed=rng), t=fine,
+    )  # fmt: skip
+    y = tr.y[:: m].copy()
+    y[rng.random(y.shape) < 0.1] = np.nan
+    y[60:75] = np.nan
+    try:
+        est = make_estimator("kkl", sys, x0=x0)
+    except DesignError:
+        return  # e.g. practically unobservable draws
+    res = est.run(u, y, t=t)
+    assert_contains(res, tr.x[:: m])
+    assert np.all(np.isfinite(res.lower))
+
+
 # ------------------------------------------------------------------ errors ---------------------
 def test_errors_name_the_argument():
     sc = ivobs.scenarios.get("servo-motor")
@@ -441,6 +595,43 @@ def test_errors_name_the_argument():
         make_estimator("kkl", pend.system, x0=pend.x0, T0="zero")
     with pytest.raises(IvobsError, match="input_hold"):
         make_estimator("kkl", pend.system, x0=pend.x0, input_hold="cubic")
+
+
+@pytest.mark.parametrize(
+    "option, system",
+    [("max_cond", "lti"), ("rtol", "ct"), ("atol", "ct"), ("gamma", "dt-ltv"), ("ell", "ct-ltv")],
+)
+def test_e6_numeric_options_are_checked_and_named(option, system):
+    if system == "lti":
+        sc = ivobs.scenarios.get("servo-motor")
+    elif system == "ct":
+        sc = ivobs.scenarios.get("kkl-random8", continuous=True, t_final=0.1)
+    elif system == "dt-ltv":
+        sc = ivobs.scenarios.get("kkl-ltv-dt")
+    else:
+        sc = ivobs.scenarios.get("pendulum", t_final=0.1)
+    bad = ["x", 1j, True, np.nan, np.inf, -1.0, 0.0, [1.0, 2.0], np.array([1.0, 2.0]), {}]
+    if option != "gamma" and option != "ell":
+        bad.append(None)  # gamma / ell: None means the default
+    for val in bad:
+        with pytest.raises(IvobsError, match=rf"^{option}: expected a (real|finite) number"):
+            make_estimator("kkl", sc.system, x0=sc.x0, **{option: val})
+    make_estimator("kkl", sc.system, x0=sc.x0, **{option: np.float64(0.5) if option in ("rtol",
+                   "atol", "gamma") else np.array(3.0)})  # fmt: skip
+
+
+def test_e6_other_options_are_checked_and_named():
+    sc = ivobs.scenarios.get("servo-motor")
+    with pytest.raises(IvobsError, match=r"max_cond: expected a finite number >= 1"):
+        make_estimator("kkl", sc.system, x0=sc.x0, max_cond=0.5)
+    with pytest.raises(IvobsError, match=r"rtol: .*< 1"):
+        make_estimator("kkl", sc.system, x0=sc.x0, rtol=2.0)
+    with pytest.raises(IvobsError, match="tune: expected True or False"):
+        make_estimator("kkl", sc.system, x0=sc.x0, tune="no")
+    with pytest.raises(IvobsError, match="coordinates: expected 'z' or 'x'"):
+        make_estimator("kkl", sc.system, x0=sc.x0, coordinates=np.array(["z", "x"]))
+    with pytest.raises(IvobsError, match="input_hold: expected"):
+        make_estimator("kkl", sc.system, x0=sc.x0, input_hold=np.zeros(3))
 
 
 def test_singular_A_k_in_time_varying_discrete_time():

@@ -188,6 +188,9 @@ def test_sparse_gain_checks():
         ("fixed-time", {}, "stacked matrices"),
         ("zonotope", {}, "generator matrix"),
         ("zonotope", {"L": "heat"}, "generator matrix"),
+        ("strip", {}, "generator matrix"),
+        ("constrained-zonotope", {}, "constrained zonotope"),
+        ("exact", {}, "2 nx linear programs"),
     ],
 )
 def test_dense_design_steps_refuse_large_systems(method, options, step):

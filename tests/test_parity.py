@@ -7,7 +7,9 @@ import pytest
 import ivobs
 from ivobs import DesignError, IvobsError
 from ivobs.design.parity import (
+    forward_window,
     general_T,
+    injection_candidates,
     invertible_injection,
     is_invertible,
     optimal_T,
@@ -15,6 +17,7 @@ from ivobs.design.parity import (
     stack_matrices,
     stack_window,
     width_optimal_T,
+    window_bound,
 )
 from ivobs.linalg import is_observable
 from ivobs.testing import random_system
@@ -168,17 +171,150 @@ def test_output_injection_makes_A_invertible_and_keeps_observability():
     for seed in range(6):
         sys = random_system(seed, nx=3 + seed % 2, ny=1 + seed % 2, invertible=False)
         assert not is_invertible(sys.A)
-        L = invertible_injection(sys.A, sys.C)
-        Ap = sys.A - L @ sys.C
-        assert is_invertible(Ap) and is_observable(Ap, sys.C)
+        cands = injection_candidates(sys.A, sys.C)
+        assert len(cands) >= 2
+        for L in cands:
+            Ap = sys.A - L @ sys.C
+            assert is_invertible(Ap) and is_observable(Ap, sys.C)
+        # the last candidate is the pole placement at 0.5 ... 0.9
         np.testing.assert_allclose(
-            np.sort(np.linalg.eigvals(Ap).real), np.linspace(0.5, 0.9, sys.nx), atol=1e-6
+            np.sort(np.linalg.eigvals(sys.A - cands[-1] @ sys.C).real),
+            np.linspace(0.5, 0.9, sys.nx),
+            atol=1e-6,
+        )
+        L = invertible_injection(sys.A, sys.C)
+        assert any(np.array_equal(L, c) for c in cands)
+        assert np.linalg.cond(sys.A - L @ sys.C) <= min(
+            np.linalg.cond(sys.A - c @ sys.C) * (1 + np.linalg.norm(c @ sys.C, 2)) for c in cands
         )
     with pytest.raises(DesignError, match="C = 0"):
         invertible_injection(np.zeros((2, 2)), np.zeros((1, 2)))
+
+
+def test_a3b_injection_is_small_and_well_conditioned():
+    """A3b: the system of the audit (eigenvalues 0, -0.94, -0.99, ‖A‖ = 13.7). Placing the
+    poles at 0.5 ... 0.9 needs |L| = 156 and gives cond(A - LC) = 2e6; the minimal-norm gain
+    that only lifts the null direction of A needs |L| < 1 and gives cond(A - LC) < 20."""
+    base = random_system(44, nx=3, ny=1, nu=1, invertible=False, rho=0.99)
+    A, C = base.A, base.C
+    placed = injection_candidates(A, C)[-1]
+    assert np.abs(placed).max() > 100 and np.linalg.cond(A - placed @ C) > 1e6
+    L = invertible_injection(A, C)
+    assert np.abs(L).max() < 1.0
+    assert np.linalg.cond(A - L @ C) < 20.0
+    assert is_observable(A - L @ C, C)
 
 
 def test_singular_A_in_window_is_a_design_error():
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     with pytest.raises(DesignError, match="not invertible"):
         stack_matrices(A, None, [[1.0, 0.0]], s=1)
+
+
+# -- certification of a window gain on the forward form (audit findings A3, A3b) -------------
+def _window_data(sys, s, k, rng, centre):
+    """(w, ξ, x_k) of the window ending at k of a random trajectory, in the layouts of
+    forward_window: w = [z_k; …; z_{k-s}], z = [u; y; c]; ξ = [x_{k-s}; v lag-major; δ]."""
+    T = k + 1
+    u = rng.normal(size=(T, sys.nu))
+    d = rng.uniform(sys.d.lo, sys.d.hi, size=(T, sys.nd))
+    tr = ivobs.simulate(sys, rng.normal(size=sys.nx), u, d)
+    c = sys.d.center if centre else np.zeros(sys.nd)
+    lags = [k - i for i in range(s + 1)]
+    parts = [u[lags], tr.y[lags]] + ([np.broadcast_to(c, (s + 1, sys.nd))] if centre else [])
+    w = np.hstack(parts).ravel()
+    v = np.hstack([u[lags]] + ([np.broadcast_to(c, (s + 1, sys.nd))] if centre else []))
+    xi = np.concatenate([tr.x[k - s], v.ravel(), (d[lags] - c).ravel()])
+    return w, xi, tr.x[k]
+
+
+@pytest.mark.parametrize("centre", [False, True])
+def test_forward_window_reproduces_the_window(centre):
+    sys = random_system(3, nx=3, ny=2, nu=1, feedthrough=True, symmetric_bounds=False)
+    s, k = 3, 9
+    fw = forward_window([sys.matrices_at(k - i) for i in range(s + 1)], centre=centre)
+    w, xi, xk = _window_data(sys, s, k, np.random.default_rng(1), centre)
+    np.testing.assert_allclose(np.asarray(fw.Z @ xi, dtype=float), w, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(fw.X @ xi, dtype=float), xk, atol=1e-12)
+    assert np.all(fw.Za >= np.abs(fw.Z)) and np.all(fw.Xa >= np.abs(fw.X))
+
+
+def _exact_residual(G, mats, nx, s):
+    """|x_k - G w| coefficients in exact rational arithmetic (no centre, no missing)."""
+    from fractions import Fraction
+
+    def q(M):
+        return np.vectorize(Fraction, otypes=[object])(np.asarray(M, dtype=float))
+
+    A, B, C, D, E, F = (q(M) for M in mats[0])
+    nu, ny, nd = B.shape[1], C.shape[0], E.shape[1]
+    nz, nxi, d0 = nu + ny, nx + (s + 1) * (nu + nd), nx + (s + 1) * nu
+    X = np.full((nx, nxi), Fraction(0), dtype=object)
+    for i in range(nx):
+        X[i, i] = Fraction(1)
+    Z = np.full(((s + 1) * nz, nxi), Fraction(0), dtype=object)
+    for i in range(s, -1, -1):
+        cu, cd = nx + i * nu, d0 + i * nd
+        Y = C.dot(X)
+        Y[:, cu : cu + nu] += D
+        Y[:, cd : cd + nd] += F
+        Z[i * nz + nu : (i + 1) * nz] = Y
+        for j in range(nu):
+            Z[i * nz + j, cu + j] = Fraction(1)
+        if i:
+            X = A.dot(X)
+            X[:, cu : cu + nu] += B
+            X[:, cd : cd + nd] += E
+    return np.abs((X - q(G).dot(Z)).astype(float))
+
+
+def test_window_bound_is_a_bound_in_exact_arithmetic():
+    """The audit's A3b system with the large gain of the 0.5 ... 0.9 pole placement: the
+    computed window gain misses x_k - G w = -T Md 𝛅 by rounding; the certified bound contains
+    the exact (rational) residual entry by entry, with and without refinement, and the
+    refinement shrinks the x and v blocks to the rounding of G itself."""
+    base = random_system(44, nx=3, ny=1, nu=1, invertible=False, rho=0.99)
+    sys = ivobs.LinearSystem(base.A, base.B, base.C, E=base.E, F=base.F, d=base.d)
+    L = injection_candidates(sys.A, sys.C)[-1]
+    est = ivobs.make_estimator("fixed-time", sys, L=L)
+    d = est.design
+    s, nu, ny = d.s, sys.nu, sys.ny
+    nz = nu + ny
+    Mv = np.zeros(((s + 1) * ny, (s + 1) * nz))  # [Mu | My] interleaved per lag as w
+    for i in range(s + 1):
+        Mv[:, i * nz : i * nz + nu] = d.Mu[:, i * nu : (i + 1) * nu]
+        Mv[:, i * nz + nu : (i + 1) * nz] = d.My[:, i * ny : (i + 1) * ny]
+    Sel = np.zeros(((s + 1) * ny, (s + 1) * nz))
+    for i in range(s + 1):
+        Sel[i * ny : (i + 1) * ny, i * nz + nu : (i + 1) * nz] = np.eye(ny)
+    G = d.T @ (Sel - Mv)
+    mats = [sys.matrices_at(0)] * (s + 1)
+    fw = forward_window(mats, centre=False)
+    nxi = fw.Z.shape[1]
+    for refine in (False, True):
+        wb = window_bound(G, 3, fw, refine=refine)
+        exact = _exact_residual(wb.G, mats, 3, s)
+        bound = np.hstack([wb.Rx, wb.Rv, wb.Rd])
+        assert bound.shape == (3, nxi)
+        assert np.all(exact <= bound)
+        if not refine:
+            assert exact[:, :3].max() > 1e-12  # the unrefined gain is visibly off
+        else:
+            assert exact[:, :3].max() < 1e-13
+    assert np.isfinite(wb.kappa) and wb.kappa > 1.0
+
+
+def test_window_bound_detects_a_wrong_gain():
+    sc = ivobs.scenarios.get("dinh2019")
+    sys = sc.system
+    est = ivobs.make_estimator("fixed-time", sys, s=2)
+    kern = est._kernel(2, np.zeros((3, 1), dtype=bool))
+    fw = forward_window([sys.matrices_at(0)] * 3, centre=False)
+    good = window_bound(kern.GQ, 2, fw, refine=False)
+    assert good.Rx.sum(axis=1).max() < 1e-14 and good.Rv.sum(axis=1).max() < 1e-14
+    # |R_δ| is |T Md| of eq. (11) to rounding
+    np.testing.assert_allclose(good.Rd[:2], np.abs(est.design.T @ est.design.Md), atol=1e-14)
+    bad = window_bound(kern.GQ + 1e-6, 2, fw, refine=False)
+    assert bad.Rx.sum(axis=1).min() > 1e-7
+    fixed = window_bound(kern.GQ + 1e-6, 2, fw, refine=True)
+    assert fixed.Rx.sum(axis=1).max() < 1e-14

@@ -134,6 +134,25 @@ def test_input_validation_messages():
     tv = LinearSystem(lambda k: 0.5 * np.eye(3), C=np.eye(3)[:1])
     with pytest.raises(IvobsError, match="time-invariant"):
         OpenLoop(tv, x0)
+    # flags are booleans: a string such as "no" is truthy and would mean the opposite
+    with pytest.raises(IvobsError, match="vectorize: expected True or False, got 'no'"):
+        est.run(tr.u, tr.y, vectorize="no")
+    with pytest.raises(IvobsError, match="progress: expected True, False or None"):
+        est.run(tr.u, tr.y, progress="yes")
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"check_consistency": "no"}, "check_consistency: expected True or False, got 'no'"),
+        ({"weighted": 1}, "weighted: expected True or False, got 1"),
+        ({"s": 10**6}, "s: expected a window of at most 1000 past samples"),
+    ],
+)
+def test_fixed_time_option_errors(options, message):
+    sc = ivobs.scenarios.get("servo-motor", horizon=10)
+    with pytest.raises(IvobsError, match=message):
+        make_estimator("fixed-time", sc.system, x0=sc.x0, **options)
 
 
 def test_inconsistency_reporting_policy():

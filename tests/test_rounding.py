@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -66,3 +67,17 @@ def test_batch_scale_equals_the_per_stream_scale():
     # a missing sample counts as 0; the running maximum never decreases
     assert np.all(np.diff(s_batch, axis=-1) >= 0)
     assert s_batch[2, 0] == 1e8  # |D u| alone
+
+
+@pytest.mark.parametrize("method", sorted(ivobs.methods()))
+def test_no_false_alarm_at_a_large_data_scale(method):
+    """|D u| = 1e8 carries a state of size 1: every method's consistency test must allow for the
+    rounding of y at that scale (no valid sample reported inconsistent), and stay sound."""
+    sys, tr = _feedthrough()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an inconsistency report is a UserWarning
+        res = ivobs.make_estimator(method, sys, x0=Box(-1.0, 1.0)).run(tr.u, tr.y)
+    assert not res.inconsistent.any()
+    assert res.contains(tr.x).all()
+    # the state is known to the disturbance (|E d| = 1e-3) plus a margin at the scale of y
+    assert np.nanmax(res.width[5:]) < 1e3

@@ -11,6 +11,10 @@ import sys
 import time
 from typing import Any, TextIO
 
+import numpy as np
+
+from .errors import IvobsError
+
 __all__ = ["Progress"]
 
 
@@ -42,6 +46,8 @@ class Progress:
         if enabled is None:
             isatty = getattr(self.stream, "isatty", None)
             enabled = bool(isatty()) if callable(isatty) else False
+        elif not isinstance(enabled, (bool, np.bool_)):
+            raise IvobsError(f"progress: expected True, False or None, got {enabled!r}")
         self.enabled = bool(enabled)
         self.interval = float(interval)
         self.count = 0

@@ -141,3 +141,11 @@ def as_int(name: str, value: Any, minimum: int | None = None) -> int:
     if minimum is not None and value < minimum:
         raise IvobsError(f"{name}: expected an integer >= {minimum}, got {value}")
     return value
+
+
+def as_bool(name: str, value: Any) -> bool:
+    """Return a bool (``True``/``False`` or a NumPy bool only: a string such as ``"no"`` is
+    truthy and would silently mean the opposite)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise IvobsError(f"{name}: expected True or False, got {value!r}")
+    return bool(value)

@@ -47,14 +47,49 @@ from .errors import InconsistentDataError, IvobsError
 from .sets import Box, Zonotope
 
 __all__ = [
+    "UNIT_ROUNDOFF",
     "Certificates",
     "ConstrainedZonotope",
+    "box_generators",
+    "certified_empty",
+    "consolidate_small",
     "eliminate_constraints",
+    "gamma",
     "hull_bounds",
     "hull_certificates",
     "independent_constraints",
+    "radius_certificate",
     "reduce_generators",
+    "safe_radius",
 ]
+
+UNIT_ROUNDOFF = np.finfo(float).eps / 2
+"""``u = 2⁻⁵³``: a rounded IEEE double operation returns ``x (1 + δ)`` with ``|δ| <= u``."""
+
+
+def gamma(n: int) -> float:
+    """``γ_n = n u / (1 - n u)`` (Higham, *Accuracy and Stability of Numerical Algorithms*,
+    Lemma 3.1): a computed sum or dot product of ``n`` terms differs from the exact one by at
+    most ``γ_n`` times the sum of the absolute values of the terms."""
+    return n * UNIT_ROUNDOFF / (1.0 - n * UNIT_ROUNDOFF)
+
+
+def safe_radius(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(c, r)`` with ``[lo, hi] ⊆ [c - r, c + r]`` in exact arithmetic: ``c = (lo + hi)/2``
+    and ``r = (hi - lo)/2`` are rounded, so ``r`` is enlarged by ``γ_3 (|c| + r)``; ``r = 0``
+    (and ``c = lo`` exactly) where ``lo = hi``."""
+    c = 0.5 * (lo + hi)
+    r = 0.5 * (hi - lo)
+    return c, np.where(hi > lo, r + gamma(3) * (np.abs(c) + r), 0.0)
+
+def box_generators(r: np.ndarray) -> np.ndarray:
+    """The box ``[-r, r]`` as generator columns ``diag(r)``, only the nonzero ones (a box of
+    rounding errors appended to a zonotope's generators)."""
+    nz = np.flatnonzero(r > 0)
+    out = np.zeros((r.shape[0], nz.size))
+    out[nz, np.arange(nz.size)] = r[nz]
+    return out
+
 
 EMPTY_TOL = 1e-7
 """A constrained zonotope counts as empty when its constraints need ``‖ξ‖∞ > 1 + EMPTY_TOL``."""
@@ -84,26 +119,65 @@ def _certified_min(
     mu = np.zeros(nc)
     if nc == 0:
         return -radius * float(np.abs(g).sum()), mu, True
-    res = linprog(g, A_eq=A, b_eq=b, bounds=(-radius, radius), method="highs")
-    if res.status == 2:
-        return float("nan"), mu, False
-    if res.status == 0 and getattr(res, "eqlin", None) is not None:
-        marg = np.asarray(res.eqlin.marginals, dtype=float)
-        if marg.shape == mu.shape and np.all(np.isfinite(marg)):
-            mu = marg
-    return float(mu @ b - radius * np.abs(g - A.T @ mu).sum()), mu, True
+    infeasible = 0
+    for method, options in _LP_ATTEMPTS:
+        res = linprog(
+            g, A_eq=A, b_eq=b, bounds=(-radius, radius), method=method, options=options
+        )
+        if res.status == 0 and getattr(res, "eqlin", None) is not None:
+            marg = np.asarray(res.eqlin.marginals, dtype=float)
+            if marg.shape == mu.shape and np.all(np.isfinite(marg)):
+                mu = marg
+                break
+        infeasible += res.status == 2
+    else:
+        if infeasible == len(_LP_ATTEMPTS):
+            return float("nan"), mu, False
+    return float(_dual_bounds(g[None, :], A, b, mu[None, :], radius)[0]), mu, True
 
 
-def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
-    """``min {‖ξ‖∞ : A ξ = b}`` (``inf`` when ``A ξ = b`` has no solution): one LP.
+_LP_ATTEMPTS: tuple[tuple[str, dict[str, Any]], ...] = (
+    ("highs", {}),
+    ("highs", {"presolve": False}),
+    ("highs-ipm", {}),
+)
+"""HiGHS configurations tried in turn for one bound: on the ill-conditioned programs of a set
+pinned down by its constraints, HiGHS' presolve sometimes fails (status 4) or calls a feasible
+program infeasible; without presolve, or with the interior point method, it usually succeeds.
+Any multiplier gives a valid bound, so a failure only loosens that bound."""
 
-    The set ``<c, G, A, b>`` is empty exactly when this exceeds 1.
+
+def _dual_bounds(
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, mu: np.ndarray, radius: float
+) -> np.ndarray:
+    """``μ_iᵀb - radius ‖g_i - Aᵀμ_i‖₁`` for every row, lowered by the bound
+    ``γ_{nc+m+3} (|μ_i|ᵀ|b| + radius (‖g_i‖₁ + |μ_i|ᵀ|A| 1))`` of its rounding: a lower bound of
+    ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}`` in exact arithmetic, whatever ``μ``."""
+    nc, m = A.shape
+    am = np.abs(mu)
+    err = gamma(nc + m + 3) * (
+        am @ np.abs(b) + radius * (np.abs(Gs).sum(axis=1) + am @ np.abs(A).sum(axis=1))
+    )
+    return mu @ b - radius * np.abs(Gs - mu @ A).sum(axis=1) - err * (1.0 + gamma(4))
+
+
+def radius_certificate(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """``(r, r_low)``: HiGHS' value of ``r* = min {‖ξ‖∞ : A ξ = b}`` (``inf`` when it finds no
+    solution, ``0`` on solver trouble) and a lower bound of ``r*`` certified in floating point.
+
+    The set ``<c, G, A, b>`` is empty exactly when ``r* > 1``. By duality, every ``μ`` gives
+    ``r* >= μᵀb / ‖Aᵀμ‖₁`` (``μᵀb = μᵀA ξ <= ‖Aᵀμ‖₁ ‖ξ‖∞``); ``r_low`` is this ratio at the
+    LP's equality multipliers (or, when ``A ξ = b`` has no solution at all, at the
+    least-squares residual ``μ = b - A ξ_ls``, for which ``Aᵀμ ≈ 0``), with the numerator
+    lowered and the denominator raised by the ``γ_n`` bounds of their rounding. ``0`` when no
+    certificate is found: emptiness is then never claimed.
     """
     nc, m = A.shape
     if nc == 0:
-        return 0.0
+        return 0.0, 0.0
     if m == 0:
-        return 0.0 if np.all(np.abs(b) <= _ZERO * (1.0 + np.abs(b))) else float("inf")
+        ok = bool(np.all(b == 0))
+        return (0.0, 0.0) if ok else (float("inf"), float("inf"))
     # variables (ξ, s): min s  s.t.  A ξ = b,  ξ - s <= 0,  -ξ - s <= 0
     eye = np.eye(m)
     ones = np.ones((m, 1))
@@ -120,10 +194,41 @@ def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
         method="highs",
     )
     if res.status == 2:
-        return float("inf")
-    if res.status != 0:  # numerical trouble: do not claim emptiness
-        return 0.0
-    return float(res.x[-1])
+        r = float("inf")
+        mu = b - A @ np.linalg.lstsq(A, b, rcond=None)[0]
+    elif res.status == 0:
+        r = float(res.x[-1])
+        mu = np.asarray(getattr(res.eqlin, "marginals", np.zeros(nc)), dtype=float)
+        if mu.shape != (nc,) or not np.all(np.isfinite(mu)):
+            return r, 0.0
+    else:  # numerical trouble: do not claim emptiness
+        return 0.0, 0.0
+    am = np.abs(mu)
+    num = float(mu @ b) - gamma(nc + 1) * float(am @ np.abs(b))
+    den = float(np.abs(A.T @ mu).sum()) + gamma(nc + m + 1) * float(am @ np.abs(A).sum(axis=1))
+    den *= 1.0 + gamma(2)
+    if not num > 0.0:
+        return r, 0.0
+    if den == 0.0:
+        return r, float("inf")
+    return r, num / den * (1.0 - gamma(2))
+
+
+def certified_empty(A: np.ndarray, b: np.ndarray) -> bool:
+    """Whether ``<c, G, A, b>`` is certainly empty, with a margin: even the set with the larger
+    box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` is empty (:func:`radius_certificate`)."""
+    return radius_certificate(A, b)[1] > 1.0 + EMPTY_TOL
+
+
+def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
+    """``min {‖ξ‖∞ : A ξ = b}`` (``inf`` when ``A ξ = b`` has no solution): one LP.
+
+    The set ``<c, G, A, b>`` is empty exactly when this exceeds 1.
+    """
+    nc, m = A.shape
+    if m == 0 and nc:
+        return 0.0 if np.all(np.abs(b) <= _ZERO * (1.0 + np.abs(b))) else float("inf")
+    return radius_certificate(A, b)[0]
 
 
 def _certified_mins(
@@ -132,8 +237,9 @@ def _certified_mins(
     """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
 
     The independent programs are solved as one block-diagonal LP (one HiGHS call: the per-call
-    overhead dominates programs this small); should HiGHS call the big program infeasible,
-    they are solved one by one (degenerate, over-determined constraints can fool it).
+    overhead dominates programs this small); should HiGHS fail on the big program (or call it
+    infeasible), they are solved one by one (degenerate, over-determined or ill-conditioned
+    constraints can fool it; see :data:`_LP_ATTEMPTS`).
     """
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
@@ -143,18 +249,17 @@ def _certified_mins(
         Gs.ravel(), A_eq=A_blk, b_eq=np.tile(b, K), bounds=(-radius, radius), method="highs"
     )
     mu = np.zeros((K, nc))
-    if res.status == 2:
-        vals = np.empty(K)
-        for i in range(K):
-            vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
-            if not ok:
-                return np.full(K, np.nan), np.zeros((K, nc)), False
-        return vals, mu, True
     if res.status == 0 and getattr(res, "eqlin", None) is not None:
         marg = np.asarray(res.eqlin.marginals, dtype=float)
         if marg.size == K * nc and np.all(np.isfinite(marg)):
             mu = marg.reshape(K, nc)
-    return mu @ b - radius * np.abs(Gs - mu @ A).sum(axis=1), mu, True
+            return _dual_bounds(Gs, A, b, mu, radius), mu, True
+    vals = np.empty(K)
+    for i in range(K):
+        vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
+        if not ok:
+            return np.full(K, np.nan), np.zeros((K, nc)), False
+    return vals, mu, True
 
 
 def hull_bounds(
@@ -174,7 +279,7 @@ def _drop_zero_idx(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """Remove (numerically) trivial constraints ``0 ξ = 0`` (all coefficients below
     :data:`_ROW_TOL`: dropping a constraint gives a superset) and generators that are zero in
-    ``G`` and ``A``.
+    ``G`` and ``A`` (exactly: dropping a small one would give a subset).
 
     Returns ``(c, G, A, b, rows, cols, consistent)``: the masks of the kept constraints and
     generators, and False for a dropped constraint ``a ξ = b`` with ``|b| > ‖a‖₁`` (an empty
@@ -186,8 +291,8 @@ def _drop_zero_idx(
     zb, za = b[~rows], np.abs(A[~rows]).sum(axis=1)
     consistent = bool(np.all(np.abs(zb) <= za + 1e-8 * (1.0 + np.abs(zb))))
     A, b = A[rows], b[rows]
-    gscale = 1.0 + (np.abs(G).max() if G.size else 0.0)
-    cols = np.any(np.abs(G) > _ZERO * gscale, axis=0) | np.any(np.abs(A) > _ZERO * scale, axis=0)
+    # only exactly zero generators: fixing a small nonzero ξ_j at 0 would shrink the set
+    cols = np.any(G != 0, axis=0) | np.any(A != 0, axis=0)
     return c, G[:, cols], A[:, cols], b, rows, cols, consistent
 
 
@@ -323,10 +428,11 @@ class Certificates:
     Hausdorff heuristic of Scott et al. 2016, Section 4.2, which only breaks ties here.
     """
 
-    __slots__ = ("D", "mu", "weight")
+    __slots__ = ("D", "mu", "radius", "weight")
 
     def __init__(self, D: np.ndarray, mu: np.ndarray, weight: np.ndarray):
         self.D, self.mu, self.weight = D, mu, weight
+        self.radius = 1.0  # see hull_certificates: the factors' box the certificates assume
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
         """Constraints ``rows`` and factors ``cols`` are kept (the others were zero)."""
@@ -366,26 +472,36 @@ def hull_certificates(
 ) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
     """Certified interval hull of ``<c, G, A, b>`` and the certificates of its ``2 n`` bounds
     (weighted by the inverse width of each coordinate, so that losses are relative), or
-    ``None`` when the set is empty.
+    ``None`` when the set is certainly empty (:func:`certified_empty`: a dual certificate,
+    checked in floating point, that even the box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the
+    constraints).
 
-    When HiGHS calls the set infeasible but :func:`_feasibility_radius` finds it within
-    ``1 + EMPTY_TOL`` (a numerically thin set), the bounds are those of the set with the box
-    ``‖ξ‖∞ <= 1 + EMPTY_TOL``: a superset, so still sound.
+    When HiGHS calls the set infeasible without such a certificate (a set that is thin, or
+    empty only by rounding), the bounds are those of the *softened* set with the box
+    ``‖ξ‖∞ <= ρ``, ``ρ = max(1, r*) (1 + EMPTY_TOL)`` (``r*`` the smallest feasible radius
+    found): a superset, so still sound. ``cert.radius`` is then ``ρ``: the certificates are
+    those of ``<c, ρ G, ρ A, b>`` (the same set, with the factors rescaled to the unit box),
+    which the caller should keep instead of the original.
     """
     n = G.shape[0]
     Gs = np.vstack([G, -G])
     vals, mu, ok = _certified_mins(Gs, A, b)
+    radius = 1.0
     if not ok:
-        if _feasibility_radius(A, b) > 1.0 + EMPTY_TOL:
+        r, r_low = radius_certificate(A, b)
+        if r_low > 1.0 + EMPTY_TOL:
             return None
-        vals, mu, ok = _certified_mins(Gs, A, b, 1.0 + EMPTY_TOL)
-        if not ok:  # pragma: no cover - HiGHS contradicting itself: the zonotope bound
+        radius = (max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)
+        vals, mu, ok = _certified_mins(Gs, A, b, radius)
+        if not ok:  # HiGHS contradicting itself: the bound of the zonotope (any μ is valid)
             mu = np.zeros_like(mu)
-            vals = -(1.0 + EMPTY_TOL) * np.abs(Gs).sum(axis=1)
+            vals = _dual_bounds(Gs, A, b, mu, radius)
     lo = c + vals[:n]
     hi = c - vals[n:]
     width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
-    return lo, hi, Certificates(Gs, mu, np.concatenate([1.0 / width, 1.0 / width]))
+    cert = Certificates(Gs * radius, mu, np.concatenate([1.0 / width, 1.0 / width]))
+    cert.radius = radius
+    return lo, hi, cert
 
 
 def independent_constraints(A: np.ndarray) -> np.ndarray:
@@ -502,9 +618,47 @@ def eliminate_constraints(
     return c, G, A, b
 
 
-def reduce_generators(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray, max_generators: int
+def consolidate_small(
+    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray, tol_x: float, tol_c: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Replace the generators that are small in both parts (``|G_j| <= tol_x`` and
+    ``|A_j| <= tol_c``: the rounding slacks and boxes of earlier steps, factors pinned down by
+    rescaling) by two boxes: ``diag(Σ_j |G_j|)`` in ``x`` and ``diag(Σ_j |A_j|)`` in the
+    constraints (a slack per row). The segment ``{(G_j; A_j) t}`` lies in the sum of the two,
+    so the result contains the original (only correlations between rows of the replaced
+    factors are lost); at most ``n + nc`` columns are left of them (the sums rounded up by
+    ``γ_{k+1}``). Dropping them instead would give a subset."""
+    n, m = G.shape
+    if m == 0:
+        return c, G, A, b
+    small = np.all(np.abs(G) <= tol_x, axis=0)
+    if A.shape[0]:
+        small &= np.all(np.abs(A) <= tol_c, axis=0)
+    k = int(small.sum())
+    if k <= 1:
+        return c, G, A, b
+    up = 1.0 + gamma(k + 1)
+    gx = np.abs(G[:, small]).sum(axis=1) * up
+    ga = np.abs(A[:, small]).sum(axis=1) * up
+    ix, ia = np.flatnonzero(gx > 0), np.flatnonzero(ga > 0)
+    if ix.size + ia.size >= k:
+        return c, G, A, b
+    nc = A.shape[0]
+    Gb = np.zeros((n, ix.size + ia.size))
+    Ab = np.zeros((nc, ix.size + ia.size))
+    Gb[ix, np.arange(ix.size)] = gx[ix]
+    Ab[ia, ix.size + np.arange(ia.size)] = ga[ia]
+    return c, np.hstack([G[:, ~small], Gb]), np.hstack([A[:, ~small], Ab]), b
+
+
+def reduce_generators(
+    c: np.ndarray,
+    G: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    max_generators: int,
+    residual: bool = False,
+) -> Any:
     """At most ``max_generators`` generators, by reducing the lifted zonotope
     ``<[c; -b], [G; A]>`` (Scott et al. 2016, Section 4.3; its ``x`` part and constraint part
     shrink together, so the constrained zonotope it represents contains the original).
@@ -515,33 +669,82 @@ def reduce_generators(
     coordinates ``α = P⁺ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``, so the removed
     generators are absorbed by rescaling the basis, ``P diag(1 + Σ|α|)``. Those with the
     smallest ``‖α‖₁`` are removed. No generator is added, the directions of the kept ones are
-    unchanged (coordinates are invariant to the scaling of the constraint rows). When the lifted
-    generators do not span the lifted space, the part of the removed ones outside the basis'
-    span (below the rank tolerance) is enclosed in a box.
+    unchanged (coordinates are invariant to the scaling of the constraint rows). What the
+    basis misses of the removed generators, ``Σ |l - P α|`` (the part outside the basis' span
+    when the lifted generators do not span the lifted space, and the error of the computed
+    ``α``), is enclosed in a box, enlarged by the bound ``γ_{r+2} (|l| + |P| |α|)`` of its
+    rounding; the scale factors are rounded up. The result contains the original in exact
+    arithmetic, whatever the rounding.
 
-    At least the ``r <= n + nc`` basis generators are kept, whatever ``max_generators``."""
+    At least the ``r <= n + nc`` basis generators are kept, whatever ``max_generators``.
+
+    With ``residual=True`` the box is not added: ``(c, G, A, b, box)`` is returned, ``box``
+    ``(n + nc,)`` the radii of the box the caller must add (Minkowski) to the result."""
     n, m = G.shape
     if m <= max_generators:
-        return c, G, A, b
+        return (c, G, A, b, np.zeros(n + A.shape[0])) if residual else (c, G, A, b)
     L = np.vstack([G, A])
-    Q, R, piv = qr(L, mode="economic", pivoting=True)
+    R, piv = qr(L, mode="r", pivoting=True)
     diag = np.abs(np.diag(R))
     rank = int(np.sum(diag > 1e-10 * diag[0])) if diag.size and diag[0] > 0 else 0
     max_generators = max(max_generators, rank)  # the basis is always kept
     basis, others = piv[:rank], piv[rank:]
-    # L[:, piv] = Q R: the others have coordinates α = R11⁻¹ R12 in the basis L[:, basis];
-    # what is left of them, Q2 R22, is zero when the lifted generators span the lifted space
+    # L[:, piv] = Q R: the others have coordinates α = R11⁻¹ R12 in the basis L[:, basis]
     alpha = np.linalg.solve(R[:rank, :rank], R[:rank, rank:])  # (scipy trsm is slow here)
     order = np.argsort(np.abs(alpha).sum(axis=0), kind="stable")
     n_rm = m - max_generators
     rm, kept = order[:n_rm], others[order[n_rm:]]
-    P = L[:, basis] * (1.0 + np.abs(alpha[:, rm]).sum(axis=1))
-    resid = np.abs(Q[:, rank:] @ R[rank:, rank:][:, rm]).sum(axis=1)
+    # rounding: the computed α are not the exact coordinates, so what the basis misses of each
+    # removed generator l is the residual l - P α, evaluated directly (in exact arithmetic the
+    # Q2 R22 part) plus the bound γ_{r+2} (|l| + |P| |α|) of its rounding; the scale factors
+    # are rounded up (γ_{k+3}) so that the scaled basis is never smaller than the exact one
+    Lb, a_rm = L[:, basis], alpha[:, rm]
+    L_rm = L[:, others[rm]]
+    resid = np.abs(L_rm - Lb @ a_rm).sum(axis=1) + gamma(rank + 2) * (
+        np.abs(L_rm).sum(axis=1) + np.abs(Lb) @ np.abs(a_rm).sum(axis=1)
+    )
+    scale = 1.0 + np.abs(a_rm).sum(axis=1)
+    if residual:
+        L2 = np.hstack([Lb * (scale * (1.0 + gamma(n_rm + 3))), L[:, kept]])
+        return c, L2[:n], L2[n:], b, resid
+    tau = _box_in_basis(Lb, resid) if rank == L.shape[0] else None
+    if tau is not None:  # the basis spans the space: absorb the box too
+        scale, resid = scale + tau, np.zeros_like(resid)
+    P = Lb * (scale * (1.0 + gamma(n_rm + 3)))
     big = resid > 0
     box = np.zeros((L.shape[0], int(big.sum())))
     box[np.flatnonzero(big), np.arange(box.shape[1])] = resid[big]
     L2 = np.hstack([P, L[:, kept], box])
     return c, L2[:n], L2[n:], b
+
+
+def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> np.ndarray | None:
+    """``τ >= 0`` with ``box(ρ) ⊆ <0, P diag(τ)>`` for a square invertible ``P``, verified in
+    floating point, or ``None`` (``P`` too ill-conditioned to verify).
+
+    ``v ∈ box(ρ)`` has coordinates ``P⁻¹ v``. With ``X ≈ P⁻¹`` and ``θ >= ‖I - X P‖∞`` (the
+    computed residual plus the bound ``γ_{n+1} (I + |X| |P|)`` of its rounding), ``θ < 1``
+    gives ``P⁻¹ v = X v + (I - X P) P⁻¹ v``, so
+    ``|P⁻¹ v| <= |X| ρ + θ / (1 - θ) ‖|X| ρ‖∞`` (a Neumann-series bound, as in verified
+    linear algebra)."""
+    if not np.any(rho):
+        return np.zeros_like(rho)
+    n = P.shape[0]
+    try:
+        X = np.linalg.inv(P)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(X)):
+        return None
+    aX = np.abs(X)
+    Rm = np.eye(n) - X @ P
+    theta = float(
+        (np.abs(Rm) + gamma(n + 1) * (np.eye(n) + aX @ np.abs(P))).sum(axis=1).max()
+    ) * (1.0 + gamma(n + 2))
+    if not theta < 0.5:
+        return None
+    v = (aX @ rho) * (1.0 + gamma(n + 1))
+    return (v + theta / (1.0 - theta) * float(v.max())) * (1.0 + gamma(4))
 
 
 # --------------------------------------------------------------------------------------------
@@ -710,9 +913,10 @@ class ConstrainedZonotope:
 
     # -- questions (linear programs) ----------------------------------------------------------
     def is_empty(self) -> bool:
-        """Whether no ``ξ`` in the unit box meets ``A ξ = b`` (one LP, tolerance
-        :data:`EMPTY_TOL`)."""
-        return _feasibility_radius(self.A, self.b) > 1.0 + EMPTY_TOL
+        """Whether no ``ξ`` in the unit box meets ``A ξ = b``, certainly: one LP, whose dual
+        certificate is checked in floating point with the margin :data:`EMPTY_TOL`
+        (:func:`certified_empty`)."""
+        return certified_empty(self.A, self.b)
 
     def interval_hull(self) -> Box:
         """The smallest box containing the set: ``2 n`` LPs with HiGHS, each bound certified by

@@ -28,6 +28,24 @@ Notation: ``D = A − LC`` (003's ``D``), ``G = E − LF`` (how ``d`` enters the
   monotonically). Each LP picks such a gain minimising the one-step image, then ``w_{j+1} = w∞'``.
   For ``interval`` the constraint ``D' >= 0`` is kept (then ``|D'| = D'``).
 
+**Smallest gain among the optimal ones** (audit A8). The LP objectives above do not always fix
+``L``: with redundant noise-free outputs (``ny > nx``, ``F = 0`` or zero-width bounds) the part of
+``L`` in the left null space of ``C`` changes neither ``A − LC`` nor ``E − LF``, and HiGHS returns
+any vertex, e.g. ``L = (−999999.1, 10⁶)`` at the ``|L_ij| <= 10⁶`` box. Such a gain is harmless
+with every output present, but the estimators use ``L_k = L diag(observed)`` when an output is
+missing: ``|A − L_k C| ≈ 10⁶`` and the bounds explode (0.2 → 2·10¹⁷ in three steps). Each LP is
+therefore solved in two stages: after the optimum ``q_iᵀx*`` of each objective part ``q_i``, a
+second LP keeps ``q_iᵀx <= q_iᵀx* + τ·max(1, |q_iᵀx*|)`` (``τ = 1e-12``, or ``1e-9`` should HiGHS
+find that infeasible: :data:`OPT_TOL`; the tie-break of the margin LP is its own part) and minimises
+``max_j Σ_i w_j |L_ij| + REG_L1 Σ_ij w_j |L_ij|`` with ``w_j = ‖C_j‖₁``: since
+``|A − L_(j) C| <= |A − LC| + |L_:j| |C_j|`` (``L_(j)``: column ``j`` zeroed), the largest
+weighted column norm bounds how much any single missing output can degrade the error
+dynamics; the weighted ℓ₁ term decides the remaining ties. On the redundant example the gain
+becomes ``(0.45, 0.45)``. Optimal values move by at most ``τ`` (relative), which changed the
+paper examples' gains by ``<= 1e-11`` and their widths by ``<= 1.3e-11`` (relative).
+:func:`missing_radius` reports ``ρ(|A − L_(j) C|)`` per output; :func:`refine_width` never trades a
+single-output gap that its start gain rides out (radius ``< 1``) for a diverging one.
+
 Nothing here loops over time; LPs go to HiGHS (``scipy.optimize.linprog``), LMIs to CVXPY
 (:func:`ivobs.design._lmi.solve`). Every result is checked on the numbers it returns.
 """
@@ -48,6 +66,7 @@ __all__ = [
     "check_abs_schur",
     "check_nonnegative_schur",
     "fixed_radius",
+    "missing_radius",
     "nonnegative_gain",
     "refine_width",
     "steady_width",
@@ -59,6 +78,12 @@ round-off). The estimators propagate with the ``D⁺/D⁻`` split, so such entri
 
 _MU_MIN = 1e-7  # LMI (41) margin below which the LMI is considered infeasible
 _L_BOUND = 1e6  # box on the gain entries in the LPs (keeps HiGHS away from unbounded rays)
+
+OPT_TOL = (1e-12, 1e-9)
+"""Relative slack of an LP's optimal value in the regularising second stage (audit A8): the
+first value, the second if HiGHS calls the first infeasible (its own tolerances are 1e-7)."""
+REG_L1 = 1e-3
+"""Weight of ``Σ_ij w_j |L_ij|`` (tie-break) next to the largest column norm in that stage."""
 
 
 def spectral_radius(M: np.ndarray) -> float:
@@ -73,6 +98,18 @@ def steady_width(D: np.ndarray, G: np.ndarray, delta: np.ndarray) -> np.ndarray:
     if spectral_radius(Dabs) >= 1.0:
         return np.full(n, np.inf)
     return np.linalg.solve(np.eye(n) - Dabs, np.abs(G) @ delta)
+
+
+def missing_radius(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """``ρ(|A − L_(j) C|)`` for each output ``j`` missing alone (``L_(j)``: ``L`` with column
+    ``j`` set to zero, the gain the estimators use then): the growth rate of the bounds' width
+    while output ``j`` is missing (``>= 1``: they grow until it returns)."""
+    out = np.empty(C.shape[0])
+    for j in range(C.shape[0]):
+        Lj = np.array(L, dtype=float)
+        Lj[:, j] = 0.0
+        out[j] = spectral_radius(np.abs(A - Lj @ C))
+    return out
 
 
 def _structural_obstruction(A: np.ndarray, C: np.ndarray) -> str:
@@ -216,11 +253,84 @@ def _abs_bound_rows(
     return np.vstack([coef - aux, -coef - aux]), np.concatenate([-const, const])
 
 
+def output_weights(C: np.ndarray) -> np.ndarray:
+    """Weights ``w_j = ‖C_j‖₁`` (row ``j`` of ``C``) of the gain's columns in the regularising
+    stage: ``Σ_i w_j |L_ij|`` bounds what column ``j`` of ``L`` adds to ``|A − L_k C|`` when
+    output ``j`` is missing (``|L_:j| |C_j|``), and does not change when an output is rescaled.
+    Rows of zeros (an output that only sees ``u`` or ``d``) weigh as the largest row."""
+    w = np.abs(C).sum(axis=1)
+    return np.where(w > 0.0, w, max(1.0, float(w.max(initial=0.0))))
+
+
 def _solve_lp(
-    c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, bounds: list[tuple[Any, Any]]
+    c: np.ndarray,
+    A_ub: np.ndarray,
+    b_ub: np.ndarray,
+    bounds: list[tuple[Any, Any]],
+    gain: tuple[int, np.ndarray] | None = None,
+    parts: list[np.ndarray] | None = None,
 ) -> np.ndarray | None:
+    """HiGHS; with ``gain = (n, w)`` (the first ``n·p`` columns are ``L``, row-major) the
+    regularising second stage of the module docstring, which keeps each objective part
+    (``parts``, default ``[c]``; ``c`` is a weighted sum of them) at its optimal value."""
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
-    return res.x if res.status == 0 else None
+    if res.status != 0:
+        return None
+    if gain is None:
+        return res.x
+    parts = [c] if parts is None else parts
+    best = np.array([float(q @ res.x) for q in parts])
+    for tol in OPT_TOL:
+        reg = _smallest_gain(np.array(parts), best, tol, A_ub, b_ub, bounds, *gain)
+        if reg is not None:
+            return reg
+    return res.x
+
+
+def _smallest_gain(
+    parts: np.ndarray,
+    best: np.ndarray,
+    tol: float,
+    A_ub: np.ndarray,
+    b_ub: np.ndarray,
+    bounds: list[tuple[Any, Any]],
+    n: int,
+    w: np.ndarray,
+) -> np.ndarray | None:
+    """Second stage (audit A8): among the points with ``q_iᵀx <= best_i + tol·max(1,
+    |best_i|)`` for every objective part ``q_i``, minimise ``t + REG_L1 Σ_ij w_j |L_ij|`` with
+    ``t >= Σ_i w_j |L_ij|`` for every column ``j`` (auxiliary ``U >= ±L``): the LP optimum is
+    kept (to the tolerance), the gain is the smallest one attaining it, spread over redundant
+    outputs. None when HiGHS fails (the caller then tries the next tolerance)."""
+    p = w.size
+    nL, N = n * p, parts.shape[1]
+    size = N + nL + 1
+    wU = np.tile(w, n)  # weight of U_ij (row-major, like L)
+    eye = np.eye(nL)
+    rows = [
+        np.hstack([A_ub, np.zeros((A_ub.shape[0], nL + 1))]),
+        np.hstack([parts, np.zeros((parts.shape[0], nL + 1))]),
+        np.hstack([eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
+        np.hstack([-eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
+    ]
+    col = np.zeros((p, size))  # Σ_i w_j U_ij − t <= 0
+    for j in range(p):
+        col[j, N + j : N + nL : p] = w[j]
+    col[:, -1] = -1.0
+    rows.append(col)
+    slack = tol * np.maximum(1.0, np.abs(best))
+    b = np.concatenate([b_ub, best + slack, np.zeros(2 * nL + p)])
+    obj = np.zeros(size)
+    obj[N : N + nL] = REG_L1 * wU
+    obj[-1] = 1.0
+    res = linprog(
+        obj,
+        A_ub=np.vstack(rows),
+        b_ub=b,
+        bounds=list(bounds) + [(0, None)] * (nL + 1),
+        method="highs",
+    )
+    return res.x[:N] if res.status == 0 else None
 
 
 def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -233,13 +343,22 @@ def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     for i in range(n):
         A2[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = v
         A2[i, lp.offset["s"]] = -v[i]
-    c = np.zeros(lp.size)
-    c[lp.offset["s"]] = 1.0
+    c_s = np.zeros(lp.size)
+    c_s[lp.offset["s"]] = 1.0
     # tie-break among optimal gains: the smallest |A − LC| v (degenerate optima otherwise stall
     # the alternation, e.g. 003's planar example at ρ = 0.7 instead of 0.5)
-    c[lp.offset["T"] : lp.offset["T"] + n * n] = 1e-6 * np.tile(v, n) / v.sum()
+    c_t = np.zeros(lp.size)
+    c_t[lp.offset["T"] : lp.offset["T"] + n * n] = np.tile(v, n) / v.sum()
+    c = c_s + 1e-6 * c_t
     bounds = [(-_L_BOUND, _L_BOUND)] * (n * p) + [(0, None)] * (n * n) + [(0, None)]
-    x = _solve_lp(c, np.vstack([A1, A2]), np.concatenate([b1, np.zeros(n)]), bounds)
+    x = _solve_lp(
+        c,
+        np.vstack([A1, A2]),
+        np.concatenate([b1, np.zeros(n)]),
+        bounds,
+        (n, output_weights(C)),
+        [c_s, c_t],
+    )
     if x is None:
         return None
     return lp.gain(x), float(x[lp.offset["s"]])
@@ -301,11 +420,15 @@ def refine_width(
     """Decrease the steady-state width ``(I − |D|)⁻¹ |G| Δ`` from a stable start ``L0``
     (module docstring). ``nonnegative=True`` keeps ``A − LC >= 0`` (observer (3)/(36));
     otherwise only ``|A − LC|`` Schur is kept (observer (5)). Never returns a gain whose
-    steady-state width is larger (componentwise) than ``L0``'s."""
+    steady-state width is larger (componentwise) than ``L0``'s, nor one that makes the bounds
+    diverge during a gap of one output that ``L0`` rides out: every output ``j`` with
+    ``ρ(|A − L0_(j) C|) < 1`` (:func:`missing_radius`) keeps ``ρ(|A − L_(j) C|) < 1`` (the
+    refinement stops at the last gain that does)."""
     n, p = A.shape[0], C.shape[0]
     m = E.shape[1]
     delta = np.asarray(delta, dtype=float)
     L = np.asarray(L0, dtype=float)
+    gaps = missing_radius(A, C, L) < 1.0  # single-output gaps L0 rides out
     w = steady_width(A - L @ C, E - L @ F, delta)
     if m == 0 or not np.all(np.isfinite(w)) or not np.any(delta > 0):
         return L
@@ -320,6 +443,7 @@ def refine_width(
     else:
         D_rows, D_b = _abs_bound_rows(D_lin, lp.aux("T", n * n))
     bounds = [(-_L_BOUND, _L_BOUND)] * (n * p) + [(0, None)] * (n * n + n * m)
+    weights = (n, output_weights(C))
     for _ in range(iters):
         # one-step image  T w + TG Δ  (row i), constrained <= w, objective Σ_i image_i / w_i
         img = np.zeros((n, lp.size))
@@ -328,7 +452,9 @@ def refine_width(
             img[i, lp.offset["TG"] + i * m : lp.offset["TG"] + (i + 1) * m] = delta
         scale = 1.0 / np.maximum(w, 1e-12 * max(1.0, float(w.max())))
         c = scale @ img
-        x = _solve_lp(c, np.vstack([D_rows, G_rows, img]), np.concatenate([D_b, G_b, w]), bounds)
+        x = _solve_lp(
+            c, np.vstack([D_rows, G_rows, img]), np.concatenate([D_b, G_b, w]), bounds, weights
+        )
         if x is None:
             break
         L_new = lp.gain(x)
@@ -339,6 +465,8 @@ def refine_width(
         if not np.all(np.isfinite(w_new)) or spectral_radius(np.abs(D_new)) >= 1.0 - 1e-9:
             break
         if np.any(w_new > w * (1 + 1e-9) + 1e-15):
+            break
+        if gaps.any() and np.any(missing_radius(A, C, L_new)[gaps] >= 1.0):
             break
         gain = float(np.sum((w - w_new) * scale))
         L, w = L_new, w_new

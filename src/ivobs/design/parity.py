@@ -16,9 +16,16 @@ general solution is ``T = Mx† + S Mx⊥`` (Lemma 1, Lemma 2), and Theorem 1 (e
 one minimising ``‖T Md‖_F``.
 
 Time-varying systems (001 Remark 4): :func:`stack_window` takes the matrices of each step of the
-window. Non-invertible ``A`` (001 Remark 1): :func:`invertible_injection` finds ``L`` with
-``A - LC`` invertible; ``L y`` then enters as a known input. No loops over time here: a window
-has ``s + 1`` steps, and that is all these functions see.
+window. Non-invertible ``A`` (001 Remark 1): :func:`injection_candidates` and
+:func:`invertible_injection` find small gains ``L`` with ``A - LC`` well-conditioned; ``L y``
+then enters as a known input.
+
+Certification (not in the paper): the stacked matrices come from inverses, so a computed window
+gain satisfies eqs. (8)-(9) only to rounding amplified by the conditioning of ``A``.
+:func:`forward_window` writes the window forward (products of the model matrices, no inverse)
+and :func:`window_bound` bounds, entry by entry, what a given gain really does, with a ``γ_n``
+rounding bound (:func:`gamma`), and refines it once. No loops over time here: a window has
+``s + 1`` steps, and that is all these functions see.
 """
 
 from __future__ import annotations
@@ -33,20 +40,37 @@ from ..errors import DesignError, IvobsError
 
 __all__ = [
     "SINGULAR_RCOND",
+    "ForwardWindow",
     "OptimalT",
+    "WindowBound",
+    "forward_window",
+    "gamma",
     "general_T",
+    "injection_candidates",
     "invertible_injection",
     "optimal_T",
     "pinv_perp",
     "stack_matrices",
     "stack_window",
     "width_optimal_T",
+    "window_bound",
 ]
 
 SINGULAR_RCOND = 1e-8
 """``A`` counts as non-invertible when ``σ_min(A) <= SINGULAR_RCOND · max(1, σ_max(A))``."""
 
 _EPS = np.finfo(float).eps
+
+
+def gamma(n: int) -> float:
+    """``γ_n = n ε / (1 - n ε)`` with ``ε = 2⁻⁵²`` (twice the unit roundoff, so conservative):
+    a floating-point expression whose every term passes through at most ``n`` roundings has an
+    error of at most ``γ_n`` times the same expression evaluated on absolute values (Higham,
+    *Accuracy and Stability of Numerical Algorithms*, Lemma 3.1 and §3.5)."""
+    ne = n * _EPS
+    if not ne < 0.5:
+        return np.inf
+    return ne / (1.0 - ne)
 
 
 def _rcond(M: np.ndarray) -> float:
@@ -107,6 +131,244 @@ def stack_window(
         Mu[r, i * nu : (i + 1) * nu] += D
         Md[r, i * nd : (i + 1) * nd] += F
     return Mx, Mu, Md
+
+
+_WORK = np.longdouble
+"""Working precision of the certification (:func:`forward_window`, :func:`window_bound`): the
+x87 extended format where the platform has it (``ε = 2⁻⁶³``), else ``float64``; every bound
+uses the ``ε`` of the format actually used, so it holds either way."""
+
+_EPS_WORK = float(np.finfo(_WORK).eps)
+
+
+def _gamma_work(n: int) -> float:
+    ne = n * _EPS_WORK
+    return ne / (1.0 - ne) if ne < 0.5 else np.inf
+
+
+@dataclass(frozen=True)
+class ForwardWindow:
+    """The window of the fixed-time estimator written *forward*, without any inverse.
+
+    Free variables ``ξ = [x_{k-a}; 𝐯; 𝛅]``: the state at the anchor lag ``a``, the known inputs
+    ``v_{k-i} = [u_{k-i}; c_{k-i}]`` (``c`` the centre of ``d``, only with ``centre=True``) and
+    the normalised disturbances ``δ_{k-i} = d_{k-i} - c_{k-i}``, both lag-major
+    (``i = 0 … s``). ``Z`` maps ``ξ`` to the window vector ``w = [z_k; …; z_{k-s}]``,
+    ``z = [u; y; c]`` (rows of missing outputs and of lags ``> a`` are zero), ``X`` maps ``ξ``
+    to ``x_k``; ``Za``, ``Xa`` are the same recursions on absolute values (for the rounding
+    bound). All four in the working precision :data:`_WORK`. ``y_rows``: the rows of ``w``
+    holding available outputs of lags ``<= a``; ``v_rows``, ``v_cols``: the rows of ``w``
+    holding ``u`` and ``c`` and the columns of ``ξ`` they equal.
+    """
+
+    Z: np.ndarray
+    Za: np.ndarray
+    X: np.ndarray
+    Xa: np.ndarray
+    lag: int
+    n_rounds: int
+    y_rows: np.ndarray
+    v_rows: np.ndarray
+    v_cols: np.ndarray
+    x_cols: slice
+    v_slice: slice
+    d_slice: slice
+
+
+def forward_window(
+    mats: Sequence[tuple[np.ndarray, ...]],
+    *,
+    centre: bool,
+    lag: int | None = None,
+    missing: np.ndarray | None = None,
+) -> ForwardWindow:
+    """The forward map of one window (see :class:`ForwardWindow`), used to certify a computed
+    window gain (:func:`window_bound`).
+
+    ``mats[i] = (A, B, C, D, E, F)`` of the *original* system at step ``k - i`` (no output
+    injection, no inverse: ``x_{j+1} = A x_j + B u_j + E (c_j + δ_j)``,
+    ``y_j = C x_j + D u_j + F (c_j + δ_j)``), ``i = 0 … s``; ``lag``: the anchor ``a``
+    (default ``s``); ``missing``: ``(s+1, ny)`` bool, those outputs are zero in ``w``.
+    ``n_rounds`` bounds the roundings along any product path of ``X`` and of the output rows
+    of ``Z``: per step one product of inner size ``nx`` and one addition.
+    """
+    s = len(mats) - 1
+    a = s if lag is None else int(lag)
+    _, B0, C0, _, E0, _ = mats[0]
+    nx, nu, ny, nd = B0.shape[0], B0.shape[1], C0.shape[0], E0.shape[1]
+    nc = nd if centre else 0
+    nv, nz = nu + nc, nu + ny + nc
+    nxi = nx + (s + 1) * (nv + nd)
+    d0 = nx + (s + 1) * nv
+    Z = np.zeros(((s + 1) * nz, nxi), dtype=_WORK)
+    Za = np.zeros_like(Z)
+    # P = [X; Xa]: the signed map and the same recursion on absolute values, in one array
+    P = np.zeros((2 * nx, nxi), dtype=_WORK)
+    P[:nx, :nx] = P[nx:, :nx] = np.eye(nx)
+    y_rows: list[int] = []
+    v_rows: list[int] = []
+    v_cols: list[int] = []
+    for i in range(a, -1, -1):
+        A, B, C, D, E, F = (np.asarray(M, dtype=_WORK) for M in mats[i])
+        r0, cu, cd = i * nz, nx + i * nv, d0 + i * nd
+        cols_u, cols_c, cols_d = slice(cu, cu + nu), slice(cu + nu, cu + nv), slice(cd, cd + nd)
+        Y = np.vstack([C @ P[:nx], np.abs(C) @ P[nx:]])
+        Y[:, cols_u] += np.vstack([D, np.abs(D)])
+        FF = np.vstack([F, np.abs(F)])
+        Y[:, cols_d] += FF
+        if nc:
+            Y[:, cols_c] += FF
+        if missing is not None and np.any(missing[i]):
+            avail = ~np.asarray(missing[i], dtype=bool)
+            Y[:ny][~avail] = 0.0
+            Y[ny:][~avail] = 0.0
+        else:
+            avail = np.ones(ny, dtype=bool)
+        Z[r0 + nu : r0 + nu + ny] = Y[:ny]
+        Za[r0 + nu : r0 + nu + ny] = Y[ny:]
+        y_rows.extend((r0 + nu + np.nonzero(avail)[0]).tolist())
+        vr = list(range(r0, r0 + nu)) + list(range(r0 + nu + ny, r0 + nz))
+        v_rows.extend(vr)
+        v_cols.extend(range(cu, cu + nv))
+        Z[vr, np.arange(cu, cu + nv)] = 1.0  # u_{k-i}, c_{k-i} are entries of ξ
+        Za[vr, np.arange(cu, cu + nv)] = 1.0
+        if i > 0:
+            P = np.vstack([A @ P[:nx], np.abs(A) @ P[nx:]])
+            P[:, cols_u] += np.vstack([B, np.abs(B)])
+            EE = np.vstack([E, np.abs(E)])
+            P[:, cols_d] += EE
+            if nc:
+                P[:, cols_c] += EE
+    X, Xa = P[:nx], P[nx:]
+    return ForwardWindow(
+        Z=Z,
+        Za=Za,
+        X=X,
+        Xa=Xa,
+        lag=a,
+        n_rounds=(a + 1) * (nx + 1),
+        y_rows=np.array(y_rows, dtype=int),
+        v_rows=np.array(v_rows, dtype=int),
+        v_cols=np.array(v_cols, dtype=int),
+        x_cols=slice(0, nx),
+        v_slice=slice(nx, d0),
+        d_slice=slice(d0, nxi),
+    )
+
+
+@dataclass(frozen=True)
+class WindowBound:
+    """A window gain ``G`` and its certified error (:func:`window_bound`).
+
+    For the true trajectory, ``target - G w = R ξ`` exactly, with ``|R| <= [Rx, Rv, Rd]``
+    elementwise (``ξ`` and the blocks as in :class:`ForwardWindow`, ``target`` is ``x_k`` for
+    the first rows, ``0`` for parity rows); ``kappa`` and ``nu`` bound the anchor state:
+    ``‖x_{k-a}‖_∞ <= kappa ‖w‖_∞ + nu · 𝐫`` (``𝐫`` the stacked radii, lag-major).
+    ``kappa = inf`` when the window does not determine ``x_{k-a}``.
+    """
+
+    G: np.ndarray
+    Rx: np.ndarray
+    Rv: np.ndarray
+    Rd: np.ndarray
+    kappa: float
+    nu: np.ndarray
+
+
+def _residual(
+    G: np.ndarray, target: np.ndarray, target_abs: np.ndarray, fw: ForwardWindow
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, bound)``: ``R = target - G Z`` computed in the working precision (signed), and
+    ``bound >= |target - G Z|`` in exact arithmetic, elementwise (``float64``).
+
+    ``bound = (|R| + γ_2N (|G| Za + |target|)) (1 + ε₆₄)``: ``γ`` of the working precision,
+    ``N`` the roundings along the longest product path (the forward recursion, the product with
+    ``G`` of inner size ``m``, the subtraction); the factor 2 in ``γ_2N`` covers the rounding of
+    the bound itself (nonnegative terms), ``1 + ε₆₄`` its conversion to ``float64``."""
+    Gw = np.asarray(G, dtype=_WORK)
+    n = fw.n_rounds + G.shape[1] + 2
+    R = target - Gw @ fw.Z
+    B = np.abs(R) + _gamma_work(2 * n) * (np.abs(Gw) @ fw.Za + target_abs)
+    return R, B.astype(float) * (1.0 + _EPS)
+
+
+def _anchor(fw: ForwardWindow, nx: int) -> tuple[np.ndarray | None, float, np.ndarray]:
+    """``(G', kappa, nu)``: ``G' = O⁺ (S_y - Z_yv S_v)`` estimates ``x_{k-a}`` from the window
+    (``O`` the forward observability matrix of the available outputs), certified like any
+    window gain: ``x_{k-a} - G' w = R' ξ``; with ``ρ' = ‖R'_x‖_∞ < 1/2``,
+    ``‖x_{k-a}‖_∞ <= (‖G'‖_∞ (1 + γ) + ‖R'_v‖_∞) ‖w‖_∞ / (1 - ρ') + 1ᵀ R'_δ 𝐫 / (1 - ρ')``.
+    ``(None, inf, 0)`` when ``O`` does not have full column rank."""
+    nd_cols = fw.Z.shape[1] - fw.d_slice.start
+    fail = (None, np.inf, np.zeros(nd_cols))
+    O = np.asarray(fw.Z[fw.y_rows, fw.x_cols], dtype=float)
+    if O.shape[0] < nx:
+        return fail
+    U, sv, Vt = np.linalg.svd(O, full_matrices=False)
+    if not sv[-1] > 10.0 * max(O.shape) * _EPS * sv[0]:
+        return fail
+    Op = (Vt.T / sv) @ U.T
+    Gp = np.zeros((nx, fw.Z.shape[0]))
+    Gp[:, fw.y_rows] = Op
+    Gp[:, fw.v_rows] = -Op @ np.asarray(fw.Z[np.ix_(fw.y_rows, fw.v_cols)], dtype=float)
+    tgt = np.zeros((nx, fw.Z.shape[1]), dtype=_WORK)
+    tgt[:, fw.x_cols] = np.eye(nx)
+    _, Rp = _residual(Gp, tgt, np.abs(tgt), fw)
+    rho = float(Rp[:, fw.x_cols].sum(axis=1).max())
+    if not rho < 0.5:
+        return fail
+    gn = float(np.abs(Gp).sum(axis=1).max()) * (1.0 + gamma(Gp.shape[1] + 2))
+    rv = float(Rp[:, fw.v_slice].sum(axis=1).max(initial=0.0))
+    kappa = (gn + rv) / (1.0 - rho) * (1.0 + gamma(4))
+    nu = Rp[:, fw.d_slice].sum(axis=0) / (1.0 - rho) * (1.0 + gamma(nx + 4))
+    return Gp, kappa, nu
+
+
+def window_bound(
+    G: np.ndarray, nx_rows: int, fw: ForwardWindow, *, refine: bool = True
+) -> WindowBound:
+    """Certify a computed window gain ``G`` (rows ``0 … nx_rows - 1`` estimate ``x_k``, the
+    others are parity rows with target 0) on the forward form of the window.
+
+    Whatever rounding went into ``G`` (the inverses of eq. 4, an ill-conditioned ``A``, a large
+    output injection, the SVDs of Theorem 1), ``target - G w`` is linear in
+    ``ξ = [x_{k-a}; 𝐯; 𝛅]`` with coefficients ``R = target - G Z`` computed from products of
+    the model matrices only, in extended precision, with the rounding bound of
+    :func:`_residual`. The ``𝛅`` block is the disturbance gain (``-T Md`` of eq. 9 up to
+    rounding); the ``x`` and ``𝐯`` blocks would be zero in exact arithmetic: they measure how
+    far ``G`` is from ``T Mx = I`` and from cancelling the known inputs.
+
+    ``refine``: one step of iterative refinement on those two blocks,
+    ``G ← G + R_x G' + R_v S_v`` (``G'`` the anchor estimator of :func:`_anchor`, ``S_v`` the
+    selection of the known entries of ``w``), kept if its certified error is smaller; it only
+    moves ``G`` by the size of its error. The returned ``G`` is the one certified.
+    """
+    nx = fw.X.shape[0]
+    m = G.shape[0]
+    target = np.zeros((m, fw.Z.shape[1]), dtype=_WORK)
+    target_abs = np.zeros_like(target)
+    target[:nx_rows] = fw.X
+    target_abs[:nx_rows] = fw.Xa
+    Gp, kappa, nu = _anchor(fw, nx)
+    R, Bd = _residual(G, target, target_abs, fw)
+
+    def cost(b: np.ndarray) -> float:
+        return float(np.max(b[:, fw.x_cols].sum(axis=1) * kappa + b[:, fw.v_slice].sum(axis=1)))
+
+    if refine and Gp is not None and m:
+        D = R[:, fw.x_cols] @ np.asarray(Gp, dtype=_WORK)
+        D[:, fw.v_rows] += R[:, fw.v_cols]
+        G2 = np.asarray(np.asarray(G, dtype=_WORK) + D, dtype=float)
+        _, Bd2 = _residual(G2, target, target_abs, fw)
+        if cost(Bd2) < cost(Bd):
+            G, Bd = G2, Bd2
+    return WindowBound(
+        G=G,
+        Rx=Bd[:, fw.x_cols],
+        Rv=Bd[:, fw.v_slice],
+        Rd=Bd[:, fw.d_slice],
+        kappa=kappa,
+        nu=nu,
+    )
 
 
 def stack_matrices(
@@ -288,37 +550,98 @@ def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
     return T
 
 
-def invertible_injection(A: Any, C: Any) -> np.ndarray:
-    """A gain ``L`` with ``A - LC`` invertible (001 Remark 1), by pole placement.
-
-    The poles of ``A - LC`` are placed at distinct real values ``0.5 … 0.9`` (nonzero, so the
-    matrix is invertible; moderate, so ``(A - LC)⁻¹`` stays well-conditioned) with
-    :func:`scipy.signal.place_poles` on the dual pair ``(Aᵀ, C_rᵀ)``, ``C_r`` an orthonormal
-    basis of the rows of ``C`` (place_poles needs full column rank). Output injection keeps
-    ``(A - LC, C)`` observable whenever ``(A, C)`` is. Raises :class:`DesignError` when the
-    placement fails (unobservable pair) or the result is not invertible.
-    """
+def _place(A: np.ndarray, C: np.ndarray, poles: np.ndarray) -> np.ndarray | None:
+    """``L`` with the eigenvalues of ``A - LC`` at ``poles`` (``scipy.signal.place_poles`` on
+    the dual pair ``(Aᵀ, C_rᵀ)``, ``C_r`` an orthonormal-row factor of ``C``: place_poles needs
+    full column rank), or None when the placement fails."""
     from scipy.signal import place_poles
 
-    A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
-    nx = A.shape[0]
     U, sv, Vt = np.linalg.svd(C, full_matrices=False)
     r = int(np.sum(sv > max(C.shape) * _EPS * (sv[0] if sv.size else 0.0)))
     if r == 0:
-        raise DesignError("output injection (001 Remark 1): C = 0, no gain can change A")
+        return None
     Cr = sv[:r, None] * Vt[:r]  # C = U_r C_r
-    poles = np.linspace(0.5, 0.9, nx) if nx > 1 else np.array([0.7])
     try:
         Lr = place_poles(A.T, Cr.T, poles).gain_matrix.T
-    except Exception as exc:  # scipy raises ValueError/LinAlgError with its own wording
-        raise DesignError(
-            f"output injection (001 Remark 1): could not place the poles of A - LC at "
-            f"{np.round(poles, 3).tolist()} ({exc}); pass an explicit L"
-        ) from None
+    except Exception:  # scipy raises ValueError/LinAlgError with its own wording
+        return None
     L = Lr @ U[:, :r].T
-    if not is_invertible(A - L @ C):
+    return L if np.all(np.isfinite(L)) else None
+
+
+def injection_candidates(A: Any, C: Any) -> list[np.ndarray]:
+    """Gains ``L`` with ``A - LC`` invertible (001 Remark 1), from the least to the most
+    intrusive; the caller picks one (:func:`invertible_injection`, or by the resulting design).
+
+    1. *Minimal-norm* gains that only lift the small singular directions of ``A``: with
+       ``A = U Σ Vᵀ`` and ``V₀``, ``U₀`` the directions with ``σ <= 10⁻³ σ_max``,
+       ``L = -α U₀ (C V₀)⁺`` gives ``(A - LC) V₀ = U₀ (Σ₀ + α)`` (``C V₀`` has full column rank
+       when ``(A, C)`` is observable: a null vector of ``A`` not seen by ``C`` is unobservable),
+       for ``α`` equal to the largest, the smallest remaining and their geometric mean of the
+       other singular values.
+    2. Pole placement keeping the eigenvalues of ``A`` larger than ``10⁻³ ρ(A)`` and moving
+       the others to distinct reals of magnitude ``ρ(A) / 2``.
+    3. Pole placement at ``0.5 … 0.9`` (distinct, nonzero, moderate).
+
+    A large gain (poles moved far, e.g. from ``-0.99`` to ``0.9``) makes the stacked matrices
+    of ``A - LC`` large and their rounding large (audit finding A3b), hence this order.
+    """
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    nx = A.shape[0]
+    out: list[np.ndarray] = []
+    U, sv, Vt = np.linalg.svd(A)
+    small = sv <= 1e-3 * max(sv[0], np.finfo(float).tiny)
+    if small.any() and not small.all():
+        U0, V0 = U[:, small], Vt[small].T
+        CV = C @ V0
+        if np.linalg.matrix_rank(CV) == V0.shape[1]:
+            big = sv[~small]
+            for alpha in sorted({big[0], float(np.sqrt(big[0] * big[-1])), big[-1]}):
+                out.append(-alpha * U0 @ np.linalg.pinv(CV))
+    lam = np.linalg.eigvals(A)
+    rho = float(np.max(np.abs(lam))) if lam.size else 0.0
+    if rho > 0:
+        keep = np.abs(lam) > 1e-3 * rho
+        moved = int(np.sum(~keep))
+        if 0 < moved < nx:
+            kept = lam[keep]
+            new = 0.5 * rho * np.linspace(1.0, 0.6, moved) if moved > 1 else np.array([0.5 * rho])
+            while np.any(np.abs(kept[:, None] - new[None, :]) < 1e-3 * rho):
+                new = new * 0.9
+            L = _place(A, C, np.concatenate([kept, new]))
+            if L is not None:
+                out.append(L)
+    poles = np.linspace(0.5, 0.9, nx) if nx > 1 else np.array([0.7])
+    L = _place(A, C, poles)
+    if L is not None:
+        out.append(L)
+    return [L for L in out if is_invertible(A - L @ C)]
+
+
+def _injection_score(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> float:
+    """``cond(A - LC) (1 + ‖L C‖₂ / ‖A‖₂)``: the inverse of eq. (4) stays accurate and the
+    known input ``L y`` stays small against the dynamics."""
+    Ap = A - L @ C
+    return float(
+        np.linalg.cond(Ap) * (1.0 + np.linalg.norm(L @ C, 2) / max(np.linalg.norm(A, 2), 1e-300))
+    )
+
+
+def invertible_injection(A: Any, C: Any) -> np.ndarray:
+    """A gain ``L`` with ``A - LC`` invertible (001 Remark 1): among
+    :func:`injection_candidates`, the one with the smallest ``cond(A - LC) (1 + ‖LC‖/‖A‖)``
+    (a well-conditioned ``A - LC`` reached with a small gain). Output injection keeps
+    ``(A - LC, C)`` observable whenever ``(A, C)`` is. Raises :class:`DesignError` when no
+    candidate works (``C = 0``, unobservable pair)."""
+    A = np.asarray(A, dtype=float)
+    C = np.asarray(C, dtype=float)
+    if not np.any(C):
+        raise DesignError("output injection (001 Remark 1): C = 0, no gain can change A")
+    cands = injection_candidates(A, C)
+    if not cands:
         raise DesignError(
-            "output injection (001 Remark 1): A - LC is still not invertible; pass an explicit L"
+            "output injection (001 Remark 1): found no L with A - LC invertible (is (A, C) "
+            "observable?); pass an explicit L"
         )
-    return L
+    return min(cands, key=lambda L: _injection_score(A, C, L))

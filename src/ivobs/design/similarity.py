@@ -362,19 +362,27 @@ def default_design(
     if not np.any(delta > 0) or G_of(np.zeros((n, p))).size == 0:
         G_of, delta = (lambda L_: np.eye(n)), np.ones(n)
     best_L, best_val = None, np.inf
+    last_error = ""
     for a, b in ((0.05, 0.3), (0.2, 0.6), (0.1, 0.9), (0.5, 0.9)):
         poles = np.linspace(a, b, n) if n > 1 else np.array([0.5 * (a + b)])
         try:
             L = place_real_poles(A, C, poles, who)
-        except DesignError:
+        except DesignError as exc:
+            last_error = str(exc)
             continue
         val = modal_width(A, C, L, G_of(L), delta)
         if val < best_val:
             best_L, best_val = L, val
     if best_L is None:
+        obs = np.vstack([C @ np.linalg.matrix_power(A, i) for i in range(n)])
+        why = (
+            "(A, C) is not observable"
+            if np.linalg.matrix_rank(obs) < n
+            else f"(A, C) is observable; the last attempt said: {last_error}"
+        )
         raise DesignError(
-            f"{who}: could not place distinct real poles in (0, 1) for A − LC (is (A, C) "
-            "observable?); pass L= or poles="
+            f"{who}: could not place distinct real poles in (0, 1) for A − LC: {why}; "
+            "pass L= or poles="
         )
     M0 = A - best_L @ C
     S0 = _modal_transform(M0)

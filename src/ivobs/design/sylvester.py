@@ -16,8 +16,9 @@ so its steady state, mapped back by (3.c-d), is the closed form (:func:`predicte
 
     w_x = |T⁻¹| (I - A_z)⁻¹ |T E - B_z F| Δd        (continuous time: (-A_z)⁻¹)
 
-``A_z = diag(a)`` is taken diagonal (nonnegative ``a ∈ [0, 0.95]`` in DT, ``a ∈ [-20 s, -0.05 s]``
-in CT with ``s = max(1, ρ(A))``), which makes ``(A_z, B_z)`` controllable as soon as the rows of
+``A_z = diag(a)`` is taken diagonal (nonnegative ``a ∈ [0, 0.95]`` in DT, ``a ∈ [-20 s, a_max]``
+in CT with ``s = max(1, ρ(A))`` and ``a_max`` from the flow rule below), which makes
+``(A_z, B_z)`` controllable as soon as the rows of
 ``B_z`` belonging to one eigenvalue are independent, and each row of ``T`` explicit:
 ``t_i = b_i C (A - a_i I)⁻¹``. A few candidates (eigenvalue spreads × ``B_z`` patterns: output
 directions cycled, least-noisy output directions first, a seeded random draw) are scored by
@@ -26,6 +27,19 @@ directions cycled, least-noisy output directions first, a seeded random draw) ar
 the transient ``|T⁻¹| (I - A_z)⁻¹ |T| w0`` (the summed width decay from the prior box).
 Rows of ``(T, B_z)`` are finally scaled to unit norm of ``T``'s rows (the bounds do not change,
 ``cond(T)`` improves).
+
+The flow rule (continuous time). With sampled measurements the observer carries ``T(t)``, which
+between samples follows ``dT/dt = A_z T - T A`` (the sampled-data form of (10.b), see
+:mod:`ivobs.estimators.kkl`). That flow is the linear map ``T ↦ A_z T - T A`` whose eigenvalues
+are ``λ_i(A_z) - λ_j(A)``, so it is stable iff (:func:`flow_gap`, :func:`check_flow`)::
+
+    max Re λ(A_z) < min Re λ(A)          (every target mode faster than every plant mode)
+
+Otherwise any deviation of ``T`` from its periodic solution (rounding, a missing sample, an
+irregular grid) grows like ``exp((max Re λ(A_z) - min Re λ(A)) t)``, the rows of ``T`` align
+and ``T`` stops being invertible. The default target keeps a margin: ``a_max = min(-0.05 s,
+min Re λ(A) - 0.05 s)`` (:data:`FLOW_MARGIN`), so deviations decay at least like
+``exp(-0.05 s t)``.
 """
 
 from __future__ import annotations
@@ -50,12 +64,17 @@ from ..linalg import (
 )
 
 __all__ = [
+    "CT_RANGE",
     "DT_RANGE",
+    "FLOW_MARGIN",
     "TargetChoice",
     "block_target",
+    "check_flow",
     "check_target",
     "condition_number",
     "default_target",
+    "flow_cap",
+    "flow_gap",
     "predicted_width",
     "solve_transform",
 ]
@@ -66,7 +85,12 @@ DT_RANGE = (0.0, 0.95)
 _RELAXED_COND = 1e13
 
 CT_RANGE = (-20.0, -0.05)
-"""Range of the diagonal of the default continuous-time ``A_z``, in units of ``max(1, ρ(A))``."""
+"""Range of the diagonal of the default continuous-time ``A_z``, in units of ``max(1, ρ(A))``
+(the upper end is lowered further by the flow rule, see :func:`flow_cap`)."""
+
+FLOW_MARGIN = 0.05
+"""Margin of the flow rule of the default continuous-time target, in units of ``max(1, ρ(A))``:
+``max Re λ(A_z) <= min Re λ(A) - FLOW_MARGIN * max(1, ρ(A))``."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +153,48 @@ def solve_transform(A: Any, C: Any, A_z: Any, B_z: Any) -> np.ndarray:
     return T
 
 
+def flow_gap(A_z: Any, A: Any) -> float:
+    """``max Re λ(A_z) - min Re λ(A)``: the spectral abscissa of ``T ↦ A_z T - T A``.
+
+    Negative iff the flow ``dT/dt = A_z T - T A`` of the continuous-time observer is stable (its
+    eigenvalues are ``λ_i(A_z) - λ_j(A)``); see the module docstring.
+    """
+    ez = np.linalg.eigvals(np.asarray(A_z, dtype=float))
+    ea = np.linalg.eigvals(np.asarray(A, dtype=float))
+    return float(np.max(ez.real) - np.min(ea.real))
+
+
+def flow_cap(A: Any) -> float:
+    """Largest eigenvalue allowed for the default continuous-time target: ``min(-0.05 s,
+    min Re λ(A) - 0.05 s)``, ``s = max(1, ρ(A))`` (the flow rule with margin, module docstring)."""
+    A = np.asarray(A, dtype=float)
+    s = max(1.0, spectral_radius(A))
+    slowest_allowed = float(np.min(np.linalg.eigvals(A).real)) - FLOW_MARGIN * s
+    return min(CT_RANGE[1] * s, slowest_allowed)
+
+
+def check_flow(A_z: Any, A: Any, *, who: str = "A_z", frozen: str = "") -> float:
+    """Raise :class:`DesignError` unless ``max Re λ(A_z) < min Re λ(A)`` (continuous time).
+
+    The sampled-data observer integrates ``dT/dt = A_z T - T A`` between samples; that flow is
+    stable iff this holds (module docstring). ``frozen`` (e.g. ``" at t = 0"``) says where a
+    time-varying ``A(t)`` was frozen. Returns the gap ``max Re λ(A_z) - min Re λ(A)``.
+    """
+    gap = flow_gap(A_z, A)
+    ez = np.linalg.eigvals(np.asarray(A_z, dtype=float)).real
+    ea = np.linalg.eigvals(np.asarray(A, dtype=float)).real
+    s = max(1.0, spectral_radius(A))
+    if not gap < -1e-9 * s:
+        raise DesignError(
+            f"{who}: the flow dT/dt = A_z T - T A{frozen} of the continuous-time observer is "
+            f"unstable: max Re eig(A_z) = {ez.max():.4g} is not below min Re eig(A) = "
+            f"{ea.min():.4g} (needed: every eigenvalue of A_z faster than every mode of the "
+            "plant, else T(t) drifts and loses invertibility during the run); choose eig(A_z) "
+            f"< {ea.min():.4g}" + (" (a larger ell)" if frozen else "")
+        )
+    return gap
+
+
 def check_target(
     A_z: Any, B_z: Any, continuous: bool, A: Any = None, *, who: str = "A_z"
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +202,8 @@ def check_target(
 
     Discrete time: ``A_z`` nonnegative and Schur; continuous time: Metzler and Hurwitz;
     ``(A_z, B_z)`` controllable; when ``A`` is given (time-invariant systems), no common
-    eigenvalue. Raises :class:`DesignError` naming the failed condition.
+    eigenvalue and, in continuous time, the flow rule ``max Re λ(A_z) < min Re λ(A)``
+    (:func:`check_flow`). Raises :class:`DesignError` naming the failed condition.
     """
     A_z = as_matrix(who, A_z)
     if A_z.shape[0] != A_z.shape[1]:
@@ -174,6 +241,8 @@ def check_target(
                 f"{who}: shares an eigenvalue with A (distance {gap:.2e}); "
                 "Proposition 1 needs eig(A_z) disjoint from eig(A)"
             )
+        if continuous:
+            check_flow(A_z, A, who=who)
     return A_z, B_z
 
 
@@ -266,7 +335,8 @@ def _b_patterns(C: np.ndarray, F: np.ndarray, delta: np.ndarray, n: int) -> list
     return pats
 
 
-def _spreads(n: int, continuous: bool, scale: float) -> list[np.ndarray]:
+def _spreads(n: int, continuous: bool, scale: float, cap: float = 0.0) -> list[np.ndarray]:
+    """Candidate eigenvalues; in CT shifted left so that the slowest is at most ``cap``."""
     grids = (
         [(0.25, 0.75), (0.5, 1.5), (1.0, 3.0), (2.0, 6.0), (4.0, 12.0)]
         if continuous
@@ -275,7 +345,10 @@ def _spreads(n: int, continuous: bool, scale: float) -> list[np.ndarray]:
     out = []
     for lo, hi in grids:
         a = np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)])
-        out.append(-scale * a if continuous else a)
+        if continuous:
+            a = -scale * a
+            a = a + min(0.0, cap - float(a.max()))
+        out.append(a)
     return out
 
 
@@ -288,11 +361,14 @@ def _acceptable(
     max_cond: float,
     sep: float,
 ) -> np.ndarray | None:
-    """``T`` for the diagonal target if every condition of Proposition 1 holds, else None."""
+    """``T`` for the diagonal target if every condition of Proposition 1 holds (and, in CT, the
+    flow rule ``max a < min Re λ(A)``), else None."""
     eig = np.linalg.eigvals(A)
     if np.min(np.abs(a[:, None] - eig[None, :])) < sep:
         return None
     if (continuous and np.any(a >= 0)) or (not continuous and (np.any(a < 0) or np.any(a >= 1))):
+        return None
+    if continuous and not float(np.max(a)) < float(np.min(eig.real)) - sep:
         return None
     if not is_controllable(np.diag(a), Bz):
         return None
@@ -320,9 +396,11 @@ def default_target(
 ) -> TargetChoice:
     """A diagonal target ``(A_z, B_z)`` and ``T`` for a time-invariant pair ``(A, C)``.
 
-    See the module docstring for the candidates, the score (predicted steady-state width) and the
-    gradient refinement. Raises :class:`DesignError` when no candidate gives an invertible ``T``
-    with ``cond(T) <= max_cond`` (then ``(A, C)`` is practically unobservable).
+    See the module docstring for the candidates, the score (predicted steady-state width), the
+    gradient refinement and, in continuous time, the flow rule every eigenvalue of ``A_z`` obeys
+    (``max a <= min Re λ(A) - 0.05 max(1, ρ(A))``). Raises :class:`DesignError` when no
+    candidate gives an invertible ``T`` with ``cond(T) <= max_cond`` (then ``(A, C)`` is
+    practically unobservable).
     """
     A = as_matrix("A", A)
     C = as_matrix("C", C, cols=A.shape[0], vector="row")
@@ -342,11 +420,12 @@ def default_target(
         wt = np.ones(n) if w0 is None else np.maximum(np.asarray(w0, dtype=float).ravel(), 1e-12)
     scale = max(1.0, spectral_radius(A)) if continuous else 1.0
     sep = 1e-6 * scale
+    cap = flow_cap(A) if continuous else DT_RANGE[1]  # CT: the flow rule with margin
     # candidates with cond(T) <= max_cond; ill-conditioned ones only serve as starting points
     best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
     start: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
     count, least_cond = 0, np.inf
-    for a in _spreads(n, continuous, scale):
+    for a in _spreads(n, continuous, scale, cap):
         for Bz in _b_patterns(C, F, delta if delta.size else np.zeros(0), n):
             T = _acceptable(a, Bz, A, C, continuous, _RELAXED_COND, sep)
             if T is None:
@@ -364,7 +443,7 @@ def default_target(
     if tune and start is not None:
         from scipy.optimize import minimize
 
-        lo, hi = CT_RANGE if continuous else DT_RANGE
+        lo, hi = (CT_RANGE[0], cap / scale) if continuous else DT_RANGE
         s0 = best if best is not None else start
         v0 = np.concatenate([s0[1] / scale, s0[2].ravel()])
         bounds = [(lo, hi)] * n + [(None, None)] * (n * p)

@@ -42,13 +42,21 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validate import as_float_array, as_signal, as_vector
-from ..errors import InconsistentDataError, IvobsError
+from .._validate import as_bool, as_float_array, as_signal, as_vector
+from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box
 
-__all__ = ["ROUNDING", "VECTOR_MIN_STEPS", "Design", "Estimator", "check_x0"]
+__all__ = [
+    "MAX_DENSE_STATES",
+    "ROUNDING",
+    "VECTOR_MIN_STEPS",
+    "Design",
+    "Estimator",
+    "check_size",
+    "check_x0",
+]
 
 ROUNDING = 1e-10
 """Relative outward widening of every bound (covers floating-point rounding)."""
@@ -68,6 +76,22 @@ class Design:
 
     def as_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+MAX_DENSE_STATES = 200
+"""Largest ``nx`` for the set-based methods whose every step is dense ``O(nx^3)`` work or
+``2 nx`` linear programs (zonotope, strip, constrained-zonotope, exact); docs/scale.md."""
+
+
+def check_size(who: str, nx: int, work: str) -> None:
+    """Refuse ``nx > MAX_DENSE_STATES`` for a method whose every step costs ``work``, with a
+    pointer to what scales (a :class:`~ivobs.DesignError`)."""
+    if nx > MAX_DENSE_STATES:
+        raise DesignError(
+            f"{who}: every step {work}; this does not scale to nx = {nx} > {MAX_DENSE_STATES} "
+            "states; use 'interval' or 'interval-split' with a gain L=... (sparse A: one sparse "
+            "product per step; docs/scale.md)"
+        )
 
 
 def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
@@ -366,6 +390,8 @@ class Estimator:
         start = time.perf_counter()
         if vectorize is None:
             vectorize = T >= VECTOR_MIN_STEPS or y.ndim == 3
+        else:
+            vectorize = as_bool("vectorize", vectorize)
         from .._progress import Progress
 
         with Progress(int(np.prod(y.shape[:-1])), self.name, enabled=progress) as bar:

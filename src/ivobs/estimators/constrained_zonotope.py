@@ -35,7 +35,19 @@ data (the ``exact`` method's answer, to LP tolerance), at a cost that grows with
 With it, the per-step cost is bounded by the two limits.
 
 An empty measurement update (no state, disturbance and initial condition explain ``y_k``) is a
-fault: it is reported (``Estimate.inconsistent``) and the step is predicted without ``y_k``.
+fault: it is reported (``Estimate.inconsistent``) and the step is predicted without ``y_k``,
+only with a certificate (:func:`ivobs.czonotope.certified_empty`: a dual ray, checked in floating
+point, proving that even the factor box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the constraints). When
+HiGHS calls a thin set infeasible without one, the box is that of the softened set (a superset).
+
+**Rounding (audits A12, A7).** Each measured row gets a slack factor of the size ``ρ_i`` of the
+rounding of its data and of its computed coefficients,
+``ρ = 3 γ_n (|y| + |D| |u| + |C| x̄ + |F| d̄) + |C| e`` (``γ_n = n u / (1 - n u)``, ``x̄``, ``d̄``
+bounds on ``|x|``, ``|d|``), so that a float64 record of the model's output is never found
+inconsistent whatever its scale (``|D u| = 1e8``, ``|x| ~ 1e5``). The prediction appends a box of
+generators for the rounding of ``A c + B u + E c_d`` and ``A G``; the rounding of the reduction is
+kept in a box aside (``x[k] ∈ <c, G, A, b> ⊕ box(e)``); tiny generators are consolidated into one
+box per step (:data:`CONSOLIDATE_X`, :data:`CONSOLIDATE_C`).
 """
 
 from __future__ import annotations
@@ -47,16 +59,23 @@ import numpy as np
 
 from .._validate import as_int
 from ..czonotope import (
+    EMPTY_TOL,
+    UNIT_ROUNDOFF,
+    box_generators,
+    certified_empty,
+    consolidate_small,
     eliminate_constraints,
+    gamma,
     hull_certificates,
     independent_constraints,
     reduce_generators,
+    safe_radius,
 )
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box
 from . import register
-from .base import Design, Estimator
+from .base import Design, Estimator, check_size
 
 __all__ = ["ConstrainedZonotopeDesign", "ConstrainedZonotopeEstimator"]
 
@@ -73,53 +92,79 @@ measurement look inconsistent or leave the box. A margin of ``1e-9`` of the boun
 reference widens its variable bounds by the same amount)."""
 
 
+CONSOLIDATE_X = 1e-13
+CONSOLIDATE_C = 1e-9
+"""Generators whose ``x`` part is below ``CONSOLIDATE_X (1 + |c|)`` (rounding level against the
+state) and whose constraint part is below ``CONSOLIDATE_C`` times the largest (normalised)
+coefficient are replaced, after each reduction, by one box in ``x`` and one slack per
+constraint (:func:`ivobs.czonotope.consolidate_small`, a superset): the rounding slacks of
+the measurement rows and the rounding boxes of the prediction would otherwise pile up in the
+set (a few per step) until the generator limit. Larger thresholds cost tightness where the
+state is pinned down by more outputs than disturbances (``kkl-random8``: ``1e-11`` and
+``1e-9`` widen its boxes from ``1e-8`` to ``2e-3``); on other sets these generators are
+negligible either way."""
+
+
 def _inflate(center: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """``radius (1 + INFLATE) + 1e-3 INFLATE (1 + |center|)`` where ``radius > 0``."""
     return np.where(radius > 0, radius * (1 + INFLATE) + 1e-3 * INFLATE * (1 + np.abs(center)), 0.0)
 
 
 def _measurement_update(
-    Ac: np.ndarray, b: np.ndarray, CG: np.ndarray, FR: np.ndarray, rhs: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, int, bool]:
+    Ac: np.ndarray, b: np.ndarray, CG: np.ndarray, FR: np.ndarray, rhs: np.ndarray,
+    rho: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, int, str, tuple[np.ndarray, np.ndarray]]:
     """Constraints after the measurement: the old ones (padded with the new factors) and
-    ``[C G, F R] (ξ, δ) = y - D u - C c - F c_d`` for the measured components (NaN: missing).
+    ``[C G, F R, diag(ρ)] (ξ, δ, τ) = y - D u - C c - F c_d`` for the measured components
+    (NaN: missing).
 
-    A measured output with no noise (``F_i R = 0``) gets a slack factor of relative size
-    :data:`INFLATE` (rounding in ``y`` and in the set must not make the true state look
-    inconsistent). Returns ``(A, b, p, consistent)``, ``p`` the number of new factors
-    (``δ`` and slacks)."""
+    Every measured output gets a slack factor ``τ_i`` of size ``ρ_i``, the bound of the rounding
+    of its row (in ``y`` and in the computed row, see :meth:`ConstrainedZonotopeEstimator._step`);
+    an output with no noise (``F_i R = 0``) also gets the relative margin :data:`INFLATE`. Returns
+    ``(A, b, p, status, full)``, ``p`` the number of new factors (``δ`` and slacks);
+    ``status`` is ``"ok"``, ``"empty"`` (certainly inconsistent) or ``"check"`` (implied
+    constraints were dropped that the kept ones do not quite satisfy: the caller decides with
+    :func:`ivobs.czonotope.certified_empty` on ``full``, the system before dropping)."""
     obs = ~np.isnan(rhs)
-    rows, rhs = np.hstack([CG[obs], FR[obs]]), rhs[obs]
-    quiet = np.flatnonzero(~np.any(FR[obs] != 0, axis=1))
-    slack = np.zeros((rows.shape[0], quiet.size))
-    slack[quiet, np.arange(quiet.size)] = INFLATE * (
-        1.0 + np.abs(rhs[quiet]) + np.abs(rows[quiet]).sum(axis=1)
+    rows, rhs, rho = np.hstack([CG[obs], FR[obs]]), rhs[obs], rho[obs]
+    quiet = ~np.any(FR[obs] != 0, axis=1)
+    size = rho + np.where(
+        quiet, INFLATE * (1.0 + np.abs(rhs) + np.abs(rows).sum(axis=1)), 0.0
     )
+    live = np.flatnonzero(size > 0)
+    slack = np.zeros((rows.shape[0], live.size))
+    slack[live, np.arange(live.size)] = size[live]
     rows, rhs, consistent = _clean_rows(np.hstack([rows, slack]), rhs)
-    p = FR.shape[1] + quiet.size
+    p = FR.shape[1] + live.size
     A_old = np.hstack([Ac, np.zeros((Ac.shape[0], p))])
-    A_new, b_new, implied_ok = _drop_implied(np.vstack([A_old, rows]), np.append(b, rhs))
-    return A_new, b_new, p, consistent and implied_ok
+    A_all, b_all = np.vstack([A_old, rows]), np.append(b, rhs)
+    if not consistent:
+        return A_all, b_all, p, "empty", (A_all, b_all)
+    A_new, b_new, implied_ok = _drop_implied(A_all, b_all)
+    return A_new, b_new, p, "ok" if implied_ok else "check", (A_all, b_all)
 
 
 def _clean_rows(rows: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """Normalise the new constraints (largest coefficient 1) and drop those whose coefficients
-    are all negligible (below ``1e-9 (1 + |rhs|)``: normalising them would amplify rounding);
-    such a constraint ``a ξ = rhs`` is consistent only if ``|rhs| <= ‖a‖₁`` (up to rounding)."""
+    are all negligible (below ``1e-9 (1 + |rhs|)``: normalising them would amplify rounding; a
+    superset). Such a constraint ``a ξ = rhs`` is certainly violated when
+    ``|rhs| > ‖a‖₁ (1 + EMPTY_TOL)`` beyond the rounding of the sum: then False."""
     absr = np.abs(rows)
     scale = absr.max(axis=1) if rows.shape[1] else np.zeros(rows.shape[0])
     ref = 1.0 + np.abs(rhs)
     zero = scale <= 1e-9 * ref
-    consistent = bool(np.all(np.abs(rhs[zero]) <= absr[zero].sum(axis=1) + 1e-8 * ref[zero]))
+    reach = absr[zero].sum(axis=1) * (1.0 + EMPTY_TOL) * (1.0 + gamma(rows.shape[1] + 2))
+    consistent = bool(np.all(np.abs(rhs[zero]) <= reach))
     keep = ~zero
     return rows[keep] / scale[keep, None], rhs[keep] / scale[keep], consistent
 
 
 def _drop_implied(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """Drop constraints that are linear combinations of the others (more outputs than
-    disturbances over-determine the set; HiGHS handles such degenerate programs badly). A
-    dropped row is consistent when it holds wherever the kept ones do (least-squares residual
-    below ``1e-7``); otherwise the data contradict each other."""
+    disturbances over-determine the set; HiGHS handles such degenerate programs badly): a
+    superset. Returns False when a dropped row does not hold where the kept ones do
+    (least-squares residual above ``1e-7``): the data may contradict each other, which the
+    caller decides with a certificate."""
     keep = independent_constraints(A)
     if np.all(keep):
         return A, b, True
@@ -132,9 +177,12 @@ def _drop_implied(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray,
 def _restart(
     A: np.ndarray, shift: np.ndarray, ER: np.ndarray, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Predicted set from the box ``[lo, hi]`` of ``x[k]`` (sound fallback)."""
-    c = A @ (0.5 * (lo + hi)) + shift
-    G = np.hstack([A * (0.5 * (hi - lo)), ER])
+    """Predicted set from the box ``[lo, hi]`` of ``x[k]`` (sound fallback; a box covers the
+    rounding of ``A m + shift`` and ``A diag(r)``)."""
+    m, r = safe_radius(lo, hi)
+    c = A @ m + shift
+    err = gamma(A.shape[1] + 2) * (np.abs(A) @ (np.abs(m) + r) + np.abs(shift))
+    G = np.hstack([A * r, ER, box_generators(err)])
     return c, G, np.zeros((0, G.shape[1])), np.zeros(0)
 
 
@@ -208,6 +256,8 @@ class ConstrainedZonotopeEstimator(Estimator):
         **base: Any,
     ):
         super().__init__(sys, x0, **base)
+        check_size(self.name, sys.nx, "reduces a dense constrained zonotope and solves LPs over "
+                   "its generators")
         if not isinstance(reduce, bool):
             raise IvobsError(f"reduce: expected True or False, got {reduce!r}")
         if elimination not in ("certificates", "hausdorff"):
@@ -227,57 +277,94 @@ class ConstrainedZonotopeEstimator(Estimator):
     # -- online -------------------------------------------------------------------------------
     def _initial_state(self) -> dict[str, Any]:
         assert self.x0 is not None
-        r = _inflate(self.x0.center, self.x0.radius)
+        c, r = safe_radius(self.x0.lo, self.x0.hi)
+        r = _inflate(c, r)
         keep = r > 0
         G = np.diag(r)[:, keep]
-        return {
-            "c": self.x0.center.copy(),
-            "G": G,
-            "A": np.zeros((0, G.shape[1])),
-            "b": np.zeros(0),
-        }
+        # e: a box of rounding kept aside, x[k] ∈ <c, G, A, b> ⊕ box(e)
+        return {"c": c, "G": G, "A": np.zeros((0, G.shape[1])), "b": np.zeros(0),
+                "e": np.zeros(self.sys.nx)}  # fmt: skip
 
     def _step(
         self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> tuple[np.ndarray, np.ndarray]:
         A, B, C, D, E, F = self.sys.matrices_at(k)
         dbox = self.sys.d_at(k, y_k)
-        c, G, Ac, b = state["c"], state["G"], state["A"], state["b"]
-        nx = G.shape[0]
-        cd, rd = dbox.center, _inflate(dbox.center, dbox.radius)
+        c, G, Ac, b, e = state["c"], state["G"], state["A"], state["b"], state["e"]
+        nx, m = G.shape
+        nu, nd = u_k.shape[0], dbox.dim
+        cd, rd = safe_radius(dbox.lo, dbox.hi)
+        rd = _inflate(cd, rd)
         cols = (rd > 0) & (np.any(E != 0, axis=0) | np.any(F != 0, axis=0))
         ER = E[:, cols] * rd[cols]
         FR = F[:, cols] * rd[cols]
+        au = np.abs(u_k)
+        xmag = np.abs(c) + np.abs(G).sum(axis=1) + e  # bounds |x_k|
+        dmag = np.abs(cd) + rd
 
-        # measurement update on (x_k, d_k): C x + F d = y - D u, exactly
-        A_new, b_new, p, consistent = _measurement_update(
-            Ac, b, C @ G, FR, y_k - D @ u_k - C @ c - F @ cd
-        )
+        # measurement update on (x_k, d_k): C x + F d = y - D u for the point x - ε of the set
+        # (|ε| <= e), up to the rounding bound ρ of each row: of y itself (a float64 record of
+        # the model's output) and of the computed right-hand side and row C G (γ_n times the
+        # sums of absolute values of their terms)
+        rhs = y_k - D @ u_k - C @ c - F @ cd
+        aC = np.abs(C)
+        rho = 3.0 * gamma(nx + m + nu + nd + 3) * (
+            np.abs(y_k) + np.abs(D) @ au + aC @ xmag + np.abs(F) @ dmag
+        ) + (aC @ e) * (1.0 + gamma(nx + 1))
+        A_new, b_new, p, status, full = _measurement_update(Ac, b, C @ G, FR, rhs, rho)
+        if status == "check" and certified_empty(*full):
+            status = "empty"
         ER = np.hstack([ER, np.zeros((nx, p - ER.shape[1]))])  # slack factors: not in x
         G_aug = np.hstack([G, np.zeros((nx, p))])
-        hull = hull_certificates(c, G_aug, A_new, b_new) if consistent else None
-        if hull is None:
+        hull = hull_certificates(c, G_aug, A_new, b_new) if status != "empty" else None
+        if hull is None:  # certainly inconsistent: report, predict without y_k
             state["_inconsistent"] = True
             A_new, b_new = np.hstack([Ac, np.zeros((Ac.shape[0], p))]), b
             hull = hull_certificates(c, G_aug, A_new, b_new)
-            if hull is None:  # pragma: no cover - the prior set is never empty
-                r = np.abs(G).sum(axis=1)
+            if hull is None:  # pragma: no cover - the prior set is never certainly empty
+                r = np.abs(G).sum(axis=1) * (1.0 + gamma(m + 2))
                 hull = (c - r, c + r, None)
         lo, hi, cert = hull
-        # rounding in the set's construction and in the certificates: widen like the bounds
-        lo = lo - INFLATE * (1.0 + np.abs(lo))
-        hi = hi + INFLATE * (1.0 + np.abs(hi))
+        scale = 1.0 if cert is None else cert.radius
+        if scale != 1.0:  # softened (see hull_certificates): keep the larger set
+            G_aug, A_new, ER = G_aug * scale, A_new * scale, ER * scale
+        # the box aside, and a margin for the rounding in the set's construction
+        lo = lo - e * (1.0 + 2.0 * UNIT_ROUNDOFF) - INFLATE * (1.0 + np.abs(lo))
+        hi = hi + e * (1.0 + 2.0 * UNIT_ROUNDOFF) + INFLATE * (1.0 + np.abs(hi))
 
-        # prediction (exact: same factors, so the certificates still apply), then reduction
+        # prediction (exact: same factors, so the certificates still apply), plus a box for the
+        # rounding of A c + B u + E c_d and A G (and of the plant's own float64 arithmetic) and
+        # the image of the box aside
+        aA = np.abs(A)
         c_next = A @ c + B @ u_k + E @ cd
-        G_next = np.hstack([A @ G, ER])
+        err = 2.0 * gamma(nx + m + nu + nd + 2) * scale * (
+            aA @ xmag + np.abs(B) @ au + np.abs(E) @ dmag
+        ) + (aA @ e) * (1.0 + gamma(nx + 1))
+        box = box_generators(err)
+        G_next = np.hstack([A @ G_aug[:, :m], ER, box])
+        A_next = np.hstack([A_new, np.zeros((A_new.shape[0], box.shape[1]))])
+        e_next = np.zeros(nx)
         nc, ng = self.design.max_constraints, self.design.max_generators
         if ng > 0:
-            if self.design.elimination == "hausdorff":
+            if self.design.elimination == "hausdorff" or cert is None:
                 cert = None
-            out = eliminate_constraints(c_next, G_next, A_new, b_new, nc, cert)
-            if out is None:  # pragma: no cover - numerically empty: restart from the box
-                out = _restart(A, B @ u_k + E @ cd, ER, lo, hi)
-            c_next, G_next, A_new, b_new = reduce_generators(*out, ng)
-        state["c"], state["G"], state["A"], state["b"] = c_next, G_next, A_new, b_new
+            else:
+                cert.D = np.hstack([cert.D, np.zeros((cert.D.shape[0], box.shape[1]))])
+            # in coordinates centred at c_next, so that the rounding in the reduction is
+            # relative to the set, not to |x|; the shift is added once, its rounding aside
+            out = eliminate_constraints(np.zeros(nx), G_next, A_next, b_new, nc, cert)
+            if out is None:  # numerically empty: restart from the box (sound, not a fault)
+                c_next, G_next, A_next, b_new = _restart(A, B @ u_k + E @ cd, ER, lo, hi)
+            else:
+                shift, G_next, A_next, b_new = out
+                e_next = gamma(2) * (np.abs(c_next) + np.abs(shift))
+                c_next = c_next + shift
+            tol_x = CONSOLIDATE_X * (1.0 + float(np.abs(c_next).max(initial=0.0)))
+            tol_c = CONSOLIDATE_C * float(np.abs(A_next).max(initial=0.0))
+            c_next, G_next, A_next, b_new = reduce_generators(
+                *consolidate_small(c_next, G_next, A_next, b_new, tol_x, tol_c), ng
+            )
+        # C order, as after a state() / restore() round trip (BLAS results depend on layout)
+        state["c"], state["G"] = c_next, np.ascontiguousarray(G_next)
+        state["A"], state["b"], state["e"] = np.ascontiguousarray(A_next), b_new, e_next
         return lo, hi

@@ -25,27 +25,66 @@ block dropped in a moving window) and handed to two HiGHS models (``highspy``), 
 minimisations and one for the ``nx`` maximisations, solved in two threads. Each model keeps its
 basis from program to program and from step to step (only the cost, the bounds or appended rows
 change), so every solve is warm-started: a chain of neighbouring objectives
-``min x[k][0], ..., min x[k][n-1]`` (and the maxima in reverse order).
+``min x[k][0], ..., min x[k][n-1]`` (and the maxima in reverse order). HiGHS sees the program
+shifted to the centres of the variable bounds (``z = m + z'``; ``m``: the centre of the interval
+prediction of ``x[j]`` and of the box of ``d[j]``), so that its absolute tolerances act at the
+scale of the widths, not of ``|x|`` (a state near ``1e9`` with a width of 10 is an ordinary LP).
 
-Soundness under floating point. The returned bounds are not the solver's objective values (which
-hold up to its tolerances) but *safe dual bounds* (Neumaier & Shcherbina, Math. Program. 99, 2004):
-for any multipliers ``λ`` and any box ``l <= z <= u`` containing the feasible set,
-``min c^T z >= λ^T b + Σ_j min(r_j l_j, r_j u_j)`` with ``r = c - M^T λ``. HiGHS's row duals
-give a ``λ`` for which this is tight; whatever the solver returns, the bound is valid. To make every
-variable bounded, each ``x[j]`` carries the box already proven at step ``j`` (slightly widened),
-and ``x[k]`` the interval prediction from ``x[k-1]``: these bounds are implied by the constraints,
-so they do not change the optimum.
+Soundness under floating point. The data are floating-point numbers, so each equation is kept up
+to the rounding of one floating-point evaluation of it: row ``i`` is the range
+``|a_i^T z - b_i| <= tau_i``, with (``γ_n = n ε / (1 - n ε)``, ``ε = 2^-52``, Higham 2002 §3.1)
+
+::
+
+    dynamics:     tau = γ_{nx+nu+nd} (|A| x̄ + |B| |u| + |E| d̄) + γ_{nu} |B| |u|
+    measurement:  tau = γ_{nx+nu+nd} (|C| x̄ + |D| |u| + |F| d̄) + γ_{nu+1} (|y| + |D| |u|)
+
+(``x̄``, ``d̄``: bounds on ``|x[j]|``, ``|d[j]|``). The second term covers the computation of the
+right-hand side ``B u`` or ``y - D u``; the first lets the data be a floating-point simulation of
+the model (a trajectory from :func:`ivobs.simulate`, a logger's rounding of ``y``). The program
+is therefore a relaxation of (LP) by rounding-level amounts: its hull contains the exact one and
+exceeds it by about ``ε`` times the magnitudes involved.
+
+The returned bounds are not the solver's objective values (which hold up to its tolerances) but
+*safe dual bounds* (Neumaier & Shcherbina, Math. Program. 99, 2004): for any multipliers ``λ``
+and any box ``l <= z <= u`` containing the feasible set, with ``r = c - M^T λ``,
+
+::
+
+    min c^T z  >=  Σ_i min(λ_i b_i^lo, λ_i b_i^hi) + Σ_j min(r_j l_j, r_j u_j).       (S)
+
+HiGHS's row duals give a ``λ`` for which (S) is tight; whatever the solver returns, (S) is valid.
+(S) is evaluated in floating point and the rounding of that evaluation is subtracted, a bound
+(Higham §3.1, dot products): with ``N`` the length of the longest sum,
+
+::
+
+    safe = fl(S) - γ_N ( Σ_i |λ_i| max|b_i| + Σ_j |r̂_j| w_j + Σ_i |λ_i| (|M| w)_i + |c|^T w )
+
+(``w_j = max(|l_j|, |u_j|)``; the third term is the error of the reduced costs ``r̂`` computed
+from ``λ``), rounded once more downwards. So the bound holds in exact arithmetic whatever ``λ``
+is, and a bound too tight by rounding can never become, as a variable bound of later programs, a
+constraint that cuts the true trajectory. Every variable bound is itself proven: ``x[0] ∈ x0``,
+``d[j] ∈ d_j`` (the model), ``x[k]`` within the interval prediction from ``x[k-1]`` (Lemma 1,
+widened by the same kind of error term and the dynamics range), and each past ``x[j]`` within the
+box proven at step ``j`` (widened by :data:`_VAR_MARGIN` relative, which keeps the optimum off
+those implied bounds); none of them changes the optimum.
 
 Moving window (``window=N``): only the blocks ``j = k-N .. k`` are kept, ``x[k-N]`` constrained
 to the box this estimator returned at step ``k-N`` (and every ``x[j]`` in the window to its own
 box). Each step then costs a bounded amount; the box is still guaranteed and never tighter than
 the full-horizon one (its constraints are implied by the full problem).
 
-Faults and missing data. A measurement that makes the LP infeasible cannot be explained by any
-admissible ``x[0]`` and ``d``: it is reported as inconsistent (``on_inconsistent``) and dropped,
-and the step is predicted without it (HiGHS's verdict is taken from a cold start: a warm start
-may stall at a tiny infeasibility). NaN components of ``y[k]`` are missing: their rows are free
-rows (no constraint).
+Faults and missing data. A measurement is reported inconsistent (``on_inconsistent``) only with a
+*certificate*: HiGHS declares the program infeasible and its dual ray ``λ`` satisfies (S) with
+``c = 0`` and a safe value ``> 0`` (Farkas: ``0 >= safe > 0`` for any feasible ``z``), evaluated
+as above, so the report is never false under the model's assumptions (the Monitor raises alarms
+from it). The sample is then dropped and the step predicted without it. When HiGHS says
+infeasible but no certificate holds (a warm start may stall at a tiny infeasibility: the verdict
+is retaken from a cold start with the dual, then the primal simplex), the sample is dropped
+*silently*: the box is still guaranteed (the program without ``y[k]``, or the interval
+prediction), only less tight. NaN components of ``y[k]`` are missing: their rows are free rows
+(no constraint).
 
 Data used: ``x0``, the bounds ``d`` and ``u[0..k]``, ``y[0..k]`` for the box of ``x[k]`` (the
 filtered hull; ``d[k]`` enters through ``y[k]``).
@@ -66,24 +105,48 @@ from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
 from . import register
-from .base import Design, Estimator
+from .base import Design, Estimator, check_size
 
 __all__ = ["Exact", "ExactDesign"]
 
 _VAR_MARGIN = 1e-9
-"""Relative widening of the (implied) variable bounds, so that they never cut a true trajectory."""
-
+"""Relative widening of the proven boxes when they become variable bounds of later programs (not
+needed for soundness: it keeps the optimum off those implied bounds, which helps the simplex)."""
 
 _PARALLEL = (os.cpu_count() or 1) > 1
 """Solve the min and the max programs in two threads."""
 
-_LP_TOL = 1e-9
-"""HiGHS primal and dual feasibility tolerances."""
+_PRIMAL_TOL = 1e-9
+"""HiGHS primal feasibility tolerance (on the shifted program)."""
+
+_DUAL_TOL = 1e-10
+"""HiGHS dual feasibility tolerance: the safe bound loses about this times the widths of the
+variables (two runs that end on different optimal bases, e.g. ``step()`` after ``restore()`` and
+``run()``, then agree to about that much)."""
+
+_EPS = float(np.finfo(float).eps)
+_TINY = float(np.finfo(float).smallest_subnormal)
+
+OK, INFEASIBLE, UNSURE = "ok", "infeasible", "unsure"
+"""Verdicts of a solve: bounds found; infeasible with a certificate; infeasible says HiGHS, but
+no certificate (the sample is dropped without a report)."""
+
+
+def _gamma(n: int) -> float:
+    """``γ_n = n ε / (1 - n ε)``: relative error bound of a length-``n`` dot product
+    (Higham, *Accuracy and Stability of Numerical Algorithms*, 2002, §3.1), ``ε = 2^-52`` (twice
+    the unit roundoff, which also absorbs the rounding of the error terms themselves)."""
+    ne = n * _EPS
+    return ne / (1.0 - ne)
 
 
 def _widen(lo: np.ndarray, hi: np.ndarray, rel: float = _VAR_MARGIN) -> tuple[np.ndarray, ...]:
     m = rel * (1.0 + np.maximum(np.abs(lo), np.abs(hi)))
     return lo - m, hi + m
+
+
+def _mag(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.maximum(np.abs(lo), np.abs(hi))
 
 
 @dataclass(frozen=True)
@@ -99,8 +162,8 @@ def _new_highs() -> highspy.Highs:
     h.setOptionValue("presolve", "off")
     h.setOptionValue("threads", 1)
     # tighter than HiGHS's 1e-7 defaults: the safe bound is only as tight as the duals
-    h.setOptionValue("primal_feasibility_tolerance", _LP_TOL)
-    h.setOptionValue("dual_feasibility_tolerance", _LP_TOL)
+    h.setOptionValue("primal_feasibility_tolerance", _PRIMAL_TOL)
+    h.setOptionValue("dual_feasibility_tolerance", _DUAL_TOL)
     return h
 
 
@@ -120,14 +183,32 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL
 
 
+@dataclass(frozen=True)
+class _Bounds:
+    """The data of (S) for one step, shared by the ``2 nx`` programs: row ranges (0 on free
+    rows), variable bounds, their magnitudes and ``|M| w``, and ``γ_N``."""
+
+    row_lo: np.ndarray
+    row_hi: np.ndarray
+    row_mag: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    w: np.ndarray
+    Mw: np.ndarray
+    gamma: float
+    n_terms: int
+
+
 class _TrajectoryLP:
     """The sparse LP over blocks ``(x[j], d[j])`` of consecutive steps.
 
     Rows of block ``b``: the dynamics rows linking it to block ``b-1`` (none for the first block),
     then the ``ny`` measurement rows (free rows, bounds ``±inf``, for missing or dropped
     components, so that the matrix does not depend on which samples are available). The matrix
-    is kept in COO form, stored row by row, with the row and column bounds; two
-    :class:`_Chain` s (one HiGHS model each) solve the ``min`` and the ``max`` programs.
+    is kept in COO form, stored row by row, with the row ranges and the variable bounds (in the
+    original coordinates) and the shifts ``m`` (per column) and ``M m`` (per row) of the
+    program HiGHS sees; two :class:`_Chain` s (one HiGHS model each) solve the ``min`` and the
+    ``max`` programs.
     """
 
     def __init__(self, nx: int, nd: int, ny: int, parallel: bool):
@@ -136,10 +217,14 @@ class _TrajectoryLP:
         self.rows = np.zeros(0, dtype=np.int64)
         self.cols = np.zeros(0, dtype=np.int64)
         self.vals = np.zeros(0)
+        self.rhs = np.zeros(0)  # NaN on free rows
         self.row_lo = np.zeros(0)
         self.row_hi = np.zeros(0)
+        self.relaxed = False  # HiGHS sees the ranges (True) or the equalities at rhs
+        self.row_shift = np.zeros(0)
         self.lo = np.zeros(0)
         self.hi = np.zeros(0)
+        self.shift = np.zeros(0)
         self.chains = (_Chain(self, 1.0), _Chain(self, -1.0))
         self.parallel = parallel
 
@@ -150,33 +235,41 @@ class _TrajectoryLP:
     # -- building ----------------------------------------------------------------------------
     def push(
         self,
-        dynamics: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-        measurement: tuple[np.ndarray, np.ndarray, np.ndarray],
+        dynamics: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
+        measurement: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
         x_bounds: tuple[np.ndarray, np.ndarray],
         d_bounds: tuple[np.ndarray, np.ndarray],
+        x_centre: np.ndarray,
     ) -> None:
-        """Append the block ``(x[j], d[j])``: ``dynamics = (A, E, B u)`` of step ``j-1`` (the
-        link from the previous block), ``measurement = (C, F, y - D u)`` of step ``j`` (NaN in
-        the right-hand side: a free row)."""
+        """Append the block ``(x[j], d[j])``: ``dynamics = (A, E, B u, tau)`` of step ``j-1``
+        (the link from the previous block), ``measurement = (C, F, y - D u, tau)`` of step ``j``
+        (NaN in the right-hand side: a free row); rows are ranges ``rhs ± tau``. ``x_centre``:
+        the shift of ``x[j]`` in the program HiGHS sees."""
         nx, nd, nb = self.nx, self.nd, self.nb
         off = self.lo.size
         self.lo = np.concatenate([self.lo, x_bounds[0], d_bounds[0]])
         self.hi = np.concatenate([self.hi, x_bounds[1], d_bounds[1]])
+        d_centre = 0.5 * (d_bounds[0] + d_bounds[1])
+        self.shift = np.concatenate([self.shift, x_centre, d_centre])
         if dynamics is not None:
-            A, E, bu = dynamics
-            self._append_rows(np.hstack([-A, -E, np.eye(nx), np.zeros((nx, nd))]), off - nb, bu)
-        C, F, rhs = measurement
-        self._append_rows(np.hstack([C, F]), off, rhs)
+            A, E, bu, tau = dynamics
+            dense = np.hstack([-A, -E, np.eye(nx), np.zeros((nx, nd))])
+            self._append_rows(dense, off - nb, bu, tau)
+        C, F, rhs, tau = measurement
+        self._append_rows(np.hstack([C, F]), off, rhs, tau)
         self.n_dyn.append(0 if dynamics is None else nx)
 
-    def _append_rows(self, dense: np.ndarray, col0: int, rhs: np.ndarray) -> None:
+    def _append_rows(self, dense: np.ndarray, col0: int, rhs: np.ndarray, tau: np.ndarray) -> None:
         r, c = np.nonzero(dense)
         free = np.isnan(rhs)
         self.rows = np.concatenate([self.rows, r + self.row_lo.size])
         self.cols = np.concatenate([self.cols, c + col0])
         self.vals = np.concatenate([self.vals, dense[r, c]])
-        self.row_lo = np.concatenate([self.row_lo, np.where(free, -np.inf, rhs)])
-        self.row_hi = np.concatenate([self.row_hi, np.where(free, np.inf, rhs)])
+        self.rhs = np.concatenate([self.rhs, rhs])
+        self.row_lo = np.concatenate([self.row_lo, np.where(free, -np.inf, rhs - tau)])
+        self.row_hi = np.concatenate([self.row_hi, np.where(free, np.inf, rhs + tau)])
+        shift = dense @ self.shift[col0 : col0 + dense.shape[1]]
+        self.row_shift = np.concatenate([self.row_shift, shift])
 
     def pop_front(self) -> None:
         """Remove the oldest block, its rows and the dynamics rows that reach into it."""
@@ -186,12 +279,16 @@ class _TrajectoryLP:
         self.cols = self.cols[keep] - self.nb
         self.vals = self.vals[keep]
         self.row_lo, self.row_hi = self.row_lo[n_del:], self.row_hi[n_del:]
+        self.rhs = self.rhs[n_del:]
+        self.row_shift = self.row_shift[n_del:]
         self.lo, self.hi = self.lo[self.nb :], self.hi[self.nb :]
+        self.shift = self.shift[self.nb :]
         self.n_dyn.pop(0)
         self.n_dyn[0] = 0
 
     def free_last_measurement(self) -> None:
         """Drop the measurement of the newest block (an inconsistent sample): free rows."""
+        self.rhs[-self.ny :] = np.nan
         self.row_lo[-self.ny :] = -np.inf
         self.row_hi[-self.ny :] = np.inf
 
@@ -206,32 +303,66 @@ class _TrajectoryLP:
         return self.lo[sl].copy(), self.hi[sl].copy()
 
     # -- solving -----------------------------------------------------------------------------
-    def last_x_box(self) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Bounds of ``x`` of the newest block: ``(lower, upper, feasible)``.
+    def last_x_box(self) -> tuple[np.ndarray, np.ndarray, str]:
+        """Bounds of ``x`` of the newest block: ``(lower, upper, verdict)``.
 
-        ``feasible`` is False when HiGHS finds the constraints infeasible (from a cold start);
-        the bounds are then the variable bounds.
+        ``verdict`` is :data:`OK`, :data:`INFEASIBLE` (certified) or :data:`UNSURE`; unless
+        it is OK, the bounds are the variable bounds (the interval prediction).
         """
         first = self.lo.size - self.nb
         lower = self.lo[first : first + self.nx].copy()
         upper = self.hi[first : first + self.nx].copy()
-        free = np.isinf(self.row_lo)
-        rhs = np.where(free, 0.0, self.row_lo)
+        data = self._bounds()
         if self.parallel:
-            jobs = [_pool().submit(c.solve, first, free, rhs) for c in self.chains]
-            (lo_b, ok_lo), (hi_b, ok_hi) = (job.result() for job in jobs)
+            jobs = [_pool().submit(c.solve, first, data) for c in self.chains]
+            (lo_b, v_lo), (hi_b, v_hi) = (job.result() for job in jobs)
         else:
-            (lo_b, ok_lo), (hi_b, ok_hi) = (c.solve(first, free, rhs) for c in self.chains)
-        if not (ok_lo and ok_hi):
-            return lower, upper, False
-        return np.maximum(lower, lo_b), np.minimum(upper, -hi_b), True
+            (lo_b, v_lo), (hi_b, v_hi) = (c.solve(first, data) for c in self.chains)
+        self.relaxed = self.relaxed or any(c.relaxed for c in self.chains)
+        if INFEASIBLE in (v_lo, v_hi):
+            return lower, upper, INFEASIBLE
+        if UNSURE in (v_lo, v_hi):
+            return lower, upper, UNSURE
+        return np.maximum(lower, lo_b), np.minimum(upper, -hi_b), OK
 
-    def safe_min(self, lam: np.ndarray, rhs: np.ndarray, col: int, sense: float) -> float:
-        """``λ^T b + Σ min(r l, r u)``, ``r = c - M^T λ``, ``c = sense e_col``: a lower bound on
-        ``min c^T z`` valid for every ``λ`` (Neumaier & Shcherbina 2004)."""
-        r = -np.bincount(self.cols, weights=self.vals * lam[self.rows], minlength=self.lo.size)
-        r[col] += sense
-        return float(lam @ rhs + np.minimum(r * self.lo, r * self.hi).sum())
+    def _bounds(self) -> _Bounds:
+        free = np.isinf(self.row_lo)
+        row_lo = np.where(free, 0.0, self.row_lo)
+        row_hi = np.where(free, 0.0, self.row_hi)
+        w = _mag(self.lo, self.hi)
+        Mw = np.bincount(self.rows, weights=np.abs(self.vals) * w[self.cols],
+                         minlength=row_lo.size)  # fmt: skip
+        # the longest sum of (S) and of its error terms (a column has <= nx + ny + 1 entries)
+        n = max(row_lo.size, w.size, self.nx + self.ny + 2) + 2
+        return _Bounds(row_lo, row_hi, _mag(row_lo, row_hi), self.lo, self.hi, w, Mw,
+                       _gamma(n), n)  # fmt: skip
+
+    def safe_min(self, lam: np.ndarray, data: _Bounds, col: int | None, sense: float) -> float:
+        """A lower bound on ``min c^T z`` (``c = sense e_col``; ``c = 0`` if ``col`` is None) that
+        holds in exact arithmetic for every ``λ``: (S) minus the bound on its rounding (module
+        docstring). ``-inf`` if it cannot be evaluated (non-finite multipliers)."""
+        r = -np.bincount(self.cols, weights=self.vals * lam[self.rows], minlength=data.w.size)
+        if col is not None:
+            r[col] += sense
+        with np.errstate(invalid="ignore", over="ignore"):
+            value = (
+                np.minimum(lam * data.row_lo, lam * data.row_hi).sum()
+                + np.minimum(r * data.lo, r * data.hi).sum()
+            )
+            a = np.abs(lam)
+            err = a @ data.row_mag + np.abs(r) @ data.w + a @ data.Mw
+            if col is not None:
+                err += abs(sense) * data.w[col]
+            bound = value - (data.gamma * err + 4 * data.n_terms * _TINY)
+        if not np.isfinite(bound):
+            return -np.inf
+        return float(np.nextafter(bound, -np.inf))
+
+    def certifies_infeasibility(self, ray: np.ndarray, data: _Bounds) -> bool:
+        """Farkas: ``λ`` proves the program infeasible if (S) with ``c = 0`` is safely ``> 0``
+        (for a feasible ``z`` it would be ``<= 0``). Both signs of HiGHS's ray are tried."""
+        lam = np.where(np.isinf(self.row_lo), 0.0, ray)
+        return any(self.safe_min(s * lam, data, None, 0.0) > 0.0 for s in (1.0, -1.0))
 
 
 class _Chain:
@@ -250,13 +381,17 @@ class _Chain:
         self.h = _new_highs()
         self._synced: tuple[np.ndarray, np.ndarray, np.ndarray, int, int] | None = None
         self._cost_col: int | None = None  # the one column with a nonzero cost in the model
+        self.relaxed = lp.relaxed  # rows given to HiGHS as ranges (else equalities)
 
-    def solve(self, first: int, free: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Safe lower bounds of ``sense * x[first + i]``; False if found infeasible."""
+    def solve(self, first: int, data: _Bounds) -> tuple[np.ndarray, str]:
+        """Safe lower bounds of ``sense * x[first + i]`` and the verdict (OK, INFEASIBLE with a
+        certificate, UNSURE)."""
+        self.relaxed = self.lp.relaxed
         self._sync()
         lp, h = self.lp, self.h
         out = np.full(lp.nx, -np.inf)
         order = range(lp.nx) if self.sense > 0 else reversed(range(lp.nx))
+        free = np.isinf(lp.row_lo)
         for n, i in enumerate(order):
             col = first + i
             if self._cost_col is not None and self._cost_col != col:
@@ -269,13 +404,40 @@ class _Chain:
                 h.clearSolver()
                 status = self._run(1)
             if status in _INFEASIBLE:
-                return out, False
-            if status == highspy.HighsModelStatus.kOptimal:
-                lam = np.where(free, 0.0, np.asarray(h.getSolution().row_dual))
-            else:  # numerical trouble: the bound with λ = 0 (the variable bound) stays valid
-                lam = np.zeros(rhs.size)
-            out[i] = lp.safe_min(lam, rhs, col, self.sense)
-        return out, True
+                if self._certified(data):
+                    return out, INFEASIBLE
+                if not self.relaxed:
+                    # equalities of floating-point data can be infeasible by a rounding: HiGHS
+                    # sees the ranges from now on (this step and, via the LP, the next ones)
+                    self.relaxed = True
+                    _lo, _hi, rlo, rhi = self._shifted()
+                    h.changeRowsBounds(rlo.size, np.arange(rlo.size, dtype=np.int32), rlo, rhi)
+                    h.clearSolver()
+                    status = self._run(1)
+                if status in _INFEASIBLE and not self._certified(data):
+                    h.clearSolver()  # no certificate: a second opinion from the primal simplex
+                    status = self._run(4)
+                if status in _INFEASIBLE:
+                    return out, INFEASIBLE if self._certified(data) else UNSURE
+            if status != highspy.HighsModelStatus.kOptimal:
+                h.clearSolver()  # numerical trouble: a second opinion from the primal simplex
+                status = self._run(4)
+                if status in _INFEASIBLE and self._certified(data):
+                    return out, INFEASIBLE
+            # (S) holds for any multipliers: those of the last basis even if it is not optimal
+            # (and the variable bound, λ = 0, if there are none)
+            sol = h.getSolution()
+            if sol.dual_valid and len(sol.row_dual) == free.size:
+                lam = np.where(free, 0.0, np.asarray(sol.row_dual))
+                out[i] = lp.safe_min(lam, data, col, self.sense)
+        return out, OK
+
+    def _certified(self, data: _Bounds) -> bool:
+        _status, has_ray, ray = self.h.getDualRay()
+        ray = np.asarray(ray, dtype=float)
+        if not has_ray or ray.size != self.lp.row_lo.size:
+            return False
+        return self.lp.certifies_infeasibility(ray, data)
 
     def _run(self, strategy: int) -> highspy.HighsModelStatus:
         self.h.setOptionValue("simplex_strategy", strategy)
@@ -303,9 +465,23 @@ class _Chain:
             self._append(old[3], old[4])
         elif not same:
             self._rebuild()
-        h.changeColsBounds(n_col, np.arange(n_col, dtype=np.int32), lp.lo, lp.hi)
-        h.changeRowsBounds(n_row, np.arange(n_row, dtype=np.int32), lp.row_lo, lp.row_hi)
+        lo, hi, rlo, rhi = self._shifted()
+        h.changeColsBounds(n_col, np.arange(n_col, dtype=np.int32), lo, hi)
+        h.changeRowsBounds(n_row, np.arange(n_row, dtype=np.int32), rlo, rhi)
         self._synced = (lp.rows.copy(), lp.cols.copy(), lp.vals.copy(), n_row, n_col)
+
+    def _shifted(self, col0: int = 0, row0: int = 0) -> tuple[np.ndarray, ...]:
+        """Variable bounds (from column ``col0``) and row bounds (from row ``row0``) of the
+        program HiGHS sees, ``z' = z - m``: the equalities ``a_i^T z = rhs_i`` (ranged rows
+        slow the simplex down by a third), or the ranges ``rhs_i ± tau_i`` once relaxed."""
+        lp = self.lp
+        s, rs = lp.shift[col0:], lp.row_shift[row0:]
+        lo, hi = lp.lo[col0:] - s, lp.hi[col0:] - s
+        if self.relaxed:
+            return lo, hi, lp.row_lo[row0:] - rs, lp.row_hi[row0:] - rs
+        mid = lp.rhs[row0:] - rs
+        free = np.isnan(mid)
+        return lo, hi, np.where(free, -np.inf, mid), np.where(free, np.inf, mid)
 
     def _csr(self, start: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         """Rows ``start..`` of the LP in CSR form."""
@@ -320,20 +496,21 @@ class _Chain:
         lp = self.lp
         n_new = lp.lo.size - o_ncol
         m, starts, idx, vals = self._csr(o_nrow)
+        lo, hi, rlo, rhi = self._shifted(o_ncol, o_nrow)
         empty = np.zeros(0, np.int32)
-        self.h.addCols(n_new, np.zeros(n_new), lp.lo[o_ncol:], lp.hi[o_ncol:], 0, empty, empty,
-                       np.zeros(0))  # fmt: skip
-        self.h.addRows(m, lp.row_lo[o_nrow:], lp.row_hi[o_nrow:], vals.size, starts, idx, vals)
+        self.h.addCols(n_new, np.zeros(n_new), lo, hi, 0, empty, empty, np.zeros(0))
+        self.h.addRows(m, rlo, rhi, vals.size, starts, idx, vals)
 
     def _rebuild(self) -> None:
         lp, h = self.lp, self.h
         n_col = lp.lo.size
         m, starts, idx, vals = self._csr(0)
+        lo, hi, rlo, rhi = self._shifted()
         empty = np.zeros(0, np.int32)
         basis = h.getBasis() if h.getNumCol() == n_col and h.getNumRow() == m else None
         h.clearModel()
-        h.addCols(n_col, np.zeros(n_col), lp.lo, lp.hi, 0, empty, empty, np.zeros(0))
-        h.addRows(m, lp.row_lo, lp.row_hi, vals.size, starts, idx, vals)
+        h.addCols(n_col, np.zeros(n_col), lo, hi, 0, empty, empty, np.zeros(0))
+        h.addRows(m, rlo, rhi, vals.size, starts, idx, vals)
         if basis is not None and basis.valid:
             h.setBasis(basis)  # same shape (time-varying window): a good start
         self._cost_col = None
@@ -373,6 +550,7 @@ class Exact(Estimator):
         on_inconsistent: str = "warn",
     ):
         super().__init__(sys, x0, on_inconsistent=on_inconsistent)
+        check_size(self.name, sys.nx, "solves 2 nx linear programs over the whole trajectory")
         if window is not None and (
             isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1
         ):
@@ -396,6 +574,9 @@ class Exact(Estimator):
             "dlo": np.zeros((0, s.nd)),
             "dhi": np.zeros((0, s.nd)),
             "used": np.zeros(0),  # 1.0 where the measurement entered the LP, 0.0 if dropped
+            "relaxed": 0.0,  # 1.0 once HiGHS needed the row ranges (see _Chain._shifted)
+            "plo": np.zeros((0, s.nx)),  # interval predictions (row ranges and shifts of the LP)
+            "phi": np.zeros((0, s.nx)),
         }
 
     def state(self) -> dict[str, Any]:
@@ -412,47 +593,95 @@ class Exact(Estimator):
         if lp is None:
             lp = state["lp"] = self._rebuild(state, k)
         d_k = self.sys.d_at(k, y_k)
-        x_pred = self._prediction(state, k)
-        dynamics = self._dynamics(k - 1, state["u"][-1]) if k > 0 else None
-        lp.push(dynamics, self._measurement(k, u_k, y_k), x_pred, (d_k.lo, d_k.hi))
+        if k > 0:
+            prev = (state["xlo"][-1], state["xhi"][-1], state["dlo"][-1], state["dhi"][-1])
+            dynamics = self._dynamics(k - 1, state["u"][-1], *prev)
+            p_lo, p_hi = self._prediction(k - 1, state["u"][-1], prev, dynamics[3])
+        else:
+            assert self.x0 is not None
+            dynamics = None
+            p_lo, p_hi = self.x0.lo.copy(), self.x0.hi.copy()
+        meas = self._measurement(k, u_k, y_k, True, p_lo, p_hi, d_k.lo, d_k.hi)
+        lp.push(dynamics, meas, (p_lo, p_hi), (d_k.lo, d_k.hi), 0.5 * (p_lo + p_hi))
         N = self.design.window
         if N is not None and lp.n_blocks > N + 1:
             lp.pop_front()
-        lo, hi, feasible = lp.last_x_box()
+        lo, hi, verdict = lp.last_x_box()
         used = 1.0
-        if not feasible:
-            state["_inconsistent"] = True
+        if verdict != OK:
+            # certified: a fault under the model's assumptions; unsure: dropped without a report
+            state["_inconsistent"] = verdict == INFEASIBLE
             used = 0.0
             lp.free_last_measurement()
-            lo, hi, feasible = lp.last_x_box()
-        # the two bounds are both valid: if rounding crossed them, their hull is still valid
+            lo, hi, _ = lp.last_x_box()  # if still not OK: the variable bounds (the prediction)
+        # both bounds are proven: if they cross, the data are inconsistent; the hull stays valid
         lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
         x_lo, x_hi = lp.tighten_last_x(*_widen(lo, hi))
-        self._remember(state, x_lo, x_hi, u_k, y_k, d_k, used)
+        state["relaxed"] = float(lp.relaxed)
+        self._remember(state, x_lo, x_hi, u_k, y_k, d_k, used, p_lo, p_hi)
         return lo, hi
 
-    def _prediction(self, state: dict[str, Any], k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of ``x[k]`` implied by the box of ``x[k-1]`` (Lemma 1), widened slightly."""
-        if k == 0:
-            assert self.x0 is not None
-            return self.x0.lo.copy(), self.x0.hi.copy()
-        A, B, _, _, E, _ = self.sys.matrices_at(k - 1)
-        lo, hi = image_bounds(A, state["xlo"][-1], state["xhi"][-1])
-        dlo, dhi = image_bounds(E, state["dlo"][-1], state["dhi"][-1])
-        bu = B @ state["u"][-1]
-        return _widen(lo + dlo + bu, hi + dhi + bu)
-
-    def _dynamics(self, j: int, u_j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _prediction(
+        self, j: int, u_j: np.ndarray, prev: tuple[np.ndarray, ...], tau: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``x[j+1]`` implied by the box of ``x[j]`` (Lemma 1) and the dynamics rows
+        (range ``tau``), widened by the rounding of their evaluation
+        (``γ_{nx+nd+nu+3} (|A| x̄ + |E| d̄ + |B| |u|)``) and by :data:`_VAR_MARGIN`."""
         A, B, _, _, E, _ = self.sys.matrices_at(j)
-        return A, E, B @ u_j
+        x_lo, x_hi, d_lo, d_hi = prev
+        lo, hi = image_bounds(A, x_lo, x_hi)
+        dlo, dhi = image_bounds(E, d_lo, d_hi)
+        bu = B @ u_j
+        n = self.sys.nx + self.sys.nd + self.sys.nu + 3
+        err = _gamma(n) * (np.abs(A) @ _mag(x_lo, x_hi) + np.abs(E) @ _mag(d_lo, d_hi)
+                           + np.abs(B) @ np.abs(u_j)) + tau  # fmt: skip
+        return _widen(lo + dlo + bu - err, hi + dhi + bu + err)
+
+    def _dynamics(
+        self,
+        j: int,
+        u_j: np.ndarray,
+        x_lo: np.ndarray,
+        x_hi: np.ndarray,
+        d_lo: np.ndarray,
+        d_hi: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(A, E, B u, tau)`` of step ``j``: ``x[j+1] - A x[j] - E d[j] ∈ B u ± tau`` with
+        ``tau = γ_{nx+nu+nd} (|A| x̄ + |B| |u| + |E| d̄) + γ_{nu} |B| |u|`` (module docstring);
+        ``x̄``, ``d̄`` from the boxes of ``x[j]`` and ``d[j]``."""
+        A, B, _, _, E, _ = self.sys.matrices_at(j)
+        s = self.sys
+        bu_mag = np.abs(B) @ np.abs(u_j)
+        tau = (
+            _gamma(s.nx + s.nu + s.nd)
+            * (np.abs(A) @ _mag(x_lo, x_hi) + bu_mag + np.abs(E) @ _mag(d_lo, d_hi))
+            + _gamma(s.nu) * bu_mag
+        )
+        return A, E, B @ u_j, tau
 
     def _measurement(
-        self, j: int, u_j: np.ndarray, y_j: np.ndarray, used: bool = True
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(C, F, y - D u)`` of step ``j``; NaN (missing, or a dropped sample) = free row."""
+        self,
+        j: int,
+        u_j: np.ndarray,
+        y_j: np.ndarray,
+        used: bool,
+        x_lo: np.ndarray,
+        x_hi: np.ndarray,
+        d_lo: np.ndarray,
+        d_hi: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(C, F, y - D u, tau)`` of step ``j``; NaN (missing, or a dropped sample) = free row.
+        ``tau = γ_{nx+nu+nd} (|C| x̄ + |D| |u| + |F| d̄) + γ_{nu+1} (|y| + |D| |u|)`` with ``x̄``
+        from the interval prediction of ``x[j]`` (module docstring)."""
         _, _, C, D, _, F = self.sys.matrices_at(j)
-        rhs = y_j - D @ u_j if used else np.full(self.sys.ny, np.nan)
-        return C, F, rhs
+        s = self.sys
+        if not used:
+            return C, F, np.full(s.ny, np.nan), np.zeros(s.ny)
+        du_mag = np.abs(D) @ np.abs(u_j)
+        tau = _gamma(s.nx + s.nu + s.nd) * (
+            np.abs(C) @ _mag(x_lo, x_hi) + du_mag + np.abs(F) @ _mag(d_lo, d_hi)
+        ) + _gamma(s.nu + 1) * (np.abs(y_j) + du_mag)
+        return C, F, y_j - D @ u_j, tau
 
     def _remember(
         self,
@@ -463,9 +692,12 @@ class Exact(Estimator):
         y_k: np.ndarray,
         d_k: Box,
         used: float,
+        p_lo: np.ndarray,
+        p_hi: np.ndarray,
     ) -> None:
         N = self.design.window
-        new = {"xlo": lo, "xhi": hi, "y": y_k, "u": u_k, "dlo": d_k.lo, "dhi": d_k.hi}
+        new = {"xlo": lo, "xhi": hi, "y": y_k, "u": u_k, "dlo": d_k.lo, "dhi": d_k.hi,
+               "plo": p_lo, "phi": p_hi}  # fmt: skip
         for key, val in new.items():
             hist = np.vstack([state[key], np.asarray(val, dtype=float)[None, :]])
             state[key] = hist if N is None else hist[-N:]
@@ -475,12 +707,19 @@ class Exact(Estimator):
     def _rebuild(self, state: dict[str, Any], k: int) -> _TrajectoryLP:
         """The LP of the kept history (empty at step 0; after ``restore()`` the same program)."""
         lp = _TrajectoryLP(self.sys.nx, self.sys.nd, self.sys.ny, _PARALLEL)
+        lp.relaxed = bool(state["relaxed"])
         m = state["xlo"].shape[0]
         for i, j in enumerate(range(k - m, k)):
-            dynamics = self._dynamics(j - 1, state["u"][i - 1]) if i > 0 else None
-            meas = self._measurement(j, state["u"][i], state["y"][i], bool(state["used"][i]))
+            dynamics = None
+            if i > 0:
+                prev = (state[key][i - 1] for key in ("xlo", "xhi", "dlo", "dhi"))
+                dynamics = self._dynamics(j - 1, state["u"][i - 1], *prev)
+            p_lo, p_hi = state["plo"][i], state["phi"][i]
+            d_lo, d_hi = state["dlo"][i], state["dhi"][i]
+            meas = self._measurement(j, state["u"][i], state["y"][i], bool(state["used"][i]),
+                                     p_lo, p_hi, d_lo, d_hi)  # fmt: skip
             x_b = (state["xlo"][i], state["xhi"][i])
-            lp.push(dynamics, meas, x_b, (state["dlo"][i], state["dhi"][i]))
+            lp.push(dynamics, meas, x_b, (d_lo, d_hi), 0.5 * (p_lo + p_hi))
         return lp
 
     # -- offline loop with a progress bar --------------------------------------------------

@@ -21,16 +21,20 @@ from typing import Any
 import numpy as np
 
 from .._recursion import LinearFilter, is_shared, scratch, within_band
-from .._validate import as_int, as_matrix
+from .._validate import as_bool, as_int, as_matrix
 from ..design._lmi import MAX_LMI_STATES
 from ..design.parity import (
+    forward_window,
+    gamma,
     general_T,
+    injection_candidates,
     invertible_injection,
     is_invertible,
     optimal_T,
     pinv_perp,
     stack_window,
     width_optimal_T,
+    window_bound,
 )
 from ..errors import DesignError, IvobsError
 from ..linalg import check_observable
@@ -43,6 +47,11 @@ __all__ = ["FixedTimeDesign", "FixedTimeEstimator"]
 
 _EPS = np.finfo(float).eps
 _CACHE_SIZE = 16384
+MAX_WINDOW = 1000
+"""Largest window ``s`` (past samples in the stacked matrices of 001 eq. (6))."""
+ACCURACY = 1e-9
+"""A design whose certified error exceeds ``ACCURACY ‖G_i‖₁ ‖w‖_∞`` (:meth:`FixedTimeEstimator.
+_certify`) is replaced by an output injection (001 Remark 1), when one does better."""
 _CHUNK = 1 << 16
 _BLOCK = 1024
 
@@ -117,6 +126,7 @@ class _Kernel:
     HP: np.ndarray | None = None
     rad_coef: np.ndarray | None = None
     tol_coef: np.ndarray | None = None
+    accuracy: float = np.inf
 
 
 @register
@@ -136,7 +146,12 @@ class FixedTimeEstimator(Estimator):
         published design. Default: the optimal ``T`` of Theorem 1 (eq. 13).
     S : the free matrix of the general solution ``T = Mx† + S Mx⊥`` (Lemma 2), instead of ``T``.
     L : the output-injection gain of Remark 1 (``A - LC`` invertible). Default: none when ``A`` is
-        invertible, else placed automatically (:func:`ivobs.design.parity.invertible_injection`).
+        invertible and the design with ``A`` is accurate; otherwise (``A`` singular, or so
+        ill-conditioned that the certified error of the window gain exceeds :data:`ACCURACY`
+        of the data scale) a small, well-conditioned gain
+        (:func:`ivobs.design.parity.invertible_injection`; if that design is not accurate
+        either, the narrowest accurate one among
+        :func:`ivobs.design.parity.injection_candidates`).
         ``L y`` becomes a known input and the noise ``(E - LF) d``.
     criterion : ``"frobenius"`` (default, the paper's Theorem 1: minimise ``‖T Md‖_F``) or
         ``"width"`` (not in the paper: minimise each box width ``Σ_j |(T Md Wd)_ij|`` of eq. 11
@@ -168,9 +183,20 @@ class FixedTimeEstimator(Estimator):
     a window at ``k >= s`` without enough data and without any earlier box raises
     :class:`IvobsError`.
 
-    Rounding: on top of the base margin, the radius carries ``(64 (s+1) n_z ε + max|T Mx - I|)
-    ‖G_i‖₁ ‖w‖_∞`` (the rounding of the window product ``x̂ = G w``, which may cancel, and of
-    ``T Mx = I``).
+    Rounding (what is guaranteed): the window gain ``G`` (``x̂ = G w``) is computed through the
+    inverses of eq. (4) and an SVD, so ``T Mx = I``, the cancellation of the known inputs and
+    ``|T Md|`` hold only to rounding, amplified by the conditioning of ``A`` (or of ``A - LC``).
+    Each gain is therefore *certified* on the forward form of the window, which needs no
+    inverse (:func:`ivobs.design.parity.window_bound`, :meth:`_certify`): the coefficients of
+    ``x_k - G w`` in the anchor state, the known inputs and the disturbances are computed in
+    extended precision with a ``γ_n`` bound (``γ_n = n ε / (1 - n ε)``), ``G`` is refined once
+    by them, and the radius is ``|R_δ| 𝐫`` (``= |T Md| 𝐫`` of eq. 11 up to rounding) plus the
+    certified remainder ``(Σ_j |R_v|_ij + a_i κ) ‖w‖_∞`` (``a_i κ``: the residual of
+    ``T Mx = I`` times a bound of the anchor state from the same window). On top, the radius
+    carries ``64 (s+1) n_z ε ‖G_i‖₁ ‖w‖_∞`` for the evaluation of ``G w`` in ``float64`` (at
+    most ``(s+1) n_z`` roundings per entry, and the ``ε/2`` of the recorded data), and the
+    base adds its outward margin. Exact arithmetic on the model as given is assumed (the model
+    matrices are exact, the data are the recorded ``float64`` values of the true signals).
     """
 
     name = "fixed-time"
@@ -205,17 +231,19 @@ class FixedTimeEstimator(Estimator):
         self.s = self._check_s(s, nx)
         self._tv = sys.is_time_varying
         self._criterion = criterion
+        weighted = as_bool("weighted", weighted)
         self._check_design_options(T, S, weighted)
         self._const_bounds = sys.has_constant_bounds
         self._nc = self._centre_size()
         self._nz = sys.nu + ny + self._nc
-        self._weighted = bool(weighted)
-        self._check = bool(check_consistency)
+        self._weighted = weighted
+        self._check = as_bool("check_consistency", check_consistency)
         self._L_user = None if L is None else as_matrix("L", L, nx, ny)
         self._S = None if S is None else as_matrix("S", S, nx, (self.s + 1) * ny)
         self._T_user = None if T is None else as_matrix("T", T, nx, (self.s + 1) * ny)
         self._mats_cache: OrderedDict[int, tuple[np.ndarray, ...]] = OrderedDict()
         self._kern_cache: OrderedDict[Any, _Kernel] = OrderedDict()
+        self._model_cache: OrderedDict[int, tuple[np.ndarray, ...]] = OrderedDict()
         self._L_lti: np.ndarray | None = None
         if not self._tv:
             check_observable(sys.A, sys.C, "the fixed-time estimator (001 Lemma 2)")
@@ -223,10 +251,22 @@ class FixedTimeEstimator(Estimator):
         elif self._L_user is not None:
             self._L_lti = self._L_user
         self._sel = self._selection()
-        self._ring = [(p - np.arange(self.s + 1)) % (self.s + 1) for p in range(self.s + 1)]
+        # s + 2 slots: the window z_k .. z_(k-s) plus z_(k-1) kept for the prediction through a
+        # missing sample even when s = 0 (u_(k-1) and the bounds of d_(k-1), audit finding A2)
+        self._slots = self.s + 2
+        self._ring = [(p - np.arange(self.s + 1)) % self._slots for p in range(self._slots)]
         if self._T_user is not None:
             self._T_user = self._check_T(self._T_user, self._stack(self.s)[0])
-        self.design = self._design(self.s)
+        choose = not self._tv and self._L_user is None and self._T_user is None
+        try:
+            self.design = self._design(self.s)
+            error = None
+        except DesignError as exc:  # e.g. Theorem 1's check on an ill-conditioned A
+            if not choose or self._L_lti is not None:
+                raise
+            error = exc
+        if choose:
+            self._choose_injection(error)
         self.valid_from = self.s
 
     # -- validation -----------------------------------------------------------------------
@@ -235,6 +275,12 @@ class FixedTimeEstimator(Estimator):
         if s is None:
             return max(nx - 1, 0)
         s = as_int("s", s, 0)
+        if s > MAX_WINDOW:
+            raise IvobsError(
+                f"s: expected a window of at most {MAX_WINDOW} past samples (the stacked "
+                f"matrices of 001 eq. (6) have (s + 1) ny rows and as many columns per input "
+                f"and disturbance), got s = {s}"
+            )
         if s < nx - 1:
             raise IvobsError(
                 f"s: the fixed-time estimator needs s >= nx - 1 = {nx - 1} (001 Lemma 2: the "
@@ -291,6 +337,57 @@ class FixedTimeEstimator(Estimator):
                 "(> 1e-3); pass a left inverse of Mx (see est.design.Mx), or S, or nothing"
             )
         return T + (np.eye(nx) - T @ Mx) @ np.linalg.pinv(Mx)
+
+    def _quality(self) -> tuple[float, float]:
+        """``(accuracy, width)`` of the complete window: the certified error per unit of
+        ``‖G_i‖₁ ‖w‖_∞`` (:meth:`_certify`, worst state) and ``Σ_i (|T Md| 𝐫)_i`` (unit radii
+        for bounds that vary with time)."""
+        kern = self._kernel(self.s, np.zeros((self.s + 1, self.sys.ny), dtype=bool))
+        if not kern.ok:
+            return np.inf, np.inf
+        assert kern.HP is not None
+        nx, nd = self.sys.nx, self.sys.nd
+        r = np.ones(nd)
+        if self._const_bounds and nd:
+            box = self.sys.d
+            assert isinstance(box, Box)
+            r = box.radius
+        return kern.accuracy, float(np.sum(kern.HP[:nx] @ np.tile(r, self.s + 1)))
+
+    def _use_injection(self, L: np.ndarray | None) -> None:
+        """Redesign with the output injection ``L`` (``None``: the backward propagation with
+        ``A`` itself)."""
+        self._L_lti = L
+        self._mats_cache.clear()
+        self._kern_cache.clear()
+        self.design = self._design(self.s)
+
+    def _choose_injection(self, error: DesignError | None) -> None:
+        """Remark 1 when ``A`` is invertible but ill-conditioned, or when the injection placed
+        first is not accurate (audit findings A3, A3b): if the certified error of the complete
+        window (:meth:`_quality`) exceeds :data:`ACCURACY` of the data scale, every gain of
+        :func:`ivobs.design.parity.injection_candidates` is tried, and the one with the
+        narrowest box among the accurate ones is kept (the most accurate one if none is).
+        Nothing changes for a well-conditioned design (the paper's examples). ``error``: the
+        design with ``A`` itself failed (re-raised if no injection works either)."""
+        options: list[tuple[float, float, np.ndarray | None]] = []
+        if error is None:
+            acc, width = self._quality()
+            if acc <= ACCURACY:
+                return
+            options.append((acc, width, self._L_lti))
+        for L in injection_candidates(self.sys.A, self.sys.C):
+            try:
+                self._use_injection(L)
+                options.append((*self._quality(), L))
+            except DesignError:
+                continue
+        if not options:
+            assert error is not None
+            raise error
+        good = [o for o in options if o[0] <= ACCURACY]
+        best = min(good, key=lambda o: o[1]) if good else min(options, key=lambda o: o[0])
+        self._use_injection(best[2])
 
     def _injection(self, A: np.ndarray, C: np.ndarray, L: np.ndarray | None, where: str) -> Any:
         """Remark 1: ``L`` with ``A - LC`` invertible (``None`` when ``A`` already is)."""
@@ -469,27 +566,82 @@ class FixedTimeEstimator(Estimator):
         if self._check:
             N_pad[:, rows] = N
         GQ = np.vstack([G, N_pad @ K])
-        l1 = np.abs(GQ).sum(axis=1)
-        # rounding of x̂ = G w (γ = 64 (s+1) n_z ε) and of T Mx = I (|x̂_i| <= ‖G_i‖₁ ‖w‖_∞)
-        gamma = 64.0 * (s + 1) * nz * _EPS + float(np.max(np.abs(T_R @ MxR - np.eye(nx))))
+        cert = self._certify(k, missing, GQ)
+        if cert is None:  # the window does not determine its oldest state: use the prediction
+            return _Kernel(ok=False, rank=rank)
+        GQ, HP, extra = cert
+        # rounding of the evaluation x̂ = G w (and of the recorded data), |G_i| |w| <= l1_i ‖w‖_∞
+        l1 = np.abs(GQ).sum(axis=1) * (64.0 * (s + 1) * nz * _EPS)
         return _Kernel(
             ok=True,
             rank=rank,
             nx=nx,
             GQ=GQ,
-            HP=np.abs(np.vstack([T_pad @ Md, N_pad @ Md])),
-            rad_coef=gamma * l1[:nx],
-            tol_coef=1e-9 * l1[nx:],
+            HP=HP,
+            rad_coef=l1[:nx] + extra[:nx],
+            tol_coef=l1[nx:] * (1e-9 / (64.0 * (s + 1) * nz * _EPS)) + extra[nx:],
+            accuracy=float(np.max(extra[:nx] / np.maximum(np.abs(GQ[:nx]).sum(axis=1), 1e-300))),
         )
+
+    def _certify(
+        self, k: int, missing: np.ndarray, GQ: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The window gain ``GQ`` (rows ``x̂``, then ``ρ``), refined, and its certified radius.
+
+        ``GQ`` was computed from the stacked matrices of eq. (6), i.e. from the inverses of
+        eq. (4) (of ``A - LC`` with an output injection) and an SVD: rounding, amplified by the
+        conditioning of ``A``, makes ``T Mx = I``, the cancellation of the known inputs and
+        ``|T Md|`` inexact (audit findings A3, A3b). :func:`ivobs.design.parity.window_bound`
+        evaluates what ``GQ`` actually does on the forward form of the window (products of
+        the original model matrices only, with a ``γ_n`` rounding bound): for the true
+        trajectory ``x_k - G w = R_x x_{k-a} + R_v 𝐯 + R_δ 𝛅`` exactly, ``a`` the oldest lag
+        that ``GQ`` uses, ``𝐯`` the known inputs and centres (entries of ``w``), ``|δ| <= 𝐫``.
+        With ``‖x_{k-a}‖_∞ <= κ ‖w‖_∞ + ν 𝐫`` (the same window) and ``a_i = Σ_j |R_x|_ij``:
+
+        ``|x_k - x̂_k|_i <= (|R_δ| + a ν)_i 𝐫 + (Σ_j |R_v|_ij + a_i κ) ‖w‖_∞``
+
+        returned as ``(GQ, HP, extra)``: ``GQ`` after one step of iterative refinement (it
+        moves by the size of its error only), ``HP`` (times ``1 + γ`` for the evaluation of
+        ``HP 𝐫``) replaces ``|T Md|``; ``extra`` is added to the per-``‖w‖_∞`` radius. With
+        re-centred bounds, ``c = (lo + hi)/2`` and ``r = (hi - lo)/2`` are rounded:
+        ``|d - c| <= (1 + ε) r + ε |c|``, ``|c| <= ‖w‖_∞``. None when the window does not
+        determine ``x_{k-a}`` (the prediction is used instead).
+        """
+        s, nx, nz, nd = self.s, self.sys.nx, self._nz, self.sys.nd
+        used = np.any(GQ.reshape(GQ.shape[0], s + 1, nz) != 0.0, axis=(0, 2))
+        lag = int(np.nonzero(used)[0].max()) if used.any() else 0
+        mats = [self._model(k - i) for i in range(s + 1)]
+        fw = forward_window(mats, centre=bool(self._nc), lag=lag, missing=missing)
+        wb = window_bound(GQ, nx, fw)
+        if not np.isfinite(wb.kappa):
+            return None
+        ax = wb.Rx.sum(axis=1)
+        HP = wb.Rd + ax[:, None] * wb.nu[None, :]
+        extra = wb.Rv.sum(axis=1) + ax * wb.kappa
+        if self._nc:
+            extra += _EPS * (1.0 + _EPS) * HP.sum(axis=1)
+            HP *= 1.0 + _EPS
+        HP *= 1.0 + gamma((s + 1) * nd + 2)
+        return wb.G, HP, extra
+
+    def _model(self, j: int) -> tuple[np.ndarray, ...]:
+        """``(A, B, C, D, E, F)`` of the original system at step ``j`` (no injection)."""
+        key = j if self._tv else 0
+        hit = self._model_cache.get(key)
+        if hit is None:
+            hit = self._model_cache[key] = self.sys.matrices_at(key)
+            if len(self._model_cache) > _CACHE_SIZE:
+                self._model_cache.popitem(last=False)
+        return hit
 
     # -- online -----------------------------------------------------------------------------
     def _initial_state(self) -> dict[str, Any]:
         s, nx, ny, nd = self.s, self.sys.nx, self.sys.ny, self.sys.nd
         return {
-            "z": np.zeros((s + 1, self._nz)),
-            "ymiss": np.ones((s + 1, ny)),
-            "dlo": np.zeros((s + 1, nd)),
-            "dhi": np.zeros((s + 1, nd)),
+            "z": np.zeros((s + 2, self._nz)),
+            "ymiss": np.ones((s + 2, ny)),
+            "dlo": np.zeros((s + 2, nd)),
+            "dhi": np.zeros((s + 2, nd)),
             "lo": np.zeros(nx),
             "hi": np.zeros(nx),
             "has_box": False,
@@ -499,7 +651,7 @@ class FixedTimeEstimator(Estimator):
         self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> tuple[np.ndarray, np.ndarray]:
         s, nu, ny = self.s, self.sys.nu, self.sys.ny
-        p = k % (s + 1)
+        p = k % self._slots
         miss = np.isnan(y_k)
         dbox = self.sys.d_at(k, y_k)
         z = state["z"][p]
@@ -563,15 +715,20 @@ class FixedTimeEstimator(Estimator):
         return (lo, hi), False
 
     def _no_box_error(self, k: int, rank: int) -> IvobsError:
+        why = (
+            f"the available rows of Mx have rank {rank} < nx = {self.sys.nx}"
+            if rank < self.sys.nx
+            else "the available samples do not determine the oldest state of the window, so "
+            "its gain cannot be certified (singular A)"
+        )
         return IvobsError(
             f"y: at step {k} the window y[{k - self.s}..{k}] has too many missing samples "
-            f"(the available rows of Mx have rank {rank} < nx = {self.sys.nx}) and no earlier "
-            "box exists to predict from; give a prior x0=ivobs.Box(...) or a larger s"
+            f"({why}) and no earlier box exists to predict from; give a prior "
+            "x0=ivobs.Box(...) or a larger s"
         )
 
     def _predict_state(self, state: dict[str, Any], k: int) -> tuple[np.ndarray, np.ndarray]:
-        s = self.s
-        q = (k - 1) % (s + 1)
+        q = (k - 1) % self._slots  # never the slot of step k (s + 2 slots)
         u_prev = state["z"][q, : self.sys.nu]
         return self._predict(state["lo"], state["hi"], u_prev, state["dlo"][q], state["dhi"][q], k)
 
@@ -628,10 +785,11 @@ class FixedTimeEstimator(Estimator):
         wmax: np.ndarray,
         dest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """From ``[x̂; ρ]`` (``out``), ``[|T Md| 𝐫; |N Md| 𝐫]`` (``rhp``) and ``‖w‖_∞``: the
-        bounds ``x̂ ∓ rad`` and the inconsistency flags ``|ρ| > |N Md| 𝐫`` (tolerance ``1e-9``
-        relative). ``rad`` adds ``(γ + max|T Mx - I|) ‖G_i‖₁ ‖w‖_∞``: the rounding of the
-        window product (``γ = 64 (s+1) n_z ε``) and of ``T Mx = I`` (``|x̂_i| <= ‖G_i‖₁ ‖w‖_∞``).
+        """From ``[x̂; ρ]`` (``out``), ``[|T Md| 𝐫; |N Md| 𝐫]`` (``rhp``, the certified
+        disturbance gains ``HP 𝐫`` of :meth:`_certify`) and ``‖w‖_∞``: the bounds ``x̂ ∓ rad``
+        and the inconsistency flags ``|ρ| > |N Md| 𝐫`` (tolerance ``1e-9`` relative).
+        ``rad = rhp + rad_coef ‖w‖_∞``, ``rad_coef`` the evaluation rounding
+        ``64 (s+1) n_z ε ‖G_i‖₁`` plus the certified remainder of :meth:`_certify`.
         Written into ``dest = (lo, hi, bad)`` when given (``out`` is then overwritten).
         """
         assert kern.rad_coef is not None and kern.tol_coef is not None

@@ -41,7 +41,34 @@ step with ``Q_k = S(A − L_k C)S⁻¹`` (which may have negative entries even w
 the split form covers it) stays sound; with every component missing it is the model's prediction
 ``x+ ∈ A[x̲, x̄] + B u + E[d]``. **Inconsistent data**: when ``y[k]`` lies outside
 ``C[x̲_k, x̄_k] + D_u u_k + F[d]`` no state in the box explains it (a fault); it is reported and
-treated as missing.
+treated as missing. The width of the bounds grows during a gap of output ``j`` alone at the rate
+``ρ(|A − L_(j) C|)`` (``design.missing_radius``); the default gains are the smallest among the
+width-optimal ones (:mod:`ivobs.design.cooperative`, audit A8), so that no gap multiplies the
+bounds by the size of a needlessly large gain.
+
+**Rounding** (``interval``, ``interval-split``; audit A8). The terms one step adds are not all of
+the size of the data: ``L_k y`` is ``|L|`` times larger, and ``A − L_k C`` is formed in floating
+point. By the standard bound on sums (``|fl(Σ t_i) − Σ t_i| <= γ_m Σ |t_i|``,
+``γ_m = m u / (1 − m u)``, ``u = 2⁻⁵³``; ``m = 2 n_r + n_u + 2 n_y + 2 n_d + 6`` with ``n_r`` the
+nonzeros per row of ``|A| + |L||C|``), one step of the loop is off by at most
+
+    δ_k = γ_m (a_z ‖z_k‖_∞ + a_y ‖y_k‖_∞ + a_u ‖u_k‖_∞ + a_d ‖d‖_∞)
+
+with ``a_z = 3 ‖|A| + |L||C|‖_∞`` (the products ``Q_k z``, the rounding of ``Q_k`` itself acting
+on the true state, which lies in the box), ``a_y = ‖L‖_∞``, ``a_u = 2 ‖|B| + |L||D_u|‖_∞``,
+``a_d = 3 ‖|E| + |L||F|‖_∞`` (Lemma 1 on the computed ``E − L_k F``) and ``‖d‖`` the largest
+bound magnitude (:class:`RoundingBound`). *Loop* (``step()``, short records, missing samples):
+every step widens its new bounds by ``δ_k``, so they enclose the exact recursion from the
+computed box for every missing pattern (also when ``|A − L_k C|`` is not Schur), by induction.
+*Vectorised path* (complete data): the errors add up to at most ``κ max_j δ_j`` with
+``κ = ‖(I − |A − LC|)⁻¹‖_∞``; the outward margin ``ROUNDING (1 + |bound| + s_k)`` of
+:mod:`ivobs.estimators.base` is enlarged to ``ROUNDING (1 + μ |bound| + ν s_k)`` with
+``μ = κ γ_m a_z / ROUNDING``, ``ν = κ γ_m (a_y + a_u' + a_d') / ROUNDING`` (``a_u'``, ``a_d'``: the
+same terms relative to the data scale ``s_k``) whenever they exceed 1 (taking, like the base
+margin, the bound's own magnitude for the running maximum of ``‖z_j‖``; the block evaluation of
+:class:`~ivobs._recursion.LinearFilter` reorders the same sums). The consistency test's slack
+grows by ``max(1, μ, ν)``. On the paper examples ``μ, ν < 0.6`` (nothing changes there); with a
+gain ``L = (−999999.1, 10⁶)`` they are about 100. ``interval-transformed`` keeps the base margin.
 """
 
 from __future__ import annotations
@@ -67,6 +94,7 @@ from ..design.cooperative import (
     check_abs_schur,
     check_nonnegative_schur,
     fixed_radius,
+    missing_radius,
     nonnegative_gain,
     refine_width,
     spectral_radius,
@@ -85,7 +113,7 @@ from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box, image_bounds, neg, pos
 from . import register
-from .base import Design, Estimator
+from .base import ROUNDING, Design, Estimator
 
 __all__ = [
     "IntervalDesign",
@@ -105,26 +133,31 @@ class IntervalDesign(Design):
     """``L``: gain; ``D = A − LC`` (003's notation; nonnegative); ``spectral_radius`` of ``D``;
     ``gain``: how ``L`` was obtained (``'lmi'``, ``'lmi+width'``, ``'given'``);
     ``steady_width``: ``(I − D)⁻¹ |E − LF| Δ``, the limit of the bounds' width for constant
-    bounds (None for callable bounds)."""
+    bounds (None for callable bounds); ``missing_radius``: ``ρ(|A − L_(j) C|)`` for each output
+    ``j`` missing alone (``L_(j)``: column ``j`` of ``L`` zeroed, the gain used then), the growth
+    rate of the width during a gap of that output (None for sparse systems)."""
 
     L: np.ndarray
     D: np.ndarray
     spectral_radius: float
     gain: str
     steady_width: np.ndarray | None
+    missing_radius: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class SplitDesign(Design):
     """``L``: gain; ``D = A − LC`` (any sign); ``spectral_radius`` of ``|D| = D⁺ + D⁻``;
     ``gain``: ``'width'``, ``'margin'``, ``'lmi'`` or ``'given'``; ``steady_width``:
-    ``(I − |D|)⁻¹ |E − LF| Δ`` (None for callable bounds)."""
+    ``(I − |D|)⁻¹ |E − LF| Δ`` (None for callable bounds); ``missing_radius``: as for
+    :class:`IntervalDesign`."""
 
     L: np.ndarray
     D: np.ndarray
     spectral_radius: float
     gain: str
     steady_width: np.ndarray | None
+    missing_radius: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -159,11 +192,13 @@ class _StepMatrices:
     Gn: np.ndarray  # (S (E − L_k F))⁻
 
 
-def _bad_streams(res: np.ndarray, rad: np.ndarray, y: np.ndarray) -> Any:
+def _bad_streams(
+    res: np.ndarray, rad: np.ndarray, y: np.ndarray, ctol: float = CONSISTENCY_TOL
+) -> Any:
     """The loop's test ``|res| <= rad + tol`` (:meth:`_CooperativeObserver._consistent`) over
     a record or a batch: None when it passes; for a batch the ``(B,)`` mask of streams that
     fail; True when the single record fails (the caller falls back to its loop)."""
-    fail = np.abs(res) > rad + CONSISTENCY_TOL * (1.0 + np.abs(y) + 2.0 * rad)
+    fail = np.abs(res) > rad + ctol * (1.0 + np.abs(y) + 2.0 * rad)
     if not fail.any():
         return None
     return fail.reshape(fail.shape[0], -1).any(axis=1) if y.ndim == 3 else True
@@ -268,12 +303,146 @@ def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: b
     return D
 
 
+@dataclass(frozen=True)
+class RoundingBound:
+    """The floating-point model of the recursion with a gain ``L`` (``S = I``; module
+    docstring, "Rounding"). One step's error is at most
+    ``gamma (a_z ‖z‖_∞ + a_y ‖y‖_∞ + a_u ‖u‖_∞ + a_d ‖d‖_∞)`` (``‖d‖``: the largest bound
+    magnitude); ``kappa = ‖(I − |A − LC|)⁻¹‖_∞`` amplifies it over the steps with complete
+    measurements; ``mu``, ``nu``: the factors on the bounds' magnitude and on the data scale
+    that the outward margin of the vectorised path needs beyond
+    :data:`~ivobs.estimators.base.ROUNDING`."""
+
+    kappa: float
+    gamma: float
+    a_z: float
+    a_y: float
+    a_u: float
+    a_d: float
+    mu: float
+    nu: float
+
+
+def rounding_bound(sys: LinearSystem, L: np.ndarray, D: Any) -> RoundingBound:
+    """:class:`RoundingBound` of the recursion with gain ``L`` and ``D = A − LC`` (dense or
+    ``scipy.sparse``; ``|D|`` Schur): ``mu = κ γ a_z / ROUNDING`` and
+    ``nu = κ γ (a_y + a_u' + a_d') / ROUNDING``, where ``a_u'``, ``a_d'`` bound the input and
+    disturbance terms relative to the base data scale ``s`` (which bounds ``g_j |u_j|``,
+    ``|E| |d|``, ``|F| |d|``)."""
+    u_round = np.finfo(float).eps / 2
+    n, ny, nu, nd = sys.nx, sys.ny, sys.nu, sys.nd
+    absL = np.abs(L)
+    if sys.is_sparse:
+        from scipy.sparse import identity
+        from scipy.sparse.linalg import spsolve
+
+        Aa = abs(sys.sparse("A"))
+        Ca = abs(sys.sparse("C"))
+        Da = abs(D).tocsc()
+        with np.errstate(all="ignore"):
+            kap = np.atleast_1d(spsolve((identity(n, format="csc") - Da).tocsc(), np.ones(n)))
+    else:
+        Aa, Ca = np.abs(sys.A_at(0)), np.abs(sys.C_at(0))
+        with np.errstate(all="ignore"):
+            kap = np.linalg.solve(np.eye(n) - np.abs(D), np.ones(n))
+    # (I − |D|)⁻¹ >= 0 when |D| is Schur: its row sums are the amplification of each component
+    kappa = float(kap.max()) if np.all(np.isfinite(kap)) and kap.min() >= 1.0 - 1e-9 else np.inf
+    # terms per row of Q_k = A − L_k C (any pattern): products with structural zeros are exact
+    if sys.is_sparse:
+        from scipy.sparse import csr_matrix
+
+        P = ((Aa != 0).astype(float) + csr_matrix(absL) @ (Ca != 0).astype(float)).tocsr()
+        P.eliminate_zeros()
+        row_nnz = int(np.max(np.diff(P.indptr), initial=1))
+    else:
+        P = (Aa != 0) | (absL @ (Ca != 0) != 0)
+        row_nnz = int(np.max(P.sum(axis=1), initial=1))
+    m = 2 * max(row_nnz, 1) + nu + 2 * ny + 2 * nd + 6
+    gamma = m * u_round / (1.0 - m * u_round)
+    # Q_k z (with the rounding of Q_k = A − L_k C itself and the true state inside the box)
+    a_z = 3.0 * float(np.max(np.asarray(Aa @ np.ones(n)).ravel() + absL @ (Ca @ np.ones(n))))
+    a_y = float(np.max(absL.sum(axis=1), initial=0.0))  # L_k y
+    a_u = a_u_s = 0.0  # (B − L_k D_u) u, and the same relative to the data scale
+    if nu:
+        B, Du = np.abs(sys.B_at(0)), np.abs(sys.D_at(0))
+        Mu = 2.0 * (B + absL @ Du)
+        a_u = float(np.max(Mu.sum(axis=1)))
+        g = np.max(np.vstack([B, Du]), axis=0)  # the base scale bounds g_j |u_j|
+        a_u_s = float(np.max((Mu[:, g > 0] / g[g > 0]).sum(axis=1), initial=0.0))
+    a_d = a_d_s = 0.0  # (E − L_k F) d and its Lemma-1 bounds
+    if nd:
+        E, F = np.abs(sys.E_at(0)), np.abs(sys.F_at(0))
+        a_d = 3.0 * float(np.max((E + absL @ F).sum(axis=1)))
+        # |E| |d| <= s, |F| |d| <= s (base scale) for Box bounds; nothing is known for callables
+        a_d_s = 3.0 * (1.0 + a_y) if isinstance(sys.d, Box) else 0.0
+    mu = kappa * gamma * a_z / ROUNDING
+    nu_ = kappa * gamma * (a_y + a_u_s + a_d_s) / ROUNDING
+    return RoundingBound(kappa, gamma, a_z, a_y, a_u, a_d, mu, nu_)
+
+
 class _CooperativeObserver(Estimator):
     """Shared machinery (module docstring): the split-form recursion in ``z = S x``."""
 
     needs_x0: ClassVar[bool] = True
     _S: np.ndarray | None = None
     _Si: np.ndarray | None = None
+    # rounding factors beyond the base margin (module docstring, "Rounding"); 1: none
+    _mu: float = 1.0
+    _nu: float = 1.0
+    _ctol: float = CONSISTENCY_TOL
+    _rounding: RoundingBound | None = None  # None: the base margin only (S ≠ I)
+
+    def _set_rounding(self, L: np.ndarray, D: Any) -> None:
+        """The margin factors of :func:`rounding_bound` (``S = I``)."""
+        rb = rounding_bound(self.sys, L, D)
+        if not np.isfinite(rb.mu + rb.nu):
+            raise DesignError(
+                f"{self.name}: (I − |A − LC|)⁻¹ could not be evaluated (|A − LC| has spectral "
+                "radius too close to 1): the rounding of the recursion cannot be bounded"
+            )
+        self._mu, self._nu = max(1.0, rb.mu), max(1.0, rb.nu)
+        sizes = np.array([2 * self.sys.nx, self.sys.ny, self.sys.nu])
+        keep = sizes > 0  # the blocks of v = [z̲; z̄; y_obs; u] (reduceat needs nonempty ones)
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        self._round_blocks = (starts[keep], np.array([rb.a_z, rb.a_y, rb.a_u])[keep])
+        self._ctol = CONSISTENCY_TOL * max(self._mu, self._nu)
+        self._rounding = rb
+
+    def _local_error(self, v: np.ndarray, dbox: Box | None) -> float:
+        """The rounding bound of one step of the loop (module docstring, "Rounding"),
+        ``γ (a_z ‖z‖_∞ + a_y ‖y_obs‖_∞ + a_u ‖u‖_∞ + a_d ‖d‖_∞)``, for ``v = [z̲; z̄; y_obs; u]``
+        (fresh; overwritten): the largest entry of each block (one ``reduceat``)."""
+        rb = self._rounding
+        assert rb is not None
+        idx, coef = self._round_blocks
+        e = float(coef.dot(np.maximum.reduceat(np.abs(v, out=v), idx)))
+        if rb.a_d and dbox is not None:
+            dm = self.__dict__.get("_dmax") if self.sys.has_constant_bounds else None
+            if dm is None:
+                dm = float(max(np.abs(dbox.lo).max(), np.abs(dbox.hi).max()))
+                if self.sys.has_constant_bounds:
+                    self.__dict__["_dmax"] = dm
+            e += rb.a_d * dm
+        return rb.gamma * e
+
+    def _widen(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """In place: ``(mu − 1) ROUNDING |bound|`` on top of the base margin (when ``mu > 1``)."""
+        if self._mu > 1.0:
+            m = np.maximum(np.abs(lo), np.abs(hi))
+            m *= (self._mu - 1.0) * ROUNDING
+            lo -= m
+            hi += m
+        return lo, hi
+
+    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
+        s = super()._step_scale(k, u_k, y_k, t_k)
+        return s * self._nu if self._nu > 1.0 else s
+
+    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
+        s = super()._data_scale(u, y, t)
+        if self._nu > 1.0:
+            s *= self._nu
+        return s
 
     def _setup(self, L: np.ndarray, S: np.ndarray | None = None) -> None:
         sys = self.sys
@@ -372,7 +541,7 @@ class _CooperativeObserver(Estimator):
             flo, fhi = _hull(*self._F_pm, dbox.lo, dbox.hi)
         du = self._Du @ u
         plo, phi = plo + du + flo, phi + du + fhi
-        tol = CONSISTENCY_TOL * (1.0 + np.abs(y) + (phi - plo))  # NaN (missing) compares False
+        tol = self._ctol * (1.0 + np.abs(y) + (phi - plo))  # NaN (missing) compares False
         bad = ((y < plo - tol) | (y > phi + tol)) & obs
         return not bool(np.any(bad))
 
@@ -400,7 +569,7 @@ class _CooperativeObserver(Estimator):
         dev -= yr
         if not (dev > 0.0).any():  # NaN (missing) compares False
             return True
-        tol = CONSISTENCY_TOL * (1.0 + np.abs(y) + 2.0 * yr)
+        tol = self._ctol * (1.0 + np.abs(y) + 2.0 * yr)
         return not bool(np.any((dev > tol) & obs))
 
     def _step(
@@ -416,10 +585,15 @@ class _CooperativeObserver(Estimator):
             state["_inconsistent"] = True
             obs = np.zeros_like(obs)
         m = self._matrices(obs)
-        known = m.Bz @ u_k + m.Lz @ np.where(obs, y_k, 0.0)
+        y_obs = np.where(obs, y_k, 0.0)
+        known = m.Bz @ u_k + m.Lz @ y_obs
         glo, ghi = _hull(m.Gp, m.Gn, dbox.lo, dbox.hi)
         state["hi"] = m.Qp @ zhi - m.Qn @ zlo + known + ghi
         state["lo"] = m.Qp @ zlo - m.Qn @ zhi + known + glo
+        if self._rounding is not None:  # this step's rounding, inside the state (any pattern)
+            e = self._local_error(np.concatenate([zlo, zhi, y_obs, u_k]), dbox)
+            state["hi"] += e
+            state["lo"] -= e
         return xlo, xhi
 
     def _step_sparse(
@@ -453,6 +627,11 @@ class _CooperativeObserver(Estimator):
         nz = v.copy()
         csr_accumulate(m.S2, z, nz)
         csr_accumulate(m.K, np.concatenate([y_k if full else np.where(obs, y_k, 0.0), u_k]), nz)
+        if self._rounding is not None:  # this step's rounding, inside the state (any pattern)
+            yo = y_k if full else np.where(obs, y_k, 0.0)
+            e = self._local_error(np.concatenate([z, yo, u_k]), dbox if self.sys.nd else None)
+            nz[:n] += e
+            nz[n:] -= e
         state["z"] = nz
         return z[n:], z[:n]
 
@@ -469,7 +648,7 @@ class _CooperativeObserver(Estimator):
         dev = np.abs(y - yc)
         if not (dev > yr).any():
             return True
-        tol = CONSISTENCY_TOL * (1.0 + np.abs(y) + 2.0 * yr)
+        tol = self._ctol * (1.0 + np.abs(y) + 2.0 * yr)
         return not bool(np.any(dev - yr > tol))
 
     def _f_mid(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
@@ -534,8 +713,8 @@ class _CooperativeObserver(Estimator):
         # the loop's test is |res| <= pr + tol(|y|, pr); without |y| the band is narrower, so
         # passing it decides without touching y again
         bad = None
-        if not within_band(innov, s_i, yrad + CONSISTENCY_TOL * (1.0 + 2.0 * yrad)):
-            bad = _bad_streams(innov if s_i is None else innov + s_i, yrad, y)
+        if not within_band(innov, s_i, yrad + self._ctol * (1.0 + 2.0 * yrad)):
+            bad = _bad_streams(innov if s_i is None else innov + s_i, yrad, y, self._ctol)
             if bad is True:
                 return None
         del innov
@@ -546,6 +725,7 @@ class _CooperativeObserver(Estimator):
         else:
             np.add(xc, s_x - rad, out=lo)
             xc += s_x + rad
+        self._widen(lo, xc)
         if bad is not None:  # only the streams with an inconsistent measurement by the loop
             return redo_streams(self, u, y, t, lo, xc, bad)
         return lo, xc
@@ -587,9 +767,10 @@ class _CooperativeObserver(Estimator):
         yc = (clo + chi) @ Rs
         yc += matrix_product(u, self._Du.T) + 0.5 * (flo + fhi)
         yr = (chi - clo) @ Ra + 0.5 * (fhi - flo)
-        bad = _bad_streams(y - yc, yr, y)
+        bad = _bad_streams(y - yc, yr, y, self._ctol)
         if bad is True:
             return None
+        self._widen(lo, hi)
         if bad is not None and bad.any():
             return redo_streams(self, u, y, None, lo, hi, bad)
         return lo, hi
@@ -656,6 +837,11 @@ class _CooperativeObserver(Estimator):
             return np.atleast_1d(spsolve(M, np.abs(G) @ design_delta(self.sys)))
         return steady_width(D, G, design_delta(self.sys))
 
+    def _missing_radius(self, L: np.ndarray) -> np.ndarray | None:
+        if self.sys.is_sparse:
+            return None
+        return missing_radius(self.sys.A_at(0), self.sys.C_at(0), L)
+
     def _given_gain(self, L: Any, nonnegative: bool) -> tuple[np.ndarray, Any, float]:
         """A user's gain, checked (sparse algebra for sparse systems): ``(L, D, ρ)`` with ``ρ``
         the spectral radius of ``D`` (``nonnegative``) or of ``|D|``."""
@@ -689,9 +875,11 @@ class IntervalObserver(_CooperativeObserver):
     ``gain="lmi"``: LMI (41) of 002 with diagonal ``P`` (a margin maximised,
     :func:`ivobs.design.cooperative.nonnegative_gain`); ``gain="width"`` (default): that gain
     refined by linear programs that lower the steady-state width ``(I − D)⁻¹|G|Δ`` while keeping
-    ``D >= 0`` (:func:`ivobs.design.cooperative.refine_width`; never wider than the LMI gain).
-    When no gain makes ``A − LC`` nonnegative and Schur (002 Example 2, 003 §IV.A) a
-    :class:`~ivobs.DesignError` says so: use ``interval-split`` or ``interval-transformed``.
+    ``D >= 0`` (:func:`ivobs.design.cooperative.refine_width`; never wider than the LMI gain,
+    and among equally good gains the smallest, e.g. with redundant noise-free sensors; a gap of
+    one output that the LMI gain rides out stays bounded). When no gain makes ``A − LC``
+    nonnegative and Schur (002 Example 2, 003 §IV.A) a :class:`~ivobs.DesignError` says so: use
+    ``interval-split`` or ``interval-transformed``.
 
     Missing samples, inconsistent data and the vectorised path: see the module docstring.
     """
@@ -723,12 +911,14 @@ class IntervalObserver(_CooperativeObserver):
             gain = "given"
         L, D, rho = self._given_gain(L, nonnegative=True)
         self._setup(L)
+        self._set_rounding(L, D)
         self.design = IntervalDesign(
             L=L,
             D=D,
             spectral_radius=rho,
             gain=gain,
             steady_width=self._steady(D, L),
+            missing_radius=self._missing_radius(L),
         )
 
 
@@ -751,8 +941,11 @@ class SplitIntervalObserver(_CooperativeObserver):
     ``|A − LC| v <= s v`` alternating with the Perron vector ``v``
     (:func:`ivobs.design.cooperative.abs_schur_gain`); ``gain="width"`` (default): that gain
     refined to lower the steady-state width ``(I − |D|)⁻¹|G|Δ``
-    (:func:`ivobs.design.cooperative.refine_width`). :class:`~ivobs.DesignError` when no gain
+    (:func:`ivobs.design.cooperative.refine_width`). Both linear programs return the smallest
+    gain among their optimal ones (audit A8). :class:`~ivobs.DesignError` when no gain
     with ``ρ(|A − LC|) < 1`` is found.
+
+    Missing samples, rounding and the vectorised path: see the module docstring.
     """
 
     name = "interval-split"
@@ -798,12 +991,14 @@ class SplitIntervalObserver(_CooperativeObserver):
             gain = "given"
         L, D, rho = self._given_gain(L, nonnegative=False)
         self._setup(L)
+        self._set_rounding(L, D)
         self.design = SplitDesign(
             L=L,
             D=D,
             spectral_radius=rho,
             gain=gain,
             steady_width=self._steady(D, L),
+            missing_radius=self._missing_radius(L),
         )
 
 

@@ -67,6 +67,7 @@ Continuous time: the missing rows are left out of the jump (``T`` and ``z`` jump
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -85,9 +86,11 @@ from .._validate import as_matrix, as_vector
 from ..design._lmi import MAX_LMI_STATES
 from ..design.sylvester import (
     block_target,
+    check_flow,
     check_target,
     condition_number,
     default_target,
+    flow_cap,
     predicted_width,
     solve_transform,
 )
@@ -101,6 +104,11 @@ from .base import Design, Estimator
 __all__ = ["KKL", "KKLDesign"]
 
 _EPS = np.finfo(float).eps
+_ANCHOR_TOL = 1e-9
+"""Relative distance of ``T`` to the constant ``T_h`` of a regular grid below which the state is
+moved onto ``T_h`` (continuous time; the cost is ``|T_h - T| |x|``, see ``KKL._to_anchor``)."""
+_CACHE_SIZE = 256
+"""Sampling periods whose interval matrices are kept (continuous time)."""
 
 
 @dataclass(frozen=True)
@@ -156,6 +164,40 @@ def _pinv(T: np.ndarray, max_cond: float) -> _Transform:
     ok = bool(np.isfinite(cond) and cond <= max_cond)
     P = ((Vt.T / s) @ U.T) / norms[None, :] if ok else np.zeros((nx, nz))
     return _Transform(T=T, P=P, cond=cond, ok=ok)
+
+
+def _number(
+    name: str,
+    val: Any,
+    *,
+    above: float | None = None,
+    at_least: float | None = None,
+    below: float | None = None,
+    why: str = "",
+) -> float:
+    """A real, finite scalar option within its range, else :class:`IvobsError` naming it."""
+    if isinstance(val, np.ndarray) and val.ndim == 0 and val.dtype.kind in "fiu":
+        val = val.item()
+    if isinstance(val, (bool, np.bool_)) or not isinstance(val, numbers.Real):
+        raise IvobsError(
+            f"{name}: expected a real number, got {val!r} ({type(val).__name__})"
+        )
+    v = float(val)
+    rng = []
+    if above is not None:
+        rng.append(f"> {above:g}")
+    if at_least is not None:
+        rng.append(f">= {at_least:g}")
+    if below is not None:
+        rng.append(f"< {below:g}")
+    if (
+        not np.isfinite(v)
+        or (above is not None and not v > above)
+        or (at_least is not None and not v >= at_least)
+        or (below is not None and not v < below)
+    ):
+        raise IvobsError(f"{name}: expected a finite number {' and '.join(rng)}{why}, got {val!r}")
+    return v
 
 
 def _d_delta(sys: LinearSystem) -> np.ndarray:
@@ -227,7 +269,7 @@ class KKL(Estimator):
         self._tv = sys.is_time_varying
         self._mode = "ct" if self._ct else ("dt-ltv" if self._tv else "dt-lti")
         self._check_options(
-            A_z, B_z, T, T0, gamma, ell, coordinates, max_cond, input_hold, rtol, atol
+            A_z, B_z, T, T0, gamma, ell, coordinates, max_cond, tune, input_hold, rtol, atol
         )
         self.max_cond = float(max_cond)
         self.coordinates = coordinates
@@ -255,10 +297,12 @@ class KKL(Estimator):
         ell: Any,
         coordinates: Any,
         max_cond: Any,
+        tune: Any,
         input_hold: Any,
         rtol: Any,
         atol: Any,
     ) -> None:
+        """Every option checked before use: an :class:`IvobsError` naming the argument."""
         if (A_z is None) != (B_z is None):
             raise IvobsError("A_z, B_z: give both target matrices or neither")
         if T is not None and (self._tv or A_z is None):
@@ -279,28 +323,23 @@ class KKL(Estimator):
                 "ell: the factor of (11.a) is for continuous-time time-varying "
                 "systems" + ("; use gamma" if self._mode == "dt-ltv" else "")
             )
-        for nm, val in (
-            ("gamma", gamma),
-            ("ell", ell),
-            ("max_cond", max_cond),
-            ("rtol", rtol),
-            ("atol", atol),
-        ):
-            if val is not None and (
-                isinstance(val, bool)
-                or not np.isscalar(val)
-                or not np.isfinite(float(val))
-                or float(val) <= 0
-            ):
-                raise IvobsError(f"{nm}: expected a finite number > 0, got {val!r}")
-        if coordinates not in ("z", "x"):
+        for nm, val in (("gamma", gamma), ("ell", ell)):
+            if val is not None:
+                _number(nm, val, above=0.0)
+        _number("max_cond", max_cond, at_least=1.0, why="; cond(T) >= 1 for every T")
+        _number("rtol", rtol, above=0.0, below=1.0)
+        _number("atol", atol, above=0.0)
+        if not isinstance(tune, (bool, np.bool_)):
+            raise IvobsError(f"tune: expected True or False, got {tune!r}")
+        if not isinstance(coordinates, str) or coordinates not in ("z", "x"):
             raise IvobsError(f"coordinates: expected 'z' or 'x', got {coordinates!r}")
         if coordinates == "x" and self._mode != "dt-lti":
             raise IvobsError(
                 "coordinates: 'x' (observer (6)) needs a constant T, i.e. a "
                 "discrete-time time-invariant system; use 'z'"
             )
-        if not (callable(input_hold) or input_hold in ("linear", "zero")):
+        hold_ok = isinstance(input_hold, str) and input_hold in ("linear", "zero")
+        if not (callable(input_hold) or hold_ok):
             raise IvobsError(
                 f"input_hold: expected 'linear', 'zero' or a callable t -> u(t), got {input_hold!r}"
             )
@@ -422,12 +461,13 @@ class KKL(Estimator):
                     f"A_z: n_z = {At.shape[0]} < nx = {sys.nx}; T[k] (n_z x nx) "
                     "can only be left-invertible with n_z >= nx"
                 )
-        factor = (
-            float(ell if ell is not None else 2.0)
-            if self._ct
-            else float(gamma if gamma is not None else 1.0)
-        )
+        if self._ct:
+            factor = float(ell) if ell is not None else _default_ell(At, A0)
+        else:
+            factor = float(gamma if gamma is not None else 1.0)
         Az, Bz = check_target(factor * At, Bt, self._ct)
+        if self._ct:  # the flow rule, with A(t) frozen at t = 0 (module docstring)
+            check_flow(Az, A0, who="A_z" if ell is None else "ell", frozen=" (A frozen at t = 0)")
         self._Az, self._Bz = Az, Bz
         nz = Az.shape[0]
         if T0 is None:
@@ -549,7 +589,7 @@ class KKL(Estimator):
             zlo, zhi = np.zeros(nz), np.zeros(nz)
             xlo, xhi = np.full(nx, -np.inf), np.full(nx, np.inf)
         st: dict[str, Any] = {"zlo": zlo, "zhi": zhi}
-        if self._mode == "dt-ltv":
+        if self._mode == "dt-ltv" or (self._mode == "ct" and not self._tv):
             st.update(xlo=xlo, xhi=xhi)
         if self._mode == "ct":
             st.update(
@@ -692,10 +732,12 @@ class KKL(Estimator):
 
         # keyed (and computed) by h rounded to 1e-12, so that a grid such as np.arange(0, 10, .01)
         # (steps differing by 1e-17) reuses one set, the same whatever step comes first
-        h = key = float(np.round(h, 12))
+        h = key = round(float(h), 12)
         cache = self.__dict__.setdefault("_ct_cache", {})
         if key in cache:
             return cache[key]
+        if len(cache) >= _CACHE_SIZE:  # irregular grids: one entry per distinct period
+            cache.clear()
         sys = self.sys
         A, B, E = sys.A_at(0), sys.B_at(0), sys.E_at(0)
         n, m, q = sys.nx, sys.nu, sys.nd
@@ -709,8 +751,10 @@ class KKL(Estimator):
         N = int(np.clip(np.ceil(400 * growth), 1, 256))  # sub-intervals for the d radius
         mids = (np.arange(N) + 0.5) * h / N
         data = {
+            "h": h,
             "Phi_z": expm(self._Az * h),
             "Psi": expm(-A * h),
+            "eA": eM[:n, :n],
             "G0": eM[:n, n : n + m],
             "G1": eM[:n, n + m :],
             "GE": expm(Me * h)[:n, n:],
@@ -759,6 +803,136 @@ class KKL(Estimator):
         rad = rad + np.linalg.norm(Tn, axis=1) * float(c["var"] @ dr)
         mid = Tn @ (xu + c["GE"] @ dc)
         return Tn, c["Phi_z"] @ zlo + mid - rad, c["Phi_z"] @ zhi + mid + rad
+
+    def _anchor(self, c: dict[str, Any], first: bool = False) -> dict[str, Any] | None:
+        """The constant ``T`` of a regular grid of period ``h`` (time-invariant; cached).
+
+        With every output observed, one interval maps ``T(t_k+)`` to
+        ``e^{A_z h} T e^{-A h} + h B_z C``; its fixed point ``T_h`` solves the Sylvester equation
+        (eq. 4 of the sampled system, solved once per period)::
+
+            T_h e^{A h} - e^{A_z h} T_h = h B_z C e^{A h}
+
+        (``T_h → T`` of (4) as ``h → 0``). Started at ``T_h`` (:meth:`_to_anchor`), ``T`` is
+        constant at the samples and nothing about it is propagated: ``T(t_k-) = T_h - h B_z C``,
+        and the ``d`` radius of an interval is one matrix. ``D = e^{A_z h} T_h - T(t_k-) e^{A h}``
+        (the computed residual) enters the radius as ``|D T_h⁻¹| max(|z̲|, |z̄|)``. ``None`` when
+        ``T_h`` is singular or ill-conditioned (then ``T`` is propagated by :meth:`_flow_lti`);
+        on the first interval (``first``) that is a :class:`DesignError`: the target modes are
+        too fast for the sampling period (rows of ``T`` with ``|a_i| h >> 1`` are forgotten
+        between samples and become ``h b_i C``).
+        """
+        if "anchor" not in c:
+            c["anchor"] = self._make_anchor(c)
+        if c["anchor"] is None and first:
+            Th = c.get("T_h")
+            cond = _pinv(Th, self.max_cond).cond if Th is not None else float("inf")
+            a = float(np.min(np.linalg.eigvals(self._Az).real))
+            raise DesignError(
+                f"kkl: sampling period h = {c['h']:g}: the transformation at the samples "
+                f"(T_h, fixed point of T -> e^(A_z h) T e^(-A h) + h B_z C) has cond {cond:.3e} > "
+                f"max_cond = {self.max_cond:.0e}; target modes much faster than 1/h are forgotten "
+                f"between samples (fastest eigenvalue of A_z: {a:.4g}, a h = {a * c['h']:.3g}): "
+                "pass A_z, B_z with slower eigenvalues (still faster than every mode of A) or "
+                "sample faster"
+            )
+        return c["anchor"]
+
+    def _make_anchor(self, c: dict[str, Any]) -> dict[str, Any] | None:
+        """The pieces of :meth:`_anchor` for the interval data ``c`` (None if ``T_h`` is bad)."""
+        from scipy.linalg import solve_sylvester
+
+        h, Phi, eA = c["h"], c["Phi_z"], c["eA"]
+        Q = h * self._Bz @ self.sys.C_at(0)
+        try:
+            with np.errstate(all="ignore"):
+                Th = solve_sylvester(-Phi, eA, Q @ eA)
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+        for _ in range(4):  # make T_h an exact fixed point of the computed jump
+            Tm = Th - Q
+            if np.array_equal(Tm + Q, Th):
+                break
+            Th = Tm + Q
+        else:
+            return None
+        c["T_h"] = Th
+        trh = _pinv(Th, self.max_cond)
+        if not (trh.ok and np.all(np.isfinite(Tm))):
+            return None
+        D = Phi @ Th - Tm @ eA
+        data = {
+            "T": Th,
+            "tr": trh,
+            "Tm": Tm,
+            "trm": _pinv(Tm, self.max_cond),
+            "res": np.abs(D @ trh.P),
+            "rad": (h / c["N"]) * np.abs(Tm @ c["nodesE"]).sum(axis=0)
+            + np.linalg.norm(Tm, axis=1)[:, None] * c["var"][None, :],
+            "TG0": Tm @ c["G0"],
+            "TG1": Tm @ c["G1"],
+            "TGE": Tm @ c["GE"],
+        }
+        if "gl" in c:
+            data["TgB"] = Tm @ c["gl"][2]
+        return data
+
+    def _to_anchor(
+        self, an: dict[str, Any], k: int, T: np.ndarray, zlo: np.ndarray, zhi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Switch the state ``(T, z̲, z̄)`` at ``t_(k-1)+`` to ``T_h`` when that costs nothing.
+
+        ``T = T_h`` already (bitwise; after a JSON round trip too): nothing to do. First
+        interval (``k = 1``, nothing measured yet): ``z`` is re-initialised from ``x0`` by (3.b)
+        with ``T_h``. ``T`` within ``1e-9`` (relative) of ``T_h`` (back after missing samples or a
+        change of period, the flow being stable): ``T_h x = z + (T_h - T) T⁻¹ z``, bounded by
+        Lemma 1. Otherwise the state is returned unchanged.
+        """
+        Th = an["T"]
+        if T is Th:
+            return T, zlo, zhi
+        if np.array_equal(T, Th):
+            return Th, zlo, zhi
+        if k == 1 and self.x0 is not None:
+            zl, zh = image_bounds(Th, self.x0.lo, self.x0.hi)
+            return Th, zl, zh
+        if np.max(np.abs(T - Th)) <= _ANCHOR_TOL * np.max(np.abs(Th)):
+            tr = _pinv(T, self.max_cond)
+            if tr.ok:
+                clo, chi = image_bounds((Th - T) @ tr.P, zlo, zhi)
+                return Th, zlo + clo, zhi + chi
+        return T, zlo, zhi
+
+    def _flow_anchored(
+        self,
+        c: dict[str, Any],
+        an: dict[str, Any],
+        zlo: np.ndarray,
+        zhi: np.ndarray,
+        t0: float,
+        t1: float,
+        u0: np.ndarray,
+        u1: np.ndarray,
+        dlo: np.ndarray,
+        dhi: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_flow_lti` from ``T(t0+) = T_h``: the same formulas with the matrices of
+        :meth:`_anchor`, plus the residual term of ``T_h``."""
+        if callable(self._hold):
+            sg, wg, _ = c["gl"]
+            mid = sum(
+                w * (tb @ self._u_between(t0 + s, t0, t1, u0, u1))
+                for s, w, tb in zip(sg, wg, an["TgB"])
+            )
+        else:
+            mid = an["TG0"] @ u0
+            if self._hold == "linear":
+                mid = mid + an["TG1"] @ (u1 - u0)
+        dc, dr = 0.5 * (dlo + dhi), 0.5 * (dhi - dlo)
+        mid = mid + an["TGE"] @ dc
+        rad = an["rad"] @ dr + an["res"] @ np.maximum(np.abs(zlo), np.abs(zhi))
+        Phi = c["Phi_z"]
+        return an["Tm"], Phi @ zlo + mid - rad, Phi @ zhi + mid + rad
 
     def _flow_ode(
         self,
@@ -813,6 +987,8 @@ class KKL(Estimator):
         d = self.sys.d_at(k, y_k)
         T, zlo, zhi = state["T"], state["zlo"], state["zhi"]
         h = 0.0
+        an = None
+        model = None  # time-invariant: the previous box propagated through the model
         if state["t_prev"] is not None:
             t0 = float(state["t_prev"])
             h = t_k - t0
@@ -820,28 +996,43 @@ class KKL(Estimator):
                 raise IvobsError(f"t: sample times must increase; got t = {t_k} after {t0}")
             dlo = np.minimum(state["dlo_prev"], d.lo)
             dhi = np.maximum(state["dhi_prev"], d.hi)
-            T, zlo, zhi = self._flow(T, zlo, zhi, t0, t_k, state["u_prev"], u_k, dlo, dhi)
+            u0 = state["u_prev"]
+            if not self._tv:
+                c = self._interval_data(h)
+                an = self._anchor(c, first=k == 1)
+                model = self._predict_box(c, state["xlo"], state["xhi"], t0, t_k, u0, u_k, dlo, dhi)
+            if an is not None:
+                T, zlo, zhi = self._to_anchor(an, k, T, zlo, zhi)
+            if an is not None and T is an["T"]:  # constant T: nothing propagated
+                T, zlo, zhi = self._flow_anchored(c, an, zlo, zhi, t0, t_k, u0, u_k, dlo, dhi)
+            else:
+                an = None
+                T, zlo, zhi = self._flow(T, zlo, zhi, t0, t_k, u0, u_k, dlo, dhi)
         obs = ~np.isnan(y_k)
         if h > 0 and obs.any():  # the measurement jump (sampled form of B_z y in (3)/(10))
-            tr = _pinv(T, self.max_cond)
-            if tr.ok:
-                lo, hi = self._recover(tr, zlo, zhi)
-                obs = self._usable(state, y_k, lo, hi, C, D, F, u_k, d)
+            tr = an["trm"] if an is not None else _pinv(T, self.max_cond)
+            box = self._ct_box(state, tr, zlo, zhi, model)
+            if box is not None:
+                obs = self._usable(state, y_k, box[0], box[1], C, D, F, u_k, d)
             Bo = h * self._Bz[:, obs]
-            T = T + Bo @ C[obs]
+            if an is not None and obs.all():
+                T = an["T"]  # = T(t_k-) + h B_z C exactly (see _anchor)
+            else:
+                T = T + Bo @ C[obs]
             v = Bo @ (y_k[obs] - D[obs] @ u_k)
             BF = Bo @ F[obs]
             v = v - BF @ (0.5 * (d.lo + d.hi))
             gr = np.abs(BF) @ (0.5 * (d.hi - d.lo))
             zlo, zhi = zlo + v - gr, zhi + v + gr
-        tr = _pinv(T, self.max_cond)
-        if not tr.ok:
+        tr = an["tr"] if an is not None and T is an["T"] else _pinv(T, self.max_cond)
+        box = self._ct_box(state, tr, zlo, zhi, model)
+        if box is None:
             raise DesignError(
                 f"kkl: T(t) lost left-invertibility at t = {t_k} (cond {tr.cond:.3e} > max_cond "
                 f"= {self.max_cond:.0e}); choose faster target dynamics (larger ell) or another "
                 "A_z, B_z (004 Propositions 1, 3)"
             )
-        lo, hi = self._recover(tr, zlo, zhi)
+        lo, hi = box
         if k == 0:
             lo, hi = self._first_box(lo, hi)
         state.update(
@@ -853,7 +1044,70 @@ class KKL(Estimator):
             dlo_prev=d.lo.copy(),
             dhi_prev=d.hi.copy(),
         )
+        if not self._tv:
+            state.update(xlo=lo.copy(), xhi=hi.copy())
         return lo, hi
+
+    def _ct_box(
+        self,
+        state: dict[str, Any],
+        tr: _Transform,
+        zlo: np.ndarray,
+        zhi: np.ndarray,
+        model: tuple[np.ndarray, np.ndarray] | None,
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The box from ``z`` (3.c-d)/(10.d), intersected with the model prediction ``model`` of
+        the previous box (time-invariant; both are sound); the prediction alone while ``T`` is
+        not left-invertible (e.g. right after a long gap); None if neither is available.
+
+        An empty intersection beyond rounding means the data contradict the model: reported as
+        an inconsistency; each crossed coordinate then keeps the hull of the two crossed ends.
+        """
+        if not tr.ok:
+            return model
+        lo, hi = self._recover(tr, zlo, zhi)
+        if model is None:
+            return lo, hi
+        lo, hi = np.maximum(lo, model[0]), np.minimum(hi, model[1])
+        cross = lo > hi
+        if cross.any():
+            if np.any(lo - hi > 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))):
+                state["_inconsistent"] = True
+            lo, hi = np.where(cross, hi, lo), np.where(cross, lo, hi)
+        return lo, hi
+
+    def _predict_box(
+        self,
+        c: dict[str, Any],
+        xlo: np.ndarray,
+        xhi: np.ndarray,
+        t0: float,
+        t1: float,
+        u0: np.ndarray,
+        u1: np.ndarray,
+        dlo: np.ndarray,
+        dhi: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``x(t1) ∈ e^{A h}[x̲, x̄] + ∫ e^{A(h-s)} (B u + E d) ds`` (time-invariant; Lemma 1 and
+        the enclosures of :meth:`_flow_lti` with ``T = I``)."""
+        if "radI" not in c:
+            c["radI"] = c["h"] / c["N"] * np.abs(c["nodesE"]).sum(axis=0) + c["var"][None, :]
+            c["abs_eA"] = np.abs(c["eA"])
+        xc, xr = 0.5 * (xlo + xhi), 0.5 * (xhi - xlo)
+        if callable(self._hold):
+            sg, wg, nodesB = c["gl"]
+            mid = sum(
+                w * (nb @ self._u_between(t0 + s, t0, t1, u0, u1))
+                for s, w, nb in zip(sg, wg, nodesB)
+            )
+        elif self._hold == "zero":
+            mid = c["G0"] @ u0
+        else:
+            mid = c["G0"] @ u0 + c["G1"] @ (u1 - u0)
+        dc, dr = 0.5 * (dlo + dhi), 0.5 * (dhi - dlo)
+        mid = mid + c["eA"] @ xc + c["GE"] @ dc
+        rad = c["abs_eA"] @ xr + c["radI"] @ dr
+        return mid - rad, mid + rad
 
     # -- vectorised run (discrete-time LTI) ----------------------------------------------
     def _run(
@@ -972,6 +1226,15 @@ class KKL(Estimator):
         terms = (filt, xr0, yr0, gc if tv else None, fc if tv else None, x0)
         self.__dict__["_vec"] = (Tn, terms)
         return terms
+
+
+def _default_ell(A_tilde: np.ndarray, A0: np.ndarray) -> float:
+    """The CT factor of (11.a): 2 (Example 2), or more if needed for the flow rule at ``t = 0``:
+    ``ell max Re λ(Ã) <= min Re λ(A(0)) - FLOW_MARGIN max(1, ρ(A(0)))``."""
+    top = float(np.max(np.linalg.eigvals(A_tilde).real))
+    if not top < 0:
+        return 2.0  # not Hurwitz: check_target names it
+    return max(2.0, flow_cap(A0) / top)
 
 
 def _accessor(M: Any) -> Callable[[float], np.ndarray]:
