@@ -4,8 +4,10 @@ LMIs (7)-(8) of 003, the LP for |A - LC| Schur, the width refinement and the che
 import numpy as np
 import pytest
 
+import ivobs
 from ivobs import Box, DesignError, scenarios
 from ivobs.design.cooperative import (
+    NONNEG_TOL,
     abs_schur_gain,
     check_abs_schur,
     check_nonnegative_schur,
@@ -13,6 +15,7 @@ from ivobs.design.cooperative import (
     nonnegative_gain,
     output_weights,
     refine_width,
+    spectral_radius,
     steady_width,
 )
 
@@ -198,3 +201,17 @@ def test_a8_missing_radius():
     r = missing_radius(A, C, L)
     assert r[0] == pytest.approx(1.0, abs=1e-12)
     assert r[1] == pytest.approx(rho(np.abs(A - L * [1.0, 0.0] @ C)), rel=1e-12) and r[1] > 1
+
+
+def test_lmi_gain_is_repaired_when_the_sdp_leaves_round_off_negatives():
+    """kkl-random8: the SDP meets P A − Y C >= 0 only to its tolerance and L = P⁻¹ Y leaves
+    A − LC at −4e-9; the nearest nonnegative gain (LP) keeps A − LC >= 0 and Schur."""
+    sc = ivobs.scenarios.get("kkl-random8")
+    A, C = sc.system.A, sc.system.C
+    L = nonnegative_gain(A, C)
+    D = A - L @ C
+    assert D.min() >= -NONNEG_TOL * max(1.0, np.abs(A).max())
+    assert spectral_radius(D) < 1.0
+    tr = sc.simulate("vertex", seed=3)
+    res = ivobs.make_estimator("interval", sc.system, x0=sc.x0).run(tr.u, tr.y)
+    assert res.contains(tr.x).all()

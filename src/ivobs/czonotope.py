@@ -538,7 +538,8 @@ def _choose_factor(
         return None
     shape = np.where(cand & np.isfinite(err), err, np.inf)
     if not np.any(np.isfinite(shape)):
-        shape = np.where(cand, R * np.linalg.norm(G, axis=0), np.inf)
+        with np.errstate(invalid="ignore"):  # R = inf on the non-candidates
+            shape = np.where(cand, R * np.linalg.norm(G, axis=0), np.inf)
     if cert is not None:
         loss = np.where(cand, cert.elimination_loss(A, b, piv), np.inf)
         best = loss.min()

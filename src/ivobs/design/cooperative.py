@@ -200,7 +200,40 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
             "'interval-transformed'"
         )
     L = np.linalg.solve(np.diag(pvec.value), Y.value)
+    tol = NONNEG_TOL * max(1.0, float(np.max(np.abs(A), initial=0.0)))
+    if np.any(A - L @ C < -tol):
+        L = _nearest_nonnegative_gain(A, C, L)
     check_nonnegative_schur(A, C, L, who)
+    return L
+
+
+def _nearest_nonnegative_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """The gain closest to ``L`` (``Σ |L'_ij − L_ij|``) with ``A − L'C >= 0``, by LP (HiGHS).
+
+    The SDP solver meets ``P A − Y C >= 0`` only to its tolerance, so ``L = P⁻¹ Y`` may leave
+    entries of ``A − LC`` slightly negative (e.g. ``−4e-9`` on ``kkl-random8``); the LP moves
+    ``L`` by about as much, which keeps the spectral radius (checked by the caller). The entries
+    that ``L`` can move are kept ``1e-6 max(1, max|A|)`` above zero if possible (HiGHS meets its
+    constraints only to its own tolerance). Returns ``L`` unchanged if the LP fails."""
+    n, p = L.shape
+    m = A.shape[1]
+    # variables: L' (row-major, n p), t (n p) with |L' − L| <= t; rows (L' C)_ij <= A_ij
+    rows = np.zeros((n * m, 2 * n * p))
+    for i in range(n):
+        rows[i * m : (i + 1) * m, i * p : (i + 1) * p] = C.T
+    eye = np.eye(n * p)
+    A_ub = np.vstack([rows, np.hstack([eye, -eye]), np.hstack([-eye, -eye])])
+    c = np.concatenate([np.zeros(n * p), np.ones(n * p)])
+    bounds = [(None, None)] * (n * p) + [(0, None)] * (n * p)
+    # entries that L can move get a margin above HiGHS's feasibility tolerance (else none)
+    movable = (np.abs(C).sum(axis=0) > 0)[None, :].repeat(n, axis=0).ravel()
+    scale = max(1.0, float(np.max(np.abs(A), initial=0.0)))
+    for margin in (1e-6 * scale, 0.0):
+        b_ub = np.concatenate([A.ravel() - margin * movable, L.ravel(), -L.ravel()])
+        res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs",
+                      options={"primal_feasibility_tolerance": 1e-10})  # fmt: skip
+        if res.status == 0:
+            return res.x[: n * p].reshape(n, p)
     return L
 
 

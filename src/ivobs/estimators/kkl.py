@@ -769,6 +769,21 @@ class KKL(Estimator):
         cache[key] = data
         return data
 
+    def _input_integral(
+        self, c: dict[str, Any], t0: float, t1: float, u0: np.ndarray, u1: np.ndarray
+    ) -> np.ndarray:
+        """``∫ e^{A(h-s)} B u(t0 + s) ds`` over one interval, for the input hold: zero-order
+        (``G0 u0``), linear (``G0 u0 + G1 (u1 - u0)``) or a callable (Gauss–Legendre nodes)."""
+        if callable(self._hold):
+            sg, wg, nodesB = c["gl"]
+            return sum(
+                w * (nb @ self._u_between(t0 + s, t0, t1, u0, u1))
+                for s, w, nb in zip(sg, wg, nodesB)
+            )
+        if self._hold == "zero":
+            return c["G0"] @ u0
+        return c["G0"] @ u0 + c["G1"] @ (u1 - u0)
+
     def _flow_lti(
         self,
         T: np.ndarray,
@@ -788,16 +803,7 @@ class KKL(Estimator):
         h = t1 - t0
         c = self._interval_data(h)
         Tn = c["Phi_z"] @ T @ c["Psi"]
-        if callable(self._hold):
-            sg, wg, nodesB = c["gl"]
-            xu = sum(
-                w * (nb @ self._u_between(t0 + s, t0, t1, u0, u1))
-                for s, w, nb in zip(sg, wg, nodesB)
-            )
-        elif self._hold == "zero":
-            xu = c["G0"] @ u0
-        else:
-            xu = c["G0"] @ u0 + c["G1"] @ (u1 - u0)
+        xu = self._input_integral(c, t0, t1, u0, u1)
         dc, dr = 0.5 * (dlo + dhi), 0.5 * (dhi - dlo)
         rad = (h / c["N"]) * np.abs(Tn @ c["nodesE"]).sum(axis=0) @ dr
         rad = rad + np.linalg.norm(Tn, axis=1) * float(c["var"] @ dr)
@@ -1094,16 +1100,7 @@ class KKL(Estimator):
             c["radI"] = c["h"] / c["N"] * np.abs(c["nodesE"]).sum(axis=0) + c["var"][None, :]
             c["abs_eA"] = np.abs(c["eA"])
         xc, xr = 0.5 * (xlo + xhi), 0.5 * (xhi - xlo)
-        if callable(self._hold):
-            sg, wg, nodesB = c["gl"]
-            mid = sum(
-                w * (nb @ self._u_between(t0 + s, t0, t1, u0, u1))
-                for s, w, nb in zip(sg, wg, nodesB)
-            )
-        elif self._hold == "zero":
-            mid = c["G0"] @ u0
-        else:
-            mid = c["G0"] @ u0 + c["G1"] @ (u1 - u0)
+        mid = self._input_integral(c, t0, t1, u0, u1)
         dc, dr = 0.5 * (dlo + dhi), 0.5 * (dhi - dlo)
         mid = mid + c["eA"] @ xc + c["GE"] @ dc
         rad = c["abs_eA"] @ xr + c["radI"] @ dr
