@@ -44,6 +44,7 @@ from scipy.sparse import block_diag, csr_matrix
 
 from ._validate import as_float_array, as_matrix, as_vector, check_finite
 from .errors import InconsistentDataError, IvobsError
+from .linalg import UNIT_ROUNDOFF, gamma
 from .sets import Box, Zonotope
 
 __all__ = [
@@ -62,17 +63,6 @@ __all__ = [
     "reduce_generators",
     "safe_radius",
 ]
-
-UNIT_ROUNDOFF = np.finfo(float).eps / 2
-"""``u = 2⁻⁵³``: a rounded IEEE double operation returns ``x (1 + δ)`` with ``|δ| <= u``."""
-
-
-def gamma(n: int) -> float:
-    """``γ_n = n u / (1 - n u)`` (Higham, *Accuracy and Stability of Numerical Algorithms*,
-    Lemma 3.1): a computed sum or dot product of ``n`` terms differs from the exact one by at
-    most ``γ_n`` times the sum of the absolute values of the terms."""
-    return n * UNIT_ROUNDOFF / (1.0 - n * UNIT_ROUNDOFF)
-
 
 def safe_radius(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(c, r)`` with ``[lo, hi] ⊆ [c - r, c + r]`` in exact arithmetic: ``c = (lo + hi)/2``

@@ -13,7 +13,9 @@ from ._validate import as_matrix
 from .errors import IvobsError
 
 __all__ = [
+    "UNIT_ROUNDOFF",
     "controllability_matrix",
+    "gamma",
     "is_controllable",
     "is_hurwitz",
     "is_metzler",
@@ -25,6 +27,22 @@ __all__ = [
     "observability_rank",
     "spectral_radius",
 ]
+
+
+UNIT_ROUNDOFF = float(np.finfo(float).eps) / 2
+"""``u = 2⁻⁵³``: a rounded IEEE double operation returns ``x (1 + δ)`` with ``|δ| <= u``."""
+
+
+def gamma(n: int, unit: float = UNIT_ROUNDOFF) -> float:
+    """``γ_n = n u / (1 - n u)`` (Higham, *Accuracy and Stability of Numerical Algorithms*,
+    Lemma 3.1): an expression whose every term passes through at most ``n`` roundings differs
+    from the exact one by at most ``γ_n`` times the same expression on absolute values (a sum
+    or dot product of ``n`` terms). ``unit = 2u`` (``ε``) gives a conservative variant that
+    also absorbs the rounding of the error terms themselves. ``inf`` when ``n u >= 1/2``."""
+    nu = n * unit
+    if not nu < 0.5:
+        return float("inf")
+    return nu / (1.0 - nu)
 
 
 def spectral_radius(M: Any) -> float:

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DesignError, IvobsError
+from ..linalg import gamma as _gamma
 
 __all__ = [
     "SINGULAR_RCOND",
@@ -63,14 +64,9 @@ _EPS = np.finfo(float).eps
 
 
 def gamma(n: int) -> float:
-    """``γ_n = n ε / (1 - n ε)`` with ``ε = 2⁻⁵²`` (twice the unit roundoff, so conservative):
-    a floating-point expression whose every term passes through at most ``n`` roundings has an
-    error of at most ``γ_n`` times the same expression evaluated on absolute values (Higham,
-    *Accuracy and Stability of Numerical Algorithms*, Lemma 3.1 and §3.5)."""
-    ne = n * _EPS
-    if not ne < 0.5:
-        return np.inf
-    return ne / (1.0 - ne)
+    """``γ_n`` with ``ε = 2⁻⁵²`` (twice the unit roundoff, so conservative):
+    :func:`ivobs.linalg.gamma` with ``unit = ε`` (Higham, Lemma 3.1 and §3.5)."""
+    return _gamma(n, _EPS)
 
 
 def _rcond(M: np.ndarray) -> float:

@@ -102,6 +102,7 @@ import numpy as np
 
 from .._progress import Progress
 from ..errors import IvobsError
+from ..linalg import gamma
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
 from . import register
@@ -136,8 +137,7 @@ def _gamma(n: int) -> float:
     """``γ_n = n ε / (1 - n ε)``: relative error bound of a length-``n`` dot product
     (Higham, *Accuracy and Stability of Numerical Algorithms*, 2002, §3.1), ``ε = 2^-52`` (twice
     the unit roundoff, which also absorbs the rounding of the error terms themselves)."""
-    ne = n * _EPS
-    return ne / (1.0 - ne)
+    return gamma(n, _EPS)
 
 
 def _widen(lo: np.ndarray, hi: np.ndarray, rel: float = _VAR_MARGIN) -> tuple[np.ndarray, ...]:

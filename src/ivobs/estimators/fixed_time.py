@@ -22,7 +22,6 @@ import numpy as np
 
 from .._recursion import LinearFilter, is_shared, scratch, within_band
 from .._validate import as_bool, as_int, as_matrix
-from ..design._lmi import MAX_LMI_STATES
 from ..design.parity import (
     forward_window,
     gamma,
@@ -41,7 +40,7 @@ from ..linalg import check_observable
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
 from . import register
-from .base import ROUNDING, Design, Estimator, outward
+from .base import ROUNDING, Design, Estimator, check_size, outward
 
 __all__ = ["FixedTimeDesign", "FixedTimeEstimator"]
 
@@ -221,13 +220,8 @@ class FixedTimeEstimator(Estimator):
     ):
         super().__init__(sys, x0, on_inconsistent=on_inconsistent)
         nx, ny = sys.nx, sys.ny
-        if nx > MAX_LMI_STATES:
-            raise DesignError(
-                f"{self.name}: the window needs s + 1 >= nx samples, so the stacked matrices of "
-                f"001 eq. (6) have O(nx^2 ny) entries and every step O(nx^2 ny) work; this does "
-                f"not scale to nx = {nx} > {MAX_LMI_STATES} states; use 'interval' or "
-                "'interval-split' with a gain L=... for large sparse systems (docs/scale.md)"
-            )
+        check_size(self.name, nx, "uses the stacked matrices of 001 eq. (6) over s + 1 >= nx "
+                   "samples (O(nx^2 ny) entries and work)")
         self.s = self._check_s(s, nx)
         self._tv = sys.is_time_varying
         self._criterion = criterion

@@ -110,6 +110,7 @@ from ..design.similarity import (
     transformed_width,
 )
 from ..errors import DesignError, IvobsError
+from ..linalg import gamma as _gamma
 from ..model import LinearSystem
 from ..sets import Box, image_bounds, neg, pos
 from . import register
@@ -329,7 +330,6 @@ def rounding_bound(sys: LinearSystem, L: np.ndarray, D: Any) -> RoundingBound:
     ``nu = κ γ (a_y + a_u' + a_d') / ROUNDING``, where ``a_u'``, ``a_d'`` bound the input and
     disturbance terms relative to the base data scale ``s`` (which bounds ``g_j |u_j|``,
     ``|E| |d|``, ``|F| |d|``)."""
-    u_round = np.finfo(float).eps / 2
     n, ny, nu, nd = sys.nx, sys.ny, sys.nu, sys.nd
     absL = np.abs(L)
     if sys.is_sparse:
@@ -358,7 +358,7 @@ def rounding_bound(sys: LinearSystem, L: np.ndarray, D: Any) -> RoundingBound:
         P = (Aa != 0) | (absL @ (Ca != 0) != 0)
         row_nnz = int(np.max(P.sum(axis=1), initial=1))
     m = 2 * max(row_nnz, 1) + nu + 2 * ny + 2 * nd + 6
-    gamma = m * u_round / (1.0 - m * u_round)
+    gamma = _gamma(m)
     # Q_k z (with the rounding of Q_k = A − L_k C itself and the true state inside the box)
     a_z = 3.0 * float(np.max(np.asarray(Aa @ np.ones(n)).ravel() + absL @ (Ca @ np.ones(n))))
     a_y = float(np.max(absL.sum(axis=1), initial=0.0))  # L_k y
@@ -730,22 +730,28 @@ class _CooperativeObserver(Estimator):
             return redo_streams(self, u, y, t, lo, xc, bad)
         return lo, xc
 
+    def _disturbance_images(self, T: int) -> tuple[Any, ...]:
+        """The step matrices with every output observed and Lemma 1's bounds of the disturbance
+        terms over ``T`` steps: ``(m, glo, ghi, flo, fhi)``, ``[glo, ghi] ∋ (S(E − LF)) d`` and
+        ``[flo, fhi] ∋ F d`` (``(T, ·)`` for time-varying bounds; zeros without ``d``)."""
+        box = self.sys.d
+        n, ny = self.sys.nx, self.sys.ny
+        m = self._matrices(np.ones(ny, dtype=bool))
+        if box is None:
+            return m, np.zeros(n), np.zeros(n), np.zeros(ny), np.zeros(ny)
+        dlo, dhi = (box.lo[:T], box.hi[:T]) if box.is_time_varying else (box.lo, box.hi)
+        glo, ghi = image_bounds(m.Gz, dlo, dhi)
+        flo, fhi = image_bounds(self._F, dlo, dhi)
+        return m, glo, ghi, flo, fhi
+
     def _run_sparse(
         self, u: np.ndarray, y: np.ndarray, T: int
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """Sparse ``A``: the bounds themselves, ``[z̄; z̲]+ = S2 [z̄; z̲] + v[k]``, one sparse
         product per step with every input term ``v`` precomputed by one matrix product
         (:class:`~ivobs._recursion.LinearFilter`, loop form); then the consistency of ``y``."""
-        box = self.sys.d
-        n, ny = self.sys.nx, self.sys.ny
-        m = self._matrices(np.ones(ny, dtype=bool))
-        if box is None:
-            glo = ghi = np.zeros(n)
-            flo = fhi = np.zeros(ny)
-        else:
-            dlo, dhi = (box.lo[:T], box.hi[:T]) if box.is_time_varying else (box.lo, box.hi)
-            glo, ghi = image_bounds(m.Gz, dlo, dhi)
-            flo, fhi = image_bounds(self._F, dlo, dhi)
+        n = self.sys.nx
+        m, glo, ghi, flo, fhi = self._disturbance_images(T)
         two = np.vstack
         W = [two([m.Lz, m.Lz]), two([m.Bz, m.Bz])]
         sig = [y, u]
@@ -786,16 +792,8 @@ class _CooperativeObserver(Estimator):
         cached = self.__dict__.get("_vec")
         if cached is not None and cached[0] == T:
             return cached[1]
-        box = self.sys.d
         n, ny = self.sys.nx, self.sys.ny
-        m = self._matrices(np.ones(ny, dtype=bool))
-        if box is None:
-            glo = ghi = np.zeros(n)
-            flo = fhi = np.zeros(ny)
-        else:
-            dlo, dhi = (box.lo[:T], box.hi[:T]) if box.is_time_varying else (box.lo, box.hi)
-            glo, ghi = image_bounds(m.Gz, dlo, dhi)
-            flo, fhi = image_bounds(self._F, dlo, dhi)
+        m, glo, ghi, flo, fhi = self._disturbance_images(T)
         gc, gr = 0.5 * (glo + ghi), 0.5 * (ghi - glo)
         fc, fr = 0.5 * (flo + fhi), 0.5 * (fhi - flo)
         Q = m.Qp - m.Qn

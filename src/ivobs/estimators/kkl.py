@@ -770,19 +770,30 @@ class KKL(Estimator):
         return data
 
     def _input_integral(
-        self, c: dict[str, Any], t0: float, t1: float, u0: np.ndarray, u1: np.ndarray
+        self,
+        c: dict[str, Any],
+        t0: float,
+        t1: float,
+        u0: np.ndarray,
+        u1: np.ndarray,
+        mats: tuple[Any, np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
-        """``∫ e^{A(h-s)} B u(t0 + s) ds`` over one interval, for the input hold: zero-order
-        (``G0 u0``), linear (``G0 u0 + G1 (u1 - u0)``) or a callable (Gauss–Legendre nodes)."""
+        """``M ∫ e^{A(h-s)} B u(t0 + s) ds`` over one interval, for the input hold: zero-order
+        (``G0 u0``), linear (``G0 u0 + G1 (u1 - u0)``) or a callable (Gauss–Legendre nodes).
+        ``mats = (nodes, G0, G1)`` already multiplied by ``M`` (default: those of ``c``,
+        ``M = I``)."""
+        if mats is None:
+            mats = (c["gl"][2] if "gl" in c else None, c["G0"], c["G1"])
+        nodes, G0, G1 = mats
         if callable(self._hold):
-            sg, wg, nodesB = c["gl"]
+            sg, wg, _ = c["gl"]
             return sum(
                 w * (nb @ self._u_between(t0 + s, t0, t1, u0, u1))
-                for s, w, nb in zip(sg, wg, nodesB)
+                for s, w, nb in zip(sg, wg, nodes)
             )
         if self._hold == "zero":
-            return c["G0"] @ u0
-        return c["G0"] @ u0 + c["G1"] @ (u1 - u0)
+            return G0 @ u0
+        return G0 @ u0 + G1 @ (u1 - u0)
 
     def _flow_lti(
         self,
@@ -924,16 +935,7 @@ class KKL(Estimator):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`_flow_lti` from ``T(t0+) = T_h``: the same formulas with the matrices of
         :meth:`_anchor`, plus the residual term of ``T_h``."""
-        if callable(self._hold):
-            sg, wg, _ = c["gl"]
-            mid = sum(
-                w * (tb @ self._u_between(t0 + s, t0, t1, u0, u1))
-                for s, w, tb in zip(sg, wg, an["TgB"])
-            )
-        else:
-            mid = an["TG0"] @ u0
-            if self._hold == "linear":
-                mid = mid + an["TG1"] @ (u1 - u0)
+        mid = self._input_integral(c, t0, t1, u0, u1, (an.get("TgB"), an["TG0"], an["TG1"]))
         dc, dr = 0.5 * (dlo + dhi), 0.5 * (dhi - dlo)
         mid = mid + an["TGE"] @ dc
         rad = an["rad"] @ dr + an["res"] @ np.maximum(np.abs(zlo), np.abs(zhi))

@@ -14,13 +14,11 @@ import numpy as np
 
 from .._recursion import SplitFilter, redo_streams, within_band
 from .._validate import as_int
-from ..design._lmi import MAX_LMI_STATES
 from ..design.hinf import observer_gain
-from ..errors import DesignError
 from ..model import LinearSystem
 from ..sets import Box
 from . import register
-from .base import Design, Estimator
+from .base import Design, Estimator, check_size
 
 __all__ = ["Reachability", "ReachabilityDesign"]
 
@@ -127,13 +125,8 @@ class Reachability(Estimator):
         **base: Any,
     ):
         super().__init__(sys, x0, **base)
-        if sys.nx > MAX_LMI_STATES:
-            raise DesignError(
-                f"{self.name}: the exact interval hull of the error's reachable set propagates "
-                f"nx x (nx + nd) matrices (O(nx^3) work per step) and does not scale to nx = "
-                f"{sys.nx} > {MAX_LMI_STATES} states; use 'interval' or 'interval-split' with a "
-                "gain L=... (sparse A: one sparse product per step; docs/scale.md)"
-            )
+        check_size(self.name, sys.nx, "propagates the exact interval hull of the error's "
+                   "reachable set, nx x (nx + nd) matrices (O(nx^3) work)")
         K = None if memory is None else as_int("memory", memory, 1)
         Lm, gamma, P, rho = observer_gain(sys, L, self.name)
         self._mats = sys.matrices_at(0)

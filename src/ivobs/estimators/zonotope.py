@@ -13,14 +13,13 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
-from ..design._lmi import MAX_LMI_STATES
 from ..design.hinf import observer_gain
 from ..errors import DesignError, IvobsError
 from ..linalg import spectral_radius
 from ..model import LinearSystem
 from ..sets import Box, Zonotope
 from . import register
-from .base import Design, Estimator
+from .base import Design, Estimator, check_size
 from .reachability import consistent, gain_without, observer_bounds
 
 __all__ = ["ZonotopeDesign", "ZonotopeEstimator"]
@@ -105,13 +104,8 @@ class ZonotopeEstimator(Estimator):
     ):
         super().__init__(sys, x0, **base)
         nx = sys.nx
-        if nx > MAX_LMI_STATES:
-            raise DesignError(
-                f"{self.name}: every step multiplies an nx x q generator matrix (q >= nx) and "
-                f"sorts its columns (O(nx^3) work per step); this does not scale to nx = {nx} > "
-                f"{MAX_LMI_STATES} states; use 'interval' or 'interval-split' with a gain L=... "
-                "(sparse A: one sparse product per step; docs/scale.md)"
-            )
+        check_size(self.name, nx, "multiplies an nx x q generator matrix (q >= nx) and sorts "
+                   "its columns (O(nx^3) work)")
         q = ORDER_PER_STATE * nx if order is None else as_int("order", order)
         if q < nx:
             raise IvobsError(f"order: expected q >= nx = {nx} generators (002 Remark 2), got {q}")
