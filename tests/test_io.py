@@ -3,6 +3,7 @@ malformed inputs, each rejected with the line and the key, leaving no output fil
 
 import functools
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -225,19 +226,13 @@ def test_run_system_reports_alarms_of_a_faulty_log(tmp_path, capsys):
     y[40:, 1] += 1.0  # a speed sensor offset of ~18 noise bounds
     save_system(tmp_path / "s.toml", sc)
     write_log(tmp_path / "log.csv", tr.u, y)
-    code = main(
-        [
-            "run",
-            "--system",
-            str(tmp_path / "s.toml"),
-            "--log",
-            str(tmp_path / "log.csv"),
-            "--method",
-            "interval-split",
-        ]
-    )
+    args = ["run", "--system", str(tmp_path / "s.toml"), "--log", str(tmp_path / "log.csv")]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main([*args, "--method", "interval-split"])
     text = capsys.readouterr().out
     assert code == 1 and "ALARMS" in text and "first: step 40:" in text
+    assert not caught, "the alarms are reported once, by the command, not also as warnings"
 
 
 def test_run_needs_a_scenario_or_a_system(capsys):

@@ -106,6 +106,7 @@ def _run_system(args: argparse.Namespace) -> int:
         raise IvobsError(
             f"{args.log}: the system is continuous-time (dt = 0): the log needs a time column t"
         )
+    est.on_inconsistent = "ignore"  # reported below, once, as ALARMS (from the Monitor)
     res = _estimate(est, log.u, log.y, log.t, args)
     record = Monitor(spec.system, est, x0=spec.x0).check(log.u, log.y, t=log.t, estimate=res)
     alarms = np.flatnonzero(record.alarm)

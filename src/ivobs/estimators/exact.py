@@ -121,9 +121,9 @@ _PRIMAL_TOL = 1e-9
 """HiGHS primal feasibility tolerance (on the shifted program)."""
 
 _DUAL_TOL = 1e-10
-"""HiGHS dual feasibility tolerance: the safe bound loses about this times the widths of the
-variables (two runs that end on different optimal bases, e.g. ``step()`` after ``restore()`` and
-``run()``, then agree to about that much)."""
+"""HiGHS dual feasibility tolerance: the safe bound loses up to this times the sum of the
+widths of the variables (two runs that end on different optimal bases, e.g. ``step()`` after
+``restore()`` and ``run()``, then agree to about that much: 5e-9 for 16 steps of 2 states)."""
 
 _EPS = float(np.finfo(float).eps)
 _TINY = float(np.finfo(float).smallest_subnormal)
@@ -164,6 +164,9 @@ def _new_highs() -> highspy.Highs:
     # tighter than HiGHS's 1e-7 defaults: the safe bound is only as tight as the duals
     h.setOptionValue("primal_feasibility_tolerance", _PRIMAL_TOL)
     h.setOptionValue("dual_feasibility_tolerance", _DUAL_TOL)
+    # Devex pricing for the dual simplex: on the windowed benchmark (bench_exact.py) 13 % faster
+    # than the default (dual steepest edge), with the same boxes
+    h.setOptionValue("simplex_dual_edge_weight_strategy", 1)
     return h
 
 
