@@ -5,6 +5,8 @@ in every other method's box" (parametrised over the methods registered at collec
 import io
 import itertools
 import json
+import subprocess
+import sys
 import warnings
 from functools import cache
 
@@ -333,3 +335,18 @@ def test_exact_is_contained_in_every_other_method(method, which):
     tol = LP_TOL * (1 + np.abs(ref.lower[k0:]))
     assert np.all(ref.lower[k0:] >= res.lower[k0:] - tol), f"{method} is below exact"
     assert np.all(ref.upper[k0:] <= res.upper[k0:] + tol), f"{method} is above exact"
+
+
+def test_no_solver_banner_on_standard_output():
+    """HiGHS >= 1.15 prints "Running HiGHS ..." from C++ at construction: ivobs silences it (a
+    table written by ``ivobs compare > file`` must hold only the table)."""
+    code = (
+        "import numpy as np, ivobs\n"
+        "sys = ivobs.scenarios.get('servo-motor', horizon=5)\n"
+        "tr = sys.simulate('vertex', seed=0)\n"
+        "est = ivobs.make_estimator('exact', sys.system, x0=sys.x0, progress=False)\n"
+        "print('width', est.run(tr.u, tr.y).width.sum() > 0)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout == "width True\n"
+    assert "HiGHS" not in out.stderr

@@ -93,7 +93,10 @@ filtered hull; ``d[k]`` enters through ``y[k]``).
 from __future__ import annotations
 
 import os
+import sys
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -156,8 +159,38 @@ class ExactDesign(Design):
     window: int | None = None
 
 
+_BANNER_SILENCED = False
+
+
+@contextmanager
+def _first_highs_silenced() -> Iterator[None]:
+    """Around the first ``highspy.Highs()`` of the process: HiGHS >= 1.15 prints its banner
+    ("Running HiGHS ...") from C++ when the object is constructed, before any option (such as
+    ``output_flag``) can be set. The C-level standard output is sent to ``/dev/null`` for that
+    one call (HiGHS prints the banner once per process)."""
+    global _BANNER_SILENCED
+    if _BANNER_SILENCED:
+        yield
+        return
+    _BANNER_SILENCED = True
+    try:
+        sys.stdout.flush()
+        saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    except (OSError, ValueError, AttributeError):  # no file descriptor 1: nothing to silence
+        yield
+        return
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+
+
 def _new_highs() -> highspy.Highs:
-    h = highspy.Highs()
+    with _first_highs_silenced():
+        h = highspy.Highs()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("presolve", "off")
     h.setOptionValue("threads", 1)
