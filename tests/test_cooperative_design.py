@@ -15,9 +15,9 @@ from ivobs.design.cooperative import (
     nonnegative_gain,
     output_weights,
     refine_width,
-    spectral_radius,
     steady_width,
 )
+from ivobs.linalg import spectral_radius
 
 
 def mats(name):

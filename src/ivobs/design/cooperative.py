@@ -58,6 +58,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from ..errors import DesignError
+from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
 
 __all__ = [
@@ -84,10 +85,6 @@ OPT_TOL = (1e-12, 1e-9)
 first value, the second if HiGHS calls the first infeasible (its own tolerances are 1e-7)."""
 REG_L1 = 1e-3
 """Weight of ``Σ_ij w_j |L_ij|`` (tie-break) next to the largest column norm in that stage."""
-
-
-def spectral_radius(M: np.ndarray) -> float:
-    return 0.0 if M.size == 0 else float(np.max(np.abs(np.linalg.eigvals(M))))
 
 
 def steady_width(D: np.ndarray, G: np.ndarray, delta: np.ndarray) -> np.ndarray:

@@ -97,7 +97,6 @@ from ..design.cooperative import (
     missing_radius,
     nonnegative_gain,
     refine_width,
-    spectral_radius,
     steady_width,
 )
 from ..design.similarity import (
@@ -111,6 +110,7 @@ from ..design.similarity import (
 )
 from ..errors import DesignError, IvobsError
 from ..linalg import gamma as _gamma
+from ..linalg import spectral_radius
 from ..model import LinearSystem
 from ..sets import Box, image_bounds, neg, pos
 from . import register
