@@ -564,3 +564,69 @@ def test_a8_vectorised_margin_covers_the_terms_of_a_large_gain(big):
     res = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]))
     assert_contains(res, np.stack([t.x for t in trs]))
     assert not res.inconsistent.any()
+
+
+def _nearly_unobservable(seed: int) -> tuple[LinearSystem, Box, ivobs.Trajectory]:
+    """A stable system whose ``C`` is ``eps`` away from orthogonal to an eigenvector, far from
+    the origin: the default design of interval-transformed then takes a large gain and an
+    ill-conditioned ``S`` (the case that once lost the true state by 3.6 box widths)."""
+    rng = np.random.default_rng(seed)
+    nx = 2 + seed % 2
+    V = rng.normal(size=(nx, nx))
+    A = V @ np.diag(rng.uniform(-0.9, 0.9, nx)) @ np.linalg.inv(V)
+    v0 = V[:, 0] / np.linalg.norm(V[:, 0])
+    c = rng.normal(size=nx)
+    c += (float(rng.choice([1e-5, 1e-7])) - c @ v0) * v0
+    r = rng.uniform(0.2, 1.0, 2) * 1e-4
+    sys = LinearSystem(A, None, c[None, :], E=0.3 * rng.normal(size=(nx, 2)),
+                       F=0.1 * rng.normal(size=(1, 2)), d=Box(-r, r))  # fmt: skip
+    centre = float(rng.choice([1e5, 1e7])) * rng.choice([-1.0, 1.0], nx)
+    x0 = Box(centre - 1e-6, centre + 1e-6)
+    d = np.where(rng.random((30, 2)) < 0.5, -r, r)
+    return sys, x0, ivobs.simulate(sys, np.where(rng.random(nx) < 0.5, x0.lo, x0.hi), None, d)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_transformed_contains_the_state_with_a_large_gain_and_ill_conditioned_S(seed):
+    """The recursion in ``z = S x`` bounds its own rounding (the residual ``Q S − S M̂`` acting
+    on ``x``, the computed ``S⁻¹``, the products with ``S``) in both run paths."""
+    sys, x0, tr = _nearly_unobservable(seed)
+    try:
+        est = ivobs.make_estimator("interval-transformed", sys, x0=x0)
+    except DesignError:
+        pytest.skip("no transformed design for this system")
+    for vectorize in (True, False):
+        res = est.run(None, tr.y, vectorize=vectorize)
+        assert not res.inconsistent.any()
+        assert_contains(res, tr.x)
+
+
+def test_transformed_step_error_is_negligible_on_the_paper_example():
+    """On 002's servo motor the rounding terms of ``z = S x`` change nothing visible: the
+    paper's widths are kept (relative change below 1e-12)."""
+    sc = scenarios.get("servo-motor")
+    est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0)
+    m = est._matrices(np.ones(sc.system.ny, dtype=bool))
+    g, c = est._tconv
+    assert m.err is not None and np.all(m.err < 1e-12) and g < 1e-12 and c < 1e-13
+    tr = sc.simulate("vertex", seed=0)
+    res = est.run(sc.u, tr.y)
+    assert_contains(res, tr.x)
+
+
+def test_transformed_regression_large_gain_far_from_the_origin():
+    """Audit A13: ``L ≈ (5.4e6, −1.8e6)``, ``cond(S) ≈ 1.2e7``, ``|x| ≈ 1e6``: the true state was
+    4231 outside a box 1164 wide at step 2."""
+    A = [[0.021076483834902654, 1.296600609653334], [0.05440529898189982, -0.2652197859523413]]
+    C = [[-0.6981669039978192, -2.034870354896757]]
+    E = [[-0.4361806017959113, -0.5284829050220129], [0.13777619470524255, -0.4373513334001146]]
+    F = [[0.05347979189606259, 0.03640272926732858]]
+    r = np.array([5.6966072933002644e-05, 7.835263952421959e-05])
+    sys = LinearSystem(A, None, C, E=E, F=F, d=Box(-r, r))
+    x0 = Box([1e6 - 1e-6, -1e6 - 1e-6], [1e6 + 1e-6, -1e6 + 1e-6])
+    d = np.where(np.random.default_rng(0).random((10, 2)) < 0.5, -r, r)
+    tr = ivobs.simulate(sys, x0.lo, None, d)
+    est = ivobs.make_estimator("interval-transformed", sys, x0=x0)
+    assert np.abs(est.design.L).max() > 1e6  # the default design's large gain
+    for vectorize in (True, False):
+        assert_contains(est.run(None, tr.y, vectorize=vectorize), tr.x)

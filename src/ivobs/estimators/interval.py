@@ -68,7 +68,22 @@ same terms relative to the data scale ``s_k``) whenever they exceed 1 (taking, l
 margin, the bound's own magnitude for the running maximum of ``‖z_j‖``; the block evaluation of
 :class:`~ivobs._recursion.LinearFilter` reorders the same sums). The consistency test's slack
 grows by ``max(1, μ, ν)``. On the paper examples ``μ, ν < 0.6`` (nothing changes there); with a
-gain ``L = (−999999.1, 10⁶)`` they are about 100. ``interval-transformed`` keeps the base margin.
+gain ``L = (−999999.1, 10⁶)`` they are about 100.
+
+**Rounding in** ``z = S x`` (``interval-transformed``). The recursion runs with computed
+matrices ``Q = fl(S M̂ Si)``, ``S L_k``, ``S (B − L_k D_u)``, ``S (E − L_k F)`` (``M̂ = fl(A − L_k
+C)``, ``Si`` the computed ``S⁻¹``), while the true ``z = S x`` obeys the exact ones. On the true
+state the matrix error is ``(Q − S M S⁻¹) z = (Q S − S M̂) x + S (M̂ − M) x``: an evaluated
+residual acting on ``x`` (no ``cond(S)`` factor). With the errors of the other products and of
+the evaluation, one step is off by at most ``c_x ‖x‖ + c_z ‖z‖ + c_y ‖y‖ + c_u ‖u‖ + c_d ‖d‖``
+(:func:`transform_step_error`); the loop adds it to the new ``z`` bounds at every step, the
+vectorised path adds ``‖Si‖ κ_z`` times its running maximum to the ``x`` bounds
+(``κ_z = ‖(I − |Q|)⁻¹‖_∞``). The box of ``x = S⁻¹ z`` is widened for the computed inverse
+(``|Si S − I|``, :func:`transform_conversion`) and ``z_0`` for the products with ``S``. On the
+paper examples these terms are below ``1e-12`` relative; with a large gain and an
+ill-conditioned ``S`` (nearly unobservable systems far from the origin: ``|L| ~ 10⁶``,
+``cond(S) ~ 10⁷``, ``|x| ~ 10⁶``) they are the real floating-point error of the design and
+dominate the width: prefer ``interval-split``, or give ``poles=`` with a smaller gain.
 """
 
 from __future__ import annotations
@@ -191,6 +206,8 @@ class _StepMatrices:
     Gz: np.ndarray  # S (E − L_k F)
     Gp: np.ndarray  # (S (E − L_k F))⁺
     Gn: np.ndarray  # (S (E − L_k F))⁻
+    # S ≠ I: coefficients of one step's error on (‖x‖∞, ‖z‖∞, ‖y‖∞, ‖u‖∞, ‖d‖∞)
+    err: np.ndarray | None = None
 
 
 def _bad_streams(
@@ -302,6 +319,73 @@ def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: b
         ref = "003 Assumption 2.A" if nonnegative else "003 Theorem 3"
         raise DesignError(f"{who}: {what}: spectral radius {rho:.6g} >= 1 ({ref})")
     return D
+
+
+def _norm_inf(M: np.ndarray) -> float:
+    """``‖M‖_∞`` (largest absolute row sum; 0 for an empty matrix)."""
+    return float(np.max(np.abs(M).sum(axis=1), initial=0.0)) if M.size else 0.0
+
+
+def transform_conversion(S: np.ndarray, Si: np.ndarray, who: str) -> tuple[float, float]:
+    """Rounding of ``x = S⁻¹ z`` evaluated with the computed inverse ``Si`` (module docstring,
+    "Rounding", ``S ≠ I``): ``(g, c)`` with ``g >= ‖Si S − I‖_∞`` (the residual plus the
+    rounding of its evaluation, ``γ_{n+1} |Si| |S|``) and ``c = γ_{n+1} ‖Si‖_∞``. For the true
+    ``z = S x`` in a box of magnitude ``ζ`` whose image by Lemma 1 of ``Si`` has magnitude
+    ``ξ``: ``|x − Si z| <= |Si S − I| |x|``, so ``‖x‖ <= (ξ + c ζ) / (1 − g)`` and the box of
+    ``x`` is the image widened by ``c ζ + g (ξ + c ζ) / (1 − g)``. ``DesignError`` when
+    ``g >= 1/2`` (``S`` numerically singular)."""
+    n = S.shape[0]
+    gam = _gamma(n + 1)
+    g = _norm_inf(np.abs(Si @ S - np.eye(n)) + gam * (np.abs(Si) @ np.abs(S)))
+    if not g < 0.5:
+        raise DesignError(
+            f"{who}: the transformation S is numerically singular (‖S⁻¹S − I‖ = {g:.3g} in "
+            f"floating point, cond(S) = {np.linalg.cond(S):.3g}): no guaranteed bounds through "
+            "x = S⁻¹ z; give another L, R, e1, e2 or S"
+        )
+    return g, gam * _norm_inf(Si)
+
+
+def transform_step_error(
+    S: np.ndarray,
+    Si: np.ndarray,
+    A: np.ndarray,
+    Lk: np.ndarray,
+    C: np.ndarray,
+    B: np.ndarray,
+    Du: np.ndarray,
+    E: np.ndarray,
+    F: np.ndarray,
+    Q: np.ndarray,
+    mats: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """Coefficients ``(c_x, c_z, c_y, c_u, c_d)`` of the error of one step of the recursion in
+    ``z = S x`` (``S ≠ I``; module docstring, "Rounding"): the computed step differs from the
+    exact ``z+ = S M S⁻¹ z + S L_k y + S(B − L_k D_u) u + S(E − L_k F) d`` (``M = A − L_k C``,
+    true ``z = S x``) by at most ``c_x ‖x‖ + c_z ‖z‖ + c_y ‖y‖ + c_u ‖u‖ + c_d ‖d‖``
+    (∞-norms; ``x``, ``z``: the true state, bounded by its boxes):
+
+    * ``(Q − S M S⁻¹) z = (Q S − S M̂) x + S (M̂ − M) x`` with ``M̂ = fl(A − L_k C)``: the
+      residual ``Q S − S M̂`` is evaluated (plus ``γ (|Q| |S| + |S| |M̂|)`` for its rounding)
+      and ``|M̂ − M| <= γ (|A| + |L_k| |C|)`` — no ``cond(S)`` factor: the error acts on
+      ``x``, not on ``S⁻¹`` applied to ``z``;
+    * the computed ``S L_k``, ``S (B − L_k D_u)``, ``S (E − L_k F)``: ``γ |S|`` times the
+      absolute values of their factors;
+    * the evaluation of the step (split form, sums of ``m`` terms): ``γ_m`` times
+      ``‖Q‖ ‖z‖ + ‖S L_k‖ ‖y‖ + ‖S (B − L_k D_u)‖ ‖u‖ + ‖S (E − L_k F)‖ ‖d‖``.
+    """
+    n, ny, nu, nd = A.shape[0], C.shape[0], B.shape[1], E.shape[1]
+    Bz, Lz, Gz = mats
+    gam = _gamma(2 * n + 2 * ny + nu + 2 * nd + 8)
+    aS, aL = np.abs(S), np.abs(Lk)
+    Mh = A - Lk @ C
+    res = np.abs(Q @ S - S @ Mh) + gam * (np.abs(Q) @ aS + aS @ np.abs(Mh))
+    c_x = _norm_inf(res + gam * (aS @ (np.abs(A) + aL @ np.abs(C))))
+    c_z = gam * _norm_inf(Q)
+    c_y = gam * (_norm_inf(Lz) + 2.0 * _norm_inf(aS @ aL))
+    c_u = gam * (_norm_inf(Bz) + 2.0 * _norm_inf(aS @ (np.abs(B) + aL @ np.abs(Du))))
+    c_d = gam * (_norm_inf(Gz) + 2.0 * _norm_inf(aS @ (np.abs(E) + aL @ np.abs(F))))
+    return np.array([c_x, c_z, c_y, c_u, c_d])
 
 
 @dataclass(frozen=True)
@@ -455,6 +539,9 @@ class _CooperativeObserver(Estimator):
         self._S = S
         self._Si = None if S is None else np.linalg.inv(S)
         self._Si_pm = None if S is None else (pos(self._Si), neg(self._Si))
+        if S is not None:
+            assert self._Si is not None
+            self._tconv = transform_conversion(S, self._Si, self.name)
         self._C_pm = (pos(C), neg(C))
         self._F_pm = (pos(F), neg(F))
         self._cache: dict[bytes, Any] = {}
@@ -485,10 +572,16 @@ class _CooperativeObserver(Estimator):
                 self._cache[key] = self._sparse_step(Lk, Bz, Gz)
                 return self._cache[key]
             Q = self._A - Lk @ self._C
+            err = None
             if self._S is not None:
-                Q = self._S @ Q @ self._Si
-                Bz, Lk, Gz = self._S @ Bz, self._S @ Lk, self._S @ Gz
-            self._cache[key] = _StepMatrices(pos(Q), neg(Q), Bz, Lk, Gz, pos(Gz), neg(Gz))
+                S, Si = self._S, self._Si
+                assert Si is not None
+                Q = S @ Q @ Si
+                Bz, Lz, Gz = S @ Bz, S @ Lk, S @ Gz
+                err = transform_step_error(S, Si, self._A, Lk, self._C, self._B, self._Du,
+                                           self._E, self._F, Q, (Bz, Lz, Gz))  # fmt: skip
+                Lk = Lz
+            self._cache[key] = _StepMatrices(pos(Q), neg(Q), Bz, Lk, Gz, pos(Gz), neg(Gz), err)
         return self._cache[key]
 
     def _sparse_step(self, Lk: np.ndarray, Bz: np.ndarray, Gz: np.ndarray) -> _SparseStep:
@@ -505,7 +598,11 @@ class _CooperativeObserver(Estimator):
         assert self.x0 is not None
         lo, hi = self.x0.lo.copy(), self.x0.hi.copy()
         if self._S is not None:
-            lo, hi = image_bounds(self._S, lo, hi)  # 002 (42a-b)
+            # 002 (42a-b), widened by the rounding of the products (γ_{n+1} |S| |x0|)
+            mag = np.abs(self._S) @ np.maximum(np.abs(lo), np.abs(hi))
+            lo, hi = image_bounds(self._S, lo, hi)
+            mag *= _gamma(self.sys.nx + 1)
+            lo, hi = lo - mag, hi + mag
         if self.__dict__.get("_sparse"):  # one stacked vector [z̄; z̲]
             return {"z": np.concatenate([hi, lo])}
         return {"lo": lo, "hi": hi}
@@ -517,7 +614,13 @@ class _CooperativeObserver(Estimator):
             assert self.x0 is not None
             return self.x0.lo.copy(), self.x0.hi.copy()
         assert self._Si_pm is not None
-        return _hull(*self._Si_pm, lo, hi)  # 002 (42e-f)
+        xlo, xhi = _hull(*self._Si_pm, lo, hi)  # 002 (42e-f)
+        # the computed inverse and the rounding of the products (transform_conversion)
+        g, c = self._tconv
+        cz = c * float(np.max(np.maximum(np.abs(lo), np.abs(hi))))
+        xi = float(np.max(np.maximum(np.abs(xlo), np.abs(xhi))))
+        e = cz + g * (xi + cz) / (1.0 - g)
+        return xlo - e, xhi + e
 
     def _consistent(
         self,
@@ -592,6 +695,17 @@ class _CooperativeObserver(Estimator):
         state["lo"] = m.Qp @ zlo - m.Qn @ zhi + known + glo
         if self._rounding is not None:  # this step's rounding, inside the state (any pattern)
             e = self._local_error(np.concatenate([zlo, zhi, y_obs, u_k]), dbox)
+            state["hi"] += e
+            state["lo"] -= e
+        elif m.err is not None:  # S ≠ I: transform_step_error, on the true x and z
+            norms = np.array([
+                np.max(np.maximum(np.abs(xlo), np.abs(xhi)), initial=0.0),
+                np.max(np.maximum(np.abs(zlo), np.abs(zhi)), initial=0.0),
+                np.max(np.abs(y_obs), initial=0.0),
+                np.max(np.abs(u_k), initial=0.0),
+                max(np.max(np.abs(dbox.lo), initial=0.0), np.max(np.abs(dbox.hi), initial=0.0)),
+            ])  # fmt: skip
+            e = float(m.err @ norms)
             state["hi"] += e
             state["lo"] -= e
         return xlo, xhi
@@ -696,6 +810,8 @@ class _CooperativeObserver(Estimator):
             return None
         if self._sparse:
             return self._run_sparse(u, y, T)
+        if self._S is not None and not np.isfinite(self._transform_kappa()):
+            return None  # |Q| not Schur in floating point: the loop bounds each step's error
         vec = self._vector_terms(T)
         filt, rad, yrad, gsig, fsig = vec
         nx = self.sys.nx
@@ -726,9 +842,88 @@ class _CooperativeObserver(Estimator):
             np.add(xc, s_x - rad, out=lo)
             xc += s_x + rad
         self._widen(lo, xc)
+        if self._S is not None:
+            extra = self._transform_margin(lo, xc, u, y)
+            lo -= extra
+            xc += extra
         if bad is not None:  # only the streams with an inconsistent measurement by the loop
             return redo_streams(self, u, y, t, lo, xc, bad)
         return lo, xc
+
+    def _transform_kappa(self) -> float:
+        """``κ_z = ‖(I − |Q|)⁻¹‖_∞`` of the step with every output observed (``S ≠ I``):
+        how the steps' errors add up in ``z`` (``inf`` if ``|Q|`` is not Schur)."""
+        kap = self.__dict__.get("_kappa_z")
+        if kap is None:
+            m = self._matrices(np.ones(self.sys.ny, dtype=bool))
+            n = self.sys.nx
+            with np.errstate(all="ignore"):
+                try:
+                    v = np.linalg.solve(np.eye(n) - (m.Qp + m.Qn), np.ones(n))
+                except np.linalg.LinAlgError:
+                    v = np.full(n, np.inf)
+            ok = np.all(np.isfinite(v)) and v.min() >= 1.0 - 1e-9
+            kap = self.__dict__["_kappa_z"] = float(v.max()) if ok else np.inf
+        return kap
+
+    def _transform_margin(
+        self, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, y: np.ndarray
+    ) -> np.ndarray:
+        """The rounding of the vectorised path in ``z = S x`` (``S ≠ I``; module docstring,
+        "Rounding"): per step, ``‖Si‖ κ_z max_{j<=k} δ_j`` plus the conversion to ``x``
+        (:func:`transform_conversion`), with ``δ_j`` from :func:`transform_step_error` on the
+        running maxima of ``‖x‖`` (the bounds), ``‖z‖ <= 2 ‖S‖ ‖x‖``, ``‖y‖``, ``‖u‖`` and
+        ``‖d‖``. When the margin from each stream's whole-record maxima is below
+        ``1e-3 ROUNDING`` that one is used (whole-array reductions): shape ``(..., 1, 1)``;
+        else the running maxima are taken per block of ``T / 64`` steps (the maximum up to
+        the end of a step's block): shape ``(..., T, 1)``."""
+        assert self._S is not None and self._Si is not None
+        m = self._matrices(np.ones(self.sys.ny, dtype=bool))
+        assert m.err is not None
+        c_x, c_z, c_y, c_u, c_d = m.err
+        nS, nSi, kap = _norm_inf(self._S), _norm_inf(self._Si), self._transform_kappa()
+        g, c = self._tconv
+        box = self.sys.d
+        Dm = 0.0
+        if isinstance(box, Box):
+            Dm = float(np.max(np.maximum(np.abs(box.lo), np.abs(box.hi)), initial=0.0))
+
+        def margin(X: Any, Y: Any, U: Any) -> Any:
+            delta = (c_x + 2.0 * nS * c_z) * X + c_y * Y + c_u * U + c_d * Dm
+            zeta = 2.0 * nS * X
+            return nSi * kap * delta + c * zeta + g * (X + c * zeta) / (1.0 - g)
+
+        lead = y.shape[:-2]
+        B = int(np.prod(lead))
+
+        def largest(a: np.ndarray) -> np.ndarray:  # max |a| per stream (u may be shared)
+            flat = a.reshape(B, -1) if a.ndim == y.ndim else a.reshape(1, -1)
+            if not flat.shape[1]:
+                return np.zeros(flat.shape[0])
+            return np.maximum(flat.max(axis=1), -flat.min(axis=1))
+
+        extra = margin(np.maximum(largest(hi), largest(lo)), largest(y), largest(u))
+        if float(np.max(extra)) <= 1e-3 * ROUNDING:
+            return extra.reshape(*lead, 1, 1)
+
+        # per block of K steps (64 blocks: contiguous reductions), then the running maximum
+        # over blocks: at step k, the maximum up to the end of k's block (>= the one up to k)
+        T = y.shape[-2]
+        K = max(1, -(-T // 64))
+        starts = np.arange(0, T, K)
+
+        def running(a: np.ndarray) -> np.ndarray:
+            if not a.shape[-1]:
+                return np.zeros((*a.shape[:-2], starts.size))
+            r = np.maximum(
+                np.maximum.reduceat(a, starts, axis=-2).max(axis=-1),
+                -np.minimum.reduceat(a, starts, axis=-2).min(axis=-1),
+            )
+            return np.maximum.accumulate(r, axis=-1, out=r)
+
+        X = np.maximum(running(hi), running(lo))
+        extra = margin(X, running(y), running(u))
+        return np.repeat(extra, K, axis=-1)[..., :T, None]
 
     def _disturbance_images(self, T: int) -> tuple[Any, ...]:
         """The step matrices with every output observed and Lemma 1's bounds of the disturbance
