@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import ivobs
-from ivobs import Box, scenarios
+from ivobs import Box, IvobsError, LinearSystem, scenarios
 from ivobs.testing import adversarial_run, assert_contains, random_system
 
 CASES = [
@@ -186,3 +186,15 @@ def test_correlated_disturbance_is_used_exactly() -> None:
     tr2 = ivobs.simulate(split, tr.x[0], None, np.hstack([tr.d, tr.d]))
     ind = ivobs.make_estimator("constrained-zonotope", split, x0=x0).run(tr2.u, tr2.y)
     assert np.all(ind.width[1:] > 0.1) and np.mean(ind.width[1:]) > 1.0  # 0.125, 1.375
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.parametrize("method", ["strip", "constrained-zonotope", "intersect"])
+def test_overflow_of_an_unstable_plant_is_a_clear_error(method):
+    """An unstable plant through a long outage: the set really exceeds the largest float; the
+    error says so (step, cause), instead of a raw SciPy 'array must not contain infs'."""
+    sys = LinearSystem([[1.8, 0.3], [0.0, 1.5]], None, [[1.0, 0.0]], E=0.1 * np.eye(2),
+                       F=np.zeros((1, 2)), d=Box.symmetric([1.0, 1.0]))  # fmt: skip
+    est = ivobs.make_estimator(method, sys, x0=Box([-1.0, -1.0], [1.0, 1.0]))
+    with pytest.raises(IvobsError, match=r"overflowed at step 12\d\d .*unstable"):
+        est.run(None, np.full((1300, 1), np.nan))

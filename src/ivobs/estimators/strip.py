@@ -62,7 +62,14 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
-from ..czonotope import UNIT_ROUNDOFF, box_generators, gamma, reduce_generators, safe_radius
+from ..czonotope import (
+    UNIT_ROUNDOFF,
+    box_generators,
+    check_overflow,
+    gamma,
+    reduce_generators,
+    safe_radius,
+)
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box, Zonotope
@@ -230,6 +237,7 @@ class StripEstimator(Estimator):
         ) + (aM @ acc) * (1.0 + gamma(nz + 1))
         H_next = np.hstack([H_next, box_generators(err)])
         H_next = H_next[:, np.any(H_next != 0, axis=0)]
+        check_overflow(self.name, k, p_next, H_next)
         e_next = np.zeros(nx)
         if self.design.reduction == "box":
             m = H_next.shape[1]
