@@ -95,3 +95,16 @@ def test_user_gain_is_checked():
     with pytest.raises(IvobsError, match=r"L: expected shape \(3, 2\)"):
         observer_gain(s, np.zeros((2, 3)), "test")
     assert check_gain(s.A, s.C, sc.reference["L2"], "x") == pytest.approx(0.99977, abs=1e-4)
+
+
+def test_an_lmi_without_solution_says_what_to_do():
+    """An infeasible LMI: the DesignError names the problem, the solvers' statuses and the ways
+    out (an explicit gain, another method)."""
+    import cvxpy as cp
+
+    from ivobs.design._lmi import solve
+
+    P = cp.Variable((2, 2), symmetric=True)
+    problem = cp.Problem(cp.Minimize(0), [P >> np.eye(2), P << -np.eye(2)])
+    with pytest.raises(DesignError, match=r"toy LMI: the LMI has no .*infeasible.*L=\.\.\."):
+        solve(problem, "toy LMI")

@@ -50,7 +50,12 @@ def solve(problem: Any, what: str) -> str:
         statuses.append(f"{solver}: {problem.status}")
         if problem.status == cp.OPTIMAL and _finite(problem):
             return solver
-    raise DesignError(f"{what}: the LMI has no (accurate) solution ({'; '.join(statuses)})")
+    raise DesignError(
+        f"{what}: the LMI has no (accurate) solution ({'; '.join(statuses)}); a nearly "
+        "unobservable or badly scaled (A, C) often causes this: pass an explicit gain L=... "
+        "(e.g. from scipy.signal.place_poles), or use another method ('kkl', 'interval-split', "
+        "'fixed-time')"
+    )
 
 
 def _finite(problem: Any) -> bool:
