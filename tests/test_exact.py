@@ -350,3 +350,17 @@ def test_no_solver_banner_on_standard_output():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout == "width True\n"
     assert "HiGHS" not in out.stderr
+
+
+@pytest.mark.parametrize("factor", [1e12, 1e300])
+def test_gross_faults_are_reported_even_beyond_the_solvers_infinite_bound(factor):
+    """Measurements multiplied by ``factor``: every sample is inconsistent. Right-hand sides
+    above HiGHS's infinite bound (1e20) would be free rows in the LP; the interval test on the
+    prediction certifies them first. The boxes stay guaranteed (the model's predictions)."""
+    sc = scenarios.get("servo-motor", horizon=20)
+    tr = sc.simulate("vertex", seed=0)
+    est = ivobs.make_estimator("exact", sc.system, x0=sc.x0, progress=False,
+                               on_inconsistent="ignore")  # fmt: skip
+    res = est.run(sc.u, tr.y * factor)
+    assert res.inconsistent.all()
+    assert res.contains(tr.x).all()

@@ -79,7 +79,10 @@ Faults and missing data. A measurement is reported inconsistent (``on_inconsiste
 *certificate*: HiGHS declares the program infeasible and its dual ray ``λ`` satisfies (S) with
 ``c = 0`` and a safe value ``> 0`` (Farkas: ``0 >= safe > 0`` for any feasible ``z``), evaluated
 as above, so the report is never false under the model's assumptions (the Monitor raises alarms
-from it). The sample is then dropped and the step predicted without it. When HiGHS says
+from it). The sample is then dropped and the step predicted without it. A sample that lies outside
+what the interval prediction of ``x[k]`` can explain (Lemma 1, rounding subtracted) is certified
+inconsistent before any LP (gross faults, and right-hand sides beyond HiGHS's infinite bound
+``1e20``, which HiGHS would take as free rows). When HiGHS says
 infeasible but no certificate holds (a warm start may stall at a tiny infeasibility: the verdict
 is retaken from a cold start with the dual, then the primal simplex), the sample is dropped
 *silently*: the box is still guaranteed (the program without ``y[k]``, or the interval
@@ -638,13 +641,19 @@ class Exact(Estimator):
             dynamics = None
             p_lo, p_hi = self.x0.lo.copy(), self.x0.hi.copy()
         meas = self._measurement(k, u_k, y_k, True, p_lo, p_hi, d_k.lo, d_k.hi)
+        gross = self._outside_prediction(meas, p_lo, p_hi, d_k.lo, d_k.hi)
+        if gross:  # certainly inconsistent already by interval arithmetic: no LP needed
+            meas = self._measurement(k, u_k, y_k, False, p_lo, p_hi, d_k.lo, d_k.hi)
         lp.push(dynamics, meas, (p_lo, p_hi), (d_k.lo, d_k.hi), 0.5 * (p_lo + p_hi))
         N = self.design.window
         if N is not None and lp.n_blocks > N + 1:
             lp.pop_front()
         lo, hi, verdict = lp.last_x_box()
         used = 1.0
-        if verdict != OK:
+        if gross:
+            state["_inconsistent"] = True
+            used = 0.0
+        elif verdict != OK:
             # certified: a fault under the model's assumptions; unsure: dropped without a report
             state["_inconsistent"] = verdict == INFEASIBLE
             used = 0.0
@@ -656,6 +665,30 @@ class Exact(Estimator):
         state["relaxed"] = float(lp.relaxed)
         self._remember(state, x_lo, x_hi, u_k, y_k, d_k, used, p_lo, p_hi)
         return lo, hi
+
+    @staticmethod
+    def _outside_prediction(
+        meas: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        p_lo: np.ndarray,
+        p_hi: np.ndarray,
+        d_lo: np.ndarray,
+        d_hi: np.ndarray,
+    ) -> bool:
+        """A measurement row certainly violated over the interval prediction of ``x[k]`` (which
+        contains every state consistent with the model and the past data) and the box of
+        ``d[k]``: ``|y − D u − (C x + F d)| > tau`` for every such ``x``, ``d`` (Lemma 1, with
+        the rounding of its evaluation, ``γ (|C| x̄ + |F| d̄)``, subtracted). A certificate of
+        inconsistency that needs no LP, and one HiGHS could not give for right-hand sides
+        beyond its infinite bound (``1e20``), which it treats as free rows."""
+        C, F, rhs, tau = meas
+        lo_c, hi_c = image_bounds(C, p_lo, p_hi)
+        lo_f, hi_f = image_bounds(F, d_lo, d_hi)
+        n = C.shape[1] + F.shape[1] + 2
+        err = _gamma(n) * (np.abs(C) @ _mag(p_lo, p_hi) + np.abs(F) @ _mag(d_lo, d_hi))
+        with np.errstate(invalid="ignore"):  # NaN (missing) compares False
+            above = rhs - tau > hi_c + hi_f + 2.0 * err
+            below = rhs + tau < lo_c + lo_f - 2.0 * err
+        return bool(np.any(above | below))
 
     def _prediction(
         self, j: int, u_j: np.ndarray, prev: tuple[np.ndarray, ...], tau: np.ndarray
