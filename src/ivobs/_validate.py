@@ -59,6 +59,7 @@ def as_matrix(
     (``vector="row"``). ``rows``/``cols`` (when given) are checked.
     """
     arr = as_float_array(name, value)
+    given = arr.shape  # reported in errors: the shape the caller passed, not the reshaped one
     if arr.ndim == 0:
         arr = arr.reshape(1, 1)
     elif arr.ndim == 1:
@@ -68,7 +69,11 @@ def as_matrix(
     check_finite(name, arr)
     exp = (rows if rows is not None else "any", cols if cols is not None else "any")
     if (rows is not None and arr.shape[0] != rows) or (cols is not None and arr.shape[1] != cols):
-        raise IvobsError(f"{name}: expected shape {_shape_str(exp)}, got {_shape_str(arr.shape)}")
+        got = _shape_str(given)
+        if given != arr.shape:
+            how = "a column" if vector == "col" else "a row"
+            got += f" (read as {how} {_shape_str(arr.shape)})"
+        raise IvobsError(f"{name}: expected shape {_shape_str(exp)}, got {got}")
     return arr
 
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from . import linalg
-from ._validate import as_float_array, as_matrix, check_finite
+from ._validate import _shape_str, as_float_array, as_matrix, check_finite
 from .errors import IvobsError
 from .sets import Box
 
@@ -41,7 +41,7 @@ BoundsLike = Box | Callable[[Any, Any], Box] | None
 class _Matrix:
     """A constant, stacked or callable matrix with a checked shape."""
 
-    __slots__ = ("_dense", "const", "fn", "name", "shape", "sp", "stack", "vector")
+    __slots__ = ("_dense", "const", "fn", "given", "name", "shape", "sp", "stack", "vector")
 
     def __init__(
         self, name: str, value: MatrixLike, rows: int | None, cols: int | None, vector: str
@@ -61,8 +61,10 @@ class _Matrix:
                 raise IvobsError(f"{name}: calling {name}(0) failed: {exc!r}") from None
             m = as_matrix(f"{name}(0)", first, rows, cols, vector=vector)
             self.shape = m.shape
+            self.given = np.shape(first)
         else:
             arr = as_float_array(name, value)
+            self.given = arr.shape
             if arr.ndim == 3:
                 check_finite(name, arr)
                 if (rows is not None and arr.shape[1] != rows) or (
@@ -88,7 +90,7 @@ class _Matrix:
                 f"{cols if cols is not None else 'any'}), got {sp.shape}"
             )
         self.sp = sp
-        self.shape = sp.shape
+        self.shape = self.given = sp.shape
 
     @property
     def is_constant(self) -> bool:
@@ -114,6 +116,34 @@ class _Matrix:
         if self.const is not None or self.sp is not None:
             return self.at(0)
         return self.stack if self.stack is not None else self.fn
+
+
+def _radius_box(name: str, value: Any, n: int, matrix: str) -> Box:
+    """``value`` as the bounds of the ``n`` components multiplied by ``matrix``: a Box of
+    dimension ``n``, or ``n`` radii ``r`` meaning ``|.| <= r``."""
+    if isinstance(value, Box):
+        if value.dim != n:
+            raise IvobsError(
+                f"{name}: expected a Box of dimension {n} (the columns of {matrix}), got "
+                f"dimension {value.dim}"
+            )
+        return value
+    arr = as_float_array(name, value)
+    if arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.ravel()
+    if arr.ndim != 1 or arr.shape[0] != n:
+        got = "a scalar" if arr.ndim == 0 else f"shape {_shape_str(arr.shape)}"
+        raise IvobsError(
+            f"{name}: expected a vector of {n} bound(s) (|{name}_i| <= r_i, one per column of "
+            f"{matrix}) or an ivobs.Box of dimension {n}, got {got}"
+        )
+    check_finite(name, arr)
+    if np.any(arr < 0):
+        i = int(np.argmax(arr < 0))
+        raise IvobsError(
+            f"{name}: expected nonnegative bounds (|{name}_i| <= r_i), got {arr[i]} at index {i}"
+        )
+    return Box._trusted(0.0 - arr, 0.0 + arr)  # as Box.symmetric: no -0.0
 
 
 def _issparse(value: Any) -> bool:
@@ -161,8 +191,11 @@ class LinearSystem:
         self.dt = self._check_dt(dt)
         self._A = _Matrix("A", A, None, None, "col")
         nx = int(self._A.shape[0])
-        if self._A.shape != (nx, nx):
-            raise IvobsError(f"A: expected a square matrix, got shape {self._A.shape}")
+        if self._A.shape != (nx, nx) or nx == 0:
+            raise IvobsError(
+                "A: expected a square matrix with at least one row, got shape "
+                f"{_shape_str(self._A.given)}"
+            )
         if C is None:
             raise IvobsError("C: the output matrix is required (y = C x + D u + F d)")
         self._C = _Matrix("C", C, None, nx, "row")
@@ -383,10 +416,10 @@ class LinearSystem:
         Builds ``d = [w; v]``, ``E_d = [E 0]``, ``F_d = [0 F]``. ``w`` and ``v`` are boxes, or
         vectors ``w̄``, ``v̄`` meaning ``|w| <= w̄``, ``|v| <= v̄`` (002 eq. 9).
         """
-        wb = w if isinstance(w, Box) else Box.symmetric(as_float_array("w", w).ravel())
-        vb = v if isinstance(v, Box) else Box.symmetric(as_float_array("v", v).ravel())
-        Ew = as_matrix("E", E, None, wb.dim)
-        Fv = as_matrix("F", F, None, vb.dim)
+        Ew = as_matrix("E", E)
+        Fv = as_matrix("F", F)
+        wb = _radius_box("w", w, Ew.shape[1], "E")
+        vb = _radius_box("v", v, Fv.shape[1], "F")
         nx, ny = Ew.shape[0], Fv.shape[0]
         E_d = np.hstack([Ew, np.zeros((nx, vb.dim))])
         F_d = np.hstack([np.zeros((ny, wb.dim)), Fv])

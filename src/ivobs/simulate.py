@@ -64,6 +64,20 @@ def _bounds_rows(box: Box, T: int) -> tuple[np.ndarray, np.ndarray]:
     return np.broadcast_to(box.lo, (T, box.dim)), np.broadcast_to(box.hi, (T, box.dim))
 
 
+def _rng(seed: Any) -> np.random.Generator:
+    """NumPy's generator for ``seed``: None (fresh entropy), an integer >= 0, or a
+    ``numpy.random.Generator`` (used as is; also a ``BitGenerator`` or ``SeedSequence``)."""
+    if isinstance(seed, (np.random.Generator, np.random.BitGenerator, np.random.SeedSequence)):
+        return np.random.default_rng(seed)
+    if seed is not None and (
+        isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0
+    ):
+        raise IvobsError(
+            f"seed: expected None, an integer >= 0 or a numpy.random.Generator, got {seed!r}"
+        )
+    return np.random.default_rng(seed)
+
+
 def sinusoidal_disturbance(
     box: Box, T: int, *, freqs: Any = None, phases: Any = None
 ) -> np.ndarray:
@@ -81,10 +95,12 @@ def sinusoidal_disturbance(
 
 
 def uniform_disturbance(box: Box, T: int, seed: Any = None) -> np.ndarray:
-    """Independent uniform samples inside the bounds."""
+    """Independent uniform samples inside the bounds (``seed``: None, an integer >= 0 or a
+    ``numpy.random.Generator``)."""
     T = as_int("T", T, 0)
+    rng = _rng(seed)
     lo, hi = _bounds_rows(box, T)
-    return np.random.default_rng(seed).uniform(lo, hi)
+    return rng.uniform(lo, hi)
 
 
 def vertex_disturbance(box: Box, T: int, seed: Any = None, hold: int = 1) -> np.ndarray:
@@ -95,8 +111,8 @@ def vertex_disturbance(box: Box, T: int, seed: Any = None, hold: int = 1) -> np.
     """
     T = as_int("T", T, 0)
     hold = as_int("hold", hold, 1)
+    rng = _rng(seed)
     lo, hi = _bounds_rows(box, T)
-    rng = np.random.default_rng(seed)
     n_draw = -(-T // hold)
     bits = rng.integers(0, 2, size=(n_draw, box.dim)).astype(bool)
     bits = np.repeat(bits, hold, axis=0)[:T]
@@ -104,7 +120,9 @@ def vertex_disturbance(box: Box, T: int, seed: Any = None, hold: int = 1) -> np.
 
 
 def disturbance(kind: str, box: Box, T: int, seed: Any = None) -> np.ndarray:
-    """``kind`` in ``{"sinusoidal", "uniform", "vertex", "zero"}`` (zero: the bounds' center)."""
+    """``kind`` in ``{"sinusoidal", "uniform", "vertex", "zero"}`` (zero: the bounds' center).
+    ``seed`` (random kinds): None, an integer >= 0 or a ``numpy.random.Generator``."""
+    _rng(seed)  # checked for every kind: a bad seed is a mistake even where it is unused
     if kind == "sinusoidal":
         return sinusoidal_disturbance(box, T)
     if kind == "uniform":

@@ -42,7 +42,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validate import as_bool, as_float_array, as_signal, as_vector
+from .._validate import _shape_str, as_bool, as_float_array, as_signal, as_vector
 from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem
 from ..result import Estimate
@@ -258,8 +258,10 @@ class Estimator:
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
         if not self.rounds_itself:
             outward(lo, hi, scale)
-        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
-            raise IvobsError(f"{self.name}: produced NaN bounds at step {k} (a bug; please report)")
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            state_arrays = [v for v in self._state.values() if isinstance(v, np.ndarray)]
+            what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"
+            raise self._non_finite_error(k, _overflowed(lo, hi, *state_arrays), what)
         return Box._trusted(lo, hi)
 
     def predict(self, u_k: Any = None, t: float | None = None) -> Box:
@@ -379,7 +381,12 @@ class Estimator:
         ``progress``: draw a progress bar for the step-by-step path (``None``: on a terminal)."""
         y = as_signal("y", y, self.sys.ny, allow_nan=True)
         T = y.shape[-2]
-        u = as_signal("u", u, self.sys.nu, T)
+        u = as_signal("u", u, self.sys.nu, T if u is None else None)
+        if u.shape[-2] != T:
+            raise IvobsError(
+                "u and y: expected the same number of samples (rows), got "
+                f"u: {u.shape[-2]}, y: {T}"
+            )
         if u.ndim == 3 or y.ndim == 3:
             B = (u if u.ndim == 3 else y).shape[0]
             if u.ndim == 3 and y.ndim == 3 and u.shape[0] != y.shape[0]:
@@ -455,10 +462,25 @@ class Estimator:
         hi[..., :vf, :] = np.nan
         if not np.isfinite(np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])):
             bad = ~(np.isfinite(lo[..., vf:, :]) & np.isfinite(hi[..., vf:, :]))
-            k = int(np.argwhere(bad)[0][-2]) + vf
-            raise IvobsError(
-                f"{self.name}: produced non-finite bounds at step {k} (a bug; please report)"
+            first = np.argwhere(bad)[0]
+            k = int(first[-2]) + vf
+            row = tuple(int(i) for i in first[:-2])  # the stream of a batch
+            prev = max(k - 1, vf)  # finite: k is the first non-finite step
+            raise self._non_finite_error(
+                k, _overflowed(lo[row][k], hi[row][k], lo[row][prev], hi[row][prev])
             )
+
+    def _non_finite_error(self, k: int, overflowed: bool, what: str = "non-finite") -> IvobsError:
+        """The error for non-finite bounds at step ``k``: an overflow of the float range (an
+        unstable system that the measurements do not bound) or NaN from finite data (a bug)."""
+        if overflowed:
+            return IvobsError(
+                f"{self.name}: the bounds overflowed (exceed 1.8e308) at step "
+                f"{k}: the system is unstable and the measurements do not bound the state (e.g. "
+                "a long outage); shorten the record, or give measurements that observe the "
+                "unstable modes"
+            )
+        return IvobsError(f"{self.name}: produced {what} bounds at step {k} (a bug; please report)")
 
     def _loop(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, bar: Any = None
@@ -537,9 +559,15 @@ class Estimator:
                 f"state: saved by method {state.get('method')!r} with another design; it can only "
                 f"be restored into the same method ({self.name!r}) with the same design"
             )
+        saved = state["state"]
+        if not isinstance(saved, dict):
+            raise IvobsError(
+                "state: expected entry 'state' to be the dict of saved values from "
+                f"Estimator.state(), got {type(saved).__name__}"
+            )
         ref = self._initial_state()
         st: dict[str, Any] = {}
-        for key, val in state["state"].items():
+        for key, val in saved.items():
             if isinstance(val, dict) and "array" in val:
                 try:
                     st[key] = np.array(val["array"], dtype=float).reshape(val["shape"])
@@ -553,6 +581,7 @@ class Estimator:
         missing = set(ref) - set(st)
         if missing:
             raise IvobsError(f"state: missing entries {sorted(missing)}")
+        _check_restored(st, ref)
         self._state = st
 
     # -- helpers for subclasses ------------------------------------------------------------
@@ -572,6 +601,104 @@ class Estimator:
         return (
             f"<{type(self).__name__} {self.name!r} nx={self.sys.nx} valid_from={self.valid_from}>"
         )
+
+
+_TAMPERED = "; the state was altered or is not from Estimator.state() of this estimator"
+
+
+def _check_restored(st: dict[str, Any], ref: dict[str, Any]) -> None:
+    """Check a restored online state against a fresh one (``ref``, from ``_initial_state()``):
+    the step counter, the data scale, and every entry of ``ref`` (arrays: dimensions, fixed
+    axes, finite values, ``lo <= hi``; scalars: their type). Axes that grow while running
+    (generators: the last axis of a matrix; histories: an axis empty at step 0) may differ."""
+    k = st.get("k")
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
+        raise IvobsError(f"state: entry 'k': expected the step count (an integer >= 0), got {k!r}"
+                         + _TAMPERED)
+    scale = st.get("_scale", 0.0)
+    if (isinstance(scale, bool) or not isinstance(scale, (int, float, np.number))
+            or not np.isfinite(scale) or scale < 0):
+        raise IvobsError(
+            f"state: entry '_scale': expected the data scale (a finite number >= 0), got "
+            f"{scale!r}" + _TAMPERED
+        )
+    for key, fresh in ref.items():
+        val = st[key]
+        if isinstance(fresh, np.ndarray):
+            _check_restored_array(key, val, fresh)
+        elif isinstance(fresh, (bool, np.bool_)):
+            if not isinstance(val, (bool, np.bool_)):
+                raise IvobsError(f"state: entry {key!r}: expected True or False, got {val!r}"
+                                 + _TAMPERED)
+        elif isinstance(fresh, (int, np.integer)):
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)):
+                raise IvobsError(f"state: entry {key!r}: expected an integer, got {val!r}"
+                                 + _TAMPERED)
+        elif isinstance(fresh, (float, np.floating)) or fresh is None:  # None: not yet known
+            number = not isinstance(val, bool) and isinstance(val, (int, float, np.number))
+            finite_ok = number and (
+                bool(np.isfinite(val)) or (fresh is not None and not np.isfinite(fresh))
+            )
+            if not (finite_ok or (fresh is None and val is None)):
+                raise IvobsError(
+                    f"state: entry {key!r}: expected a finite number"
+                    f"{' or None' if fresh is None else ''}, got {val!r}" + _TAMPERED
+                )
+    for key in ref:  # bounds kept in pairs: <name>lo <= <name>hi
+        if key.endswith("lo") and key[:-2] + "hi" in ref:
+            lo, hi = st[key], st[key[:-2] + "hi"]
+            if lo.shape != hi.shape:
+                raise IvobsError(
+                    f"state: entries {key!r} and {key[:-2] + 'hi'!r}: expected bounds of the same "
+                    f"shape, got {_shape_str(lo.shape)} and {_shape_str(hi.shape)}" + _TAMPERED
+                )
+            if np.any(lo > hi):
+                idx = tuple(int(i) for i in np.argwhere(lo > hi)[0])
+                raise IvobsError(
+                    f"state: entries {key!r} and {key[:-2] + 'hi'!r}: expected lower <= upper "
+                    f"bounds, got {lo[idx]} > {hi[idx]} at index {idx}" + _TAMPERED
+                )
+
+
+def _check_restored_array(key: str, val: Any, fresh: np.ndarray) -> None:
+    """One array entry of a restored state against its fresh counterpart (see
+    :func:`_check_restored`)."""
+    if not isinstance(val, np.ndarray):
+        raise IvobsError(
+            f"state: entry {key!r}: expected a saved array, got {type(val).__name__} "
+            f"{val!r:.60}" + _TAMPERED
+        )
+    pattern = tuple(
+        "any" if (i == 0 and n == 0) or (i == fresh.ndim - 1 and fresh.ndim >= 2) else n
+        for i, n in enumerate(fresh.shape)
+    )
+    if val.ndim != fresh.ndim or any(
+        p != "any" and p != n for p, n in zip(pattern, val.shape)
+    ):
+        raise IvobsError(
+            f"state: entry {key!r}: expected an array of shape {_shape_str(pattern)}, got "
+            f"{_shape_str(val.shape)}" + _TAMPERED
+        )
+    # non-finite values only in an entry that has them in a fresh state, and NaN in a kept
+    # measurement record "y" (a missing sample, as in step())
+    bad = np.isinf(val) if key == "y" else ~np.isfinite(val)
+    if np.all(np.isfinite(fresh)) and np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise IvobsError(
+            f"state: entry {key!r}: expected finite numbers, got {val[idx]} at index {idx}"
+            + _TAMPERED
+        )
+
+
+_HUGE = 1e300
+"""A bound this large is one step of growth away from the end of the float range."""
+
+
+def _overflowed(*arrays: np.ndarray) -> bool:
+    """Whether any array holds an infinity or a finite value beyond :data:`_HUGE` (the bounds
+    ran out of the float range; NaN then comes from ``inf - inf``)."""
+    with np.errstate(invalid="ignore"):
+        return any(bool(np.any(np.abs(a) > _HUGE)) for a in arrays if a.dtype.kind == "f")
 
 
 def _copy_state(state: Any) -> Any:

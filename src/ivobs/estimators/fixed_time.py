@@ -240,7 +240,10 @@ class FixedTimeEstimator(Estimator):
         self._model_cache: OrderedDict[int, tuple[np.ndarray, ...]] = OrderedDict()
         self._L_lti: np.ndarray | None = None
         if not self._tv:
-            check_observable(sys.A, sys.C, "the fixed-time estimator (001 Lemma 2)")
+            try:
+                check_observable(sys.A, sys.C, "the fixed-time estimator (001 Lemma 2)")
+            except IvobsError as exc:  # a design impossibility, as for the other methods
+                raise DesignError(str(exc)) from None
             self._L_lti = self._injection(sys.A, sys.C, self._L_user, "A")
         elif self._L_user is not None:
             self._L_lti = self._L_user
@@ -463,7 +466,7 @@ class FixedTimeEstimator(Estimator):
         _, _, _, rank = pinv_perp(Mx)
         if rank < nx:
             where = "the window k = 0..s" if not self._tv else f"the window ending at k = {k}"
-            raise IvobsError(
+            raise DesignError(
                 f"pair (A, C) is not observable over {where}: the stacked matrix Mx (001 eq. 6) "
                 f"has rank {rank} of {nx}; the fixed-time estimator needs rank nx (increase s)"
             )

@@ -518,7 +518,9 @@ class KKL(Estimator):
         """Offline: the first ``k`` with ``cond(T[k]) <= max_cond`` (``T[k]`` is data-free)."""
         A = self.sys.A
         stacked = isinstance(A, np.ndarray) and A.ndim == 3
-        limit = A.shape[0] if stacked else 100 + 20 * self._Tseq[0].T.shape[0]
+        # T[k] needs A[0..k-1]: a stack of N matrices determines T[0..N]; one step further,
+        # LinearSystem's own error says that the stack is too short (not "not observable")
+        limit = A.shape[0] + 2 if stacked else 100 + 20 * self._Tseq[0].T.shape[0]
         for k in range(limit):
             tr = self._transform(k)
             if tr.ok:
