@@ -207,6 +207,8 @@ def test_bad_seed_names_seed(seed):
         ivobs.uniform_disturbance(sc.system.d, 5, seed=seed)
     with pytest.raises(IvobsError, match=r"^seed: "):
         sc.simulate("uniform", seed)
+    with pytest.raises(IvobsError, match=r"^seed: "):  # its own disturbance generator
+        ivobs.scenarios.get("henon").simulate("uniform", seed)
 
 
 def test_good_seeds_are_accepted():

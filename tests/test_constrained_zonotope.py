@@ -189,6 +189,7 @@ def test_correlated_disturbance_is_used_exactly() -> None:
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")
 @pytest.mark.parametrize("method", ["strip", "constrained-zonotope", "intersect"])
 def test_overflow_of_an_unstable_plant_is_a_clear_error(method):
     """An unstable plant through a long outage: the set really exceeds the largest float; the

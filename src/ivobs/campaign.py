@@ -292,6 +292,8 @@ class _SpecReader:
                     f"unknown disturbance {d!r}; expected one of {', '.join(DISTURBANCES)}",
                 )
         sopts = self.scenario_options(scen, doc.get("scenario_options", {}), doc.get("horizon"))
+        if "recorded" in dists:
+            self.check_recorded(scen, sopts)
         burn_in = None
         if "burn_in" in doc:
             burn_in = self.integer(("burn_in",), doc["burn_in"])
@@ -476,6 +478,14 @@ class _SpecReader:
                 raise self.fail(("burn_in",), f"{burn_in} leaves no step of scenario {name!r} "
                                               f"({T} steps); lower it")  # fmt: skip
 
+    def check_recorded(self, scen: list[str], sopts: dict[str, dict]) -> None:
+        """``disturbance = "recorded"`` needs scenarios with a stored record (every job of the
+        others would fail)."""
+        without = [n for n in scen if _scenario(n, sopts[n]).recorded is None]
+        if without:
+            raise self.fail(("disturbance",), f"'recorded' needs scenarios with a stored record; "
+                                              f"none in: {', '.join(without)}")  # fmt: skip
+
     def check_unique(self, spec: CampaignSpec) -> None:
         seen: dict[str, Job] = {}
         for job in spec.jobs():
@@ -582,6 +592,40 @@ def _worker_name() -> str:
         with contextlib.suppress(Exception):
             return str(mod.get_worker().address)
     return f"pid {os.getpid()}"
+
+
+def check_designs(spec: CampaignSpec) -> list[str]:
+    """Construct every estimator of the spec once (per scenario, method and option set): an
+    invalid option value (every job of it would fail) raises :class:`~ivobs.IvobsError` naming
+    the spec and the method's options. Returns one line per design that the method declines
+    (``DesignError``, or a system class it does not support: those jobs are recorded as
+    ``failed``, which is expected)."""
+    from .errors import DesignError
+    from .estimators import make_estimator
+
+    for mod in spec.imports:
+        importlib.import_module(mod)
+    declined: list[str] = []
+    seen: set[str] = set()
+    for job in spec.jobs():
+        key = job.design_key()
+        if key in seen:
+            continue
+        seen.add(key)
+        sc = _scenario(job.scenario, job.scenario_options)
+        try:
+            make_estimator(job.method, sc.system, x0=sc.x0, **job.options)
+        except DesignError as exc:
+            declined.append(f"{job.method} {job.options or ''} on {job.scenario}: {exc}")
+        except IvobsError as exc:
+            if not job.options or "support" in str(exc):
+                declined.append(f"{job.method} on {job.scenario}: {exc}")
+                continue
+            raise IvobsError(
+                f"{spec.source}: options.{job.method} = {job.options} (scenario "
+                f"{job.scenario}): {exc}"
+            ) from None
+    return declined
 
 
 def run_job(job: Job | dict[str, Any]) -> dict[str, Any]:

@@ -63,6 +63,7 @@ import json
 import math
 import os
 import re
+import stat
 import tempfile
 import tomllib
 from collections.abc import Iterator
@@ -83,6 +84,7 @@ __all__ = [
     "SystemFile",
     "atomic_path",
     "callable_ref",
+    "check_output_path",
     "dumps_system",
     "equal_systems",
     "load_system",
@@ -106,17 +108,61 @@ _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
 # ============================================================================================
 # atomic writes
 # ============================================================================================
+def _file_mode(path: Path) -> int:
+    """The mode a plain ``open(path, "w")`` gives: the existing file's, else ``0o666`` less the
+    umask (``tempfile.mkstemp`` creates ``0o600`` files)."""
+    with contextlib.suppress(OSError):
+        return stat.S_IMODE(path.stat().st_mode)
+    return 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    """The process umask: from ``/proc/self/status`` where it exists (reading it with
+    ``os.umask`` sets it for a moment, which other threads creating files could see)."""
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/self/status", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def check_output_path(path: str | os.PathLike[str], what: str | None = None) -> Path:
+    """Check that ``path`` can be written as a file (its folder exists, it is no folder itself),
+    before any work is done. ``what`` names the argument in the error (e.g. ``"--csv"``)."""
+    path = Path(path)
+    prefix = f"{what}: " if what else ""
+    folder = path.parent if str(path.parent) else Path(".")
+    if str(path) in ("", "."):
+        raise IvobsError(f"{prefix}expected a file name, got {str(path)!r}")
+    if path.is_dir():
+        raise IvobsError(f"{prefix}{str(path)!r} is a directory; expected a file name")
+    if not folder.is_dir():
+        why = "is not a directory" if folder.exists() else "does not exist"
+        raise IvobsError(f"{prefix}cannot write {str(path)!r}: the folder {str(folder)!r} {why}")
+    if not os.access(folder, os.W_OK):
+        raise IvobsError(f"{prefix}cannot write {str(path)!r}: the folder is not writable")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path next to ``path`` (same suffix); rename it to ``path`` on success,
-    delete it on any error. Readers never see a half-written file."""
-    path = Path(path)
+    delete it on any error. Readers never see a half-written file. The file gets the mode a
+    plain ``open(path, "w")`` would give (the umask's, or the replaced file's)."""
+    path = check_output_path(path)
     folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise IvobsError(f"{path}: the folder {str(folder)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=path.suffix or ".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(
+            dir=folder, prefix=f".{path.name}.", suffix=path.suffix or ".tmp"
+        )
+    except OSError as exc:
+        raise IvobsError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
     os.close(fd)
     try:
+        os.chmod(tmp, _file_mode(path))
         yield Path(tmp)
         os.replace(tmp, path)
     except BaseException:
@@ -884,6 +930,8 @@ class _Reader:
                 )
             for c, cell in enumerate(r):
                 try:
+                    if "_" in cell:  # float() accepts 1_000; a CSV number does not
+                        raise ValueError(cell)
                     data[j, c] = float(cell)
                 except ValueError:
                     raise self.fail(
@@ -982,6 +1030,8 @@ def load_system(path: str | os.PathLike[str]) -> SystemFile:
     anything malformed. Loading a file that names a Python callable imports its module: load
     trusted files only."""
     path = Path(path)
+    if path.is_dir():
+        raise IvobsError(f"system file {str(path)!r} is a directory; expected a TOML file")
     if not path.is_file():
         raise IvobsError(f"system file {str(path)!r} not found")
     try:
@@ -997,6 +1047,13 @@ def load_system(path: str | os.PathLike[str]) -> SystemFile:
 _STEP_COLS = ("k", "step")
 _TIME_COLS = ("t", "time")
 _SIGNAL = re.compile(r"^(?P<kind>[uy])(?:\d+|[_\[(.].*)?$", re.IGNORECASE)
+_NUMBERED = re.compile(r"^[uy](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$", re.IGNORECASE)
+
+
+def _signal_number(column: str) -> int | None:
+    """The number of a signal column (``y2``, ``y_2``, ``y[2]``, ``y(2)``), else None."""
+    m = _NUMBERED.match(column)
+    return None if m is None else int(next(g for g in m.groups() if g is not None))
 
 
 @dataclass
@@ -1042,7 +1099,10 @@ class LogParser:
         return next(csv.reader([text]))
 
     def header(self, text: str, line: int = 1) -> None:
-        cols = [c.strip() for c in self._cells(text)]
+        """Read the header: signal columns numbered ``u1, u2, ...`` (also ``y[2]``, ``y_2``)
+        are mapped by their number, whatever their order; unnumbered ones (``u_speed``) are
+        taken in header order. A UTF-8 byte-order mark (Excel) is ignored."""
+        cols = [c.strip() for c in self._cells(text.lstrip("\ufeff"))]
         self.columns = cols
         seen: set[str] = set()
         for i, c in enumerate(cols):
@@ -1077,6 +1137,24 @@ class LogParser:
                     f"the system has {n} {what}, so the log needs {n} "
                     f"{kind}-columns ({kind}1, ...); found {len(idx)}: {names}",
                 )
+            self._by_number(kind, idx, line)
+
+    def _by_number(self, kind: str, idx: list[int], line: int) -> None:
+        """Order the ``kind`` columns ``idx`` (in place) by their number when all have one."""
+        nums = [_signal_number(self.columns[i]) for i in idx]
+        if not idx or any(n is None for n in nums):
+            return
+        n = len(idx)
+        for base in (1, 0):
+            if sorted(nums) == list(range(base, base + n)):  # type: ignore[type-var]
+                idx[:] = [i for _, i in sorted(zip(nums, idx))]  # type: ignore[type-var]
+                return
+        names = ", ".join(self.columns[i] for i in idx)
+        raise self.fail(
+            line,
+            f"{kind}-columns {names}: expected the numbers {kind}1..{kind}{n} (each once; "
+            "columns are matched by their number)",
+        )
 
     def row(self, text: str, line: int) -> LogRow:
         if not self.columns:
@@ -1094,6 +1172,8 @@ class LogParser:
                 vals[i] = np.nan
                 continue
             try:
+                if "_" in s:  # float() accepts 1_000; a CSV number does not
+                    raise ValueError(s)
                 vals[i] = float(s)
             except ValueError:
                 raise self.fail(
@@ -1143,6 +1223,14 @@ class LogParser:
         return out
 
 
+def not_utf8(source: str, exc: UnicodeDecodeError) -> IvobsError:
+    """The error for a log that is not UTF-8 text."""
+    return IvobsError(
+        f"{source}: not valid UTF-8 ({exc.reason}, byte "
+        f"{exc.object[exc.start : exc.start + 1]!r}); a log must be UTF-8 text (CSV)"
+    )
+
+
 def _is_skipped(text: str) -> bool:
     s = text.strip()
     return not s or s.startswith("#")
@@ -1177,18 +1265,23 @@ def read_log(path: str | os.PathLike[str], system: LinearSystem) -> Log:
     does not increase.
     """
     path = Path(path)
+    if path.is_dir():
+        raise IvobsError(f"log file {str(path)!r} is a directory; expected a CSV file")
     if not path.is_file():
         raise IvobsError(f"log file {str(path)!r} not found")
     parser = LogParser(system.nu, system.ny, str(path))
     rows: list[LogRow] = []
-    with open(path, newline="", encoding="utf-8") as fh:
-        for i, text in enumerate(fh, start=1):
-            if _is_skipped(text):
-                continue
-            if not parser.columns:
-                parser.header(text, i)
-            else:
-                rows.append(parser.row(text, i))
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            for i, text in enumerate(fh, start=1):
+                if _is_skipped(text):
+                    continue
+                if not parser.columns:
+                    parser.header(text, i)
+                else:
+                    rows.append(parser.row(text, i))
+    except UnicodeDecodeError as exc:
+        raise not_utf8(str(path), exc) from None
     if not parser.columns:
         raise IvobsError(f"{path}: empty log (expected a header line such as k,u1,y1,y2)")
     if not rows:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -10,7 +12,7 @@ import numpy as np
 from .errors import IvobsError
 from .result import Estimate
 
-__all__ = ["plot_estimates", "save_figure"]
+__all__ = ["figure_path", "plot_estimates", "save_figure"]
 
 _STYLES = ["-", "--", "-.", ":"]
 
@@ -88,9 +90,47 @@ def plot_estimates(
     return fig
 
 
-def save_figure(fig: Any, path: str) -> None:
-    """Save and close a figure."""
+def figure_formats() -> list[str]:
+    """File extensions matplotlib can write (``png``, ``pdf``, ``svg``, ...)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
+def figure_path(path: str | os.PathLike[str], what: str | None = None) -> Path:
+    """The file a figure for ``path`` is written to, checked before any work: ``.png`` is added
+    when ``path`` has no extension; an unsupported extension or an unwritable place is an
+    :class:`~ivobs.IvobsError` naming ``what`` (e.g. ``"--plot"``)."""
+    from .io import check_output_path
+
+    path = Path(path)
+    prefix = f"{what}: " if what else ""
+    if path.is_dir():
+        raise IvobsError(f"{prefix}{str(path)!r} is a directory; expected a file name such as "
+                         f"{str(path / 'figure.png')!r}")  # fmt: skip
+    if not path.suffix:
+        path = path.with_name(path.name + ".png")
+    fmt = path.suffix[1:].lower()
+    formats = figure_formats()
+    if fmt not in formats:
+        raise IvobsError(
+            f"{prefix}unsupported figure format {path.suffix!r} ({str(path)!r}); expected one "
+            f"of {', '.join('.' + f for f in formats)}"
+        )
+    return check_output_path(path, what)
+
+
+def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
+    """Save (atomically: a temporary file, renamed) and close a figure; returns the path written
+    (``.png`` added when ``path`` has no extension, see :func:`figure_path`)."""
     import matplotlib.pyplot as plt
 
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    from .io import atomic_path
+
+    try:
+        target = figure_path(path)
+        with atomic_path(target) as tmp:
+            fig.savefig(tmp, dpi=120, format=target.suffix[1:].lower())
+    finally:
+        plt.close(fig)
+    return target

@@ -6,6 +6,7 @@ Used by ``ivobs demo``, ``ivobs compare`` and the benchmark suite.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -100,6 +101,7 @@ def markdown_table(
     ref = next((r for r in ok if r.method == reference), None) if reference else None
     head = ["method"] + [f"width {n}" for n in names] + (["ratio to " + reference] if ref else [])
     head += ["contains truth", "design (s)", "run (s)"]
+    point = _point_states(ref) if ref is not None else None
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         if not r.ok or r.mean_width is None:
@@ -112,9 +114,41 @@ def markdown_table(
             continue
         cells = [r.method] + [f"{w:.4g}" for w in r.mean_width]
         if ref is not None:
-            ratio = np.mean(r.mean_width / np.where(ref.mean_width > 0, ref.mean_width, np.nan))
-            cells.append(f"{ratio:.3f}")
+            cells.append(_ratio_cell(r, ref, point))
         seen = {True: "yes", False: "**NO**", None: "n/a"}[r.contains]
         cells += [seen, f"{r.design_time:.3f}", f"{r.run_time:.4f}"]
         lines.append("| " + " | ".join(cells) + " |")
+    if point is not None and point.any():
+        which = "every state" if point.all() else ", ".join(n for n, p in zip(names, point) if p)
+        lines.append(
+            f"\nRatios leave out {which}: there the {reference} box is (numerically) a point "
+            f"(mean width below {POINT_TOL:g} (1 + |x|)), so a ratio would compare rounding "
+            "margins, not methods ('point' when no state is left)."
+        )
     return "\n".join(lines)
+
+
+POINT_TOL = 1e-6
+"""A reference box narrower than ``POINT_TOL (1 + |x|)`` on average is a point for the ratios."""
+
+
+def _point_states(ref: MethodResult) -> np.ndarray:
+    """States where the reference's mean width is below ``POINT_TOL (1 + |x|)`` (``|x|``: the
+    largest magnitude of its bounds)."""
+    assert ref.estimate is not None and ref.mean_width is not None
+    est = ref.estimate
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns (before valid_from)
+        mag = np.nanmax(np.maximum(np.abs(est.lower), np.abs(est.upper)), axis=0)
+    mag = np.where(np.isfinite(mag), mag, 0.0)
+    return ref.mean_width < POINT_TOL * (1.0 + mag)
+
+
+def _ratio_cell(r: MethodResult, ref: MethodResult, point: np.ndarray | None) -> str:
+    """Mean over states of ``r``'s width over the reference's, states at a point left out."""
+    assert r.mean_width is not None and ref.mean_width is not None
+    keep = ~point if point is not None else np.ones(ref.mean_width.shape, dtype=bool)
+    keep &= ref.mean_width > 0
+    if not keep.any():
+        return "point"
+    return f"{np.mean(r.mean_width[keep] / ref.mean_width[keep]):.3f}"

@@ -9,7 +9,6 @@ transformation). A batch of streams has bounds of shape ``(B, T, nx)``.
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -131,7 +130,8 @@ class Estimate:
 
     # -- files ---------------------------------------------------------------------------
     def to_csv(self, path: str | os.PathLike[str]) -> None:
-        """Write ``k, lower_1.., upper_1..`` (and ``t``) with full precision, atomically."""
+        """Write ``k, [t,] lower_1.., upper_1.., missing, inconsistent`` atomically: bounds with
+        full precision, ``k`` and the flags as integers (``missing``/``inconsistent``: 0 or 1)."""
         if self.is_batch:
             raise IvobsError("to_csv: batch estimates are not written as CSV; save lower/upper")
         path = Path(path)
@@ -140,25 +140,20 @@ class Estimate:
             f"upper_{i + 1}" for i in range(self.nx)
         ]
         cols += ["missing", "inconsistent"]
-        k = np.arange(self.T)
-        parts = [k[:, None]] + ([np.asarray(self.t)[:, None]] if self.t is not None else [])
-        parts += [self.lower, self.upper, self.missing[:, None], self.inconsistent[:, None]]
-        data = np.hstack([np.asarray(p, dtype=float) for p in parts])
+        times = [np.asarray(self.t, dtype=float)[:, None]] if self.t is not None else []
+        data = np.hstack([*times, self.lower, self.upper])
+        flags = np.column_stack([self.missing, self.inconsistent]).astype(int)
         header = (
             f"# ivobs estimate\n# method: {self.method}\n# valid_from: {self.valid_from}\n"
             + ",".join(cols)
         )
-        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(header + "\n")
-                for row in data:
-                    fh.write(",".join(_fmt(v) for v in row) + "\n")
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        from .io import atomic_path  # the file gets the umask's mode, like open(path, "w")
+
+        with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(header + "\n")
+            for k, (row, flag) in enumerate(zip(data, flags)):
+                cells = [str(k), *(_fmt(v) for v in row), *(str(int(f)) for f in flag)]
+                fh.write(",".join(cells) + "\n")
 
     @classmethod
     def from_csv(cls, path: str | os.PathLike[str]) -> Estimate:
@@ -167,7 +162,7 @@ class Estimate:
         path = Path(path)
         if not path.exists():
             raise IvobsError(f"from_csv: no such file {str(path)!r}")
-        with open(path) as fh:
+        with open(path, encoding="utf-8") as fh:
             lines = fh.read().splitlines()
         body = []
         for line in lines:

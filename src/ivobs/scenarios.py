@@ -8,7 +8,7 @@ example) the scenario says what ivobs chose in ``notes``.
 
 Disturbance kinds for :meth:`Scenario.simulate`: ``"paper"`` (the paper's signal),
 ``"vertex"`` (bang-bang on the bounds' vertices: adversarial), ``"uniform"``, ``"sinusoidal"``,
-``"zero"`` (the bounds' center).
+``"zero"`` (the bounds' center), ``"recorded"`` (the stored record of the CORA scenarios).
 """
 
 from __future__ import annotations
@@ -23,9 +23,10 @@ import numpy as np
 from .errors import IvobsError
 from .model import LinearSystem
 from .sets import Box
-from .simulate import Trajectory, disturbance, simulate
+from .simulate import Trajectory, _rng, disturbance, simulate
 
 __all__ = [
+    "DISTURBANCES",
     "Scenario",
     "get",
     "heat_gain",
@@ -37,6 +38,9 @@ __all__ = [
 ]
 
 DisturbanceFactory = Callable[[str, Any, int], Any]
+
+#: The disturbance kinds of :meth:`Scenario.simulate` (``"center"`` is accepted for ``"zero"``).
+DISTURBANCES = ("paper", "vertex", "uniform", "sinusoidal", "zero", "recorded")
 
 
 @dataclass
@@ -86,9 +90,18 @@ class Scenario:
 
     def simulate(self, disturbance: str = "paper", seed: Any = None) -> Trajectory:
         """The true trajectory under a disturbance of the given kind."""
+        if disturbance not in (*DISTURBANCES, "center"):
+            raise IvobsError(
+                f"disturbance: unknown kind {disturbance!r}; expected one of "
+                f"{', '.join(DISTURBANCES)}"
+            )
         if disturbance == "recorded":
             if self.recorded is None:
-                raise IvobsError(f"scenario {self.name!r} has no recorded trajectory")
+                with_record = [n for n in names() if n.startswith("cora-")]
+                raise IvobsError(
+                    f"disturbance 'recorded': scenario {self.name!r} has no recorded trajectory "
+                    f"(only the scenarios with stored data have one: {', '.join(with_record)})"
+                )
             return self.recorded
         d = self.disturbance(disturbance, seed)
         if self.system.is_continuous:
@@ -373,7 +386,7 @@ def _henon(horizon: int = 200) -> Scenario:
     sys = LinearSystem(A, None, C, E=E, F=F, d=bounds)
 
     def factory(kind: str, seed: Any, T: int) -> Any:
-        rng = np.random.default_rng(seed)
+        rng = _rng(seed)
         if kind == "paper":
 
             def d_fn(k: int, x: np.ndarray) -> np.ndarray:

@@ -47,6 +47,52 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def check_disturbance(kind: str) -> str:
+    """``--disturbance``: one of the scenario disturbance kinds."""
+    from ..scenarios import DISTURBANCES
+
+    if kind not in (*DISTURBANCES, "center"):
+        raise IvobsError(
+            f"--disturbance: unknown kind {kind!r}; expected one of {', '.join(DISTURBANCES)}"
+        )
+    return kind
+
+
+def check_seed(seed: int) -> int:
+    """``--seed``: a non-negative integer (NumPy's random generators refuse negative seeds)."""
+    if seed < 0:
+        raise IvobsError(f"--seed: expected an integer >= 0, got {seed}")
+    return seed
+
+
+def check_out_dir(path: str, what: str) -> None:
+    """An output folder (created if needed): refuse an existing file, or a missing parent."""
+    import os
+
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise IvobsError(f"{what}: {path!r} exists and is not a folder; give a folder name")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(path) and not os.path.isdir(parent):
+        raise IvobsError(f"{what}: cannot create {path!r}: the folder {parent!r} does not exist")
+
+
+def parse_states(text: str, nx: int) -> list[int]:
+    """``--states 1,3``: 1-based state numbers -> 0-based indices, each in ``1..nx``."""
+    out: list[int] = []
+    for part in text.split(","):
+        s = part.strip()
+        try:
+            i = int(s)
+        except ValueError:
+            raise IvobsError(
+                f"--states: expected comma-separated state numbers 1..{nx}, got {s!r}"
+            ) from None
+        if not 1 <= i <= nx:
+            raise IvobsError(f"--states: expected state numbers 1..{nx} (nx = {nx}), got {i}")
+        out.append(i - 1)
+    return out
+
+
 def use_agg() -> Any:
     """Headless figures."""
     import matplotlib

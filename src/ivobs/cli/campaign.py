@@ -5,8 +5,10 @@ Results go to one CSV table, one line per job as it finishes; running the same c
 resumes (jobs already in the table are skipped). A summary (mean width over seeds with a 95 %
 confidence half-width, containment, times) is printed at the end. See ``docs/campaign.md``.
 
-Exit status: 0; 1 when a box missed the true state or a job raised an unexpected error
-(``status = error``; a method that declines a system is ``failed`` and expected); 2 on a bad spec.
+Exit status: 0; 1 when a box missed the true state, a job raised an unexpected error
+(``status = error``; a method that declines a system is ``failed`` and expected) or every job
+failed; 2 on a bad spec (``--dry-run`` also constructs every estimator once: invalid option
+values are a bad spec).
 """
 
 from __future__ import annotations
@@ -73,12 +75,15 @@ def main(args: argparse.Namespace) -> int:
         if output.is_file():
             done = {r["job_id"] for r in campaign.read_results(output)}
         n_done = sum(j.id in done for j in jobs)
+        declined = campaign.check_designs(spec)
         print(
             f"{title}: {len(jobs)} jobs = {len(spec.scenarios)} scenarios x "
             f"{len(spec.disturbances)} disturbances x {len(jobs) // _per_cell(spec)} method "
             f"settings x {len(spec.seeds)} seeds; {n_done} already in {output}, "
             f"{len(jobs) - n_done} to run"
         )
+        for line in declined:
+            print(f"# declined (its jobs will be 'failed'): {line}")
         return 0
     try:
         res = campaign.run_campaign(
@@ -116,6 +121,10 @@ def main(args: argparse.Namespace) -> int:
             f"seed {r['seed']}): a box missed the true state",
             file=sys.stderr,
         )
+    if res.rows and not any(r["status"] == "ok" for r in res.rows):
+        print(f"ivobs: every job failed ({failed} failed, {errors} errors): see the error column "
+              f"of {res.output}", file=sys.stderr)  # fmt: skip
+        return 1
     return 1 if res.violations or errors else 0
 
 

@@ -7,6 +7,17 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import IvobsError
+from ..scenarios import DISTURBANCES
+from . import check_disturbance, check_seed, parse_states
+
+#: Methods whose cost grows fast with the state dimension (LPs over the horizon, generators):
+#: left out of the default set for systems with more than ``LARGE_NX`` states (on heat-1d,
+#: nx = 50, 500 steps: ``exact`` takes over an hour, ``zonotope`` and ``reachability`` over a
+#: minute each; the others a few seconds to half a minute).
+SLOW_METHODS = ("exact", "constrained-zonotope", "strip", "zonotope", "reachability")
+LARGE_NX = 20
+
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -16,42 +27,88 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
                     "containment and timings; optionally write an overlay figure like the papers'.",
     )
     p.add_argument("scenario", help="scenario name (see `ivobs scenarios`)")
-    p.add_argument("--methods", help="comma-separated method names (default: all but intersect)")
+    p.add_argument("--methods", help="comma-separated method names (default: all but intersect; "
+                                     f"for more than {LARGE_NX} states also without "
+                                     f"{', '.join(SLOW_METHODS)})")
     p.add_argument("--disturbance", default="paper",
-                   help="paper | vertex | uniform | sinusoidal | zero | recorded (CORA)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--burn-in", type=int, default=None, help="steps excluded from mean widths")
-    p.add_argument("--plot", metavar="FILE", help="write an overlay figure (PNG)")
-    p.add_argument("--states", help="comma-separated state indices to plot (1-based)")
+                   help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios; default: paper)")
+    p.add_argument("--seed", type=int, default=0, help="random seed for vertex/uniform (>= 0)")
+    p.add_argument("--burn-in", type=int, default=None,
+                   help="steps excluded from mean widths (default: a tenth of the horizon)")
+    p.add_argument("--plot", metavar="FILE",
+                   help="write an overlay figure (format from the extension; none: .png is added)")
+    p.add_argument("--states", help="comma-separated state numbers to plot (1..nx)")
     return p
+
+
+def default_methods(sc: Any) -> tuple[list[str], list[str]]:
+    """The default methods for scenario ``sc`` and those left out for its size."""
+    from ..estimators import methods as all_methods
+
+    names = [m for m in all_methods() if m != "intersect"]
+    if sc.system.nx <= LARGE_NX:
+        return names, []
+    return [m for m in names if m not in SLOW_METHODS], [m for m in names if m in SLOW_METHODS]
 
 
 def main(args: argparse.Namespace) -> int:
     from .. import scenarios
-    from ..estimators import methods as all_methods
     from ..report import compare, markdown_table
 
+    check_disturbance(args.disturbance)
+    check_seed(args.seed)
     sc = scenarios.get(args.scenario)
-    names = ([m.strip() for m in args.methods.split(",") if m.strip()] if args.methods
-             else [m for m in all_methods() if m != "intersect"])
+    states = parse_states(args.states, sc.system.nx) if args.states else None
+    if args.states and not args.plot:
+        raise IvobsError("--states: selects the states of the figure; give --plot FILE too")
+    if args.burn_in is not None and not 0 <= args.burn_in < sc.horizon:
+        raise IvobsError(f"--burn-in: expected a number of steps in 0..{sc.horizon - 1} "
+                         f"({sc.name} has {sc.horizon} steps), got {args.burn_in}")
+    plot_path = None
+    if args.plot:
+        from ..plot import figure_path
+
+        plot_path = figure_path(args.plot, "--plot")
+    left_out: list[str] = []
+    if args.methods:
+        names = [m.strip() for m in args.methods.split(",") if m.strip()]
+        if not names:
+            raise IvobsError(f"--methods: expected comma-separated method names, got "
+                             f"{args.methods!r}")
+    else:
+        names, left_out = default_methods(sc)
     traj, results = compare(sc, names, disturbance=args.disturbance, seed=args.seed,
                             burn_in=args.burn_in)
     burn = sc.horizon // 10 if args.burn_in is None else args.burn_in
     print(f"# {sc.name}: {sc.source}")
-    print(f"# {sc.horizon} steps, {args.disturbance} disturbances, burn-in {burn} steps\n")
+    print(f"# {sc.horizon} steps, {args.disturbance} disturbances, burn-in {burn} steps")
+    if left_out:
+        print(f"# {sc.system.nx} states: {', '.join(left_out)} left out (slow at this size); "
+              f"include them with --methods {','.join(names + left_out)}")
+    print()
     ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
     print(markdown_table(results, sc.state_names, reference=ref))
-    if args.plot:
+    print_reasons(results)
+    if plot_path is not None:
         from . import use_agg
 
         use_agg()
         from ..plot import plot_estimates, save_figure
 
-        states = ([int(s) - 1 for s in args.states.split(",")] if args.states else None)
         good = {r.method: r.estimate for r in results if r.ok}
+        if not good:
+            raise IvobsError("--plot: no method gave an estimate; nothing to plot")
         truth = None if np.isnan(traj.x).all() else traj.x
         fig = plot_estimates(good, truth=truth, states=states, t=traj.t,
                              state_names=sc.state_names, title=f"{sc.name}")
-        save_figure(fig, args.plot)
-        print(f"\nfigure: {args.plot}")
+        print(f"\nfigure: {save_figure(fig, plot_path)}")
     return 1 if any(r.ok and r.contains is False for r in results) else 0
+
+
+def print_reasons(results: Any) -> None:
+    """The full reason of every method without a result (the table's cell is cut short)."""
+    failed = [r for r in results if not r.ok and r.error]
+    if failed:
+        print()
+        for r in failed:
+            print(f"{r.method}: {r.error}")

@@ -6,6 +6,8 @@ import argparse
 import time
 from typing import Any
 
+from . import check_out_dir
+
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -36,6 +38,7 @@ def main(args: argparse.Namespace) -> int:
     if args.paper is not None:
         papers = [p for p in args.paper.split(",") if p.strip()]
     figure_specs(papers)  # validates the list before any work
+    check_out_dir(args.out, "--out")
     t0 = time.perf_counter()
     paths = generate(args.out, papers, verbose=True)
     print(f"{len(paths)} figure(s) in {time.perf_counter() - t0:.1f} s")

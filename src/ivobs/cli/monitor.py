@@ -96,7 +96,11 @@ class _Session:
             )
         est = self.spec.make_estimator(method)
         self.monitor = Monitor(self.spec.system, est, x0=self.spec.x0, tight=not args.no_tight)
-        self.state_path = Path(args.state) if args.state else None
+        self.state_path = None
+        if args.state:  # checked before the first row is printed
+            from ..io import check_output_path
+
+            self.state_path = check_output_path(args.state, "--state")
         self.rows = 0  # data rows consumed (processed or skipped as already done)
         self.last_step: int | None = None
         self.last_t: float | None = None
@@ -106,14 +110,22 @@ class _Session:
 
     def _load(self) -> None:
         assert self.state_path is not None
+        name = str(self.state_path)
         try:
             data = json.loads(self.state_path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
-            raise IvobsError(f"--state: cannot read {str(self.state_path)!r}: {exc}") from None
+            raise IvobsError(f"--state: cannot read {name!r}: {exc}") from None
         if not isinstance(data, dict) or data.get("format") != STATE_FORMAT:
-            raise IvobsError(f"--state: {str(self.state_path)!r} is not an ivobs monitor state")
-        self.monitor.restore(data["monitor"])
+            raise IvobsError(f"--state: {name!r} is not an ivobs monitor state")
+        _check_state(data, self.monitor, name)
+        try:
+            self.monitor.restore(data["monitor"])
+        except IvobsError as exc:
+            raise IvobsError(f"--state: {name!r}: {exc}") from None
+        except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
+            raise _malformed(name, "monitor.estimator.state", f"{exc}") from None
         stream = data.get("stream", {})
+        _probe(self.monitor, name, stream.get("t"))
         self.rows = int(stream.get("rows", 0))
         self.last_step = stream.get("step")
         self.last_t = stream.get("t")
@@ -144,6 +156,102 @@ class _Session:
         return from_file and index < self.rows
 
 
+def _malformed(name: str, key: str, msg: str) -> IvobsError:
+    return IvobsError(
+        f"--state: {name!r} is a malformed monitor state: {key}: {msg} (the file was altered "
+        "or is not from `ivobs monitor --state`; delete it to start afresh)"
+    )
+
+
+def _numbers(name: str, key: str, v: Any, n: int, nan: bool = True) -> np.ndarray:
+    """A saved vector of ``n`` numbers (non-finite ones spelled as strings, as saved)."""
+    if not isinstance(v, list) or len(v) != n:
+        got = f"{len(v)} values" if isinstance(v, list) else repr(v)[:40]
+        raise _malformed(name, key, f"expected a list of {n} numbers, got {got}")
+    try:
+        arr = np.array([float(x) for x in v], dtype=float)
+    except (TypeError, ValueError):
+        raise _malformed(name, key, f"expected numbers, got {v!r}"[:200]) from None
+    if not nan and np.isnan(arr).any():
+        raise _malformed(name, key, f"NaN at component {int(np.flatnonzero(np.isnan(arr))[0])}")
+    return arr
+
+
+def _count(name: str, key: str, v: Any) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise _malformed(name, key, f"expected an integer >= 0, got {v!r}")
+    return v
+
+
+def _check_state(data: dict[str, Any], mon: Any, name: str) -> None:
+    """The structure of a saved state: what ``Monitor.restore`` and ``Estimator.restore`` take
+    on trust (lengths, NaN, ``lo <= hi``, types)."""
+    sys_ = mon.sys
+    m = data.get("monitor")
+    if not isinstance(m, dict):
+        raise _malformed(name, "monitor", f"expected a table, got {m!r}"[:200])
+    _count(name, "monitor.k", m.get("k"))
+    _count(name, "monitor.alarms", m.get("alarms"))
+    prev = m.get("prev")
+    if prev is not None:
+        if not isinstance(prev, dict) or set(prev) != {"lo", "hi", "u", "y"}:
+            raise _malformed(name, "monitor.prev", "expected the keys lo, hi, u, y")
+        lo = _numbers(name, "monitor.prev.lo", prev["lo"], sys_.nx, nan=False)
+        hi = _numbers(name, "monitor.prev.hi", prev["hi"], sys_.nx, nan=False)
+        bad = np.flatnonzero(lo > hi)
+        if bad.size:
+            i = int(bad[0])
+            raise _malformed(name, "monitor.prev", f"lo > hi at component {i}: {lo[i]} > {hi[i]}")
+        _numbers(name, "monitor.prev.u", prev["u"], sys_.nu, nan=False)
+        _numbers(name, "monitor.prev.y", prev["y"], sys_.ny)
+    est = m.get("estimator")
+    if not isinstance(est, dict) or not isinstance(est.get("state"), dict):
+        got = est.get("state") if isinstance(est, dict) else est
+        raise _malformed(name, "monitor.estimator.state", f"expected a table, got {got!r}"[:200])
+    ref = mon.estimator._initial_state()
+    for key, val in est["state"].items():
+        where = f"monitor.estimator.state.{key}"
+        if isinstance(ref.get(key), np.ndarray):
+            if not isinstance(val, dict) or set(val) != {"array", "shape"}:
+                raise _malformed(name, where, "expected a saved array {array, shape}")
+            shape = val["shape"]
+            if not isinstance(shape, list) or len(shape) != ref[key].ndim:
+                raise _malformed(name, where, f"expected a {ref[key].ndim}-D shape, got {shape!r}")
+    stream = data.get("stream", {})
+    if not isinstance(stream, dict):
+        raise _malformed(name, "stream", f"expected a table, got {stream!r}"[:200])
+    _count(name, "stream.rows", stream.get("rows", 0))
+    if stream.get("step") is not None:
+        _count(name, "stream.step", stream["step"])
+    t = stream.get("t")
+    if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float))
+                          or not np.isfinite(t)):  # fmt: skip
+        raise _malformed(name, "stream.t", f"expected a finite number, got {t!r}")
+
+
+def _probe(mon: Any, name: str, t: Any) -> None:
+    """One prediction from the restored state (``Estimator.predict``: the state is unchanged):
+    entries with a wrong shape, NaN or ``lo > hi`` show up here rather than on the next row."""
+    est, sys_ = mon.estimator, mon.sys
+    if est.k < est.valid_from:
+        return
+    t_k = None
+    if sys_.is_continuous:
+        t_k = (0.0 if t is None else float(t)) + 1e-3
+    try:
+        box = est.predict(np.zeros(sys_.nu) if sys_.nu else None, t_k)
+    except IvobsError as exc:
+        if "NaN" in str(exc):
+            raise _malformed(name, "monitor.estimator.state", "gives NaN bounds") from None
+        return  # e.g. bounds that need the measurement: nothing to judge
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError, ArithmeticError,
+            np.linalg.LinAlgError) as exc:  # fmt: skip
+        raise _malformed(name, "monitor.estimator.state", f"unusable ({exc})") from None
+    lo, hi = np.asarray(box.lo, dtype=float), np.asarray(box.hi, dtype=float)
+    if np.isnan(lo).any() or np.isnan(hi).any() or np.any(lo > hi):
+        raise _malformed(name, "monitor.estimator.state", "gives an empty or NaN box")
+
+
 def main(args: argparse.Namespace) -> int:
     from ..io import LogParser
 
@@ -151,6 +259,11 @@ def main(args: argparse.Namespace) -> int:
         raise IvobsError(f"--save-every: expected an integer >= 1, got {args.save_every}")
     if args.follow and not args.input:
         raise IvobsError("--follow: needs --input FILE (stdin is followed anyway)")
+    if args.input:
+        if Path(args.input).is_dir():
+            raise IvobsError(f"--input: {args.input!r} is a directory; expected a CSV file")
+        if not Path(args.input).is_file():
+            raise IvobsError(f"--input: no such file {args.input!r}")
     session = _Session(args)
     mon = session.monitor
     sys_ = mon.sys
@@ -165,9 +278,7 @@ def main(args: argparse.Namespace) -> int:
         sys.stdout.flush()
     fh: TextIO
     if args.input:
-        if not Path(args.input).is_file():
-            raise IvobsError(f"--input: no such file {args.input!r}")
-        fh = open(args.input, encoding="utf-8", newline="")
+        fh = open(args.input, encoding="utf-8-sig", newline="")
     else:
         fh = sys.stdin
     alarms = 0
@@ -212,6 +323,10 @@ def main(args: argparse.Namespace) -> int:
             if unsaved >= args.save_every:
                 session.save()
                 unsaved = 0
+    except UnicodeDecodeError as exc:
+        from ..io import not_utf8
+
+        raise not_utf8(source, exc) from None
     finally:
         if unsaved and not in_step:
             session.save()
