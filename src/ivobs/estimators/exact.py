@@ -131,6 +131,9 @@ _DUAL_TOL = 1e-10
 widths of the variables (two runs that end on different optimal bases, e.g. ``step()`` after
 ``restore()`` and ``run()``, then agree to about that much: 5e-9 for 16 steps of 2 states)."""
 
+_ITERATION_LIMIT = 100_000
+"""Simplex iterations allowed per program (typically 60-110 here)."""
+
 _EPS = float(np.finfo(float).eps)
 _TINY = float(np.finfo(float).smallest_subnormal)
 
@@ -200,9 +203,10 @@ def _new_highs() -> highspy.Highs:
     # tighter than HiGHS's 1e-7 defaults: the safe bound is only as tight as the duals
     h.setOptionValue("primal_feasibility_tolerance", _PRIMAL_TOL)
     h.setOptionValue("dual_feasibility_tolerance", _DUAL_TOL)
-    # Devex pricing for the dual simplex: on the windowed benchmark (bench_exact.py) 13 % faster
-    # than the default (dual steepest edge), with the same boxes
-    h.setOptionValue("simplex_dual_edge_weight_strategy", 1)
+    # a bound on the work of one program: a solve that stalls (seen with Devex pricing, tried
+    # and dropped: cora-vehicle6 never finished) ends as not optimal, and the safe bound (S)
+    # of its last multipliers (or the variable bounds) is used; ~100 iterations are typical
+    h.setOptionValue("simplex_iteration_limit", _ITERATION_LIMIT)
     return h
 
 
