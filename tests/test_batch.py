@@ -287,3 +287,11 @@ def test_empty_records_and_systems_without_inputs(method):
     np.testing.assert_allclose(vec.upper[vf:], ref.upper[vf:], rtol=1e-9, atol=1e-12)
     batch = est.run(None, np.stack([tr.y, tr.y]))
     np.testing.assert_allclose(batch.upper[1, vf:], ref.upper[vf:], rtol=1e-9, atol=1e-12)
+
+
+def test_a_batch_of_empty_records():
+    """``(B, 0, ny)``: an empty estimate of shape ``(B, 0, nx)`` (no division by the length)."""
+    sys_ = random_system(5, nx=3, ny=1, nu=1)
+    est = ivobs.make_estimator("reachability", sys_, x0=ivobs.Box([-1] * 3, [1] * 3))
+    res = est.run(np.zeros((0, 1)), np.zeros((4, 0, 1)))
+    assert res.lower.shape == (4, 0, 3) and res.upper.shape == (4, 0, 3)

@@ -303,3 +303,31 @@ def test_default_members_skip_what_cannot_be_designed():
     else:
         with pytest.raises(ivobs.DesignError, match="methods="):
             intersect(ct, Box(-np.ones(2), np.ones(2)))
+
+
+def test_vectorised_path_keeps_the_members_inconsistency_flags():
+    """A faulty stream in a complete batch: the fixed-time member flags it in its own
+    vectorised run; intersect reports the same steps as its loop (it used to drop them)."""
+    sys_ = random_system(1, nx=2, ny=2, nu=2, feedthrough=True)
+    x0 = Box([-1, -1], [1, 1])
+    est = ivobs.make_estimator("intersect", sys_, x0=x0, on_inconsistent="ignore")
+    tr = adversarial_run(sys_, x0, 30, seed=2)
+    Y = tr.y.copy()
+    Y[10:, 0] += 0.05  # a small sensor offset from step 10
+    rb = est.run(np.stack([tr.u] * 4), np.stack([tr.y] * 3 + [Y]))
+    rl = est.run(tr.u, Y, vectorize=False)
+    assert rl.inconsistent.any()
+    np.testing.assert_array_equal(rb.inconsistent[3], rl.inconsistent)
+    assert not rb.inconsistent[:3].any()
+
+
+def test_time_varying_system_uses_the_strip_in_every_path():
+    """The pendulum (continuous time, time-varying C): the measurement strip depends on the
+    time, so the vectorised path defers to the loop instead of leaving the strip out."""
+    sc = scenarios.get("pendulum", t_final=3.0)
+    est = ivobs.make_estimator("intersect", sc.system, x0=sc.x0)
+    Y = np.stack([sc.simulate("vertex", seed=s).y for s in (0, 1)])
+    rb = est.run(sc.u, Y, t=sc.t)
+    rl = est.run(sc.u, Y[0], t=sc.t, vectorize=False)
+    np.testing.assert_allclose(rb.lower[0], rl.lower, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(rb.upper[0], rl.upper, rtol=1e-9, atol=1e-12)

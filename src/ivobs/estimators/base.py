@@ -409,7 +409,7 @@ class Estimator:
                 lo = np.empty((B, T, nx))
                 hi = np.empty((B, T, nx))
                 inconsistent = np.zeros((B, T), dtype=bool)
-                size = T * max(nx, self.sys.ny, self.sys.nu, 1)
+                size = max(1, T) * max(nx, self.sys.ny, self.sys.nu, 1)
                 chunk = max(1, BATCH_CHUNK // size)
                 for b0 in range(0, B, chunk):
                     sl = slice(b0, min(B, b0 + chunk))

@@ -227,9 +227,13 @@ class Intersect(Estimator):
         nx = self.sys.nx
         shape = (*y.shape[:-1], nx)
         lo, hi = np.full(shape, -np.inf), np.full(shape, np.inf)
-        if not self.design.strip or not self._strip_rows:
+        if not self.design.strip:
             return lo, hi
-        if self.sys.is_time_varying or not self.sys.has_constant_bounds:
+        if self.sys.is_time_varying:
+            return None  # the pinning rows depend on the step: the loop (as step() does)
+        if not self._strip_rows:
+            return lo, hi
+        if not self.sys.has_constant_bounds:
             return None
         _, _, _, D, _, F = self.sys.matrices_at(0)
         d = self.sys.d_at(0, None)
@@ -331,6 +335,8 @@ class Intersect(Estimator):
         """A member's raw bounds (fresh arrays; the caller rounds them outward)."""
         out = m._run(u, y, t)
         if out is not None:
+            if len(out) > 2 and np.any(out[2]):  # the member flagged a sample: the loop reports
+                return None
             return np.array(out[0], dtype=float), np.array(out[1], dtype=float)
         if y.ndim == 2:
             lo, hi, inc = m._loop(u, y, t)
