@@ -383,3 +383,21 @@ def test_a_solver_stopped_by_its_iteration_limit_still_gives_guaranteed_boxes(mo
     assert not res.inconsistent.any()
     assert np.all(res.lower <= ref.lower + 1e-9) and np.all(res.upper >= ref.upper - 1e-9)
     assert np.mean(res.width) > np.mean(ref.width)  # the limit did bite
+
+
+def test_state_with_a_missing_sample_is_strict_json():
+    """A missing sample kept in exact's history is saved as null (strict JSON, e.g. for other
+    languages' parsers) and restored as missing: the same boxes afterwards."""
+    sys = random_system(3, nx=3, ny=2, nu=1)
+    x0 = Box.symmetric(np.ones(3))
+    tr = adversarial_run(sys, x0, 6, seed=0)
+    est = ivobs.make_estimator("exact", sys, x0=x0, progress=False)
+    est.step(tr.u[0], tr.y[0])
+    est.step(tr.u[1], None)
+    text = json.dumps(est.state(), allow_nan=False)
+    other = ivobs.make_estimator("exact", sys, x0=x0, progress=False)
+    other.restore(json.loads(text))
+    for k in range(2, 6):
+        a, b = est.step(tr.u[k], tr.y[k]), other.step(tr.u[k], tr.y[k])
+        np.testing.assert_allclose(a.lo, b.lo, rtol=1e-9, atol=1e-8)
+        np.testing.assert_allclose(a.hi, b.hi, rtol=1e-9, atol=1e-8)

@@ -543,7 +543,12 @@ class Estimator:
         data = {}
         for key, val in st.items():
             if isinstance(val, np.ndarray):
-                data[key] = {"array": val.tolist(), "shape": list(val.shape)}
+                if val.dtype.kind == "f" and np.isnan(val).any():
+                    # NaN (a missing sample) as null: strict JSON; restore() reads it back
+                    lst = [None if v != v else v for v in val.ravel().tolist()]
+                    data[key] = {"array": lst, "shape": list(val.shape)}
+                else:
+                    data[key] = {"array": val.tolist(), "shape": list(val.shape)}
             elif isinstance(val, (np.floating, np.integer, np.bool_)):
                 data[key] = val.item()
             else:
