@@ -656,7 +656,7 @@ def run_job(job: Job | dict[str, Any]) -> dict[str, Any]:
             row["run_time"] = time.perf_counter() - t0
             row["valid_from"] = int(res.valid_from)
             row["inconsistent"] = 0 if res.inconsistent is None else int(res.inconsistent.sum())
-            if not np.isnan(traj.x).all():  # CORA's 2-D record stores no state
+            if traj.has_truth:
                 row["contains"] = bool(np.all(res.contains(traj.x)))
             widths = res.mean_width(burn)
             row["widths"] = [float(w) for w in widths]

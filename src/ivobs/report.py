@@ -77,7 +77,7 @@ def compare(
             res.error = f"{type(exc).__name__}: {exc}"
             out.append(res)
             continue
-        if not np.isnan(traj.x).all():  # CORA's 2-D record stores no state
+        if traj.has_truth:
             res.contains = bool(np.all(res.estimate.contains(traj.x)))
         if burn < res.estimate.T:
             res.mean_width = res.estimate.mean_width(burn)

@@ -51,6 +51,12 @@ class Trajectory:
     def T(self) -> int:
         return int(self.x.shape[0])
 
+    @property
+    def has_truth(self) -> bool:
+        """Whether the record holds its true state (CORA's recorded 2-D record stores none:
+        ``x`` is all NaN)."""
+        return not bool(np.isnan(self.x).all())
+
 
 def _bounds_rows(box: Box, T: int) -> tuple[np.ndarray, np.ndarray]:
     if not isinstance(box, Box):

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import numpy as np
-
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
 from . import check_disturbance, check_seed, parse_states
@@ -98,7 +96,7 @@ def main(args: argparse.Namespace) -> int:
         good = {r.method: r.estimate for r in results if r.ok}
         if not good:
             raise IvobsError("--plot: no method gave an estimate; nothing to plot")
-        truth = None if np.isnan(traj.x).all() else traj.x
+        truth = traj.x if traj.has_truth else None
         fig = plot_estimates(good, truth=truth, states=states, t=traj.t,
                              state_names=sc.state_names, title=f"{sc.name}")
         print(f"\nfigure: {save_figure(fig, plot_path)}")

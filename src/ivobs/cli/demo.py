@@ -6,8 +6,6 @@ import argparse
 import os
 from typing import Any
 
-import numpy as np
-
 from ..scenarios import DISTURBANCES
 from . import check_disturbance, check_out_dir, check_seed
 from .compare import default_methods, print_reasons
@@ -58,7 +56,7 @@ def main(args: argparse.Namespace) -> int:
     print_reasons(results)
     os.makedirs(args.out, exist_ok=True)
     good = {r.method: r.estimate for r in results if r.ok}
-    has_truth = not np.isnan(traj.x).all()  # CORA's recorded 2-D record stores no state
+    has_truth = traj.has_truth
     if good:
         fig = plot_estimates(
             good,

@@ -107,7 +107,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
     traj = sc.simulate(args.disturbance, args.seed)
     est = make_estimator(args.method, sc.system, x0=sc.x0)
     res = _estimate(est, traj.u, traj.y, traj.t if sc.system.is_continuous else None, args)
-    has_truth = not np.isnan(traj.x).all()  # CORA's recorded 2-D record stores no state
+    has_truth = traj.has_truth
     ok = bool(np.all(res.contains(traj.x))) if has_truth else True
     burn = sc.horizon // 10
     mw = res.mean_width(max(burn, res.valid_from))
