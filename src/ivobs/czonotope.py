@@ -53,7 +53,6 @@ __all__ = [
     "ConstrainedZonotope",
     "box_generators",
     "certified_empty",
-    "check_overflow",
     "consolidate_small",
     "eliminate_constraints",
     "gamma",
@@ -72,17 +71,6 @@ def safe_radius(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     c = 0.5 * (lo + hi)
     r = 0.5 * (hi - lo)
     return c, np.where(hi > lo, r + gamma(3) * (np.abs(c) + r), 0.0)
-
-def check_overflow(who: str, k: int, *arrays: np.ndarray) -> None:
-    """``IvobsError`` when the predicted set of step ``k + 1`` has overflowed (an entry beyond
-    the largest float, ``inf`` or ``nan``): an unstable system whose measurements do not bound
-    the state (e.g. a long outage) — the set really is that large; reducing it is impossible."""
-    if all(np.isfinite(a).all() for a in arrays):
-        return
-    raise IvobsError(
-        f"{who}: the predicted set overflowed at step {k + 1} (magnitudes beyond 1.8e308): the "
-        "system is unstable and the measurements do not bound the state (e.g. a long outage)"
-    )
 
 
 def box_generators(r: np.ndarray) -> np.ndarray:

@@ -470,6 +470,13 @@ class Estimator:
                 k, _overflowed(lo[row][k], hi[row][k], lo[row][prev], hi[row][prev])
             )
 
+    def _check_overflow(self, k: int, *arrays: np.ndarray) -> None:
+        """For estimators that keep a set (strip, constrained-zonotope): the set predicted for
+        step ``k`` has run out of the float range (an unstable system the measurements do not
+        bound; reducing it is impossible): the overflow error of :meth:`_non_finite_error`."""
+        if not all(np.isfinite(a).all() for a in arrays):
+            raise self._non_finite_error(k, True)
+
     def _non_finite_error(self, k: int, overflowed: bool, what: str = "non-finite") -> IvobsError:
         """The error for non-finite bounds at step ``k``: an overflow of the float range (an
         unstable system that the measurements do not bound) or NaN from finite data (a bug)."""

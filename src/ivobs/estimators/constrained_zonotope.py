@@ -63,7 +63,6 @@ from ..czonotope import (
     UNIT_ROUNDOFF,
     box_generators,
     certified_empty,
-    check_overflow,
     consolidate_small,
     eliminate_constraints,
     gamma,
@@ -343,7 +342,7 @@ class ConstrainedZonotopeEstimator(Estimator):
         ) + (aA @ e) * (1.0 + gamma(nx + 1))
         box = box_generators(err)
         G_next = np.hstack([A @ G_aug[:, :m], ER, box])
-        check_overflow(self.name, k, c_next, G_next)
+        self._check_overflow(k + 1, c_next, G_next)
         A_next = np.hstack([A_new, np.zeros((A_new.shape[0], box.shape[1]))])
         e_next = np.zeros(nx)
         nc, ng = self.design.max_constraints, self.design.max_generators

@@ -65,7 +65,6 @@ from .._validate import as_int, as_matrix
 from ..czonotope import (
     UNIT_ROUNDOFF,
     box_generators,
-    check_overflow,
     gamma,
     reduce_generators,
     safe_radius,
@@ -237,7 +236,7 @@ class StripEstimator(Estimator):
         ) + (aM @ acc) * (1.0 + gamma(nz + 1))
         H_next = np.hstack([H_next, box_generators(err)])
         H_next = H_next[:, np.any(H_next != 0, axis=0)]
-        check_overflow(self.name, k, p_next, H_next)
+        self._check_overflow(k + 1, p_next, H_next)
         e_next = np.zeros(nx)
         if self.design.reduction == "box":
             m = H_next.shape[1]
