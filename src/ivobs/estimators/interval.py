@@ -323,7 +323,12 @@ def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: b
 
 def _norm_inf(M: np.ndarray) -> float:
     """``‖M‖_∞`` (largest absolute row sum; 0 for an empty matrix)."""
-    return float(np.max(np.abs(M).sum(axis=1), initial=0.0)) if M.size else 0.0
+    return float(np.linalg.norm(M, np.inf))
+
+
+def _largest(*arrays: np.ndarray) -> float:
+    """``max |a_i|`` over all the entries of ``arrays`` (0 when they are empty)."""
+    return max((float(np.max(np.abs(a), initial=0.0)) for a in arrays), default=0.0)
 
 
 def transform_conversion(S: np.ndarray, Si: np.ndarray, who: str) -> tuple[float, float]:
@@ -617,8 +622,8 @@ class _CooperativeObserver(Estimator):
         xlo, xhi = _hull(*self._Si_pm, lo, hi)  # 002 (42e-f)
         # the computed inverse and the rounding of the products (transform_conversion)
         g, c = self._tconv
-        cz = c * float(np.max(np.maximum(np.abs(lo), np.abs(hi))))
-        xi = float(np.max(np.maximum(np.abs(xlo), np.abs(xhi))))
+        cz = c * _largest(lo, hi)
+        xi = _largest(xlo, xhi)
         e = cz + g * (xi + cz) / (1.0 - g)
         return xlo - e, xhi + e
 
@@ -698,13 +703,8 @@ class _CooperativeObserver(Estimator):
             state["hi"] += e
             state["lo"] -= e
         elif m.err is not None:  # S ≠ I: transform_step_error, on the true x and z
-            norms = np.array([
-                np.max(np.maximum(np.abs(xlo), np.abs(xhi)), initial=0.0),
-                np.max(np.maximum(np.abs(zlo), np.abs(zhi)), initial=0.0),
-                np.max(np.abs(y_obs), initial=0.0),
-                np.max(np.abs(u_k), initial=0.0),
-                max(np.max(np.abs(dbox.lo), initial=0.0), np.max(np.abs(dbox.hi), initial=0.0)),
-            ])  # fmt: skip
+            norms = np.array([_largest(xlo, xhi), _largest(zlo, zhi), _largest(y_obs),
+                              _largest(u_k), _largest(dbox.lo, dbox.hi)])  # fmt: skip
             e = float(m.err @ norms)
             state["hi"] += e
             state["lo"] -= e
@@ -886,7 +886,7 @@ class _CooperativeObserver(Estimator):
         box = self.sys.d
         Dm = 0.0
         if isinstance(box, Box):
-            Dm = float(np.max(np.maximum(np.abs(box.lo), np.abs(box.hi)), initial=0.0))
+            Dm = _largest(box.lo, box.hi)
 
         def margin(X: Any, Y: Any, U: Any) -> Any:
             delta = (c_x + 2.0 * nS * c_z) * X + c_y * Y + c_u * U + c_d * Dm
