@@ -34,22 +34,9 @@ def _normalise(name: Any) -> str:
 
 
 def methods() -> list[str]:
-    """Names of the available methods, in the order of the papers."""
-    order = [
-        "fixed-time",
-        "reachability",
-        "zonotope",
-        "interval",
-        "interval-transformed",
-        "interval-split",
-        "kkl",
-        "strip",
-        "constrained-zonotope",
-        "exact",
-        "intersect",
-    ]
-    known = [m for m in order if m in _REGISTRY]
-    return known + sorted(set(_REGISTRY) - set(known))
+    """Names of the available methods, in the order their classes declare (``order``: the
+    papers' order), then by name."""
+    return sorted(_REGISTRY, key=lambda name: (_REGISTRY[name].order, name))
 
 
 def get(name: str) -> type[Estimator]:

@@ -5,34 +5,29 @@ offline loop, missing samples bookkeeping, inconsistency reporting and outward r
 
 A subclass provides
 
-* ``__init__(sys, x0=None, *, <its design options>, **base_options)``: validate, design offline
-  (no time loop), set ``self.design`` (a :class:`Design` dataclass with the papers' symbols) and
+* ``__init__(sys, x0=None, *, <its design options>, **options)``: validate, design offline (no
+  time loop), set ``self.design`` (a :class:`Design` dataclass with the papers' symbols) and
   ``self.valid_from``; then call nothing else.
-* ``_initial_state() -> dict``: the online state at step 0 (numpy arrays / numbers only).
-* ``_step(state, k, u_k, y_k, t_k) -> (lo, hi)``: advance one step in place and return the
-  bounds of ``x[k]`` from ``u[0..k]``, ``y[0..k]``. ``y_k`` may contain NaN (missing components:
-  predict without them). On a measurement that contradicts the model, set
-  ``state["_inconsistent"] = True`` and predict without it.
+* ``_initial_state() -> S``: the online state at step 0, a frozen dataclass derived from
+  :class:`~ivobs.estimators.state.OnlineState` (arrays named as in the paper).
+* ``_step(state, u_k, y_k, t_k) -> Step[S]``: the method's recursion, written once: from the
+  state at step ``k = state.k``, the next state and the bounds of ``x[k]`` from ``u[0..k]``,
+  ``y[0..k]`` (before outward rounding). It never modifies ``state``. ``y_k`` may contain NaN
+  (missing components: predict without them). A measurement that contradicts the model is
+  reported by ``Step(..., inconsistent=True)`` and not used.
 * optionally ``_run(u, y, t) -> (lo, hi) | (lo, hi, inconsistent) | None``: the whole record
-  at once (vectorised; batch ``(B, T, n)`` inputs allowed), as *fresh* arrays the base class may
-  modify in place; ``inconsistent`` is a ``(..., T)`` bool array of steps whose measurement was
-  found inconsistent (and not used). Return ``None`` to fall back to the loop (e.g. missing
-  samples).
+  at once (vectorised; batch ``(B, T, n)`` inputs allowed) from a shared kernel, tested equal to
+  the loop over ``_step``; fresh arrays the base class may modify in place; ``inconsistent`` a
+  ``(..., T)`` bool array of steps whose measurement was found inconsistent (and not used).
+  Return ``None`` to fall back to the loop (e.g. missing samples).
 
-Soundness under floating point: every returned bound of ``x[k]`` is widened outwards by
-``ROUNDING * (1 + |bound| + s_k)`` (:data:`ROUNDING` ``= 1e-10``, about ``4.5e5`` units of
-rounding ``eps``), where ``s_k`` is the *data scale*: the largest magnitude of a data term seen up
-to step ``k`` (``|y_j|``, ``|B| |u_j|``, ``|D| |u_j|``, ``|E| |d_j|``, ``|F| |d_j|``, ``j <= k``).
-A recursion that combines terms of size ``s`` loses about ``eps s`` per operation, amplified by
-the gain of the error dynamics; the margin covers amplifications up to ``~1e5`` relative to the
-largest quantity involved, the bounds *and* the data (a measurement ``y = 1e8`` carrying a state
-of size 1 is only known to ``eps 1e8``). This is a documented safety margin, not interval
-arithmetic with directed rounding.
+Rounding: every bound is widened outwards by :func:`~ivobs.estimators.rounding.outward`
+(see :mod:`ivobs.estimators.rounding`).
 """
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import hashlib
 import inspect
 import time
@@ -47,6 +42,9 @@ from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box
+from ._legacy_state import _check_restored, _copy_state
+from .rounding import ROUNDING, outward, overflowed
+from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step, dump_state, load_state
 
 __all__ = [
     "MAX_DENSE_STATES",
@@ -57,9 +55,6 @@ __all__ = [
     "check_size",
     "check_x0",
 ]
-
-ROUNDING = 1e-10
-"""Relative outward widening of every bound (covers floating-point rounding)."""
 
 BATCH_CHUNK = 2_000_000
 """Batches are processed in chunks of about this many floats per signal (cache-sized)."""
@@ -115,53 +110,6 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
-def outward(
-    lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | float | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Widen bounds by the rounding margin ``ROUNDING (1 + max(|lo|, |hi|) + scale)`` (NaN
-    stays NaN), in place: pass arrays you own. ``scale``: the data scale per step, shaped like
-    the bounds without their last axis (see the module docstring).
-
-    Works through cache-sized slabs of rows with two reused buffers: on a long record of a
-    large system, whole-array temporaries cost more in page faults than the arithmetic."""
-    n = lo.shape[-1] if lo.ndim else 1
-    flat = lo.ndim == 2 or (lo.flags.c_contiguous and hi.flags.c_contiguous)  # rows: views
-    if lo.size <= _SLAB or not flat or n == 0 or lo.shape != hi.shape:
-        with np.errstate(invalid="ignore"):
-            m = np.maximum(np.abs(lo), np.abs(hi))
-            if scale is not None:
-                m += np.asarray(scale)[..., None] if np.ndim(scale) else scale
-            m *= ROUNDING
-            m += ROUNDING
-            lo -= m
-            hi += m
-        return lo, hi
-    L, H = lo.reshape(-1, n), hi.reshape(-1, n)
-    rows = L.shape[0]
-    # the part of the margin that does not depend on the bound: ROUNDING (1 + s) per row
-    base = ROUNDING * (1.0 + (0.0 if scale is None else np.asarray(scale, dtype=float)))
-    S = np.broadcast_to(base, lo.shape[:-1]).reshape(-1, 1)
-    step = max(1, _SLAB // n)
-    m = np.empty((min(step, rows), n))
-    t = np.empty_like(m)
-    with np.errstate(invalid="ignore"):
-        for r0 in range(0, rows, step):
-            r1 = min(rows, r0 + step)
-            mm, tt = m[: r1 - r0], t[: r1 - r0]
-            np.abs(L[r0:r1], out=mm)
-            np.abs(H[r0:r1], out=tt)
-            np.maximum(mm, tt, out=mm)
-            mm *= ROUNDING
-            mm += S[r0:r1]
-            L[r0:r1] -= mm
-            H[r0:r1] += mm
-    return lo, hi
-
-
-_SLAB = 1 << 15
-"""Elements per slab of :func:`outward`."""
-
-
 def _owned(a: Any) -> np.ndarray:
     """A float array safe to modify in place: ``_run`` returns fresh arrays (or views of
     fresh arrays), so only read-only or foreign-typed results are copied."""
@@ -170,12 +118,37 @@ def _owned(a: Any) -> np.ndarray:
     return np.array(a, dtype=float)
 
 
+def _inconsistent(state: Any) -> bool:
+    """Whether the step that produced ``state`` found its measurement inconsistent."""
+    if isinstance(state, OnlineState):
+        return state.inconsistent
+    return bool(state.get("_last_inconsistent", False))
+
+
+def _arrays(state: OnlineState) -> list[np.ndarray]:
+    """The float arrays of a state (to tell an overflow from a bug)."""
+    out = []
+    for f in dataclasses.fields(state):
+        v = getattr(state, f.name)
+        if isinstance(v, np.ndarray) and v.dtype.kind == "f":
+            out.append(v)
+    return out
+
+
 class Estimator:
     """Base class of all guaranteed estimators (see the module docstring for the contract)."""
 
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     reference: ClassVar[str] = ""
+    """Where the method comes from, as reference keys of docs/references.md
+    (``"[Tang2019, Algorithm 1]"``)."""
+    order: ClassVar[int] = 1000
+    """Position in ``ivobs.methods()``, the README table and the docs (papers' order)."""
+    data_used: ClassVar[str] = "filter"
+    """Which data the box of ``x[k]`` uses: ``"filter"`` (``u[0..k]``, ``y[0..k]``) or
+    ``"prediction"`` (``u[0..k-1]``, ``y[0..k-1]``)."""
+    supports_nonlinear: ClassVar[bool] = False
     supports_continuous: ClassVar[bool] = False
     supports_time_varying: ClassVar[bool] = False
     needs_x0: ClassVar[bool] = True
@@ -208,32 +181,40 @@ class Estimator:
         self.valid_from: int = 0
         self.last_inconsistent: bool = False
         """Whether the measurement of the last ``step()`` was found inconsistent (not used)."""
-        self._state: dict[str, Any] | None = None
+        self._state: Any = None  # an OnlineState (a dict for methods not yet typed)
 
     # -- to implement ---------------------------------------------------------------------
-    def _initial_state(self) -> dict[str, Any]:
+    def _initial_state(self) -> Any:
+        """The online state at step 0 (an :class:`OnlineState` dataclass)."""
         raise NotImplementedError
 
-    def _step(
-        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _step(self, state: Any, *args: Any) -> Any:
+        """``_step(state, u_k, y_k, t_k) -> Step``: the recursion (module docstring)."""
         raise NotImplementedError
 
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray] | None:
+    ) -> tuple[np.ndarray, ...] | None:
         return None
+
+    def initial_state(self) -> Any:
+        """The online state at step 0 (the state after :meth:`reset`)."""
+        st = self._initial_state()
+        if not isinstance(st, OnlineState):
+            st["k"] = 0
+        return st
 
     # -- online ---------------------------------------------------------------------------
     def reset(self) -> None:
         """Return to step 0 (before the first measurement)."""
-        self._state = self._initial_state()
-        self._state["k"] = 0
+        self._state = self.initial_state()
 
     @property
     def k(self) -> int:
         """Number of steps processed online so far."""
-        return 0 if self._state is None else int(self._state["k"])
+        if self._state is None:
+            return 0
+        return self._state.k if isinstance(self._state, OnlineState) else int(self._state["k"])
 
     def step(self, u_k: Any = None, y_k: Any = None, t: float | None = None) -> Box:
         """Process ``u[k]``, ``y[k]`` and return the box of ``x[k]`` (NaN box before
@@ -241,41 +222,96 @@ class Estimator:
         measurement is missing. Continuous-time methods need the sample time ``t``."""
         if self._state is None:
             self.reset()
-        assert self._state is not None
+        k = self.k
+        self._state, box = self._advance_any(self._state, u_k, y_k, t, in_place=True)
+        self.last_inconsistent = _inconsistent(self._state)
+        if self.last_inconsistent:
+            self._report_inconsistent([k])
+        return box
+
+    def advance(
+        self,
+        state: Any,
+        u_k: Any = None,
+        y_k: Any = None,
+        t: float | None = None,
+        *,
+        finite: bool = True,
+    ) -> tuple[Any, Box]:
+        """The pure form of :meth:`step`: from an online ``state`` (from :meth:`initial_state`
+        or a previous call), the next state and the box of ``x[k]``; the estimator's own online
+        state is not touched (this is how :class:`Intersect` composes its members).
+        ``new_state.inconsistent`` says whether ``y_k`` contradicted the model. ``finite=False``
+        returns a non-finite box instead of raising the overflow error (a member of a
+        composition whose other members still bound the state)."""
+        return self._advance_any(state, u_k, y_k, t, finite=finite)
+
+    def _advance_any(
+        self,
+        state: Any,
+        u_k: Any,
+        y_k: Any,
+        t: Any,
+        *,
+        in_place: bool = False,
+        finite: bool = True,
+    ) -> tuple[Any, Box]:
         u_k = self._check_u_k(u_k)
         y_k = self._check_y_k(y_k)
         t_k = self._check_t_k(t)
-        k = int(self._state["k"])
-        scale = max(float(self._state.get("_scale", 0.0)), self._step_scale(k, u_k, y_k, t_k))
-        self._state["_scale"] = scale
-        lo, hi = self._step(self._state, k, u_k, y_k, t_k)
-        self._state["k"] = k + 1
-        self.last_inconsistent = bool(self._state.pop("_inconsistent", False))
-        if self.last_inconsistent:
-            self._report_inconsistent([k])
+        if isinstance(state, OnlineState):
+            k = state.k
+            new, lo, hi, _flag = self._advance(state, u_k, y_k, t_k)
+            return new, self._box(k, lo, hi, new.scale, _arrays(new), finite)
+        st = state if in_place else _copy_state(state)  # a dict state (not yet typed)
+        k = int(st["k"])
+        scale = max(float(st.get("_scale", 0.0)), self._step_scale(k, u_k, y_k, t_k))
+        st["_scale"] = scale
+        lo, hi = self._step(st, k, u_k, y_k, t_k)
+        st["k"] = k + 1
+        st["_last_inconsistent"] = bool(st.pop("_inconsistent", False))
+        arrays = [v for v in st.values() if isinstance(v, np.ndarray)]
+        return st, self._box(k, lo, hi, scale, arrays, finite)
+
+    def _advance(
+        self, state: OnlineState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> tuple[OnlineState, np.ndarray, np.ndarray, bool]:
+        """One step of the typed protocol: the data scale, the method's recursion, the counter."""
+        scale = max(state.scale, self._step_scale(state.k, u_k, y_k, t_k))
+        if self.rounds_itself:  # it needs s_k inside its step
+            state = dataclasses.replace(state, scale=scale)
+        res: Step[Any] = self._step(state, u_k, y_k, t_k)
+        new = dataclasses.replace(
+            res.state, k=state.k + 1, scale=scale, inconsistent=bool(res.inconsistent)
+        )
+        return new, res.lo, res.hi, bool(res.inconsistent)
+
+    def _box(
+        self,
+        k: int,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        scale: float,
+        arrays: list[np.ndarray],
+        finite: bool = True,
+    ) -> Box:
+        """The returned box of step ``k``: rounded outwards, NaN before ``valid_from``."""
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
         if not self.rounds_itself:
             outward(lo, hi, scale)
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-            state_arrays = [v for v in self._state.values() if isinstance(v, np.ndarray)]
+        if finite and not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
             what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"
-            raise self._non_finite_error(k, _overflowed(lo, hi, *state_arrays), what)
+            raise self._non_finite_error(k, overflowed(lo, hi, *arrays), what)
         return Box._trusted(lo, hi)
 
     def predict(self, u_k: Any = None, t: float | None = None) -> Box:
         """The box the next :meth:`step` would return for ``x[k]`` if ``y[k]`` were missing,
-        without changing the online state (a step on a copy of the state)."""
+        without changing the online state."""
         if self._state is None:
             self.reset()
-        saved = _copy_state(self._state)
-        flag = self.last_inconsistent
-        try:
-            return self.step(u_k, None, t)
-        finally:
-            self._state = saved
-            self.last_inconsistent = flag
+        return self.advance(self._state, u_k, None, t)[1]
 
     def _check_u_k(self, u_k: Any) -> np.ndarray:
         if u_k is None:
@@ -384,8 +420,7 @@ class Estimator:
         u = as_signal("u", u, self.sys.nu, T if u is None else None)
         if u.shape[-2] != T:
             raise IvobsError(
-                "u and y: expected the same number of samples (rows), got "
-                f"u: {u.shape[-2]}, y: {T}"
+                f"u and y: expected the same number of samples (rows), got u: {u.shape[-2]}, y: {T}"
             )
         if u.ndim == 3 or y.ndim == 3:
             B = (u if u.ndim == 3 else y).shape[0]
@@ -413,8 +448,9 @@ class Estimator:
                 chunk = max(1, BATCH_CHUNK // size)
                 for b0 in range(0, B, chunk):
                     sl = slice(b0, min(B, b0 + chunk))
-                    lo[sl], hi[sl], inconsistent[sl] = self._block(u[sl], y[sl], t_arr,
-                                                                   vectorize, bar)
+                    lo[sl], hi[sl], inconsistent[sl] = self._block(
+                        u[sl], y[sl], t_arr, vectorize, bar
+                    )
                     self._finalize(lo[sl], hi[sl], self._data_scale(u[sl], y[sl], t_arr))
             else:
                 lo, hi, inconsistent = self._block(u, y, t_arr, vectorize, bar)
@@ -450,9 +486,7 @@ class Estimator:
         parts = [self._loop(u[b], y[b], t, bar) for b in range(y.shape[0])]
         return tuple(np.stack(p) for p in zip(*parts))  # type: ignore[return-value]
 
-    def _finalize(
-        self, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None
-    ) -> None:
+    def _finalize(self, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None) -> None:
         """In place: outward rounding (``scale``: the data scale ``s_k``, ``(..., T)``), NaN
         before ``valid_from``, no non-finite bound after."""
         if not self.rounds_itself:
@@ -467,7 +501,7 @@ class Estimator:
             row = tuple(int(i) for i in first[:-2])  # the stream of a batch
             prev = max(k - 1, vf)  # finite: k is the first non-finite step
             raise self._non_finite_error(
-                k, _overflowed(lo[row][k], hi[row][k], lo[row][prev], hi[row][prev])
+                k, overflowed(lo[row][k], hi[row][k], lo[row][prev], hi[row][prev])
             )
 
     def _check_overflow(self, k: int, *arrays: np.ndarray) -> None:
@@ -492,20 +526,25 @@ class Estimator:
     def _loop(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, bar: Any = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The record step by step through the same recursion as :meth:`step`."""
         T = y.shape[0]
-        state = self._initial_state()
-        state["k"] = 0
+        state = self.initial_state()
         lo = np.empty((T, self.sys.nx))
         hi = np.empty((T, self.sys.nx))
         inc = np.zeros(T, dtype=bool)
+        typed = isinstance(state, OnlineState)
         for k in range(T):
-            if self.rounds_itself:
-                t_k = None if t is None else float(t[k])
-                state["_scale"] = max(state.get("_scale", 0.0),
-                                      self._step_scale(k, u[k], y[k], t_k))
-            lo[k], hi[k] = self._step(state, k, u[k], y[k], None if t is None else float(t[k]))
-            state["k"] = k + 1
-            inc[k] = bool(state.pop("_inconsistent", False))
+            t_k = None if t is None else float(t[k])
+            if typed:
+                state, lo[k], hi[k], inc[k] = self._advance(state, u[k], y[k], t_k)
+            else:
+                if self.rounds_itself:
+                    state["_scale"] = max(
+                        state.get("_scale", 0.0), self._step_scale(k, u[k], y[k], t_k)
+                    )
+                lo[k], hi[k] = self._step(state, k, u[k], y[k], t_k)
+                state["k"] = k + 1
+                inc[k] = bool(state.pop("_inconsistent", False))
             if bar is not None:
                 bar.update()
         return lo, hi, inc
@@ -545,13 +584,25 @@ class Estimator:
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
     def state(self) -> dict[str, Any]:
-        """The online state as a JSON-serialisable dict (see :meth:`restore`)."""
-        st = self._state if self._state is not None else {**self._initial_state(), "k": 0}
+        """The online state as a JSON-serialisable dict (see :meth:`restore`): the method, the
+        fingerprint of its design, the format version and the state's fields."""
+        return self.save_state(self._state if self._state is not None else self.initial_state())
+
+    def save_state(self, st: Any) -> dict[str, Any]:
+        """A given online state of this estimator as the JSON-serialisable dict of
+        :meth:`state`."""
+        if isinstance(st, OnlineState):
+            return {
+                "format": STATE_FORMAT,
+                "version": STATE_VERSION,
+                "method": self.name,
+                "fingerprint": self._fingerprint(),
+                "state": dump_state(st),
+            }
         data = {}
         for key, val in st.items():
             if isinstance(val, np.ndarray):
                 if val.dtype.kind == "f" and np.isnan(val).any():
-                    # NaN (a missing sample) as null: strict JSON; restore() reads it back
                     lst = [None if v != v else v for v in val.ravel().tolist()]
                     data[key] = {"array": lst, "shape": list(val.shape)}
                 else:
@@ -563,7 +614,14 @@ class Estimator:
         return {"method": self.name, "fingerprint": self._fingerprint(), "state": data}
 
     def restore(self, state: dict[str, Any]) -> None:
-        """Continue from a state saved by :meth:`state` (same method and design)."""
+        """Continue from a state saved by :meth:`state` (same method and design); the saved
+        values are checked against a fresh state of this estimator."""
+        self._state = self.check_state(state)
+
+    def check_state(self, state: Any) -> Any:
+        """The online state held by ``state`` (a dict from :meth:`state`), checked against this
+        estimator (method, design fingerprint, format version, every entry); raises
+        :class:`~ivobs.IvobsError` naming what is wrong. Does not change the estimator."""
         if not isinstance(state, dict) or "state" not in state:
             raise IvobsError("state: expected the dict returned by Estimator.state()")
         if state.get("method") != self.name or state.get("fingerprint") != self._fingerprint():
@@ -571,13 +629,24 @@ class Estimator:
                 f"state: saved by method {state.get('method')!r} with another design; it can only "
                 f"be restored into the same method ({self.name!r}) with the same design"
             )
-        saved = state["state"]
+        fresh = self.initial_state()
+        if isinstance(fresh, OnlineState):
+            version = state.get("version", 1)
+            if version != STATE_VERSION:
+                raise IvobsError(
+                    f"state: saved in state format version {version!r}; this ivobs reads version "
+                    f"{STATE_VERSION} (typed states). Re-run from the start of the record, or "
+                    "load it with the ivobs version that saved it"
+                )
+            return load_state(state["state"], fresh)
+        return self._restore_dict(state["state"], fresh)
+
+    def _restore_dict(self, saved: Any, ref: dict[str, Any]) -> dict[str, Any]:
         if not isinstance(saved, dict):
             raise IvobsError(
                 "state: expected entry 'state' to be the dict of saved values from "
                 f"Estimator.state(), got {type(saved).__name__}"
             )
-        ref = self._initial_state()
         st: dict[str, Any] = {}
         for key, val in saved.items():
             if isinstance(val, dict) and "array" in val:
@@ -590,11 +659,12 @@ class Estimator:
                     ) from None
             else:
                 st[key] = val
+        ref = {k: v for k, v in ref.items() if k != "k"}
         missing = set(ref) - set(st)
         if missing:
             raise IvobsError(f"state: missing entries {sorted(missing)}")
         _check_restored(st, ref)
-        self._state = st
+        return st
 
     # -- helpers for subclasses ------------------------------------------------------------
     @classmethod
@@ -613,118 +683,3 @@ class Estimator:
         return (
             f"<{type(self).__name__} {self.name!r} nx={self.sys.nx} valid_from={self.valid_from}>"
         )
-
-
-_TAMPERED = "; the state was altered or is not from Estimator.state() of this estimator"
-
-
-def _check_restored(st: dict[str, Any], ref: dict[str, Any]) -> None:
-    """Check a restored online state against a fresh one (``ref``, from ``_initial_state()``):
-    the step counter, the data scale, and every entry of ``ref`` (arrays: dimensions, fixed
-    axes, finite values, ``lo <= hi``; scalars: their type). Axes that grow while running
-    (generators: the last axis of a matrix; histories: an axis empty at step 0) may differ."""
-    k = st.get("k")
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
-        raise IvobsError(f"state: entry 'k': expected the step count (an integer >= 0), got {k!r}"
-                         + _TAMPERED)
-    scale = st.get("_scale", 0.0)
-    if (isinstance(scale, bool) or not isinstance(scale, (int, float, np.number))
-            or not np.isfinite(scale) or scale < 0):
-        raise IvobsError(
-            f"state: entry '_scale': expected the data scale (a finite number >= 0), got "
-            f"{scale!r}" + _TAMPERED
-        )
-    for key, fresh in ref.items():
-        val = st[key]
-        if isinstance(fresh, np.ndarray):
-            _check_restored_array(key, val, fresh)
-        elif isinstance(fresh, (bool, np.bool_)):
-            if not isinstance(val, (bool, np.bool_)):
-                raise IvobsError(f"state: entry {key!r}: expected True or False, got {val!r}"
-                                 + _TAMPERED)
-        elif isinstance(fresh, (int, np.integer)):
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)):
-                raise IvobsError(f"state: entry {key!r}: expected an integer, got {val!r}"
-                                 + _TAMPERED)
-        elif isinstance(fresh, (float, np.floating)) or fresh is None:  # None: not yet known
-            number = not isinstance(val, bool) and isinstance(val, (int, float, np.number))
-            finite_ok = number and (
-                bool(np.isfinite(val)) or (fresh is not None and not np.isfinite(fresh))
-            )
-            if not (finite_ok or (fresh is None and val is None)):
-                raise IvobsError(
-                    f"state: entry {key!r}: expected a finite number"
-                    f"{' or None' if fresh is None else ''}, got {val!r}" + _TAMPERED
-                )
-    for key in ref:  # bounds kept in pairs: <name>lo <= <name>hi
-        if key.endswith("lo") and key[:-2] + "hi" in ref:
-            lo, hi = st[key], st[key[:-2] + "hi"]
-            if lo.shape != hi.shape:
-                raise IvobsError(
-                    f"state: entries {key!r} and {key[:-2] + 'hi'!r}: expected bounds of the same "
-                    f"shape, got {_shape_str(lo.shape)} and {_shape_str(hi.shape)}" + _TAMPERED
-                )
-            if np.any(lo > hi):
-                idx = tuple(int(i) for i in np.argwhere(lo > hi)[0])
-                raise IvobsError(
-                    f"state: entries {key!r} and {key[:-2] + 'hi'!r}: expected lower <= upper "
-                    f"bounds, got {lo[idx]} > {hi[idx]} at index {idx}" + _TAMPERED
-                )
-
-
-def _check_restored_array(key: str, val: Any, fresh: np.ndarray) -> None:
-    """One array entry of a restored state against its fresh counterpart (see
-    :func:`_check_restored`)."""
-    if not isinstance(val, np.ndarray):
-        raise IvobsError(
-            f"state: entry {key!r}: expected a saved array, got {type(val).__name__} "
-            f"{val!r:.60}" + _TAMPERED
-        )
-    pattern = tuple(
-        "any" if (i == 0 and n == 0) or (i == fresh.ndim - 1 and fresh.ndim >= 2) else n
-        for i, n in enumerate(fresh.shape)
-    )
-    if val.ndim != fresh.ndim or any(
-        p != "any" and p != n for p, n in zip(pattern, val.shape)
-    ):
-        raise IvobsError(
-            f"state: entry {key!r}: expected an array of shape {_shape_str(pattern)}, got "
-            f"{_shape_str(val.shape)}" + _TAMPERED
-        )
-    # non-finite values only in an entry that has them in a fresh state, and NaN in a kept
-    # measurement record "y" (a missing sample, as in step())
-    bad = np.isinf(val) if key == "y" else ~np.isfinite(val)
-    if np.all(np.isfinite(fresh)) and np.any(bad):
-        idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise IvobsError(
-            f"state: entry {key!r}: expected finite numbers, got {val[idx]} at index {idx}"
-            + _TAMPERED
-        )
-
-
-_HUGE = 1e300
-"""A bound this large is one step of growth away from the end of the float range."""
-
-
-def _overflowed(*arrays: np.ndarray) -> bool:
-    """Whether any array holds an infinity or a finite value beyond :data:`_HUGE` (the bounds
-    ran out of the float range; NaN then comes from ``inf - inf``)."""
-    with np.errstate(invalid="ignore"):
-        return any(bool(np.any(np.abs(a) > _HUGE)) for a in arrays if a.dtype.kind == "f")
-
-
-def _copy_state(state: Any) -> Any:
-    """A deep copy of an online state (fast path for the usual dict of arrays and numbers)."""
-    if isinstance(state, dict):
-        return {k: _copy_state(v) for k, v in state.items()}
-    if isinstance(state, list):
-        return [_copy_state(v) for v in state]
-    if isinstance(state, np.ndarray):
-        return state.copy()
-    if isinstance(state, (int, float, str, bool, type(None), np.generic)):
-        return state
-    try:
-        return copy.deepcopy(state)
-    except TypeError as exc:
-        raise IvobsError(f"predict: this method's online state cannot be copied ({exc})") from None
-

@@ -236,6 +236,7 @@ class ConstrainedZonotopeEstimator(Estimator):
     """
 
     name = "constrained-zonotope"
+    order = 90
     summary = "set-membership filter in constrained-zonotope form, hull by LP (Scott et al. 2016)"
     reference = (
         "J. K. Scott, D. M. Raimondo, G. R. Marseglia, R. D. Braatz, Constrained zonotopes: a new "

@@ -578,6 +578,7 @@ class Exact(Estimator):
     """
 
     name = "exact"
+    order = 100
     summary = "linear-programming reference: the tightest guaranteed box from the same data"
     reference = "set-membership hull (002 §I) by LP with HiGHS; safe bounds (Neumaier 2004)"
     supports_time_varying = True
@@ -622,9 +623,9 @@ class Exact(Estimator):
             "phi": np.zeros((0, s.nx)),
         }
 
-    def state(self) -> dict[str, Any]:
+    def save_state(self, st: Any) -> dict[str, Any]:
         """The online state (JSON-serialisable): the kept history; the LP is rebuilt on restore."""
-        out = super().state()
+        out = super().save_state(st)
         out["state"].pop("lp", None)
         return out
 

@@ -199,6 +199,7 @@ class FixedTimeEstimator(Estimator):
     """
 
     name = "fixed-time"
+    order = 10
     summary = "fixed-time parity-space estimator with the optimal T of Theorem 1 (001)"
     reference = "Wang, Dinh, Zhang, Raïssi, Shen, IFAC 2020 (paper 001)"
     supports_time_varying = True

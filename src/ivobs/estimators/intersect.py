@@ -33,7 +33,7 @@ its own prior ``x0``); the strip uses ``u[k]``, ``y[k]``.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,7 +42,10 @@ from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
 from . import _REGISTRY, get, make_estimator, register
-from .base import ROUNDING, Design, Estimator, outward
+from ._legacy_state import _copy_state
+from .base import Design, Estimator, _inconsistent
+from .rounding import ROUNDING, outward
+from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -72,6 +75,13 @@ def _pinning_rows(C: np.ndarray) -> list[tuple[int, int, float]]:
     return out
 
 
+@dataclass(frozen=True)
+class IntersectState(OnlineState):
+    """The members' online states, in the order of ``design.members``."""
+
+    members: tuple[Any, ...] = field(default=())
+
+
 @register
 class Intersect(Estimator):
     """Intersection of the boxes of several guaranteed estimators, step by step.
@@ -91,6 +101,7 @@ class Intersect(Estimator):
     """
 
     name = "intersect"
+    order = 110
     summary = "intersection of several guaranteed estimates (and the measurement strip)"
     reference = "intersection of guaranteed enclosures; strip by Lemma 1 (003/004)"
     supports_continuous = True
@@ -273,33 +284,41 @@ class Intersect(Estimator):
         return lo, hi, empty
 
     # -- online ---------------------------------------------------------------------------
-    def _initial_state(self) -> dict[str, Any]:
-        return {"members": [{**m._initial_state(), "k": 0} for m in self.members]}
+    def _initial_state(self) -> IntersectState:
+        return IntersectState(members=tuple(m.initial_state() for m in self.members))
+
+    def predict(self, u_k: Any = None, t: float | None = None) -> Box:
+        """See :meth:`Estimator.predict` (members not yet typed are stepped on a copy)."""
+        if self._state is None:
+            self.reset()
+        members = tuple(
+            _copy_state(ms) if isinstance(ms, dict) else ms for ms in self._state.members
+        )
+        return self.advance(replace(self._state, members=members), u_k, None, t)[1]
 
     def _step(
-        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        nx = self.sys.nx
-        scale = float(state.get("_scale", 0.0))
-        los, his = [], []
+        self, state: IntersectState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[IntersectState]:
+        nx, k = self.sys.nx, state.k
+        los, his, members = [], [], []
         flagged = False
-        for m, ms in zip(self.members, state["members"]):
-            lo, hi = m._step(ms, k, u_k, y_k, t_k)
-            ms["k"] = k + 1
-            flagged |= bool(ms.pop("_inconsistent", False))
-            valid = k >= m.valid_from
-            if valid:  # each member rounded by its own margin (base.outward; audit A6)
-                lo, hi = outward(np.array(lo, dtype=float), np.array(hi, dtype=float), scale)
-            los.append(np.asarray(lo, dtype=float) if valid else np.full(nx, np.nan))
-            his.append(np.asarray(hi, dtype=float) if valid else np.full(nx, np.nan))
+        for m, ms in zip(self.members, state.members, strict=True):
+            # each member's box rounded by its own margin (the same data scale)
+            if isinstance(ms, dict):  # a member not yet typed (transitional: in place)
+                ms, box = m._advance_any(ms, u_k, y_k, t_k, in_place=True, finite=False)
+            else:
+                ms, box = m.advance(ms, u_k, y_k, t_k, finite=False)
+            members.append(ms)
+            flagged |= _inconsistent(ms)
+            los.append(box.lo)
+            his.append(box.hi)
         if k < self.valid_from:
             lo_s = hi_s = np.full(nx, np.nan)
         else:
-            lo_s, hi_s = outward(*self._strip_box(k, u_k, y_k, t_k), scale)
+            lo_s, hi_s = outward(*self._strip_box(k, u_k, y_k, t_k), state.scale)
         lo, hi, empty = self._combine(np.array(los), np.array(his), lo_s, hi_s)
-        if flagged or bool(empty):
-            state["_inconsistent"] = True
-        return lo, hi
+        new = replace(state, members=tuple(members))
+        return Step(new, lo, hi, flagged or bool(empty))
 
     # -- offline --------------------------------------------------------------------------
     def _run(
@@ -355,29 +374,25 @@ class Intersect(Estimator):
         parts = [self.name, str(self.design.strip)] + [m._fingerprint() for m in self.members]
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
-    def state(self) -> dict[str, Any]:
-        """The online state (JSON-serialisable): the members' states, nested."""
-        st = self._state if self._state is not None else {**self._initial_state(), "k": 0}
-        members = []
-        for m, ms in zip(self.members, st["members"]):
-            saved = m._state
-            m._state = ms
-            try:
-                members.append(m.state())
-            finally:
-                m._state = saved
+    def save_state(self, st: Any) -> dict[str, Any]:
+        """The online state (JSON-serialisable): the members' saved states, nested."""
         return {
+            "format": STATE_FORMAT,
+            "version": STATE_VERSION,
             "method": self.name,
             "fingerprint": self._fingerprint(),
             "state": {
-                "k": int(st["k"]),
-                "_scale": float(st.get("_scale", 0.0)),
-                "members": members,
+                "k": st.k,
+                "scale": st.scale,
+                "inconsistent": st.inconsistent,
+                "members": [
+                    m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)
+                ],
             },
         }
 
-    def restore(self, state: dict[str, Any]) -> None:
-        """Continue from a state saved by :meth:`state` (same members, same designs)."""
+    def check_state(self, state: Any) -> IntersectState:
+        """The state saved by :meth:`state`, checked (same members, same designs)."""
         if not isinstance(state, dict) or not isinstance(state.get("state"), dict):
             raise IvobsError("state: expected the dict returned by Estimator.state()")
         if state.get("method") != self.name or state.get("fingerprint") != self._fingerprint():
@@ -385,22 +400,31 @@ class Intersect(Estimator):
                 f"state: saved by method {state.get('method')!r} with other members or designs; "
                 f"it can only be restored into the same {self.name!r} estimator"
             )
-        k = state["state"].get("k")
-        scale = state["state"].get("_scale", 0.0)
-        if not isinstance(k, int) or k < 0 or not isinstance(scale, (int, float)):
+        if state.get("version", 1) != STATE_VERSION:
+            raise IvobsError(
+                f"state: saved in state format version {state.get('version', 1)!r}; this ivobs "
+                f"reads version {STATE_VERSION}; re-run from the start of the record"
+            )
+        saved = state["state"]
+        k, scale = saved.get("k"), saved.get("scale", 0.0)
+        if (
+            isinstance(k, bool)
+            or not isinstance(k, int)
+            or k < 0
+            or not isinstance(scale, (int, float))
+            or not np.isfinite(scale)
+            or scale < 0
+        ):
             raise IvobsError(
                 "state: expected a step count 'k' (integer >= 0) and a data scale; the state "
                 "was altered or is not from Estimator.state()"
             )
-        saved = state["state"].get("members")
-        if not isinstance(saved, list) or len(saved) != len(self.members):
+        members = saved.get("members")
+        if not isinstance(members, list) or len(members) != len(self.members):
             raise IvobsError(f"state: expected the states of {len(self.members)} members")
-        states = []
-        for m, s in zip(self.members, saved):
-            previous = m._state
-            try:
-                m.restore(s)
-                states.append(m._state)
-            finally:
-                m._state = previous
-        self._state = {"members": states, "k": k, "_scale": float(scale)}
+        return IntersectState(
+            members=tuple(m.check_state(s) for m, s in zip(self.members, members, strict=True)),
+            k=k,
+            scale=float(scale),
+            inconsistent=bool(saved.get("inconsistent", False)),
+        )

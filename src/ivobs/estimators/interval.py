@@ -1078,6 +1078,7 @@ class IntervalObserver(_CooperativeObserver):
     """
 
     name = "interval"
+    order = 40
     summary = "interval observer, A − LC nonnegative and Schur (002 eq. 36, 003 Theorem 1)"
     reference = "002 Section V.A, eqs. (36)-(41); 003 Theorem 1, eq. (3)"
 
@@ -1142,6 +1143,7 @@ class SplitIntervalObserver(_CooperativeObserver):
     """
 
     name = "interval-split"
+    order = 60
     summary = "interval observer with D⁺/D⁻, |A − LC| Schur (003 Theorem 3, eq. 5)"
     reference = "003 Theorem 3, eqs. (5)-(8), Corollary 1"
 
@@ -1228,6 +1230,7 @@ class TransformedIntervalObserver(_CooperativeObserver):
     """
 
     name = "interval-transformed"
+    order = 50
     summary = "interval observer in z = S x with nonnegative R (002 Theorem 5, 003 Theorem 2)"
     reference = "002 Section V.B, Theorem 5, eqs. (42)-(48); 003 Theorem 2, eq. (4)"
 

@@ -239,6 +239,7 @@ class KKL(Estimator):
     """
 
     name = "kkl"
+    order = 70
     summary = "KKL/Sylvester interval observer z = T x (004): LTI and LTV, discrete and continuous"
     reference = "004 (Dinh & Tran, arXiv 2405.06445), observers (3), (6), (10), (15)"
     supports_continuous: ClassVar[bool] = True

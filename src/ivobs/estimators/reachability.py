@@ -112,6 +112,7 @@ class Reachability(Estimator):
     """
 
     name = "reachability"
+    order = 20
     summary = "H∞ observer + exact interval hull of the error's reachable set (002 Alg. 1)"
     reference = "002 Tang et al., IEEE TAC 2019: Algorithm 1, Theorem 2, eqs. (10), (13), (21)"
 

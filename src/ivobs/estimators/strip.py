@@ -112,6 +112,7 @@ class StripEstimator(Estimator):
     """
 
     name = "strip"
+    order = 80
     summary = "zonotopic set-membership filter, strip intersection (Alamo et al. 2005)"
     reference = (
         "T. Alamo, J. M. Bravo, E. F. Camacho, Guaranteed state estimation by zonotopes, "

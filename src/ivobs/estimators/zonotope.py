@@ -7,7 +7,7 @@ systems*, IEEE TAC 2019 (``seeds/002_b3ef6f5573cb68d4.txt``), eqs. (33)-(35), Re
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -20,9 +20,10 @@ from ..model import LinearSystem
 from ..sets import Box, Zonotope
 from . import register
 from .base import Design, Estimator, check_size
+from .state import OnlineState, Step
 from .reachability import consistent, gain_without, observer_bounds
 
-__all__ = ["ZonotopeDesign", "ZonotopeEstimator"]
+__all__ = ["ZonotopeDesign", "ZonotopeEstimator", "ZonotopeState"]
 
 ORDER_PER_STATE = 10
 """Default order ``q = ORDER_PER_STATE * nx`` (generators kept by the reduction)."""
@@ -39,6 +40,14 @@ class ZonotopeDesign(Design):
     spectral_radius: float
     order: int
     weight: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class ZonotopeState(OnlineState):
+    """``x[k] ∈ <p, H>``: centre ``p`` (nx,) and generators ``H`` (nx, ·) of eq. (34)."""
+
+    p: np.ndarray
+    H: np.ndarray
 
 
 @register
@@ -89,6 +98,7 @@ class ZonotopeEstimator(Estimator):
     """
 
     name = "zonotope"
+    order = 30
     summary = "zonotope set-membership observer with order reduction (002 Prop. 1, eq. 34)"
     reference = "002 Tang et al., IEEE TAC 2019: Proposition 1, eqs. (33)-(35), Remark 2; [3]"
 
@@ -104,8 +114,11 @@ class ZonotopeEstimator(Estimator):
     ):
         super().__init__(sys, x0, **base)
         nx = sys.nx
-        check_size(self.name, nx, "multiplies an nx x q generator matrix (q >= nx) and sorts "
-                   "its columns (O(nx^3) work)")
+        check_size(
+            self.name,
+            nx,
+            "multiplies an nx x q generator matrix (q >= nx) and sorts its columns (O(nx^3) work)",
+        )
         q = ORDER_PER_STATE * nx if order is None else as_int("order", order)
         if q < nx:
             raise IvobsError(f"order: expected q >= nx = {nx} generators (002 Remark 2), got {q}")
@@ -145,32 +158,33 @@ class ZonotopeEstimator(Estimator):
         return gain_without(self._mats, self.design.L, obs)
 
     # -- online --------------------------------------------------------------------------------
-    def _initial_state(self) -> dict[str, Any]:
-        return {"p": self._p0.copy(), "H": self._H0.copy()}
+    def _initial_state(self) -> ZonotopeState:
+        return ZonotopeState(p=self._p0.copy(), H=self._H0.copy())
 
     def _step(
-        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        p, H = state["p"], state["H"]
+        self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[ZonotopeState]:
+        p, H = state.p, state.H
         rad = np.abs(H).sum(axis=1)
         lo, hi = p - rad, p + rad
         A, B, C, D, E, F = self._mats
         if self._const is not None:
             c, r = self._const
         else:
-            box = self.sys.d_at(k, y_k)
+            box = self.sys.d_at(state.k, y_k)
             c, r = box.center, box.radius
         obs = ~np.isnan(y_k)
         innov = np.where(obs, y_k, 0.0) - C @ p - D @ u_k - F @ c
+        inconsistent = False
         if obs.any():
             bound = np.abs(C @ H).sum(axis=1) + self._absF @ r
             if not consistent(innov, bound, y_k, obs):
-                state["_inconsistent"] = True
+                inconsistent = True
                 obs = np.zeros_like(obs)
         Lk, Mk, Gk = self._gain_at(obs)
-        state["p"] = A @ p + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
-        state["H"] = np.hstack([Mk @ self._reduce(H), Gk * r])
-        return lo, hi
+        p_next = A @ p + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)  # (34a)
+        H_next = np.hstack([Mk @ self._reduce(H), Gk * r])  # (34b)
+        return Step(replace(state, p=p_next, H=H_next), lo, hi, inconsistent)
 
     # -- offline, vectorised --------------------------------------------------------------------
     def _run(
