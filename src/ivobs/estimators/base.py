@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validate import _shape_str, as_bool, as_float_array, as_signal, as_vector
+from .._validate import as_bool, as_float_array, as_signal, as_vector
 from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem
 from ..result import Estimate

@@ -111,7 +111,11 @@ def _inflate(center: np.ndarray, radius: np.ndarray) -> np.ndarray:
 
 
 def _measurement_update(
-    Ac: np.ndarray, b: np.ndarray, CG: np.ndarray, FR: np.ndarray, rhs: np.ndarray,
+    Ac: np.ndarray,
+    b: np.ndarray,
+    CG: np.ndarray,
+    FR: np.ndarray,
+    rhs: np.ndarray,
     rho: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, int, str, tuple[np.ndarray, np.ndarray]]:
     """Constraints after the measurement: the old ones (padded with the new factors) and
@@ -128,9 +132,7 @@ def _measurement_update(
     obs = ~np.isnan(rhs)
     rows, rhs, rho = np.hstack([CG[obs], FR[obs]]), rhs[obs], rho[obs]
     quiet = ~np.any(FR[obs] != 0, axis=1)
-    size = rho + np.where(
-        quiet, INFLATE * (1.0 + np.abs(rhs) + np.abs(rows).sum(axis=1)), 0.0
-    )
+    size = rho + np.where(quiet, INFLATE * (1.0 + np.abs(rhs) + np.abs(rows).sum(axis=1)), 0.0)
     live = np.flatnonzero(size > 0)
     slack = np.zeros((rows.shape[0], live.size))
     slack[live, np.arange(live.size)] = size[live]
@@ -257,8 +259,11 @@ class ConstrainedZonotopeEstimator(Estimator):
         **base: Any,
     ):
         super().__init__(sys, x0, **base)
-        check_size(self.name, sys.nx, "reduces a dense constrained zonotope and solves LPs over "
-                   "its generators")
+        check_size(
+            self.name,
+            sys.nx,
+            "reduces a dense constrained zonotope and solves LPs over its generators",
+        )
         if not isinstance(reduce, bool):
             raise IvobsError(f"reduce: expected True or False, got {reduce!r}")
         if elimination not in ("certificates", "hausdorff"):

@@ -221,8 +221,12 @@ class FixedTimeEstimator(Estimator):
     ):
         super().__init__(sys, x0, on_inconsistent=on_inconsistent)
         nx, ny = sys.nx, sys.ny
-        check_size(self.name, nx, "uses the stacked matrices of 001 eq. (6) over s + 1 >= nx "
-                   "samples (O(nx^2 ny) entries and work)")
+        check_size(
+            self.name,
+            nx,
+            "uses the stacked matrices of 001 eq. (6) over s + 1 >= nx "
+            "samples (O(nx^2 ny) entries and work)",
+        )
         self.s = self._check_s(s, nx)
         self._tv = sys.is_time_varying
         self._criterion = criterion

@@ -179,9 +179,7 @@ def _number(
     if isinstance(val, np.ndarray) and val.ndim == 0 and val.dtype.kind in "fiu":
         val = val.item()
     if isinstance(val, (bool, np.bool_)) or not isinstance(val, numbers.Real):
-        raise IvobsError(
-            f"{name}: expected a real number, got {val!r} ({type(val).__name__})"
-        )
+        raise IvobsError(f"{name}: expected a real number, got {val!r} ({type(val).__name__})")
     v = float(val)
     rng = []
     if above is not None:

@@ -126,8 +126,12 @@ class Reachability(Estimator):
         **base: Any,
     ):
         super().__init__(sys, x0, **base)
-        check_size(self.name, sys.nx, "propagates the exact interval hull of the error's "
-                   "reachable set, nx x (nx + nd) matrices (O(nx^3) work)")
+        check_size(
+            self.name,
+            sys.nx,
+            "propagates the exact interval hull of the error's "
+            "reachable set, nx x (nx + nd) matrices (O(nx^3) work)",
+        )
         K = None if memory is None else as_int("memory", memory, 1)
         Lm, gamma, P, rho = observer_gain(sys, L, self.name)
         self._mats = sys.matrices_at(0)

@@ -132,8 +132,12 @@ class StripEstimator(Estimator):
         **base: Any,
     ):
         super().__init__(sys, x0, **base)
-        check_size(self.name, sys.nx, "multiplies and reduces a dense nx x q generator matrix "
-                   "(q = 10 nx by default, O(nx^3) work)")
+        check_size(
+            self.name,
+            sys.nx,
+            "multiplies and reduces a dense nx x q generator matrix "
+            "(q = 10 nx by default, O(nx^3) work)",
+        )
         if reduction not in ("parallelotope", "box"):
             raise IvobsError(f"reduction: expected 'parallelotope' or 'box', got {reduction!r}")
         q = 10 * sys.nx if order is None else as_int("order", order, 1)

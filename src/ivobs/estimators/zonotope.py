@@ -20,8 +20,8 @@ from ..model import LinearSystem
 from ..sets import Box, Zonotope
 from . import register
 from .base import Design, Estimator, check_size
-from .state import OnlineState, Step
 from .reachability import consistent, gain_without, observer_bounds
+from .state import OnlineState, Step
 
 __all__ = ["ZonotopeDesign", "ZonotopeEstimator", "ZonotopeState"]
 
