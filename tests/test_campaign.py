@@ -270,8 +270,8 @@ def test_failures_are_rows_and_errors_can_be_retried(tmp_path, plugin, capsys):
 
 def test_one_writer_at_a_time(tmp_path):
     out = tmp_path / "r.csv"
-    with campaign._ResultsFile(out), pytest.raises(IvobsError, match="another campaign"):
-        campaign._ResultsFile(out).__enter__()
+    with campaign.ResultsFile(out), pytest.raises(IvobsError, match="another campaign"):
+        campaign.ResultsFile(out).__enter__()
 
 
 # ------------------------------------------------------------------------------------------

@@ -187,3 +187,20 @@ def test_monitor_killed_and_restarted_prints_the_same_bounds(plant, capsys):
         k = int(line.split(",", 1)[0])
         assert merged.setdefault(k, line) == line  # a repeated step is the same line
     assert [merged[k] for k in sorted(merged)] == full[1:]
+
+
+def test_cli_restart_with_the_state_of_a_typed_state_method(plant, capsys):
+    """A method whose online state is a dataclass (zonotope) resumes from its state file like
+    one with a dict state."""
+    log, part = plant / "log.csv", plant / "part.csv"
+    lines = log.read_text().splitlines(keepends=True)
+    part.write_text("".join(lines[:61]))  # header + 60 rows
+    system, state = plant / "servo.toml", plant / "state.json"
+    _, full = _monitor(capsys, "--system", system, "--method", "zonotope", "--input", log)
+    _, first = _monitor(
+        capsys, "--system", system, "--method", "zonotope", "--input", part, "--state", state
+    )
+    _, second = _monitor(
+        capsys, "--system", system, "--method", "zonotope", "--input", log, "--state", state
+    )
+    assert first + second == full and len(full) == 161

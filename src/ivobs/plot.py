@@ -101,7 +101,7 @@ def figure_path(path: str | os.PathLike[str], what: str | None = None) -> Path:
     """The file a figure for ``path`` is written to, checked before any work: ``.png`` is added
     when ``path`` has no extension; an unsupported extension or an unwritable place is an
     :class:`~ivobs.IvobsError` naming ``what`` (e.g. ``"--plot"``)."""
-    from .io import check_output_path
+    from .io.atomic import check_output_path
 
     path = Path(path)
     prefix = f"{what}: " if what else ""
@@ -125,7 +125,7 @@ def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
     (``.png`` added when ``path`` has no extension, see :func:`figure_path`)."""
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .io.atomic import atomic_path
 
     try:
         target = figure_path(path)

@@ -147,7 +147,7 @@ class Estimate:
             f"# ivobs estimate\n# method: {self.method}\n# valid_from: {self.valid_from}\n"
             + ",".join(cols)
         )
-        from .io import atomic_path  # the file gets the umask's mode, like open(path, "w")
+        from .io.atomic import atomic_path  # the umask's file mode, like open(path, "w")
 
         with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
             fh.write(header + "\n")

@@ -20,7 +20,7 @@ from typing import Any
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
+    p: argparse.ArgumentParser = sub.add_parser(
         "campaign",
         help="run a grid of scenarios x methods x seeds (local processes or a Dask cluster)",
         description="Run every job of a campaign spec (TOML: scenarios, methods, options grids, "

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import sys
 import time
 from collections.abc import Iterator
@@ -22,11 +21,9 @@ import numpy as np
 
 from ..errors import IvobsError
 
-STATE_FORMAT = "ivobs-monitor-state"
-
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
+    p: argparse.ArgumentParser = sub.add_parser(
         "monitor",
         help="stream measurements through a guaranteed estimator and raise fault alarms",
         description="Read log rows (header k|t, u1.., y1..) from stdin or --input, print one line "
@@ -85,7 +82,7 @@ class _Session:
     """The monitor plus what is needed to resume the stream where it stopped."""
 
     def __init__(self, args: argparse.Namespace):
-        from ..io import load_system
+        from ..io.systemfile import load_system
         from ..monitor import Monitor
 
         self.spec = load_system(args.system)
@@ -98,7 +95,7 @@ class _Session:
         self.monitor = Monitor(self.spec.system, est, x0=self.spec.x0, tight=not args.no_tight)
         self.state_path = None
         if args.state:  # checked before the first row is printed
-            from ..io import check_output_path
+            from ..io.atomic import check_output_path
 
             self.state_path = check_output_path(args.state, "--state")
         self.rows = 0  # data rows consumed (processed or skipped as already done)
@@ -109,21 +106,18 @@ class _Session:
             self._load()
 
     def _load(self) -> None:
+        from ..io.statefile import check_monitor_state, malformed, read_state_file
+
         assert self.state_path is not None
         name = str(self.state_path)
-        try:
-            data = json.loads(self.state_path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise IvobsError(f"--state: cannot read {name!r}: {exc}") from None
-        if not isinstance(data, dict) or data.get("format") != STATE_FORMAT:
-            raise IvobsError(f"--state: {name!r} is not an ivobs monitor state")
-        _check_state(data, self.monitor, name)
+        data = read_state_file(self.state_path)
+        check_monitor_state(data, self.monitor.sys, self.monitor.estimator, name)
         try:
             self.monitor.restore(data["monitor"])
         except IvobsError as exc:
             raise IvobsError(f"--state: {name!r}: {exc}") from None
         except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
-            raise _malformed(name, "monitor.estimator.state", f"{exc}") from None
+            raise malformed(name, "monitor.estimator.state", f"{exc}") from None
         stream = data.get("stream", {})
         _probe(self.monitor, name, stream.get("t"))
         self.rows = int(stream.get("rows", 0))
@@ -134,15 +128,10 @@ class _Session:
     def save(self) -> None:
         if self.state_path is None:
             return
-        from ..io import write_text_atomic
+        from ..io.statefile import write_state_file
 
-        data = {
-            "format": STATE_FORMAT,
-            "method": self.monitor.method,
-            "monitor": self.monitor.state(),
-            "stream": {"rows": self.rows, "step": self.last_step, "t": self.last_t},
-        }
-        write_text_atomic(self.state_path, json.dumps(data))
+        stream = {"rows": self.rows, "step": self.last_step, "t": self.last_t}
+        write_state_file(self.state_path, self.monitor.method, self.monitor.state(), stream)
 
     def already_done(self, row: Any, index: int, from_file: bool) -> bool:
         """Whether a row was processed before the restart: by its step or time column when the
@@ -156,82 +145,11 @@ class _Session:
         return from_file and index < self.rows
 
 
-def _malformed(name: str, key: str, msg: str) -> IvobsError:
-    return IvobsError(
-        f"--state: {name!r} is a malformed monitor state: {key}: {msg} (the file was altered "
-        "or is not from `ivobs monitor --state`; delete it to start afresh)"
-    )
-
-
-def _numbers(name: str, key: str, v: Any, n: int, nan: bool = True) -> np.ndarray:
-    """A saved vector of ``n`` numbers (non-finite ones spelled as strings, as saved)."""
-    if not isinstance(v, list) or len(v) != n:
-        got = f"{len(v)} values" if isinstance(v, list) else repr(v)[:40]
-        raise _malformed(name, key, f"expected a list of {n} numbers, got {got}")
-    try:
-        arr = np.array([float(x) for x in v], dtype=float)
-    except (TypeError, ValueError):
-        raise _malformed(name, key, f"expected numbers, got {v!r}"[:200]) from None
-    if not nan and np.isnan(arr).any():
-        raise _malformed(name, key, f"NaN at component {int(np.flatnonzero(np.isnan(arr))[0])}")
-    return arr
-
-
-def _count(name: str, key: str, v: Any) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-        raise _malformed(name, key, f"expected an integer >= 0, got {v!r}")
-    return v
-
-
-def _check_state(data: dict[str, Any], mon: Any, name: str) -> None:
-    """The structure of a saved state: what ``Monitor.restore`` and ``Estimator.restore`` take
-    on trust (lengths, NaN, ``lo <= hi``, types)."""
-    sys_ = mon.sys
-    m = data.get("monitor")
-    if not isinstance(m, dict):
-        raise _malformed(name, "monitor", f"expected a table, got {m!r}"[:200])
-    _count(name, "monitor.k", m.get("k"))
-    _count(name, "monitor.alarms", m.get("alarms"))
-    prev = m.get("prev")
-    if prev is not None:
-        if not isinstance(prev, dict) or set(prev) != {"lo", "hi", "u", "y"}:
-            raise _malformed(name, "monitor.prev", "expected the keys lo, hi, u, y")
-        lo = _numbers(name, "monitor.prev.lo", prev["lo"], sys_.nx, nan=False)
-        hi = _numbers(name, "monitor.prev.hi", prev["hi"], sys_.nx, nan=False)
-        bad = np.flatnonzero(lo > hi)
-        if bad.size:
-            i = int(bad[0])
-            raise _malformed(name, "monitor.prev", f"lo > hi at component {i}: {lo[i]} > {hi[i]}")
-        _numbers(name, "monitor.prev.u", prev["u"], sys_.nu, nan=False)
-        _numbers(name, "monitor.prev.y", prev["y"], sys_.ny)
-    est = m.get("estimator")
-    if not isinstance(est, dict) or not isinstance(est.get("state"), dict):
-        got = est.get("state") if isinstance(est, dict) else est
-        raise _malformed(name, "monitor.estimator.state", f"expected a table, got {got!r}"[:200])
-    ref = mon.estimator._initial_state()
-    for key, val in est["state"].items():
-        where = f"monitor.estimator.state.{key}"
-        if isinstance(ref.get(key), np.ndarray):
-            if not isinstance(val, dict) or set(val) != {"array", "shape"}:
-                raise _malformed(name, where, "expected a saved array {array, shape}")
-            shape = val["shape"]
-            if not isinstance(shape, list) or len(shape) != ref[key].ndim:
-                raise _malformed(name, where, f"expected a {ref[key].ndim}-D shape, got {shape!r}")
-    stream = data.get("stream", {})
-    if not isinstance(stream, dict):
-        raise _malformed(name, "stream", f"expected a table, got {stream!r}"[:200])
-    _count(name, "stream.rows", stream.get("rows", 0))
-    if stream.get("step") is not None:
-        _count(name, "stream.step", stream["step"])
-    t = stream.get("t")
-    if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float))
-                          or not np.isfinite(t)):  # fmt: skip
-        raise _malformed(name, "stream.t", f"expected a finite number, got {t!r}")
-
-
 def _probe(mon: Any, name: str, t: Any) -> None:
     """One prediction from the restored state (``Estimator.predict``: the state is unchanged):
     entries with a wrong shape, NaN or ``lo > hi`` show up here rather than on the next row."""
+    from ..io.statefile import malformed
+
     est, sys_ = mon.estimator, mon.sys
     if est.k < est.valid_from:
         return
@@ -242,18 +160,18 @@ def _probe(mon: Any, name: str, t: Any) -> None:
         box = est.predict(np.zeros(sys_.nu) if sys_.nu else None, t_k)
     except IvobsError as exc:
         if "NaN" in str(exc):
-            raise _malformed(name, "monitor.estimator.state", "gives NaN bounds") from None
+            raise malformed(name, "monitor.estimator.state", "gives NaN bounds") from None
         return  # e.g. bounds that need the measurement: nothing to judge
     except (TypeError, ValueError, KeyError, IndexError, AttributeError, ArithmeticError,
             np.linalg.LinAlgError) as exc:  # fmt: skip
-        raise _malformed(name, "monitor.estimator.state", f"unusable ({exc})") from None
+        raise malformed(name, "monitor.estimator.state", f"unusable ({exc})") from None
     lo, hi = np.asarray(box.lo, dtype=float), np.asarray(box.hi, dtype=float)
     if np.isnan(lo).any() or np.isnan(hi).any() or np.any(lo > hi):
-        raise _malformed(name, "monitor.estimator.state", "gives an empty or NaN box")
+        raise malformed(name, "monitor.estimator.state", "gives an empty or NaN box")
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..io import LogParser
+    from ..io.logs import LogParser
 
     if args.save_every < 1:
         raise IvobsError(f"--save-every: expected an integer >= 1, got {args.save_every}")
@@ -324,7 +242,7 @@ def main(args: argparse.Namespace) -> int:
                 session.save()
                 unsaved = 0
     except UnicodeDecodeError as exc:
-        from ..io import not_utf8
+        from ..io.logs import not_utf8
 
         raise not_utf8(source, exc) from None
     finally:

@@ -22,7 +22,7 @@ from . import check_disturbance, check_seed
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
+    p: argparse.ArgumentParser = sub.add_parser(
         "run",
         help="run one method on a scenario, or on a system file and a log",
         description="Simulate a scenario (or read a system file and a measurement log), run one "
@@ -87,7 +87,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Check every output path before any work: an error in one never leaves another written."""
-    from ..io import check_output_path
+    from ..io.atomic import check_output_path
 
     if args.csv:
         args.csv = str(check_output_path(args.csv, "--csv"))
@@ -123,7 +123,8 @@ def _run_scenario(args: argparse.Namespace) -> int:
 
 
 def _run_system(args: argparse.Namespace) -> int:
-    from ..io import load_system, read_log
+    from ..io.logs import read_log
+    from ..io.systemfile import load_system
     from ..monitor import Monitor
 
     if not args.log:

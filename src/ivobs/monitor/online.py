@@ -1,100 +1,25 @@
-"""Streaming fault detection: a guaranteed estimator plus a consistency test at every step.
-
-At step ``k`` the :class:`Monitor` predicts, *from the data before k only*, a box ``P_k`` that
-contains ``x[k]``:
-
-* the model's one-step prediction from the previous box (Lemma 1 of papers 003/004,
-  :func:`ivobs.image_bounds`)::
-
-      x[k] ∈ A_{k-1} [X_{k-1}] + B_{k-1} u[k-1] + E_{k-1} [d[k-1]]
-
-  where ``X_{k-1}`` is the tightest box of ``x[k-1]`` known after step ``k - 1`` (the
-  estimator's box intersected with the previous prediction); at ``k = 0``, the prior box ``x0``;
-* intersected (``tight=True``) with the estimator's own prediction of ``x[k]``: the box the
-  estimator returns when ``y[k]`` is missing (every method predicts through missing samples).
-  For prediction-form observers this is their box itself; for zonotope or exact methods it is
-  tighter than a box-wise prediction.
-
-It then checks the measurement against the output band this predicts::
-
-      y[k] ∈ C_k [P_k] + D_k u[k] + F_k [d[k]]
-
-(``d[k-1]`` and ``d[k]`` are different samples with independent bounds, so using both boxes is
-sound even though one disturbance enters both equations). An **alarm** is raised when a measured
-component lies outside the band, when the estimator reports the measurement as inconsistent
-(empty intersections in the exact, strip and constrained-zonotope methods), or when the
-estimator's box and the prediction do not meet.
-
-**Guarantee.** Under the model's assumptions (the matrices are right, ``d[k]`` stays in its
-bounds, ``x[0]`` in its prior box) ``x[k] ∈ P_k`` and ``y[k]`` lies in the band at every step, so
-an alarm is never false. Floating-point rounding is covered by widening the band by
-``margin * (1 + |bound|)`` (``margin = 1e-9`` by default). An alarm therefore proves that the
-data contradict the model: a sensor or actuator fault, a wrong model or wrong bounds.
-
-The monitor uses the estimator protocol only (``step``, ``state``/``restore``), so it works with
-every method; its state (``state()`` / ``restore()``) is JSON-serialisable, so a restarted
-monitor continues with the same boxes and the same alarms as one that never stopped.
-"""
+"""The online monitor: a guaranteed estimator and a consistency test at every step (the
+method is described in :mod:`ivobs.monitor`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ._validate import as_float_array, as_signal, as_vector
-from .errors import IvobsError
-from .estimators import Estimator, make_estimator
-from .io import equal_systems
-from .model import LinearSystem
-from .result import Estimate
-from .sets import Box, image_bounds, neg, pos
+from .._validate import as_float_array, as_signal, as_vector
+from ..errors import IvobsError
+from ..estimators import Estimator, make_estimator
+from ..io.systemwrite import equal_systems
+from ..model import LinearSystem
+from ..result import Estimate
+from ..sets import Box, image_bounds, neg, pos
+from .offline import check_record
+from .records import MonitorRecord, MonitorStep, stack_steps
 
-__all__ = ["Monitor", "MonitorRecord", "MonitorStep"]
+__all__ = ["Monitor"]
 
 STATE_VERSION = 1
-
-
-@dataclass(frozen=True)
-class MonitorStep:
-    """The outcome of one step.
-
-    ``lower``/``upper``: the estimator's box of ``x[k]`` (NaN before its ``valid_from``);
-    ``alarm``: the measurement contradicts the model (never false under its assumptions);
-    ``reason``: why (empty without alarm); ``band_lower``/``band_upper``: the output band the
-    data before ``k`` predict for ``y[k]`` (infinite where nothing is known yet).
-    """
-
-    step: int
-    lower: np.ndarray
-    upper: np.ndarray
-    alarm: bool
-    reason: str = ""
-    band_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    band_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
-
-    @property
-    def box(self) -> Box:
-        return Box._trusted(self.lower, self.upper)
-
-
-@dataclass
-class MonitorRecord:
-    """:meth:`Monitor.run` over a record: arrays over the steps."""
-
-    lower: np.ndarray
-    upper: np.ndarray
-    alarm: np.ndarray
-    reasons: list[str]
-    band_lower: np.ndarray
-    band_upper: np.ndarray
-
-    @property
-    def first_alarm(self) -> int | None:
-        """The first step with an alarm (None without one)."""
-        idx = np.flatnonzero(self.alarm)
-        return int(idx[0]) if idx.size else None
 
 
 class Monitor:
@@ -238,7 +163,7 @@ class Monitor:
         """:meth:`update` over a record, continuing from the current state (exactly what a
         stream of the same rows gives)."""
         u, y, tt = self._record(u, y, t)
-        return _record(
+        return stack_steps(
             [self.update(u[k], y[k], None if tt is None else float(tt[k])) for k in range(len(y))],
             self.sys,
         )
@@ -249,11 +174,12 @@ class Monitor:
         """The alarms of a whole record, offline and vectorised over time (long logs).
 
         Uses the estimator's ``run()`` (or ``estimate``, a result of that run already at hand)
-        and, at every step, the band of the Lemma 1 prediction from the estimator's box of the
-        step before (at step 0, the prior box). This band contains the online monitor's (which
-        also intersects with its own previous prediction and, with ``tight=True``, with the
-        estimator's prediction), so ``check`` may see fewer alarms than :meth:`update`; every
-        alarm it raises carries the same guarantee. Leaves the online state alone.
+        and, at every step, the band of the one-step prediction ([Efimov2013, Lemma 1]) from
+        the estimator's box of the step before (at step 0, the prior box). This band contains
+        the online monitor's (which also intersects with its own previous prediction and, with
+        ``tight=True``, with the estimator's prediction), so ``check`` may see fewer alarms than
+        :meth:`update`; every alarm it raises carries the same guarantee. Leaves the online
+        state alone.
         """
         u, y, tt = self._record(u, y, t)
         res = estimate
@@ -264,95 +190,7 @@ class Monitor:
                 f"estimate: expected bounds of shape {(y.shape[0], self.sys.nx)}, got "
                 f"{res.lower.shape}"
             )
-        sys, T = self.sys, y.shape[0]
-        X_lo, X_hi = res.lower, res.upper
-        known = ~np.isnan(X_lo).any(axis=1)
-        P_lo, P_hi = np.full((T, sys.nx), -np.inf), np.full((T, sys.nx), np.inf)
-        if self.x0 is not None:
-            P_lo[0], P_hi[0] = self.x0.lo, self.x0.hi
-        steps = np.arange(T)
-        if T > 1 and sys.is_discrete:
-            prev_lo = np.where(known[:-1, None], X_lo[:-1], -np.inf)
-            prev_hi = np.where(known[:-1, None], X_hi[:-1], np.inf)
-            a_lo, a_hi = self._images("A", steps[:-1], prev_lo, prev_hi)
-            e_lo, e_hi = self._disturbance_images("E", steps[:-1], y[:-1])
-            bu = self._products("B", steps[:-1], u[:-1])
-            P_lo[1:], P_hi[1:] = a_lo + bu + e_lo, a_hi + bu + e_hi
-        keys = tt if (sys.is_continuous and tt is not None) else steps
-        c_lo, c_hi = self._images("C", keys, P_lo, P_hi)
-        f_lo, f_hi = self._disturbance_images("F", steps, y)
-        du = self._products("D", keys, u)
-        b_lo, b_hi = c_lo + du + f_lo, c_hi + du + f_hi
-        b_lo, b_hi = (
-            b_lo - self.margin * (1 + np.abs(b_lo)),
-            b_hi + self.margin * (1 + np.abs(b_hi)),
-        )
-        b_lo, b_hi = np.nan_to_num(b_lo, nan=-np.inf), np.nan_to_num(b_hi, nan=np.inf)
-        out = (y < b_lo) | (y > b_hi)
-        with np.errstate(invalid="ignore"):
-            lo, hi = np.maximum(P_lo, X_lo), np.minimum(P_hi, X_hi)
-            gap = lo - hi > self.margin * (1 + np.maximum(np.abs(lo), np.abs(hi)))
-        disjoint = known & gap.any(axis=1)
-        inconsistent = np.asarray(res.inconsistent, dtype=bool)
-        alarm = out.any(axis=1) | disjoint | inconsistent
-        reasons = [""] * T
-        for k in np.flatnonzero(alarm):
-            why = [
-                f"y{i + 1} = {y[k, i]:.6g} outside the predicted band "
-                f"[{b_lo[k, i]:.6g}, {b_hi[k, i]:.6g}]"
-                for i in np.flatnonzero(out[k])[:3]
-            ]
-            if inconsistent[k]:
-                why.append(f"{self.method}: measurement inconsistent with the model and bounds")
-            if disjoint[k]:
-                i = int(np.argmax(gap[k]))
-                why.append(
-                    f"estimate disjoint from the model's prediction in x{i + 1} "
-                    f"([{X_lo[k, i]:.6g}, {X_hi[k, i]:.6g}] vs "
-                    f"[{P_lo[k, i]:.6g}, {P_hi[k, i]:.6g}])"
-                )
-            reasons[int(k)] = "; ".join(why)
-        return MonitorRecord(X_lo.copy(), X_hi.copy(), alarm, reasons, b_lo, b_hi)
-
-    def _images(
-        self, name: str, keys: np.ndarray, lo: np.ndarray, hi: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Lemma 1 for ``A`` or ``C`` over rows of boxes (one matrix per row when the system is
-        time-varying)."""
-        get = self.sys.A_at if name == "A" else self.sys.C_at
-        if not self.sys.is_time_varying:
-            return image_bounds(get(0), lo, hi)
-        pairs = [image_bounds(get(k), lo[i], hi[i]) for i, k in enumerate(keys)]
-        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-
-    def _products(self, name: str, keys: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``B u`` or ``D u`` over rows."""
-        get = self.sys.B_at if name == "B" else self.sys.D_at
-        if not self.sys.is_time_varying:
-            return u @ get(0).T
-        return np.array([get(k) @ u[i] for i, k in enumerate(keys)])
-
-    def _disturbance_images(
-        self, name: str, steps: np.ndarray, y: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``E[d[k]]`` or ``F[d[k]]`` over the steps (bounds from ``y[k]`` when callable)."""
-        sys = self.sys
-        get = sys.E_at if name == "E" else sys.F_at
-        n = sys.nx if name == "E" else sys.ny
-        if sys.is_time_varying or callable(sys.d):
-            pairs = [image_bounds(get(k), *_bounds(sys.d_at(k, y[i]))) for i, k in enumerate(steps)]
-            return (
-                np.array([p[0] for p in pairs]).reshape(-1, n),
-                np.array([p[1] for p in pairs]).reshape(-1, n),
-            )
-        d = sys.d_at(0) if sys.has_constant_bounds else sys.d
-        assert isinstance(d, Box)
-        if d.is_time_varying:
-            if steps.size:
-                d.at(int(steps[-1]))  # raises when the record is longer than the bounds
-            return image_bounds(get(0), d.lo[steps], d.hi[steps])
-        lo, hi = image_bounds(get(0), d.lo, d.hi)
-        return np.broadcast_to(lo, (steps.size, n)), np.broadcast_to(hi, (steps.size, n))
+        return check_record(self.sys, self.x0, self.margin, self.method, u, y, tt, res)
 
     def _record(self, u: Any, y: Any, t: Any) -> tuple[np.ndarray, np.ndarray, Any]:
         y = as_signal("y", y, self.sys.ny, allow_nan=True, allow_batch=False)
@@ -374,7 +212,8 @@ class Monitor:
         return y
 
     def _predict(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """``A[X_{k-1}] + B u[k-1] + E[d[k-1]]`` (Lemma 1), or the prior box at ``k = 0``."""
+        """``A[X_{k-1}] + B u[k-1] + E[d[k-1]]`` ([Efimov2013, Lemma 1]), or the prior box at
+        ``k = 0``."""
         if k == 0:
             return None if self.x0 is None else (self.x0.lo.copy(), self.x0.hi.copy())
         if self._prev is None or self.sys.is_continuous:
@@ -388,7 +227,8 @@ class Monitor:
     def _image(
         self, name: str, k: Any, lo: np.ndarray, hi: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Lemma 1 for ``M = A`` or ``C`` at step ``k`` (``M⁺``, ``M⁻`` cached when constant)."""
+        """[Efimov2013, Lemma 1] for ``M = A`` or ``C`` at step ``k`` (``M⁺``, ``M⁻`` cached
+        when constant)."""
         if name in self._split:
             Mp, Mn = self._split[name]
         else:
@@ -418,7 +258,7 @@ class Monitor:
         except IvobsError as exc:
             if "cannot be copied" in str(exc):  # e.g. a live LP solver: Lemma 1 only from now
                 self.tight = False
-            return None  # also bounds computed from y[k] (003 Remark 1): no prediction
+            return None  # also bounds computed from y[k] ([Efimov2013, Remark 1]): no prediction
         return None if box.is_unknown else (box.lo, box.hi)
 
     def _meet(
@@ -495,22 +335,6 @@ class Monitor:
 
     def __repr__(self) -> str:
         return f"<Monitor {self.method!r} k={self._k} alarms={self.alarms}>"
-
-
-def _bounds(box: Box) -> tuple[np.ndarray, np.ndarray]:
-    return box.lo, box.hi
-
-
-def _record(steps: list[MonitorStep], sys: LinearSystem) -> MonitorRecord:
-    T = len(steps)
-    return MonitorRecord(
-        lower=np.array([s.lower for s in steps]).reshape(T, sys.nx),
-        upper=np.array([s.upper for s in steps]).reshape(T, sys.nx),
-        alarm=np.array([s.alarm for s in steps], dtype=bool),
-        reasons=[s.reason for s in steps],
-        band_lower=np.array([s.band_lower for s in steps]).reshape(T, sys.ny),
-        band_upper=np.array([s.band_upper for s in steps]).reshape(T, sys.ny),
-    )
 
 
 def _vector(name: str, v: Any, n: int) -> np.ndarray:

@@ -1,0 +1,399 @@
+"""Campaign specs (TOML): the grid of scenarios × disturbances × methods × option sets × seeds,
+read with the file/line errors of :mod:`ivobs.io.reader`."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import importlib
+import itertools
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import IvobsError
+from ..io.options import check_option, method_class
+from ..io.reader import TomlReader
+from .job import Job
+from .worker import cached_scenario
+
+__all__ = [
+    "DISTURBANCES",
+    "CampaignSpec",
+    "MethodEntry",
+    "check_designs",
+    "load_spec",
+    "loads_spec",
+]
+
+DISTURBANCES = ("vertex", "uniform", "sinusoidal", "zero", "center", "paper", "recorded")
+"""Disturbance kinds a spec may name (see :meth:`ivobs.scenarios.Scenario.simulate`)."""
+
+
+@dataclass
+class MethodEntry:
+    """A method of the spec and its options grid (``{option: [values to try]}``)."""
+
+    name: str
+    grid: dict[str, list[Any]] = field(default_factory=dict)
+
+    def option_sets(self) -> list[dict[str, Any]]:
+        keys = list(self.grid)
+        return [dict(zip(keys, combo)) for combo in itertools.product(*self.grid.values())]
+
+
+@dataclass
+class CampaignSpec:
+    """A validated campaign spec (see the module docstring for the format)."""
+
+    scenarios: list[str]
+    methods: list[MethodEntry]
+    seeds: list[int]
+    disturbances: list[str] = field(default_factory=lambda: ["vertex"])
+    scenario_options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    burn_in: int | None = None
+    output: Path = Path("results.csv")
+    summary: Path | None = None
+    imports: list[str] = field(default_factory=list)
+    name: str = ""
+    description: str = ""
+    source: str = "<spec>"
+
+    def jobs(self) -> list[Job]:
+        """The grid, scenario-major: scenario × disturbance × method × option set × seed."""
+        out = []
+        for sc, dist, entry in itertools.product(self.scenarios, self.disturbances, self.methods):
+            for opts in entry.option_sets():
+                for seed in self.seeds:
+                    out.append(Job(
+                        scenario=sc, method=entry.name, seed=seed, disturbance=dist,
+                        options=opts, scenario_options=dict(self.scenario_options.get(sc, {})),
+                        burn_in=self.burn_in, imports=tuple(self.imports),
+                    ))  # fmt: skip
+        return out
+
+
+class _SpecReader(TomlReader):
+    """Validate a parsed spec; errors name the file, the line and the key."""
+
+    KEYS = (
+        "name", "description", "scenarios", "methods", "seeds", "disturbance", "horizon",
+        "burn_in", "scenario_options", "options", "output", "summary", "imports",
+    )  # fmt: skip
+
+    # -- small checks ----------------------------------------------------------------------
+    def string(self, key: tuple[str, ...], v: Any) -> str:
+        if not isinstance(v, str) or not v.strip():
+            raise self.fail(key, f"expected a non-empty string, got {v!r}")
+        return v.strip()
+
+    def integer(self, key: tuple[str, ...], v: Any, low: int = 0) -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or v < low:
+            raise self.fail(key, f"expected an integer >= {low}, got {v!r}")
+        return v
+
+    def table(self, key: tuple[str, ...], v: Any) -> dict[str, Any]:
+        if not isinstance(v, dict):
+            raise self.fail(key, f"expected a table, got {v!r}")
+        return v
+
+    def strings(self, key: tuple[str, ...], v: Any, allow_one: bool = False) -> list[str]:
+        if allow_one and isinstance(v, str):
+            v = [v]
+        if not isinstance(v, list) or not v:
+            raise self.fail(key, f"expected a non-empty list of strings, got {v!r}")
+        out = [self.string(key, s) for s in v]
+        dup = sorted({s for s in out if out.count(s) > 1})
+        if dup:
+            raise self.fail(key, f"listed twice: {', '.join(dup)}")
+        return out
+
+    def plain(self, key: tuple[str, ...], v: Any) -> Any:
+        """TOML values a job id can hash (no dates and times)."""
+        if isinstance(v, (_dt.date, _dt.time)):
+            raise self.fail(key, f"dates and times are not option values (got {v!r})")
+        if isinstance(v, float) and not math.isfinite(v):
+            raise self.fail(key, f"expected a finite number, got {v!r}")
+        if isinstance(v, list):
+            return [self.plain(key, x) for x in v]
+        if isinstance(v, dict):
+            return {k: self.plain((*key, k), x) for k, x in v.items()}
+        return v
+
+    # -- the parts of the spec ------------------------------------------------------------
+    def read(self, base_dir: Path, stem: str) -> CampaignSpec:
+        doc = self.doc
+        for k in doc:
+            if k not in self.KEYS:
+                raise self.fail((k,), f"unknown key {k!r}; allowed keys: {', '.join(self.KEYS)}")
+        for k in ("scenarios", "methods"):
+            if k not in doc:
+                raise self.fail((), f"missing key {k!r} (a list of names)")
+        imports = self.imports(doc.get("imports", []))
+        scen = self.scenarios(doc["scenarios"])
+        methods = self.methods(doc["methods"], doc.get("options", {}))
+        seeds = self.seeds(doc.get("seeds", [0]))
+        dists = self.strings(("disturbance",), doc.get("disturbance", "vertex"), allow_one=True)
+        for d in dists:
+            if d not in DISTURBANCES:
+                raise self.fail(
+                    ("disturbance",),
+                    f"unknown disturbance {d!r}; expected one of {', '.join(DISTURBANCES)}",
+                )
+        sopts = self.scenario_options(scen, doc.get("scenario_options", {}), doc.get("horizon"))
+        if "recorded" in dists:
+            self.check_recorded(scen, sopts)
+        burn_in = None
+        if "burn_in" in doc:
+            burn_in = self.integer(("burn_in",), doc["burn_in"])
+            self.check_burn_in(scen, sopts, burn_in)
+        output = base_dir / self.string(("output",), doc.get("output", f"{stem}.csv"))
+        summary = doc.get("summary")
+        spec = CampaignSpec(
+            scenarios=scen, methods=methods, seeds=seeds, disturbances=dists,
+            scenario_options=sopts, burn_in=burn_in, output=output,
+            summary=None if summary is None else base_dir / self.string(("summary",), summary),
+            imports=imports, name=str(doc.get("name", "")),
+            description=str(doc.get("description", "")), source=self.source,
+        )  # fmt: skip
+        self.check_unique(spec)
+        return spec
+
+    def imports(self, v: Any) -> list[str]:
+        if v == []:
+            return []
+        mods = self.strings(("imports",), v)
+        for m in mods:
+            try:
+                importlib.import_module(m)
+            except Exception as exc:
+                raise self.fail(("imports",), f"cannot import {m!r}: {exc}") from None
+        return mods
+
+    def scenarios(self, v: Any) -> list[str]:
+        from .. import scenarios
+
+        names = self.strings(("scenarios",), v)
+        known = scenarios.names()
+        for n in names:
+            if n not in known:
+                raise self.fail(
+                    ("scenarios",), f"unknown scenario {n!r}; known: {', '.join(known)}"
+                )
+        return names
+
+    def methods(self, v: Any, options: Any) -> list[MethodEntry]:
+        key = ("methods",)
+        if not isinstance(v, list) or not v:
+            raise self.fail(key, f"expected a non-empty list of method names, got {v!r}")
+        options = self.table(("options",), options)
+        grids: dict[str, dict[str, list[Any]]] = {}
+        for name, table in options.items():
+            cls = self.method_class(("options", name), name)
+            grids[cls.name] = self.grid(
+                ("options", name), cls, self.table(("options", name), table)
+            )
+        entries: list[MethodEntry] = []
+        for i, item in enumerate(v):
+            if isinstance(item, str):
+                cls = self.method_class(key, item)
+                entries.append(MethodEntry(cls.name, grids.get(cls.name, {})))
+                continue
+            if not isinstance(item, dict):
+                raise self.fail(key, f"entry {i}: expected a name or {{ name = ..., options = "
+                                     f"{{...}} }}, got {item!r}")  # fmt: skip
+            extra = sorted(set(item) - {"name", "options"})
+            if extra or "name" not in item:
+                raise self.fail(key, f"entry {i}: expected the keys name and options, got "
+                                     f"{sorted(item)}")  # fmt: skip
+            cls = self.method_class(key, item["name"])
+            grid = self.grid(key, cls, self.table(key, item.get("options", {})))
+            entries.append(MethodEntry(cls.name, grid))
+        listed = {e.name for e in entries}
+        for name in grids:
+            if name not in listed:
+                raise self.fail(("options", name), f"method {name!r} is not in methods")
+        return entries
+
+    def method_class(self, key: tuple[str, ...], name: Any) -> Any:
+        return method_class(self, key, self.string(key, name))
+
+    def grid(self, key: tuple[str, ...], cls: Any, table: dict[str, Any]) -> dict[str, list[Any]]:
+        out: dict[str, list[Any]] = {}
+        for opt, val in table.items():
+            k = (*key, opt)
+            check_option(self, key, cls, opt)
+            val = self.plain(k, val)
+            values = val if isinstance(val, list) else [val]
+            if not values:
+                raise self.fail(k, "an empty list of values gives no jobs; give at least one")
+            out[opt] = values
+        return out
+
+    def seeds(self, v: Any) -> list[int]:
+        key = ("seeds",)
+        if isinstance(v, dict):
+            extra = sorted(set(v) - {"start", "stop", "step", "count"})
+            if extra:
+                raise self.fail((*key, extra[0]), "expected the keys start, stop, step or count")
+            start = self.integer((*key, "start"), v.get("start", 0))
+            step = self.integer((*key, "step"), v.get("step", 1), low=1)
+            if ("stop" in v) == ("count" in v):
+                raise self.fail(key, "give either stop (exclusive) or count, e.g. "
+                                     "{ start = 0, stop = 10 }")  # fmt: skip
+            if "count" in v:
+                seeds = [
+                    start + step * i
+                    for i in range(self.integer((*key, "count"), v["count"], low=1))
+                ]
+            else:
+                seeds = list(range(start, self.integer((*key, "stop"), v["stop"]), step))
+            if not seeds:
+                raise self.fail(key, f"the range {v} holds no seed")
+            return seeds
+        if not isinstance(v, list) or not v:
+            raise self.fail(key, f"expected a list of integers or {{ start = 0, stop = 10 }}, "
+                                 f"got {v!r}")  # fmt: skip
+        seeds = [self.integer(key, s) for s in v]
+        dup = sorted({s for s in seeds if seeds.count(s) > 1})
+        if dup:
+            raise self.fail(key, f"listed twice: {dup}")
+        return seeds
+
+    def scenario_options(
+        self, scen: list[str], table: Any, horizon: Any
+    ) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {s: {} for s in scen}
+        table = self.table(("scenario_options",), table)
+        for name, opts in table.items():
+            k = ("scenario_options", name)
+            if name not in scen:
+                raise self.fail(k, f"scenario {name!r} is not in scenarios")
+            for opt, val in self.table(k, opts).items():
+                if opt not in _builder_params(name):
+                    raise self.fail(
+                        (*k, opt),
+                        f"scenario {name!r} has no option {opt!r}; "
+                        f"accepted: {', '.join(_builder_params(name))}",
+                    )
+                out[name][opt] = self.plain((*k, opt), val)
+        if horizon is not None:
+            self.horizon(scen, horizon, out)
+        for name in scen:  # build each once here: bad option values fail now, not per job
+            try:
+                cached_scenario(name, out[name])
+            except IvobsError as exc:
+                raise self.fail(("scenario_options", name), str(exc)) from None
+        return out
+
+    def horizon(self, scen: list[str], v: Any, out: dict[str, dict[str, Any]]) -> None:
+        key = ("horizon",)
+        takers = [s for s in scen if "horizon" in _builder_params(s)]
+        if isinstance(v, dict):
+            per = {}
+            for name, h in v.items():
+                if name not in scen:
+                    raise self.fail((*key, name), f"scenario {name!r} is not in scenarios")
+                if name not in takers:
+                    raise self.fail((*key, name), f"scenario {name!r} has no horizon option")
+                per[name] = self.integer((*key, name), h, low=1)
+        else:
+            h = self.integer(key, v, low=1)
+            if not takers:
+                raise self.fail(key, f"none of the scenarios ({', '.join(scen)}) has a horizon "
+                                     "option")  # fmt: skip
+            per = dict.fromkeys(takers, h)
+        for name, h in per.items():
+            if "horizon" in out[name]:
+                raise self.fail(key, f"scenario {name!r}: horizon given twice (here and in "
+                                     "[scenario_options])")  # fmt: skip
+            out[name]["horizon"] = h
+
+    def check_burn_in(
+        self, scen: list[str], sopts: dict[str, dict[str, Any]], burn_in: int
+    ) -> None:
+        for name in scen:
+            sc = cached_scenario(name, sopts[name])
+            T = int(sc.t.size) if sc.t is not None else int(sc.horizon)
+            if burn_in >= T:
+                raise self.fail(("burn_in",), f"{burn_in} leaves no step of scenario {name!r} "
+                                              f"({T} steps); lower it")  # fmt: skip
+
+    def check_recorded(self, scen: list[str], sopts: dict[str, dict[str, Any]]) -> None:
+        """``disturbance = "recorded"`` needs scenarios with a stored record (every job of the
+        others would fail)."""
+        without = [n for n in scen if cached_scenario(n, sopts[n]).recorded is None]
+        if without:
+            raise self.fail(("disturbance",), f"'recorded' needs scenarios with a stored record; "
+                                              f"none in: {', '.join(without)}")  # fmt: skip
+
+    def check_unique(self, spec: CampaignSpec) -> None:
+        seen: dict[str, Job] = {}
+        for job in spec.jobs():
+            if job.id in seen:
+                raise self.fail(
+                    ("methods",),
+                    f"two entries give the same jobs ({job.method} "
+                    f"with options {job.options or '{}'}); "
+                    "list each method and option set once",
+                )
+            seen[job.id] = job
+
+
+def _builder_params(name: str) -> list[str]:
+    """Keyword options of a scenario builder (``horizon``, ``seed``, ...)."""
+    from .. import scenarios
+
+    return scenarios.options(name)
+
+
+def loads_spec(text: str, source: str = "<spec>", base_dir: str | os.PathLike[str] = ".",
+               stem: str = "campaign") -> CampaignSpec:  # fmt: skip
+    """Parse and validate a spec given as text (paths relative to ``base_dir``)."""
+    return _SpecReader(text, source).read(Path(base_dir), stem)
+
+
+def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:
+    """Read and validate a spec file; ``output`` and ``summary`` are relative to its folder.
+    Errors (:class:`~ivobs.IvobsError`) name the file, the line and the key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise IvobsError(f"spec: cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    return loads_spec(text, source=str(path), base_dir=path.parent, stem=path.stem)
+
+
+def check_designs(spec: CampaignSpec) -> list[str]:
+    """Construct every estimator of the spec once (per scenario, method and option set): an
+    invalid option value (every job of it would fail) raises :class:`~ivobs.IvobsError` naming
+    the spec and the method's options. Returns one line per design that the method declines
+    (``DesignError``, or a system class it does not support: those jobs are recorded as
+    ``failed``, which is expected)."""
+    from ..errors import DesignError
+    from ..estimators import make_estimator
+
+    for mod in spec.imports:
+        importlib.import_module(mod)
+    declined: list[str] = []
+    seen: set[str] = set()
+    for job in spec.jobs():
+        key = job.design_key()
+        if key in seen:
+            continue
+        seen.add(key)
+        sc = cached_scenario(job.scenario, job.scenario_options)
+        try:
+            make_estimator(job.method, sc.system, x0=sc.x0, **job.options)
+        except DesignError as exc:
+            declined.append(f"{job.method} {job.options or ''} on {job.scenario}: {exc}")
+        except IvobsError as exc:
+            if not job.options or "support" in str(exc):
+                declined.append(f"{job.method} on {job.scenario}: {exc}")
+                continue
+            raise IvobsError(
+                f"{spec.source}: options.{job.method} = {job.options} (scenario "
+                f"{job.scenario}): {exc}"
+            ) from None
+    return declined

@@ -1,0 +1,104 @@
+"""Files: operating ivobs on real data.
+
+* **System files** (TOML, :mod:`ivobs.io.systemfile`, :mod:`ivobs.io.systemwrite`): the model
+  ``x[k+1] = A x[k] + B u[k] + E d[k]``, ``y[k] = C x[k] + D u[k] + F d[k]``, the disturbance
+  bounds, the prior box on ``x[0]`` and a method with its options (:mod:`ivobs.io.options`)::
+
+      name = "servo-motor"
+
+      [system]
+      dt = 0.1
+      A = [[1.0, 0.1, 0.0], [0.0, 0.8495, 0.4977], [0.0, -0.0357, 0.9995]]
+      B = [[0.0], [0.0], [0.0729]]
+      C = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+
+      [x0]
+      lower = [-0.2, -0.2, -0.2]
+      upper = [0.2, 0.2, 0.2]
+
+      [method]
+      name = "interval-split"
+
+  Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line and the key
+  (:mod:`ivobs.io.reader`). The format is documented in ``docs/operating.md``.
+* **Logs** (CSV, :mod:`ivobs.io.logs`): a step or time column, ``u1, u2, ...`` and
+  ``y1, y2, ...``; an empty cell or ``NaN`` is a missing sample.
+* **Monitor state files** (JSON, :mod:`ivobs.io.statefile`).
+* **Atomic writes** (:mod:`ivobs.io.atomic`): every file ivobs writes goes to a temporary file
+  in the same folder and is then renamed, so a crash or an error never leaves a half-written
+  file behind.
+
+**Security**: a matrix or a bound may name a Python callable by import path
+(``A = { python = "ivobs.scenarios:pendulum_A", params = { L0 = 1.0, L1 = 0.5, omega = 1.0 } }``).
+Loading such a file imports that module, which runs its code: load system files from trusted
+sources only.
+
+The names below are imported on first use (:pep:`562`): importing :mod:`ivobs.io.atomic` (as
+the result and plot modules do) loads no estimator.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .atomic import atomic_path, check_output_path, write_text_atomic
+    from .callables import callable_ref
+    from .logs import Log, LogParser, LogRow, not_utf8, read_log, write_log
+    from .reader import KeyLines
+    from .systemfile import SystemFile, load_system, loads_system
+    from .systemwrite import dumps_system, equal_systems, save_system
+
+__all__ = [
+    "KeyLines",
+    "Log",
+    "LogParser",
+    "LogRow",
+    "SystemFile",
+    "atomic_path",
+    "callable_ref",
+    "check_output_path",
+    "dumps_system",
+    "equal_systems",
+    "load_system",
+    "loads_system",
+    "not_utf8",
+    "read_log",
+    "save_system",
+    "write_log",
+    "write_text_atomic",
+]
+
+_WHERE = {
+    "atomic_path": "atomic",
+    "check_output_path": "atomic",
+    "write_text_atomic": "atomic",
+    "callable_ref": "callables",
+    "Log": "logs",
+    "LogParser": "logs",
+    "LogRow": "logs",
+    "not_utf8": "logs",
+    "read_log": "logs",
+    "write_log": "logs",
+    "KeyLines": "reader",
+    "SystemFile": "systemfile",
+    "load_system": "systemfile",
+    "loads_system": "systemfile",
+    "dumps_system": "systemwrite",
+    "equal_systems": "systemwrite",
+    "save_system": "systemwrite",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value  # once resolved, an ordinary attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
