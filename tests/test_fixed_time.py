@@ -350,7 +350,7 @@ def test_explicit_S_and_L(dinh):
 def test_vectorised_chunks_blocks_and_inconsistency_match_the_loop(monkeypatch):
     """Small chunks and blocks (so that every boundary is crossed), missing samples, a gap,
     inconsistent spikes, a batch: the vectorised path reproduces the loop, flags included."""
-    import ivobs.estimators.fixed_time as ft
+    import ivobs.estimators.fixed_time.windows as ft
 
     monkeypatch.setattr(ft, "_CHUNK", 37)
     monkeypatch.setattr(ft, "_BLOCK", 8)
