@@ -30,7 +30,15 @@ from ...model import LinearSystem
 from ...sets import Box
 from ..base import Design
 
-__all__ = ["MAX_WINDOW", "FixedTimeDesign", "WindowDesigner", "check_T", "check_window"]
+__all__ = [
+    "MAX_WINDOW",
+    "FixedTimeDesign",
+    "WindowDesigner",
+    "check_T",
+    "check_design_options",
+    "check_window",
+    "injection",
+]
 
 CACHE_SIZE = 16384
 """Entries kept per cache (matrices per step, gains per step and missing pattern)."""
