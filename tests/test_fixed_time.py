@@ -1,7 +1,8 @@
-"""The fixed-time parity-space estimator of paper 001: the paper's design and bounds,
+"""The fixed-time parity-space estimator [Wang2020]: the paper's design and bounds,
 containment under vertex disturbances (LTI/LTV, singular A, asymmetric bounds, D u), the
 fixed-time property, missing samples, batches, online use, errors."""
 
+import dataclasses
 import json
 import warnings
 
@@ -10,7 +11,7 @@ import pytest
 
 import ivobs
 from ivobs import Box, DesignError, InconsistentDataError, IvobsError, LinearSystem
-from ivobs.estimators.fixed_time import FixedTimeEstimator
+from ivobs.estimators.fixed_time import FixedTimeEstimator, FixedTimeState
 from ivobs.testing import adversarial_run, assert_contains, random_system
 
 
@@ -294,6 +295,31 @@ def test_step_reproduces_run_and_state_restores():
         np.testing.assert_array_equal(other.step(tr.u[k], y[k]).hi, est.step(tr.u[k], y[k]).hi)
 
 
+def test_advance_returns_a_new_state_and_leaves_the_given_one_unchanged():
+    """The online state is a frozen FixedTimeState: a step builds new ring buffers and a new
+    box, the given state and its arrays stay as they were (missing samples included)."""
+    sys = random_system(8, nx=3, ny=1, nu=1, invertible=False)
+    tr = adversarial_run(sys, Box(-np.ones(3), np.ones(3)), 16, seed=8)
+    y = tr.y.copy()
+    y[9:11] = np.nan
+    est = ivobs.make_estimator("fixed-time", sys)
+    loop = est.run(tr.u, y, vectorize=False)
+    state = est.initial_state()
+    assert isinstance(state, FixedTimeState) and not state.has_box
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        state.has_box = True
+    names = ("z", "ymiss", "dlo", "dhi", "lo", "hi")
+    for k in range(16):
+        before = {name: getattr(state, name).copy() for name in names}
+        new, box = est.advance(state, tr.u[k], y[k])
+        for name in names:
+            np.testing.assert_array_equal(getattr(state, name), before[name])
+        assert state.k == k and new.k == k + 1 and new.has_box == (k >= est.s)
+        if k >= est.s:
+            np.testing.assert_array_equal(box.lo, loop.lower[k])
+        state = new
+
+
 # -- inconsistent data, errors ------------------------------------------------------------------
 def test_parity_check_reports_inconsistent_measurements(dinh):
     sc, tr = dinh
@@ -350,7 +376,7 @@ def test_explicit_S_and_L(dinh):
 def test_vectorised_chunks_blocks_and_inconsistency_match_the_loop(monkeypatch):
     """Small chunks and blocks (so that every boundary is crossed), missing samples, a gap,
     inconsistent spikes, a batch: the vectorised path reproduces the loop, flags included."""
-    import ivobs.estimators.fixed_time as ft
+    import ivobs.estimators.fixed_time.windows as ft
 
     monkeypatch.setattr(ft, "_CHUNK", 37)
     monkeypatch.setattr(ft, "_BLOCK", 8)
@@ -455,9 +481,9 @@ def test_reduced_windows_are_intersected_with_the_prediction():
     assert rp.width[32:50].mean() < rb.width[32:50].mean()
 
 
-# -- audit findings A2, A3, A3b --------------------------------------------------------------
-def test_a2_s0_predicts_a_missing_sample_with_the_previous_input():
-    """A2: nx = 1 (s = 0) keeps one sample per window; the prediction through a missing sample
+# -- a window of one sample, nearly singular and singular A -----------------------------------
+def test_s0_predicts_a_missing_sample_with_the_previous_input():
+    """nx = 1 (s = 0) keeps one sample per window; the prediction through a missing sample
     needs u[k-1] and the bounds of d[k-1], which a single ring slot had already overwritten
     with those of step k. Inputs alternating ±5 make the difference obvious."""
     sys = LinearSystem([[0.9]], [[1.0]], [[1.0]], E=[[0.2]], F=[[0.0]], d=Box([0.1], [0.5]))
@@ -508,7 +534,7 @@ def _max_excess(res, x):
     return float(np.max(np.maximum(res.lower - x, x - res.upper)[..., v:, :]))
 
 
-def _audit_a3_system():
+def _nearly_singular_system():
     A = np.array(
         [
             [0.12609559714027987, 0.32010332880987175, -1.0651677453570858],
@@ -529,13 +555,13 @@ def _audit_a3_system():
     return LinearSystem(A, None, C, E=E, F=F, d=Box(-r, r)), r
 
 
-def test_a3_nearly_singular_A_is_sound_and_not_wider_than_an_injection():
-    """A3: rcond(A) ~ 1e-7 passes the invertibility test (1e-8), and the inverses of eq. (4)
+def test_nearly_singular_A_is_sound_and_not_wider_than_an_injection():
+    """rcond(A) ~ 1e-7 passes the invertibility test (1e-8), and the inverses of eq. (4)
     make Mx = [C; C A⁻¹; C A⁻²] (cond 1e14) inaccurate: the computed T misses T Mx = I by
     ~1e-2 and the boxes missed the state (3 of these 40 runs, by up to 0.035). Now the window
     gain is certified on the forward form (and refined), and an output injection replaces A
     when that is more accurate."""
-    sys, r = _audit_a3_system()
+    sys, r = _nearly_singular_system()
     est = ivobs.make_estimator("fixed-time", sys)
     x0 = np.stack([np.random.default_rng(seed).uniform(-10, 10, 3) for seed in range(40)])
     d = np.stack(
@@ -554,8 +580,8 @@ def test_a3_nearly_singular_A_is_sound_and_not_wider_than_an_injection():
     np.testing.assert_allclose(res.width[:, 2:], inj.run(None, y).width[:, 2:], rtol=1e-9)
 
 
-def test_a3b_output_injection_rounding_is_covered():
-    """A3b: singular A; the gain placing the poles at 0.5 ... 0.9 had |L| = 156, and the
+def test_output_injection_rounding_is_covered():
+    """Singular A; the gain placing the poles at 0.5 ... 0.9 had |L| = 156, and the
     rounding of the stacked matrices of A - LC (not in the margin) put the state outside by
     4e-6 at |x| = 200. Now |L| < 1, and any rounding of the window gain is certified."""
     base = random_system(44, nx=3, ny=1, nu=1, invertible=False, rho=0.99)
@@ -583,8 +609,8 @@ def test_a3b_output_injection_rounding_is_covered():
 
 
 @pytest.mark.parametrize("seed", range(12))
-def test_a3_property_near_singular_and_singular_A(seed):
-    """Random systems (nx = 1 ... 4: s = 0 too, the case of A2) whose A has an eigenvalue
+def test_property_near_singular_and_singular_A(seed):
+    """Random systems (nx = 1 ... 4: s = 0 too, one sample per window) whose A has an eigenvalue
     10^-3 ... 10^-13 or exactly 0 (one output or two, s = nx - 1 or larger), vertex
     disturbances, initial states up to ±100: every box of the loop and of the vectorised path
     contains the state, also with 10 % missing samples, and no admissible sample is reported
@@ -612,7 +638,7 @@ def test_a3_property_near_singular_and_singular_A(seed):
         assert not loop.inconsistent.any() and not vec.inconsistent.any()
 
 
-def test_a3_time_varying_with_nearly_singular_steps():
+def test_time_varying_with_nearly_singular_steps():
     """Remark 4 with A(k) nearly singular (rcond ~ 1e-7, no injection) at every third step:
     the per-step window gains are certified too."""
     base = _ltv_system()

@@ -1,4 +1,4 @@
-"""Parity-space design of paper 001: stacked matrices (eq. 6), optimal T (Theorem 1, eq. 13),
+"""Parity-space design [Wang2020]: stacked matrices (eq. 6), optimal T (Theorem 1, eq. 13),
 general solution (Lemma 2), output injection (Remark 1)."""
 
 import numpy as np
@@ -191,8 +191,8 @@ def test_output_injection_makes_A_invertible_and_keeps_observability():
         invertible_injection(np.zeros((2, 2)), np.zeros((1, 2)))
 
 
-def test_a3b_injection_is_small_and_well_conditioned():
-    """A3b: the system of the audit (eigenvalues 0, -0.94, -0.99, ‖A‖ = 13.7). Placing the
+def test_injection_is_small_and_well_conditioned():
+    """A singular A (eigenvalues 0, -0.94, -0.99, ‖A‖ = 13.7). Placing the
     poles at 0.5 ... 0.9 needs |L| = 156 and gives cond(A - LC) = 2e6; the minimal-norm gain
     that only lifts the null direction of A needs |L| < 1 and gives cond(A - LC) < 20."""
     base = random_system(44, nx=3, ny=1, nu=1, invertible=False, rho=0.99)
@@ -211,7 +211,7 @@ def test_singular_A_in_window_is_a_design_error():
         stack_matrices(A, None, [[1.0, 0.0]], s=1)
 
 
-# -- certification of a window gain on the forward form (audit findings A3, A3b) -------------
+# -- certification of a window gain on the forward form -------------------------------------
 def _window_data(sys, s, k, rng, centre):
     """(w, ξ, x_k) of the window ending at k of a random trajectory, in the layouts of
     forward_window: w = [z_k; …; z_{k-s}], z = [u; y; c]; ξ = [x_{k-s}; v lag-major; δ]."""
@@ -269,10 +269,10 @@ def _exact_residual(G, mats, nx, s):
 
 
 def test_window_bound_is_a_bound_in_exact_arithmetic():
-    """The audit's A3b system with the large gain of the 0.5 ... 0.9 pole placement: the
-    computed window gain misses x_k - G w = -T Md 𝛅 by rounding; the certified bound contains
-    the exact (rational) residual entry by entry, with and without refinement, and the
-    refinement shrinks the x and v blocks to the rounding of G itself."""
+    """A singular A (eigenvalues 0, -0.94, -0.99) with the large gain of the 0.5 ... 0.9 pole
+    placement: the computed window gain misses x_k - G w = -T Md 𝛅 by rounding; the certified
+    bound contains the exact (rational) residual entry by entry, with and without refinement,
+    and the refinement shrinks the x and v blocks to the rounding of G itself."""
     base = random_system(44, nx=3, ny=1, nu=1, invertible=False, rho=0.99)
     sys = ivobs.LinearSystem(base.A, base.B, base.C, E=base.E, F=base.F, d=base.d)
     L = injection_candidates(sys.A, sys.C)[-1]
