@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ivobs
-from ivobs.czonotope import ConstrainedZonotope, eliminate_constraints, reduce_generators
+from ivobs.sets import ConstrainedZonotope, eliminate_constraints, reduce_generators
 
 
 def vertices(z: ConstrainedZonotope) -> np.ndarray:
@@ -178,7 +178,7 @@ def test_certificates_follow_the_reduction(seed: int) -> None:
     """The certificates of the hull bounds are transformed with the set: their objectives stay
     the rows of ±G, and the bounds they certify stay valid (below the LP optimum) after every
     elimination."""
-    from ivobs.czonotope import hull_certificates
+    from ivobs.sets import hull_certificates
 
     z = random_cz(np.random.default_rng(200 + seed), n=3, m=14, nc=6)
     lo, hi, cert = hull_certificates(z.c, z.G, z.A, z.b)
