@@ -79,6 +79,18 @@ def test_linear_map_minkowski_sum_and_translation() -> None:
     np.testing.assert_allclose(zz.interval_hull().hi, v1.max(axis=0) + 1, atol=1e-7)
 
 
+def test_a_box_or_zonotope_on_the_left_of_a_sum_gives_a_constrained_zonotope() -> None:
+    z = random_cz(np.random.default_rng(5))
+    for left in (ivobs.Box([-1.0, 0.0], [1.0, 0.5]), ivobs.Zonotope([0.5, 0.0], [[1.0], [2.0]])):
+        s, r = left + z, z + left
+        assert isinstance(s, ConstrainedZonotope) and s.num_constraints == z.num_constraints
+        k = s.num_generators - z.num_generators  # the left operand's generators come first
+        np.testing.assert_array_equal(s.G, np.hstack([r.G[:, z.num_generators :], z.G]))
+        np.testing.assert_array_equal(s.A[:, k:], z.A)
+        np.testing.assert_array_equal(s.c, r.c)
+    np.testing.assert_array_equal((np.array([1.0, 2.0]) + z).c, z.c + np.array([1.0, 2.0]))
+
+
 def test_intersection_with_box_strip_and_hyperplane() -> None:
     sq = ConstrainedZonotope.from_box(ivobs.Box([-1.0, -1.0], [1.0, 1.0]))
     # the strip |x1 + x2 - 1.5| <= 0.1 cuts the corner of the square

@@ -232,13 +232,16 @@ class Box:
 
     def __add__(self, other: Any) -> Any:
         """Minkowski sum with a box (a box), or with a zonotope (a zonotope, the box's generators
-        first); a vector translates."""
+        first); a vector translates. A set of a richer kind (a constrained zonotope) answers
+        through its ``__radd__``."""
         if isinstance(other, Box._zonotope):
             return self.to_zonotope() + other
         if isinstance(other, Box):
             if other.dim != self.dim:
                 raise IvobsError(f"Box + Box: dimensions differ ({self.dim} and {other.dim})")
             return Box._trusted(self.lo + other.lo, self.hi + other.hi)
+        if hasattr(other, "interval_hull"):
+            return NotImplemented
         v = as_float_array("translation", other)
         return Box._trusted(self.lo + v, self.hi + v)
 

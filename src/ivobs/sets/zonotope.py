@@ -110,7 +110,9 @@ class Zonotope:
         return self.linear_map(M)
 
     def __add__(self, other: Any) -> Zonotope:
-        """Minkowski sum ([Tang2019, Property 3, eq. (4a)]); a vector translates."""
+        """Minkowski sum ([Tang2019, Property 3, eq. (4a)]) with a zonotope or a box; a vector
+        translates. A set of a richer kind (a constrained zonotope) answers through its
+        ``__radd__``."""
         if isinstance(other, Box):
             other = other.to_zonotope()
         if isinstance(other, Zonotope):
@@ -119,6 +121,8 @@ class Zonotope:
                     f"Zonotope + Zonotope: dimensions differ ({self.dim}, {other.dim})"
                 )
             return Zonotope._trusted(self.c + other.c, np.hstack([self.G, other.G]))
+        if hasattr(other, "interval_hull"):
+            return NotImplemented
         v = as_vector("translation", other, self.dim)
         return Zonotope._trusted(self.c + v, self.G)
 

@@ -108,7 +108,7 @@ class ConstrainedZonotope:
 
     # -- exact operations ([Scott2016, Proposition 1]) ----------------------------------------
     def linear_map(self, M: Any) -> ConstrainedZonotope:
-        """``M Z = <M c, M G, A, b>`` (Proposition 1)."""
+        """``M Z = <M c, M G, A, b>`` ([Scott2016, Proposition 1])."""
         M = as_matrix("M", M, cols=self.dim, vector="row")
         return ConstrainedZonotope._trusted(M @ self.c, M @ self.G, self.A, self.b)
 
@@ -116,8 +116,8 @@ class ConstrainedZonotope:
         return self.linear_map(M)
 
     def __add__(self, other: Any) -> ConstrainedZonotope:
-        """Minkowski sum (Proposition 1) with a constrained zonotope, zonotope or box; a vector
-        translates."""
+        """Minkowski sum ([Scott2016, Proposition 1]) with a constrained zonotope, zonotope or
+        box; a vector translates."""
         if isinstance(other, Box):
             other = ConstrainedZonotope.from_box(other)
         elif isinstance(other, Zonotope):
@@ -140,11 +140,19 @@ class ConstrainedZonotope:
         v = as_vector("translation", other, self.dim)
         return ConstrainedZonotope._trusted(self.c + v, self.G, self.A, self.b)
 
-    __radd__ = __add__
+    def __radd__(self, other: Any) -> ConstrainedZonotope:
+        """``other + Z`` for a box, zonotope or vector: the left operand's generators first, as
+        in ``Box + Zonotope``."""
+        if isinstance(other, Box):
+            return ConstrainedZonotope.from_box(other) + self
+        if isinstance(other, Zonotope):
+            return ConstrainedZonotope.from_zonotope(other) + self
+        return self.__add__(other)
 
     def intersect(self, other: Any, R: Any = None) -> ConstrainedZonotope:
-        """Generalised intersection ``Z ∩_R Y = {z ∈ Z : R z ∈ Y}`` (Proposition 1); ``R = I``
-        (plain intersection) by default. ``Y`` may be a constrained zonotope, zonotope or box."""
+        """Generalised intersection ``Z ∩_R Y = {z ∈ Z : R z ∈ Y}`` ([Scott2016, Proposition
+        1]); ``R = I`` (plain intersection) by default. ``Y`` may be a constrained zonotope,
+        zonotope or box."""
         if isinstance(other, Box):
             other = ConstrainedZonotope.from_box(other)
         elif isinstance(other, Zonotope):
@@ -210,8 +218,9 @@ class ConstrainedZonotope:
 
     # -- reduction ([Scott2016, Section 4]) ---------------------------------------------------
     def rescale(self) -> ConstrainedZonotope:
-        """The same set with its factors rescaled to their propagated bounds (Section 4.2).
-        Raises :class:`~ivobs.InconsistentDataError` when propagation proves it empty."""
+        """The same set with its factors rescaled to their propagated bounds ([Scott2016,
+        Section 4.2]). Raises :class:`~ivobs.InconsistentDataError` when propagation proves it
+        empty."""
         A, b, _ = _normalise_rows_s(self.A, self.b)
         out = _rescale(self.c, self.G, A, b)
         if out is None:
@@ -222,8 +231,9 @@ class ConstrainedZonotope:
         self, max_generators: int | None = None, max_constraints: int | None = None
     ) -> ConstrainedZonotope:
         """A constrained zonotope containing this one with at most ``max_constraints``
-        constraints (eliminated first, Section 4.2) and ``max_generators`` generators (lifted
-        zonotope reduction, Section 4.3). ``None`` leaves that count alone."""
+        constraints (eliminated first, [Scott2016, Section 4.2]) and ``max_generators``
+        generators (lifted zonotope reduction, [Scott2016, Section 4.3]). ``None`` leaves that
+        count alone."""
         c, G, A, b = self.c, self.G, self.A, self.b
         if max_constraints is not None:
             if max_constraints < 0:
