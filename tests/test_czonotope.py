@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ivobs
-from ivobs.czonotope import ConstrainedZonotope, eliminate_constraints, reduce_generators
+from ivobs.sets import ConstrainedZonotope, eliminate_constraints, reduce_generators
 
 
 def vertices(z: ConstrainedZonotope) -> np.ndarray:
@@ -77,6 +77,18 @@ def test_linear_map_minkowski_sum_and_translation() -> None:
     )
     zz = z1 + ivobs.Zonotope([0.0, 0.0], [[1.0], [1.0]])
     np.testing.assert_allclose(zz.interval_hull().hi, v1.max(axis=0) + 1, atol=1e-7)
+
+
+def test_a_box_or_zonotope_on_the_left_of_a_sum_gives_a_constrained_zonotope() -> None:
+    z = random_cz(np.random.default_rng(5))
+    for left in (ivobs.Box([-1.0, 0.0], [1.0, 0.5]), ivobs.Zonotope([0.5, 0.0], [[1.0], [2.0]])):
+        s, r = left + z, z + left
+        assert isinstance(s, ConstrainedZonotope) and s.num_constraints == z.num_constraints
+        k = s.num_generators - z.num_generators  # the left operand's generators come first
+        np.testing.assert_array_equal(s.G, np.hstack([r.G[:, z.num_generators :], z.G]))
+        np.testing.assert_array_equal(s.A[:, k:], z.A)
+        np.testing.assert_array_equal(s.c, r.c)
+    np.testing.assert_array_equal((np.array([1.0, 2.0]) + z).c, z.c + np.array([1.0, 2.0]))
 
 
 def test_intersection_with_box_strip_and_hyperplane() -> None:
@@ -178,7 +190,7 @@ def test_certificates_follow_the_reduction(seed: int) -> None:
     """The certificates of the hull bounds are transformed with the set: their objectives stay
     the rows of ±G, and the bounds they certify stay valid (below the LP optimum) after every
     elimination."""
-    from ivobs.czonotope import hull_certificates
+    from ivobs.sets import hull_certificates
 
     z = random_cz(np.random.default_rng(200 + seed), n=3, m=14, nc=6)
     lo, hi, cert = hull_certificates(z.c, z.G, z.A, z.b)

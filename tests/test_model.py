@@ -19,8 +19,9 @@ def test_minimal_system_and_dimensions():
 
 
 def test_full_system_accepts_vectors_for_single_columns():
-    s = LinearSystem(A, [0.0, 1.0], [1.0, 0.0], D=[0.5], E=[1.0, 1.0], F=[0.1],
-                     d=Box([-1.0], [2.0]), dt=0.1)
+    s = LinearSystem(
+        A, [0.0, 1.0], [1.0, 0.0], D=[0.5], E=[1.0, 1.0], F=[0.1], d=Box([-1.0], [2.0]), dt=0.1
+    )
     assert s.B.shape == (2, 1) and s.C.shape == (1, 2) and s.E.shape == (2, 1)
     assert s.F.shape == (1, 1) and s.dt == 0.1
 
@@ -79,15 +80,14 @@ def test_bounds_time_varying_and_callable():
     s = LinearSystem(A, C=C, E=np.ones((2, 1)), d=Box(lo, -lo))
     assert s.d_at(3) == Box([-4.0], [4.0])
     assert not s.has_constant_bounds
-    s2 = LinearSystem(A, C=C, F=np.ones((1, 1)),
-                      d=lambda k, y: Box([-abs(y[0])], [abs(y[0])]))
+    s2 = LinearSystem(A, C=C, F=np.ones((1, 1)), d=lambda k, y: Box([-abs(y[0])], [abs(y[0])]))
     assert s2.nd == 1 and s2.d_at(0, np.array([2.0])) == Box([-2.0], [2.0])
     s3 = LinearSystem(A, C=C, F=np.ones((1, 1)), d=lambda k, y: Box([0, 0], [1, 1]))
     with pytest.raises(IvobsError, match="must return an ivobs.Box of dimension 1"):
         s3.d_at(0, np.zeros(1))
 
 
-def test_process_measurement_constructor_matches_paper_002_form():
+def test_process_measurement_constructor_stacks_w_and_v_into_one_disturbance():
     Ew = np.eye(2)
     Fv = np.array([[2.0]])
     s = LinearSystem.from_process_measurement(A, np.zeros((2, 1)), C, Ew, Fv, [0.1, 0.2], [0.3])
@@ -110,15 +110,15 @@ def test_observability_and_schur_helpers():
 
 def test_observability_indices():
     # chain of 3 integrators measured at the end: one output, index 3
-    A3 = np.diag([1.0, 1.0], 1)
-    assert linalg.observability_indices(A3, [[0, 0, 1.0]]) == [1]
-    assert linalg.observability_indices(A3, [[1.0, 0, 0]]) == [3]
+    A_chain3 = np.diag([1.0, 1.0], 1)
+    assert linalg.observability_indices(A_chain3, [[0, 0, 1.0]]) == [1]
+    assert linalg.observability_indices(A_chain3, [[1.0, 0, 0]]) == [3]
     # two outputs on a 4-state system: indices sum to the rank
-    A4 = np.diag([1.0, 0, 1.0], 1)
-    C4 = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
-    m = linalg.observability_indices(A4, C4)
-    assert m == [2, 2] and sum(m) == linalg.observability_rank(A4, C4)
-    assert linalg.is_controllable(A3, [[0], [0], [1.0]])
+    A_chain4 = np.diag([1.0, 0, 1.0], 1)
+    C_chain4 = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    m = linalg.observability_indices(A_chain4, C_chain4)
+    assert m == [2, 2] and sum(m) == linalg.observability_rank(A_chain4, C_chain4)
+    assert linalg.is_controllable(A_chain3, [[0], [0], [1.0]])
 
 
 def test_statespace_round_trip():
@@ -171,3 +171,14 @@ def test_sparse_matrices_are_kept_sparse_with_dense_views_on_demand():
     bad = sp.csr_matrix(([np.inf], ([0], [0])), shape=(n, n))
     with pytest.raises(IvobsError, match="finite numbers in the sparse matrix"):
         LinearSystem(bad, C=C)
+
+
+def test_linear_system_answers_every_member_of_the_model_protocols():
+    """Estimators use a model through ivobs.model.SystemModel / LinearModel only."""
+    from ivobs.model import LinearModel, SystemModel
+
+    sys = LinearSystem(A, C=C, E=np.eye(2), d=Box([-0.1, -0.1], [0.1, 0.1]))
+    for proto in (SystemModel, LinearModel):
+        members = [n for n in vars(proto) if not n.startswith("_")]
+        assert members and all(hasattr(sys, n) for n in members), proto
+    assert "matrices_at" in vars(LinearModel) and "d_at" in vars(SystemModel)

@@ -1,4 +1,4 @@
-"""Box and Zonotope: the same verbs, exact hulls, sound reduction (Lemma 1 of 003/004)."""
+"""Box and Zonotope: the same verbs, exact hulls ([Efimov2013, Lemma 1]), sound reduction."""
 
 import numpy as np
 import pytest
@@ -102,6 +102,9 @@ def test_zonotope_operations():
     assert s.num_generators == 4
     np.testing.assert_array_equal(s.c, [1.5, 0.5])
     assert z.contains([2.5, 1.0]) and not z.contains([2.5, -1.0])
+    t = Box([0, 0], [1, 1]) + z  # the box's generators first
+    np.testing.assert_array_equal(t.G, np.hstack([np.diag([0.5, 0.5]), z.G]))
+    np.testing.assert_array_equal(t.c, s.c)
     with pytest.raises(IvobsError, match="expected shape"):
         Zonotope([0.0, 0.0], np.ones((3, 2)))
 
@@ -124,7 +127,7 @@ def test_hull_contains_samples_and_is_tight(seed):
 @settings(max_examples=25, deadline=None)
 @given(seeds)
 def test_reduction_contains_the_original(seed):
-    """002 Remark 2: <0, H> ⊆ <0, ↓_{q,W} H>; checked on vertices of the original (LP)."""
+    """[Tang2019, Remark 2]: <0, H> ⊆ <0, ↓_{q,W} H>; checked on vertices of the original (LP)."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 4))
     m = int(rng.integers(n + 1, 12))
@@ -148,8 +151,18 @@ def test_reduction_keeps_largest_generators_and_boxes_the_rest():
 
 
 def test_public_names():
-    for name in ["Box", "Zonotope", "LinearSystem", "Estimate", "make_estimator", "simulate",
-                 "IvobsError", "DesignError", "scenarios", "methods"]:
+    for name in [
+        "Box",
+        "Zonotope",
+        "LinearSystem",
+        "Estimate",
+        "make_estimator",
+        "simulate",
+        "IvobsError",
+        "DesignError",
+        "scenarios",
+        "methods",
+    ]:
         assert hasattr(ivobs, name)
     assert issubclass(ivobs.DesignError, ivobs.IvobsError)
     assert issubclass(ivobs.IvobsError, ValueError)

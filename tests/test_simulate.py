@@ -9,8 +9,15 @@ from ivobs import Box, IvobsError, LinearSystem, simulate
 
 def _sys():
     A = np.array([[0.9, 0.2], [-0.1, 0.7]])
-    return LinearSystem(A, [[1.0], [0.0]], [[1.0, 1.0]], D=[[0.5]], E=[[0.1, 0], [0, 0.2]],
-                        F=[[0.0, 1.0]], d=Box([-1.0, 0.0], [1.0, 2.0]))
+    return LinearSystem(
+        A,
+        [[1.0], [0.0]],
+        [[1.0, 1.0]],
+        D=[[0.5]],
+        E=[[0.1, 0], [0, 0.2]],
+        F=[[0.0, 1.0]],
+        d=Box([-1.0, 0.0], [1.0, 2.0]),
+    )
 
 
 def test_discrete_simulation_follows_the_model():
@@ -37,8 +44,9 @@ def test_generators_stay_in_bounds_and_vertex_hits_vertices():
     assert set(np.unique(v[:, 0])) == {-1.0, 1.0} and set(np.unique(v[:, 1])) == {0.0, 2.0}
     held = ivobs.vertex_disturbance(box, 40, seed=3, hold=10)
     assert np.all(held[:10] == held[0]) and np.all(held[10:20] == held[10])
-    np.testing.assert_array_equal(ivobs.vertex_disturbance(box, 50, seed=7),
-                                  ivobs.vertex_disturbance(box, 50, seed=7))
+    np.testing.assert_array_equal(
+        ivobs.vertex_disturbance(box, 50, seed=7), ivobs.vertex_disturbance(box, 50, seed=7)
+    )
     with pytest.raises(IvobsError, match="unknown disturbance kind"):
         ivobs.disturbance("gaussian", box, 10)
 

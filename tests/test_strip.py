@@ -106,7 +106,7 @@ def test_never_tighter_than_the_exact_hull_and_tighter_than_the_zonotope_method(
 
 def test_section_hull_is_the_exact_hull_of_a_zonotope_and_a_hyperplane() -> None:
     rng = np.random.default_rng(4)
-    from ivobs.czonotope import ConstrainedZonotope
+    from ivobs.sets import ConstrainedZonotope
 
     for _ in range(5):
         z = rng.normal(size=3)

@@ -142,10 +142,10 @@ def as_int(name: str, value: Any, minimum: int | None = None) -> int:
             value = int(value)
         else:
             raise IvobsError(f"{name}: expected an integer, got {value!r}")
-    value = int(value)
-    if minimum is not None and value < minimum:
-        raise IvobsError(f"{name}: expected an integer >= {minimum}, got {value}")
-    return value
+    n = int(value)
+    if minimum is not None and n < minimum:
+        raise IvobsError(f"{name}: expected an integer >= {minimum}, got {n}")
+    return n
 
 
 def as_bool(name: str, value: Any) -> bool:

@@ -34,11 +34,11 @@ UNIT_ROUNDOFF = float(np.finfo(float).eps) / 2
 
 
 def gamma(n: int, unit: float = UNIT_ROUNDOFF) -> float:
-    """``γ_n = n u / (1 - n u)`` (Higham, *Accuracy and Stability of Numerical Algorithms*,
-    Lemma 3.1): an expression whose every term passes through at most ``n`` roundings differs
-    from the exact one by at most ``γ_n`` times the same expression on absolute values (a sum
-    or dot product of ``n`` terms). ``unit = 2u`` (``ε``) gives a conservative variant that
-    also absorbs the rounding of the error terms themselves. ``inf`` when ``n u >= 1/2``."""
+    """``γ_n = n u / (1 - n u)`` ([Higham2002, Lemma 3.1]): an expression whose every term passes
+    through at most ``n`` roundings differs from the exact one by at most ``γ_n`` times the same
+    expression on absolute values (a sum or dot product of ``n`` terms). ``unit = 2u`` (``ε``)
+    gives a conservative variant that also absorbs the rounding of the error terms themselves.
+    ``inf`` when ``n u >= 1/2``."""
     nu = n * unit
     if not nu < 0.5:
         return float("inf")
@@ -78,7 +78,8 @@ def is_metzler(M: Any, tol: float = 0.0) -> bool:
 
 def _rank_tol(M: np.ndarray) -> float:
     s = np.linalg.svd(M, compute_uv=False) if M.size else np.zeros(0)
-    return (s[0] if s.size else 0.0) * max(M.shape) * np.finfo(float).eps * 10
+    tol: float = (s[0] if s.size else 0.0) * max(M.shape) * np.finfo(float).eps * 10
+    return tol
 
 
 def observability_matrix(A: Any, C: Any, steps: int | None = None) -> np.ndarray:
@@ -101,7 +102,7 @@ def observability_rank(A: Any, C: Any) -> int:
 
 def is_observable(A: Any, C: Any) -> bool:
     """``rank [C; CA; ...; CA^(n-1)] = n``."""
-    return observability_rank(A, C) == np.asarray(A).shape[0]
+    return observability_rank(A, C) == int(np.asarray(A).shape[0])
 
 
 def observability_indices(A: Any, C: Any) -> list[int]:
@@ -109,8 +110,8 @@ def observability_indices(A: Any, C: Any) -> list[int]:
 
     Rows ``c_i A^j`` are scanned by increasing power ``j`` and output ``i``; a row is kept when it
     is linearly independent of those kept before. ``m_i`` counts the kept rows of output ``i``;
-    ``sum m_i`` is the observability rank (``n`` for an observable pair). Paper 004 uses these as
-    the block sizes of its target dynamics (Propositions 3-4, ``n_z = sum m_i``).
+    ``sum m_i`` is the observability rank (``n`` for an observable pair). [Dinh2024, Propositions
+    3–4] uses these as the block sizes of its target dynamics (``n_z = sum m_i``).
     """
     A = as_matrix("A", A)
     C = as_matrix("C", C, cols=A.shape[0], vector="row")
@@ -149,7 +150,7 @@ def controllability_matrix(A: Any, B: Any) -> np.ndarray:
 def is_controllable(A: Any, B: Any) -> bool:
     """``rank [B, AB, ..., A^(n-1)B] = n``."""
     K = controllability_matrix(A, B)
-    return int(np.linalg.matrix_rank(K, tol=_rank_tol(K))) == np.asarray(A).shape[0]
+    return int(np.linalg.matrix_rank(K, tol=_rank_tol(K))) == int(np.asarray(A).shape[0])
 
 
 def check_observable(A: Any, C: Any, who: str) -> None:

@@ -97,7 +97,8 @@ def sinusoidal_disturbance(
     w = 0.3 + 0.47 * np.arange(n) if freqs is None else as_vector("freqs", freqs, n)
     ph = 0.9 * np.arange(n) if phases is None else as_vector("phases", phases, n)
     k = np.arange(T)[:, None]
-    return 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(w * k + ph)
+    out: np.ndarray = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(w * k + ph)
+    return out
 
 
 def uniform_disturbance(box: Box, T: int, seed: Any = None) -> np.ndarray:
@@ -162,7 +163,7 @@ def simulate(
     u : (T, nu) known inputs (``None`` when ``nu = 0``); in continuous time also a callable
         ``t -> u``.
     d : (T, nd) disturbance sequence, or a callable ``(k, x_k) -> d_k`` for disturbances that
-        depend on the state (nonlinear terms treated as bounded disturbances, paper 003); in
+        depend on the state (nonlinear terms treated as bounded disturbances, [Efimov2013]); in
         continuous time a callable ``(t, x) -> d``. ``None`` means zero.
     T : number of steps when neither ``u`` nor ``d`` is an array.
     t : continuous time only: increasing sample times ``(T,)``.
@@ -177,7 +178,7 @@ def simulate(
     T = _infer_T(T, u, d)
     u_arr = as_signal("u", u, sys.nu, T, allow_batch=False)
     d_fn = d if callable(d) else None
-    d_arr = None
+    d_arr = np.empty((0, sys.nd))  # unused when d is a callable
     if d_fn is None:
         d_arr = (
             np.zeros((T, sys.nd)) if d is None else as_signal("d", d, sys.nd, T, allow_batch=False)
@@ -219,7 +220,7 @@ def _check_d(sys: LinearSystem, d: np.ndarray, y: np.ndarray, tol: float = 1e-12
     T = d.shape[0]
     if isinstance(sys.d, Box):
         lo, hi = _bounds_rows(sys.d, T)
-    else:  # bounds computed from the measurement (paper 003 Remark 1)
+    else:  # bounds computed from the measurement ([Efimov2013, Remark 1])
         boxes = [sys.d_at(k, y[k]) for k in range(T)]
         lo = np.array([b.lo for b in boxes])
         hi = np.array([b.hi for b in boxes])
@@ -253,13 +254,11 @@ def _simulate_ct(
     else:
         u_arr = as_signal("u", u, sys.nu, T, allow_batch=False)
     d_fn = d if callable(d) else None
-    d_arr = (
-        None
-        if d_fn
-        else (
+    d_arr = np.empty((0, sys.nd))  # unused when d is a callable
+    if not d_fn:
+        d_arr = (
             np.zeros((T, sys.nd)) if d is None else as_signal("d", d, sys.nd, T, allow_batch=False)
         )
-    )
     x = np.empty((T, sys.nx))
     dd = np.empty((T, sys.nd))
     x[0] = x0
@@ -284,11 +283,12 @@ def _simulate_ct(
             continue
         uk, dk = u_arr[k], dd[k]
 
-        def rhs(tt: float, xx: np.ndarray, uk=uk, dk=dk) -> np.ndarray:
+        def rhs(tt: float, xx: np.ndarray, uk: np.ndarray = uk, dk: np.ndarray = dk) -> np.ndarray:
             A, B, _, _, E, _ = sys.matrices_at(tt)
             uu = as_vector("u", u_fn(tt), sys.nu) if u_fn else uk
             dv = as_vector("d", d_fn(tt, xx), sys.nd) if d_fn else dk
-            return A @ xx + B @ uu + E @ dv
+            dx: np.ndarray = A @ xx + B @ uu + E @ dv
+            return dx
 
         sol = solve_ivp(rhs, (t[k], t[k + 1]), xk, method="DOP853", rtol=1e-10, atol=1e-12)
         if not sol.success:

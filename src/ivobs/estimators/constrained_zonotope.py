@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int
-from ..czonotope import (
+from ..sets.czonotope import (
     EMPTY_TOL,
     UNIT_ROUNDOFF,
     box_generators,

@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
-from ..czonotope import (
+from ..sets.czonotope import (
     UNIT_ROUNDOFF,
     box_generators,
     gamma,

@@ -1,14 +1,14 @@
-"""The one model of ivobs and its validation.
+"""The linear model of ivobs, :class:`LinearSystem`, and its validation.
 
 ::
 
     x[k+1] = A x[k] + B u[k] + E d[k]          d[k] ∈ d   (unknown, bounded)
     y[k]   = C x[k] + D u[k] + F d[k]
 
-One disturbance vector ``d`` enters both equations (paper 001 is exactly this: ``E = D1``,
-``F = D2``). Paper 002's separate process disturbance ``w`` and noise ``v`` are ``d = [w; v]``,
-``E = [E 0]``, ``F = [0 F]``: see :meth:`LinearSystem.from_process_measurement`. Paper 003 writes
-``b(t)`` for ``B u + E d`` with interval bounds; paper 004 writes ``(F, H, D, W)`` for
+One disturbance vector ``d`` enters both equations ([Wang2020] is exactly this: ``E = D1``,
+``F = D2``). [Tang2019]'s separate process disturbance ``w`` and noise ``v`` are ``d = [w; v]``,
+``E = [E 0]``, ``F = [0 F]``: see :meth:`LinearSystem.from_process_measurement`. [Efimov2013]
+writes ``b(t)`` for ``B u + E d`` with interval bounds; [Dinh2024] writes ``(F, H, D, W)`` for
 ``(A, C, E, F)`` with ``u`` already multiplied by ``B``. The full mapping is in
 ``docs/notation.md``.
 
@@ -16,106 +16,29 @@ One disturbance vector ``d`` enters both equations (paper 001 is exactly this: `
 convention): then ``x' = A x + B u + E d``. Matrices may be callables of the step ``k`` (of the
 time ``t`` in continuous time) or stacked arrays ``(T, rows, cols)``: the system is then
 time-varying. The bounds ``d`` may be a :class:`~ivobs.Box`, a box whose bounds are arrays over the
-steps, or a callable ``(k, y_k) -> Box`` (bounds computed from the measurement, paper 003
-Remark 1 and its Hénon example).
+steps, or a callable ``(k, y_k) -> Box`` (bounds computed from the measurement, [Efimov2013,
+Remark 1] and its Hénon example).
+
+A :class:`LinearSystem` is a :class:`~ivobs.model.LinearModel` (the members estimators use).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import linalg
-from ._validate import _shape_str, as_float_array, as_matrix, check_finite
-from .errors import IvobsError
-from .sets import Box
+from .. import linalg
+from .._validate import _shape_str, as_float_array, as_matrix, check_finite
+from ..errors import IvobsError
+from ..sets import Box
+from ._matrix import Matrix, MatrixLike, is_scipy_sparse
+from .protocol import BoundsLike
 
-__all__ = ["LinearSystem"]
+if TYPE_CHECKING:
+    from .protocol import LinearModel
 
-MatrixLike = Any  # array_like, (T, r, c) stacked array, or callable k -> array_like
-BoundsLike = Box | Callable[[Any, Any], Box] | None
-
-
-class _Matrix:
-    """A constant, stacked or callable matrix with a checked shape."""
-
-    __slots__ = ("_dense", "const", "fn", "given", "name", "shape", "sp", "stack", "vector")
-
-    def __init__(
-        self, name: str, value: MatrixLike, rows: int | None, cols: int | None, vector: str
-    ):
-        self.name, self.vector = name, vector
-        self.const: np.ndarray | None = None
-        self.stack: np.ndarray | None = None
-        self.fn: Callable[[Any], Any] | None = None
-        self.sp: Any = None
-        if _issparse(value):
-            self._init_sparse(value, rows, cols)
-        elif callable(value):
-            self.fn = value
-            try:
-                first = value(0)
-            except Exception as exc:  # the user's function failed: say which and where
-                raise IvobsError(f"{name}: calling {name}(0) failed: {exc!r}") from None
-            m = as_matrix(f"{name}(0)", first, rows, cols, vector=vector)
-            self.shape = m.shape
-            self.given = np.shape(first)
-        else:
-            arr = as_float_array(name, value)
-            self.given = arr.shape
-            if arr.ndim == 3:
-                check_finite(name, arr)
-                if (rows is not None and arr.shape[1] != rows) or (
-                    cols is not None and arr.shape[2] != cols
-                ):
-                    raise IvobsError(
-                        f"{name}: expected stacked matrices of shape (T, {rows}, {cols}), "
-                        f"got {arr.shape}"
-                    )
-                self.stack = arr
-                self.shape = arr.shape[1:]
-            else:
-                self.const = as_matrix(name, arr, rows, cols, vector=vector)
-                self.shape = self.const.shape
-
-    def _init_sparse(self, value: Any, rows: int | None, cols: int | None) -> None:
-        sp = value.tocsr().astype(float)
-        if not np.all(np.isfinite(sp.data)):
-            raise IvobsError(f"{self.name}: expected finite numbers in the sparse matrix")
-        if (rows is not None and sp.shape[0] != rows) or (cols is not None and sp.shape[1] != cols):
-            raise IvobsError(
-                f"{self.name}: expected shape ({rows if rows is not None else 'any'}, "
-                f"{cols if cols is not None else 'any'}), got {sp.shape}"
-            )
-        self.sp = sp
-        self.shape = self.given = sp.shape
-
-    @property
-    def is_constant(self) -> bool:
-        return self.const is not None or self.sp is not None
-
-    def at(self, k: Any) -> np.ndarray:
-        if self.const is not None:
-            return self.const
-        if self.sp is not None:  # dense view on demand (methods that do not exploit sparsity)
-            self.const = self.sp.toarray()
-            return self.const
-        if self.stack is not None:
-            ki = int(k)
-            if not 0 <= ki < self.stack.shape[0]:
-                raise IvobsError(
-                    f"{self.name}: step {ki} is beyond the {self.stack.shape[0]} stacked matrices"
-                )
-            return self.stack[ki]
-        assert self.fn is not None
-        return as_matrix(f"{self.name}({k})", self.fn(k), *self.shape, vector=self.vector)
-
-    def public(self) -> Any:
-        if self.const is not None or self.sp is not None:
-            return self.at(0)
-        return self.stack if self.stack is not None else self.fn
+__all__ = ["BoundsLike", "LinearSystem", "MatrixLike"]
 
 
 def _radius_box(name: str, value: Any, n: int, matrix: str) -> Box:
@@ -144,14 +67,6 @@ def _radius_box(name: str, value: Any, n: int, matrix: str) -> Box:
             f"{name}: expected nonnegative bounds (|{name}_i| <= r_i), got {arr[i]} at index {i}"
         )
     return Box._trusted(0.0 - arr, 0.0 + arr)  # as Box.symmetric: no -0.0
-
-
-def _issparse(value: Any) -> bool:
-    try:
-        from scipy.sparse import issparse
-    except ImportError:  # pragma: no cover
-        return False
-    return bool(issparse(value))
 
 
 class LinearSystem:
@@ -187,9 +102,9 @@ class LinearSystem:
         F: MatrixLike = None,
         d: BoundsLike = None,
         dt: bool | float = True,
-    ):
+    ) -> None:
         self.dt = self._check_dt(dt)
-        self._A = _Matrix("A", A, None, None, "col")
+        self._A = Matrix("A", A, None, None, "col")
         nx = int(self._A.shape[0])
         if self._A.shape != (nx, nx) or nx == 0:
             raise IvobsError(
@@ -198,14 +113,14 @@ class LinearSystem:
             )
         if C is None:
             raise IvobsError("C: the output matrix is required (y = C x + D u + F d)")
-        self._C = _Matrix("C", C, None, nx, "row")
+        self._C = Matrix("C", C, None, nx, "row")
         ny = self._C.shape[0]
-        self._B = _Matrix("B", np.zeros((nx, 0)) if B is None else B, nx, None, "col")
+        self._B = Matrix("B", np.zeros((nx, 0)) if B is None else B, nx, None, "col")
         nu = self._B.shape[1]
-        self._D = _Matrix("D", np.zeros((ny, nu)) if D is None else D, ny, nu, "col")
+        self._D = Matrix("D", np.zeros((ny, nu)) if D is None else D, ny, nu, "col")
         self._d, nd = self._check_bounds(d, E, F)
-        self._E = _Matrix("E", np.zeros((nx, nd)) if E is None else E, nx, nd, "col")
-        self._F = _Matrix("F", np.zeros((ny, nd)) if F is None else F, ny, nd, "row")
+        self._E = Matrix("E", np.zeros((nx, nd)) if E is None else E, nx, nd, "col")
+        self._F = Matrix("F", np.zeros((ny, nd)) if F is None else F, ny, nd, "row")
         if self._E.shape[1] != self._F.shape[1]:
             raise IvobsError(
                 f"E and F: both act on the same disturbance d, so they need the same number of "
@@ -258,7 +173,7 @@ class LinearSystem:
             ref = E if E is not None else F
             if callable(ref):
                 ref = ref(0)
-            if _issparse(ref):
+            if is_scipy_sparse(ref):
                 return d, int(ref.shape[1])
             arr = np.asarray(ref, dtype=float)
             nd = arr.shape[-1] if arr.ndim >= 2 else (1 if E is not None else arr.shape[0])
@@ -269,12 +184,35 @@ class LinearSystem:
         )
 
     # -- public accessors -------------------------------------------------------------------
-    A = property(lambda self: self._A.public(), doc="State matrix (array, stack or callable).")
-    B = property(lambda self: self._B.public(), doc="Input matrix.")
-    C = property(lambda self: self._C.public(), doc="Output matrix.")
-    D = property(lambda self: self._D.public(), doc="Feedthrough matrix.")
-    E = property(lambda self: self._E.public(), doc="Disturbance matrix, state equation.")
-    F = property(lambda self: self._F.public(), doc="Disturbance matrix, output equation.")
+    @property
+    def A(self) -> Any:
+        """State matrix (array, stack or callable)."""
+        return self._A.public()
+
+    @property
+    def B(self) -> Any:
+        """Input matrix."""
+        return self._B.public()
+
+    @property
+    def C(self) -> Any:
+        """Output matrix."""
+        return self._C.public()
+
+    @property
+    def D(self) -> Any:
+        """Feedthrough matrix."""
+        return self._D.public()
+
+    @property
+    def E(self) -> Any:
+        """Disturbance matrix, state equation."""
+        return self._E.public()
+
+    @property
+    def F(self) -> Any:
+        """Disturbance matrix, output equation."""
+        return self._F.public()
 
     @property
     def d(self) -> BoundsLike:
@@ -326,7 +264,7 @@ class LinearSystem:
             raise IvobsError(f"sparse: {name} is time-varying")
         return csr_matrix(m.at(0))
 
-    def _mats(self) -> tuple[_Matrix, ...]:
+    def _mats(self) -> tuple[Matrix, ...]:
         return (self._A, self._B, self._C, self._D, self._E, self._F)
 
     def A_at(self, k: Any) -> np.ndarray:
@@ -411,10 +349,10 @@ class LinearSystem:
         D: MatrixLike = None,
         dt: bool | float = True,
     ) -> LinearSystem:
-        """Paper 002's form ``x+ = Ax + Bu + E w``, ``y = Cx + Du + F v`` with ``w ∈ w``, ``v ∈ v``.
+        """[Tang2019]'s form ``x+ = Ax + Bu + E w``, ``y = Cx + Du + F v``, ``w ∈ w``, ``v ∈ v``.
 
         Builds ``d = [w; v]``, ``E_d = [E 0]``, ``F_d = [0 F]``. ``w`` and ``v`` are boxes, or
-        vectors ``w̄``, ``v̄`` meaning ``|w| <= w̄``, ``|v| <= v̄`` (002 eq. 9).
+        vectors ``w̄``, ``v̄`` meaning ``|w| <= w̄``, ``|v| <= v̄`` ([Tang2019, eq. (9)]).
         """
         Ew = as_matrix("E", E)
         Fv = as_matrix("F", F)
@@ -493,3 +431,9 @@ class LinearSystem:
         kind = "continuous" if self.is_continuous else "discrete"
         tv = ", time-varying" if self.is_time_varying else ""
         return f"LinearSystem({kind}{tv}, nx={self.nx}, nu={self.nu}, ny={self.ny}, nd={self.nd})"
+
+
+if TYPE_CHECKING:
+
+    def _is_a_linear_model(sys: LinearSystem) -> LinearModel:
+        return sys  # mypy checks that LinearSystem has every member estimators use

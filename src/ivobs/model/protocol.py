@@ -1,0 +1,163 @@
+"""What an estimator may ask of a model, as typing protocols.
+
+Estimators depend on these members, never on a model's internals, so that a second kind of model
+(a nonlinear system) can sit beside :class:`~ivobs.LinearSystem` behind the same estimator
+protocol. :class:`SystemModel` is what every model answers: dimensions, time base, the bounds of
+the unknown disturbance ``d``. :class:`LinearModel` adds the matrices of
+
+    x[k+1] = A x[k] + B u[k] + E d[k],   y[k] = C x[k] + D u[k] + F d[k]
+
+at each step (all of today's estimators use them; a nonlinear model may provide them for a
+linearisation with the remainder bounded in ``d``, as [Efimov2013, Remark 1] treats nonlinear
+terms). :class:`~ivobs.LinearSystem` satisfies both (checked statically in
+:mod:`ivobs.model.linear`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..sets import Box
+
+__all__ = ["BoundsLike", "LinearModel", "SystemModel"]
+
+BoundsLike = Box | Callable[[Any, Any], Box] | None
+"""Disturbance bounds as given: a Box (constant or with ``(T, nd)`` bounds), a callable
+``(k, y_k) -> Box`` (bounds computed from the measurement), or None (no disturbance)."""
+
+
+class SystemModel(Protocol):
+    """Dimensions, time base and disturbance bounds: what every model answers."""
+
+    @property
+    def nx(self) -> int:
+        """Number of states."""
+        ...
+
+    @property
+    def nu(self) -> int:
+        """Number of known inputs ``u``."""
+        ...
+
+    @property
+    def ny(self) -> int:
+        """Number of measured outputs ``y``."""
+        ...
+
+    @property
+    def nd(self) -> int:
+        """Number of components of the unknown, bounded disturbance ``d``."""
+        ...
+
+    @property
+    def dt(self) -> bool | float:
+        """``True`` or a sampling period ``> 0`` (discrete time), ``0`` (continuous time)."""
+        ...
+
+    @property
+    def is_continuous(self) -> bool:
+        """``dt == 0``."""
+        ...
+
+    @property
+    def is_discrete(self) -> bool:
+        """``not is_continuous``."""
+        ...
+
+    @property
+    def sampling_period(self) -> float:
+        """The sampling period (1 for ``dt=True``, 0 in continuous time)."""
+        ...
+
+    @property
+    def is_time_varying(self) -> bool:
+        """Whether the model changes with the step (its matrices or functions depend on ``k``)."""
+        ...
+
+    @property
+    def has_constant_bounds(self) -> bool:
+        """Whether ``d`` is absent or one constant Box."""
+        ...
+
+    @property
+    def d(self) -> BoundsLike:
+        """The disturbance bounds as given."""
+        ...
+
+    def d_at(self, k: Any, y: Any = None) -> Box:
+        """Bounds of ``d[k]`` (a callable bound receives ``(k, y_k)``)."""
+        ...
+
+
+class LinearModel(SystemModel, Protocol):
+    """A model with matrices ``(A, B, C, D, E, F)`` at each step."""
+
+    def matrices_at(self, k: Any) -> tuple[np.ndarray, ...]:
+        """``(A, B, C, D, E, F)`` at step ``k`` (time ``t`` in continuous time)."""
+        ...
+
+    def A_at(self, k: Any) -> np.ndarray:
+        """``A`` at step ``k``."""
+        ...
+
+    def B_at(self, k: Any) -> np.ndarray:
+        """``B`` at step ``k``."""
+        ...
+
+    def C_at(self, k: Any) -> np.ndarray:
+        """``C`` at step ``k``."""
+        ...
+
+    def D_at(self, k: Any) -> np.ndarray:
+        """``D`` at step ``k``."""
+        ...
+
+    def E_at(self, k: Any) -> np.ndarray:
+        """``E`` at step ``k``."""
+        ...
+
+    def F_at(self, k: Any) -> np.ndarray:
+        """``F`` at step ``k``."""
+        ...
+
+    @property
+    def A(self) -> Any:
+        """``A`` as given: an array (time-invariant), a stack or a callable."""
+        ...
+
+    @property
+    def B(self) -> Any:
+        """``B`` as given."""
+        ...
+
+    @property
+    def C(self) -> Any:
+        """``C`` as given."""
+        ...
+
+    @property
+    def D(self) -> Any:
+        """``D`` as given."""
+        ...
+
+    @property
+    def E(self) -> Any:
+        """``E`` as given."""
+        ...
+
+    @property
+    def F(self) -> Any:
+        """``F`` as given."""
+        ...
+
+    @property
+    def is_sparse(self) -> bool:
+        """Whether ``A`` is a ``scipy.sparse`` matrix (large systems)."""
+        ...
+
+    def sparse(self, name: str) -> Any:
+        """Matrix ``name`` (``"A"``, ..., ``"F"``) as a ``scipy.sparse`` CSR matrix."""
+        ...

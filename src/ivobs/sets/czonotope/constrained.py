@@ -1,0 +1,280 @@
+"""The constrained zonotope ``<c, G, A, b>`` ([Scott2016, Definition 3]) and its set operations.
+
+Linear map, Minkowski sum and (generalised) intersection are exact and cheap ([Scott2016,
+Proposition 1]); questions (hull, emptiness, membership) are the LPs of :mod:`.hull`; reduction
+is :mod:`.elimination` then :mod:`.reduction`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..._validate import as_float_array, as_matrix, as_vector, check_finite
+from ...errors import InconsistentDataError, IvobsError
+from ..box import Box
+from ..zonotope import Zonotope
+from .elimination import _drop_zero_idx, _normalise_rows_s, _rescale, eliminate_constraints
+from .hull import _feasibility_radius, certified_empty, hull_bounds
+from .reduction import reduce_generators
+
+__all__ = ["ConstrainedZonotope"]
+
+
+class ConstrainedZonotope:
+    """``<c, G, A, b> = {c + G ξ : ‖ξ‖∞ <= 1, A ξ = b}`` ([Scott2016, Definition 3]).
+
+    Parameters
+    ----------
+    center : (n,)
+    generators : (n, m), optional (``m = 0`` when omitted)
+    A : (nc, m), optional (no constraint: a zonotope)
+    b : (nc,), required with ``A``
+
+    Answers the verbs of :class:`~ivobs.Box` and :class:`~ivobs.Zonotope` (``M @ Z``, ``Z + W``,
+    ``interval_hull()``, ``reduce()``, ``contains()``) plus ``intersect``, ``intersect_strip``,
+    ``intersect_hyperplane`` and ``is_empty``.
+    """
+
+    __slots__ = ("A", "G", "b", "c")
+    __array_priority__ = 100
+
+    def __init__(self, center: Any, generators: Any = None, A: Any = None, b: Any = None):
+        c = as_vector("ConstrainedZonotope center", center)
+        n = c.shape[0]
+        if generators is None:
+            G = np.zeros((n, 0))
+        else:
+            G = as_float_array("ConstrainedZonotope generators", generators)
+            if G.ndim == 1 and n == 1:
+                G = G.reshape(1, -1)
+            if G.ndim != 2 or G.shape[0] != n:
+                raise IvobsError(
+                    f"ConstrainedZonotope generators: expected shape ({n}, m), got {G.shape}"
+                )
+            check_finite("ConstrainedZonotope generators", G)
+        m = G.shape[1]
+        if (A is None) != (b is None):
+            raise IvobsError("ConstrainedZonotope: give both A and b (A ξ = b), or neither")
+        if A is None:
+            A_ = np.zeros((0, m))
+            b_ = np.zeros(0)
+        else:
+            A_ = as_float_array("ConstrainedZonotope A", A)
+            if A_.ndim == 1:
+                A_ = A_.reshape(1, -1)
+            if A_.ndim != 2 or A_.shape[1] != m:
+                raise IvobsError(
+                    f"ConstrainedZonotope A: expected shape (nc, {m}) (one column per "
+                    f"generator), got {A_.shape}"
+                )
+            check_finite("ConstrainedZonotope A", A_)
+            b_ = as_vector("ConstrainedZonotope b", b, A_.shape[0]) if A_.shape[0] else np.zeros(0)
+        self.c, self.G, self.A, self.b = c, G, A_, b_
+
+    @classmethod
+    def _trusted(
+        cls, c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+    ) -> ConstrainedZonotope:
+        z = object.__new__(cls)
+        z.c, z.G, z.A, z.b = c, G, A, b
+        return z
+
+    @classmethod
+    def from_box(cls, box: Box) -> ConstrainedZonotope:
+        """``<center, diag(radius)>`` with no constraint (constant bounded boxes)."""
+        z = box.to_zonotope()
+        keep = np.any(z.G != 0, axis=0)
+        return cls._trusted(z.c, z.G[:, keep], np.zeros((0, int(keep.sum()))), np.zeros(0))
+
+    @classmethod
+    def from_zonotope(cls, z: Zonotope) -> ConstrainedZonotope:
+        """The zonotope ``<c, G>`` (no constraint)."""
+        return cls._trusted(z.c.copy(), z.G.copy(), np.zeros((0, z.G.shape[1])), np.zeros(0))
+
+    # -- properties ---------------------------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return int(self.c.shape[0])
+
+    @property
+    def num_generators(self) -> int:
+        return int(self.G.shape[1])
+
+    @property
+    def num_constraints(self) -> int:
+        return int(self.A.shape[0])
+
+    # -- exact operations ([Scott2016, Proposition 1]) ----------------------------------------
+    def linear_map(self, M: Any) -> ConstrainedZonotope:
+        """``M Z = <M c, M G, A, b>`` ([Scott2016, Proposition 1])."""
+        M = as_matrix("M", M, cols=self.dim, vector="row")
+        return ConstrainedZonotope._trusted(M @ self.c, M @ self.G, self.A, self.b)
+
+    def __rmatmul__(self, M: Any) -> ConstrainedZonotope:
+        return self.linear_map(M)
+
+    def __add__(self, other: Any) -> ConstrainedZonotope:
+        """Minkowski sum ([Scott2016, Proposition 1]) with a constrained zonotope, zonotope or
+        box; a vector translates."""
+        if isinstance(other, Box):
+            other = ConstrainedZonotope.from_box(other)
+        elif isinstance(other, Zonotope):
+            other = ConstrainedZonotope.from_zonotope(other)
+        if isinstance(other, ConstrainedZonotope):
+            if other.dim != self.dim:
+                raise IvobsError(f"Minkowski sum: dimensions differ ({self.dim}, {other.dim})")
+            A = np.block(
+                [
+                    [self.A, np.zeros((self.num_constraints, other.num_generators))],
+                    [np.zeros((other.num_constraints, self.num_generators)), other.A],
+                ]
+            )
+            return ConstrainedZonotope._trusted(
+                self.c + other.c,
+                np.hstack([self.G, other.G]),
+                A,
+                np.concatenate([self.b, other.b]),
+            )
+        v = as_vector("translation", other, self.dim)
+        return ConstrainedZonotope._trusted(self.c + v, self.G, self.A, self.b)
+
+    def __radd__(self, other: Any) -> ConstrainedZonotope:
+        """``other + Z`` for a box, zonotope or vector: the left operand's generators first, as
+        in ``Box + Zonotope``."""
+        if isinstance(other, Box):
+            return ConstrainedZonotope.from_box(other) + self
+        if isinstance(other, Zonotope):
+            return ConstrainedZonotope.from_zonotope(other) + self
+        return self.__add__(other)
+
+    def intersect(self, other: Any, R: Any = None) -> ConstrainedZonotope:
+        """Generalised intersection ``Z ∩_R Y = {z ∈ Z : R z ∈ Y}`` ([Scott2016, Proposition
+        1]); ``R = I`` (plain intersection) by default. ``Y`` may be a constrained zonotope,
+        zonotope or box."""
+        if isinstance(other, Box):
+            other = ConstrainedZonotope.from_box(other)
+        elif isinstance(other, Zonotope):
+            other = ConstrainedZonotope.from_zonotope(other)
+        if not isinstance(other, ConstrainedZonotope):
+            raise IvobsError(
+                f"intersect: expected a ConstrainedZonotope, Zonotope or Box, "
+                f"got {type(other).__name__}"
+            )
+        R_ = np.eye(self.dim) if R is None else as_matrix("R", R, other.dim, self.dim)
+        if R is None and other.dim != self.dim:
+            raise IvobsError(f"intersect: dimensions differ ({self.dim}, {other.dim})")
+        m1, m2 = self.num_generators, other.num_generators
+        A = np.block(
+            [
+                [self.A, np.zeros((self.num_constraints, m2))],
+                [np.zeros((other.num_constraints, m1)), other.A],
+                [R_ @ self.G, -other.G],
+            ]
+        )
+        b = np.concatenate([self.b, other.b, other.c - R_ @ self.c])
+        G = np.hstack([self.G, np.zeros((self.dim, m2))])
+        return ConstrainedZonotope._trusted(self.c, G, A, b)
+
+    def intersect_hyperplane(self, h: Any, y: float) -> ConstrainedZonotope:
+        """``{x ∈ Z : hᵀx = y}``: one constraint ``hᵀG ξ = y - hᵀc`` (``Y`` a point)."""
+        h = as_vector("h", h, self.dim)
+        A = np.vstack([self.A, (h @ self.G)[None, :]])
+        b = np.append(self.b, float(y) - h @ self.c)
+        return ConstrainedZonotope._trusted(self.c, self.G, A, b)
+
+    def intersect_strip(self, h: Any, y: float, sigma: float) -> ConstrainedZonotope:
+        """``{x ∈ Z : |hᵀx - y| <= σ}`` (``Z ∩_R Y`` with ``Y = <y, σ>``, ``R = hᵀ``): one
+        constraint and one generator more."""
+        if not np.isfinite(sigma) or sigma < 0:
+            raise IvobsError(f"sigma: expected a half-width >= 0, got {sigma}")
+        return self.intersect(ConstrainedZonotope([float(y)], [[float(sigma)]]), R=np.atleast_2d(h))
+
+    # -- questions (linear programs) ----------------------------------------------------------
+    def is_empty(self) -> bool:
+        """Whether no ``ξ`` in the unit box meets ``A ξ = b``, certainly: one LP, whose dual
+        certificate is checked in floating point with the margin :data:`EMPTY_TOL`
+        (:func:`certified_empty`)."""
+        return certified_empty(self.A, self.b)
+
+    def interval_hull(self) -> Box:
+        """The smallest box containing the set: ``2 n`` LPs with HiGHS, each bound certified by
+        duality (see the module docstring). Raises :class:`~ivobs.InconsistentDataError` for an
+        empty set."""
+        out = hull_bounds(self.c, self.G, self.A, self.b)
+        if out is None:
+            raise InconsistentDataError("interval_hull: the constrained zonotope is empty")
+        return Box._trusted(*out)
+
+    def contains(self, x: Any, tol: float = 1e-9) -> bool:
+        """Whether ``x`` is in the set (one LP: ``min ‖ξ‖∞`` with ``G ξ = x - c``, ``A ξ = b``)."""
+        x = as_vector("x", x, self.dim)
+        Aeq = np.vstack([self.G, self.A])
+        beq = np.concatenate([x - self.c, self.b])
+        if self.num_generators == 0:
+            return bool(np.all(np.abs(beq) <= tol))
+        return _feasibility_radius(Aeq, beq) <= 1.0 + tol
+
+    # -- reduction ([Scott2016, Section 4]) ---------------------------------------------------
+    def rescale(self) -> ConstrainedZonotope:
+        """The same set with its factors rescaled to their propagated bounds ([Scott2016,
+        Section 4.2]). Raises :class:`~ivobs.InconsistentDataError` when propagation proves it
+        empty."""
+        A, b, _ = _normalise_rows_s(self.A, self.b)
+        out = _rescale(self.c, self.G, A, b)
+        if out is None:
+            raise InconsistentDataError("rescale: the constrained zonotope is empty")
+        return ConstrainedZonotope._trusted(*_drop_zero_idx(*out[:4])[:4])
+
+    def reduce(
+        self, max_generators: int | None = None, max_constraints: int | None = None
+    ) -> ConstrainedZonotope:
+        """A constrained zonotope containing this one with at most ``max_constraints``
+        constraints (eliminated first, [Scott2016, Section 4.2]) and ``max_generators``
+        generators (lifted zonotope reduction, [Scott2016, Section 4.3]). ``None`` leaves that
+        count alone."""
+        c, G, A, b = self.c, self.G, self.A, self.b
+        if max_constraints is not None:
+            if max_constraints < 0:
+                raise IvobsError(f"max_constraints: expected >= 0, got {max_constraints}")
+            out = eliminate_constraints(c, G, A, b, int(max_constraints))
+            if out is None:
+                raise InconsistentDataError("reduce: the constrained zonotope is empty")
+            c, G, A, b = out
+        if max_generators is not None:
+            c, G, A, b = reduce_generators(c, G, A, b, int(max_generators))
+        return ConstrainedZonotope._trusted(c, G, A, b)
+
+    def to_zonotope(self) -> Zonotope:
+        """A zonotope containing the set (every constraint eliminated)."""
+        z = self.reduce(max_constraints=0)
+        return Zonotope._trusted(z.c, z.G)
+
+    def sample(self, size: int, rng: Any = None) -> np.ndarray:
+        """Vertices of the set that maximise random linear objectives (one LP each; for tests
+        and plots)."""
+        from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
+
+        rng = np.random.default_rng(rng)
+        pts = []
+        m = self.num_generators
+        for _ in range(size):
+            w = rng.normal(size=self.dim)
+            res = linprog(
+                -(w @ self.G),
+                A_eq=self.A if self.num_constraints else None,
+                b_eq=self.b if self.num_constraints else None,
+                bounds=(-1, 1),
+                method="highs",
+            )
+            if res.status != 0:
+                raise InconsistentDataError("sample: the constrained zonotope is empty")
+            pts.append(self.c + self.G @ res.x if m else self.c)
+        return np.array(pts)
+
+    def __repr__(self) -> str:
+        return (
+            f"ConstrainedZonotope(n={self.dim}, generators={self.num_generators}, "
+            f"constraints={self.num_constraints})"
+        )

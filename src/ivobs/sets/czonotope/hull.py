@@ -1,0 +1,292 @@
+"""Questions to a constrained zonotope ``<c, G, A, b>`` answered by linear programs in its
+factors ``ξ``: interval hull, emptiness and membership ([Scott2016]).
+
+The LPs are solved with HiGHS (``scipy.optimize.linprog``), and every bound is certified by LP
+duality, so it is a valid bound whatever the solver's tolerances: for any multiplier ``μ``,
+``min {gᵀξ : Aξ = b, |ξ| <= 1} >= μᵀb - ‖g - Aᵀμ‖₁``, evaluated with the ``γ_n`` bounds of its
+rounding ([Higham2002, Lemma 3.1]) — safe bounds from an approximate dual, as in
+[Neumaier2004]. Emptiness is claimed only with a dual certificate checked the same way.
+:class:`Certificates` keeps the multipliers of the hull's ``2 n`` bounds, so that a reduction
+can tell what it loosens. SciPy is imported where an LP is solved (it is slow to import).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...linalg import gamma
+from ._tolerances import EMPTY_TOL, ZERO_TOL
+
+__all__ = [
+    "Certificates",
+    "certified_empty",
+    "hull_bounds",
+    "hull_certificates",
+    "radius_certificate",
+]
+
+
+def _certified_min(
+    g: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float = 1.0
+) -> tuple[float, np.ndarray, bool]:
+    """A lower bound of ``min {gᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``, its multipliers ``μ`` and
+    whether the set is nonempty.
+
+    The bound is the Lagrangian dual ``μᵀb - radius ‖g - Aᵀμ‖₁`` at HiGHS' equality multipliers
+    ``μ`` (any ``μ`` gives a valid bound; the optimal one gives the optimum). When HiGHS reports
+    infeasibility, ``(nan, 0, False)``; on any other solver failure ``μ = 0`` (the bound of the
+    zonotope without constraints), never an unsound number.
+    """
+    nc = A.shape[0]
+    mu = np.zeros(nc)
+    if nc == 0:
+        return -radius * float(np.abs(g).sum()), mu, True
+    from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
+
+    infeasible = 0
+    for method, options in _LP_ATTEMPTS:
+        res = linprog(g, A_eq=A, b_eq=b, bounds=(-radius, radius), method=method, options=options)
+        if res.status == 0 and getattr(res, "eqlin", None) is not None:
+            marg = np.asarray(res.eqlin.marginals, dtype=float)
+            if marg.shape == mu.shape and np.all(np.isfinite(marg)):
+                mu = marg
+                break
+        infeasible += res.status == 2
+    else:
+        if infeasible == len(_LP_ATTEMPTS):
+            return float("nan"), mu, False
+    return float(_dual_bounds(g[None, :], A, b, mu[None, :], radius)[0]), mu, True
+
+
+_LP_ATTEMPTS: tuple[tuple[str, dict[str, Any]], ...] = (
+    ("highs", {}),
+    ("highs", {"presolve": False}),
+    ("highs-ipm", {}),
+)
+"""HiGHS configurations tried in turn for one bound: on the ill-conditioned programs of a set
+pinned down by its constraints, HiGHS' presolve sometimes fails (status 4) or calls a feasible
+program infeasible; without presolve, or with the interior point method, it usually succeeds.
+Any multiplier gives a valid bound, so a failure only loosens that bound."""
+
+
+def _dual_bounds(
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, mu: np.ndarray, radius: float
+) -> np.ndarray:
+    """``μ_iᵀb - radius ‖g_i - Aᵀμ_i‖₁`` for every row, lowered by the bound
+    ``γ_{nc+m+3} (|μ_i|ᵀ|b| + radius (‖g_i‖₁ + |μ_i|ᵀ|A| 1))`` of its rounding: a lower bound of
+    ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}`` in exact arithmetic, whatever ``μ``."""
+    nc, m = A.shape
+    am = np.abs(mu)
+    err = gamma(nc + m + 3) * (
+        am @ np.abs(b) + radius * (np.abs(Gs).sum(axis=1) + am @ np.abs(A).sum(axis=1))
+    )
+    bounds: np.ndarray = mu @ b - radius * np.abs(Gs - mu @ A).sum(axis=1) - err * (1.0 + gamma(4))
+    return bounds
+
+
+def radius_certificate(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """``(r, r_low)``: HiGHS' value of ``r* = min {‖ξ‖∞ : A ξ = b}`` (``inf`` when it finds no
+    solution, ``0`` on solver trouble) and a lower bound of ``r*`` certified in floating point.
+
+    The set ``<c, G, A, b>`` is empty exactly when ``r* > 1``. By duality, every ``μ`` gives
+    ``r* >= μᵀb / ‖Aᵀμ‖₁`` (``μᵀb = μᵀA ξ <= ‖Aᵀμ‖₁ ‖ξ‖∞``); ``r_low`` is this ratio at the
+    LP's equality multipliers (or, when ``A ξ = b`` has no solution at all, at the
+    least-squares residual ``μ = b - A ξ_ls``, for which ``Aᵀμ ≈ 0``), with the numerator
+    lowered and the denominator raised by the ``γ_n`` bounds of their rounding. ``0`` when no
+    certificate is found: emptiness is then never claimed.
+    """
+    nc, m = A.shape
+    if nc == 0:
+        return 0.0, 0.0
+    if m == 0:
+        ok = bool(np.all(b == 0))
+        return (0.0, 0.0) if ok else (float("inf"), float("inf"))
+    from scipy.optimize import linprog
+
+    # variables (ξ, s): min s  s.t.  A ξ = b,  ξ - s <= 0,  -ξ - s <= 0
+    eye = np.eye(m)
+    ones = np.ones((m, 1))
+    A_ub = np.vstack([np.hstack([eye, -ones]), np.hstack([-eye, -ones])])
+    cost = np.zeros(m + 1)
+    cost[-1] = 1.0
+    res = linprog(
+        cost,
+        A_ub=A_ub,
+        b_ub=np.zeros(2 * m),
+        A_eq=np.hstack([A, np.zeros((nc, 1))]),
+        b_eq=b,
+        bounds=[(None, None)] * m + [(0, None)],
+        method="highs",
+    )
+    if res.status == 2:
+        r = float("inf")
+        mu = b - A @ np.linalg.lstsq(A, b, rcond=None)[0]
+    elif res.status == 0:
+        r = float(res.x[-1])
+        mu = np.asarray(getattr(res.eqlin, "marginals", np.zeros(nc)), dtype=float)
+        if mu.shape != (nc,) or not np.all(np.isfinite(mu)):
+            return r, 0.0
+    else:  # numerical trouble: do not claim emptiness
+        return 0.0, 0.0
+    am = np.abs(mu)
+    num = float(mu @ b) - gamma(nc + 1) * float(am @ np.abs(b))
+    den = float(np.abs(A.T @ mu).sum()) + gamma(nc + m + 1) * float(am @ np.abs(A).sum(axis=1))
+    den *= 1.0 + gamma(2)
+    if not num > 0.0:
+        return r, 0.0
+    if den == 0.0:
+        return r, float("inf")
+    return r, num / den * (1.0 - gamma(2))
+
+
+def certified_empty(A: np.ndarray, b: np.ndarray) -> bool:
+    """Whether ``<c, G, A, b>`` is certainly empty, with a margin: even the set with the larger
+    box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` is empty (:func:`radius_certificate`)."""
+    return radius_certificate(A, b)[1] > 1.0 + EMPTY_TOL
+
+
+def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
+    """``min {‖ξ‖∞ : A ξ = b}`` (``inf`` when ``A ξ = b`` has no solution): one LP.
+
+    The set ``<c, G, A, b>`` is empty exactly when this exceeds 1.
+    """
+    nc, m = A.shape
+    if m == 0 and nc:
+        return 0.0 if np.all(np.abs(b) <= ZERO_TOL * (1.0 + np.abs(b))) else float("inf")
+    return radius_certificate(A, b)[0]
+
+
+def _certified_mins(
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
+
+    The independent programs are solved as one block-diagonal LP (one HiGHS call: the per-call
+    overhead dominates programs this small); should HiGHS fail on the big program (or call it
+    infeasible), they are solved one by one (degenerate, over-determined or ill-conditioned
+    constraints can fool it; see :data:`_LP_ATTEMPTS`).
+    """
+    K, nc = Gs.shape[0], A.shape[0]
+    if nc == 0 or K == 0:
+        return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
+    from scipy.optimize import linprog
+    from scipy.sparse import block_diag, csr_matrix
+
+    A_blk = block_diag([csr_matrix(A)] * K, format="csr")
+    res = linprog(
+        Gs.ravel(), A_eq=A_blk, b_eq=np.tile(b, K), bounds=(-radius, radius), method="highs"
+    )
+    mu = np.zeros((K, nc))
+    if res.status == 0 and getattr(res, "eqlin", None) is not None:
+        marg = np.asarray(res.eqlin.marginals, dtype=float)
+        if marg.size == K * nc and np.all(np.isfinite(marg)):
+            mu = marg.reshape(K, nc)
+            return _dual_bounds(Gs, A, b, mu, radius), mu, True
+    vals = np.empty(K)
+    for i in range(K):
+        vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
+        if not ok:
+            return np.full(K, np.nan), np.zeros((K, nc)), False
+    return vals, mu, True
+
+
+def hull_bounds(
+    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Certified interval hull of ``<c, G, A, b>`` (two LPs per coordinate, one HiGHS call), or
+    ``None`` when the set is empty. See :func:`hull_certificates`."""
+    out = hull_certificates(c, G, A, b)
+    return None if out is None else (out[0], out[1])
+
+
+class Certificates:
+    """Dual certificates of some linear bounds of ``<c, G, A, b>``, kept valid through reduction.
+
+    Row ``i`` certifies ``min_ξ D_iᵀξ >= μ_iᵀb - ‖D_i - Aᵀμ_i‖₁`` (``D`` (K, m): objectives in
+    the factors ``ξ``, ``μ`` (K, nc): multipliers, e.g. those of :func:`hull_certificates`).
+    Each reparametrisation of the set (row scaling, rescaling, elimination of a factor) maps the
+    objectives and multipliers so that the certificates keep meaning the same linear functions
+    of ``x``. What a reduction step does to the certified bounds is then known before it is
+    taken: :meth:`elimination_loss` is the loosening, weighted by ``weight`` (K,), of every
+    bound if factor ``j`` were eliminated. This is how the estimator chooses what to eliminate
+    (the bounds of the box it reports stay as tight as possible), instead of the shape-only
+    Hausdorff heuristic of [Scott2016, Section 4.2], which only breaks ties here.
+    """
+
+    __slots__ = ("D", "mu", "radius", "weight")
+
+    def __init__(self, D: np.ndarray, mu: np.ndarray, weight: np.ndarray):
+        self.D, self.mu, self.weight = D, mu, weight
+        self.radius = 1.0  # see hull_certificates: the factors' box the certificates assume
+
+    def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
+        """Constraints ``rows`` and factors ``cols`` are kept (the others were zero)."""
+        self.mu = self.mu[:, rows]
+        self.D = self.D[:, cols]
+
+    def scale_rows(self, s: np.ndarray) -> None:
+        """Constraint ``r`` was divided by ``s_r``."""
+        self.mu = self.mu * s
+
+    def scale_factors(self, rad: np.ndarray) -> None:
+        """Factor ``j`` was rescaled, ``ξ_j = m_j + rad_j ξ'_j`` (offsets go to constants)."""
+        self.D = self.D * rad
+
+    def elimination_loss(self, A: np.ndarray, b: np.ndarray, piv: np.ndarray) -> np.ndarray:
+        """Weighted loosening of the certified bounds if factor ``j`` is eliminated with row
+        ``piv[j]`` (for every ``j``). The multipliers move to ``μ + (r_j / a_pj) e_p`` so that
+        the reduced cost ``r = D - Aᵀμ`` of ``ξ_j``, whose box is dropped, becomes zero."""
+        m = A.shape[1]
+        Rc = self.D - self.mu @ A  # (K, m)
+        apj = A[piv, np.arange(m)]
+        t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
+        new = np.abs(Rc[:, None, :] - t[:, :, None] * A[piv][None, :, :]).sum(axis=2)
+        loss = new - t * b[piv][None, :] - np.abs(Rc).sum(axis=1, keepdims=True)
+        weighted: np.ndarray = self.weight @ loss
+        return weighted
+
+    def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
+        """Factor ``j`` eliminated with row ``p`` (before the row and column are removed)."""
+        Rc = self.D[:, j] - self.mu @ A[:, j]
+        self.mu = self.mu.copy()
+        self.mu[:, p] += Rc / A[p, j]
+        self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])
+
+
+def hull_certificates(
+    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
+    """Certified interval hull of ``<c, G, A, b>`` and the certificates of its ``2 n`` bounds
+    (weighted by the inverse width of each coordinate, so that losses are relative), or
+    ``None`` when the set is certainly empty (:func:`certified_empty`: a dual certificate,
+    checked in floating point, that even the box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the
+    constraints).
+
+    When HiGHS calls the set infeasible without such a certificate (a set that is thin, or
+    empty only by rounding), the bounds are those of the *softened* set with the box
+    ``‖ξ‖∞ <= ρ``, ``ρ = max(1, r*) (1 + EMPTY_TOL)`` (``r*`` the smallest feasible radius
+    found): a superset, so still sound. ``cert.radius`` is then ``ρ``: the certificates are
+    those of ``<c, ρ G, ρ A, b>`` (the same set, with the factors rescaled to the unit box),
+    which the caller should keep instead of the original.
+    """
+    n = G.shape[0]
+    Gs = np.vstack([G, -G])
+    vals, mu, ok = _certified_mins(Gs, A, b)
+    radius = 1.0
+    if not ok:
+        r, r_low = radius_certificate(A, b)
+        if r_low > 1.0 + EMPTY_TOL:
+            return None
+        radius = (max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)
+        vals, mu, ok = _certified_mins(Gs, A, b, radius)
+        if not ok:  # HiGHS contradicting itself: the bound of the zonotope (any μ is valid)
+            mu = np.zeros_like(mu)
+            vals = _dual_bounds(Gs, A, b, mu, radius)
+    lo = c + vals[:n]
+    hi = c - vals[n:]
+    width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
+    cert = Certificates(Gs * radius, mu, np.concatenate([1.0 / width, 1.0 / width]))
+    cert.radius = radius
+    return lo, hi, cert

@@ -1,0 +1,200 @@
+"""Zonotopes ``<c, G> = {c + G b : ||b||_inf <= 1}``, and boxes of rounding errors as generators.
+
+A zonotope answers the verbs of :class:`~ivobs.Box` ([Tang2019, Properties 1–4]): linear map
+(``M @ Z``), Minkowski sum (``Z1 + Z2``, a box or a vector too), ``interval_hull()`` (exact),
+``contains``, plus ``reduce`` (order reduction, [Combastel2015]). As in [Tang2019] and
+[Wang2020], the *order* of a zonotope is its number of generators ``m`` (CORA calls ``m / n`` the
+order).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_float_array, as_matrix, as_vector, check_finite
+from ..errors import IvobsError
+from ..linalg import gamma
+from .box import Box
+
+__all__ = ["Zonotope", "box_generators", "safe_radius"]
+
+
+def safe_radius(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(c, r)`` with ``[lo, hi] ⊆ [c - r, c + r]`` in exact arithmetic: ``c = (lo + hi)/2``
+    and ``r = (hi - lo)/2`` are rounded, so ``r`` is enlarged by ``γ_3 (|c| + r)``
+    ([Higham2002, Lemma 3.1]); ``r = 0`` (and ``c = lo`` exactly) where ``lo = hi``."""
+    c = 0.5 * (lo + hi)
+    r = 0.5 * (hi - lo)
+    return c, np.where(hi > lo, r + gamma(3) * (np.abs(c) + r), 0.0)
+
+
+def box_generators(r: np.ndarray) -> np.ndarray:
+    """The box ``[-r, r]`` as generator columns ``diag(r)``, only the nonzero ones (a box of
+    rounding errors appended to a zonotope's generators)."""
+    nz = np.flatnonzero(r > 0)
+    out = np.zeros((r.shape[0], nz.size))
+    out[nz, np.arange(nz.size)] = r[nz]
+    return out
+
+
+class Zonotope:
+    """``<c, G> = {c + G b : ||b||_inf <= 1}`` ([Tang2019, Definition 3], [Wang2020,
+    Definition 3]).
+
+    Parameters
+    ----------
+    center : array_like, shape ``(n,)``
+    generators : array_like, shape ``(n, m)`` (``m`` may be 0)
+    """
+
+    __slots__ = ("G", "c")
+    __array_priority__ = 100
+
+    def __init__(self, center: Any, generators: Any = None) -> None:
+        c = as_vector("Zonotope center", center)
+        n = c.shape[0]
+        if generators is None:
+            G = np.zeros((n, 0))
+        else:
+            G = as_float_array("Zonotope generators", generators)
+            if G.ndim == 1 and n == 1:
+                G = G.reshape(1, -1)
+            if G.ndim != 2 or G.shape[0] != n:
+                raise IvobsError(f"Zonotope generators: expected shape ({n}, m), got {G.shape}")
+            check_finite("Zonotope generators", G)
+        self.c = c
+        self.G = G
+
+    @classmethod
+    def _trusted(cls, c: np.ndarray, G: np.ndarray) -> Zonotope:
+        z = object.__new__(cls)
+        z.c = c
+        z.G = G
+        return z
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.c
+
+    @property
+    def generators(self) -> np.ndarray:
+        return self.G
+
+    @property
+    def dim(self) -> int:
+        return int(self.c.shape[0])
+
+    @property
+    def num_generators(self) -> int:
+        """Number of generators ``m`` (the zonotope's *order* in [Wang2020] and [Tang2019])."""
+        return int(self.G.shape[1])
+
+    def radius(self) -> np.ndarray:
+        """Radius of the interval hull: ``sum_j |G_ij|`` ([Tang2019, Property 4, eq. (5)])."""
+        out: np.ndarray = np.abs(self.G).sum(axis=1)
+        return out
+
+    def interval_hull(self) -> Box:
+        """Smallest box containing the zonotope ([Tang2019, Property 4, eq. (5)]; exact)."""
+        r = self.radius()
+        return Box._trusted(self.c - r, self.c + r)
+
+    def linear_map(self, M: Any) -> Zonotope:
+        """``M <c, G> = <M c, M G>`` ([Tang2019, Property 3, eq. (4b)])."""
+        M = as_matrix("M", M, cols=self.dim, vector="row")
+        return Zonotope._trusted(M @ self.c, M @ self.G)
+
+    def __rmatmul__(self, M: Any) -> Zonotope:
+        return self.linear_map(M)
+
+    def __add__(self, other: Any) -> Zonotope:
+        """Minkowski sum ([Tang2019, Property 3, eq. (4a)]) with a zonotope or a box; a vector
+        translates. A set of a richer kind (a constrained zonotope) answers through its
+        ``__radd__``."""
+        if isinstance(other, Box):
+            other = other.to_zonotope()
+        if isinstance(other, Zonotope):
+            if other.dim != self.dim:
+                raise IvobsError(
+                    f"Zonotope + Zonotope: dimensions differ ({self.dim}, {other.dim})"
+                )
+            return Zonotope._trusted(self.c + other.c, np.hstack([self.G, other.G]))
+        if hasattr(other, "interval_hull"):
+            return NotImplemented
+        v = as_vector("translation", other, self.dim)
+        return Zonotope._trusted(self.c + v, self.G)
+
+    __radd__ = __add__
+
+    def reduce(self, order: int, weight: Any = None) -> Zonotope:
+        """Order reduction ``↓_{q,W}`` of [Tang2019, Remark 2] ([Combastel2015]'s operator).
+
+        Keeps at most ``q = order`` generators (``q >= n``): the generators are sorted by the
+        weighted norm ``h^T W h`` (``W`` positive definite, identity by default); the ``q - n``
+        largest are kept and the others are enclosed in the box ``diag(sum_j |h_ij|)``. The
+        result contains the original zonotope ([Tang2019, Remark 2]: ``<0, H> ⊆ <0, ↓H>``).
+        """
+        q = int(order)
+        n = self.dim
+        if q < n:
+            raise IvobsError(
+                f"reduce: order (number of generators kept) must be >= n = {n}, got {q}"
+            )
+        G = self.G[:, np.any(self.G != 0.0, axis=0)]
+        if G.shape[1] <= q:
+            return Zonotope._trusted(self.c, G)
+        if weight is None:
+            norms = np.einsum("ij,ij->j", G, G)
+        else:
+            W = as_matrix("weight", weight, n, n)
+            norms = np.einsum("ij,ik,kj->j", G, W, G)
+        order_idx = np.argsort(-norms, kind="stable")
+        keep = G[:, order_idx[: q - n]]
+        box = np.abs(G[:, order_idx[q - n :]]).sum(axis=1)
+        return Zonotope._trusted(self.c, np.hstack([keep, np.diag(box)]))
+
+    def contains(self, x: Any, tol: float = 1e-9) -> bool:
+        """Whether ``x`` lies in the zonotope (one LP with HiGHS; for checks, not hot loops)."""
+        from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
+
+        x = as_vector("x", x, self.dim)
+        m = self.num_generators
+        if m == 0:
+            return bool(np.all(np.abs(x - self.c) <= tol))
+        # min s  s.t.  G b = x - c, -1 - s <= b <= 1 + s  ->  inside iff s <= tol
+        A_eq = np.hstack([self.G, np.zeros((self.dim, 1))])
+        A_ub = np.vstack(
+            [np.hstack([np.eye(m), -np.ones((m, 1))]), np.hstack([-np.eye(m), -np.ones((m, 1))])]
+        )
+        b_ub = np.ones(2 * m)
+        cost = np.zeros(m + 1)
+        cost[-1] = 1.0
+        res = linprog(
+            cost,
+            A_ub=A_ub,
+            b_ub=b_ub,
+            A_eq=A_eq,
+            b_eq=x - self.c,
+            bounds=[(None, None)] * m + [(0, None)],
+            method="highs",
+        )
+        return bool(res.status == 0 and res.x[-1] <= tol)
+
+    def sample(self, size: int, rng: Any = None, *, vertices: bool = False) -> np.ndarray:
+        """Points ``c + G b`` with ``b`` uniform in the cube (or on its vertices)."""
+        rng = np.random.default_rng(rng)
+        m = self.num_generators
+        if vertices:
+            b = rng.choice([-1.0, 1.0], size=(size, m))
+        else:
+            b = rng.uniform(-1.0, 1.0, size=(size, m))
+        out: np.ndarray = self.c + b @ self.G.T
+        return out
+
+    def __repr__(self) -> str:
+        return f"Zonotope(n={self.dim}, generators={self.num_generators})"
+
+
+Box._zonotope = Zonotope  # Box.to_zonotope and Box + Zonotope (see Box._zonotope)
