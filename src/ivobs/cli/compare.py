@@ -64,7 +64,7 @@ def main(args: argparse.Namespace) -> int:
                          f"({sc.name} has {sc.horizon} steps), got {args.burn_in}")
     plot_path = None
     if args.plot:
-        from ..plot import figure_path
+        from ..report.plot import figure_path
 
         plot_path = figure_path(args.plot, "--plot")
     left_out: list[str] = []
@@ -91,7 +91,7 @@ def main(args: argparse.Namespace) -> int:
         from . import use_agg
 
         use_agg()
-        from ..plot import plot_estimates, save_figure
+        from ..report.plot import plot_estimates, save_figure
 
         good = {r.method: r.estimate for r in results if r.ok}
         if not good:

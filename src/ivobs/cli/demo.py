@@ -34,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
 
     use_agg()
     from .. import scenarios
-    from ..plot import plot_estimates, save_figure
+    from ..report.plot import plot_estimates, save_figure
     from ..report import compare, markdown_table
 
     check_disturbance(args.disturbance)

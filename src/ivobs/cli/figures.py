@@ -32,7 +32,7 @@ def main(args: argparse.Namespace) -> int:
     from . import use_agg
 
     use_agg()
-    from ..figures import figure_specs, generate
+    from ..report.figures import figure_specs, generate
 
     papers = None
     if args.paper is not None:
