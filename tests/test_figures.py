@@ -14,6 +14,8 @@ import pytest
 import ivobs
 from ivobs import figures
 from ivobs.cli import main as cli_main
+from ivobs.report.figures.common import check_contains
+from ivobs.report.figures.tang2019 import in_planar_zonotope
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -83,11 +85,11 @@ def test_containment_check_raises_on_a_missed_state():
     sc = ivobs.scenarios.get("dinh2019", horizon=20)
     traj = sc.simulate("paper")
     res = ivobs.make_estimator("fixed-time", sc.system, s=2).run(traj.u, traj.y)
-    figures._check("ok", res, traj.x)  # the real truth passes
+    check_contains("ok", res, traj.x)  # the real truth passes
     x = traj.x.copy()
     x[7, 1] = res.upper[7, 1] + 1e-6
     with pytest.raises(figures.FigureCheckError, match=r"first at \(7,\)"):
-        figures._check("shifted", res, x)
+        check_contains("shifted", res, x)
 
 
 def test_error_sets_of_paper002_fig5():
@@ -106,7 +108,7 @@ def test_error_sets_of_paper002_fig5():
     pts = s.parallelotope()
     np.testing.assert_allclose(pts.max(axis=0), s.box_transformed.hi, atol=1e-9)
     # the samples are inside Ω_k (and fill a good part of it)
-    assert figures._in_planar_zonotope(s.omega, s.samples).all()
+    assert in_planar_zonotope(s.omega, s.samples).all()
     assert np.all(np.abs(s.samples).max(axis=0) > 0.4 * s.box_reach.hi)
     assert s.samples.shape == (200, 2)
 
@@ -125,9 +127,9 @@ def test_zonotope_polygon():
     # random zonotope: every sample inside, every vertex on the boundary (a support point)
     rng = np.random.default_rng(3)
     Z = ivobs.Zonotope(rng.normal(size=2), rng.normal(size=(2, 7)))
-    assert figures._in_planar_zonotope(Z, Z.sample(500, rng)).all()
+    assert in_planar_zonotope(Z, Z.sample(500, rng)).all()
     P = figures.zonotope_polygon(Z)
-    assert figures._in_planar_zonotope(Z, P).all()
-    assert not figures._in_planar_zonotope(Z, Z.center + 1.01 * (P - Z.center)).any()
+    assert in_planar_zonotope(Z, P).all()
+    assert not in_planar_zonotope(Z, Z.center + 1.01 * (P - Z.center)).any()
     with pytest.raises(ivobs.IvobsError, match="planar"):
         figures.zonotope_polygon(ivobs.Zonotope(np.zeros(3), np.eye(3)))

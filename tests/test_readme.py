@@ -25,3 +25,37 @@ def test_exactly_two_setup_commands_and_ci_runs_the_test_one():
 def test_quickstart_runs():
     block = re.search(r"## Quickstart\n\n```python\n(.*?)```", README, flags=re.S).group(1)
     exec(compile(block, "README quickstart", "exec"), {})
+
+
+def _readme_methods_table():
+    section = README.split("## Methods", 1)[1].split("\n## ", 1)[0]
+    lines = [ln for ln in section.splitlines() if ln.startswith("| `")]
+    return [[c.strip() for c in ln.strip().strip("|").split(" | ")] for ln in lines]
+
+
+def test_readme_methods_table_lists_the_methods_in_their_order():
+    import ivobs
+    from ivobs.cli.methods_cmd import rows
+
+    table = _readme_methods_table()
+    assert [cells[0].strip("`") for cells in table] == ivobs.methods()
+    # data used, needs x0, time-varying, continuous: the classes' attributes
+    assert [cells[3:] for cells in table] == [
+        [r["data used"], r["needs x0"], r["time-varying"], r["continuous"]] for r in rows()
+    ]
+
+
+def test_methods_command_prints_every_method_with_its_metadata(capsys):
+    import ivobs
+    from ivobs.cli import main
+
+    assert main(["methods"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].split() == [
+        "method", "paper", "data", "used", "needs", "x0", "time-varying", "continuous"
+    ]
+    listed = [ln.split()[0] for ln in out.splitlines()[1:] if not ln.startswith(" ")]
+    assert listed == ivobs.methods()
+    assert main(["methods", "--markdown"]) == 0
+    md = capsys.readouterr().out.splitlines()
+    assert [ln.split(" | ")[0].strip("| `") for ln in md[2:]] == ivobs.methods()

@@ -81,7 +81,8 @@ class Estimate:
     @property
     def width(self) -> np.ndarray:
         """``upper - lower`` (NaN before ``valid_from``)."""
-        return self.upper - self.lower
+        width: np.ndarray = self.upper - self.lower
+        return width
 
     @property
     def valid(self) -> np.ndarray:
@@ -107,7 +108,8 @@ class Estimate:
             raise IvobsError(f"contains: expected x of shape {self.lower.shape}, got {x.shape}")
         ok = np.all((x >= self.lower - tol) & (x <= self.upper + tol), axis=-1)
         ok[..., : self.valid_from] = True
-        return ok
+        contained: np.ndarray = ok
+        return contained
 
     def mean_width(self, burn_in: int = 0) -> np.ndarray:
         """Mean width per state over steps ``>= max(valid_from, burn_in)`` (shape ``(nx,)``)."""
@@ -115,7 +117,8 @@ class Estimate:
         if start >= self.T:
             raise IvobsError(f"mean_width: no valid step at or after {start} (T = {self.T})")
         w = self.width[..., start:, :]
-        return w.reshape(-1, self.nx).mean(axis=0)
+        mean: np.ndarray = w.reshape(-1, self.nx).mean(axis=0)
+        return mean
 
     def tightness_ratio(self, reference: Estimate, burn_in: int = 0) -> np.ndarray:
         """Mean width per state divided by the reference's (e.g. the ``exact`` hull): ``>= 1``
@@ -142,6 +145,7 @@ class Estimate:
         cols += ["missing", "inconsistent"]
         times = [np.asarray(self.t, dtype=float)[:, None]] if self.t is not None else []
         data = np.hstack([*times, self.lower, self.upper])
+        assert self.missing is not None and self.inconsistent is not None  # by __post_init__
         flags = np.column_stack([self.missing, self.inconsistent]).astype(int)
         header = (
             f"# ivobs estimate\n# method: {self.method}\n# valid_from: {self.valid_from}\n"
@@ -209,8 +213,10 @@ class Estimate:
 
     # -- figures -------------------------------------------------------------------------
     def plot(self, truth: Any = None, states: Any = None, ax: Any = None, **kwargs: Any) -> Any:
-        """Bands per state (and the true trajectory when given); returns the figure."""
-        from .plot import plot_estimates
+        """Bands per state (and the true trajectory when given); returns the figure
+        (:func:`ivobs.report.plot.plot_estimates`)."""
+        # the plotting layer imports this module for its annotations only: no import cycle
+        from .report.plot import plot_estimates
 
         return plot_estimates(
             {self.method or "estimate": self}, truth=truth, states=states, axes=ax, **kwargs

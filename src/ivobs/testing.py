@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from .errors import IvobsError
 from .linalg import is_observable
 from .model import LinearSystem
 from .result import Estimate
@@ -77,7 +78,12 @@ def adversarial_run(
     rng = np.random.default_rng(seed)
     x_true0 = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
     u = rng.normal(size=(T, sys.nu))
-    d = vertex_disturbance(sys.d, T, seed=rng, hold=hold) if sys.nd else None
+    d = None
+    if sys.nd:
+        box = sys.d
+        if not isinstance(box, Box):
+            raise IvobsError("adversarial_run: expected constant disturbance bounds (a Box)")
+        d = vertex_disturbance(box, T, seed=rng, hold=hold)
     return simulate(sys, x_true0, u, d)
 
 

@@ -18,23 +18,37 @@ LARGE_NX = 20
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
-        "compare", help="compare methods on a scenario (table + overlay figure)",
+    p: argparse.ArgumentParser = sub.add_parser(
+        "compare",
+        help="compare methods on a scenario (table + overlay figure)",
         description="Simulate a scenario once, run several methods on the same record and print "
-                    "their mean widths (and ratio to the exact hull when 'exact' is among them), "
-                    "containment and timings; optionally write an overlay figure like the papers'.",
+        "their mean widths (and ratio to the exact hull when 'exact' is among them), "
+        "containment and timings; optionally write an overlay figure like the papers'.",
     )
     p.add_argument("scenario", help="scenario name (see `ivobs scenarios`)")
-    p.add_argument("--methods", help="comma-separated method names (default: all but intersect; "
-                                     f"for more than {LARGE_NX} states also without "
-                                     f"{', '.join(SLOW_METHODS)})")
-    p.add_argument("--disturbance", default="paper",
-                   help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios; default: paper)")
+    p.add_argument(
+        "--methods",
+        help="comma-separated method names (default: all but intersect; "
+        f"for more than {LARGE_NX} states also without "
+        f"{', '.join(SLOW_METHODS)})",
+    )
+    p.add_argument(
+        "--disturbance",
+        default="paper",
+        help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios; default: paper)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed for vertex/uniform (>= 0)")
-    p.add_argument("--burn-in", type=int, default=None,
-                   help="steps excluded from mean widths (default: a tenth of the horizon)")
-    p.add_argument("--plot", metavar="FILE",
-                   help="write an overlay figure (format from the extension; none: .png is added)")
+    p.add_argument(
+        "--burn-in",
+        type=int,
+        default=None,
+        help="steps excluded from mean widths (default: a tenth of the horizon)",
+    )
+    p.add_argument(
+        "--plot",
+        metavar="FILE",
+        help="write an overlay figure (format from the extension; none: .png is added)",
+    )
     p.add_argument("--states", help="comma-separated state numbers to plot (1..nx)")
     return p
 
@@ -60,29 +74,35 @@ def main(args: argparse.Namespace) -> int:
     if args.states and not args.plot:
         raise IvobsError("--states: selects the states of the figure; give --plot FILE too")
     if args.burn_in is not None and not 0 <= args.burn_in < sc.horizon:
-        raise IvobsError(f"--burn-in: expected a number of steps in 0..{sc.horizon - 1} "
-                         f"({sc.name} has {sc.horizon} steps), got {args.burn_in}")
+        raise IvobsError(
+            f"--burn-in: expected a number of steps in 0..{sc.horizon - 1} "
+            f"({sc.name} has {sc.horizon} steps), got {args.burn_in}"
+        )
     plot_path = None
     if args.plot:
-        from ..plot import figure_path
+        from ..report.plot import figure_path
 
         plot_path = figure_path(args.plot, "--plot")
     left_out: list[str] = []
     if args.methods:
         names = [m.strip() for m in args.methods.split(",") if m.strip()]
         if not names:
-            raise IvobsError(f"--methods: expected comma-separated method names, got "
-                             f"{args.methods!r}")
+            raise IvobsError(
+                f"--methods: expected comma-separated method names, got {args.methods!r}"
+            )
     else:
         names, left_out = default_methods(sc)
-    traj, results = compare(sc, names, disturbance=args.disturbance, seed=args.seed,
-                            burn_in=args.burn_in)
+    traj, results = compare(
+        sc, names, disturbance=args.disturbance, seed=args.seed, burn_in=args.burn_in
+    )
     burn = sc.horizon // 10 if args.burn_in is None else args.burn_in
     print(f"# {sc.name}: {sc.source}")
     print(f"# {sc.horizon} steps, {args.disturbance} disturbances, burn-in {burn} steps")
     if left_out:
-        print(f"# {sc.system.nx} states: {', '.join(left_out)} left out (slow at this size); "
-              f"include them with --methods {','.join(names + left_out)}")
+        print(
+            f"# {sc.system.nx} states: {', '.join(left_out)} left out (slow at this size); "
+            f"include them with --methods {','.join(names + left_out)}"
+        )
     print()
     ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
     print(markdown_table(results, sc.state_names, reference=ref))
@@ -91,14 +111,20 @@ def main(args: argparse.Namespace) -> int:
         from . import use_agg
 
         use_agg()
-        from ..plot import plot_estimates, save_figure
+        from ..report.plot import plot_estimates, save_figure
 
-        good = {r.method: r.estimate for r in results if r.ok}
+        good = {r.method: r.estimate for r in results if r.estimate is not None}
         if not good:
             raise IvobsError("--plot: no method gave an estimate; nothing to plot")
         truth = traj.x if traj.has_truth else None
-        fig = plot_estimates(good, truth=truth, states=states, t=traj.t,
-                             state_names=sc.state_names, title=f"{sc.name}")
+        fig = plot_estimates(
+            good,
+            truth=truth,
+            states=states,
+            t=traj.t,
+            state_names=sc.state_names,
+            title=f"{sc.name}",
+        )
         print(f"\nfigure: {save_figure(fig, plot_path)}")
     return 1 if any(r.ok and r.contains is False for r in results) else 0
 

@@ -12,10 +12,10 @@ from .compare import default_methods, print_reasons
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
+    p: argparse.ArgumentParser = sub.add_parser(
         "demo",
-        help="run every method on the servo motor (paper 002) and compare",
-        description="Run every available method on the DC servo motor of paper 002, print a "
+        help="run every method on the servo motor [Tang2019] and compare",
+        description="Run every available method on the DC servo motor of [Tang2019], print a "
         "table of mean widths and containment, and write a figure.",
     )
     p.add_argument("--out", default="ivobs-demo", help="output folder (default: ./ivobs-demo)")
@@ -34,8 +34,8 @@ def main(args: argparse.Namespace) -> int:
 
     use_agg()
     from .. import scenarios
-    from ..plot import plot_estimates, save_figure
     from ..report import compare, markdown_table
+    from ..report.plot import plot_estimates, save_figure
 
     check_disturbance(args.disturbance)
     check_seed(args.seed)
@@ -55,7 +55,7 @@ def main(args: argparse.Namespace) -> int:
     print(markdown_table(results, sc.state_names, reference=ref))
     print_reasons(results)
     os.makedirs(args.out, exist_ok=True)
-    good = {r.method: r.estimate for r in results if r.ok}
+    good = {r.method: r.estimate for r in results if r.estimate is not None}
     has_truth = traj.has_truth
     if good:
         fig = plot_estimates(

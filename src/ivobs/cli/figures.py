@@ -1,4 +1,5 @@
-"""``ivobs figures``: regenerate the figures of papers 001-004 into a folder."""
+"""``ivobs figures``: regenerate the papers' figures into a folder (``--paper 001`` to ``004``:
+[Wang2020], [Tang2019], [Efimov2013], [Dinh2024])."""
 
 from __future__ import annotations
 
@@ -10,13 +11,14 @@ from . import check_out_dir
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
+    p: argparse.ArgumentParser = sub.add_parser(
         "figures",
         help="regenerate the papers' figures (001-004) as PNG files",
-        description="Redraw the figures of the papers ivobs implements (001: fixed-time; 002: "
-        "reachability, zonotope, interval observers; 003: interval observers, Hénon map; 004: "
-        "KKL observers) with ivobs' methods, one PNG per figure. Each figure checks that its "
-        "bounds contain the true state. What differs from the papers: docs/figures.md.",
+        description="Redraw the figures of the papers ivobs implements (001 [Wang2020]: "
+        "fixed-time; 002 [Tang2019]: reachability, zonotope, interval observers; 003 "
+        "[Efimov2013]: interval observers, Hénon map; 004 [Dinh2024]: KKL observers) with "
+        "ivobs' methods, one PNG per figure. Each figure checks that its bounds contain the true "
+        "state. What differs from the papers: docs/figures.md.",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument(
@@ -32,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
     from . import use_agg
 
     use_agg()
-    from ..figures import figure_specs, generate
+    from ..report.figures import figure_specs, generate
 
     papers = None
     if args.paper is not None:

@@ -92,7 +92,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     if args.csv:
         args.csv = str(check_output_path(args.csv, "--csv"))
     if args.plot:
-        from ..plot import figure_path
+        from ..report.plot import figure_path
 
         args.plot = str(figure_path(args.plot, "--plot"))
         if args.csv and Path(args.csv).resolve() == Path(args.plot).resolve():
@@ -179,7 +179,7 @@ def _write(res: Any, args: argparse.Namespace, truth: Any = None, **plot_kw: Any
         from . import use_agg
 
         use_agg()
-        from ..plot import plot_estimates, save_figure
+        from ..report.plot import plot_estimates, save_figure
 
         fig = plot_estimates({res.method: res}, truth=truth, **plot_kw)
         path = save_figure(fig, args.plot)

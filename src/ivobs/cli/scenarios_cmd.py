@@ -7,7 +7,7 @@ from typing import Any
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser(
+    p: argparse.ArgumentParser = sub.add_parser(
         "scenarios",
         help="list the papers' example systems",
         description="List the scenarios (paper examples) by name.",

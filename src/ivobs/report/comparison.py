@@ -13,15 +13,15 @@ from typing import Any
 
 import numpy as np
 
-from .errors import IvobsError
-from .estimators import get as get_method
-from .estimators import make_estimator
-from .estimators import methods as all_methods
-from .result import Estimate
-from .scenarios import Scenario
-from .simulate import Trajectory
+from ..errors import IvobsError
+from ..estimators import get as get_method
+from ..estimators import make_estimator
+from ..estimators import methods as all_methods
+from ..result import Estimate
+from ..scenarios import Scenario
+from ..simulate import Trajectory
 
-__all__ = ["MethodResult", "compare", "markdown_table"]
+__all__ = ["POINT_TOL", "MethodResult", "compare", "markdown_table"]
 
 
 @dataclass
@@ -96,10 +96,11 @@ def markdown_table(
     mean over states of each method's width ratio to it.
     """
     ok = [r for r in results if r.ok and r.mean_width is not None]
-    nx = ok[0].mean_width.shape[0] if ok else 0
+    first = ok[0].mean_width if ok else None
+    nx = first.shape[0] if first is not None else 0
     names = list(state_names) if state_names else [f"x{i + 1}" for i in range(nx)]
     ref = next((r for r in ok if r.method == reference), None) if reference else None
-    head = ["method"] + [f"width {n}" for n in names] + (["ratio to " + reference] if ref else [])
+    head = ["method"] + [f"width {n}" for n in names] + ([f"ratio to {reference}"] if ref else [])
     head += ["contains truth", "design (s)", "run (s)"]
     point = _point_states(ref) if ref is not None else None
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

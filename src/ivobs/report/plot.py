@@ -5,12 +5,14 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import IvobsError
-from .result import Estimate
+from ..errors import IvobsError
+
+if TYPE_CHECKING:  # only for annotations: Estimate.plot() calls this module (no import cycle)
+    from ..result import Estimate
 
 __all__ = ["figure_path", "plot_estimates", "save_figure"]
 
@@ -75,8 +77,13 @@ def plot_estimates(
                 ax.plot(t, hi, ls, color=c, lw=1.2, label=label_m)
                 ax.plot(t, lo, ls, color=c, lw=1.2)
         if x is not None:
-            ax.plot(t, x[:, i] - (x[:, i] if relative else 0.0), "k.", ms=3,
-                    label="true state" if j == 0 else None)
+            ax.plot(
+                t,
+                x[:, i] - (x[:, i] if relative else 0.0),
+                "k.",
+                ms=3,
+                label="true state" if j == 0 else None,
+            )
         label = state_names[i] if state_names is not None else f"$x_{{{i + 1}}}$"
         if relative:
             label = f"bounds − {label}"
@@ -101,7 +108,7 @@ def figure_path(path: str | os.PathLike[str], what: str | None = None) -> Path:
     """The file a figure for ``path`` is written to, checked before any work: ``.png`` is added
     when ``path`` has no extension; an unsupported extension or an unwritable place is an
     :class:`~ivobs.IvobsError` naming ``what`` (e.g. ``"--plot"``)."""
-    from .io.atomic import check_output_path
+    from ..io.atomic import check_output_path
 
     path = Path(path)
     prefix = f"{what}: " if what else ""
@@ -125,7 +132,7 @@ def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
     (``.png`` added when ``path`` has no extension, see :func:`figure_path`)."""
     import matplotlib.pyplot as plt
 
-    from .io.atomic import atomic_path
+    from ..io.atomic import atomic_path
 
     try:
         target = figure_path(path)

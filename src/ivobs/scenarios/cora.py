@@ -1,9 +1,8 @@
-"""Benchmark systems from CORA (M. Althoff et al., github.com/TUMcps/CORA), shipped as scenarios.
+"""The CORA benchmark systems of [Althoff2021], shipped as scenarios (``cora-*``).
 
 Numeric data only (matrices, sets, signals, trajectories), extracted from CORA v2026.0.1; see
 ``ivobs/data/CORA_README.md`` for the provenance, the time convention and known defects. Credit
-CORA when you use them; for ``cora-2dim`` also Alamo, Bravo & Camacho, *Guaranteed state
-estimation by zonotopes*, Automatica 41(6), 2005, Sec. 7.1.
+CORA ([Althoff2021]) when you use them; for ``cora-2dim`` also [Alamo2005, Section 7.1].
 
 Mapping onto ivobs' model: CORA's ``x+ = A x + B u + w``, ``y = C x + v`` with zonotopes
 ``w ∈ <W_c, W_G>``, ``v ∈ <V_c, V_G>``, ``x0 ∈ <R0_c, R0_G>`` becomes ``d = (β_w, β_v) ∈
@@ -25,16 +24,18 @@ from typing import Any
 
 import numpy as np
 
-from .model import LinearSystem
-from .scenarios import Scenario, register_scenario
-from .sets import Box
-from .simulate import Trajectory, disturbance
+from ..model import LinearSystem
+from ..sets import Box
+from ..simulate import Trajectory, disturbance
+from .registry import Scenario, bounds_box, register_scenario
 
 _FILES = {
     "cora-2dim": ("cora_2dim.npz", "CORA/Alamo 2005 2-D example: 2 states, 1 output, 20 steps"),
     "cora-vehicle6": ("cora_vehicle6.npz", "CORA vehicle model: 6 states, 4 outputs, 350 steps"),
-    "cora-pedestrian4": ("cora_pedestrian4.npz",
-                         "CORA pedestrian (double integrator): 4 states, 2 outputs, 240 steps"),
+    "cora-pedestrian4": (
+        "cora_pedestrian4.npz",
+        "CORA pedestrian (double integrator): 4 states, 2 outputs, 240 steps",
+    ),
     "cora-slip4": ("cora_slip4.npz", "CORA side-slip model: 4 states, 3 outputs, 700 steps"),
 }
 
@@ -54,27 +55,34 @@ def _build(name: str) -> Scenario:
     mw, mv = WG.shape[1], VG.shape[1]
     E = np.hstack([WG, np.zeros((nx, mv))])
     F = np.hstack([np.zeros((ny, mw)), VG])
-    sys = LinearSystem(A, B, C, D=D, E=E, F=F, d=Box(-np.ones(mw + mv), np.ones(mw + mv)),
-                       dt=float(z["dt"]))
+    sys = LinearSystem(
+        A, B, C, D=D, E=E, F=F, d=Box(-np.ones(mw + mv), np.ones(mw + mv)), dt=float(z["dt"])
+    )
     r0 = np.abs(z["R0_G"]).sum(axis=1)
     x0 = Box(z["R0_c"] - r0, z["R0_c"] + r0)
     u, y = z["u"], z["y"]
     T = y.shape[0]
     x_rec = z["x"] if "x" in z else np.full((T, nx), np.nan)
-    recorded = Trajectory(x=x_rec, y=y, u=u, d=np.full((T, mw + mv), np.nan),
-                          t=np.arange(T) * float(z["dt"]))
+    recorded = Trajectory(
+        x=x_rec, y=y, u=u, d=np.full((T, mw + mv), np.nan), t=np.arange(T) * float(z["dt"])
+    )
 
     def factory(kind: str, seed: Any, T_: int) -> Any:
         if kind == "paper":
-            return disturbance("uniform", sys.d, T_, 0 if seed is None else seed)
+            return disturbance("uniform", bounds_box(sys), T_, 0 if seed is None else seed)
         return None
 
     return Scenario(
-        name=name, system=sys, x0=x0,
+        name=name,
+        system=sys,
+        x0=x0,
         x_true0=x_rec[0] if np.all(np.isfinite(x_rec[0])) else np.asarray(z["R0_c"], float),
-        u=u, horizon=T,
+        u=u,
+        horizon=T,
         source=f"CORA v2026.0.1 benchmark data ({fname}); see ivobs/data/CORA_README.md",
-        description=summary, recorded=recorded, _disturbance=factory,
+        description=summary,
+        recorded=recorded,
+        _disturbance=factory,
         reference={"W_G": WG, "V_G": VG, "R0_G": z["R0_G"]},
         notes="x_true0 for simulations is CORA's recorded x[0] (R0's center when none is stored)",
     )
