@@ -331,3 +331,18 @@ def test_time_varying_system_uses_the_strip_in_every_path():
     rl = est.run(sc.u, Y[0], t=sc.t, vectorize=False)
     np.testing.assert_allclose(rb.lower[0], rl.lower, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(rb.upper[0], rl.upper, rtol=1e-9, atol=1e-12)
+
+
+def test_predict_between_steps_leaves_the_members_warm_starts_alone():
+    """``predict()`` is a look-ahead: with an ``exact`` member (a warm-started LP kept for the
+    online state), stepping with predictions in between gives run()'s numbers exactly."""
+    sys = random_system(6, nx=3, ny=2, nu=1)
+    x0 = Box(-np.ones(3), np.ones(3))
+    tr = adversarial_run(sys, x0, 20, seed=2)
+    ref = intersect(sys, x0, methods=[("exact", {"window": 4}), "interval-split"]).run(tr.u, tr.y)
+    est = intersect(sys, x0, methods=[("exact", {"window": 4}), "interval-split"])
+    his = []
+    for k in range(20):
+        est.predict(tr.u[k])
+        his.append(est.step(tr.u[k], tr.y[k]).hi)
+    np.testing.assert_array_equal(np.array(his)[est.valid_from :], ref.upper[est.valid_from :])

@@ -182,6 +182,9 @@ class Estimator:
         self.last_inconsistent: bool = False
         """Whether the measurement of the last ``step()`` was found inconsistent (not used)."""
         self._state: Any = None  # an OnlineState (a dict for methods not yet typed)
+        self._branching = False
+        """True while a step runs that will not be continued (:meth:`predict`): a method with
+        warm-started solver caches (exact) leaves them with the state they belong to."""
 
     # -- to implement ---------------------------------------------------------------------
     def _initial_state(self) -> Any:
@@ -237,14 +240,23 @@ class Estimator:
         t: float | None = None,
         *,
         finite: bool = True,
+        keep: bool = True,
     ) -> tuple[Any, Box]:
         """The pure form of :meth:`step`: from an online ``state`` (from :meth:`initial_state`
         or a previous call), the next state and the box of ``x[k]``; the estimator's own online
         state is not touched (this is how :class:`Intersect` composes its members).
         ``new_state.inconsistent`` says whether ``y_k`` contradicted the model. ``finite=False``
         returns a non-finite box instead of raising the overflow error (a member of a
-        composition whose other members still bound the state)."""
-        return self._advance_any(state, u_k, y_k, t, finite=finite)
+        composition whose other members still bound the state). ``keep=False``: the new state
+        will not be continued (a look-ahead such as :meth:`predict`), so solver caches kept for
+        ``state`` stay with it."""
+        if keep:
+            return self._advance_any(state, u_k, y_k, t, finite=finite)
+        self._branching, before = True, self._branching
+        try:
+            return self._advance_any(state, u_k, y_k, t, finite=finite)
+        finally:
+            self._branching = before
 
     def _advance_any(
         self,
@@ -311,7 +323,7 @@ class Estimator:
         without changing the online state."""
         if self._state is None:
             self.reset()
-        return self.advance(self._state, u_k, None, t)[1]
+        return self.advance(self._state, u_k, None, t, keep=False)[1]
 
     def _check_u_k(self, u_k: Any) -> np.ndarray:
         if u_k is None:

@@ -287,15 +287,6 @@ class Intersect(Estimator):
     def _initial_state(self) -> IntersectState:
         return IntersectState(members=tuple(m.initial_state() for m in self.members))
 
-    def predict(self, u_k: Any = None, t: float | None = None) -> Box:
-        """See :meth:`Estimator.predict` (members not yet typed are stepped on a copy)."""
-        if self._state is None:
-            self.reset()
-        members = tuple(
-            _copy_state(ms) if isinstance(ms, dict) else ms for ms in self._state.members
-        )
-        return self.advance(replace(self._state, members=members), u_k, None, t)[1]
-
     def _step(
         self, state: IntersectState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[IntersectState]:
@@ -305,9 +296,11 @@ class Intersect(Estimator):
         for m, ms in zip(self.members, state.members, strict=True):
             # each member's box rounded by its own margin (the same data scale)
             if isinstance(ms, dict):  # a member not yet typed (transitional: in place)
+                if self._branching:
+                    ms = _copy_state(ms)
                 ms, box = m._advance_any(ms, u_k, y_k, t_k, in_place=True, finite=False)
             else:
-                ms, box = m.advance(ms, u_k, y_k, t_k, finite=False)
+                ms, box = m.advance(ms, u_k, y_k, t_k, finite=False, keep=not self._branching)
             members.append(ms)
             flagged |= _inconsistent(ms)
             los.append(box.lo)

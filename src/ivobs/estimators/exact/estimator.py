@@ -125,7 +125,6 @@ class Exact(Estimator):
         self.progress = progress
         self.valid_from = 0
         self._warm = WarmStarts()
-        self._branch = False  # predict(): a cold program for a branch that is not kept
 
     # -- state ----------------------------------------------------------------------------
     def _initial_state(self) -> ExactState:
@@ -142,22 +141,12 @@ class Exact(Estimator):
             p_hi=np.zeros((0, s.nx)),
         )
 
-    def predict(self, u_k: Any = None, t: float | None = None) -> Box:
-        """See :meth:`Estimator.predict`. The prediction solves the program rebuilt from the
-        kept history; the warm-started one stays with the online state, so the next
-        :meth:`step` gives the same box as without this call."""
-        self._branch = True
-        try:
-            return super().predict(u_k, t)
-        finally:
-            self._branch = False
-
     # -- one step -------------------------------------------------------------------------
     def _step(
         self, state: ExactState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ExactState]:
         k, sys = state.k, self.sys
-        warm = None if self._branch else self._warm.take(state.history, (k, state.relaxed))
+        warm = None if self._branching else self._warm.take(state.history, (k, state.relaxed))
         if warm is None:
             warm = self._rebuild(state)
         lp = warm.lp
@@ -193,7 +182,7 @@ class Exact(Estimator):
         rows = {"x_lo": x_lo, "x_hi": x_hi, "y": y_k, "u": u_k, "d_lo": d_k.lo, "d_hi": d_k.hi,
                 "p_lo": p_lo, "p_hi": p_hi}  # fmt: skip
         new = self._remember(state, rows, used, lp.relaxed)
-        if not self._branch:
+        if not self._branching:
             # the base counts the step: the program is that of the state at k + 1
             self._warm.put(new.history, (k + 1, new.relaxed), warm)
         return Step(new, lo, hi, inconsistent)
