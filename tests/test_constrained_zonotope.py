@@ -106,12 +106,11 @@ def test_size_stays_bounded_by_the_limits() -> None:
     est = ivobs.make_estimator(
         "constrained-zonotope", sys, x0=x0, max_constraints=5, max_generators=30
     )
-    est.reset()
+    st = est.initial_state()
     for k in range(60):
-        est.step(tr.u[k], tr.y[k])
-        st = est._state
-        assert st["A"].shape[0] <= 5 and st["G"].shape[1] <= 30
-        assert st["A"].shape[1] == st["G"].shape[1]
+        st, _ = est.advance(st, tr.u[k], tr.y[k])
+        assert st.A.shape[0] <= 5 and st.G.shape[1] <= 30
+        assert st.A.shape[1] == st.G.shape[1]
     assert est.design.max_constraints == 5 and est.design.max_generators == 30
 
 
