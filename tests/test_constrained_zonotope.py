@@ -1,4 +1,4 @@
-"""The constrained-zonotope filter (Scott et al. 2016): exact without reduction, sound and close
+"""The constrained-zonotope filter [Scott2016]: exact without reduction, sound and close
 to exact with it, bounded size, faults, online use."""
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def test_fault_detection_empty_set() -> None:
 
 
 def test_time_varying_and_callable_bounds() -> None:
-    """The Hénon scenario bounds d from y_k (003 Remark 1); kkl-ltv-dt has A_k."""
+    """The Hénon scenario bounds d from y_k [Efimov2013, Remark 1]; kkl-ltv-dt has A_k."""
     for name in ("henon", "kkl-ltv-dt"):
         sc = scenarios.get(name, horizon=30)
         tr = sc.simulate("paper")
