@@ -188,6 +188,33 @@ def test_random_systems_contain_the_truth_and_paths_agree(case):
     )
 
 
+SIZES = [(1, 1, 0), (2, 1, 2), (4, 2, 1), (5, 3, 0), (6, 2, 2)]  # (nx, ny, nu)
+
+
+@pytest.mark.parametrize("method", ["reachability", "zonotope"])
+@pytest.mark.parametrize("size", SIZES)
+def test_vectorised_path_equals_the_loop_on_random_systems_of_several_sizes(method, size):
+    """The vectorised run (the observer by the shared linear-filter kernel, data-independent
+    radii) against the loop over the step, for one record and for a batch of records."""
+    nx, ny, nu = size
+    sys = random_system(
+        100 + nx, nx=nx, ny=ny, nu=nu, symmetric_bounds=nx % 2 == 0, feedthrough=nu > 0
+    )
+    x0 = Box(-np.ones(nx), 2.0 * np.ones(nx))
+    trs = [adversarial_run(sys, x0, 120, seed=s) for s in range(2)]
+    est = make_estimator(method, sys, x0=x0)
+    batch = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]), vectorize=True)
+    for b, tr in enumerate(trs):
+        loop = est.run(tr.u, tr.y, vectorize=False)
+        assert_contains(loop, tr.x)
+        single = est.run(tr.u, tr.y, vectorize=True)
+        tol = 1e-9 * (1 + np.abs(loop.upper).max())
+        for lo, hi in ((single.lower, single.upper), (batch.lower[b], batch.upper[b])):
+            assert np.abs(lo - loop.lower).max() <= tol
+            assert np.abs(hi - loop.upper).max() <= tol
+    assert batch.contains(np.stack([t.x for t in trs])).all()
+
+
 @pytest.mark.parametrize("case", CASES[:4])
 def test_missing_samples_random_and_gap(case):
     sys, x0 = _system(case)
