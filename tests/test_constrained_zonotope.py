@@ -1,4 +1,4 @@
-"""The constrained-zonotope filter (Scott et al. 2016): exact without reduction, sound and close
+"""The constrained-zonotope filter [Scott2016]: exact without reduction, sound and close
 to exact with it, bounded size, faults, online use."""
 
 from __future__ import annotations
@@ -106,12 +106,11 @@ def test_size_stays_bounded_by_the_limits() -> None:
     est = ivobs.make_estimator(
         "constrained-zonotope", sys, x0=x0, max_constraints=5, max_generators=30
     )
-    est.reset()
+    st = est.initial_state()
     for k in range(60):
-        est.step(tr.u[k], tr.y[k])
-        st = est._state
-        assert st["A"].shape[0] <= 5 and st["G"].shape[1] <= 30
-        assert st["A"].shape[1] == st["G"].shape[1]
+        st, _ = est.advance(st, tr.u[k], tr.y[k])
+        assert st.A.shape[0] <= 5 and st.G.shape[1] <= 30
+        assert st.A.shape[1] == st.G.shape[1]
     assert est.design.max_constraints == 5 and est.design.max_generators == 30
 
 
@@ -149,7 +148,7 @@ def test_fault_detection_empty_set() -> None:
 
 
 def test_time_varying_and_callable_bounds() -> None:
-    """The Hénon scenario bounds d from y_k (003 Remark 1); kkl-ltv-dt has A_k."""
+    """The Hénon scenario bounds d from y_k [Efimov2013, Remark 1]; kkl-ltv-dt has A_k."""
     for name in ("henon", "kkl-ltv-dt"):
         sc = scenarios.get(name, horizon=30)
         tr = sc.simulate("paper")

@@ -1,4 +1,4 @@
-"""H∞ observer gain of paper 002 (Theorem 1, problem (20), LMI (16))."""
+"""H∞ observer gain of [Tang2019, Theorem 1, problem (20), LMI (16)]."""
 
 import numpy as np
 import pytest

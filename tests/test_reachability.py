@@ -1,4 +1,4 @@
-"""`reachability`: paper 002, Algorithm 1 / Theorem 2 with the H∞ gain of Theorem 1."""
+"""`reachability`: [Tang2019, Algorithm 1, Theorem 2] with the H∞ gain of [Tang2019, Theorem 1]."""
 
 import json
 
@@ -32,7 +32,7 @@ def _system(case):
 
 
 def _exact_radius(M, G, h0, r_rows):
-    """ρ[k] = |M^k| h0 + Σ_{i<k} |M^i G| r[k-1-i] by brute force (002 eq. 21)."""
+    """ρ[k] = |M^k| h0 + Σ_{i<k} |M^i G| r[k-1-i] by brute force [Tang2019, eq. (21)]."""
     T = r_rows.shape[0]
     out = np.zeros((T, M.shape[0]))
     pw = [np.eye(M.shape[0])]
@@ -45,7 +45,7 @@ def _exact_radius(M, G, h0, r_rows):
     return out
 
 
-# --- paper 002, Example 2 ------------------------------------------------------------------
+# --- [Tang2019], Example 2 -----------------------------------------------------------------
 def test_tang_example2_gain_and_containment():
     sc = ivobs.scenarios.get("tang-example2", horizon=60)
     est = make_estimator("reachability", sc.system, x0=sc.x0)
@@ -94,7 +94,7 @@ def test_box_is_the_exact_interval_hull_theorem2():
             assert abs(bound - tr.x[k, i]) <= 2e-10 * (1 + abs(tr.x[k, i]) + s_k)
 
 
-# --- paper 002, Example 1: servo motor ----------------------------------------------------
+# --- [Tang2019], Example 1: servo motor ---------------------------------------------------
 def test_servo_default_design_and_containment():
     sc = ivobs.scenarios.get("servo-motor", horizon=300)
     est = make_estimator("reachability", sc.system, x0=sc.x0)
@@ -105,7 +105,7 @@ def test_servo_default_design_and_containment():
 
 
 def test_servo_L1_is_much_tighter_than_L2_for_speed_and_current():
-    """002 Section VII: with L1 (H∞) the bounds of n and i are much tighter than with L2."""
+    """[Tang2019, Section VII]: with L1 (H∞) the bounds of n and i are much tighter than with L2."""
     sc = ivobs.scenarios.get("servo-motor", horizon=200)
     tr = sc.simulate("paper")
     w = {}
@@ -120,7 +120,7 @@ def test_servo_L1_is_much_tighter_than_L2_for_speed_and_current():
 
 
 def _interval_observer_36(sys, x0, L, u, y):
-    """Interval observer (002 eqs. 36-37), written out here: A - LC ≥ 0 is required."""
+    """Interval observer [Tang2019, eqs. (36)-(37)], written out here: A - LC ≥ 0 is required."""
     M = sys.A - L @ sys.C
     assert (M >= 0).all()
     G = sys.E - L @ sys.F
@@ -149,7 +149,7 @@ def test_theorem7_reachability_inside_interval_observer_same_gain_L2():
 
 def test_theorem7_against_the_interval_estimator():
     if "interval" not in ivobs.methods():
-        pytest.skip("the 'interval' estimator (002 eqs. 36-37) is not available yet")
+        pytest.skip("the 'interval' estimator ([Tang2019, eqs. (36)-(37)]) is not available yet")
     sc = ivobs.scenarios.get("servo-motor", horizon=150)
     L2 = sc.reference["L2"]
     for kind in ("paper", "vertex"):
@@ -179,13 +179,40 @@ def test_random_systems_contain_the_truth_and_paths_agree(case):
         box = est.step(tr.u[k], tr.y[k])
         np.testing.assert_array_equal(box.lo, res.lower[k])
         np.testing.assert_array_equal(box.hi, res.upper[k])
-    # the radius is data-independent and equals the brute-force sum (002 eq. 21)
+    # the radius is data-independent and equals the brute-force sum [Tang2019, eq. (21)]
     M, G = est._M, est._G
     r_rows = np.tile(sys.d.radius, (30, 1))
     exact = _exact_radius(M, G, x0.radius, r_rows)
     np.testing.assert_allclose(
         radius_sequence(M, np.diag(x0.radius), G * sys.d.radius, 30), exact, rtol=1e-12
     )
+
+
+SIZES = [(1, 1, 0), (2, 1, 2), (4, 2, 1), (5, 3, 0), (6, 2, 2)]  # (nx, ny, nu)
+
+
+@pytest.mark.parametrize("method", ["reachability", "zonotope"])
+@pytest.mark.parametrize("size", SIZES)
+def test_vectorised_path_equals_the_loop_on_random_systems_of_several_sizes(method, size):
+    """The vectorised run (the observer by the shared linear-filter kernel, data-independent
+    radii) against the loop over the step, for one record and for a batch of records."""
+    nx, ny, nu = size
+    sys = random_system(
+        100 + nx, nx=nx, ny=ny, nu=nu, symmetric_bounds=nx % 2 == 0, feedthrough=nu > 0
+    )
+    x0 = Box(-np.ones(nx), 2.0 * np.ones(nx))
+    trs = [adversarial_run(sys, x0, 120, seed=s) for s in range(2)]
+    est = make_estimator(method, sys, x0=x0)
+    batch = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]), vectorize=True)
+    for b, tr in enumerate(trs):
+        loop = est.run(tr.u, tr.y, vectorize=False)
+        assert_contains(loop, tr.x)
+        single = est.run(tr.u, tr.y, vectorize=True)
+        tol = 1e-9 * (1 + np.abs(loop.upper).max())
+        for lo, hi in ((single.lower, single.upper), (batch.lower[b], batch.upper[b])):
+            assert np.abs(lo - loop.lower).max() <= tol
+            assert np.abs(hi - loop.upper).max() <= tol
+    assert batch.contains(np.stack([t.x for t in trs])).all()
 
 
 @pytest.mark.parametrize("case", CASES[:4])

@@ -1,4 +1,4 @@
-"""The strip method (Alamo, Bravo & Camacho 2005): soundness, the measurement box, ordering
+"""The strip method [Alamo2005]: soundness, the measurement box, ordering
 against the exact hull, online use, inconsistent data, options."""
 
 from __future__ import annotations
@@ -176,7 +176,7 @@ def test_bad_options() -> None:
 
 
 def test_time_varying_and_callable_bounds() -> None:
-    """The Hénon scenario bounds d from y_k (003 Remark 1); kkl-ltv-dt has A_k."""
+    """The Hénon scenario bounds d from y_k [Efimov2013, Remark 1]; kkl-ltv-dt has A_k."""
     for name in ("henon", "kkl-ltv-dt"):
         sc = scenarios.get(name, horizon=60)
         tr = sc.simulate("paper")

@@ -1,4 +1,5 @@
-"""`zonotope`: paper 002, Proposition 1 (eq. 34) with the reduction of Remark 2; Theorem 6."""
+"""`zonotope`: [Tang2019, Proposition 1, eq. (34)] with the reduction of [Tang2019, Remark 2];
+[Tang2019, Theorem 6]."""
 
 import json
 
@@ -25,7 +26,7 @@ def _system(case):
     return sys, Box(-np.ones(3), np.ones(3) * 1.5)
 
 
-# --- Theorem 6 on the servo motor (paper 002, Example 1) -----------------------------------
+# --- [Tang2019, Theorem 6] on the servo motor ([Tang2019], Example 1) ------------------------
 @pytest.mark.parametrize("kind", ["paper", "vertex"])
 def test_theorem6_reachability_inside_zonotope_with_L1(kind):
     sc = ivobs.scenarios.get("servo-motor", horizon=200)

@@ -1,15 +1,16 @@
-"""H∞ observer gain by an LMI (paper 002, Tang et al., IEEE TAC 2019, Theorem 1, problem (20)).
+"""H∞ observer gain by an LMI [Tang2019, Theorem 1, problem (20)].
 
 For the Luenberger observer ``x̂+ = A x̂ + B u + L (y - C x̂ - D u)`` the estimation error
 ``e = x - x̂`` of the model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` obeys
 
-    e+ = (A - L C) e + (E - L F) d = A_e e + B_e d                                 (002 eq. 15)
+    e+ = (A - L C) e + (E - L F) d = A_e e + B_e d                        [Tang2019, eq. (15)]
 
-(ivobs' one correlated disturbance ``d``; paper 002's ``d = [w; v]``, ``E = [E 0]``,
-``F = [0 F]`` gives ``B_e = [E  -LF]``, its eq. (15)). Theorem 1: if ``P ≻ 0`` and ``Y`` satisfy
+(ivobs' one correlated disturbance ``d``; [Tang2019]'s ``d = [w; v]``, ``E = [E 0]``,
+``F = [0 F]`` gives ``B_e = [E  -LF]``, its eq. (15)). [Tang2019, Theorem 1]: if ``P ≻ 0`` and
+``Y`` satisfy
 
     [ I - P           *         * ]
-    [ 0          -γ² I_nd       * ]  ≺ 0                                           (002 eq. 16)
+    [ 0          -γ² I_nd       * ]  ≺ 0                                [Tang2019, eq. (16)]
     [ PA - YC     PE - YF      -P ]
 
 then with ``L = P⁻¹ Y`` the error system is stable and ``‖(zI - A_e)⁻¹ B_e‖∞ < γ`` (the
@@ -42,7 +43,8 @@ MARGIN = 1e-8
 def hinf_gain(
     A: Any, C: Any, E: Any, F: Any, *, margin: float = MARGIN
 ) -> tuple[np.ndarray, float, np.ndarray]:
-    """Observer gain minimising the H∞ norm from ``d`` to ``e`` (002 Theorem 1, problem (20)).
+    """Observer gain minimising the H∞ norm from ``d`` to ``e`` [Tang2019, Theorem 1,
+    problem (20)].
 
     Parameters
     ----------
@@ -74,7 +76,7 @@ def hinf_gain(
     E = as_matrix("E", E, nx, None)
     nd = E.shape[1]
     F = as_matrix("F", F, ny, nd, vector="row")
-    check_size(nx, "hinf_gain (002 LMI (16))")
+    check_size(nx, "hinf_gain ([Tang2019] LMI (16))")
     margin = float(margin)
 
     P = cp.Variable((nx, nx), symmetric=True)
@@ -88,17 +90,18 @@ def hinf_gain(
         blocks = [
             [b for j, b in enumerate(row) if j != 1] for i, row in enumerate(blocks) if i != 1
         ]
-    lmi = sym(cp.bmat(blocks))
+    # cvxpy re-exports its (unannotated) atoms implicitly, which strict typing does not see
+    lmi = sym(cp.bmat(blocks))  # type: ignore[attr-defined]
     size = 2 * nx + nd
     cons = [lmi << -margin * np.eye(size)]
-    objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P))
-    solve(cp.Problem(objective, cons), "hinf_gain: problem (20) of paper 002 (LMI (16))")
+    objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P))  # type: ignore[attr-defined]
+    solve(cp.Problem(objective, cons), "hinf_gain: problem (20) of [Tang2019] (LMI (16))")
 
     Pv = np.asarray(P.value, dtype=float)
     Pv = 0.5 * (Pv + Pv.T)
     L = np.linalg.solve(Pv, np.asarray(Y.value, dtype=float))
     check_gain(A, C, L, "hinf_gain: the solver's gain L = P⁻¹Y")
-    gamma = float(np.sqrt(max(float(g.value), 0.0))) if nd else 0.0
+    gamma = float(np.sqrt(max(float(np.asarray(g.value, dtype=float)), 0.0))) if nd else 0.0
     return L, gamma, Pv
 
 
@@ -109,7 +112,7 @@ def check_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> float:
         raise DesignError(
             f"{who}: A - LC is not Schur stable (spectral radius {rho:.6g} >= 1); the error "
             "e+ = (A - LC) e + (E - LF) d would not stay bounded. Pass a stabilising gain, or "
-            "omit L to design the H∞ gain of paper 002 (Theorem 1)"
+            "omit L to design the H∞ gain of [Tang2019, Theorem 1]"
         )
     return rho
 

@@ -1,8 +1,7 @@
-"""Set-membership filter with constrained zonotopes (Scott, Raimondo, Marseglia & Braatz 2016).
+"""Set-membership filter with constrained zonotopes [Scott2016].
 
-Scott et al., *Constrained zonotopes: a new tool for set-based estimation and fault detection*,
-Automatica 69 (2016), Section 5: prediction and measurement update are exact in
-constrained-zonotope form; only the reduction (Section 4) over-approximates.
+[Scott2016, Section 5]: prediction and measurement update are exact in constrained-zonotope
+form; only the reduction [Scott2016, Section 4] over-approximates.
 
 The disturbance ``d`` enters both equations (``x+ = A x + B u + E d``, ``y = C x + D u + F d``),
 so the update is done on the pair ``(x_k, d_k)``, never on separate process and measurement noise:
@@ -10,16 +9,16 @@ with ``X_k = <c, G, A_c, b>`` the set of ``x[k]`` predicted from ``y[0..k-1]`` a
 ``d_k = c_d + R δ``, ``‖δ‖∞ <= 1`` (bounds re-centred, ``R = diag(radius)``),
 
 * measurement update (the measured components of ``y_k``; the generalised intersection of
-  Proposition 1 with a point ``Y``)::
+  [Scott2016, Proposition 1] with a point ``Y``)::
 
       X_k|k × D_k = <(c, c_d), [G 0; 0 R], [A_c 0; C G  F R], [b; y_k - D u_k - C c - F c_d]>
 
 * box: the interval hull of the ``x`` part, by LP (HiGHS), each bound certified by duality;
-* prediction (linear map and Minkowski sum, Proposition 1):
+* prediction (linear map and Minkowski sum, [Scott2016, Proposition 1]):
   ``X_{k+1} = <A c + B u_k + E c_d, [A G, E R], ..., ...>``;
-* reduction (Section 4): at most ``max_constraints`` constraints (rescaling + elimination,
-  4.2), then at most ``max_generators`` generators (lifted zonotope, 4.3, with a
-  parallelotope enclosure).
+* reduction [Scott2016, Section 4]: at most ``max_constraints`` constraints (rescaling +
+  elimination, Section 4.2), then at most ``max_generators`` generators (lifted zonotope,
+  Section 4.3, with the parallelotope enclosure of [Chisci1998]).
 
 Which factor to eliminate is not chosen by the paper's shape heuristic (an estimate of the
 Hausdorff distance) but by what the box needs: the LPs of the box give dual certificates of its
@@ -40,19 +39,19 @@ only with a certificate (:func:`ivobs.czonotope.certified_empty`: a dual ray, ch
 point, proving that even the factor box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the constraints). When
 HiGHS calls a thin set infeasible without one, the box is that of the softened set (a superset).
 
-**Rounding (audits A12, A7).** Each measured row gets a slack factor of the size ``ρ_i`` of the
-rounding of its data and of its computed coefficients,
-``ρ = 3 γ_n (|y| + |D| |u| + |C| x̄ + |F| d̄) + |C| e`` (``γ_n = n u / (1 - n u)``, ``x̄``, ``d̄``
-bounds on ``|x|``, ``|d|``), so that a float64 record of the model's output is never found
-inconsistent whatever its scale (``|D u| = 1e8``, ``|x| ~ 1e5``). The prediction appends a box of
-generators for the rounding of ``A c + B u + E c_d`` and ``A G``; the rounding of the reduction is
-kept in a box aside (``x[k] ∈ <c, G, A, b> ⊕ box(e)``); tiny generators are consolidated into one
-box per step (:data:`CONSOLIDATE_X`, :data:`CONSOLIDATE_C`).
+**Rounding.** Each measured row gets a slack factor of the size ``ρ_i`` of the rounding of its
+data and of its computed coefficients, ``ρ = 3 γ_n (|y| + |D| |u| + |C| x̄ + |F| d̄) + |C| e``
+(``γ_n = n u / (1 - n u)`` [Higham2002, Chapter 3], ``x̄``, ``d̄`` bounds on ``|x|``, ``|d|``),
+so that a float64 record of the model's output is never found inconsistent whatever its scale
+(``|D u| = 1e8``, ``|x| ~ 1e5``). The prediction appends a box of generators for the rounding of
+``A c + B u + E c_d`` and ``A G``; the rounding of the reduction is kept in a box aside
+(``x[k] ∈ <c, G, A, b> ⊕ box(e)``); tiny generators are consolidated into one box per step
+(:data:`CONSOLIDATE_X`, :data:`CONSOLIDATE_C`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -61,6 +60,7 @@ from .._validate import as_int
 from ..sets.czonotope import (
     EMPTY_TOL,
     UNIT_ROUNDOFF,
+    Certificates,
     box_generators,
     certified_empty,
     consolidate_small,
@@ -76,8 +76,9 @@ from ..model import LinearSystem
 from ..sets import Box
 from . import register
 from .base import Design, Estimator, check_size
+from .state import OnlineState, Step
 
-__all__ = ["ConstrainedZonotopeDesign", "ConstrainedZonotopeEstimator"]
+__all__ = ["ConstrainedZonotopeDesign", "ConstrainedZonotopeEstimator", "ConstrainedZonotopeState"]
 
 
 INFLATE = 1e-9
@@ -123,7 +124,7 @@ def _measurement_update(
     (NaN: missing).
 
     Every measured output gets a slack factor ``τ_i`` of size ``ρ_i``, the bound of the rounding
-    of its row (in ``y`` and in the computed row, see :meth:`ConstrainedZonotopeEstimator._step`);
+    of its row (in ``y`` and in the computed row, see :meth:`ConstrainedZonotopeEstimator._update`);
     an output with no noise (``F_i R = 0``) also gets the relative margin :data:`INFLATE`. Returns
     ``(A, b, p, status, full)``, ``p`` the number of new factors (``δ`` and slacks);
     ``status`` is ``"ok"``, ``"empty"`` (certainly inconsistent) or ``"check"`` (implied
@@ -190,7 +191,7 @@ def _restart(
 
 @dataclass(frozen=True)
 class ConstrainedZonotopeDesign(Design):
-    """Complexity limits of the constrained zonotope (Scott et al. 2016, Section 4).
+    """Complexity limits of the constrained zonotope [Scott2016, Section 4].
 
     ``max_constraints`` (``n_c``) and ``max_generators`` (``n_g``) bound the set kept between
     steps; ``0`` means no limit (``reduce=False``: the exact filter). ``elimination``: how the
@@ -213,9 +214,58 @@ def default_limits(nx: int) -> tuple[int, int]:
     return 2 * nx, 16 * nx
 
 
+@dataclass(frozen=True)
+class ConstrainedZonotopeState(OnlineState):
+    """``x[k] ∈ <c, G, A, b> ⊕ box(e)``: the constrained zonotope of ``x[k]`` predicted from
+    ``y[0..k-1]`` (centre ``c``, generators ``G``, constraints ``A ξ = b``) and ``e``, the box
+    of the rounding of the last reduction, kept aside until the next prediction."""
+
+    c: np.ndarray
+    G: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    e: np.ndarray
+
+
+@dataclass(frozen=True)
+class _StepData:
+    """What a step knows before its measurement update: the model at ``k``, the bounds of
+    ``d[k]`` (re-centred and inflated: ``d = cd + rd δ``), the columns ``E R``, ``F R`` of the
+    disturbance factors, bounds ``xmag >= |x_k|`` and ``dmag >= |d_k|``, and ``n``, the length of
+    the sums whose rounding ``γ_n`` bounds."""
+
+    mats: tuple[np.ndarray, ...]
+    u: np.ndarray
+    cd: np.ndarray
+    ER: np.ndarray
+    FR: np.ndarray
+    xmag: np.ndarray
+    dmag: np.ndarray
+    n: int
+
+
+@dataclass(frozen=True)
+class _Filtered:
+    """The set after the measurement update of a step: the box ``[lo, hi]`` of ``x[k]``, the
+    generators ``G`` (the state's, padded for the new factors), constraints ``A ξ = b``, ``ER``
+    padded likewise, the certificates of the box (None for the paper's rule or when absent),
+    their radius ``scale`` (1 unless the set was softened) and whether ``y[k]`` was
+    inconsistent (then not used)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    G: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    ER: np.ndarray
+    cert: Certificates | None
+    scale: float
+    inconsistent: bool
+
+
 @register
 class ConstrainedZonotopeEstimator(Estimator):
-    """Constrained-zonotope set-membership filter (Scott et al. 2016, Section 5).
+    """Constrained-zonotope set-membership filter [Scott2016, Section 5].
 
     Uses ``u[0..k]`` and ``y[0..k]``: the box at step ``k`` is the filtered set, after the
     measurement update with ``y[k]`` (before reduction). Needs the prior box ``x0``.
@@ -239,13 +289,11 @@ class ConstrainedZonotopeEstimator(Estimator):
 
     name = "constrained-zonotope"
     order = 90
-    summary = "set-membership filter in constrained-zonotope form, hull by LP (Scott et al. 2016)"
-    reference = (
-        "J. K. Scott, D. M. Raimondo, G. R. Marseglia, R. D. Braatz, Constrained zonotopes: a new "
-        "tool for set-based estimation and fault detection, Automatica 69 (2016)"
-    )
+    summary = "set-membership filter in constrained-zonotope form, hull by LP"
+    reference = "[Scott2016, Sections 4-5]"
+    data_used = "filter"
     supports_time_varying = True
-    needs_x0 = True
+    design: ConstrainedZonotopeDesign
 
     def __init__(
         self,
@@ -256,9 +304,9 @@ class ConstrainedZonotopeEstimator(Estimator):
         max_generators: int | None = None,
         reduce: bool = True,
         elimination: str = "certificates",
-        **base: Any,
-    ):
-        super().__init__(sys, x0, **base)
+        **options: Any,
+    ) -> None:
+        super().__init__(sys, x0, **options)
         check_size(
             self.name,
             sys.nx,
@@ -278,53 +326,70 @@ class ConstrainedZonotopeEstimator(Estimator):
         self.design = ConstrainedZonotopeDesign(
             max_constraints=nc, max_generators=ng, elimination=elimination
         )
-        self.valid_from = 0
 
     # -- online -------------------------------------------------------------------------------
-    def _initial_state(self) -> dict[str, Any]:
+    def _initial_state(self) -> ConstrainedZonotopeState:
         assert self.x0 is not None
         c, r = safe_radius(self.x0.lo, self.x0.hi)
         r = _inflate(c, r)
-        keep = r > 0
-        G = np.diag(r)[:, keep]
-        # e: a box of rounding kept aside, x[k] ∈ <c, G, A, b> ⊕ box(e)
-        return {"c": c, "G": G, "A": np.zeros((0, G.shape[1])), "b": np.zeros(0),
-                "e": np.zeros(self.sys.nx)}  # fmt: skip
+        G = np.diag(r)[:, r > 0]
+        return ConstrainedZonotopeState(
+            c=c, G=G, A=np.zeros((0, G.shape[1])), b=np.zeros(0), e=np.zeros(self.sys.nx)
+        )
 
     def _step(
-        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        A, B, C, D, E, F = self.sys.matrices_at(k)
+        self, state: ConstrainedZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[ConstrainedZonotopeState]:
+        k = state.k
+        mats = self.sys.matrices_at(k)
+        E, F = mats[4], mats[5]
         dbox = self.sys.d_at(k, y_k)
-        c, G, Ac, b, e = state["c"], state["G"], state["A"], state["b"], state["e"]
-        nx, m = G.shape
-        nu, nd = u_k.shape[0], dbox.dim
         cd, rd = safe_radius(dbox.lo, dbox.hi)
         rd = _inflate(cd, rd)
         cols = (rd > 0) & (np.any(E != 0, axis=0) | np.any(F != 0, axis=0))
-        ER = E[:, cols] * rd[cols]
-        FR = F[:, cols] * rd[cols]
-        au = np.abs(u_k)
-        xmag = np.abs(c) + np.abs(G).sum(axis=1) + e  # bounds |x_k|
-        dmag = np.abs(cd) + rd
+        data = _StepData(
+            mats=mats,
+            u=u_k,
+            cd=cd,
+            ER=E[:, cols] * rd[cols],
+            FR=F[:, cols] * rd[cols],
+            xmag=np.abs(state.c) + np.abs(state.G).sum(axis=1) + state.e,
+            dmag=np.abs(cd) + rd,
+            n=state.G.shape[0] + state.G.shape[1] + u_k.shape[0] + dbox.dim,
+        )
+        upd = self._update(state, data, y_k)
+        c, G, A, b, e = self._predict(k, state, data, upd)
+        # C order, as after a state() / restore() round trip (BLAS results depend on layout)
+        new = replace(state, c=c, G=np.ascontiguousarray(G), A=np.ascontiguousarray(A), b=b, e=e)
+        return Step(new, upd.lo, upd.hi, upd.inconsistent)
 
-        # measurement update on (x_k, d_k): C x + F d = y - D u for the point x - ε of the set
-        # (|ε| <= e), up to the rounding bound ρ of each row: of y itself (a float64 record of
-        # the model's output) and of the computed right-hand side and row C G (γ_n times the
-        # sums of absolute values of their terms)
-        rhs = y_k - D @ u_k - C @ c - F @ cd
+    def _update(
+        self, state: ConstrainedZonotopeState, data: _StepData, y_k: np.ndarray
+    ) -> _Filtered:
+        """Measurement update on ``(x_k, d_k)``: ``C x + F d = y - D u`` for the point
+        ``x - ε`` of the set (``|ε| <= e``), up to the rounding bound ``ρ`` of each row: of
+        ``y`` itself (a float64 record of the model's output) and of the computed right-hand
+        side and row ``C G`` (``γ_n`` times the sums of absolute values of their terms). Then
+        the certified box of ``x[k]`` (the box aside and a margin for the rounding in the
+        set's construction added)."""
+        _, _, C, D, _, F = data.mats
+        c, G, Ac, b, e = state.c, state.G, state.A, state.b, state.e
+        nx, m = G.shape
+        rhs = y_k - D @ data.u - C @ c - F @ data.cd
         aC = np.abs(C)
-        rho = 3.0 * gamma(nx + m + nu + nd + 3) * (
-            np.abs(y_k) + np.abs(D) @ au + aC @ xmag + np.abs(F) @ dmag
+        rho = 3.0 * gamma(data.n + 3) * (
+            np.abs(y_k) + np.abs(D) @ np.abs(data.u) + aC @ data.xmag + np.abs(F) @ data.dmag
         ) + (aC @ e) * (1.0 + gamma(nx + 1))
-        A_new, b_new, p, status, full = _measurement_update(Ac, b, C @ G, FR, rhs, rho)
+        A_new, b_new, p, status, full = _measurement_update(Ac, b, C @ G, data.FR, rhs, rho)
         if status == "check" and certified_empty(*full):
             status = "empty"
-        ER = np.hstack([ER, np.zeros((nx, p - ER.shape[1]))])  # slack factors: not in x
+        ER = np.hstack([data.ER, np.zeros((nx, p - data.ER.shape[1]))])  # slacks: not in x
         G_aug = np.hstack([G, np.zeros((nx, p))])
-        hull = hull_certificates(c, G_aug, A_new, b_new) if status != "empty" else None
+        hull: tuple[np.ndarray, np.ndarray, Certificates | None] | None = None
+        if status != "empty":
+            hull = hull_certificates(c, G_aug, A_new, b_new)
+        inconsistent = hull is None
         if hull is None:  # certainly inconsistent: report, predict without y_k
-            state["_inconsistent"] = True
             A_new, b_new = np.hstack([Ac, np.zeros((Ac.shape[0], p))]), b
             hull = hull_certificates(c, G_aug, A_new, b_new)
             if hull is None:  # pragma: no cover - the prior set is never certainly empty
@@ -334,44 +399,64 @@ class ConstrainedZonotopeEstimator(Estimator):
         scale = 1.0 if cert is None else cert.radius
         if scale != 1.0:  # softened (see hull_certificates): keep the larger set
             G_aug, A_new, ER = G_aug * scale, A_new * scale, ER * scale
-        # the box aside, and a margin for the rounding in the set's construction
         lo = lo - e * (1.0 + 2.0 * UNIT_ROUNDOFF) - INFLATE * (1.0 + np.abs(lo))
         hi = hi + e * (1.0 + 2.0 * UNIT_ROUNDOFF) + INFLATE * (1.0 + np.abs(hi))
+        return _Filtered(lo, hi, G_aug, A_new, b_new, ER, cert, scale, inconsistent)
 
-        # prediction (exact: same factors, so the certificates still apply), plus a box for the
-        # rounding of A c + B u + E c_d and A G (and of the plant's own float64 arithmetic) and
-        # the image of the box aside
+    def _predict(
+        self, k: int, state: ConstrainedZonotopeState, data: _StepData, upd: _Filtered
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(c, G, A, b, e)`` of ``x[k+1]``: the prediction (exact: same factors, so the
+        certificates still apply), plus a box for the rounding of ``A c + B u + E c_d`` and
+        ``A G`` (and of the plant's own float64 arithmetic) and the image of the box aside;
+        then the reduction [Scott2016, Section 4]."""
+        A, B, _, _, E, _ = data.mats
+        c, e, m = state.c, state.e, state.G.shape[1]
+        nx = c.shape[0]
         aA = np.abs(A)
-        c_next = A @ c + B @ u_k + E @ cd
-        err = 2.0 * gamma(nx + m + nu + nd + 2) * scale * (
-            aA @ xmag + np.abs(B) @ au + np.abs(E) @ dmag
+        c_next = A @ c + B @ data.u + E @ data.cd
+        err = 2.0 * gamma(data.n + 2) * upd.scale * (
+            aA @ data.xmag + np.abs(B) @ np.abs(data.u) + np.abs(E) @ data.dmag
         ) + (aA @ e) * (1.0 + gamma(nx + 1))
         box = box_generators(err)
-        G_next = np.hstack([A @ G_aug[:, :m], ER, box])
+        G_next = np.hstack([A @ upd.G[:, :m], upd.ER, box])
         self._check_overflow(k + 1, c_next, G_next)
-        A_next = np.hstack([A_new, np.zeros((A_new.shape[0], box.shape[1]))])
-        e_next = np.zeros(nx)
-        nc, ng = self.design.max_constraints, self.design.max_generators
-        if ng > 0:
-            if self.design.elimination == "hausdorff" or cert is None:
-                cert = None
-            else:
-                cert.D = np.hstack([cert.D, np.zeros((cert.D.shape[0], box.shape[1]))])
-            # in coordinates centred at c_next, so that the rounding in the reduction is
-            # relative to the set, not to |x|; the shift is added once, its rounding aside
-            out = eliminate_constraints(np.zeros(nx), G_next, A_next, b_new, nc, cert)
-            if out is None:  # numerically empty: restart from the box (sound, not a fault)
-                c_next, G_next, A_next, b_new = _restart(A, B @ u_k + E @ cd, ER, lo, hi)
-            else:
-                shift, G_next, A_next, b_new = out
-                e_next = gamma(2) * (np.abs(c_next) + np.abs(shift))
-                c_next = c_next + shift
-            tol_x = CONSOLIDATE_X * (1.0 + float(np.abs(c_next).max(initial=0.0)))
-            tol_c = CONSOLIDATE_C * float(np.abs(A_next).max(initial=0.0))
-            c_next, G_next, A_next, b_new = reduce_generators(
-                *consolidate_small(c_next, G_next, A_next, b_new, tol_x, tol_c), ng
-            )
-        # C order, as after a state() / restore() round trip (BLAS results depend on layout)
-        state["c"], state["G"] = c_next, np.ascontiguousarray(G_next)
-        state["A"], state["b"], state["e"] = np.ascontiguousarray(A_next), b_new, e_next
-        return lo, hi
+        A_next = np.hstack([upd.A, np.zeros((upd.A.shape[0], box.shape[1]))])
+        if self.design.max_generators <= 0:
+            return c_next, G_next, A_next, upd.b, np.zeros(nx)
+        return self._reduce(c_next, G_next, A_next, upd, box.shape[1], data)
+
+    def _reduce(
+        self,
+        c: np.ndarray,
+        G: np.ndarray,
+        A: np.ndarray,
+        upd: _Filtered,
+        n_box: int,
+        data: _StepData,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """At most ``max_constraints`` constraints, eliminated where the certified box loses
+        least (or by the paper's rule), then at most ``max_generators`` generators."""
+        nx = c.shape[0]
+        b, e = upd.b, np.zeros(nx)
+        cert = upd.cert
+        if self.design.elimination == "hausdorff" or cert is None:
+            cert = None
+        else:
+            cert.D = np.hstack([cert.D, np.zeros((cert.D.shape[0], n_box))])
+        # in coordinates centred at c, so that the rounding in the reduction is relative to the
+        # set, not to |x|; the shift is added once, its rounding aside
+        out = eliminate_constraints(np.zeros(nx), G, A, b, self.design.max_constraints, cert)
+        if out is None:  # numerically empty: restart from the box (sound, not a fault)
+            A_k, B, _, _, E, _ = data.mats
+            c, G, A, b = _restart(A_k, B @ data.u + E @ data.cd, upd.ER, upd.lo, upd.hi)
+        else:
+            shift, G, A, b = out
+            e = gamma(2) * (np.abs(c) + np.abs(shift))
+            c = c + shift
+        tol_x = CONSOLIDATE_X * (1.0 + float(np.abs(c).max(initial=0.0)))
+        tol_c = CONSOLIDATE_C * float(np.abs(A).max(initial=0.0))
+        c, G, A, b = reduce_generators(
+            *consolidate_small(c, G, A, b, tol_x, tol_c), self.design.max_generators
+        )
+        return c, G, A, b, e

@@ -1,26 +1,33 @@
-"""Interval estimation by reachability analysis of an H∞ observer's error (paper 002, Section III).
+"""Interval estimation by reachability analysis of an H∞ observer's error [Tang2019, Section III].
 
-Paper: Tang, Wang, Wang, Raïssi, Shen, *Interval estimation methods for discrete-time LTI
-systems*, IEEE TAC 2019 (``seeds/002_b3ef6f5573cb68d4.txt``): Algorithm 1, Theorem 2,
-eqs. (10), (13), (21)-(26); gain by Theorem 1 / problem (20) (:mod:`ivobs.design.hinf`).
+[Tang2019, Algorithm 1, Theorem 2, eqs. (10), (13), (21)-(26)]; the gain by [Tang2019,
+Theorem 1, problem (20)] (:mod:`ivobs.design.hinf`). The observer itself and what
+``reachability`` shares with ``zonotope`` are in :mod:`ivobs.estimators._luenberger`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from .._recursion import SplitFilter, redo_streams, within_band
+from .._recursion import SplitFilter, redo_streams
 from .._validate import as_int
-from ..design.hinf import observer_gain
 from ..model import LinearSystem
 from ..sets import Box
 from . import register
-from .base import Design, Estimator, check_size
+from ._luenberger import (
+    ObserverDesign,
+    ObserverEstimator,
+    consistent,
+    observer_bounds,
+    observer_filter,
+)
+from .base import check_size
+from .state import OnlineState, Step
 
-__all__ = ["Reachability", "ReachabilityDesign"]
+__all__ = ["Reachability", "ReachabilityDesign", "ReachabilityState", "radius_sequence"]
 
 TAIL = 1e-3
 """Default memory: the smallest ``K`` with ``‖ |(A - LC)^K| ‖∞ <= TAIL`` (see ``memory``)."""
@@ -28,21 +35,38 @@ TAIL = 1e-3
 MAX_MEMORY = 500
 """Upper limit of the default memory (slowly converging gains)."""
 
+EXACT, WINDOW = 0, 1
+"""Modes of :class:`ReachabilityState`: Algorithm 1's exact state, or the finite-memory window."""
+
 _CHUNK = 1 << 21
 """Floats per block when the data-independent radius sequence is computed (memory bound)."""
 
 
 @dataclass(frozen=True)
-class ReachabilityDesign(Design):
-    """``L``: observer gain; ``gamma``: its H∞ bound (None for a user gain); ``P``: the LMI's
-    Lyapunov matrix (None for a user gain); ``spectral_radius`` of ``A - LC``; ``memory``: ``K``,
-    the window of exactly propagated terms for time-varying bounds and missing samples."""
+class ReachabilityDesign(ObserverDesign):
+    """The observer's design (:class:`~ivobs.estimators._luenberger.ObserverDesign`) and
+    ``memory``: ``K``, the window of exactly propagated terms for time-varying bounds and
+    missing samples."""
 
-    L: np.ndarray
-    gamma: float | None
-    P: np.ndarray | None
-    spectral_radius: float
     memory: int
+
+
+@dataclass(frozen=True)
+class ReachabilityState(OnlineState):
+    """``x[k] ∈ x̂[k] ± ρ[k]``: the observer's state ``xh`` (``x̂[k]``) and what gives ``ρ[k]``.
+
+    ``mode``: :data:`EXACT` (constant bounds, no missing sample yet): Algorithm 1's
+    ``X = [M^k H0, M^k G diag r]`` and ``s = Σ_{i<k} |M^i G| r``; then :data:`WINDOW`:
+    ``Z = Φ(k, k0) Z0`` while complete (no columns once its oldest term left), and ``slots``
+    ``(n_s, nx, nx + nd)``: slot ``j`` is ``[Φ(k, j) diag ρ_j, Φ(k, j+1) G_j diag r_j]`` for the
+    last ``K`` steps ``j`` (oldest first)."""
+
+    xh: np.ndarray
+    mode: int
+    X: np.ndarray
+    s: np.ndarray
+    Z: np.ndarray
+    slots: np.ndarray
 
 
 def default_memory(M: np.ndarray, tail: float = TAIL, cap: int = MAX_MEMORY) -> int:
@@ -56,30 +80,32 @@ def default_memory(M: np.ndarray, tail: float = TAIL, cap: int = MAX_MEMORY) -> 
 
 
 @register
-class Reachability(Estimator):
-    """Reachability-based interval estimation (002 Algorithm 1, Theorem 2).
+class Reachability(ObserverEstimator):
+    """Reachability-based interval estimation [Tang2019, Algorithm 1, Theorem 2].
 
-    Observer (002 eq. 10), with ``d ∈ [c - r, c + r]`` re-centred (``G = E - L F``)::
+    Observer [Tang2019, eq. (10)], with ``d ∈ [c - r, c + r]`` re-centred (``G = E - L F``)::
 
         x̂[k+1] = A x̂[k] + B u[k] + L (y[k] - C x̂[k] - D u[k]) + G c[k],   x̂[0] = center(x0)
 
-    Its error ``e = x - x̂`` obeys ``e+ = M e + G δ``, ``M = A - L C``, ``|δ| <= r``, so (eqs.
-    21-26, Algorithm 1) ``x[k] ∈ x̂[k] ± ρ[k]`` with the exact interval hull of the reachable set
+    Its error ``e = x - x̂`` obeys ``e+ = M e + G δ``, ``M = A - L C``, ``|δ| <= r``, so
+    [Tang2019, eqs. (21)-(26), Algorithm 1] ``x[k] ∈ x̂[k] ± ρ[k]`` with the exact interval hull
+    of the reachable set
 
         ρ[k] = |M^k| h0 + Σ_{i<k} |M^i G| r[k-1-i],        h0 = radius(x0)   (H0 = diag h0)
 
-    (Property 4: ``Box(<0, X>)`` has radius ``|X| 1``; ``|·|`` elementwise). Over-approximation
-    happens only in these Box operations (002 Remark 1).
+    ([Tang2019, Property 4]: ``Box(<0, X>)`` has radius ``|X| 1``; ``|·|`` elementwise).
+    Over-approximation happens only in these Box operations [Tang2019, Remark 1].
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``
     (the paper's convention); ``y[k]`` enters the box of ``x[k+1]``.
 
-    **Gain.** By default the H∞ gain of Theorem 1 / problem (20); ``L=`` gives it explicitly (the
-    papers' comparisons "with the same gain"); ``A - LC`` must be Schur.
+    **Gain.** By default the H∞ gain of [Tang2019, Theorem 1, problem (20)]; ``L=`` gives it
+    explicitly (the papers' comparisons "with the same gain"); ``A - LC`` must be Schur.
 
     **Constant bounds, no missing sample:** Algorithm 1 exactly (``ρ`` by the running sums of
-    ``|M^i G| r``; with :meth:`run` the whole sequence is computed once, data-independent, and
-    ``x̂`` by a vectorised recursion; batches ``(B, T, n)`` too).
+    ``|M^i G| r``; with :meth:`run` the whole sequence is computed once, data-independent
+    (:func:`radius_sequence`), and ``x̂`` by the shared linear-filter kernel; batches
+    ``(B, T, n)`` too).
 
     **Time-varying or measurement-dependent bounds ``r[k]``, missing samples:** the sum is a
     convolution and, with missing components of ``y[k]`` (gain column set to zero at that step:
@@ -105,16 +131,19 @@ class Reachability(Estimator):
     Parameters
     ----------
     sys : time-invariant discrete-time :class:`~ivobs.LinearSystem`
-    x0 : Box, prior box on ``x[0]`` (002: ``x0 ∈ <p0, H0>``)
-    L : (nx, ny) observer gain, optional (default: H∞ gain, 002 Theorem 1, problem (20))
+    x0 : Box, prior box on ``x[0]`` ([Tang2019]: ``x0 ∈ <p0, H0>``)
+    L : (nx, ny) observer gain, optional (default: the H∞ gain of [Tang2019, Theorem 1,
+        problem (20)])
     memory : window ``K`` for time-varying bounds / missing samples (default: smallest ``K``
         with ``‖ |M^K| ‖∞ <= 1e-3``, at most 500)
     """
 
     name = "reachability"
     order = 20
-    summary = "H∞ observer + exact interval hull of the error's reachable set (002 Alg. 1)"
-    reference = "002 Tang et al., IEEE TAC 2019: Algorithm 1, Theorem 2, eqs. (10), (13), (21)"
+    summary = "H∞ observer + exact interval hull of the error's reachable set"
+    reference = "[Tang2019, Algorithm 1, Theorems 1-2, eqs. (10), (13), (21)-(26)]"
+    data_used = "prediction"
+    design: ReachabilityDesign
 
     def __init__(
         self,
@@ -123,9 +152,9 @@ class Reachability(Estimator):
         *,
         L: Any = None,
         memory: int | None = None,
-        **base: Any,
-    ):
-        super().__init__(sys, x0, **base)
+        **options: Any,
+    ) -> None:
+        super().__init__(sys, x0, **options)
         check_size(
             self.name,
             sys.nx,
@@ -133,206 +162,140 @@ class Reachability(Estimator):
             "reachable set, nx x (nx + nd) matrices (O(nx^3) work)",
         )
         K = None if memory is None else as_int("memory", memory, 1)
-        Lm, gamma, P, rho = observer_gain(sys, L, self.name)
-        self._mats = sys.matrices_at(0)
-        A, _, C, _, E, F = self._mats
-        self._M = A - Lm @ C
-        self._G = E - Lm @ F
-        self._absC, self._absF = np.abs(C), np.abs(F)
+        observer = self._design_observer(L)
         K = default_memory(self._M) if K is None else K
-        self.design = ReachabilityDesign(L=Lm, gamma=gamma, P=P, spectral_radius=rho, memory=K)
+        self.design = ReachabilityDesign(**observer.as_dict(), memory=K)
         assert self.x0 is not None
         self._xc = self.x0.center.copy()
         self._h0 = self.x0.radius.copy()
-        self._const: tuple[np.ndarray, np.ndarray] | None = None
-        if sys.has_constant_bounds:
-            box = sys.d_at(0)
-            self._const = (box.center, box.radius)
-
-    # -- helpers -------------------------------------------------------------------------------
-    def _bounds(self, k: int, y_k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Centre and radius of the bounds of ``d[k]`` (cached when constant)."""
-        if self._const is not None:
-            return self._const
-        box = self.sys.d_at(k, y_k)
-        return box.center, box.radius
+        self._vec: tuple[int, np.ndarray, np.ndarray, SplitFilter] | None = None
 
     # -- online --------------------------------------------------------------------------------
-    def _initial_state(self) -> dict[str, Any]:
+    def _initial_state(self) -> ReachabilityState:
         nx, nd = self.sys.nx, self.sys.nd
         if self._const is not None:  # exact Algorithm 1: X = [M^k H0, M^k G diag r]
             X = np.hstack([np.diag(self._h0), self._G * self._const[1]])
             Z = np.zeros((nx, 0))
         else:
             X, Z = np.zeros((nx, 0)), np.diag(self._h0)
-        return {
-            "xh": self._xc.copy(),
-            "mode": 0 if self._const is not None else 1,
-            "X": X,
-            "s": np.zeros(nx),  # Σ_{i<k} |M^i G| r
-            # window: Z = Φ(k, k0) Z0 while complete; slot j = [Φ(k, j) diag ρ_j,
-            # Φ(k, j+1) G_j diag r_j] for the last K steps j (oldest first)
-            "Z": Z,
-            "slots": np.zeros((0, nx, nx + nd)),
-        }
+        return ReachabilityState(
+            xh=self._xc.copy(),
+            mode=EXACT if self._const is not None else WINDOW,
+            X=X,
+            s=np.zeros(nx),
+            Z=Z,
+            slots=np.zeros((0, nx, nx + nd)),
+        )
 
-    def _window_radius(self, state: dict[str, Any]) -> np.ndarray:
+    def _radius(self, state: ReachabilityState) -> np.ndarray:
+        """``ρ[k]``: Algorithm 1's running sum while exact, else the window's bound."""
         nx = self.sys.nx
-        S = np.abs(state["slots"])
+        if state.mode == EXACT:
+            rho: np.ndarray = np.abs(state.X[:, :nx]).sum(axis=1) + state.s
+            return rho
+        S = np.abs(state.slots)
         g = S[:, :, nx:].sum(axis=2)  # (n_s, nx)
         suffix = np.cumsum(g[::-1], axis=0)[::-1]  # Σ over slots j' >= j
         cand = S[:, :, :nx].sum(axis=2) + suffix
-        if not state["Z"].shape[1]:
-            return cand.min(axis=0)
-        z = np.abs(state["Z"]).sum(axis=1) + (suffix[0] if suffix.shape[0] else 0.0)
+        if not state.Z.shape[1]:
+            window: np.ndarray = cand.min(axis=0)
+            return window
+        z: np.ndarray = np.abs(state.Z).sum(axis=1) + (suffix[0] if suffix.shape[0] else 0.0)
         return np.minimum(z, cand.min(axis=0)) if cand.shape[0] else z
 
     def _step(
-        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        nx = self.sys.nx
-        xh = state["xh"]
-        exact = state["mode"] == 0
-        if exact:
-            rho = np.abs(state["X"][:, :nx]).sum(axis=1) + state["s"]
-        else:
-            rho = self._window_radius(state)
+        self, state: ReachabilityState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[ReachabilityState]:
+        xh = state.xh
+        rho = self._radius(state)
         lo, hi = xh - rho, xh + rho
 
         A, B, C, D, E, F = self._mats
-        c, r = self._bounds(k, y_k)
+        c, r = self._bounds(state.k, y_k)
         obs = ~np.isnan(y_k)
         full = bool(obs.all())
         innov = (y_k if full else np.where(obs, y_k, 0.0)) - C @ xh - D @ u_k - F @ c
+        inconsistent = False
         if (full or obs.any()) and not consistent(
             innov, self._absC @ rho + self._absF @ r, y_k, obs
         ):
-            state["_inconsistent"] = True
+            inconsistent = True
             obs, full = np.zeros_like(obs), False
-        if full:
-            Lk, Mk, Gk = self.design.L, self._M, self._G
-            state["xh"] = A @ xh + B @ u_k + E @ c + Lk @ innov
+        Lk, Mk, Gk = self._gain_at(obs)
+        if full:  # [Tang2019, eq. (10)]
+            xh_next = A @ xh + B @ u_k + E @ c + Lk @ innov
         else:
-            Lk, Mk, Gk = gain_without(self._mats, self.design.L, obs)
-            state["xh"] = A @ xh + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
+            xh_next = A @ xh + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
 
-        if exact and full:
-            X = state["X"]
-            state["s"] = state["s"] + np.abs(X[:, nx:]).sum(axis=1)
-            state["X"] = Mk @ X
-            return lo, hi
-        if exact:  # first missing sample: box the disturbance part, continue with the window
-            state["mode"] = 1
-            state["Z"] = np.hstack([state["X"][:, :nx], np.diag(state["s"])])
-            state["X"] = np.zeros((nx, 0))
-            state["s"] = np.zeros(nx)
-        slots = np.concatenate([state["slots"], np.zeros((1, nx, nx + self.sys.nd))])
+        if state.mode == EXACT and full:  # Algorithm 1
+            nx = self.sys.nx
+            new = replace(
+                state, xh=xh_next, s=state.s + np.abs(state.X[:, nx:]).sum(axis=1), X=Mk @ state.X
+            )
+        else:
+            new = self._window_step(replace(state, xh=xh_next), rho, r, Mk, Gk)
+        return Step(new, lo, hi, inconsistent)
+
+    def _window_step(
+        self,
+        state: ReachabilityState,
+        rho: np.ndarray,
+        r: np.ndarray,
+        Mk: np.ndarray,
+        Gk: np.ndarray,
+    ) -> ReachabilityState:
+        """The finite-memory bound (class docstring): the window moves on by one step."""
+        nx = self.sys.nx
+        if state.mode == EXACT:  # first missing sample: box the disturbance part, go on windowed
+            state = replace(
+                state,
+                mode=WINDOW,
+                Z=np.hstack([state.X[:, :nx], np.diag(state.s)]),
+                X=np.zeros((nx, 0)),
+                s=np.zeros(nx),
+            )
+        slots = np.concatenate([state.slots, np.zeros((1, nx, nx + self.sys.nd))])
         slots[-1, :, :nx] = np.diag(rho)
         slots = Mk @ slots
         slots[-1, :, nx:] = Gk * r  # d[k] enters e[k+1] unpropagated
-        Z = Mk @ state["Z"]
+        Z = Mk @ state.Z
         if slots.shape[0] > self.design.memory:  # oldest slot leaves: Z loses a term
             slots = slots[1:]
             Z = np.zeros((nx, 0))
-        state["slots"], state["Z"] = slots, Z
-        return lo, hi
+        return replace(state, slots=slots, Z=Z)
 
     # -- offline, vectorised --------------------------------------------------------------------
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray] | None:
-        if not self.sys.has_constant_bounds or not y.shape[-2] or np.isnan(y).any():
+    ) -> tuple[np.ndarray, ...] | None:
+        """Algorithm 1 over a record or a batch: ``ρ`` once (:func:`radius_sequence`, kept for
+        the record length), ``x̂`` by the shared linear-filter kernel; streams of a batch with
+        an inconsistent measurement are redone by the loop."""
+        if self._const is None or not y.shape[-2] or np.isnan(y).any():
             return None  # (an empty record: the loop)
-        assert self._const is not None
         c, r = self._const
         T = y.shape[-2]
-        cached = self.__dict__.get("_vec")
-        if cached is None or cached[0] != T:
+        if self._vec is None or self._vec[0] != T:
             rho = radius_sequence(self._M, np.diag(self._h0), self._G * r, T)
             yrad = rho @ self._absC.T + self._absF @ r  # |C| ρ + |F| r: consistency of y
             filt = (
-                cached[3]
-                if cached is not None
-                else observer_filter(self._M, self._mats, self.design.L, c)
+                self._vec[3]
+                if self._vec is not None
+                else observer_filter(self._M, self._mats, self._L, c)
             )
-            cached = self.__dict__["_vec"] = (T, rho, yrad, filt)
-        _, rho, yrad, filt = cached
+            self._vec = (T, rho, yrad, filt)
+        _, rho, yrad, filt = self._vec
         out = observer_bounds(
-            self._M, self._mats, self.design.L, c, self._xc, u, y, rho, yrad, filt, streams=True
+            self._M, self._mats, self._L, c, self._xc, u, y, rho, yrad, filt, streams=True
         )
         if out is None or len(out) == 2:
             return out
         return redo_streams(self, u, y, t, *out)
 
 
-def observer_filter(
-    M: np.ndarray, mats: tuple[np.ndarray, ...], L: np.ndarray, c: np.ndarray
-) -> SplitFilter:
-    """The observer of 002 eqs. (10)/(34a) as a linear filter of ``(y, u)``: state ``x̂``
-    (``x̂+ = M x̂ + L y + (B - L D) u + (E - L F) c``), outputs ``x̂`` and the innovation
-    ``y - C x̂ - D u - F c``."""
-    _, B, C, D, E, F = mats
-    ny = C.shape[0]
-    return SplitFilter(
-        M,
-        [L, B - L @ D],
-        [np.eye(M.shape[0]), -C],
-        [[None, None], [np.eye(ny), -D]],
-        g=(E - L @ F) @ c,
-        h=[None, -(F @ c)],
-    )
-
-
-def observer_bounds(
-    M: np.ndarray,
-    mats: tuple[np.ndarray, ...],
-    L: np.ndarray,
-    c: np.ndarray,
-    x0: np.ndarray,
-    u: np.ndarray,
-    y: np.ndarray,
-    rad: np.ndarray,
-    yrad: np.ndarray,
-    filt: SplitFilter | None = None,
-    streams: bool = False,
-) -> tuple[np.ndarray, ...] | None:
-    """``x̂[k] ∓ rad[k]`` over a record ``(T, ·)`` or a batch ``(B, T, ·)``, with
-    ``x̂+ = M x̂ + (B - L D) u + L y + (E - L F) c`` (002 eqs. 10 / 34a), ``x̂[0] = x0``;
-    ``None`` when some ``|y - C x̂ - D u - F c| > yrad`` (inconsistent data: the caller falls
-    back to its loop, which reports the step). ``rad`` ``(T, nx)`` and ``yrad`` ``(T, ny)`` are
-    data-independent. One pass of :class:`ivobs._recursion.SplitFilter` (``filt``, from
-    :func:`observer_filter`): the part of ``x̂`` shared by a batch's streams (``x0``, ``c``, a
-    common input) is folded into the offsets ``shared ∓ rad``. With ``streams=True`` a batch
-    with inconsistent streams gives ``(lo, hi, bad)``, ``bad`` the streams to redo (loop)."""
-    if filt is None:
-        filt = observer_filter(M, mats, L, c)
-    nx = M.shape[0]
-    hi = np.empty((*y.shape[:-1], nx))
-    (xh, innov), shared = filt.run([y, u], x0=x0, out=[hi, None], temp=[1])
-    s_x, s_i = (None, None) if shared is None else shared
-    # consistent() allows 1e-9 (1 + |innov| + |y| + yrad) of excess: a narrower band first
-    bad = None
-    if not within_band(innov, s_i, yrad + 1e-9 * (1.0 + yrad)):
-        if s_i is not None:
-            innov = innov + s_i
-        fail = inconsistent_steps(innov, yrad, y)
-        if fail.any():
-            if not streams or y.ndim != 3:
-                return None
-            bad = fail.any(axis=-1)
-    del innov
-    lo = np.empty_like(hi)
-    if s_x is None:
-        np.subtract(xh, rad, out=lo)
-        xh += rad
-    else:
-        np.add(xh, s_x - rad, out=lo)
-        xh += s_x + rad
-    return (lo, xh) if bad is None else (lo, xh, bad)
-
-
 def radius_sequence(M: np.ndarray, H0: np.ndarray, GR: np.ndarray, T: int) -> np.ndarray:
-    """``ρ[k] = |M^k H0| 1 + Σ_{i<k} |M^i GR| 1`` for ``k < T`` (002 eq. 21), shape ``(T, nx)``.
+    """``ρ[k] = |M^k H0| 1 + Σ_{i<k} |M^i GR| 1`` for ``k < T`` [Tang2019, eq. (21)], shape
+    ``(T, nx)``.
 
     Data-independent. The powers ``M^i [H0 GR]`` are built by doubling (``M^(s..2s-1) X =
     M^s M^(0..s-1) X``), then block by block; once a block is exactly zero (the powers of a
@@ -365,36 +328,3 @@ def radius_sequence(M: np.ndarray, H0: np.ndarray, GR: np.ndarray, T: int) -> np
     rho = a
     rho[1:] += np.cumsum(b[:-1], axis=0)
     return rho
-
-
-def gain_without(
-    mats: tuple[np.ndarray, ...], L: np.ndarray, obs: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``L_k`` (columns of missing outputs zeroed), ``M_k = A - L_k C``, ``G_k = E - L_k F``."""
-    A, _, C, _, E, F = mats
-    Lk = L * obs
-    return Lk, A - Lk @ C, E - Lk @ F
-
-
-def inconsistent_steps(innov: np.ndarray, bound: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``(..., T)`` mask of the steps :func:`consistent` rejects (complete measurements)."""
-    excess = np.abs(innov) - bound
-    tol = 1e-9 * (1.0 + np.abs(innov) + np.abs(y) + bound)
-    return (excess > tol).any(axis=-1)
-
-
-def consistent(innov: np.ndarray, bound: np.ndarray, y: np.ndarray, obs: np.ndarray | None) -> bool:
-    """``|innov| <= bound`` (up to a rounding tolerance) where observed (``obs``; all if None).
-
-    ``innov = y - C x̂ - D u - F c`` and ``bound`` its radius implied by the model and the set
-    estimate (a measurement outside is inconsistent: a fault under the model's assumptions).
-    """
-    excess = np.abs(innov)
-    excess -= bound
-    if obs is not None and not obs.all():
-        excess = np.where(obs, excess, -np.inf)
-    if not (excess > 0.0).any():
-        return True
-    y0 = np.where(np.isnan(y), 0.0, y)
-    tol = 1e-9 * (1.0 + np.abs(innov) + np.abs(y0) + bound)
-    return not (excess > tol).any()

@@ -1,11 +1,7 @@
-"""Zonotopic set-membership filter with strip intersection (Alamo, Bravo & Camacho 2005).
+"""Zonotopic set-membership filter with strip intersection [Alamo2005].
 
-T. Alamo, J. M. Bravo, E. F. Camacho, *Guaranteed state estimation by zonotopes*, Automatica 41
-(2005) 1035-1043; J. M. Bravo, T. Alamo, E. F. Camacho, *Bounded error identification of
-systems with time-varying parameters*, IEEE TAC 51 (2006) (the same intersection).
-
-**Intersection with a strip (Alamo et al. 2005).** For a zonotope ``<p, H>`` and a
-strip ``S = {x : |hᵀx - t| <= σ}``, every ``λ`` gives a zonotope containing ``<p, H> ∩ S``::
+**Intersection with a strip [Alamo2005].** For a zonotope ``<p, H>`` and a strip
+``S = {x : |hᵀx - t| <= σ}``, every ``λ`` gives a zonotope containing ``<p, H> ∩ S``::
 
     X(λ) = <p + λ (t - hᵀp), [(I - λ hᵀ) H, σ λ]>
 
@@ -17,15 +13,14 @@ form ``λ* = H Hᵀ h / (hᵀ H Hᵀ h + σ²)``.
 ``<(p, c_d), blkdiag(H, R)>`` (``d = c_d + R δ``), each measured component ``i`` is the
 hyperplane ``C_i x + F_i d = y_i - D_i u`` in the joint space (the measurement noise is the
 ``F d`` part of the joint set; its half-width is only the rounding level, see below), and the
-prediction maps the
-intersected joint set with ``[A E]``. This is exact for the correlation, and reduces to the
-classical strip ``σ_i = Σ_j |F_ij| r_j`` when the noise components enter one output and not the
-state. The components of ``y_k`` are intersected one after the other.
+prediction maps the intersected joint set with ``[A E]``. This is exact for the correlation, and
+reduces to the classical strip ``σ_i = Σ_j |F_ij| r_j`` when the noise components enter one
+output and not the state. The components of ``y_k`` are intersected one after the other.
 
-**Rounding (audit A11).** ``y`` is a float64 record (possibly a float64 simulation of the
-model) and every update is rounded, so component ``i`` is intersected as the strip of half-width
-(``h = (C_i, F_i)``, ``t = y_i - D_i u``, ``w̄`` a bound on ``|(x, d)|`` from the joint box,
-``γ_n = n u / (1 - n u)``, Higham 2002 §3.1)::
+**Rounding.** ``y`` is a float64 record (possibly a float64 simulation of the model) and every
+update is rounded, so component ``i`` is intersected as the strip of half-width (``h = (C_i,
+F_i)``, ``t = y_i - D_i u``, ``w̄`` a bound on ``|(x, d)|`` from the joint box,
+``γ_n = n u / (1 - n u)`` [Higham2002, Section 3.1])::
 
     σ_i = 2 γ_{nz+nu+2} (|y_i| + |D_i| |u| + |h|ᵀ w̄) + γ_{nz+1} (|t| + |h|ᵀ |z|)
           + γ_{nz} |h|ᵀ |H_z| 1                                                        (8)
@@ -48,15 +43,15 @@ state is measured the box is therefore the measurement box whenever the predicti
 
 **Order reduction.** After the prediction the zonotope keeps at most ``order`` generators.
 The default (``reduction="parallelotope"``) absorbs the generators to remove into a basis of
-``nx`` large, independent ones (Chisci's parallelotope rule; see
+``nx`` large, independent ones (the parallelotope rule of [Chisci1998]; see
 :func:`ivobs.czonotope.reduce_generators`): at the same order it is markedly tighter than
-Combastel's box reduction (``reduction="box"``, :meth:`ivobs.Zonotope.reduce`, paper 002,
-Remark 2, which encloses the smallest generators in a box).
+the box reduction of [Combastel2015] (``reduction="box"``, :meth:`ivobs.Zonotope.reduce`,
+[Tang2019, Remark 2], which encloses the smallest generators in a box).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -74,24 +69,94 @@ from ..model import LinearSystem
 from ..sets import Box, Zonotope
 from . import register
 from .base import Design, Estimator, check_size
+from .state import OnlineState, Step
 
-__all__ = ["StripDesign", "StripEstimator"]
+__all__ = ["StripDesign", "StripEstimator", "StripState"]
 
 
 @dataclass(frozen=True)
 class StripDesign(Design):
-    """``order``: generators kept by the reduction (the zonotope *order* of papers 001/002);
-    ``reduction``: ``"parallelotope"`` or ``"box"``; ``weight``: the weight ``W`` of the box
-    reduction (identity when None)."""
+    """``order``: generators kept by the reduction (the zonotope order ``q`` of [Tang2019,
+    Remark 2]); ``reduction``: ``"parallelotope"`` or ``"box"``; ``weight``: the weight ``W`` of
+    the box reduction (identity when None)."""
 
     order: int
     reduction: str
     weight: np.ndarray | None
 
 
+@dataclass(frozen=True)
+class StripState(OnlineState):
+    """``x[k] ∈ <p, H> ⊕ box(e)``: the zonotope of ``x[k]`` predicted from ``y[0..k-1]``
+    (centre ``p``, generators ``H``) and ``e``, the box of the rounding of the last reduction,
+    kept aside until the next prediction."""
+
+    p: np.ndarray
+    H: np.ndarray
+    e: np.ndarray
+
+
+@dataclass
+class _Joint:
+    """The pair ``(x_k, d_k)`` during the measurement update of one step: in the zonotope
+    ``<z, Hz>`` up to the rounding box ``acc`` kept aside, and in the box ``[lo, hi]`` (the
+    exact enclosures of the module docstring). Local to a step, updated strip by strip."""
+
+    z: np.ndarray
+    Hz: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    acc: np.ndarray
+
+    def intersect(
+        self, h: np.ndarray, t: float, y_i: float, du: float, g_meas: float, nx: int
+    ) -> bool:
+        """Intersect with the strip ``|hᵀ(x, d) - t| <= σ`` of one measured component
+        (``t = y_i - D_i u``, ``du = |D_i| |u|``); False when it certainly misses the set
+        (inconsistent: the set is left as it was)."""
+        z, Hz, acc = self.z, self.Hz, self.acc
+        nz = z.shape[0]
+        ah = np.abs(h)
+        s = Hz.T @ h
+        e = float(t - h @ z)
+        # the half-width of the strip that certainly holds (x_k, d_k): eq. (8) of the module
+        # docstring with the rounding of y, of t, of e and of s ([Higham2002]'s γ_n bounds)
+        wmax = np.maximum(np.abs(self.lo), np.abs(self.hi))
+        sigma = (
+            g_meas * (abs(y_i) + du + ah @ wmax)
+            + gamma(nz + 1) * (abs(t) + ah @ np.abs(z))
+            + gamma(nz) * float((ah @ np.abs(Hz)).sum())
+        ) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+        # the point of <z, Hz> that is (x_k, d_k) minus the rounding: in a wider strip
+        sigma_z = (sigma + ah @ acc) * (1.0 + gamma(nz + 2))
+        s1 = float(np.abs(s).sum())
+        if abs(e) > (s1 + sigma_z) * (1.0 + gamma(s.size + 2)):
+            return False  # the strip misses the zonotope: certain
+        contracted = _propagate_hyperplane(h, t, self.lo, self.hi, sigma)
+        if contracted is None:
+            return False
+        lo, hi = contracted
+        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z)
+        lo[:nx] = np.maximum(lo[:nx], lo_j - acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF))
+        hi[:nx] = np.minimum(hi[:nx], hi_j + acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF))
+        self.lo, self.hi = lo, hi
+        den = float(s @ s) + sigma_z * sigma_z
+        if s1 == 0.0 or not den > 0.0:
+            return True
+        lam = Hz @ s / den  # the F-radius optimal λ* of [Alamo2005] (joint space)
+        al = np.abs(lam)
+        # rounding of z + λ e and of H - λ sᵀ, σ λ: added to the box aside
+        self.acc = acc + gamma(3) * (
+            np.abs(z) + al * abs(e) + np.abs(Hz).sum(axis=1) + al * (s1 + sigma_z)
+        )
+        self.z = z + lam * e
+        self.Hz = np.hstack([Hz - np.outer(lam, s), (sigma_z * lam)[:, None]])
+        return True
+
+
 @register
 class StripEstimator(Estimator):
-    """Zonotopic filter with strip intersection and F-radius gain (Alamo et al. 2005).
+    """Zonotopic filter with strip intersection and F-radius gain [Alamo2005].
 
     Uses ``u[0..k]`` and ``y[0..k]``: the box at step ``k`` is the filtered set, after the
     intersection with the strips of ``y[k]``. Needs the prior box ``x0``. Per step: ``ny``
@@ -106,20 +171,19 @@ class StripEstimator(Estimator):
         Generators kept between steps (default ``10 nx``; at least ``nx``). More generators
         give tighter boxes at a cost per step growing with ``order`` (``O(ny nx order²)``).
     reduction : ``"parallelotope"`` (default) or ``"box"``
-        Order reduction: Chisci's parallelotope absorption, or Combastel's box.
+        Order reduction: the parallelotope absorption of [Chisci1998], or the box of
+        [Combastel2015].
     weight : (nx, nx) array, optional
         Positive definite weight of the box reduction (which generators are kept).
     """
 
     name = "strip"
     order = 80
-    summary = "zonotopic set-membership filter, strip intersection (Alamo et al. 2005)"
-    reference = (
-        "T. Alamo, J. M. Bravo, E. F. Camacho, Guaranteed state estimation by zonotopes, "
-        "Automatica 41 (2005) 1035-1043"
-    )
+    summary = "zonotopic set-membership filter, strip intersection"
+    reference = "[Alamo2005]"
+    data_used = "filter"
     supports_time_varying = True
-    needs_x0 = True
+    design: StripDesign
 
     def __init__(
         self,
@@ -129,9 +193,9 @@ class StripEstimator(Estimator):
         order: int | None = None,
         reduction: str = "parallelotope",
         weight: Any = None,
-        **base: Any,
-    ):
-        super().__init__(sys, x0, **base)
+        **options: Any,
+    ) -> None:
+        super().__init__(sys, x0, **options)
         check_size(
             self.name,
             sys.nx,
@@ -153,92 +217,76 @@ class StripEstimator(Estimator):
         if W is not None and reduction != "box":
             raise IvobsError("weight: only the 'box' reduction takes a weight")
         self.design = StripDesign(order=q, reduction=reduction, weight=W)
-        self.valid_from = 0
 
-    def _initial_state(self) -> dict[str, Any]:
+    # -- online --------------------------------------------------------------------------------
+    def _initial_state(self) -> StripState:
         assert self.x0 is not None
         p, r = safe_radius(self.x0.lo, self.x0.hi)
-        # e: a box kept aside (rounding of the last reduction), x[k] ∈ <p, H> ⊕ box(e)
-        return {"p": p, "H": np.diag(r)[:, r > 0], "e": np.zeros(self.sys.nx)}
+        return StripState(p=p, H=np.diag(r)[:, r > 0], e=np.zeros(self.sys.nx))
 
     def _step(
-        self, state: dict[str, Any], k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
+        self, state: StripState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[StripState]:
+        k = state.k
         A, B, C, D, E, F = self.sys.matrices_at(k)
-        dbox = self.sys.d_at(k, y_k)
+        joint = self._joint(state, self.sys.d_at(k, y_k), E, F)
         nx = self.sys.nx
-        p, H = state["p"], state["H"]
+        au = np.abs(u_k)
+        g_meas = 2.0 * gamma(joint.z.shape[0] + u_k.shape[0] + 2)
+        inconsistent = False
+        for i in np.flatnonzero(~np.isnan(y_k)):
+            t = float(y_k[i] - D[i] @ u_k)
+            h = np.concatenate([C[i], F[i]])
+            if not joint.intersect(h, t, float(y_k[i]), np.abs(D[i]) @ au, g_meas, nx):
+                inconsistent = True
+        joint.acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
+        r = np.abs(joint.Hz[:nx]).sum(axis=1) + joint.acc[:nx]
+        lo = np.maximum(joint.z[:nx] - r, joint.lo[:nx])
+        hi = np.minimum(joint.z[:nx] + r, joint.hi[:nx])
+        hi = np.maximum(hi, lo)  # equal up to rounding when a state is pinned down exactly
+        p, H, e = self._predict(k, A, B, E, joint, u_k)
+        return Step(replace(state, p=p, H=H, e=e), lo, hi, inconsistent)
+
+    def _joint(self, state: StripState, dbox: Box, E: np.ndarray, F: np.ndarray) -> _Joint:
+        """The joint zonotope of ``(x_k, d_k)`` and its box (the rounding of ``|H| 1`` and the
+        box aside added)."""
+        nx = self.sys.nx
+        p, H = state.p, state.H
         cd, rd = safe_radius(dbox.lo, dbox.hi)
         cols = np.flatnonzero((rd > 0) & (np.any(E != 0, axis=0) | np.any(F != 0, axis=0)))
-        nd = cd.shape[0]
-        nz = nx + nd
-        # joint zonotope of (x_k, d_k)
+        nz = nx + cd.shape[0]
         z = np.concatenate([p, cd])
         Hz = np.zeros((nz, H.shape[1] + cols.size))
         Hz[:nx, : H.shape[1]] = H
         Hz[nx + cols, H.shape[1] + np.arange(cols.size)] = rd[cols]
         r0 = np.abs(H).sum(axis=1)
-        pad = gamma(H.shape[1] + 2) * (np.abs(p) + r0) + state["e"] * (1.0 + gamma(2))
+        pad = gamma(H.shape[1] + 2) * (np.abs(p) + r0) + state.e * (1.0 + gamma(2))
         box_lo = np.concatenate([p - r0 - pad, dbox.lo])
         box_hi = np.concatenate([p + r0 + pad, dbox.hi])
-        au = np.abs(u_k)
-        g_meas = 2.0 * gamma(nz + u_k.shape[0] + 2)
-        # the rounding of the updates, kept aside: (x_k, d_k) ∈ <z, Hz> ⊕ box(acc)
         acc = np.zeros(nz)
-        acc[:nx] = state["e"]
-        for i in np.flatnonzero(~np.isnan(y_k)):
-            h = np.concatenate([C[i], F[i]])
-            ah = np.abs(h)
-            t = float(y_k[i] - D[i] @ u_k)
-            s = Hz.T @ h
-            e = float(t - h @ z)
-            # the half-width of the strip that certainly holds (x_k, d_k): eq. (8) of the module
-            # docstring with the rounding of y, of t, of e and of s (Higham's γ_n bounds)
-            wmax = np.maximum(np.abs(box_lo), np.abs(box_hi))
-            sigma = (
-                g_meas * (abs(float(y_k[i])) + np.abs(D[i]) @ au + ah @ wmax)
-                + gamma(nz + 1) * (abs(t) + ah @ np.abs(z))
-                + gamma(nz) * float((ah @ np.abs(Hz)).sum())
-            ) * (1.0 + 4.0 * UNIT_ROUNDOFF)
-            # the point of <z, Hz> that is (x_k, d_k) minus the rounding: in a wider strip
-            sigma_z = (sigma + ah @ acc) * (1.0 + gamma(nz + 2))
-            s1 = float(np.abs(s).sum())
-            if abs(e) > (s1 + sigma_z) * (1.0 + gamma(s.size + 2)):
-                state["_inconsistent"] = True  # the strip misses the zonotope: certain
-                continue
-            contracted = _propagate_hyperplane(h, t, box_lo, box_hi, sigma)
-            if contracted is None:
-                state["_inconsistent"] = True
-                continue
-            box_lo, box_hi = contracted
-            lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z)
-            box_lo[:nx] = np.maximum(box_lo[:nx], lo_j - acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF))
-            box_hi[:nx] = np.minimum(box_hi[:nx], hi_j + acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF))
-            den = float(s @ s) + sigma_z * sigma_z
-            if s1 == 0.0 or not den > 0.0:
-                continue
-            lam = Hz @ s / den  # the F-radius optimal λ* of Alamo et al. (joint space)
-            al = np.abs(lam)
-            # rounding of z + λ e and of H - λ sᵀ, σ λ: added to the box aside
-            acc = acc + gamma(3) * (
-                np.abs(z) + al * abs(e) + np.abs(Hz).sum(axis=1) + al * (s1 + sigma_z)
-            )
-            z = z + lam * e
-            Hz = np.hstack([Hz - np.outer(lam, s), (sigma_z * lam)[:, None]])
-        acc *= 1.0 + gamma(y_k.shape[0] + 1)  # the rounding of the sums of acc itself
-        r = np.abs(Hz[:nx]).sum(axis=1) + acc[:nx]
-        lo = np.maximum(z[:nx] - r, box_lo[:nx])
-        hi = np.minimum(z[:nx] + r, box_hi[:nx])
-        hi = np.maximum(hi, lo)  # equal up to rounding when a state is pinned down exactly
-        # prediction with [A E] on the joint set, then order reduction; the box covers the
-        # rounding of M z + B u, of M H and of the plant's own float64 arithmetic, and the
-        # image of the box aside
+        acc[:nx] = state.e
+        return _Joint(z=z, Hz=Hz, lo=box_lo, hi=box_hi, acc=acc)
+
+    def _predict(
+        self,
+        k: int,
+        A: np.ndarray,
+        B: np.ndarray,
+        E: np.ndarray,
+        joint: _Joint,
+        u_k: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(p, H, e)`` of ``x[k+1]``: the joint set mapped by ``[A E]``, then reduced. A box
+        covers the rounding of ``M z + B u``, of ``M H`` and of the plant's own float64
+        arithmetic, and the image of the box aside."""
+        nx = self.sys.nx
+        z, Hz, acc = joint.z, joint.Hz, joint.acc
         M = np.hstack([A, E])
         aM = np.abs(M)
         p_next, H_next = M @ z + B @ u_k, M @ Hz
-        err = 2.0 * gamma(nz + u_k.shape[0] + 1) * (
-            aM @ (np.abs(z) + np.abs(Hz).sum(axis=1) + acc) + np.abs(B) @ au
-        ) + (aM @ acc) * (1.0 + gamma(nz + 1))
+        err = 2.0 * gamma(z.shape[0] + u_k.shape[0] + 1) * (
+            aM @ (np.abs(z) + np.abs(Hz).sum(axis=1) + acc) + np.abs(B) @ np.abs(u_k)
+        ) + (aM @ acc) * (1.0 + gamma(z.shape[0] + 1))
         H_next = np.hstack([H_next, box_generators(err)])
         H_next = H_next[:, np.any(H_next != 0, axis=0)]
         self._check_overflow(k + 1, p_next, H_next)
@@ -254,8 +302,7 @@ class StripEstimator(Estimator):
             out = reduce_generators(p_next, H_next, none, np.zeros(0), self.design.order, True)
             H_next, e_next = out[1], out[4]
         # C order, as after a state() / restore() round trip (BLAS results depend on layout)
-        state["p"], state["H"], state["e"] = p_next, np.ascontiguousarray(H_next), e_next
-        return lo, hi
+        return p_next, np.ascontiguousarray(H_next), e_next
 
 
 def _section_hull(

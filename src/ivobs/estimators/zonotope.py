@@ -1,8 +1,5 @@
-"""Zonotope-based set-membership estimation (paper 002, Section IV, Proposition 1; from [3],
-Combastel 2015), with the reduction operator of 002 Remark 2.
-
-Paper: Tang, Wang, Wang, Raïssi, Shen, *Interval estimation methods for discrete-time LTI
-systems*, IEEE TAC 2019 (``seeds/002_b3ef6f5573cb68d4.txt``), eqs. (33)-(35), Remark 2.
+"""Zonotope-based set-membership estimation [Tang2019, Section IV, Proposition 1, eqs. (33)-(35)]
+(the zonotopic observer of [Combastel2015]), with the reduction operator of [Tang2019, Remark 2].
 """
 
 from __future__ import annotations
@@ -13,14 +10,13 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
-from ..design.hinf import observer_gain
 from ..errors import DesignError, IvobsError
 from ..linalg import spectral_radius
 from ..model import LinearSystem
 from ..sets import Box, Zonotope
 from . import register
-from .base import Design, Estimator, check_size
-from .reachability import consistent, gain_without, observer_bounds
+from ._luenberger import ObserverDesign, ObserverEstimator, consistent, observer_bounds
+from .base import check_size
 from .state import OnlineState, Step
 
 __all__ = ["ZonotopeDesign", "ZonotopeEstimator", "ZonotopeState"]
@@ -30,48 +26,47 @@ ORDER_PER_STATE = 10
 
 
 @dataclass(frozen=True)
-class ZonotopeDesign(Design):
-    """``L``: observer gain; ``gamma``, ``P``: H∞ design (None for a user gain);
-    ``spectral_radius`` of ``A - LC``; ``order``: ``q`` of ``↓_{q,W}``; ``weight``: ``W``."""
+class ZonotopeDesign(ObserverDesign):
+    """The observer's design (:class:`~ivobs.estimators._luenberger.ObserverDesign`);
+    ``order``: ``q`` of ``↓_{q,W}``; ``weight``: ``W`` [Tang2019, Remark 2]."""
 
-    L: np.ndarray
-    gamma: float | None
-    P: np.ndarray | None
-    spectral_radius: float
     order: int
     weight: np.ndarray | None
 
 
 @dataclass(frozen=True)
 class ZonotopeState(OnlineState):
-    """``x[k] ∈ <p, H>``: centre ``p`` (nx,) and generators ``H`` (nx, ·) of eq. (34)."""
+    """``x[k] ∈ <p, H>``: centre ``p`` (nx,) and generators ``H`` (nx, ·) of [Tang2019,
+    eq. (34)]."""
 
     p: np.ndarray
     H: np.ndarray
 
 
 @register
-class ZonotopeEstimator(Estimator):
-    """Zonotope set-membership estimator (002 Proposition 1, eq. 34; reduction of Remark 2).
+class ZonotopeEstimator(ObserverEstimator):
+    """Zonotope set-membership estimator [Tang2019, Proposition 1, eq. (34)], with the
+    reduction of [Tang2019, Remark 2].
 
     With ``y = C x + D u + F d``, adding ``L (y - C x - D u - F d) = 0`` to the state equation
-    (002 eq. 33) and re-centring ``d ∈ [c - r, c + r]`` (``d = c + diag(r) b``, ``|b| <= 1``)::
+    [Tang2019, eq. (33)] and re-centring ``d ∈ [c - r, c + r]`` (``d = c + diag(r) b``,
+    ``|b| <= 1``)::
 
         p[k+1] = (A - LC) p[k] + B u[k] + L (y[k] - D u[k]) + (E - LF) c[k]          (34a)
         H[k+1] = [ (A - LC) ↓_{q,W} H[k],  (E - LF) diag(r[k]) ]                      (34b)
 
-    ``x[0] ∈ <p0, H0>`` with ``p0 = center(x0)``, ``H0 = diag(radius(x0))``. The paper's (34b)
+    ``x[0] ∈ <p0, H0>`` with ``p0 = center(x0)``, ``H0 = diag(radius(x0))``. [Tang2019]'s (34b)
     writes ``E, -LF`` without the bounds' scaling (it takes ``W = <0, Dw>``, ``V = <0, Dv>``);
     the generators must be scaled by the bounds, as above. The box of ``x[k]`` is the interval
-    hull ``p[k] ± |H[k]| 1`` (eq. 35, Property 4). ``↓_{q,W}`` sorts generators by ``hᵀ W h``,
-    keeps the ``q - nx`` largest and encloses the rest in a box (:meth:`ivobs.Zonotope.reduce`),
-    so ``H`` has at most ``q + nd`` columns.
+    hull ``p[k] ± |H[k]| 1`` [Tang2019, eq. (35), Property 4]. ``↓_{q,W}`` sorts generators by
+    ``hᵀ W h``, keeps the ``q - nx`` largest and encloses the rest in a box
+    (:meth:`ivobs.Zonotope.reduce`), so ``H`` has at most ``q + nd`` columns.
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``.
 
-    **Gain.** By default the H∞ gain of 002 Theorem 1 / problem (20); ``L=`` explicitly (e.g.
-    the paper's ``L1`` for its Theorem 6: the reachability box is inside this one with the same
-    gain); ``A - LC`` must be Schur.
+    **Gain.** By default the H∞ gain of [Tang2019, Theorem 1, problem (20)]; ``L=`` explicitly
+    (e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the reachability box is inside this one
+    with the same gain); ``A - LC`` must be Schur.
 
     **Missing samples** (NaN components of ``y[k]``): the gain columns of the missing outputs are
     zero at that step, ``L_k``, and (34) uses ``A - L_k C``, ``E - L_k F``: the set is still an
@@ -93,14 +88,16 @@ class ZonotopeEstimator(Estimator):
         on, while the cost per step grows with ``q``). ``q = nx`` boxes the whole set at every
         step, i.e. propagates boxes by ``|A - LC|``, which diverges when ``|A - LC|`` is not
         Schur (the servo motor with the paper's ``L1``): that case raises ``DesignError``.
-        Larger ``q`` approaches Algorithm 1 (002 Theorem 6: it is never tighter)
+        Larger ``q`` approaches Algorithm 1 ([Tang2019, Theorem 6]: it is never tighter)
     weight : (nx, nx) positive definite ``W`` of the reduction (default identity)
     """
 
     name = "zonotope"
     order = 30
-    summary = "zonotope set-membership observer with order reduction (002 Prop. 1, eq. 34)"
-    reference = "002 Tang et al., IEEE TAC 2019: Proposition 1, eqs. (33)-(35), Remark 2; [3]"
+    summary = "zonotope set-membership observer with order reduction"
+    reference = "[Tang2019, Proposition 1, eqs. (33)-(35), Remark 2]; [Combastel2015]"
+    data_used = "prediction"
+    design: ZonotopeDesign
 
     def __init__(
         self,
@@ -110,9 +107,9 @@ class ZonotopeEstimator(Estimator):
         L: Any = None,
         order: int | None = None,
         weight: Any = None,
-        **base: Any,
-    ):
-        super().__init__(sys, x0, **base)
+        **options: Any,
+    ) -> None:
+        super().__init__(sys, x0, **options)
         nx = sys.nx
         check_size(
             self.name,
@@ -121,41 +118,30 @@ class ZonotopeEstimator(Estimator):
         )
         q = ORDER_PER_STATE * nx if order is None else as_int("order", order)
         if q < nx:
-            raise IvobsError(f"order: expected q >= nx = {nx} generators (002 Remark 2), got {q}")
+            raise IvobsError(
+                f"order: expected q >= nx = {nx} generators ([Tang2019, Remark 2]), got {q}"
+            )
         W = None
         if weight is not None:
             W = as_matrix("weight", weight, nx, nx)
             if not np.allclose(W, W.T) or np.linalg.eigvalsh(0.5 * (W + W.T)).min() <= 0:
                 raise IvobsError("weight: expected a symmetric positive definite matrix W")
-        Lm, gamma, P, rho = observer_gain(sys, L, self.name)
-        self._mats = sys.matrices_at(0)
-        A, _, C, _, E, F = self._mats
-        self._M = A - Lm @ C
-        self._G = E - Lm @ F
+        observer = self._design_observer(L)
         if q == nx and spectral_radius(np.abs(self._M)) >= 1.0:
             raise DesignError(
                 f"order: q = nx = {nx} boxes the set at every step, so the boxes grow like "
                 f"|A - LC|^k, whose spectral radius is {spectral_radius(np.abs(self._M)):.4g} "
                 ">= 1 (they would diverge); use order > nx (default 10 nx)"
             )
-        self.design = ZonotopeDesign(L=Lm, gamma=gamma, P=P, spectral_radius=rho, order=q, weight=W)
+        self.design = ZonotopeDesign(**observer.as_dict(), order=q, weight=W)
         assert self.x0 is not None
         self._p0 = self.x0.center.copy()
         self._H0 = np.diag(self.x0.radius)
-        self._absF = np.abs(F)
-        self._const: tuple[np.ndarray, np.ndarray] | None = None
-        if sys.has_constant_bounds:
-            box = sys.d_at(0)
-            self._const = (box.center, box.radius)
 
     def _reduce(self, H: np.ndarray) -> np.ndarray:
+        """``↓_{q,W} H`` [Tang2019, Remark 2]."""
         z = Zonotope._trusted(np.zeros(H.shape[0]), H)
         return z.reduce(self.design.order, self.design.weight).G
-
-    def _gain_at(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if obs.all():
-            return self.design.L, self._M, self._G
-        return gain_without(self._mats, self.design.L, obs)
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ZonotopeState:
@@ -168,11 +154,7 @@ class ZonotopeEstimator(Estimator):
         rad = np.abs(H).sum(axis=1)
         lo, hi = p - rad, p + rad
         A, B, C, D, E, F = self._mats
-        if self._const is not None:
-            c, r = self._const
-        else:
-            box = self.sys.d_at(state.k, y_k)
-            c, r = box.center, box.radius
+        c, r = self._bounds(state.k, y_k)
         obs = ~np.isnan(y_k)
         innov = np.where(obs, y_k, 0.0) - C @ p - D @ u_k - F @ c
         inconsistent = False
@@ -189,20 +171,19 @@ class ZonotopeEstimator(Estimator):
     # -- offline, vectorised --------------------------------------------------------------------
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray] | None:
-        if not self.sys.has_constant_bounds or np.isnan(y).any():
+    ) -> tuple[np.ndarray, ...] | None:
+        if self._const is None or np.isnan(y).any():
             return None
-        assert self._const is not None
         c, r = self._const
         rad, crad = self._generator_radii(self._mats[2], self._G * r, y.shape[-2])
         yrad = crad + self._absF @ r  # |C H| 1 + |F| r: consistency of y
-        return observer_bounds(self._M, self._mats, self.design.L, c, self._p0, u, y, rad, yrad)
+        return observer_bounds(self._M, self._mats, self._L, c, self._p0, u, y, rad, yrad)
 
     def _generator_radii(
         self, C: np.ndarray, GR: np.ndarray, T: int
     ) -> tuple[np.ndarray, np.ndarray]:
         """``|H[k]| 1`` and ``|C H[k]| 1`` for ``k < T``: data-independent for constant bounds
-        (eq. 34b). A fixed point ``H[k+1] = H[k]`` ends the loop early."""
+        ([Tang2019, eq. (34b)]). A fixed point ``H[k+1] = H[k]`` ends the loop early."""
         rad = np.empty((T, self.sys.nx))
         crad = np.empty((T, self.sys.ny))
         H = self._H0.copy()
