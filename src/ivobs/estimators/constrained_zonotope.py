@@ -57,6 +57,9 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int
+from ..errors import IvobsError
+from ..model import LinearSystem
+from ..sets import Box
 from ..sets.czonotope import (
     EMPTY_TOL,
     UNIT_ROUNDOFF,
@@ -71,9 +74,6 @@ from ..sets.czonotope import (
     reduce_generators,
     safe_radius,
 )
-from ..errors import IvobsError
-from ..model import LinearSystem
-from ..sets import Box
 from . import register
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step

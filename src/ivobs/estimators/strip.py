@@ -57,6 +57,9 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
+from ..errors import IvobsError
+from ..model import LinearSystem
+from ..sets import Box, Zonotope
 from ..sets.czonotope import (
     UNIT_ROUNDOFF,
     box_generators,
@@ -64,9 +67,6 @@ from ..sets.czonotope import (
     reduce_generators,
     safe_radius,
 )
-from ..errors import IvobsError
-from ..model import LinearSystem
-from ..sets import Box, Zonotope
 from . import register
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
