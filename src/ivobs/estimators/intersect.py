@@ -103,7 +103,7 @@ class Intersect(Estimator):
     name = "intersect"
     order = 110
     summary = "intersection of several guaranteed estimates (and the measurement strip)"
-    reference = "intersection of guaranteed enclosures; strip by Lemma 1 (003/004)"
+    reference = "intersection of guaranteed enclosures; output strips by [Efimov2013, Lemma 1]"
     supports_continuous = True
     supports_time_varying = True
     needs_x0 = False
