@@ -100,7 +100,7 @@ def test_bad_sparse_tables_are_rejected_with_the_key(table, message):
 def test_sparse_observers_contain_the_state_and_paths_agree(method, heat300):
     sc, x, y = heat300
     est = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=sc.reference["L"])
-    assert est._sparse and sp.issparse(est.design.D) and est.design.spectral_radius < 1
+    assert est.operators.sparse and sp.issparse(est.design.D) and est.design.spectral_radius < 1
     vec = est.run(sc.u, y, vectorize=True)
     loop = est.run(sc.u, y, vectorize=False)
     assert_contains(vec, x)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import sys
 import time
@@ -208,11 +209,13 @@ def _check_state(data: dict[str, Any], mon: Any, name: str) -> None:
     if not isinstance(est, dict) or not isinstance(est.get("state"), dict):
         got = est.get("state") if isinstance(est, dict) else est
         raise _malformed(name, "monitor.estimator.state", f"expected a table, got {got!r}"[:200])
-    ref = mon.estimator._initial_state()
+    ref = mon.estimator.initial_state()
+    if not isinstance(ref, dict):  # a typed state: its fields
+        ref = {f.name: getattr(ref, f.name) for f in dataclasses.fields(ref)}
     for key, val in est["state"].items():
         where = f"monitor.estimator.state.{key}"
         if isinstance(ref.get(key), np.ndarray):
-            if not isinstance(val, dict) or set(val) != {"array", "shape"}:
+            if not isinstance(val, dict) or set(val) - {"dtype"} != {"array", "shape"}:
                 raise _malformed(name, where, "expected a saved array {array, shape}")
             shape = val["shape"]
             if not isinstance(shape, list) or len(shape) != ref[key].ndim:
