@@ -284,8 +284,9 @@ def test_batches_equal_single_runs(method):
     assert res.contains(X).all()
     for b in range(3):
         single = est.run(trs[b].u[:200], trs[b].y[:200], vectorize=False)
-        # the loop also carries each step's rounding bound in its state (interval.py,
-        # "Rounding"): up to ~2e-10 here (|x| ~ 6, kappa = 2000), a fraction of the margin
+        # the loop also carries each step's rounding bound in its state
+        # (ivobs.estimators.interval.rounding): up to ~2e-10 here (|x| ~ 6, kappa = 2000), a
+        # fraction of the margin
         np.testing.assert_allclose(res.upper[b], single.upper, rtol=1e-10, atol=1e-9)
         np.testing.assert_allclose(res.lower[b], single.lower, rtol=1e-10, atol=1e-9)
     Y[1, 50] = np.nan  # a missing sample: the loop, per stream

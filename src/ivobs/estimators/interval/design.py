@@ -128,7 +128,9 @@ def check_design_size(sys: LinearSystem, who: str, step: str) -> None:
 def sparse_radius(P: Any) -> float:
     """Spectral radius of a sparse nonnegative matrix: ARPACK (Perron root, the largest in
     modulus), or the smaller of the largest row and column sums (an upper bound, Perron–
-    Frobenius) when ARPACK does not converge. Small matrices: dense eigenvalues."""
+    Frobenius) when ARPACK does not converge. Small matrices: dense eigenvalues. ARPACK starts
+    from the positive vector of ones (not a random one), so that the same design gives the same
+    number (it is part of the design's fingerprint, which a saved state must match)."""
     n = P.shape[0]
     if n <= MAX_DENSE_DESIGN:
         return spectral_radius(P.toarray())
@@ -136,7 +138,8 @@ def sparse_radius(P: Any) -> float:
 
     bound = float(min(abs(P).sum(axis=1).max(), abs(P).sum(axis=0).max()))
     try:
-        val = eigs(P, k=1, which="LM", tol=1e-8, ncv=min(n - 1, 40), return_eigenvectors=False)
+        val = eigs(P, k=1, which="LM", tol=1e-8, ncv=min(n - 1, 40), v0=np.ones(n),
+                   return_eigenvectors=False)  # fmt: skip
     except ArpackNoConvergence:
         return bound
     return min(float(np.abs(val[0])), bound)
