@@ -10,7 +10,7 @@ user gains of ``scipy.sparse`` systems are checked with sparse algebra.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -229,15 +229,7 @@ def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalD
             gain = "lmi+width"
     else:
         gain = "given"
-    L, D, rho = given_gain(sys, L, who, nonnegative=True)
-    return IntervalDesign(
-        L=L,
-        D=D,
-        spectral_radius=rho,
-        gain=gain,
-        steady_width=_steady(sys, D, L),
-        missing_radius=_missing_radius(sys, L),
-    )
+    return _checked(IntervalDesign, sys, L, gain, who, nonnegative=True)
 
 
 def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
@@ -271,13 +263,22 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
                 L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=False)
     else:
         gain = "given"
-    L, D, rho = given_gain(sys, L, who, nonnegative=False)
-    return SplitDesign(
+    return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
+
+
+D = TypeVar("D", IntervalDesign, SplitDesign)
+
+
+def _checked(kind: type[D], sys: LinearSystem, L: Any, gain: str, who: str, nonnegative: bool) -> D:
+    """The design of a gain (:func:`given_gain`) with its steady-state width and the growth
+    rates during single-output gaps."""
+    L, D_, rho = given_gain(sys, L, who, nonnegative)
+    return kind(
         L=L,
-        D=D,
+        D=D_,
         spectral_radius=rho,
         gain=gain,
-        steady_width=_steady(sys, D, L),
+        steady_width=_steady(sys, D_, L),
         missing_radius=_missing_radius(sys, L),
     )
 

@@ -79,8 +79,30 @@ class CooperativeObserver(Estimator, Generic[S]):
         return s
 
 
+class _GainObserver(CooperativeObserver[S]):
+    """``interval`` and ``interval-split``: ``S = I``, the design is the gain ``L`` (given, or
+    designed as ``gain=`` says)."""
+
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None = None,
+        *,
+        L: Any = None,
+        gain: str = "width",
+        **options: Any,
+    ):
+        super().__init__(sys, x0, **options)
+        design = self._design(L, gain)
+        self._build(design.L, design.D)
+        self.design: IntervalDesign | SplitDesign = design
+
+    def _design(self, L: Any, gain: str) -> IntervalDesign | SplitDesign:
+        raise NotImplementedError
+
+
 @register
-class IntervalObserver(CooperativeObserver[IntervalState]):
+class IntervalObserver(_GainObserver[IntervalState]):
     """Interval observer with ``A − LC`` nonnegative and Schur ([Tang2019, eqs. (36)–(37),
     Theorem 4]; [Efimov2013, eq. (3), Theorem 1]; bounds from measurements as in
     [Efimov2013, Remark 1])::
@@ -114,23 +136,12 @@ class IntervalObserver(CooperativeObserver[IntervalState]):
     reference = "[Tang2019, Section V.A, eqs. (36)-(41)]; [Efimov2013, Theorem 1, eq. (3)]"
     state_type = IntervalState
 
-    def __init__(
-        self,
-        sys: LinearSystem,
-        x0: Box | None = None,
-        *,
-        L: Any = None,
-        gain: str = "width",
-        **options: Any,
-    ):
-        super().__init__(sys, x0, **options)
-        design = interval_design(sys, L, gain, self.name)
-        self._build(design.L, design.D)
-        self.design: IntervalDesign = design
+    def _design(self, L: Any, gain: str) -> IntervalDesign:
+        return interval_design(self.sys, L, gain, self.name)
 
 
 @register
-class SplitIntervalObserver(CooperativeObserver[SplitState]):
+class SplitIntervalObserver(_GainObserver[SplitState]):
     """Interval observer in the original coordinates with ``D = A − LC = D⁺ − D⁻`` of any sign
     ([Efimov2013, Theorem 3, eq. (5)]; error system (6); Corollary 1)::
 
@@ -161,19 +172,8 @@ class SplitIntervalObserver(CooperativeObserver[SplitState]):
     reference = "[Efimov2013, Theorem 3, eqs. (5)-(8), Corollary 1]"
     state_type = SplitState
 
-    def __init__(
-        self,
-        sys: LinearSystem,
-        x0: Box | None = None,
-        *,
-        L: Any = None,
-        gain: str = "width",
-        **options: Any,
-    ):
-        super().__init__(sys, x0, **options)
-        design = split_design(sys, L, gain, self.name)
-        self._build(design.L, design.D)
-        self.design: SplitDesign = design
+    def _design(self, L: Any, gain: str) -> SplitDesign:
+        return split_design(self.sys, L, gain, self.name)
 
 
 @register

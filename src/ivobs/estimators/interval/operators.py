@@ -283,12 +283,7 @@ class SplitOperators:
         fd = self.f_mid(dbox)
         yc += fd[0]
         yr += fd[1]
-        dev = np.abs(y - yc)
-        dev -= yr
-        if not (dev > 0.0).any():  # NaN (missing) compares False
-            return True
-        tol = self.ctol * (1.0 + np.abs(y) + 2.0 * yr)
-        return not bool(np.any((dev > tol) & obs))
+        return self._within(y, yc, yr, obs)
 
     def _consistent_stacked(
         self, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, y: np.ndarray, dbox: Box
@@ -302,11 +297,19 @@ class SplitOperators:
         if u.shape[0]:
             yc += self.Du @ u
         yr = p[self.ny :] + fd[1]
+        return self._within(y, yc, yr, None)
+
+    def _within(
+        self, y: np.ndarray, yc: np.ndarray, yr: np.ndarray, obs: np.ndarray | None
+    ) -> bool:
+        """``|y − yc| <= yr`` up to round-off on the observed components (``obs``; None: all)."""
         dev = np.abs(y - yc)
-        if not (dev > yr).any():
+        dev -= yr
+        if not (dev > 0.0).any():  # NaN (missing) compares False
             return True
         tol = self.ctol * (1.0 + np.abs(y) + 2.0 * yr)
-        return not bool(np.any(dev - yr > tol))
+        bad = dev > tol
+        return not bool(np.any(bad if obs is None else bad & obs))
 
     def f_mid(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
         """Centre and radius of ``F d`` over the bounds."""
