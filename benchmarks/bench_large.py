@@ -70,7 +70,7 @@ def main(nx: int = 2000, T: int = 2000, repeat: int = 5) -> None:
         res = ests[name].run(sc.u, y)
         assert res.contains(x).all() and not res.inconsistent.any(), name
         rho = ests[name].design.spectral_radius
-        nnz = ests[name]._matrices(np.ones(s.ny, bool)).S2.nnz
+        nnz = ests[name].operators.full.S2.nnz
         print(
             f"{name}: design (sparse checks, spectral radius {rho:.6f}) "
             f"{time.perf_counter() - t0:.2f} s, nnz of the stacked matrix {nnz}"
@@ -86,14 +86,15 @@ def main(nx: int = 2000, T: int = 2000, repeat: int = 5) -> None:
         keep("A @ x", cpu_per_call(lambda: A @ xv, 2000))
         keep("A @ x (compiled kernel)", cpu_per_call(lambda: csr_accumulate(A, xv, acc), 2000))
         for name, est in ests.items():
-            m = est._matrices(np.ones(s.ny, bool))
+            m = est.operators.full
             filt = LinearFilter(
                 m.S2,
                 [np.vstack([m.Lz, m.Lz]), np.vstack([m.Bz, m.Bz])],
                 [],
-                g=est._input_bounds(m, np.ones(s.ny, bool), s.d),
+                g=est.operators.full_inputs,
             )
-            z0 = est._initial_state()["z"]
+            lo0, hi0 = est.operators.initial_bounds()
+            z0 = np.concatenate([hi0, lo0])
             keep(
                 f"{name}: recursion",
                 cpu_per_call(lambda f=filt, z=z0: f.states([y, sc.u], x0=z), 1) / T,

@@ -22,8 +22,11 @@ def _servo() -> tuple[ivobs.scenarios.Scenario, ivobs.Trajectory]:
 def test_run_with_records_of_different_lengths_names_both():
     sc, tr = _servo()
     est = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0)
-    with pytest.raises(IvobsError, match=r"u and y: expected the same number of samples.*"
-                                         r"got u: 50, y: 40"):
+    with pytest.raises(
+        IvobsError,
+        match=r"u and y: expected the same number of samples.*"
+        r"got u: 50, y: 40",
+    ):
         est.run(tr.u[:50], tr.y[:40])
     with pytest.raises(IvobsError, match=r"u and y: .* got u: 40, y: 50"):
         est.run(tr.u[:40], tr.y[:50])
@@ -48,8 +51,12 @@ def _pm(w: object, v: object) -> LinearSystem:
         ([0.1] * 3, [0.1, np.nan], r"^v: expected finite numbers"),
         ([0.1] * 3, [0.1, np.inf], r"^v: expected finite numbers"),
         ([0.1, -0.1, 0.1], [0.1, 0.1], r"^w: expected nonnegative bounds"),
-        (Box.symmetric([0.1, 0.1]), [0.1, 0.1], r"^w: expected a Box of dimension 3 .*got "
-                                                r"dimension 2"),
+        (
+            Box.symmetric([0.1, 0.1]),
+            [0.1, 0.1],
+            r"^w: expected a Box of dimension 3 .*got "
+            r"dimension 2",
+        ),
     ],
 )
 def test_process_measurement_bounds_name_w_or_v(w, v, pattern):
@@ -61,28 +68,41 @@ def test_process_measurement_accepts_vectors_and_boxes():
     sys = _pm([0.1, 0.2, 0.3], Box([-0.1, -0.2], [0.1, 0.2]))
     assert sys.nd == 5
     np.testing.assert_array_equal(sys.d.hi, [0.1, 0.2, 0.3, 0.1, 0.2])
-    np.testing.assert_array_equal(_pm(np.array([[0.1, 0.2, 0.3]]), [0.1, 0.1]).d.lo[:3],
-                                  [-0.1, -0.2, -0.3])
+    np.testing.assert_array_equal(
+        _pm(np.array([[0.1, 0.2, 0.3]]), [0.1, 0.1]).d.lo[:3], [-0.1, -0.2, -0.3]
+    )
 
 
 # -- 3. the shape the user passed; nx >= 1 ----------------------------------------------------
 def test_a_reports_the_shape_passed_and_needs_a_state():
     with pytest.raises(IvobsError, match=r"^A: expected a square matrix .* got shape \(3,\)$"):
         LinearSystem(A=np.ones(3), C=[[1.0]])
-    with pytest.raises(IvobsError, match=r"^A: expected a square matrix with at least one row, "
-                                         r"got shape \(0, 0\)$"):
+    with pytest.raises(
+        IvobsError,
+        match=r"^A: expected a square matrix with at least one row, "
+        r"got shape \(0, 0\)$",
+    ):
         LinearSystem(A=np.zeros((0, 0)), C=np.zeros((1, 0)))
     # other matrices: the shape passed, and how a 1-D array was read
-    with pytest.raises(IvobsError, match=r"^C: expected shape \(any, 2\), got \(3,\) \(read as "
-                                         r"a row \(1, 3\)\)$"):
+    with pytest.raises(
+        IvobsError,
+        match=r"^C: expected shape \(any, 2\), got \(3,\) \(read as "
+        r"a row \(1, 3\)\)$",
+    ):
         LinearSystem(np.eye(2), C=np.ones(3))
 
 
 # -- 4. an unobservable pair is a design impossibility for every method ------------------------
 @pytest.mark.parametrize("method", ["fixed-time", "kkl", "interval-transformed"])
 def test_unobservable_pair_is_a_design_error(method):
-    sys = LinearSystem([[0.5, 0], [0, 0.7]], None, [[1.0, 0.0]], E=np.eye(2),
-                       F=np.zeros((1, 2)), d=Box.symmetric([1, 1]))
+    sys = LinearSystem(
+        [[0.5, 0], [0, 0.7]],
+        None,
+        [[1.0, 0.0]],
+        E=np.eye(2),
+        F=np.zeros((1, 2)),
+        d=Box.symmetric([1, 1]),
+    )
     with pytest.raises(DesignError, match="not observable"):
         ivobs.make_estimator(method, sys, x0=Box([-1, -1], [1, 1]))
 
@@ -116,14 +136,18 @@ def test_restore_rejects_a_state_that_is_not_a_dict():
 @pytest.mark.parametrize(
     ("key", "value", "pattern"),
     [
-        ("lo", _arr([0.0, 0.0]), r"state: entry 'lo': expected an array of shape \(3,\), got "
-                                 r"\(2,\)"),
+        (
+            "lo",
+            _arr([0.0, 0.0]),
+            r"state: entry 'lo': expected an array of shape \(3,\), got "
+            r"\(2,\)",
+        ),
         ("lo", _arr([np.nan, 0.0, 0.0]), r"state: entry 'lo': expected finite numbers, got nan"),
         ("lo", _arr([5.0, 5.0, 5.0]), r"state: entries 'lo' and 'hi': expected lower <= upper"),
         ("hi", 3.0, r"state: entry 'hi': expected a saved array, got float"),
         ("k", -2, r"state: entry 'k': expected the step count \(an integer >= 0\), got -2"),
         ("k", "3", r"state: entry 'k': expected the step count"),
-        ("_scale", float("nan"), r"state: entry '_scale': expected the data scale"),
+        ("scale", float("nan"), r"state: entry 'scale': expected the data scale"),
     ],
 )
 def test_restore_names_the_corrupted_entry(key, value, pattern):
@@ -133,8 +157,9 @@ def test_restore_names_the_corrupted_entry(key, value, pattern):
         other.restore(_with(est.state(), key, value))
 
 
-@pytest.mark.parametrize("method", ["zonotope", "reachability", "fixed-time", "kkl", "strip",
-                                    "constrained-zonotope"])
+@pytest.mark.parametrize(
+    "method", ["zonotope", "reachability", "fixed-time", "kkl", "strip", "constrained-zonotope"]
+)
 def test_restore_checks_arrays_of_every_method(method):
     est = _stepped(method)
     saved = json.loads(json.dumps(est.state()))
@@ -143,7 +168,8 @@ def test_restore_checks_arrays_of_every_method(method):
     other.restore(saved)  # the genuine state restores
     for key in arrays:
         a = np.array(saved["state"][key]["array"], dtype=float).reshape(
-            saved["state"][key]["shape"])
+            saved["state"][key]["shape"]
+        )
         with pytest.raises(IvobsError, match=rf"state: entry '{key}': expected an array of shape"):
             other.restore(_with(saved, key, _arr(a[..., None])))  # one axis too many
         if a.size:
@@ -167,22 +193,30 @@ def test_restore_of_a_scalar_entry_checks_its_type():
 # -- 6. kkl on a stack of matrices shorter than the record ---------------------------------------
 def test_kkl_reports_a_stack_shorter_than_the_record():
     A = np.stack([np.array([[0.9, 0.1], [0.0, 0.8]])] * 2)
-    sys = LinearSystem(A, None, [[1.0, 0.0]], E=0.1 * np.eye(2), F=np.zeros((1, 2)),
-                       d=Box.symmetric([1.0, 1.0]))
+    sys = LinearSystem(
+        A, None, [[1.0, 0.0]], E=0.1 * np.eye(2), F=np.zeros((1, 2)), d=Box.symmetric([1.0, 1.0])
+    )
     y = np.zeros((5, 1))
     for method in ("kkl", "exact"):
         with pytest.raises(IvobsError, match=r"^A: step 2 is beyond the 2 stacked matrices"):
             ivobs.make_estimator(method, sys, x0=Box([-1, -1], [1, 1])).run(None, y)
     with pytest.raises(IvobsError, match=r"^A: step 1 is beyond the 1 stacked matrices"):
-        ivobs.make_estimator("kkl", LinearSystem(A[:1], None, [[1.0, 0.0]]),
-                             x0=Box([-1, -1], [1, 1]))
+        ivobs.make_estimator(
+            "kkl", LinearSystem(A[:1], None, [[1.0, 0.0]]), x0=Box([-1, -1], [1, 1])
+        )
 
 
 # -- 7. bounds that overflow the float range -------------------------------------------------------
 @pytest.mark.parametrize("method", ["reachability", "fixed-time", "zonotope"])
 def test_overflowing_bounds_are_explained_not_called_a_bug(method):
-    sys = LinearSystem([[1.8, 0.3], [0.0, 1.5]], None, [[1.0, 0.0]], E=0.1 * np.eye(2),
-                       F=np.zeros((1, 2)), d=Box.symmetric([1.0, 1.0]))
+    sys = LinearSystem(
+        [[1.8, 0.3], [0.0, 1.5]],
+        None,
+        [[1.0, 0.0]],
+        E=0.1 * np.eye(2),
+        F=np.zeros((1, 2)),
+        d=Box.symmetric([1.0, 1.0]),
+    )
     y = np.full((1300, 1), np.nan)
     est = ivobs.make_estimator(method, sys, x0=Box([-1, -1], [1, 1]))
     pattern = r"the bounds overflowed \(exceed 1\.8e308\) at step \d+: the system is unstable"
@@ -215,6 +249,5 @@ def test_good_seeds_are_accepted():
     d = ivobs.scenarios.get("servo-motor").system.d
     a = ivobs.vertex_disturbance(d, 6, seed=np.int64(3))
     np.testing.assert_array_equal(a, ivobs.vertex_disturbance(d, 6, seed=3))
-    np.testing.assert_array_equal(
-        a, ivobs.vertex_disturbance(d, 6, seed=np.random.default_rng(3)))
+    np.testing.assert_array_equal(a, ivobs.vertex_disturbance(d, 6, seed=np.random.default_rng(3)))
     assert ivobs.uniform_disturbance(d, 6, seed=None).shape == (6, d.dim)

@@ -284,8 +284,9 @@ def test_batches_equal_single_runs(method):
     assert res.contains(X).all()
     for b in range(3):
         single = est.run(trs[b].u[:200], trs[b].y[:200], vectorize=False)
-        # the loop also carries each step's rounding bound in its state (interval.py,
-        # "Rounding"): up to ~2e-10 here (|x| ~ 6, kappa = 2000), a fraction of the margin
+        # the loop also carries each step's rounding bound in its state
+        # (ivobs.estimators.interval.rounding): up to ~2e-10 here (|x| ~ 6, kappa = 2000), a
+        # fraction of the margin
         np.testing.assert_allclose(res.upper[b], single.upper, rtol=1e-10, atol=1e-9)
         np.testing.assert_allclose(res.lower[b], single.lower, rtol=1e-10, atol=1e-9)
     Y[1, 50] = np.nan  # a missing sample: the loop, per stream
@@ -468,8 +469,9 @@ def redundant_system(seed, zero_width=False):
 @pytest.mark.parametrize("method", ["interval", "interval-split"])
 def test_a8_redundant_noise_free_sensors_with_a_gap(method):
     """The audit's example: a gap of sensor 2 used to take the width 0.2 -> 2e17 (|L| = 1e6)."""
-    sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.0], [0.0]],
-                       d=Box([-1.0], [1.0]))
+    sys = LinearSystem(
+        [[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.0], [0.0]], d=Box([-1.0], [1.0])
+    )
     x0 = Box([-1.0], [1.0])
     est = ivobs.make_estimator(method, sys, x0=x0)
     np.testing.assert_allclose(est.design.L, [[0.45, 0.45]], atol=1e-9)
@@ -515,8 +517,9 @@ def test_a8_a_large_given_gain_stays_sound_under_a_gap(method):
     sensor 2 makes |A − L_k C| = 1e6, which amplified the rounding of L y (|L||y| ~ 1e6) into a
     miss of 3.5e-6 and a permanent false inconsistency. The loop now carries each step's
     rounding bound in its state; the vectorised path's margin is enlarged (mu, nu ~ 100)."""
-    sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]],
-                       d=Box([0.5], [0.5]))
+    sys = LinearSystem(
+        [[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]], d=Box([0.5], [0.5])
+    )
     x0 = Box([-1.0], [1.0])
     T = 40
     tr = ivobs.simulate(sys, [0.7], u=np.sin(np.arange(T))[:, None], d=np.full((T, 1), 0.5))
@@ -527,7 +530,7 @@ def test_a8_a_large_given_gain_stays_sound_under_a_gap(method):
         res = est.run(tr.u, y, vectorize=vectorize)
         assert_contains(res, tr.x)
         assert not res.inconsistent.any()
-    assert est._rounding.mu > 50 and est._rounding.nu > 50
+    assert est.operators.margins.bound.mu > 50 and est.operators.margins.bound.nu > 50
     res = est.run(tr.u[None], tr.y[None])  # complete data: the vectorised path
     assert res.contains(tr.x[None]).all() and not res.inconsistent.any()
 
@@ -537,13 +540,15 @@ def test_a8_rounding_bound_numbers():
     0.99977): mu, nu > 1, so the margin of the vectorised path grows (by ~2e-10 relative)."""
     sc = scenarios.get("servo-motor", horizon=50)
     est = ivobs.make_estimator("interval", sc.system, x0=sc.x0, L=sc.reference["L2"])
-    rb = est._rounding
+    rb = est.operators.margins.bound
     D = np.abs(est.design.D)
     assert rb.kappa == pytest.approx(np.linalg.solve(np.eye(3) - D, np.ones(3)).max(), rel=1e-9)
     assert rb.kappa == pytest.approx(4432, rel=1e-3)
     assert 1.0 < rb.mu < 3.0 and 1.0 < rb.nu < 3.0
     default = ivobs.make_estimator("interval", sc.system, x0=sc.x0)
-    assert default._rounding.mu < 1.0 and default._rounding.nu < 1.0  # the base margin covers
+    assert (
+        default.operators.margins.bound.mu < 1.0 and default.operators.margins.bound.nu < 1.0
+    )  # the base margin covers
 
 
 @pytest.mark.parametrize("big", [1.5e6, 3e6, 6e6])
@@ -552,13 +557,15 @@ def test_a8_vectorised_margin_covers_the_terms_of_a_large_gain(big):
     are ~1e9 while the base margin is 1e-10 (1 + |x| + |y|): misses of 4e-8 ... 4e-7 before the
     margin was enlarged by mu, nu (module docstring, "Rounding")."""
     rng = np.random.default_rng(int(big))
-    sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]],
-                       d=Box([0.5], [0.5 + 1e-10]))
+    sys = LinearSystem(
+        [[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]], d=Box([0.5], [0.5 + 1e-10])
+    )
     x0 = Box([1e3 - 1.0], [1e3 + 1.0])
     est = ivobs.make_estimator("interval-split", sys, x0=x0, L=[[0.9 - big, big]])
     trs = [
-        ivobs.simulate(sys, [1e3 + rng.uniform(-1, 1)], rng.normal(size=(50, 1)) * 100,
-                       np.full((50, 1), 0.5))
+        ivobs.simulate(
+            sys, [1e3 + rng.uniform(-1, 1)], rng.normal(size=(50, 1)) * 100, np.full((50, 1), 0.5)
+        )
         for _ in range(20)
     ]
     res = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]))
@@ -606,8 +613,8 @@ def test_transformed_step_error_is_negligible_on_the_paper_example():
     paper's widths are kept (relative change below 1e-12)."""
     sc = scenarios.get("servo-motor")
     est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0)
-    m = est._matrices(np.ones(sc.system.ny, dtype=bool))
-    g, c = est._tconv
+    m = est.operators.matrices(np.ones(sc.system.ny, dtype=bool))
+    g, c = est.operators.tconv
     assert m.err is not None and np.all(m.err < 1e-12) and g < 1e-12 and c < 1e-13
     tr = sc.simulate("vertex", seed=0)
     res = est.run(sc.u, tr.y)

@@ -2,6 +2,8 @@
 sparse ``A`` (one stacked sparse product per step), and dense design steps that refuse large
 ``nx`` with a DesignError pointing to what scales."""
 
+import json
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -11,7 +13,7 @@ from ivobs import DesignError, IvobsError
 from ivobs.design._lmi import MAX_LMI_STATES
 from ivobs.io import dumps_system, equal_systems, loads_system
 from ivobs.scenarios import heat_gain
-from ivobs.testing import assert_contains
+from ivobs.testing import adversarial_run, assert_contains
 
 SPARSE = ("interval", "interval-split")
 
@@ -100,7 +102,7 @@ def test_bad_sparse_tables_are_rejected_with_the_key(table, message):
 def test_sparse_observers_contain_the_state_and_paths_agree(method, heat300):
     sc, x, y = heat300
     est = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=sc.reference["L"])
-    assert est._sparse and sp.issparse(est.design.D) and est.design.spectral_radius < 1
+    assert est.operators.sparse and sp.issparse(est.design.D) and est.design.spectral_radius < 1
     vec = est.run(sc.u, y, vectorize=True)
     loop = est.run(sc.u, y, vectorize=False)
     assert_contains(vec, x)
@@ -202,3 +204,76 @@ def test_dense_design_steps_refuse_large_systems(method, options, step):
     msg = str(err.value)
     assert f"nx = {MAX_LMI_STATES + 1} > {MAX_LMI_STATES}" in msg and "L=" in msg
     assert "'interval'" in msg or "interval-split" in msg
+
+
+def _random_sparse_system(seed):
+    """A random stable sparse system (banded ``A``, point sensors, ``d`` in both equations) and
+    a gain for each sparse method: ``A − LC >= 0`` for ``interval``, entries of both signs with
+    ``|A − LC|`` Schur for ``interval-split``."""
+    rng = np.random.default_rng(seed)
+    n, ny = 30 + 7 * seed, 2 + seed % 2
+    diag = rng.uniform(0.2, 0.5, n)
+    off = rng.uniform(-0.15 * (seed % 2), 0.15, (2, n - 1))  # odd seeds: both signs
+    A = sp.diags([off[0], diag, off[1]], [-1, 0, 1], format="csr")
+    sensors = rng.choice(n, ny, replace=False)
+    C = np.zeros((ny, n))
+    C[np.arange(ny), sensors] = rng.uniform(0.5, 2.0, ny)
+    nd = 3
+    E = 0.1 * rng.normal(size=(n, nd))
+    F = np.zeros((ny, nd))
+    F[:, -1] = 0.05
+    r = rng.uniform(0.2, 1.0, nd)
+    c = 0.3 * rng.normal(size=nd) if seed % 2 else np.zeros(nd)
+    sys = ivobs.LinearSystem(A, rng.normal(size=(n, 1)), C, E=E, F=F, d=ivobs.Box(c - r, c + r))
+    gains: dict[str, np.ndarray] = {}
+    L = np.zeros((n, ny))
+    L[sensors, np.arange(ny)] = 0.5 * diag[sensors] / C[np.arange(ny), sensors]
+    gains["interval-split"] = L.copy()
+    if seed % 2 == 0:
+        assert np.all(A.toarray() - L @ C >= 0.0)
+        gains["interval"] = L
+    return sys, gains
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sparse_random_systems_vectorised_equals_loop(seed):
+    """The sparse fast path (one stacked sparse product per step, all input terms precomputed)
+    against the step-by-step loop on random sparse systems with vertex disturbances; streams of
+    a batch against single records."""
+    sys, gains = _random_sparse_system(seed)
+    x0 = ivobs.Box(-np.ones(sys.nx), 2 * np.ones(sys.nx))
+    trs = [adversarial_run(sys, x0, 150, seed=100 * seed + b, hold=1 + b) for b in range(2)]
+    for method, L in gains.items():
+        est = ivobs.make_estimator(method, sys, x0=x0, L=L)
+        assert est.operators.sparse
+        for tr in trs:
+            loop = est.run(tr.u, tr.y, vectorize=False)
+            vec = est.run(tr.u, tr.y, vectorize=True)
+            assert_contains(loop, tr.x)
+            assert_contains(vec, tr.x)
+            scale = 1.0 + np.abs(loop.upper) + np.abs(loop.lower)
+            assert np.max(np.abs(vec.upper - loop.upper) / scale) < 1e-9
+            assert np.max(np.abs(vec.lower - loop.lower) / scale) < 1e-9
+        batch = est.run(np.stack([t.u for t in trs]), np.stack([t.y for t in trs]))
+        for b, tr in enumerate(trs):
+            single = est.run(tr.u, tr.y, vectorize=True)  # a batch sums in another order
+            np.testing.assert_allclose(batch.upper[b], single.upper, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(batch.lower[b], single.lower, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", SPARSE)
+def test_sparse_state_restores_to_identical_continuations(method, heat300):
+    sc, _x, y = heat300
+    est = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=sc.reference["L"])
+    ref = est.run(sc.u[:80], y[:80], vectorize=False)
+    est.reset()
+    for k in range(40):
+        est.step(sc.u[k], y[k])
+    saved = json.loads(json.dumps(est.state()))
+    assert set(saved["state"]) >= {"lo", "hi", "k", "scale"}
+    other = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=sc.reference["L"])
+    other.restore(saved)
+    for k in range(40, 80):
+        box = other.step(sc.u[k], y[k])
+        np.testing.assert_array_equal(box.lo, ref.lower[k])
+        np.testing.assert_array_equal(box.hi, ref.upper[k])

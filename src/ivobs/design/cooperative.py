@@ -1,25 +1,24 @@
 """Gains for cooperative interval observers: ``A − LC`` nonnegative, or ``|A − LC|`` Schur.
 
-Papers: Tang et al., IEEE TAC 2019 (``seeds/002_b3ef…``), Section V.A, Theorem 4, LMI (41);
-Efimov et al. (``seeds/003_f19a…``), Theorem 1 (Assumption 2), Theorem 3 and Corollary 1,
-LMIs (7)–(8).
+Papers: [Tang2019, Section V.A, Theorem 4, LMI (41)]; [Efimov2013, Theorem 1 (Assumption 2),
+Theorem 3 and Corollary 1, LMIs (7)–(8)].
 
-Notation: ``D = A − LC`` (003's ``D``), ``G = E − LF`` (how ``d`` enters the estimation error),
-``Δ = d_hi − d_lo`` (widths of the disturbance box).
+Notation: ``D = A − LC`` ([Efimov2013]'s ``D``), ``G = E − LF`` (how ``d`` enters the estimation
+error), ``Δ = d_hi − d_lo`` (widths of the disturbance box).
 
-* :func:`nonnegative_gain` — LMI (41) of 002 (= LMIs (7)–(8) of 003): diagonal ``P ≻ 0``,
-  ``[[P, PA − YC], [(PA − YC)ᵀ, P]] ≻ 0``, ``PA − YC ≥ 0``, ``L = P⁻¹Y``. Since ``P`` is diagonal
-  and positive, ``PA − YC = PD ≥ 0`` iff ``D ≥ 0``, and the Schur complement is
+* :func:`nonnegative_gain` — LMI (41) of [Tang2019] (= LMIs (7)–(8) of [Efimov2013]): diagonal
+  ``P ≻ 0``, ``[[P, PA − YC], [(PA − YC)ᵀ, P]] ≻ 0``, ``PA − YC ≥ 0``, ``L = P⁻¹Y``. Since ``P`` is
+  diagonal and positive, ``PA − YC = PD ≥ 0`` iff ``D ≥ 0``, and the Schur complement is
   ``P − DᵀPD ≻ 0``. For a nonnegative ``D`` a diagonal Lyapunov matrix exists iff ``D`` is Schur
   (a classical fact on positive systems), so the LMI is feasible iff *some* ``L`` makes ``D``
-  nonnegative and Schur: an infeasible LMI means no such gain exists (002 Example 2,
-  003 §IV.A). ivobs maximises the margin ``μ`` in ``[[P, PD], [·, P]] ⪰ μ I`` with ``P ⪯ I``
-  (the paper states a feasibility problem; the margin makes the answer well defined).
-* :func:`abs_schur_gain` — a gain with ``ρ(|A − LC|) < 1`` (the stability condition of 003's
-  observer (5): the bounds' radius obeys ``r+ = |D| r + …``). ``ρ(|D|) <= s`` whenever
-  ``|D| v <= s v`` for some ``v > 0``; for a fixed ``v`` this is a linear program in ``(L, s)``
-  (auxiliary ``T >= ±D``). The LP alternates with ``v ←`` Perron vector of ``|D|``; ``s`` never
-  increases.
+  nonnegative and Schur: an infeasible LMI means no such gain exists ([Tang2019, Example 2],
+  [Efimov2013, §IV.A]). ivobs maximises the margin ``μ`` in ``[[P, PD], [·, P]] ⪰ μ I`` with
+  ``P ⪯ I`` (the paper states a feasibility problem; the margin makes the answer well defined).
+* :func:`abs_schur_gain` — a gain with ``ρ(|A − LC|) < 1`` (the stability condition of
+  [Efimov2013]'s observer (5): the bounds' radius obeys ``r+ = |D| r + …``). ``ρ(|D|) <= s``
+  whenever ``|D| v <= s v`` for some ``v > 0``; for a fixed ``v`` this is a linear program in
+  ``(L, s)`` (auxiliary ``T >= ±D``). The LP alternates with ``v ←`` Perron vector of ``|D|``;
+  ``s`` never increases.
 * :func:`refine_width` — the tightness objective ivobs adds (documented, not in the papers): for
   constant bounds the bounds' width obeys ``w+ = |D| w + |G| Δ``, whose fixed point
   ``w∞ = (I − |D|)⁻¹ |G| Δ`` is the steady-state width. Given the current ``w∞ = w_j``, any
@@ -28,7 +27,7 @@ Notation: ``D = A − LC`` (003's ``D``), ``G = E − LF`` (how ``d`` enters the
   monotonically). Each LP picks such a gain minimising the one-step image, then ``w_{j+1} = w∞'``.
   For ``interval`` the constraint ``D' >= 0`` is kept (then ``|D'| = D'``).
 
-**Smallest gain among the optimal ones** (audit A8). The LP objectives above do not always fix
+**Smallest gain among the optimal ones**. The LP objectives above do not always fix
 ``L``: with redundant noise-free outputs (``ny > nx``, ``F = 0`` or zero-width bounds) the part of
 ``L`` in the left null space of ``C`` changes neither ``A − LC`` nor ``E − LF``, and HiGHS returns
 any vertex, e.g. ``L = (−999999.1, 10⁶)`` at the ``|L_ij| <= 10⁶`` box. Such a gain is harmless
@@ -52,23 +51,33 @@ Nothing here loops over time; LPs go to HiGHS (``scipy.optimize.linprog``), LMIs
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from scipy.optimize import linprog
 
 from ..errors import DesignError
 from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
+from .cooperative_lp import (
+    L_BOUND,
+    LP,
+    OPT_TOL,
+    REG_L1,
+    abs_bound_rows,
+    output_weights,
+    solve_lp,
+)
 
 __all__ = [
     "NONNEG_TOL",
+    "OPT_TOL",
+    "REG_L1",
     "abs_schur_gain",
     "check_abs_schur",
     "check_nonnegative_schur",
     "fixed_radius",
     "missing_radius",
     "nonnegative_gain",
+    "output_weights",
     "refine_width",
     "steady_width",
 ]
@@ -78,17 +87,11 @@ NONNEG_TOL = 1e-9
 round-off). The estimators propagate with the ``D⁺/D⁻`` split, so such entries stay sound."""
 
 _MU_MIN = 1e-7  # LMI (41) margin below which the LMI is considered infeasible
-_L_BOUND = 1e6  # box on the gain entries in the LPs (keeps HiGHS away from unbounded rays)
-
-OPT_TOL = (1e-12, 1e-9)
-"""Relative slack of an LP's optimal value in the regularising second stage (audit A8): the
-first value, the second if HiGHS calls the first infeasible (its own tolerances are 1e-7)."""
-REG_L1 = 1e-3
-"""Weight of ``Σ_ij w_j |L_ij|`` (tie-break) next to the largest column norm in that stage."""
 
 
 def steady_width(D: np.ndarray, G: np.ndarray, delta: np.ndarray) -> np.ndarray:
-    """``w∞ = (I − |D|)⁻¹ |G| Δ``: steady-state width of the bounds of observers (3)/(5) of 003
+    """``w∞ = (I − |D|)⁻¹ |G| Δ``: steady-state width of the bounds of observers (3)/(5) of
+    [Efimov2013]
     for constant bounds (``inf`` where ``|D|`` is not Schur)."""
     Dabs = np.abs(D)
     n = D.shape[0]
@@ -132,42 +135,44 @@ def fixed_radius(A: np.ndarray, C: np.ndarray) -> float:
 
 def check_nonnegative_schur(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> np.ndarray:
     """Return ``D = A − LC`` or raise :class:`DesignError` naming the negative entry or the
-    spectral radius (002 Theorem 4 / 003 Assumption 2)."""
-    D = A - L @ C
+    spectral radius ([Tang2019, Theorem 4] / [Efimov2013, Assumption 2])."""
+    D: np.ndarray = A - L @ C
     tol = NONNEG_TOL * max(1.0, float(np.max(np.abs(A), initial=0.0)))
     if np.any(D < -tol):
         i, j = np.unravel_index(int(np.argmin(D)), D.shape)
         raise DesignError(
             f"{who}: A − LC is not nonnegative: entry ({i + 1}, {j + 1}) = {D[i, j]:.6g} < 0 "
-            "(002 Theorem 4 / 003 Assumption 2.B need A − LC >= 0); use 'interval-split' or "
-            "'interval-transformed' with this gain"
+            "([Tang2019, Theorem 4] / [Efimov2013, Assumption 2.B] need A − LC >= 0); use "
+            "'interval-split' or 'interval-transformed' with this gain"
         )
     rho = spectral_radius(D)
     if rho >= 1.0:
         raise DesignError(
-            f"{who}: A − LC is not Schur: spectral radius {rho:.6g} >= 1 (003 Assumption 2.A)"
+            f"{who}: A − LC is not Schur: spectral radius {rho:.6g} >= 1 "
+            "([Efimov2013, Assumption 2.A])"
         )
     return D
 
 
 def check_abs_schur(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> np.ndarray:
     """Return ``D = A − LC`` or raise :class:`DesignError` when ``|D| = D⁺ + D⁻`` is not Schur
-    (the stability condition of 003 Theorem 3)."""
-    D = A - L @ C
+    (the stability condition of [Efimov2013, Theorem 3])."""
+    D: np.ndarray = A - L @ C
     rho = spectral_radius(np.abs(D))
     if rho >= 1.0:
         raise DesignError(
             f"{who}: |A − LC| = D⁺ + D⁻ is not Schur: spectral radius {rho:.6g} >= 1 "
-            f"(003 Theorem 3; ρ(A − LC) = {spectral_radius(D):.4g}); the bounds would diverge"
+            f"([Efimov2013, Theorem 3]; ρ(A − LC) = {spectral_radius(D):.4g}); the bounds would "
+            "diverge"
         )
     return D
 
 
 # -- LMI (41) ---------------------------------------------------------------------------------
 def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.ndarray:
-    """Gain ``L`` with ``A − LC`` nonnegative and Schur from LMI (41) of 002 (LMIs (7)–(8) of
-    003), maximising the margin ``μ`` (see the module docstring). Raises :class:`DesignError`
-    when no such gain exists."""
+    """Gain ``L`` with ``A − LC`` nonnegative and Schur from LMI (41) of [Tang2019] (LMIs (7)–(8)
+    of [Efimov2013]), maximising the margin ``μ`` (see the module docstring). Raises
+    :class:`DesignError` when no such gain exists."""
     import cvxpy as cp
 
     A = np.asarray(A, dtype=float)
@@ -183,12 +188,13 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
     pvec = cp.Variable(n)
     Y = cp.Variable((n, p))
     mu = cp.Variable()
-    P = cp.diag(pvec)
+    P = cp.diag(pvec)  # type: ignore[attr-defined]  # cvxpy exports its atoms by a star import
     X = P @ A - Y @ C
-    big = cp.bmat([[P, X], [X.T, P]])
+    big = cp.bmat([[P, X], [X.T, P]])  # type: ignore[attr-defined]  # (the same)
     cons = [sym(big) >> mu * np.eye(2 * n), X >= 0, pvec <= 1.0, mu <= 1.0]
     prob = cp.Problem(cp.Maximize(mu), cons)
     solve(prob, f"{who}: LMI (41) (A − LC nonnegative and Schur)")
+    assert mu.value is not None and pvec.value is not None and Y.value is not None  # solved
     mu_val = float(mu.value)
     if mu_val <= _MU_MIN:
         raise DesignError(
@@ -230,144 +236,16 @@ def _nearest_nonnegative_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np
         res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs",
                       options={"primal_feasibility_tolerance": 1e-10})  # fmt: skip
         if res.status == 0:
-            return res.x[: n * p].reshape(n, p)
+            gain: np.ndarray = res.x[: n * p].reshape(n, p)
+            return gain
     return L
-
-
-# -- LPs ------------------------------------------------------------------------------------
-class _LP:
-    """Column layout of the LPs: ``L`` (n·p, row-major), then auxiliary blocks."""
-
-    def __init__(self, n: int, p: int, blocks: dict[str, int]):
-        self.n, self.p = n, p
-        self.offset: dict[str, int] = {"L": 0}
-        size = n * p
-        for name, cols in blocks.items():
-            self.offset[name] = size
-            size += cols
-        self.size = size
-
-    def lin_D(self, A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``D_ij = A_ij − Σ_l L_il C_lj`` as rows ``(coef, const)`` for ``vec(D)`` row-major."""
-        n, p = self.n, self.p
-        coef = np.zeros((n * n, self.size))
-        for i in range(n):
-            for j in range(n):
-                coef[i * n + j, i * p : (i + 1) * p] = -C[:, j]
-        return coef, A.ravel().copy()
-
-    def lin_G(self, E: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``G_ij = E_ij − Σ_l L_il F_lj`` (``vec(G)`` row-major)."""
-        n, p = self.n, self.p
-        m = E.shape[1]
-        coef = np.zeros((n * m, self.size))
-        for i in range(n):
-            for j in range(m):
-                coef[i * m + j, i * p : (i + 1) * p] = -F[:, j]
-        return coef, E.ravel().copy()
-
-    def aux(self, name: str, rows: int) -> np.ndarray:
-        coef = np.zeros((rows, self.size))
-        coef[:, self.offset[name] : self.offset[name] + rows] = np.eye(rows)
-        return coef
-
-    def gain(self, x: np.ndarray) -> np.ndarray:
-        return x[: self.n * self.p].reshape(self.n, self.p)
-
-
-def _abs_bound_rows(
-    lin: tuple[np.ndarray, np.ndarray], aux: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Rows of ``T >= M`` and ``T >= −M`` as ``A_ub x <= b_ub`` (``M = coef x + const``)."""
-    coef, const = lin
-    return np.vstack([coef - aux, -coef - aux]), np.concatenate([-const, const])
-
-
-def output_weights(C: np.ndarray) -> np.ndarray:
-    """Weights ``w_j = ‖C_j‖₁`` (row ``j`` of ``C``) of the gain's columns in the regularising
-    stage: ``Σ_i w_j |L_ij|`` bounds what column ``j`` of ``L`` adds to ``|A − L_k C|`` when
-    output ``j`` is missing (``|L_:j| |C_j|``), and does not change when an output is rescaled.
-    Rows of zeros (an output that only sees ``u`` or ``d``) weigh as the largest row."""
-    w = np.abs(C).sum(axis=1)
-    return np.where(w > 0.0, w, max(1.0, float(w.max(initial=0.0))))
-
-
-def _solve_lp(
-    c: np.ndarray,
-    A_ub: np.ndarray,
-    b_ub: np.ndarray,
-    bounds: list[tuple[Any, Any]],
-    gain: tuple[int, np.ndarray] | None = None,
-    parts: list[np.ndarray] | None = None,
-) -> np.ndarray | None:
-    """HiGHS; with ``gain = (n, w)`` (the first ``n·p`` columns are ``L``, row-major) the
-    regularising second stage of the module docstring, which keeps each objective part
-    (``parts``, default ``[c]``; ``c`` is a weighted sum of them) at its optimal value."""
-    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
-    if res.status != 0:
-        return None
-    if gain is None:
-        return res.x
-    parts = [c] if parts is None else parts
-    best = np.array([float(q @ res.x) for q in parts])
-    for tol in OPT_TOL:
-        reg = _smallest_gain(np.array(parts), best, tol, A_ub, b_ub, bounds, *gain)
-        if reg is not None:
-            return reg
-    return res.x
-
-
-def _smallest_gain(
-    parts: np.ndarray,
-    best: np.ndarray,
-    tol: float,
-    A_ub: np.ndarray,
-    b_ub: np.ndarray,
-    bounds: list[tuple[Any, Any]],
-    n: int,
-    w: np.ndarray,
-) -> np.ndarray | None:
-    """Second stage (audit A8): among the points with ``q_iᵀx <= best_i + tol·max(1,
-    |best_i|)`` for every objective part ``q_i``, minimise ``t + REG_L1 Σ_ij w_j |L_ij|`` with
-    ``t >= Σ_i w_j |L_ij|`` for every column ``j`` (auxiliary ``U >= ±L``): the LP optimum is
-    kept (to the tolerance), the gain is the smallest one attaining it, spread over redundant
-    outputs. None when HiGHS fails (the caller then tries the next tolerance)."""
-    p = w.size
-    nL, N = n * p, parts.shape[1]
-    size = N + nL + 1
-    wU = np.tile(w, n)  # weight of U_ij (row-major, like L)
-    eye = np.eye(nL)
-    rows = [
-        np.hstack([A_ub, np.zeros((A_ub.shape[0], nL + 1))]),
-        np.hstack([parts, np.zeros((parts.shape[0], nL + 1))]),
-        np.hstack([eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
-        np.hstack([-eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
-    ]
-    col = np.zeros((p, size))  # Σ_i w_j U_ij − t <= 0
-    for j in range(p):
-        col[j, N + j : N + nL : p] = w[j]
-    col[:, -1] = -1.0
-    rows.append(col)
-    slack = tol * np.maximum(1.0, np.abs(best))
-    b = np.concatenate([b_ub, best + slack, np.zeros(2 * nL + p)])
-    obj = np.zeros(size)
-    obj[N : N + nL] = REG_L1 * wU
-    obj[-1] = 1.0
-    res = linprog(
-        obj,
-        A_ub=np.vstack(rows),
-        b_ub=b,
-        bounds=list(bounds) + [(0, None)] * (nL + 1),
-        method="highs",
-    )
-    return res.x[:N] if res.status == 0 else None
 
 
 def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float] | None:
     """min s s.t. T v <= s v, T >= ±(A − LC): ``ρ(|A − LC|) <= s``."""
     n, p = A.shape[0], C.shape[0]
-    lp = _LP(n, p, {"T": n * n, "s": 1})
-    A1, b1 = _abs_bound_rows(lp.lin_D(A, C), lp.aux("T", n * n))
+    lp = LP(n, p, {"T": n * n, "s": 1})
+    A1, b1 = abs_bound_rows(lp.lin_D(A, C), lp.aux("T", n * n))
     # (T v)_i − s v_i <= 0
     A2 = np.zeros((n, lp.size))
     for i in range(n):
@@ -376,12 +254,12 @@ def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     c_s = np.zeros(lp.size)
     c_s[lp.offset["s"]] = 1.0
     # tie-break among optimal gains: the smallest |A − LC| v (degenerate optima otherwise stall
-    # the alternation, e.g. 003's planar example at ρ = 0.7 instead of 0.5)
+    # the alternation, e.g. [Efimov2013]'s planar example at ρ = 0.7 instead of 0.5)
     c_t = np.zeros(lp.size)
     c_t[lp.offset["T"] : lp.offset["T"] + n * n] = np.tile(v, n) / v.sum()
     c = c_s + 1e-6 * c_t
-    bounds = [(-_L_BOUND, _L_BOUND)] * (n * p) + [(0, None)] * (n * n) + [(0, None)]
-    x = _solve_lp(
+    bounds = [(-L_BOUND, L_BOUND)] * (n * p) + [(0, None)] * (n * n) + [(0, None)]
+    x = solve_lp(
         c,
         np.vstack([A1, A2]),
         np.concatenate([b1, np.zeros(n)]),
@@ -401,7 +279,8 @@ def _perron_vector(M: np.ndarray) -> np.ndarray:
     w, V = np.linalg.eig(Mr)
     v = np.abs(np.real(V[:, int(np.argmax(np.real(w)))]))
     v = v / v.max()
-    return np.maximum(v, 1e-8)
+    out: np.ndarray = np.maximum(v, 1e-8)
+    return out
 
 
 def abs_schur_gain(
@@ -462,17 +341,17 @@ def refine_width(
     w = steady_width(A - L @ C, E - L @ F, delta)
     if m == 0 or not np.all(np.isfinite(w)) or not np.any(delta > 0):
         return L
-    lp = _LP(n, p, {"T": n * n, "TG": n * m})
+    lp = LP(n, p, {"T": n * n, "TG": n * m})
     D_lin = lp.lin_D(A, C)
-    G_rows, G_b = _abs_bound_rows(lp.lin_G(E, F), lp.aux("TG", n * m))
+    G_rows, G_b = abs_bound_rows(lp.lin_G(E, F), lp.aux("TG", n * m))
     if nonnegative:  # D >= 0 and T = D: T − D = 0 expressed as two inequalities
         coef, const = D_lin
         aux = lp.aux("T", n * n)
         D_rows = np.vstack([coef - aux, aux - coef, -coef])
         D_b = np.concatenate([-const, const, const])
     else:
-        D_rows, D_b = _abs_bound_rows(D_lin, lp.aux("T", n * n))
-    bounds = [(-_L_BOUND, _L_BOUND)] * (n * p) + [(0, None)] * (n * n + n * m)
+        D_rows, D_b = abs_bound_rows(D_lin, lp.aux("T", n * n))
+    bounds = [(-L_BOUND, L_BOUND)] * (n * p) + [(0, None)] * (n * n + n * m)
     weights = (n, output_weights(C))
     for _ in range(iters):
         # one-step image  T w + TG Δ  (row i), constrained <= w, objective Σ_i image_i / w_i
@@ -482,7 +361,7 @@ def refine_width(
             img[i, lp.offset["TG"] + i * m : lp.offset["TG"] + (i + 1) * m] = delta
         scale = 1.0 / np.maximum(w, 1e-12 * max(1.0, float(w.max())))
         c = scale @ img
-        x = _solve_lp(
+        x = solve_lp(
             c, np.vstack([D_rows, G_rows, img]), np.concatenate([D_b, G_b, w]), bounds, weights
         )
         if x is None:

@@ -1,20 +1,20 @@
 """Similarity transformations to a nonnegative matrix (interval observers in new coordinates).
 
-Papers: Tang et al., IEEE TAC 2019 (``seeds/002_b3ef…``), Theorem 5, Lemma 4 and eq. (48);
-Efimov et al. (``seeds/003_f19a…``), Lemma 2 and Theorem 2.
+Papers: [Tang2019, Theorem 5, Lemma 4 and eq. (48)]; [Efimov2013, Lemma 2 and Theorem 2].
 
 Given a Schur ``M = A − LC`` and a nonnegative ``R`` with the same eigenvalues, eq. (48)
 
     S = O_R⁻¹ O_M,      O_X = [e; e X; …; e X^(n−1)]   (rows; ``e1`` for ``M``, ``e2`` for ``R``)
 
-gives ``S M S⁻¹ = R`` whenever ``(M, e1)`` and ``(R, e2)`` are observable (Lemma 4): by
+gives ``S M S⁻¹ = R`` whenever ``(M, e1)`` and ``(R, e2)`` are observable ([Tang2019, Lemma 4]): by
 Cayley–Hamilton ``O_X X = Φ O_X`` with the same companion matrix ``Φ`` for both (same
 characteristic polynomial), so ``S M = O_R⁻¹ Φ O_M = R S``.
 
 **Which spectra have a nonnegative realisation** (the nonnegative inverse eigenvalue problem,
-003 §II.B, ref. [18] §11.2). Necessary: the spectral radius is itself an eigenvalue (Perron),
-every power sum ``s_k = Σ λ_i^k`` is ``>= 0`` (``s_1`` = trace). :func:`nonnegative_realization`
-builds ``R`` block-diagonally from blocks that are nonnegative by construction:
+[Efimov2013, §II.B] and its ref. [18] §11.2). Necessary: the spectral radius is itself an
+eigenvalue (Perron), every power sum ``s_k = Σ λ_i^k`` is ``>= 0`` (``s_1`` = trace).
+:func:`nonnegative_realization` builds ``R`` block-diagonally from blocks that are nonnegative
+by construction:
 
 * each real ``λ >= 0``: the ``1×1`` block ``[λ]`` (a repeated one: an upper bidiagonal Jordan chain
   with ones on the superdiagonal — "bidiagonal with the eigenvalues on the diagonal");
@@ -32,11 +32,11 @@ builds ``R`` block-diagonally from blocks that are nonnegative by construction:
   complex pair always needs ``n >= 3``.
 
 Not supported (``DesignError`` with the reason): spectra failing the necessary conditions (e.g.
-``{0, −0.5}`` of 003 §IV.A: negative trace), complex pairs without a dominating real eigenvalue
-in that triangle (realisations mixing several pairs in larger circulants exist, Fiedler/Soules
-constructions, but are not implemented), repeated complex pairs, negative eigenvalues that do not
-fit the leaders' slack (Borobia's splitting is not implemented). Any user-given nonnegative
-``R`` (``R=`` option) is accepted instead.
+``{0, −0.5}`` of [Efimov2013, §IV.A]: negative trace), complex pairs without a dominating real
+eigenvalue in that triangle (realisations mixing several pairs in larger circulants exist,
+Fiedler/Soules constructions, but are not implemented), repeated complex pairs, negative
+eigenvalues that do not fit the leaders' slack (Borobia's splitting is not implemented). Any
+user-given nonnegative ``R`` (``R=`` option) is accepted instead.
 """
 
 from __future__ import annotations
@@ -209,8 +209,9 @@ def _merge(values: list[float], tol: float) -> tuple[np.ndarray, np.ndarray]:
 def similarity_transform(
     M: np.ndarray, R: np.ndarray, e1: np.ndarray, e2: np.ndarray, who: str = "transform"
 ) -> np.ndarray:
-    """``S = O_R⁻¹ O_M`` (002 eq. 48); raises :class:`DesignError` when a pair is not
-    observable (Lemma 4 / 003 Lemma 2 need ``(M, e1)`` and ``(R, e2)`` observable)."""
+    """``S = O_R⁻¹ O_M`` ([Tang2019, eq. (48)]); raises :class:`DesignError` when a pair is
+    not observable ([Tang2019, Lemma 4] / [Efimov2013, Lemma 2] need ``(M, e1)`` and ``(R, e2)``
+    observable)."""
     n = M.shape[0]
     O_M = observability_matrix(M, np.reshape(e1, (1, n)))
     O_R = observability_matrix(R, np.reshape(e2, (1, n)))
@@ -219,7 +220,7 @@ def similarity_transform(
         if not np.isfinite(c) or c > 1e12:
             raise DesignError(
                 f"{who}: the pair {pair} is not observable ({name} has condition number "
-                f"{c:.3g}); eq. (48) of 002 needs both pairs observable: choose another "
+                f"{c:.3g}); [Tang2019, eq. (48)] needs both pairs observable: choose another "
                 f"{'e2' if pair.startswith('(R') else 'e1'} (or A − LC has a repeated "
                 "eigenvalue with several eigenvectors: choose another gain)"
             )
@@ -260,7 +261,8 @@ def _modal_transform(M: np.ndarray) -> np.ndarray | None:
     if np.linalg.cond(V) > 1e12:
         return None
     Vi = np.linalg.inv(V)
-    return Vi / np.linalg.norm(Vi, axis=1, keepdims=True)
+    rows: np.ndarray = Vi / np.linalg.norm(Vi, axis=1, keepdims=True)
+    return rows
 
 
 def modal_width(
@@ -350,9 +352,9 @@ def default_design(
     3. Nelder–Mead over ``(L, e1)`` from ``e1 = 1`` minimises :func:`design_width` (``50 (n p +
        n)`` evaluations): the search may leave the positive spectra for any real spectrum
        :func:`nonnegative_realization` supports (e.g. Suleimanova pairs ``{ρ, −μ}``,
-       ``ρ >= μ``) and non-diagonal ``R``; it is kept only if it beats step 2. On 003's planar
-       example the steady-state width (sum over the states) drops from about 18.6 (step 2) to
-       about 7.
+       ``ρ >= μ``) and non-diagonal ``R``; it is kept only if it beats step 2. On
+       [Efimov2013]'s planar example the steady-state width (sum over the states) drops from
+       about 18.6 (step 2) to about 7.
 
     Without disturbances (``Δ = 0``) the widths of ``G = I`` are used (conditioning only).
     """
@@ -464,13 +466,13 @@ def check_transform(
     cond = np.linalg.cond(S)
     if not np.isfinite(cond) or cond > 1e12:
         raise DesignError(f"{who}: S is singular or nearly so (condition number {cond:.3g})")
-    Rs = S @ M @ np.linalg.inv(S)
+    Rs: np.ndarray = S @ M @ np.linalg.inv(S)
     scale = max(1.0, float(np.max(np.abs(Rs))))
     if np.any(Rs < -1e-9 * scale):
         i, j = np.unravel_index(int(np.argmin(Rs)), Rs.shape)
         raise DesignError(
             f"{who}: S (A − LC) S⁻¹ is not nonnegative: entry ({i + 1}, {j + 1}) = "
-            f"{Rs[i, j]:.6g} < 0 (002 Theorem 5 needs R = S (A − LC) S⁻¹ >= 0)"
+            f"{Rs[i, j]:.6g} < 0 ([Tang2019, Theorem 5] needs R = S (A − LC) S⁻¹ >= 0)"
         )
     if R is not None and np.max(np.abs(Rs - R)) > 1e-3 * max(1.0, float(np.max(np.abs(R)))):
         raise DesignError(

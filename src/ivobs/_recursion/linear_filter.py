@@ -1,147 +1,23 @@
-"""Fast evaluation of the linear recursions that every observer's time loop reduces to.
-
-For constant bounds and complete measurements, the vectorised path of every recursive method is
-a *data-dependent centre* that follows a linear time-invariant recursion, plus a radius that does
-not depend on the data. Both are outputs of one discrete LTI system driven by the record,
-
-    x[k+1] = M x[k] + Σ_s W_s v_s[k] + g,        o_j[k] = H_j x[k] + Σ_s J_js v_s[k] + h_j,
-
-(``v_s``: the signals, e.g. ``y`` and ``u``; ``o_j``: e.g. the centre and the innovation), which
-:class:`LinearFilter` evaluates over whole records and batches of records at memory speed:
-
-* **Small state** (``n <=`` :data:`BLOCK_MAX_STATES`): the record is cut into blocks of ``K``
-  steps. Inside a block ``x[qK + j] = M^j s_q + Σ_{i<j} M^(j-1-i) (W v[qK+i] + g)``, so every
-  output of every block is one row of a single matrix product ``[v_q, 1, s_q] @ Op`` with a
-  block-Toeplitz ``Op`` built once (``H M^(j-1-i) W`` below the diagonal, ``J`` on it, ``H M^j``
-  on the block start ``s_q``). The block starts follow ``s_(q+1) = M^K s_q + e_q`` (``e_q`` from
-  one more product), a recursion ``K`` times shorter, solved by a loop over blocks (batches) or
-  by the same method again (long single records). The products run in the stream-major layout
-  of the data, so there is no transposition and no per-step Python work.
-* **Large or sparse state**: a loop over time, one (sparse) product per step, with all input
-  terms precomputed in one matrix product and written into the state buffer beforehand.
-
-Results agree with the step-by-step recursion up to rounding (sums in another order); the
-observers' outward rounding margin covers that (:data:`ivobs.estimators.base.ROUNDING`).
-"""
+"""The linear filter ``x[k+1] = M x[k] + Σ W v[k] + g``, ``o = H x + J v + h`` over whole records
+and batches (the package docstring: block evaluation for small states, a loop of one (sparse)
+product per step for large ones)."""
 
 from __future__ import annotations
 
-import threading
-import weakref
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = [
-    "BLOCK_MAX_STATES",
-    "LinearFilter",
-    "SplitFilter",
-    "affine_recursion",
-    "csr_accumulate",
-    "is_shared",
-    "matrix_product",
-    "redo_streams",
-    "scratch",
-    "within_band",
-]
+from .kernels import _issparse, _matrix, csr_accumulate, matrix_product, scratch
+
+__all__ = ["BLOCK_MAX_STATES", "LinearFilter", "affine_recursion"]
 
 BLOCK_MAX_STATES = 24
 """Largest state dimension for which the block (Toeplitz) evaluation is used."""
 
 _SCAN_LOOP = 256
 """Block-start recursions up to this length (or with many streams) run as a Python loop."""
-
-SCRATCH_MAX = 1 << 22
-"""Temporaries up to this many elements are reused between calls (:func:`scratch`)."""
-
-_LOCAL = threading.local()
-
-try:  # SciPy's compiled kernels y += A x (a private module, stable for years)
-    from scipy.sparse._sparsetools import csc_matvec as _csc_matvec
-    from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
-except ImportError:  # pragma: no cover
-    _csr_matvec = _csc_matvec = None
-
-
-def csr_accumulate(M: Any, x: np.ndarray, out: np.ndarray) -> None:
-    """``out += M @ x`` for a CSR (or CSC) matrix ``M`` and vectors: SciPy's compiled kernel,
-    without a temporary or the Python-level dispatch of ``@`` (for large sparse systems this is
-    the whole per-step cost of an observer); the public ``@`` when the kernel is unavailable."""
-    kernel = {"csr": _csr_matvec, "csc": _csc_matvec}.get(M.format)
-    if kernel is not None and M.data.dtype == np.float64 and x.dtype == np.float64:
-        kernel(M.shape[0], M.shape[1], M.indptr, M.indices, M.data, x, out)
-    else:  # pragma: no cover
-        out += M @ x
-
-
-def scratch(owner: Any, name: str, shape: tuple[int, ...], dtype: Any = float) -> np.ndarray:
-    """A reusable array for a temporary of ``owner`` (per thread; contents undefined).
-
-    A batch arrives in chunks of a few million numbers; a fresh array of that size costs more
-    in first-touch page faults than the arithmetic done on it, so temporaries that never leave
-    a call are kept for the next chunk. Larger ones (a long single record) are not kept."""
-    if int(np.prod(shape)) > SCRATCH_MAX:
-        return np.empty(shape, dtype=dtype)
-    store = _LOCAL.__dict__.get("store")
-    if store is None:
-        store = _LOCAL.store = weakref.WeakKeyDictionary()
-    mine = store.setdefault(owner, {})
-    a = mine.get(name)
-    if a is None or a.shape != tuple(shape) or a.dtype != np.dtype(dtype):
-        a = mine[name] = np.empty(shape, dtype=dtype)
-    return a
-
-
-def _issparse(M: Any) -> bool:
-    try:
-        from scipy.sparse import issparse
-    except ImportError:  # pragma: no cover
-        return False
-    return bool(issparse(M))
-
-
-def _matrix(a: Any, rows: int | None, cols: int | None) -> np.ndarray:
-    """A 2-D float array of the given shape (a vector is a column when ``rows`` is known)."""
-    a = np.asarray(a, dtype=float)
-    if a.ndim == 1:
-        a = a.reshape(-1, 1) if rows is not None else a.reshape(1, -1)
-    if (rows is not None and a.shape[0] != rows) or (cols is not None and a.shape[1] != cols):
-        raise ValueError(f"expected a ({rows}, {cols}) matrix, got {a.shape}")
-    return a
-
-
-def is_shared(a: np.ndarray, lead: int) -> bool:
-    """True when a ``(..., T, m)`` signal is the same for every stream of the batch (fewer
-    leading axes than ``lead``, or stride 0 along them: ``np.broadcast_to`` of one record)."""
-    if a.ndim - 2 < lead:
-        return True
-    return all(a.strides[i] == 0 or a.shape[i] == 1 for i in range(a.ndim - 2))
-
-
-def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.ndarray:
-    """``X @ Mt`` over the last axis of a ``(..., m)`` array (``Mt`` dense or sparse ``(m, p)``).
-
-    Narrow products (``m, p <= 8``: e.g. the 3 states of a batch of streams) run as one product
-    with ``kron(I_8, Mt)`` on rows of 8 samples: BLAS is slow on a very tall, 3-wide product."""
-    lead = X.shape[:-1]
-    m, p = Mt.shape
-    if _issparse(Mt):
-        res = np.asarray((Mt.T @ X.reshape(-1, m).T).T).reshape(*lead, p)
-        if out is None:
-            return res
-        out[...] = res
-        return out
-    rows = int(np.prod(lead)) if lead else 1
-    if out is None:
-        out = np.empty((*lead, p))
-    narrow = m <= 8 and p <= 8 and rows % 8 == 0 and rows >= 4096
-    if narrow and X.flags.c_contiguous and out.flags.c_contiguous:
-        big = np.kron(np.eye(8), Mt)
-        np.matmul(X.reshape(rows // 8, 8 * m), big, out=out.reshape(rows // 8, 8 * p))
-    else:
-        out.reshape(rows, p)[...] = X.reshape(rows, m) @ Mt
-    return out
 
 
 class LinearFilter:
@@ -173,9 +49,10 @@ class LinearFilter:
     ):
         self.sparse = _issparse(M)
         self.M = M.tocsr() if self.sparse else np.asarray(M, dtype=float)
-        self.n = n = self.M.shape[0]
+        n: int = self.M.shape[0]
+        self.n = n
         self.W = [_matrix(w, n, None) for w in W]
-        self.m = [w.shape[1] for w in self.W]
+        self.m: list[int] = [w.shape[1] for w in self.W]
         self.H = [h_ if _issparse(h_) else _matrix(h_, None, n) for h_ in H]
         self.p = [h_.shape[0] for h_ in self.H]
         nj, ns = len(self.H), len(self.W)
@@ -201,48 +78,7 @@ class LinearFilter:
         hit = self._ops.get(K)
         if hit is not None:
             return hit
-        n, M = self.n, self.M
-        P = [np.eye(n)]
-        for _ in range(K):
-            P.append(M @ P[-1])
-        cols_in = K * sum(self.m) + int(self.const)
-        ops = []
-        for j, H in enumerate(self.H):
-            p = self.p[j]
-            HP = [H @ Pt for Pt in P[:K]]
-            Op = np.zeros((cols_in + n, K * p))
-            off = 0
-            for s, W in enumerate(self.W):
-                m = self.m[s]
-                HPW = [Hp @ W for Hp in HP[: K - 1]]
-                Js = self.J[j][s]
-                for jj in range(K):
-                    oc = slice(jj * p, (jj + 1) * p)
-                    for i in range(jj):
-                        Op[off + i * m : off + (i + 1) * m, oc] = HPW[jj - 1 - i].T
-                    if Js is not None:
-                        Op[off + jj * m : off + (jj + 1) * m, oc] = Js.T
-                off += K * m
-            if self.const:
-                acc = np.zeros(p) if self.h[j] is None else self.h[j].copy()
-                for jj in range(K):
-                    Op[off, jj * p : (jj + 1) * p] = acc
-                    if self.g is not None:
-                        acc = acc + HP[jj] @ self.g
-                off += 1
-            for jj in range(K):
-                Op[off : off + n, jj * p : (jj + 1) * p] = HP[jj].T
-            ops.append(Op)
-        End = np.zeros((cols_in, n))
-        off = 0
-        for s, W in enumerate(self.W):
-            m = self.m[s]
-            for i in range(K):
-                End[off + i * m : off + (i + 1) * m] = (P[K - 1 - i] @ W).T
-            off += K * m
-        if self.const and self.g is not None:
-            End[off] = sum(Pt @ self.g for Pt in P[:K])
-        out = (ops, End, P[K])
+        out = _block_operators(self, K)
         self._ops[K] = out
         return out
 
@@ -378,7 +214,7 @@ class LinearFilter:
     ) -> None:
         """The last ``L < K`` steps: the leading rows/columns of the ``K``-block operators."""
         n = self.n
-        rows = []
+        rows: list[int] = []
         off = 0
         for m in self.m:
             rows.extend(range(off, off + L * m))
@@ -421,7 +257,8 @@ class LinearFilter:
             for q in range(nb - 1):
                 S[:, q + 1] = S[:, q] @ MKt
                 S[:, q + 1] += E[:, q]
-            return S[:, nb - 1] @ MKt + E[:, nb - 1]
+            last: np.ndarray = S[:, nb - 1] @ MKt + E[:, nb - 1]
+            return last
         inner = self._inner.get(K)
         if inner is None:
             inner = LinearFilter(MK, [np.eye(n)], [np.eye(n)])
@@ -451,7 +288,7 @@ class LinearFilter:
         X = np.empty((b, T, n))
         X[:, 0] = x0
         if self.sparse and b == 1:
-            return X, self._sparse_states(vs, T, X[0])
+            return X, _sparse_states(self, vs, T, X[0])
         if T > 1:
             Xn = X[:, 1:]
             Xn[...] = 0.0 if self.g is None else self.g
@@ -479,25 +316,6 @@ class LinearFilter:
             xT = xT + self.g
         return X, xT
 
-    def _sparse_states(self, vs: list[np.ndarray], T: int, x: np.ndarray) -> np.ndarray:
-        """One record, sparse ``M``: ``x[k] = g + M x[k-1] + W v[k-1]`` written row by row
-        (``x[0]`` given), two compiled sparse products per step (``W = [W_s]`` as CSC); returns
-        ``x[T]``. The row is still in cache when it is accumulated into."""
-        from scipy.sparse import csc_matrix
-
-        n = self.n
-        W = csc_matrix(np.hstack(self.W)) if self.W else csc_matrix((n, 0))
-        v = np.concatenate([a[0] for a in vs], axis=-1) if vs else np.zeros((T, 0))
-        g = np.zeros(n) if self.g is None else self.g
-        M = self.M
-        xT = np.empty(n)
-        for k in range(1, T + 1):
-            row = x[k] if k < T else xT
-            row[...] = g
-            csr_accumulate(M, x[k - 1], row)
-            csr_accumulate(W, v[k - 1], row)
-        return xT[None]
-
     def _run_loop(
         self, vs: list[np.ndarray], T: int, b: int, x0: np.ndarray, outs: list[np.ndarray]
     ) -> np.ndarray:
@@ -511,6 +329,74 @@ class LinearFilter:
             if self.h[j] is not None:
                 o += self.h[j]
         return xT
+
+
+def _sparse_states(f: LinearFilter, vs: list[np.ndarray], T: int, x: np.ndarray) -> np.ndarray:
+    """:meth:`LinearFilter.states` of one record, sparse ``M``: ``x[k] = g + M x[k-1] +
+    W v[k-1]`` written row by row (``x[0]`` given), two compiled sparse products per step
+    (``W = [W_s]`` as CSC); returns ``x[T]``. The row is still in cache when it is accumulated
+    into."""
+    from scipy.sparse import csc_matrix
+
+    n = f.n
+    W = csc_matrix(np.hstack(f.W)) if f.W else csc_matrix((n, 0))
+    v = np.concatenate([a[0] for a in vs], axis=-1) if vs else np.zeros((T, 0))
+    g = np.zeros(n) if f.g is None else f.g
+    M = f.M
+    xT = np.empty(n)
+    for k in range(1, T + 1):
+        row = x[k] if k < T else xT
+        row[...] = g
+        csr_accumulate(M, x[k - 1], row)
+        csr_accumulate(W, v[k - 1], row)
+    return xT[None]
+
+
+def _block_operators(f: LinearFilter, K: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """:meth:`LinearFilter._operators` (uncached): the block-Toeplitz operators of ``f``."""
+    n, M = f.n, f.M
+    P = [np.eye(n)]
+    for _ in range(K):
+        P.append(M @ P[-1])
+    cols_in = K * sum(f.m) + int(f.const)
+    ops = []
+    for j, H in enumerate(f.H):
+        p = f.p[j]
+        HP = [H @ Pt for Pt in P[:K]]
+        Op = np.zeros((cols_in + n, K * p))
+        off = 0
+        for s, W in enumerate(f.W):
+            m = f.m[s]
+            HPW = [Hp @ W for Hp in HP[: K - 1]]
+            Js = f.J[j][s]
+            for jj in range(K):
+                oc = slice(jj * p, (jj + 1) * p)
+                for i in range(jj):
+                    Op[off + i * m : off + (i + 1) * m, oc] = HPW[jj - 1 - i].T
+                if Js is not None:
+                    Op[off + jj * m : off + (jj + 1) * m, oc] = Js.T
+            off += K * m
+        if f.const:
+            hj = f.h[j]
+            acc = np.zeros(p) if hj is None else hj.copy()
+            for jj in range(K):
+                Op[off, jj * p : (jj + 1) * p] = acc
+                if f.g is not None:
+                    acc = acc + HP[jj] @ f.g
+            off += 1
+        for jj in range(K):
+            Op[off : off + n, jj * p : (jj + 1) * p] = HP[jj].T
+        ops.append(Op)
+    End = np.zeros((cols_in, n))
+    off = 0
+    for s, W in enumerate(f.W):
+        m = f.m[s]
+        for i in range(K):
+            End[off + i * m : off + (i + 1) * m] = (P[K - 1 - i] @ W).T
+        off += K * m
+    if f.const and f.g is not None:
+        End[off] = sum(Pt @ f.g for Pt in P[:K])
+    return ops, End, P[K]
 
 
 def affine_recursion(M: np.ndarray, v: np.ndarray, x0: np.ndarray) -> np.ndarray:
@@ -528,109 +414,3 @@ def affine_recursion(M: np.ndarray, v: np.ndarray, x0: np.ndarray) -> np.ndarray
     _, xT = f.run([v], T=T, x0=np.asarray(x0, dtype=float), out=[X[..., :T, :]], final=True)
     X[..., T, :] = xT
     return X
-
-
-class SplitFilter:
-    """A :class:`LinearFilter` whose response is split into the part that differs between the
-    streams of a batch and the part they share.
-
-    ``run(v, x0)`` returns ``(data, shared)``: ``data[j]`` ``(B, T, p_j)`` is the response to the
-    per-stream signals from ``x[0] = 0``; ``shared[j]`` ``(T, p_j)`` the response to ``x0``, the
-    constants ``g``, ``h`` and the signals that are the same for every stream (2-D, or
-    broadcast with stride 0), computed once; ``o_j = data[j] + shared[j]``. The callers fold
-    ``shared`` into the data-free offsets (the radius) they add anyway, so it costs no pass
-    over the batch. For one record (no batch axis) everything is in ``data`` and ``shared`` is
-    None. Shared signals listed in ``as_data`` are copied per stream instead (cheaper when the
-    caller has no offset to add). ``temp``: as in :meth:`LinearFilter.run`.
-    """
-
-    def __init__(
-        self,
-        M: Any,
-        W: Sequence[np.ndarray],
-        H: Sequence[np.ndarray],
-        J: Sequence[Sequence[np.ndarray | None]] | None = None,
-        g: np.ndarray | None = None,
-        h: Sequence[np.ndarray | None] | None = None,
-        block: int | None = None,
-    ):
-        self.args = (M, list(W), list(H), J, g, h)
-        self.block = block
-        nj, ns = len(H), len(W)
-        self.J = J if J is not None else [[None] * ns for _ in range(nj)]
-        self._cache: dict[tuple[bool, ...], tuple[LinearFilter, LinearFilter]] = {}
-        self._full: LinearFilter | None = None
-
-    def _filters(self, flags: tuple[bool, ...]) -> tuple[LinearFilter, LinearFilter]:
-        hit = self._cache.get(flags)
-        if hit is not None:
-            return hit
-        M, W, H, _, g, h = self.args
-        data = [s for s, f in enumerate(flags) if not f]
-        shared = [s for s, f in enumerate(flags) if f]
-        fd = LinearFilter(
-            M, [W[s] for s in data], H, [[Jj[s] for s in data] for Jj in self.J], block=self.block
-        )
-        fs = LinearFilter(
-            M,
-            [W[s] for s in shared],
-            H,
-            [[Jj[s] for s in shared] for Jj in self.J],
-            g,
-            h,
-            block=self.block,
-        )
-        self._cache[flags] = (fd, fs)
-        return fd, fs
-
-    def run(
-        self,
-        v: Sequence[np.ndarray],
-        x0: np.ndarray | None = None,
-        out: Sequence[np.ndarray | None] | None = None,
-        as_data: Sequence[int] = (),
-        temp: Sequence[int] = (),
-    ) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
-        lead = max(a.ndim for a in v) - 2
-        T = v[0].shape[-2]
-        if lead == 0:
-            if self._full is None:
-                M, W, H, _, g, h = self.args
-                self._full = LinearFilter(M, W, H, self.J, g, h, block=self.block)
-            return self._full.run(v, T=T, x0=x0, out=out, temp=temp), None
-        B = max(a.shape[0] for a in v if a.ndim == 3)
-        flags = tuple(is_shared(a, lead) and s not in as_data for s, a in enumerate(v))
-        if all(flags):  # the same record for every stream: still one response per stream
-            flags = (False, *flags[1:])
-        fd, fs = self._filters(flags)
-        dv = [np.broadcast_to(a, (B, *a.shape[-2:])) for a, f in zip(v, flags) if not f]
-        sv = [a[(0,) * (a.ndim - 2)] for a, f in zip(v, flags) if f]
-        data = fd.run(dv, T=T, out=out, temp=temp)
-        shared = fs.run(sv, T=T, x0=x0)
-        return data, shared
-
-
-def within_band(x: np.ndarray, offset: np.ndarray | None, radius: np.ndarray) -> bool:
-    """``|x + offset| <= radius`` everywhere (``offset``, ``radius`` broadcast against ``x``),
-    without forming ``x + offset``: two comparisons with data-free thresholds."""
-    up = radius if offset is None else radius - offset
-    dn = -radius if offset is None else -radius - offset
-    return not (np.greater(x, up).any() or np.less(x, dn).any())
-
-
-def redo_streams(
-    est: Any,
-    u: np.ndarray,
-    y: np.ndarray,
-    t: np.ndarray | None,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    bad: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The streams ``bad`` of a batch (a measurement found inconsistent by a vectorised path)
-    by the estimator's step-by-step loop, which reports the steps and predicts without them;
-    the other streams keep their vectorised bounds. Returns ``(lo, hi, inconsistent)``."""
-    inc = np.zeros(y.shape[:-1], dtype=bool)
-    for b in np.flatnonzero(bad):
-        lo[b], hi[b], inc[b] = est._loop(u[b], y[b], t)
-    return lo, hi, inc

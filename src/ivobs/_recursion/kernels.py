@@ -1,0 +1,136 @@
+"""Kernels shared by the fast paths: compiled sparse products, reusable temporaries, products
+over the last axis of batches, and the checks that send a stream of a batch back to its loop."""
+
+from __future__ import annotations
+
+import threading
+import weakref
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "csr_accumulate",
+    "is_shared",
+    "matrix_product",
+    "redo_streams",
+    "scratch",
+    "within_band",
+]
+
+SCRATCH_MAX = 1 << 22
+"""Temporaries up to this many elements are reused between calls (:func:`scratch`)."""
+
+_LOCAL = threading.local()
+
+try:  # SciPy's compiled kernels y += A x (a private module, stable for years)
+    from scipy.sparse._sparsetools import csc_matvec as _csc_matvec
+    from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
+except ImportError:  # pragma: no cover
+    _csr_matvec = _csc_matvec = None
+
+
+def csr_accumulate(M: Any, x: np.ndarray, out: np.ndarray) -> None:
+    """``out += M @ x`` for a CSR (or CSC) matrix ``M`` and vectors: SciPy's compiled kernel,
+    without a temporary or the Python-level dispatch of ``@`` (for large sparse systems this is
+    the whole per-step cost of an observer); the public ``@`` when the kernel is unavailable."""
+    kernel = {"csr": _csr_matvec, "csc": _csc_matvec}.get(M.format)
+    if kernel is not None and M.data.dtype == np.float64 and x.dtype == np.float64:
+        kernel(M.shape[0], M.shape[1], M.indptr, M.indices, M.data, x, out)
+    else:  # pragma: no cover
+        out += M @ x
+
+
+def scratch(owner: Any, name: str, shape: tuple[int, ...], dtype: Any = float) -> np.ndarray:
+    """A reusable array for a temporary of ``owner`` (per thread; contents undefined).
+
+    A batch arrives in chunks of a few million numbers; a fresh array of that size costs more
+    in first-touch page faults than the arithmetic done on it, so temporaries that never leave
+    a call are kept for the next chunk. Larger ones (a long single record) are not kept."""
+    if int(np.prod(shape)) > SCRATCH_MAX:
+        return np.empty(shape, dtype=dtype)
+    store = _LOCAL.__dict__.get("store")
+    if store is None:
+        store = _LOCAL.store = weakref.WeakKeyDictionary()
+    mine: dict[str, np.ndarray] = store.setdefault(owner, {})
+    a = mine.get(name)
+    if a is None or a.shape != tuple(shape) or a.dtype != np.dtype(dtype):
+        a = mine[name] = np.empty(shape, dtype=dtype)
+    return a
+
+
+def _issparse(M: Any) -> bool:
+    try:
+        from scipy.sparse import issparse
+    except ImportError:  # pragma: no cover
+        return False
+    return bool(issparse(M))
+
+
+def _matrix(a: Any, rows: int | None, cols: int | None) -> np.ndarray:
+    """A 2-D float array of the given shape (a vector is a column when ``rows`` is known)."""
+    m = np.asarray(a, dtype=float)
+    if m.ndim == 1:
+        m = m.reshape(-1, 1) if rows is not None else m.reshape(1, -1)
+    if (rows is not None and m.shape[0] != rows) or (cols is not None and m.shape[1] != cols):
+        raise ValueError(f"expected a ({rows}, {cols}) matrix, got {m.shape}")
+    return m
+
+
+def is_shared(a: np.ndarray, lead: int) -> bool:
+    """True when a ``(..., T, m)`` signal is the same for every stream of the batch (fewer
+    leading axes than ``lead``, or stride 0 along them: ``np.broadcast_to`` of one record)."""
+    if a.ndim - 2 < lead:
+        return True
+    return all(a.strides[i] == 0 or a.shape[i] == 1 for i in range(a.ndim - 2))
+
+
+def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.ndarray:
+    """``X @ Mt`` over the last axis of a ``(..., m)`` array (``Mt`` dense or sparse ``(m, p)``).
+
+    Narrow products (``m, p <= 8``: e.g. the 3 states of a batch of streams) run as one product
+    with ``kron(I_8, Mt)`` on rows of 8 samples: BLAS is slow on a very tall, 3-wide product."""
+    lead = X.shape[:-1]
+    m, p = Mt.shape
+    if _issparse(Mt):
+        res = np.asarray((Mt.T @ X.reshape(-1, m).T).T).reshape(*lead, p)
+        if out is None:
+            return res
+        out[...] = res
+        return out
+    rows = int(np.prod(lead)) if lead else 1
+    if out is None:
+        out = np.empty((*lead, p))
+    narrow = m <= 8 and p <= 8 and rows % 8 == 0 and rows >= 4096
+    if narrow and X.flags.c_contiguous and out.flags.c_contiguous:
+        big = np.kron(np.eye(8), Mt)
+        np.matmul(X.reshape(rows // 8, 8 * m), big, out=out.reshape(rows // 8, 8 * p))
+    else:
+        out.reshape(rows, p)[...] = X.reshape(rows, m) @ Mt
+    return out
+
+
+def within_band(x: np.ndarray, offset: np.ndarray | None, radius: np.ndarray) -> bool:
+    """``|x + offset| <= radius`` everywhere (``offset``, ``radius`` broadcast against ``x``),
+    without forming ``x + offset``: two comparisons with data-free thresholds."""
+    up = radius if offset is None else radius - offset
+    dn = -radius if offset is None else -radius - offset
+    return not (np.greater(x, up).any() or np.less(x, dn).any())
+
+
+def redo_streams(
+    est: Any,
+    u: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray | None,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    bad: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The streams ``bad`` of a batch (a measurement found inconsistent by a vectorised path)
+    by the estimator's step-by-step loop, which reports the steps and predicts without them;
+    the other streams keep their vectorised bounds. Returns ``(lo, hi, inconsistent)``."""
+    inc = np.zeros(y.shape[:-1], dtype=bool)
+    for b in np.flatnonzero(bad):
+        lo[b], hi[b], inc[b] = est._loop(u[b], y[b], t)
+    return lo, hi, inc

@@ -1,0 +1,150 @@
+"""The linear programs behind the cooperative gains (:mod:`ivobs.design.cooperative`): the column
+layout of ``L`` and auxiliary variables, ``T >= ±M`` rows, and the two-stage solve that returns
+the smallest gain among the optimal ones (the module docstring of
+:mod:`ivobs.design.cooperative`, "Smallest gain among the optimal ones")."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linprog
+
+__all__ = ["LP", "L_BOUND", "OPT_TOL", "REG_L1", "abs_bound_rows", "output_weights", "solve_lp"]
+
+L_BOUND = 1e6  # box on the gain entries in the LPs (keeps HiGHS away from unbounded rays)
+
+OPT_TOL = (1e-12, 1e-9)
+"""Relative slack of an LP's optimal value in the regularising second stage: the
+first value, the second if HiGHS calls the first infeasible (its own tolerances are 1e-7)."""
+REG_L1 = 1e-3
+"""Weight of ``Σ_ij w_j |L_ij|`` (tie-break) next to the largest column norm in that stage."""
+
+
+class LP:
+    """Column layout of the LPs: ``L`` (n·p, row-major), then auxiliary blocks."""
+
+    def __init__(self, n: int, p: int, blocks: dict[str, int]):
+        self.n, self.p = n, p
+        self.offset: dict[str, int] = {"L": 0}
+        size = n * p
+        for name, cols in blocks.items():
+            self.offset[name] = size
+            size += cols
+        self.size = size
+
+    def lin_D(self, A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``D_ij = A_ij − Σ_l L_il C_lj`` as rows ``(coef, const)`` for ``vec(D)`` row-major."""
+        n, p = self.n, self.p
+        coef = np.zeros((n * n, self.size))
+        for i in range(n):
+            for j in range(n):
+                coef[i * n + j, i * p : (i + 1) * p] = -C[:, j]
+        return coef, A.ravel().copy()
+
+    def lin_G(self, E: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``G_ij = E_ij − Σ_l L_il F_lj`` (``vec(G)`` row-major)."""
+        n, p = self.n, self.p
+        m = E.shape[1]
+        coef = np.zeros((n * m, self.size))
+        for i in range(n):
+            for j in range(m):
+                coef[i * m + j, i * p : (i + 1) * p] = -F[:, j]
+        return coef, E.ravel().copy()
+
+    def aux(self, name: str, rows: int) -> np.ndarray:
+        coef = np.zeros((rows, self.size))
+        coef[:, self.offset[name] : self.offset[name] + rows] = np.eye(rows)
+        return coef
+
+    def gain(self, x: np.ndarray) -> np.ndarray:
+        return x[: self.n * self.p].reshape(self.n, self.p)
+
+
+def abs_bound_rows(
+    lin: tuple[np.ndarray, np.ndarray], aux: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``T >= M`` and ``T >= −M`` as ``A_ub x <= b_ub`` (``M = coef x + const``)."""
+    coef, const = lin
+    return np.vstack([coef - aux, -coef - aux]), np.concatenate([-const, const])
+
+
+def output_weights(C: np.ndarray) -> np.ndarray:
+    """Weights ``w_j = ‖C_j‖₁`` (row ``j`` of ``C``) of the gain's columns in the regularising
+    stage: ``Σ_i w_j |L_ij|`` bounds what column ``j`` of ``L`` adds to ``|A − L_k C|`` when
+    output ``j`` is missing (``|L_:j| |C_j|``), and does not change when an output is rescaled.
+    Rows of zeros (an output that only sees ``u`` or ``d``) weigh as the largest row."""
+    w = np.abs(C).sum(axis=1)
+    return np.where(w > 0.0, w, max(1.0, float(w.max(initial=0.0))))
+
+
+def solve_lp(
+    c: np.ndarray,
+    A_ub: np.ndarray,
+    b_ub: np.ndarray,
+    bounds: list[tuple[Any, Any]],
+    gain: tuple[int, np.ndarray] | None = None,
+    parts: list[np.ndarray] | None = None,
+) -> np.ndarray | None:
+    """HiGHS; with ``gain = (n, w)`` (the first ``n·p`` columns are ``L``, row-major) the
+    regularising second stage of the module docstring, which keeps each objective part
+    (``parts``, default ``[c]``; ``c`` is a weighted sum of them) at its optimal value."""
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
+    if res.status != 0:
+        return None
+    x: np.ndarray = res.x
+    if gain is None:
+        return x
+    parts = [c] if parts is None else parts
+    best = np.array([float(q @ res.x) for q in parts])
+    for tol in OPT_TOL:
+        reg = _smallest_gain(np.array(parts), best, tol, A_ub, b_ub, bounds, *gain)
+        if reg is not None:
+            return reg
+    return x
+
+
+def _smallest_gain(
+    parts: np.ndarray,
+    best: np.ndarray,
+    tol: float,
+    A_ub: np.ndarray,
+    b_ub: np.ndarray,
+    bounds: list[tuple[Any, Any]],
+    n: int,
+    w: np.ndarray,
+) -> np.ndarray | None:
+    """Second stage: among the points with ``q_iᵀx <= best_i + tol·max(1,
+    |best_i|)`` for every objective part ``q_i``, minimise ``t + REG_L1 Σ_ij w_j |L_ij|`` with
+    ``t >= Σ_i w_j |L_ij|`` for every column ``j`` (auxiliary ``U >= ±L``): the LP optimum is
+    kept (to the tolerance), the gain is the smallest one attaining it, spread over redundant
+    outputs. None when HiGHS fails (the caller then tries the next tolerance)."""
+    p = w.size
+    nL, N = n * p, parts.shape[1]
+    size = N + nL + 1
+    wU = np.tile(w, n)  # weight of U_ij (row-major, like L)
+    eye = np.eye(nL)
+    rows = [
+        np.hstack([A_ub, np.zeros((A_ub.shape[0], nL + 1))]),
+        np.hstack([parts, np.zeros((parts.shape[0], nL + 1))]),
+        np.hstack([eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
+        np.hstack([-eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
+    ]
+    col = np.zeros((p, size))  # Σ_i w_j U_ij − t <= 0
+    for j in range(p):
+        col[j, N + j : N + nL : p] = w[j]
+    col[:, -1] = -1.0
+    rows.append(col)
+    slack = tol * np.maximum(1.0, np.abs(best))
+    b = np.concatenate([b_ub, best + slack, np.zeros(2 * nL + p)])
+    obj = np.zeros(size)
+    obj[N : N + nL] = REG_L1 * wU
+    obj[-1] = 1.0
+    res = linprog(
+        obj,
+        A_ub=np.vstack(rows),
+        b_ub=b,
+        bounds=list(bounds) + [(0, None)] * (nL + 1),
+        method="highs",
+    )
+    return res.x[:N] if res.status == 0 else None

@@ -1,0 +1,75 @@
+"""Interval observers built on cooperative (monotone) error dynamics: one family, three members.
+
+Papers: [Tang2019, Section V, Theorems 4–5, eqs. (36)–(48)]; [Efimov2013, Theorems 1–3,
+eqs. (3)–(8), Remark 1].
+
+ivobs' model ``x+ = A x + B u + E d``, ``y = C x + D_u u + F d`` (one disturbance ``d`` in both
+equations; ``D_u`` is the feedthrough) gives, for any gain ``L``,
+
+    x+ = (A − LC) x + (B − L D_u) u + L y + (E − LF) d                          (*)
+
+so with ``G = E − LF`` the Lemma-1 bounds ``G⁺ d_lo − G⁻ d_hi <= G d <= G⁺ d_hi − G⁻ d_lo``
+play the role of [Tang2019]'s ``d̲, d̄`` (eq. (37): for ``d = [w; v]``, ``E = [E 0]``,
+``F = [0 F]`` they are exactly ``E⁺w̄ − E⁻w̲ + (−LF)⁺v̄ − (−LF)⁻v̲``) and of [Efimov2013]'s
+``b̲ − LV``, ``b̄ + LV``.
+
+* ``interval`` — [Tang2019, eq. (36)] = [Efimov2013, eq. (3)]: ``A − LC`` nonnegative and Schur
+  ([Tang2019, Theorem 4] / [Efimov2013, Theorem 1]);
+* ``interval-transformed`` — [Tang2019, Theorem 5, eqs. (42)–(43)] = [Efimov2013, Theorem 2]:
+  observer (36) for ``z = S x`` with ``R = S (A − LC) S⁻¹ >= 0``, bounds mapped back by Lemma 1;
+* ``interval-split`` — [Efimov2013, Theorem 3, eq. (5)]: same coordinates,
+  ``D = A − LC = D⁺ − D⁻`` of any sign, stable iff ``|D| = D⁺ + D⁻`` is Schur.
+
+All three propagate one recursion (:mod:`.recursion`), the split form of (*) in coordinates
+``z = S x`` (``S = I`` except for ``interval-transformed``), with ``Q = S (A − LC) S⁻¹``::
+
+    z̄+ = Q⁺ z̄ − Q⁻ z̲ + S(B − L D_u) u + S L y + (SG)⁺ d_hi − (SG)⁻ d_lo
+    z̲+ = Q⁺ z̲ − Q⁻ z̄ + S(B − L D_u) u + S L y + (SG)⁺ d_lo − (SG)⁻ d_hi
+
+Soundness: multiply (*) by ``S``; Lemma 1 bounds ``Q z`` over ``[z̲, z̄]`` and ``SG d`` over the
+``d`` box, so ``z̲ <= z <= z̄`` carries over by induction from ``z̲_0 <= S x_0 <= z̄_0`` (Lemma 1
+on ``x0``). When ``Q >= 0`` (``Q⁻ = 0``) this *is* [Tang2019]'s (36)/(42) and [Efimov2013]'s
+(3)/(4); for ``interval-split`` it is [Efimov2013]'s (5). The midpoint obeys ``c+ = Q c + …`` and
+the radius ``r+ = |Q| r + radius(SG d)`` (``|Q| = Q⁺ + Q⁻``): bounded iff ``|Q|`` is Schur.
+(The stacked bounds follow ``[[Q⁺, −Q⁻], [−Q⁻, Q⁺]]``, not [Efimov2013]'s error matrix Σ; both
+are Schur iff ``|Q|`` is.) The vectorised path (:mod:`.vectorised`) runs exactly these two
+linear recursions through the shared kernels of :mod:`ivobs._recursion`.
+
+**Missing samples** (NaN in ``y[k]``): the gain's columns of the missing components are set to
+zero for that step, ``L_k = L diag(observed)``; (*) holds for *any* gain, so the same Lemma-1
+step with ``Q_k = S(A − L_k C)S⁻¹`` (which may have negative entries even when ``Q`` has none:
+the split form covers it) stays sound; with every component missing it is the model's prediction
+``x+ ∈ A[x̲, x̄] + B u + E[d]``. **Inconsistent data**: when ``y[k]`` lies outside
+``C[x̲_k, x̄_k] + D_u u_k + F[d]`` no state in the box explains it (a fault); it is reported and
+treated as missing. The width of the bounds grows during a gap of output ``j`` alone at the rate
+``ρ(|A − L_(j) C|)`` (``design.missing_radius``); the default gains are the smallest among the
+width-optimal ones (:mod:`ivobs.design.cooperative`), so that no gap multiplies the bounds by the
+size of a needlessly large gain.
+
+**Rounding**: the floating-point error of the recursion is bounded and covered by the loop
+(inside every step) and by the vectorised path (an enlarged margin): :mod:`.rounding`.
+
+The package: :mod:`.design` (offline: gains, ``S``; no time loop), :mod:`.operators` (the
+matrices derived from the design, once), :mod:`.recursion` (the typed state and the step),
+:mod:`.vectorised` (whole records and batches), :mod:`.rounding`, :mod:`.observers` (the three
+registered estimators).
+"""
+
+from __future__ import annotations
+
+from .design import IntervalDesign, SplitDesign, TransformedDesign
+from .observers import IntervalObserver, SplitIntervalObserver, TransformedIntervalObserver
+from .recursion import CooperativeState, IntervalState, SplitState, TransformedState
+
+__all__ = [
+    "CooperativeState",
+    "IntervalDesign",
+    "IntervalObserver",
+    "IntervalState",
+    "SplitDesign",
+    "SplitIntervalObserver",
+    "SplitState",
+    "TransformedDesign",
+    "TransformedIntervalObserver",
+    "TransformedState",
+]

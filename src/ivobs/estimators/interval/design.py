@@ -1,0 +1,420 @@
+"""The offline design of the interval observers: the gain ``L`` (and ``S`` for
+``interval-transformed``), checked, with the numbers the papers report about it.
+
+Nothing here loops over time: the gains come from :mod:`ivobs.design.cooperative` (LMI (41) of
+[Tang2019] = LMIs (7)–(8) of [Efimov2013], the linear programs on ``|A − LC|`` and the width
+refinement) and :mod:`ivobs.design.similarity` ([Tang2019, eq. (48)], [Efimov2013, Theorem 2]);
+user gains of ``scipy.sparse`` systems are checked with sparse algebra.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from ..._validate import as_matrix, as_vector
+from ...design._lmi import MAX_LMI_STATES
+from ...design.cooperative import (
+    NONNEG_TOL,
+    abs_schur_gain,
+    check_abs_schur,
+    check_nonnegative_schur,
+    fixed_radius,
+    missing_radius,
+    nonnegative_gain,
+    refine_width,
+    steady_width,
+)
+from ...design.similarity import (
+    check_transform,
+    default_design,
+    default_e1,
+    nonnegative_realization,
+    place_real_poles,
+    similarity_transform,
+    transformed_width,
+)
+from ...errors import DesignError, IvobsError
+from ...linalg import observability_matrix, spectral_radius
+from ...model import LinearSystem
+from ...sets import Box
+from ..base import Design
+
+__all__ = [
+    "MAX_DENSE_DESIGN",
+    "IntervalDesign",
+    "SplitDesign",
+    "TransformedDesign",
+    "check_design_size",
+    "design_delta",
+    "interval_design",
+    "sparse_gain_check",
+    "sparse_radius",
+    "split_design",
+    "transformed_design",
+]
+
+
+@dataclass(frozen=True)
+class IntervalDesign(Design):
+    """``L``: gain; ``D = A − LC`` ([Efimov2013]'s notation; nonnegative); ``spectral_radius``
+    of ``D``; ``gain``: how ``L`` was obtained (``'lmi'``, ``'lmi+width'``, ``'given'``);
+    ``steady_width``: ``(I − D)⁻¹ |E − LF| Δ``, the limit of the bounds' width for constant
+    bounds (None for callable bounds); ``missing_radius``: ``ρ(|A − L_(j) C|)`` for each output
+    ``j`` missing alone (``L_(j)``: column ``j`` of ``L`` zeroed, the gain used then), the growth
+    rate of the width during a gap of that output (None for sparse systems)."""
+
+    L: np.ndarray
+    D: np.ndarray
+    spectral_radius: float
+    gain: str
+    steady_width: np.ndarray | None
+    missing_radius: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class SplitDesign(Design):
+    """``L``: gain; ``D = A − LC`` (any sign); ``spectral_radius`` of ``|D| = D⁺ + D⁻``;
+    ``gain``: ``'width'``, ``'margin'``, ``'lmi'`` or ``'given'``; ``steady_width``:
+    ``(I − |D|)⁻¹ |E − LF| Δ`` (None for callable bounds); ``missing_radius``: as for
+    :class:`IntervalDesign`."""
+
+    L: np.ndarray
+    D: np.ndarray
+    spectral_radius: float
+    gain: str
+    steady_width: np.ndarray | None
+    missing_radius: np.ndarray | None = None
+
+
+def design_delta(sys: LinearSystem) -> np.ndarray:
+    """Widths ``Δ`` of the ``d`` box used by the width objectives: constant bounds as they
+    are, time-varying bounds their largest width per component, callable bounds
+    ([Efimov2013, Remark 1]) ones (no better information before the data arrive)."""
+    box = sys.d
+    if box is None:
+        return np.zeros(0)
+    if isinstance(box, Box):
+        w: np.ndarray = box.hi - box.lo
+        return np.max(w, axis=0) if box.is_time_varying else w
+    return np.ones(sys.nd)
+
+
+MAX_DENSE_DESIGN = MAX_LMI_STATES
+"""Above this many states the dense design steps of this package (LMI (41), the width and margin
+linear programs, similarity transforms) are refused with a :class:`~ivobs.DesignError`: pass a
+gain ``L=`` (checked sparsely for ``scipy.sparse`` systems)."""
+
+
+_SCALES = (
+    "pass a gain L=... to 'interval' or 'interval-split' (checked with sparse algebra when A is "
+    "scipy.sparse, one sparse product per step; e.g. ivobs.scenarios.heat_gain for heat-1d; "
+    "docs/scale.md)"
+)
+
+
+def check_design_size(sys: LinearSystem, who: str, step: str) -> None:
+    """:class:`DesignError` when a dense design step would run on more than
+    :data:`MAX_DENSE_DESIGN` states, pointing to what scales."""
+    if sys.nx > MAX_DENSE_DESIGN:
+        raise DesignError(
+            f"{who}: {step} is a dense design step (O(nx^2) variables or O(nx^3) work) and does "
+            f"not scale to nx = {sys.nx} > {MAX_DENSE_DESIGN} states; {_SCALES}"
+        )
+
+
+def sparse_radius(P: Any) -> float:
+    """Spectral radius of a sparse nonnegative matrix: ARPACK (Perron root, the largest in
+    modulus), or the smaller of the largest row and column sums (an upper bound, Perron–
+    Frobenius) when ARPACK does not converge. Small matrices: dense eigenvalues. ARPACK starts
+    from the positive vector of ones (not a random one), so that the same design gives the same
+    number (it is part of the design's fingerprint, which a saved state must match)."""
+    n = P.shape[0]
+    if n <= MAX_DENSE_DESIGN:
+        return spectral_radius(P.toarray())
+    from scipy.sparse.linalg import ArpackNoConvergence, eigs
+
+    bound = float(min(abs(P).sum(axis=1).max(), abs(P).sum(axis=0).max()))
+    try:
+        val = eigs(P, k=1, which="LM", tol=1e-8, ncv=min(n - 1, 40), v0=np.ones(n),
+                   return_eigenvectors=False)  # fmt: skip
+    except ArpackNoConvergence:
+        return bound
+    return min(float(np.abs(val[0])), bound)
+
+
+def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: bool) -> Any:
+    """``D = A − LC`` as a sparse matrix, checked as :func:`check_nonnegative_schur` /
+    :func:`check_abs_schur` do, without dense algebra (``scipy.sparse`` systems)."""
+    from scipy.sparse import csr_matrix
+
+    A = sys.sparse("A")
+    D = (A - csr_matrix(L) @ sys.sparse("C")).tocsr()
+    D.eliminate_zeros()
+    if nonnegative:
+        tol = NONNEG_TOL * max(1.0, float(abs(A).max()) if A.nnz else 0.0)
+        if D.nnz and D.data.min() < -tol:
+            coo = D.tocoo()
+            j = int(np.argmin(coo.data))
+            raise DesignError(
+                f"{who}: A − LC is not nonnegative: entry ({coo.row[j] + 1}, {coo.col[j] + 1}) = "
+                f"{coo.data[j]:.6g} < 0 ([Tang2019, Theorem 4] / [Efimov2013, Assumption 2.B] "
+                "need A − LC >= 0); use 'interval-split' or 'interval-transformed' with this gain"
+            )
+    rho = sparse_radius(abs(D))
+    if rho >= 1.0:
+        what = "A − LC is not Schur" if nonnegative else "|A − LC| = D⁺ + D⁻ is not Schur"
+        ref = "[Efimov2013, Assumption 2.A]" if nonnegative else "[Efimov2013, Theorem 3]"
+        raise DesignError(f"{who}: {what}: spectral radius {rho:.6g} >= 1 ({ref})")
+    return D
+
+
+def check_gain(sys: LinearSystem, L: Any) -> np.ndarray:
+    """The option ``L`` as an ``(nx, ny)`` matrix (named in the error)."""
+    return as_matrix("L", L, sys.nx, sys.ny, vector="col")
+
+
+def given_gain(
+    sys: LinearSystem, L: Any, who: str, nonnegative: bool
+) -> tuple[np.ndarray, Any, float]:
+    """A gain, checked (sparse algebra for sparse systems): ``(L, D, ρ)`` with ``D = A − LC``
+    and ``ρ`` the spectral radius of ``D`` (``nonnegative``) or of ``|D|``."""
+    L = check_gain(sys, L)
+    if sys.is_sparse:
+        D = sparse_gain_check(sys, L, who, nonnegative)
+        return L, D, sparse_radius(abs(D))
+    A, C = sys.A_at(0), sys.C_at(0)
+    if nonnegative:
+        D = check_nonnegative_schur(A, C, L, who)
+        return L, D, spectral_radius(D)
+    D = check_abs_schur(A, C, L, who)
+    return L, D, spectral_radius(np.abs(D))
+
+
+def _steady(sys: LinearSystem, D: Any, L: np.ndarray) -> np.ndarray | None:
+    """``(I − |D|)⁻¹ |E − LF| Δ`` (a sparse solve for sparse systems); None for callable
+    bounds."""
+    if sys.nd and not isinstance(sys.d, Box):
+        return None
+    G = sys.E_at(0) - L @ sys.F_at(0)
+    if sys.is_sparse:
+        from scipy.sparse import identity
+        from scipy.sparse.linalg import spsolve
+
+        M = (identity(D.shape[0], format="csc") - abs(D)).tocsc()
+        return np.atleast_1d(spsolve(M, np.abs(G) @ design_delta(sys)))
+    return steady_width(D, G, design_delta(sys))
+
+
+def _missing_radius(sys: LinearSystem, L: np.ndarray) -> np.ndarray | None:
+    if sys.is_sparse:
+        return None
+    return missing_radius(sys.A_at(0), sys.C_at(0), L)
+
+
+def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalDesign:
+    """The design of ``interval``: a given gain, or LMI (41) ([Tang2019]) refined for width
+    (``gain="width"``); :class:`DesignError` when no gain makes ``A − LC`` nonnegative and
+    Schur."""
+    if L is None:
+        if gain not in ("lmi", "width"):
+            raise IvobsError(f"gain: expected 'lmi' or 'width', got {gain!r}")
+        check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
+        A, _, C, _, E, F = sys.matrices_at(0)
+        L = nonnegative_gain(A, C, who)
+        if gain == "width":
+            L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
+            gain = "lmi+width"
+    else:
+        gain = "given"
+    return _checked(IntervalDesign, sys, L, gain, who, nonnegative=True)
+
+
+def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
+    """The design of ``interval-split``: a given gain, LMIs (7)–(8) of [Efimov2013]
+    (``"lmi"``), the smallest ``ρ(|A − LC|)`` found (``"margin"``), then refined for width
+    (``"width"``); :class:`DesignError` when no gain with ``|A − LC|`` Schur is found."""
+    if L is None:
+        if gain not in ("lmi", "margin", "width"):
+            raise IvobsError(f"gain: expected 'width', 'margin' or 'lmi', got {gain!r}")
+        what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
+        check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
+        A, _, C, _, E, F = sys.matrices_at(0)
+        if gain == "lmi":
+            L = nonnegative_gain(A, C, who)
+        else:
+            L, rho = abs_schur_gain(A, C)
+            if rho >= 1.0:
+                low = fixed_radius(A, C)
+                why = (
+                    f"; no gain can do better than {low:.6g}: the unmeasured states (zero "
+                    "columns of C) keep |A| on their block"
+                    if low >= 1.0
+                    else ""
+                )
+                raise DesignError(
+                    f"{who}: no gain found with |A − LC| Schur: the best spectral "
+                    f"radius of |A − LC| found is {rho:.6g} >= 1 ([Efimov2013, Theorem 3]){why}; "
+                    "try 'interval-transformed' (needs only A − LC Schur)"
+                )
+            if gain == "width":
+                L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=False)
+    else:
+        gain = "given"
+    return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
+
+
+D = TypeVar("D", IntervalDesign, SplitDesign)
+
+
+def _checked(kind: type[D], sys: LinearSystem, L: Any, gain: str, who: str, nonnegative: bool) -> D:
+    """The design of a gain (:func:`given_gain`) with its steady-state width and the growth
+    rates during single-output gaps."""
+    L, D_, rho = given_gain(sys, L, who, nonnegative)
+    return kind(
+        L=L,
+        D=D_,
+        spectral_radius=rho,
+        gain=gain,
+        steady_width=_steady(sys, D_, L),
+        missing_radius=_missing_radius(sys, L),
+    )
+
+
+@dataclass(frozen=True)
+class TransformedDesign(Design):
+    """``L``: gain (``A − LC`` Schur); ``poles``: eigenvalues of ``A − LC``; ``S``: the
+    transformation ``z = S x``; ``R = S (A − LC) S⁻¹`` (nonnegative up to round-off; this is the
+    matrix the observer propagates); ``e1``, ``e2``: the rows of [Tang2019, eq. (48)] (None when
+    ``S`` was given); ``spectral_radius`` of ``|R|``; ``gain``: ``'search'`` (ivobs' default
+    design), ``'given-poles'`` or ``'given'``; ``steady_width``:
+    ``|S⁻¹|(I − |R|)⁻¹|S(E − LF)| Δ``."""
+
+    L: np.ndarray
+    R: np.ndarray
+    S: np.ndarray
+    e1: np.ndarray | None
+    e2: np.ndarray | None
+    poles: np.ndarray
+    spectral_radius: float
+    gain: str
+    steady_width: np.ndarray | None
+
+
+def transformed_design(
+    sys: LinearSystem,
+    who: str,
+    *,
+    L: Any,
+    poles: Any,
+    R: Any,
+    S: Any,
+    e1: Any,
+    e2: Any,
+) -> TransformedDesign:
+    """The design of ``interval-transformed`` ([Tang2019, Theorem 5, eq. (48)], [Efimov2013,
+    Theorem 2]): the gain (given, placed poles or ivobs' search), then ``S`` (given, or by
+    eq. (48) from a nonnegative realisation ``R`` of the spectrum of ``A − LC``), checked."""
+    # every step here (pole placement, the realisation R, S by eq. (48), the dense n x n
+    # transform used at every step) is dense
+    check_design_size(sys, who, "the similarity transform ([Tang2019, eq. (48)])")
+    A, _, C, _, E, F = sys.matrices_at(0)
+    delta = design_delta(sys)
+    if L is not None and poles is not None:
+        raise IvobsError("L, poles: give the gain L or the poles to place, not both")
+    if S is not None and (e1 is not None or e2 is not None):
+        raise IvobsError("e1, e2: they only serve to compute S by eq. (48); S was given")
+    e1_search = None
+    if L is not None:
+        L, gain = check_gain(sys, L), "given"
+    elif poles is None:
+        L, e1_search = default_design(A, C, lambda L_: E - L_ @ F, delta, who)
+        gain = "search"
+    else:
+        poles = as_vector("poles", poles, sys.nx)
+        if np.any(np.abs(poles) >= 1.0):
+            raise IvobsError(f"poles: expected values inside (−1, 1), got {poles}")
+        L, gain = place_real_poles(A, C, poles, who), "given-poles"
+    M = A - L @ C
+    rho = spectral_radius(M)
+    if rho >= 1.0:
+        raise DesignError(f"{who}: A − LC is not Schur: spectral radius {rho:.6g} >= 1")
+    G = E - L @ F
+    R_given = None if R is None else _check_R(sys, R, who)
+    if S is not None:
+        S = as_matrix("S", S, sys.nx, sys.nx)
+        e1_, e2_ = None, None
+    else:
+        S, e1_, e2_ = _transform(M, G, delta, R_given, e1, e2, e1_search, who)
+        R_given = None  # S was built from R: check_transform checks nonnegativity only
+    Rs = check_transform(M, S, who, R_given)
+    steady = None
+    if not (sys.nd and not isinstance(sys.d, Box)):
+        steady = transformed_width(M, G, delta, S)
+    return TransformedDesign(
+        L=L,
+        R=Rs,
+        S=S,
+        e1=e1_,
+        e2=e2_,
+        poles=np.linalg.eigvals(M),
+        spectral_radius=spectral_radius(np.abs(Rs)),
+        gain=gain,
+        steady_width=steady,
+    )
+
+
+def _transform(
+    M: np.ndarray,
+    G: np.ndarray,
+    delta: np.ndarray,
+    R_given: np.ndarray | None,
+    e1: Any,
+    e2: Any,
+    e1_search: np.ndarray | None,
+    who: str,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(S, e1, e2)`` of [Tang2019, eq. (48)]: ``S = O_R⁻¹ O_{A−LC}`` for the nonnegative
+    ``R`` (given, or :func:`~ivobs.design.similarity.nonnegative_realization` of the spectrum
+    of ``M = A − LC``) and the rows ``e1``, ``e2`` (given or default)."""
+    n = M.shape[0]
+    e2_default: np.ndarray | None
+    if R_given is None:
+        R_t, e2_default = nonnegative_realization(np.linalg.eigvals(M))
+        R_t = np.asarray(R_t)
+    else:
+        R_t, e2_default = R_given, None
+    if e2 is not None:
+        e2_ = as_vector("e2", e2, n)
+    elif e2_default is not None:
+        e2_ = e2_default
+    else:
+        e2_ = _default_e2(R_t)
+    if e1 is not None:
+        e1_ = as_vector("e1", e1, n)
+    elif e1_search is not None and R_given is None and e2 is None:
+        e1_ = e1_search
+    else:
+        e1_ = default_e1(M, R_t, e2_, G, delta, who)
+    return similarity_transform(M, R_t, e1_, e2_, who), e1_, e2_
+
+
+def _check_R(sys: LinearSystem, given: Any, who: str) -> np.ndarray:
+    R = as_matrix("R", given, sys.nx, sys.nx)
+    if np.any(R < 0):
+        i, j = np.unravel_index(int(np.argmin(R)), R.shape)
+        raise DesignError(
+            f"{who}: R is not nonnegative: entry ({i + 1}, {j + 1}) = {R[i, j]:.6g} "
+            "< 0 ([Tang2019, Theorem 5] / [Efimov2013, Theorem 2] need R >= 0)"
+        )
+    return R
+
+
+def _default_e2(R: np.ndarray) -> np.ndarray:
+    """A row making ``(R, e2)`` well observable: ones, then unit vectors (best conditioned)."""
+    n = R.shape[0]
+    cands: list[np.ndarray] = [np.ones(n), *np.eye(n)]
+    conds = [np.linalg.cond(observability_matrix(R, c[None, :])) for c in cands]
+    return cands[int(np.argmin(conds))]

@@ -1,0 +1,235 @@
+"""The three registered interval observers: design in ``__init__`` (:mod:`.design`), the matrices
+derived from it once (:class:`~.operators.SplitOperators`), the step of :mod:`.recursion` and the
+vectorised path of :mod:`.vectorised`."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Generic, TypeVar
+
+import numpy as np
+
+from ...model import LinearSystem
+from ...sets import Box
+from .. import register
+from ..base import Estimator
+from ..state import Step
+from .design import (
+    IntervalDesign,
+    SplitDesign,
+    TransformedDesign,
+    interval_design,
+    split_design,
+    transformed_design,
+)
+from .operators import SplitOperators
+from .recursion import (
+    CooperativeState,
+    IntervalState,
+    SplitState,
+    TransformedState,
+    cooperative_step,
+)
+from .rounding import margins
+from .vectorised import VectorPath
+
+__all__ = ["IntervalObserver", "SplitIntervalObserver", "TransformedIntervalObserver"]
+
+S = TypeVar("S", bound=CooperativeState)
+
+
+class CooperativeObserver(Estimator, Generic[S]):
+    """What the three observers share (package docstring): the split-form recursion in
+    ``z = S x`` with the operators of the design, its typed state, the vectorised path, and the
+    data-scale factor ``nu`` of the rounding margin (:mod:`.rounding`)."""
+
+    needs_x0: ClassVar[bool] = True
+    data_used: ClassVar[str] = "prediction"
+    state_type: ClassVar[type[CooperativeState]] = CooperativeState
+
+    def _build(self, L: np.ndarray, D: Any, S_: np.ndarray | None = None) -> None:
+        """The operators of the gain ``L`` (``D = A − LC``; rounding margins when ``S = I``)
+        and transformation ``S``."""
+        assert self.x0 is not None
+        rounding = None if S_ is not None else margins(self.sys, L, D, self.name)
+        self.operators = SplitOperators(self.sys, self.x0, L, S_, rounding, self.name)
+        self.vector = VectorPath(self.operators)
+        self.valid_from = 0
+
+    def _initial_state(self) -> S:
+        lo, hi = self.operators.initial_bounds()
+        return self.state_type(lo=lo, hi=hi)  # type: ignore[return-value]  # state_type is S
+
+    def _step(self, state: S, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> Step[S]:
+        return cooperative_step(self.operators, state, u_k, y_k)
+
+    def _run(
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    ) -> tuple[np.ndarray, ...] | None:
+        return self.vector.run(self, u, y, t)
+
+    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
+        s = super()._step_scale(k, u_k, y_k, t_k)
+        nu = self.operators.nu
+        return s * nu if nu > 1.0 else s
+
+    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
+        s = super()._data_scale(u, y, t)
+        if self.operators.nu > 1.0:
+            s *= self.operators.nu
+        return s
+
+
+class _GainObserver(CooperativeObserver[S]):
+    """``interval`` and ``interval-split``: ``S = I``, the design is the gain ``L`` (given, or
+    designed as ``gain=`` says)."""
+
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None = None,
+        *,
+        L: Any = None,
+        gain: str = "width",
+        **options: Any,
+    ):
+        super().__init__(sys, x0, **options)
+        design = self._design(L, gain)
+        self._build(design.L, design.D)
+        self.design: IntervalDesign | SplitDesign = design
+
+    def _design(self, L: Any, gain: str) -> IntervalDesign | SplitDesign:
+        raise NotImplementedError
+
+
+@register
+class IntervalObserver(_GainObserver[IntervalState]):
+    """Interval observer with ``A − LC`` nonnegative and Schur ([Tang2019, eqs. (36)–(37),
+    Theorem 4]; [Efimov2013, eq. (3), Theorem 1]; bounds from measurements as in
+    [Efimov2013, Remark 1])::
+
+        x̄[k+1] = A x̄ + B u + L (y − C x̄ − D_u u) + Ḡ,    Ḡ = G⁺ d_hi − G⁻ d_lo
+        x̲[k+1] = A x̲ + B u + L (y − C x̲ − D_u u) + G̲,    G̲ = G⁺ d_lo − G⁻ d_hi,  G = E − LF
+
+    Errors ``x̄ − x``, ``x − x̲`` obey ``e+ = (A − LC) e + (nonnegative input)``: a
+    nonnegative ``A − LC`` keeps them nonnegative ([Tang2019, Lemma 3]), Schur keeps them
+    bounded. ``d`` bounds may be callables ``(k, y_k) -> Box`` ([Efimov2013, Remark 1], the Hénon
+    example).
+
+    **Data used:** the box of ``x[k]`` uses ``u[0..k−1]``, ``y[0..k−1]`` (and ``x0``).
+
+    **Gain** (``L=`` to give one; it must make ``A − LC`` nonnegative and Schur):
+    ``gain="lmi"``: LMI (41) of [Tang2019] with diagonal ``P`` (a margin maximised,
+    :func:`ivobs.design.cooperative.nonnegative_gain`); ``gain="width"`` (default): that gain
+    refined by linear programs that lower the steady-state width ``(I − D)⁻¹|G|Δ`` while keeping
+    ``D >= 0`` (:func:`ivobs.design.cooperative.refine_width`; never wider than the LMI gain,
+    and among equally good gains the smallest, e.g. with redundant noise-free sensors; a gap of
+    one output that the LMI gain rides out stays bounded). When no gain makes ``A − LC``
+    nonnegative and Schur ([Tang2019, Example 2], [Efimov2013, §IV.A]) a
+    :class:`~ivobs.DesignError` says so: use ``interval-split`` or ``interval-transformed``.
+
+    Missing samples, inconsistent data and the vectorised path: see the package docstring.
+    """
+
+    name = "interval"
+    order = 40
+    summary = "interval observer, A − LC nonnegative and Schur ([Tang2019, eq. (36)])"
+    reference = "[Tang2019, Section V.A, eqs. (36)-(41)]; [Efimov2013, Theorem 1, eq. (3)]"
+    state_type = IntervalState
+
+    def _design(self, L: Any, gain: str) -> IntervalDesign:
+        return interval_design(self.sys, L, gain, self.name)
+
+
+@register
+class SplitIntervalObserver(_GainObserver[SplitState]):
+    """Interval observer in the original coordinates with ``D = A − LC = D⁺ − D⁻`` of any sign
+    ([Efimov2013, Theorem 3, eq. (5)]; error system (6); Corollary 1)::
+
+        x̄[k+1] = D⁺ x̄ − D⁻ x̲ + (B − L D_u) u + L y + Ḡ
+        x̲[k+1] = D⁺ x̲ − D⁻ x̄ + (B − L D_u) u + L y + G̲        (Ḡ, G̲ as for ``interval``)
+
+    Sound for every ``L`` (Lemma 1); bounded iff ``|D| = D⁺ + D⁻`` is Schur ([Efimov2013]'s
+    copositive argument: the radius obeys ``r+ = |D| r + …``).
+
+    **Data used:** the box of ``x[k]`` uses ``u[0..k−1]``, ``y[0..k−1]`` (and ``x0``).
+
+    **Gain** (``L=`` to give one; ``|A − LC|`` must be Schur):
+    ``gain="lmi"``: LMIs (7)–(8) of [Efimov2013] (Corollary 1; they force ``D >= 0``, the same
+    LMI as [Tang2019]'s (41)); ``gain="margin"``: a local minimum of ``ρ(|A − LC|)`` by linear
+    programs on ``|A − LC| v <= s v`` alternating with the Perron vector ``v``
+    (:func:`ivobs.design.cooperative.abs_schur_gain`); ``gain="width"`` (default): that gain
+    refined to lower the steady-state width ``(I − |D|)⁻¹|G|Δ``
+    (:func:`ivobs.design.cooperative.refine_width`). Both linear programs return the smallest
+    gain among their optimal ones. :class:`~ivobs.DesignError` when no gain with
+    ``ρ(|A − LC|) < 1`` is found.
+
+    Missing samples, rounding and the vectorised path: see the package docstring.
+    """
+
+    name = "interval-split"
+    order = 60
+    summary = "interval observer with D⁺/D⁻, |A − LC| Schur ([Efimov2013, Theorem 3, eq. (5)])"
+    reference = "[Efimov2013, Theorem 3, eqs. (5)-(8), Corollary 1]"
+    state_type = SplitState
+
+    def _design(self, L: Any, gain: str) -> SplitDesign:
+        return split_design(self.sys, L, gain, self.name)
+
+
+@register
+class TransformedIntervalObserver(CooperativeObserver[TransformedState]):
+    """Interval observer in coordinates ``z = S x`` where ``R = S (A − LC) S⁻¹`` is nonnegative
+    ([Tang2019, Theorem 5, eqs. (42)–(43), (48)]; [Efimov2013, Theorem 2, eq. (4)])::
+
+        z̲_0, z̄_0 = Lemma 1 of S on x0                                           (42a-b)
+        z̄+ = R z̄ + S(B − L D_u) u + S L y + ḡ,  z̲+ = R z̲ + … + g̲,  g = bounds of S(E − LF) d
+                                                                                 (42c-d, 43)
+        x̲, x̄ = Lemma 1 of S⁻¹ on [z̲, z̄]  (k >= 1; the prior box at k = 0)       (42e-f)
+
+    ``A − LC`` only needs to be Schur. ``S = O_R⁻¹ O_{A−LC}`` ([Tang2019, eq. (48)]) with the
+    observability matrices of ``(R, e2)`` and ``(A − LC, e1)``.
+
+    **Data used:** the box of ``x[k]`` uses ``u[0..k−1]``, ``y[0..k−1]`` (and ``x0``).
+
+    **Design** (each step can be given). ``L=``, or ``poles=`` (distinct real poles placed by
+    SciPy's ``place_poles``). By default (:func:`ivobs.design.similarity.default_design`) ivobs
+    places distinct poles in ``(0, 1)`` (then ``R = diag(λ)`` is a nonnegative realisation),
+    lowers the steady-state width ``|V|(I − Λ)⁻¹|V⁻¹ G| Δ`` of the observer in modal coordinates
+    by Nelder–Mead over ``L``, then searches ``(L, e1)`` jointly over every real spectrum the
+    realisation below supports (a local search; ``design.gain == 'search'``). ``R=``: a
+    nonnegative matrix with the spectrum of ``A − LC`` (default
+    :func:`ivobs.design.similarity.nonnegative_realization`: diagonal/bidiagonal, Suleimanova
+    companion blocks, 3×3 circulants for complex pairs; ``DesignError`` with the reason when the
+    spectrum has no such realisation, e.g. [Efimov2013]'s planar example with
+    ``L = (0.3, 0.6)``: ``{0, −0.5}``, negative trace). ``e1=``, ``e2=``: the rows of eq. (48)
+    (defaults: observable choices with the smallest steady-state width). ``S=``: the
+    transformation itself.
+
+    The observer propagates with ``S (A − LC) S⁻¹`` (``design.R``), which equals the requested
+    ``R`` up to round-off; the split form makes any round-off-sized negative entry sound.
+    Its rounding in ``z = S x``: :mod:`.rounding`.
+    """
+
+    name = "interval-transformed"
+    order = 50
+    summary = "interval observer in z = S x with nonnegative R ([Tang2019, Theorem 5])"
+    reference = "[Tang2019, Section V.B, Theorem 5, eqs. (42)-(48)]; [Efimov2013, Theorem 2]"
+    state_type = TransformedState
+
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None = None,
+        *,
+        L: Any = None,
+        poles: Any = None,
+        R: Any = None,
+        S: Any = None,
+        e1: Any = None,
+        e2: Any = None,
+        **options: Any,
+    ):
+        super().__init__(sys, x0, **options)
+        design = transformed_design(sys, self.name, L=L, poles=poles, R=R, S=S, e1=e1, e2=e2)
+        self._build(design.L, None, design.S)
+        self.design: TransformedDesign = design
