@@ -122,14 +122,15 @@ def test_estimator_classes_are_small() -> None:
 
 _LABELS = re.compile(
     r"\b(?:seeds?/|seed 00\d|paper 00\d|papers? 00\d|00[1-4] (?:eq|Theorem|Remark|Prop|Section|"
-    r"Algorithm|Alg|Lemma|Fig|§)|\(00[1-4]\)|audit (?:item|A\d)|\bA\d{1,2}b?\b(?=[):, ]))"
+    r"Algorithm|Alg|Lemma|Fig|§)|\(00[1-4]\))|\b[Aa]udit\b|\b[AE]\d{1,2}b?(?::\s[a-z]|-style| only)"
+    r"|(?<![\w.])\((?:[AE]\d{1,2}b?(?:, )?)+\)|\btest_[ae]\d{1,2}_|\bpaper00\d"
 )
 
 
 def _text_files() -> list[Path]:
     files = [p for p in SRC.rglob("*.py")]
     files += [p for p in (ROOT / "tests").glob("*.py") if p.name != "test_architecture.py"]
-    files += list((ROOT / "docs").rglob("*.md")) + [ROOT / "README.md"]
+    files += [*(ROOT / "docs").rglob("*.md"), ROOT / "README.md"]
     return files
 
 
