@@ -26,10 +26,10 @@ def _ltv_system(seed, nx=3, ny=1, nu=1, symmetric=True):
     """A random discrete-time LTV system with invertible A[k] ([Dinh2024, Assumption 3])."""
     rng = np.random.default_rng(seed)
     base = random_system(rng, nx=nx, ny=ny, nu=nu, rho=1.05, symmetric_bounds=symmetric)
-    A0, A1 = base.A, 0.3 * rng.normal(size=(nx, nx))
+    A_0, A_1 = base.A, 0.3 * rng.normal(size=(nx, nx))
 
     def A_k(k):
-        return A0 + np.sin(0.7 * k) * A1
+        return A_0 + np.sin(0.7 * k) * A_1
 
     return LinearSystem(A_k, base.B, base.C, E=base.E, F=base.F, d=base.d)
 

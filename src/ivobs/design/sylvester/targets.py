@@ -278,7 +278,7 @@ def default_target(
 # Block targets for time-varying systems ([Dinh2024, Propositions 3-4, eqs. (11.a), (16.a)])
 # ------------------------------------------------------------------------------------------
 def block_target(
-    A0: Any, C0: Any, *, continuous: bool, indices: Any = None
+    A_0: Any, C_0: Any, *, continuous: bool, indices: Any = None
 ) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """``(Ã, B̃)`` of (16.a) (DT) or (11.a) (CT), before the factor ``gamma`` or ``ell``.
 
@@ -290,11 +290,11 @@ def block_target(
     [Dinh2024, Example 2]; ``B̃_i = (1, ..., 1)``. Each block is controllable (distinct
     eigenvalues, nonzero ``B̃_i``).
     """
-    A0 = as_matrix("A(0)", A0)
-    C0 = as_matrix("C(0)", C0, cols=A0.shape[0], vector="row")
-    n, p = A0.shape[0], C0.shape[0]
+    A_0 = as_matrix("A(0)", A_0)
+    C_0 = as_matrix("C(0)", C_0, cols=A_0.shape[0], vector="row")
+    n, p = A_0.shape[0], C_0.shape[0]
     if indices is None:
-        m = observability_indices(A0, C0)
+        m = observability_indices(A_0, C_0)
         if sum(m) < n:
             m = [n] * p
     else:

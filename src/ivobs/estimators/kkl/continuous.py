@@ -38,11 +38,10 @@ from typing import Any, ClassVar, NamedTuple, TypeVar
 import numpy as np
 
 from ...errors import DesignError, IvobsError
-from ...model import LinearSystem
 from ...sets import Box
 from ..state import Step
-from .design import KKLDesign, Transform, left_inverse
-from .observer import Observer, ZState
+from .design import Transform, left_inverse
+from .observer import Observer, Setting, ZState
 
 __all__ = ["ContinuousLTV", "ContinuousObserver", "ContinuousState", "Flowed", "InputHold", "Span"]
 
@@ -99,18 +98,8 @@ class ContinuousObserver(Observer[S]):
     """The sampled-data step, written once: the flow from the previous sample (subclasses), the
     measurement jump, and the recovery of the box."""
 
-    def __init__(
-        self,
-        sys: LinearSystem,
-        x0: Box | None,
-        design: KKLDesign,
-        max_cond: float,
-        rec: float,
-        hold: InputHold,
-        rtol: float,
-        atol: float,
-    ):
-        super().__init__(sys, x0, design, max_cond, rec)
+    def __init__(self, setting: Setting, hold: InputHold, rtol: float, atol: float):
+        super().__init__(setting)
         self.hold = hold
         self.rtol, self.atol = rtol, atol
 

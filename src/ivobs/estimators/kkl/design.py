@@ -264,15 +264,15 @@ def design_ltv(
     """The block target of (16.a)/(11.a), ``T[0]`` and (discrete time) the sequence of (15.b)
     with its first left-invertible step ``k_star``."""
     ct = sys.is_continuous
-    A0 = sys.A_at(0)
+    A_0 = sys.A_at(0)
     At, Bt, indices = _block_or_given(sys, A_z, B_z)
     if ct:
-        factor = float(ell) if ell is not None else _default_ell(At, A0)
+        factor = float(ell) if ell is not None else _default_ell(At, A_0)
     else:
         factor = float(gamma if gamma is not None else 1.0)
     Az, Bz = check_target(factor * At, Bt, ct)
     if ct:  # the flow rule, with A(t) frozen at t = 0 (ivobs.estimators.kkl.continuous)
-        check_flow(Az, A0, who="A_z" if ell is None else "ell", frozen=" (A frozen at t = 0)")
+        check_flow(Az, A_0, who="A_z" if ell is None else "ell", frozen=" (A frozen at t = 0)")
     T0m = _initial_transform(sys, T0, Az, Bz)
     if np.any(T0m) and x0 is None:
         x0_required(x0, "T0 is not zero, so z[0] is bounded from x[0] by (15.c)/(10.c)")
@@ -343,13 +343,13 @@ def _initial_transform(sys: LinearSystem, T0: Any, Az: np.ndarray, Bz: np.ndarra
     raise IvobsError(f"T0: expected 'zero', 'sylvester' or a matrix, got {T0!r}")
 
 
-def _default_ell(A_tilde: np.ndarray, A0: np.ndarray) -> float:
+def _default_ell(A_tilde: np.ndarray, A_0: np.ndarray) -> float:
     """The CT factor of (11.a): 2 ([Dinh2024, Example 2]), or more if needed for the flow rule
     at ``t = 0``: ``ell max Re λ(Ã) <= min Re λ(A(0)) - FLOW_MARGIN max(1, ρ(A(0)))``."""
     top = float(np.max(np.linalg.eigvals(A_tilde).real))
     if not top < 0:
         return 2.0  # not Hurwitz: check_target names it
-    return max(2.0, flow_cap(A0) / top)
+    return max(2.0, flow_cap(A_0) / top)
 
 
 class TransformSequence:

@@ -45,11 +45,10 @@ from typing import ClassVar, NamedTuple, TypeVar
 import numpy as np
 
 from ...errors import IvobsError
-from ...model import LinearSystem
 from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
-from .design import KKLDesign, ObserverMatrices, Transform, TransformSequence
-from .observer import Observer, ZState
+from .design import ObserverMatrices, Transform, TransformSequence
+from .observer import Observer, Setting, ZState
 
 __all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatState"]
 
@@ -157,16 +156,8 @@ class DiscreteObserver(Observer[S]):
 class DiscreteLTI(DiscreteObserver[S]):
     """Time-invariant: one ``T`` and the constant matrices of :class:`ObserverMatrices`."""
 
-    def __init__(
-        self,
-        sys: LinearSystem,
-        x0: Box | None,
-        design: KKLDesign,
-        max_cond: float,
-        rec: float,
-        m: ObserverMatrices,
-    ):
-        super().__init__(sys, x0, design, max_cond, rec)
+    def __init__(self, setting: Setting, m: ObserverMatrices):
+        super().__init__(setting)
         self.m = m
 
     def matrices(self, k: int) -> tuple[np.ndarray, ...]:
@@ -230,16 +221,8 @@ class ObserverX(DiscreteLTI[XHatState]):
 class DiscreteLTV(DiscreteObserver[DiscreteLTVState]):
     """Observer (15) of [Dinh2024] on the data-free sequence ``T[k]`` of (15.b)."""
 
-    def __init__(
-        self,
-        sys: LinearSystem,
-        x0: Box | None,
-        design: KKLDesign,
-        max_cond: float,
-        rec: float,
-        seq: TransformSequence,
-    ):
-        super().__init__(sys, x0, design, max_cond, rec)
+    def __init__(self, setting: Setting, seq: TransformSequence):
+        super().__init__(setting)
         self.seq = seq
 
     def initial_state(self) -> DiscreteLTVState:

@@ -22,7 +22,7 @@ from .design import (
     observer_matrices,
 )
 from .discrete import DiscreteLTV, ObserverX, ObserverZ
-from .observer import EPS, Observer
+from .observer import EPS, Observer, Setting
 from .options import check_options
 from .sampled import ContinuousLTI
 from .vectorised import VectorisedLTI
@@ -142,18 +142,17 @@ class KKL(Estimator):
         atol: float,
     ) -> Observer[Any]:
         """The observer of the system's kind (and, discrete-time LTI, the vectorised run)."""
-        sys, x0, design, max_cond = self.sys, self.x0, self.design, self.max_cond
+        sys, x0, design = self.sys, self.x0, self.design
+        setting = Setting(sys, x0, design, self.max_cond, rec)
         if sys.is_continuous:
             cls = ContinuousLTV if sys.is_time_varying else ContinuousLTI
-            return cls(sys, x0, design, max_cond, rec, hold, rtol, atol)
+            return cls(setting, hold, rtol, atol)
         if seq is not None:
-            return DiscreteLTV(sys, x0, design, max_cond, rec, seq)
+            return DiscreteLTV(setting, seq)
         assert x0 is not None  # design_lti requires it
-        m = observer_matrices(sys, design, max_cond, rec)
+        m = observer_matrices(sys, design, self.max_cond, rec)
         self._vector = VectorisedLTI(sys, x0, design, m)
-        if design.coordinates == "x":
-            return ObserverX(sys, x0, design, max_cond, rec, m)
-        return ObserverZ(sys, x0, design, max_cond, rec, m)
+        return ObserverX(setting, m) if design.coordinates == "x" else ObserverZ(setting, m)
 
     def _initial_state(self) -> OnlineState:
         state: OnlineState = self._observer.initial_state()

@@ -19,7 +19,7 @@ from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
 from .design import KKLDesign, Transform
 
-__all__ = ["Observer", "ZState", "prior_box"]
+__all__ = ["Observer", "Setting", "ZState", "prior_box"]
 
 EPS = float(np.finfo(float).eps)
 
@@ -38,6 +38,21 @@ class ZState(OnlineState):
 S = TypeVar("S", bound=OnlineState)
 
 
+@dataclass(frozen=True)
+class Setting:
+    """What every observer of a design works with: the model, the prior box on ``x[0]``, the
+    design, the threshold of left-invertibility and ``rec``, the relative rounding margin of
+    the recovery ``x = T⁺ z``: ``16 (n_z + n_x) ε`` (discrete time; linear recursions, the base
+    margin covers the rest), plus ``100 rtol`` in continuous time (the integration error of the
+    flows, covered heuristically)."""
+
+    sys: LinearSystem
+    x0: Box | None
+    design: KKLDesign
+    max_cond: float
+    rec: float
+
+
 def prior_box(x0: Box | None, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """At ``k = 0`` the prior box itself is known: intersect (sound, never looser)."""
     if x0 is None:
@@ -46,21 +61,14 @@ def prior_box(x0: Box | None, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarra
 
 
 class Observer(Generic[S]):
-    """One mode of the KKL observer: its online state and its step, written once.
+    """One mode of the KKL observer: its online state and its step, written once."""
 
-    ``rec`` is the relative rounding margin of the recovery ``x = T⁺ z``: ``16 (n_z + n_x) ε``
-    (discrete time; linear recursions, the base margin covers the rest), plus ``100 rtol`` in
-    continuous time (the integration error of the flows, covered heuristically).
-    """
-
-    def __init__(
-        self, sys: LinearSystem, x0: Box | None, design: KKLDesign, max_cond: float, rec: float
-    ):
-        self.sys = sys
-        self.x0 = x0
-        self.design = design
-        self.max_cond = max_cond
-        self.rec = rec
+    def __init__(self, setting: Setting):
+        self.sys = setting.sys
+        self.x0 = setting.x0
+        self.design = setting.design
+        self.max_cond = setting.max_cond
+        self.rec = setting.rec
 
     def initial_state(self) -> S:
         raise NotImplementedError

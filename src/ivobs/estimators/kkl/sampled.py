@@ -17,10 +17,10 @@ import numpy as np
 
 from ..._validate import as_vector
 from ...errors import DesignError
-from ...model import LinearSystem
-from ...sets import Box, image_bounds
+from ...sets import image_bounds
 from .continuous import ContinuousObserver, ContinuousState, Flowed, InputHold, Span
-from .design import KKLDesign, left_inverse
+from .design import left_inverse
+from .observer import Setting
 from .periods import Anchor, PeriodData, make_anchor, period_data
 
 __all__ = ["ContinuousLTI", "ContinuousLTIState"]
@@ -51,18 +51,8 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
     """Time-invariant: closed-form flows, a constant ``T`` on regular grids, and the model's
     prediction of the previous box."""
 
-    def __init__(
-        self,
-        sys: LinearSystem,
-        x0: Box | None,
-        design: KKLDesign,
-        max_cond: float,
-        rec: float,
-        hold: InputHold,
-        rtol: float,
-        atol: float,
-    ):
-        super().__init__(sys, x0, design, max_cond, rec, hold, rtol, atol)
+    def __init__(self, setting: Setting, hold: InputHold, rtol: float, atol: float):
+        super().__init__(setting, hold, rtol, atol)
         self._periods: dict[float, PeriodData] = {}
 
     def initial_state(self) -> ContinuousLTIState:
