@@ -10,7 +10,7 @@ step to it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import ClassVar, Generic, TypeVar
 
 import numpy as np
 
@@ -91,7 +91,9 @@ class Observer(Generic[S]):
         nx = self.sys.nx
         return np.full(nx, -np.inf), np.full(nx, np.inf)
 
-    def recover(self, tr: Transform, zlo: np.ndarray, zhi: np.ndarray) -> tuple[Any, Any]:
+    def recover(
+        self, tr: Transform, zlo: np.ndarray, zhi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(3.c-d)/(15.d): bounds of ``x = T⁺ z`` plus the rounding margin of the recovery,
         ``rec cond(T) |T⁺| (|z_c| + z_r)``."""
         zc, zr = 0.5 * (zlo + zhi), 0.5 * (zhi - zlo)
