@@ -63,11 +63,8 @@ class KKL(Estimator):
 
     name = "kkl"
     order = 70
-    summary = (
-        "KKL/Sylvester interval observer z = T x [Dinh2024]: LTI and LTV, discrete and continuous"
-    )
+    summary = "Sylvester/KKL transformation, LTI and LTV, discrete and continuous time"
     reference = "[Dinh2024, observers (3), (6), (10), (15)]"
-    data_used: ClassVar[str] = "prediction"  # discrete time; continuous time: y up to t_k
     supports_continuous: ClassVar[bool] = True
     supports_time_varying: ClassVar[bool] = True
     needs_x0: ClassVar[bool] = False
