@@ -121,9 +121,10 @@ class ContinuousObserver(Observer[S]):
         """From ``t_(k-1)+`` to ``t_k-``."""
         raise NotImplementedError
 
-    def finish(self, state: S, lo: np.ndarray, hi: np.ndarray) -> S:
-        """The next state given the box of ``x[k]`` (time-invariant systems keep it)."""
-        return state
+    def kept(self, lo: np.ndarray, hi: np.ndarray) -> dict[str, Any]:
+        """Fields of the next state that keep the box of ``x[k]`` (time-invariant: the box the
+        model predicts the next one from)."""
+        return {}
 
     def step(self, state: S, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> Step[S]:
         assert t_k is not None
@@ -164,8 +165,9 @@ class ContinuousObserver(Observer[S]):
             u_prev=u_k.copy(),
             dlo_prev=d.lo.copy(),
             dhi_prev=d.hi.copy(),
+            **self.kept(lo, hi),
         )
-        return Step(self.finish(new, lo, hi), lo, hi, bad or crossed)
+        return Step(new, lo, hi, bad or crossed)
 
     def jump(
         self,
@@ -184,7 +186,7 @@ class ContinuousObserver(Observer[S]):
         box, bad = self.x_box(tr, zlo, zhi, model)
         obs = ~np.isnan(y_k)
         if box is not None:
-            obs, inconsistent = self.usable(y_k, box[0], box[1], C, D, F, u_k, d)
+            obs, inconsistent = self.usable(y_k, box[0], box[1], CDF, u_k, d)
             bad = bad or inconsistent
         Bo = h * self.design.B_z[:, obs]
         if an is not None and obs.all():

@@ -13,7 +13,7 @@ from ``T[0]`` (:class:`TransformSequence`), whose first left-invertible ``T[k]``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -38,12 +38,14 @@ from ..base import Design
 __all__ = [
     "KKLDesign",
     "ObserverMatrices",
+    "OutputRows",
     "Transform",
     "TransformSequence",
     "design_lti",
     "design_ltv",
     "left_inverse",
     "observer_matrices",
+    "output_rows",
     "x0_required",
 ]
 
@@ -207,6 +209,22 @@ def _d_delta(sys: LinearSystem) -> np.ndarray:
     return np.ones(sys.nd)
 
 
+class OutputRows(NamedTuple):
+    """The rows of ``C``, ``D``, ``F`` of the observed outputs, and ``|C|``, ``|F|`` of them."""
+
+    C: np.ndarray
+    D: np.ndarray
+    F: np.ndarray
+    absC: np.ndarray
+    absF: np.ndarray
+
+
+def output_rows(CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> OutputRows:
+    """:class:`OutputRows` of ``(C, D, F)`` for the observed outputs ``obs``."""
+    C, D, F = (M[obs] for M in CDF)
+    return OutputRows(C, D, F, np.abs(C), np.abs(F))
+
+
 @dataclass(frozen=True)
 class ObserverMatrices:
     """The constant matrices of observers (3) and (6) of a discrete-time time-invariant design:
@@ -222,6 +240,7 @@ class ObserverMatrices:
     g_const: tuple[np.ndarray, np.ndarray] | None
     margin: np.ndarray
     Mx: np.ndarray | None
+    every: OutputRows
 
 
 def observer_matrices(
@@ -246,6 +265,7 @@ def observer_matrices(
         g_const=g_const,
         margin=rec * tr.cond * np.abs(tr.P),
         Mx=Mx,
+        every=output_rows((C, D, F), np.ones(sys.ny, dtype=bool)),
     )
 
 

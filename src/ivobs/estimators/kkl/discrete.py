@@ -47,7 +47,7 @@ import numpy as np
 from ...errors import IvobsError
 from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
-from .design import ObserverMatrices, Transform, TransformSequence
+from .design import ObserverMatrices, OutputRows, Transform, TransformSequence
 from .observer import Observer, Setting, ZState
 
 __all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatState"]
@@ -111,6 +111,10 @@ class DiscreteObserver(Observer[S]):
     def advance(self, state: S, s: StepData) -> S:
         raise NotImplementedError
 
+    def every(self) -> OutputRows | None:
+        """The output rows of a complete measurement, when the matrices are constant."""
+        return None
+
     def box(
         self, state: S, k: int, tk: Transform, zlo: np.ndarray, zhi: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -127,7 +131,7 @@ class DiscreteObserver(Observer[S]):
             lo, hi = self.first_box(lo, hi)
         d = self.sys.d_at(k, y_k)
         _, _, C, D, _, F = mats
-        obs, bad = self.usable(y_k, lo, hi, C, D, F, u_k, d)
+        obs, bad = self.usable(y_k, lo, hi, (C, D, F), u_k, d, self.every())
         s = StepData(k, u_k, y_k, d, obs, lo, hi, zlo, zhi, tk, tn, mats)
         return Step(self.advance(state, s), lo, hi, bad)
 
@@ -165,6 +169,9 @@ class DiscreteLTI(DiscreteObserver[S]):
 
     def transform(self, k: int) -> Transform:
         return self.m.tr
+
+    def every(self) -> OutputRows:
+        return self.m.every
 
     def known(self, s: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """With every output observed: ``B_z y + L_u u`` and the bounds ``g̲, ḡ`` of ``G d``."""

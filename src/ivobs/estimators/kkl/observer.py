@@ -17,7 +17,7 @@ import numpy as np
 from ...model import LinearSystem
 from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
-from .design import KKLDesign, Transform
+from .design import KKLDesign, OutputRows, Transform, output_rows
 
 __all__ = ["Observer", "Setting", "ZState", "prior_box"]
 
@@ -110,20 +110,23 @@ class Observer(Generic[S]):
         y_k: np.ndarray,
         lo: np.ndarray,
         hi: np.ndarray,
-        C: np.ndarray,
-        D: np.ndarray,
-        F: np.ndarray,
+        CDF: tuple[np.ndarray, ...],
         u_k: np.ndarray,
         d: Box,
+        every: OutputRows | None = None,
     ) -> tuple[np.ndarray, bool]:
         """The observed components of ``y[k]`` and whether ``y[k]`` contradicts the box
-        ``[lo, hi]`` of ``x[k]`` (then none is used)."""
+        ``[lo, hi]`` of ``x[k]`` (then none is used): ``|y - C x_c - D u - F d_c| <= |C| x_r +
+        |F| d_r`` up to rounding on the observed rows. ``every``: the rows of ``(C, D, F)`` for
+        a complete measurement, when kept (constant matrices)."""
         obs = ~np.isnan(y_k)
-        if not obs.any() or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        if not obs.any() or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
             return obs, False
-        Co, Fo = C[obs], F[obs]
-        yc = Co @ (0.5 * (lo + hi)) + Fo @ (0.5 * (d.lo + d.hi)) + D[obs] @ u_k
-        yr = np.abs(Co) @ (0.5 * (hi - lo)) + np.abs(Fo) @ (0.5 * (d.hi - d.lo))
-        if np.any(np.abs(y_k[obs] - yc) > yr + 1e-9 * (1.0 + np.abs(yc) + yr)):
+        full = every is not None and obs.all()
+        r = every if full and every is not None else output_rows(CDF, obs)
+        yc = r.C @ (0.5 * (lo + hi)) + r.F @ (0.5 * (d.lo + d.hi)) + r.D @ u_k
+        yr = r.absC @ (0.5 * (hi - lo)) + r.absF @ (0.5 * (d.hi - d.lo))
+        yo = y_k if full else y_k[obs]
+        if (np.abs(yo - yc) > yr + 1e-9 * (1.0 + np.abs(yc) + yr)).any():
             return np.zeros_like(obs), True
         return obs, False

@@ -10,7 +10,7 @@ The matrices of one sampling period are computed once per period (:class:`Period
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -59,10 +59,8 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
         xlo, xhi = self.initial_x()
         return ContinuousLTIState(**self.initial_fields(), xlo=xlo, xhi=xhi)
 
-    def finish(
-        self, state: ContinuousLTIState, lo: np.ndarray, hi: np.ndarray
-    ) -> ContinuousLTIState:
-        return replace(state, xlo=lo.copy(), xhi=hi.copy())
+    def kept(self, lo: np.ndarray, hi: np.ndarray) -> dict[str, Any]:
+        return {"xlo": lo.copy(), "xhi": hi.copy()}
 
     def period(self, h: float) -> PeriodData:
         """The matrices of one sampling interval of length ``h`` (kept by ``h``)."""
