@@ -1,4 +1,4 @@
-"""Sylvester (KKL) designs of paper 004: eq. (4), Proposition 1's conditions, default targets."""
+"""Sylvester (KKL) designs of [Dinh2024]: eq. (4), Proposition 1's conditions, default targets."""
 
 import numpy as np
 import pytest

@@ -1,0 +1,418 @@
+"""The KKL design of [Dinh2024]: the target pair ``(A_z, B_z)``, the transformation ``T`` and its
+left inverse, decided offline (no data, no time loop over a record).
+
+Time-invariant systems ([Dinh2024, Section 2, Algorithm 1]): ``T`` solves the Sylvester equation
+``T A = A_z T + B_z C`` ([Dinh2024, eq. (4)]); the default target is searched by
+:func:`ivobs.design.sylvester.default_target`. Time-varying systems ([Dinh2024, Section 3]): the
+block target of (16.a)/(11.a) scaled by ``gamma`` (discrete time) or ``ell`` (continuous time),
+and the data-free sequence ``T[k+1] = (A_z T[k] + B_z C[k]) A[k]⁻¹`` ([Dinh2024, eq. (15.b)])
+from ``T[0]`` (:class:`TransformSequence`), whose first left-invertible ``T[k]`` is
+``valid_from``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..._validate import as_matrix
+from ...design._lmi import MAX_LMI_STATES
+from ...design.sylvester import (
+    block_target,
+    check_flow,
+    check_target,
+    condition_number,
+    default_target,
+    flow_cap,
+    predicted_width,
+    solve_transform,
+)
+from ...errors import DesignError, IvobsError
+from ...linalg import is_observable, observability_rank
+from ...model import LinearSystem
+from ...sets import Box, image_bounds
+from ..base import Design
+
+__all__ = [
+    "KKLDesign",
+    "ObserverMatrices",
+    "OutputRows",
+    "Transform",
+    "TransformSequence",
+    "design_lti",
+    "design_ltv",
+    "left_inverse",
+    "observer_matrices",
+    "output_rows",
+    "x0_required",
+]
+
+
+@dataclass(frozen=True)
+class KKLDesign(Design):
+    """The KKL design ([Dinh2024]'s symbols; its ``(A, B)`` target pair is ``(A_z, B_z)``).
+
+    ``T``: the solution of (4) (time-invariant), or ``T(0)`` / ``T_0`` (time-varying).
+    ``A_z`` is the target matrix used (``gamma Ã`` / ``ell Ã`` for time-varying systems, with
+    ``A_tilde = Ã``). ``predicted_width``: steady-state width of the bounds (time-invariant,
+    closed form; exact in discrete time). ``k_star``: first step with a left-invertible ``T``.
+    """
+
+    A_z: np.ndarray
+    B_z: np.ndarray
+    T: np.ndarray
+    n_z: int
+    k_star: int
+    cond_T: float
+    continuous: bool
+    time_varying: bool
+    coordinates: str = "z"
+    predicted_width: np.ndarray | None = None
+    A_tilde: np.ndarray | None = None
+    indices: tuple[int, ...] | None = None
+    gamma: float | None = None
+    ell: float | None = None
+    tuned: bool = False
+
+
+@dataclass(frozen=True)
+class Transform:
+    """``T[k]``, its pseudo-inverse, condition number and whether it counts as left-invertible."""
+
+    T: np.ndarray
+    P: np.ndarray
+    cond: float
+    ok: bool
+
+
+def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
+    """Left inverse of ``T`` through its row-normalised form ``N T``.
+
+    ``z̲ <= T x <= z̄`` is equivalent to ``N z̲ <= N T x <= N z̄`` for a positive diagonal ``N``,
+    so ``x = (N T)⁺ N z`` recovers the same box; rows that decayed (fast target modes, long
+    gaps) then do not count as ill-conditioning. ``cond`` is that of ``N T``.
+    """
+    norms = np.linalg.norm(T, axis=1)
+    nz, nx = T.shape
+    if np.any(norms == 0) or not np.all(np.isfinite(norms)):
+        return Transform(T=T, P=np.zeros((nx, nz)), cond=float("inf"), ok=False)
+    U, s, Vt = np.linalg.svd(T / norms[:, None], full_matrices=False)
+    cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
+    ok = bool(np.isfinite(cond) and cond <= max_cond)
+    P = ((Vt.T / s) @ U.T) / norms[None, :] if ok else np.zeros((nx, nz))
+    return Transform(T=T, P=P, cond=cond, ok=ok)
+
+
+def x0_required(x0: Box | None, why: str) -> Box:
+    """The prior box on ``x[0]``, or an :class:`IvobsError` saying why it is needed."""
+    if x0 is None:
+        raise IvobsError(
+            f"x0: the kkl method needs a prior box on x[0] here ({why}); "
+            "pass x0=ivobs.Box(x0_lo, x0_hi)"
+        )
+    return x0
+
+
+# -- time-invariant ----------------------------------------------------------------------------
+def design_lti(
+    sys: LinearSystem,
+    x0: Box | None,
+    A_z: Any,
+    B_z: Any,
+    T: Any,
+    *,
+    tune: bool,
+    max_cond: float,
+    coordinates: str,
+) -> KKLDesign:
+    """The target pair and ``T`` of (4) for a time-invariant system ([Dinh2024, Algorithm 1])."""
+    ct = sys.is_continuous
+    x0 = x0_required(x0, "z[0] is bounded from x[0] by (3.b)")
+    if A_z is None and sys.nx > MAX_LMI_STATES:
+        raise DesignError(
+            f"kkl: the default target search solves many dense Sylvester equations (4) "
+            f"(O(nx^3) each) and does not scale to nx = {sys.nx} > {MAX_LMI_STATES} states; "
+            "give the target A_z, B_z (one solve), or use 'interval' / 'interval-split' "
+            "with a gain L=... for large sparse systems (docs/scale.md)"
+        )
+    A, _, C, _, E, F = sys.matrices_at(0)
+    if not is_observable(A, C):
+        raise DesignError(
+            f"pair (A, C) is not observable: rank {observability_rank(A, C)} of {sys.nx}; "
+            "the kkl method needs observability ([Dinh2024, Assumption 1 (I)])"
+        )
+    delta = _d_delta(sys)
+    tuned = False
+    if A_z is None:
+        choice = default_target(
+            A, C, E, F, delta, continuous=ct, w0=x0.hi - x0.lo, tune=bool(tune), max_cond=max_cond
+        )
+        Az, Bz, Tm, tuned = choice.A_z, choice.B_z, choice.T, choice.tuned
+    else:
+        Az, Bz = check_target(A_z, B_z, ct, A)
+        if Az.shape[0] != sys.nx or Bz.shape[1] != sys.ny:
+            raise IvobsError(
+                f"A_z, B_z: expected shapes ({sys.nx}, {sys.nx}) and "
+                f"({sys.nx}, {sys.ny}), got {Az.shape} and {Bz.shape}"
+            )
+        Tm = solve_transform(A, C, Az, Bz) if T is None else _checked_T(T, A, C, Az, Bz)
+    cond = condition_number(Tm)
+    # the recovery uses the row-normalised T (left_inverse): it must pass the threshold too
+    worst = cond if cond > max_cond else left_inverse(Tm, max_cond).cond
+    if not worst <= max_cond:
+        raise DesignError(
+            f"T: the Sylvester solution of (4) is singular or ill-conditioned: cond(T) = "
+            f"{worst:.3e} > max_cond = {max_cond:.0e} ([Dinh2024, Proposition 1] needs T "
+            "invertible); choose another (A_z, B_z)"
+        )
+    pw = None
+    if sys.has_constant_bounds or isinstance(sys.d, Box):
+        pw = predicted_width(Tm, Az, Bz, E, F, delta, ct)
+    return KKLDesign(
+        A_z=Az,
+        B_z=Bz,
+        T=Tm,
+        n_z=sys.nx,
+        k_star=0,
+        cond_T=cond,
+        continuous=ct,
+        time_varying=False,
+        coordinates=coordinates,
+        predicted_width=pw,
+        tuned=tuned,
+    )
+
+
+def _checked_T(T: Any, A: np.ndarray, C: np.ndarray, Az: np.ndarray, Bz: np.ndarray) -> np.ndarray:
+    """A user's ``T``, checked to solve (4) to working accuracy."""
+    n = A.shape[0]
+    Tm = as_matrix("T", T, n, n)
+    res = np.linalg.norm(Tm @ A - Az @ Tm - Bz @ C)
+    scale = np.linalg.norm(Tm) * (np.linalg.norm(A) + 1) + np.linalg.norm(Bz @ C)
+    if res > 1e-8 * scale:
+        raise DesignError(
+            f"T: does not solve T A = A_z T + B_z C (eq. 4): relative residual {res / scale:.2e}"
+        )
+    return Tm
+
+
+def _d_delta(sys: LinearSystem) -> np.ndarray:
+    """Widths of the bounds of ``d`` for scoring designs (ones for bounds computed from y)."""
+    if sys.nd == 0:
+        return np.zeros(0)
+    d = sys.d
+    if isinstance(d, Box):
+        w: np.ndarray = d.hi - d.lo
+        return np.asarray(np.max(w, axis=0)) if w.ndim == 2 else w
+    return np.ones(sys.nd)
+
+
+class OutputRows(NamedTuple):
+    """The rows of ``C``, ``D``, ``F`` of the observed outputs, and ``|C|``, ``|F|`` of them."""
+
+    C: np.ndarray
+    D: np.ndarray
+    F: np.ndarray
+    absC: np.ndarray
+    absF: np.ndarray
+
+
+def output_rows(CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> OutputRows:
+    """:class:`OutputRows` of ``(C, D, F)`` for the observed outputs ``obs``."""
+    C, D, F = (M[obs] for M in CDF)
+    return OutputRows(C, D, F, np.abs(C), np.abs(F))
+
+
+@dataclass(frozen=True)
+class ObserverMatrices:
+    """The constant matrices of observers (3) and (6) of a discrete-time time-invariant design:
+    the model ``(A, B, C, D, E, F)``, ``T`` with its left inverse ``P``, the known-input matrix
+    ``L_u = T B - B_z D``, the disturbance matrix ``G = T E - B_z F`` of (5), the Lemma-1 bounds
+    ``g = G [d̲, d̄]`` when the bounds of ``d`` are constant, the recovery margin
+    ``rec cond(T) |P|`` and, for observer (6), ``L = P B_z`` and ``A - L C``."""
+
+    mats: tuple[np.ndarray, ...]
+    tr: Transform
+    Lu: np.ndarray
+    G: np.ndarray
+    g_const: tuple[np.ndarray, np.ndarray] | None
+    margin: np.ndarray
+    Mx: np.ndarray | None
+    every: OutputRows
+
+
+def observer_matrices(
+    sys: LinearSystem, design: KKLDesign, max_cond: float, rec: float
+) -> ObserverMatrices:
+    """:class:`ObserverMatrices` of a discrete-time time-invariant design."""
+    A, B, C, D, E, F = sys.matrices_at(0)
+    tr = left_inverse(design.T, max_cond)
+    G = design.T @ E - design.B_z @ F
+    g_const = None
+    if sys.d is None or (isinstance(sys.d, Box) and not sys.d.is_time_varying):
+        dd = sys.d_at(0)
+        g_const = image_bounds(G, dd.lo, dd.hi)
+    Mx = None
+    if design.coordinates == "x":
+        Mx = A - (tr.P @ design.B_z) @ C
+    return ObserverMatrices(
+        mats=(A, B, C, D, E, F),
+        tr=tr,
+        Lu=design.T @ B - design.B_z @ D,
+        G=G,
+        g_const=g_const,
+        margin=rec * tr.cond * np.abs(tr.P),
+        Mx=Mx,
+        every=output_rows((C, D, F), np.ones(sys.ny, dtype=bool)),
+    )
+
+
+# -- time-varying ------------------------------------------------------------------------------
+def design_ltv(
+    sys: LinearSystem,
+    x0: Box | None,
+    A_z: Any,
+    B_z: Any,
+    T0: Any,
+    *,
+    gamma: Any,
+    ell: Any,
+    max_cond: float,
+) -> tuple[KKLDesign, TransformSequence | None]:
+    """The block target of (16.a)/(11.a), ``T[0]`` and (discrete time) the sequence of (15.b)
+    with its first left-invertible step ``k_star``."""
+    ct = sys.is_continuous
+    A_0 = sys.A_at(0)
+    At, Bt, indices = _block_or_given(sys, A_z, B_z)
+    if ct:
+        factor = float(ell) if ell is not None else _default_ell(At, A_0)
+    else:
+        factor = float(gamma if gamma is not None else 1.0)
+    Az, Bz = check_target(factor * At, Bt, ct)
+    if ct:  # the flow rule, with A(t) frozen at t = 0 (ivobs.estimators.kkl.continuous)
+        check_flow(Az, A_0, who="A_z" if ell is None else "ell", frozen=" (A frozen at t = 0)")
+    T0m = _initial_transform(sys, T0, Az, Bz)
+    if np.any(T0m) and x0 is None:
+        x0_required(x0, "T0 is not zero, so z[0] is bounded from x[0] by (15.c)/(10.c)")
+    seq = None
+    if ct:
+        tr = left_inverse(T0m, max_cond)
+        if not tr.ok:
+            raise DesignError(
+                f"T0: cond(T(0)) = {tr.cond:.3e} > max_cond = {max_cond:.0e}; in "
+                "continuous time T(0) must be left-invertible; choose another A_z, B_z or ell"
+            )
+        k_star, cond = 0, tr.cond
+    else:
+        seq = TransformSequence(sys, Az, Bz, T0m, max_cond)
+        k_star, cond = seq.first_left_invertible()
+    design = KKLDesign(
+        A_z=Az,
+        B_z=Bz,
+        T=T0m,
+        n_z=Az.shape[0],
+        k_star=k_star,
+        cond_T=cond,
+        continuous=ct,
+        time_varying=True,
+        A_tilde=At,
+        indices=indices,
+        gamma=None if ct else factor,
+        ell=factor if ct else None,
+    )
+    return design, seq
+
+
+def _block_or_given(
+    sys: LinearSystem, A_z: Any, B_z: Any
+) -> tuple[np.ndarray, np.ndarray, tuple[int, ...] | None]:
+    """``(Ã, B̃)`` of (16.a)/(11.a) with the observability indices, or the user's pair."""
+    if A_z is None:
+        At, Bt, m = block_target(sys.A_at(0), sys.C_at(0), continuous=sys.is_continuous)
+        return At, Bt, tuple(m)
+    At = as_matrix("A_z", A_z)
+    Bt = as_matrix("B_z", B_z, rows=At.shape[0], cols=sys.ny)
+    if At.shape[0] < sys.nx:
+        raise IvobsError(
+            f"A_z: n_z = {At.shape[0]} < nx = {sys.nx}; T[k] (n_z x nx) "
+            "can only be left-invertible with n_z >= nx"
+        )
+    return At, Bt, None
+
+
+def _initial_transform(sys: LinearSystem, T0: Any, Az: np.ndarray, Bz: np.ndarray) -> np.ndarray:
+    """``T[0]``: ``"zero"`` (discrete-time default), ``"sylvester"`` ((4) frozen at the first
+    step; continuous-time default) or the user's matrix."""
+    ct = sys.is_continuous
+    nz = Az.shape[0]
+    if T0 is None:
+        T0 = "sylvester" if ct else "zero"
+    if not isinstance(T0, str):
+        return as_matrix("T0", T0, nz, sys.nx)
+    if T0 == "zero":
+        if ct:
+            raise IvobsError(
+                "T0: 'zero' is not available in continuous time (the time T(t) becomes "
+                "left-invertible would depend on the sample grid); use 'sylvester'"
+            )
+        return np.zeros((nz, sys.nx))
+    if T0 == "sylvester":
+        return solve_transform(sys.A_at(0), sys.C_at(0), Az, Bz)
+    raise IvobsError(f"T0: expected 'zero', 'sylvester' or a matrix, got {T0!r}")
+
+
+def _default_ell(A_tilde: np.ndarray, A_0: np.ndarray) -> float:
+    """The CT factor of (11.a): 2 ([Dinh2024, Example 2]), or more if needed for the flow rule
+    at ``t = 0``: ``ell max Re λ(Ã) <= min Re λ(A(0)) - FLOW_MARGIN max(1, ρ(A(0)))``."""
+    top = float(np.max(np.linalg.eigvals(A_tilde).real))
+    if not top < 0:
+        return 2.0  # not Hurwitz: check_target names it
+    return max(2.0, flow_cap(A_0) / top)
+
+
+class TransformSequence:
+    """``T[k]`` of [Dinh2024, eq. (15.b)] with its left inverses, computed forward once and
+    kept (it does not depend on the data)."""
+
+    def __init__(
+        self, sys: LinearSystem, A_z: np.ndarray, B_z: np.ndarray, T0: np.ndarray, max_cond: float
+    ):
+        self.sys = sys
+        self.A_z, self.B_z = A_z, B_z
+        self.max_cond = max_cond
+        self._seq = [left_inverse(T0, max_cond)]
+
+    def at(self, k: int) -> Transform:
+        """``T[k]`` and its left inverse."""
+        seq = self._seq
+        while len(seq) <= k:
+            j = len(seq) - 1
+            Aj, Cj = self.sys.A_at(j), self.sys.C_at(j)
+            if not np.all(np.isfinite(Aj)) or np.linalg.cond(Aj) > 1e13:
+                raise DesignError(
+                    f"A[{j}] is singular (cond {np.linalg.cond(Aj):.2e}); the time-varying "
+                    "KKL observer (15.b) needs invertible A[k] ([Dinh2024, Assumption 3 (VIII)])"
+                )
+            rhs = self.A_z @ seq[j].T + self.B_z @ Cj
+            seq.append(left_inverse(np.linalg.solve(Aj.T, rhs.T).T, self.max_cond))
+        return seq[k]
+
+    def first_left_invertible(self) -> tuple[int, float]:
+        """Offline: the first ``k`` with ``cond(T[k]) <= max_cond``, and that condition number."""
+        A = self.sys.A
+        stacked = isinstance(A, np.ndarray) and A.ndim == 3
+        # T[k] needs A[0..k-1]: a stack of N matrices determines T[0..N]; one step further,
+        # LinearSystem's own error says that the stack is too short (not "not observable")
+        limit = A.shape[0] + 2 if stacked else 100 + 20 * self._seq[0].T.shape[0]
+        for k in range(limit):
+            tr = self.at(k)
+            if tr.ok:
+                return k, tr.cond
+        raise DesignError(
+            f"T[k] (eq. 15.b) did not become left-invertible within {limit} steps "
+            f"(cond(T[k]) > max_cond = {self.max_cond:.0e}): the pair (A[k], C[k]) may not be "
+            "uniformly observable; try a smaller gamma or another A_z, B_z "
+            "([Dinh2024, Proposition 4])"
+        )

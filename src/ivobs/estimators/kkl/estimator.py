@@ -1,0 +1,168 @@
+"""The ``kkl`` method: the estimator that designs once, picks the observer of the system's kind
+and hands it every step (see :mod:`ivobs.estimators.kkl`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ...model import LinearSystem
+from ...sets import Box
+from .. import register
+from ..base import Estimator
+from ..state import OnlineState, Step
+from .continuous import ContinuousLTV
+from .design import (
+    KKLDesign,
+    TransformSequence,
+    design_lti,
+    design_ltv,
+    observer_matrices,
+)
+from .discrete import DiscreteLTV, ObserverX, ObserverZ
+from .observer import EPS, Observer, Setting
+from .options import check_options
+from .sampled import ContinuousLTI
+from .vectorised import VectorisedLTI
+
+__all__ = ["KKL"]
+
+
+@register
+class KKL(Estimator):
+    """KKL / Sylvester interval observer of [Dinh2024] (LTI and LTV, discrete and continuous).
+
+    Parameters (keyword-only, all optional)
+    ----------------------------------------
+    A_z, B_z : target pair. Time-invariant: ``(A_z, B_z)`` of [Dinh2024, Proposition 1]
+        (default: a tuned diagonal target, see :mod:`ivobs.design.sylvester`). Time-varying:
+        ``Ã``, ``B̃`` of (16.a)/(11.a) (default: blocks from the observability indices); the
+        matrix used is ``gamma * A_z`` (DT) or ``ell * A_z`` (CT).
+    T : time-invariant only: an explicit solution of (4) for the given ``A_z``, ``B_z``.
+    T0 : time-varying only: ``"zero"`` (DT default: ``z[0] = 0``, no prior needed),
+        ``"sylvester"`` (CT default; (4) frozen at the first step, uses ``x0``), or a matrix.
+    gamma : DT time-varying factor of (16.a), default 1 ([Dinh2024, Example 3]). ell : CT factor
+        of (11.a), default 2 ([Dinh2024, Example 2]).
+    coordinates : ``"z"`` (observer (3), default) or ``"x"`` (observer (6); discrete-time LTI).
+    max_cond : largest ``cond(T)`` accepted (LTI: else :class:`DesignError`; LTV: the threshold of
+        left-invertibility that decides ``valid_from``). Default 1e7.
+    tune : refine the default time-invariant target by gradient descent on the predicted width.
+    input_hold : continuous time: ``u`` between samples: ``"zero"`` (default), ``"linear"`` or a
+        callable ``t -> u(t)`` (e.g. the known input signal itself).
+    rtol, atol : continuous time: integration tolerances.
+
+    The observer is chosen once, from the system: :class:`~.discrete.ObserverZ` /
+    :class:`~.discrete.ObserverX` (discrete-time LTI, observers (3)/(6), with the vectorised run
+    of :mod:`.vectorised`), :class:`~.discrete.DiscreteLTV` (observer (15)),
+    :class:`~.sampled.ContinuousLTI` and :class:`~.continuous.ContinuousLTV` (observers (3)/(10)
+    in sampled-data form). Their modules give the equations, what is guaranteed, the data used
+    at each step and the treatment of missing samples.
+    """
+
+    name = "kkl"
+    order = 70
+    summary = "Sylvester/KKL transformation, LTI and LTV, discrete and continuous time"
+    reference = "[Dinh2024, observers (3), (6), (10), (15)]"
+    supports_continuous: ClassVar[bool] = True
+    supports_time_varying: ClassVar[bool] = True
+    needs_x0: ClassVar[bool] = False
+    design: KKLDesign
+
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None = None,
+        *,
+        A_z: Any = None,
+        B_z: Any = None,
+        T: Any = None,
+        T0: Any = None,
+        gamma: float | None = None,
+        ell: float | None = None,
+        coordinates: str = "z",
+        max_cond: float = 1e7,
+        tune: bool = True,
+        input_hold: str | Callable[[float], Any] = "zero",
+        rtol: float = 1e-10,
+        atol: float = 1e-12,
+        **options: Any,
+    ):
+        super().__init__(sys, x0, **options)
+        check_options(
+            sys,
+            A_z=A_z,
+            B_z=B_z,
+            T=T,
+            T0=T0,
+            gamma=gamma,
+            ell=ell,
+            coordinates=coordinates,
+            max_cond=max_cond,
+            tune=tune,
+            input_hold=input_hold,
+            rtol=rtol,
+            atol=atol,
+        )
+        self.max_cond = float(max_cond)
+        self.coordinates = coordinates
+        seq: TransformSequence | None = None
+        if sys.is_time_varying:
+            self.design, seq = design_ltv(
+                sys, self.x0, A_z, B_z, T0, gamma=gamma, ell=ell, max_cond=self.max_cond
+            )
+        else:
+            self.design = design_lti(
+                sys,
+                self.x0,
+                A_z,
+                B_z,
+                T,
+                tune=tune,
+                max_cond=self.max_cond,
+                coordinates=coordinates,
+            )
+        self.valid_from = self.design.k_star
+        ct = sys.is_continuous
+        # the relative rounding margin of the recovery x = T⁺ z (Observer)
+        rec = 16 * (self.design.n_z + sys.nx) * EPS + (100 * float(rtol) if ct else 0.0)
+        self._vector: VectorisedLTI | None = None
+        self._observer = self._choose(seq, rec, input_hold, float(rtol), float(atol))
+
+    def _choose(
+        self,
+        seq: TransformSequence | None,
+        rec: float,
+        hold: str | Callable[[float], Any],
+        rtol: float,
+        atol: float,
+    ) -> Observer[Any]:
+        """The observer of the system's kind (and, discrete-time LTI, the vectorised run)."""
+        sys, x0, design = self.sys, self.x0, self.design
+        setting = Setting(sys, x0, design, self.max_cond, rec)
+        if sys.is_continuous:
+            cls = ContinuousLTV if sys.is_time_varying else ContinuousLTI
+            return cls(setting, hold, rtol, atol)
+        if seq is not None:
+            return DiscreteLTV(setting, seq)
+        assert x0 is not None  # design_lti requires it
+        m = observer_matrices(sys, design, self.max_cond, rec)
+        self._vector = VectorisedLTI(sys, x0, design, m)
+        return ObserverX(setting, m) if design.coordinates == "x" else ObserverZ(setting, m)
+
+    def _initial_state(self) -> OnlineState:
+        state: OnlineState = self._observer.initial_state()
+        return state
+
+    def _step(
+        self, state: OnlineState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[Any]:
+        return self._observer.step(state, u_k, y_k, t_k)
+
+    def _run(
+        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    ) -> tuple[np.ndarray, ...] | None:
+        if self._vector is None:
+            return None  # time-varying or continuous time: the loop
+        return self._vector.run(self, u, y, t)
