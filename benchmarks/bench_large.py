@@ -31,7 +31,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 import ivobs
-from ivobs._recursion import LinearFilter, csr_accumulate
+from ivobs.estimators._recursion import LinearFilter, csr_accumulate
 
 
 def record(sc: ivobs.scenarios.Scenario, T: int, seed: int = 0):

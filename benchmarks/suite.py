@@ -32,8 +32,17 @@ EXACT_FULL_MAX_STEPS = 400  # full-horizon exact above this is too slow for a ro
 EXACT_WINDOW = 40
 
 DEFAULT_SCENARIOS = [
-    "dinh2019", "servo-motor", "tang-example2", "efimov-planar", "henon", "kkl-random8",
-    "kkl-ltv-dt", "cora-2dim", "cora-vehicle6", "cora-pedestrian4", "cora-slip4",
+    "dinh2019",
+    "servo-motor",
+    "tang-example2",
+    "efimov-planar",
+    "henon",
+    "kkl-random8",
+    "kkl-ltv-dt",
+    "cora-2dim",
+    "cora-vehicle6",
+    "cora-pedestrian4",
+    "cora-slip4",
 ]
 
 
@@ -53,8 +62,10 @@ def run(scenario_names, method_names, disturbance, seed):
             _traj, results = compare(sc, names, disturbance=kind, seed=seed, options=options)
             ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
             exact = next((r for r in results if r.method == "exact" and r.ok), None)
-            head = (f"### {name} ({kind} disturbances, {sc.horizon} steps, burn-in "
-                    f"{sc.horizon // 10})\n\n{sc.source}. ")
+            head = (
+                f"### {name} ({kind} disturbances, {sc.horizon} steps, burn-in "
+                f"{sc.horizon // 10})\n\n{sc.source}. "
+            )
             if exact is not None and options.get("exact"):
                 head += f"Exact reference: moving window of {EXACT_WINDOW} steps. "
             sections.append(head + "\n\n" + markdown_table(results, sc.state_names, ref))
@@ -62,22 +73,36 @@ def run(scenario_names, method_names, disturbance, seed):
                 ratio = ""
                 if r.ok and exact is not None and r.mean_width is not None:
                     ratio = float(np.mean(r.mean_width / exact.mean_width))
-                rows.append({
-                    "scenario": name, "disturbance": kind, "method": r.method,
-                    "mean_width": "" if r.mean_width is None else float(np.mean(r.mean_width)),
-                    "ratio_to_exact": ratio,
-                    "contains": "" if r.contains is None else r.contains,
-                    "design_s": r.design_time, "run_s": r.run_time,
-                    "error": r.error or "",
-                })
+                rows.append(
+                    {
+                        "scenario": name,
+                        "disturbance": kind,
+                        "method": r.method,
+                        "mean_width": "" if r.mean_width is None else float(np.mean(r.mean_width)),
+                        "ratio_to_exact": ratio,
+                        "contains": "" if r.contains is None else r.contains,
+                        "design_s": r.design_time,
+                        "run_s": r.run_time,
+                        "error": r.error or "",
+                    }
+                )
             print(f"{name} [{kind}]: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     return rows, sections
 
 
 def write(rows, sections, out_md: Path, out_csv: Path, command: str) -> None:
     out_csv.parent.mkdir(parents=True, exist_ok=True)
-    fields = ["scenario", "disturbance", "method", "mean_width", "ratio_to_exact", "contains",
-              "design_s", "run_s", "error"]
+    fields = [
+        "scenario",
+        "disturbance",
+        "method",
+        "mean_width",
+        "ratio_to_exact",
+        "contains",
+        "design_s",
+        "run_s",
+        "error",
+    ]
     with open(out_csv, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=fields)
         w.writeheader()
@@ -88,7 +113,8 @@ def write(rows, sections, out_md: Path, out_csv: Path, command: str) -> None:
         f"{platform.python_version()}, ivobs {ivobs.__version__}.  \nMean widths after the "
         "burn-in; 'ratio to exact' is the mean over states of width / exact width (1 is the "
         "best any guaranteed method can do with the same data).\n\n"
-        + "\n\n".join(sections) + "\n<!-- suite:end -->"
+        + "\n\n".join(sections)
+        + "\n<!-- suite:end -->"
     )
     text = out_md.read_text() if out_md.exists() else "# Benchmarks\n"
     if "<!-- suite:start -->" in text:

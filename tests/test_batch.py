@@ -1,8 +1,9 @@
-"""Batches of streams and the shared recursion kernel (issue 9: "batches of streams", "memory").
+"""Batches of streams and the shared recursion kernel.
 
-The vectorised path of every recursive method is one pass of :mod:`ivobs._recursion`; here it
-is checked against the step-by-step loop (the reference, ``vectorize=False``) on batches of
-adversarial (vertex-disturbance) streams, for soundness and agreement to ~1e-9.
+The vectorised path of every recursive method is one pass of
+:mod:`ivobs.estimators._recursion`; here it is checked against the step-by-step loop (the
+reference, ``vectorize=False``) on batches of adversarial (vertex-disturbance) streams, for
+soundness and agreement to ~1e-9.
 """
 
 import tracemalloc
@@ -13,7 +14,7 @@ import pytest
 from scipy.sparse import csr_matrix
 
 import ivobs
-from ivobs._recursion import (
+from ivobs.estimators._recursion import (
     LinearFilter,
     SplitFilter,
     affine_recursion,

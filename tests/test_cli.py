@@ -39,6 +39,10 @@ def test_demo_writes_figure_and_table(tmp_path, capsys):
 
 
 def test_console_entry_point_runs():
-    r = subprocess.run([sys.executable, "-m", "ivobs.cli", "scenarios"], capture_output=True,
-                       text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "ivobs.cli", "scenarios"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 0 and "henon" in r.stdout

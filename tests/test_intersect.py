@@ -4,7 +4,9 @@ than a member, sound, nested state, vectorised path, faults. Members that are no
 
 import json
 import warnings
+from dataclasses import dataclass, replace
 from functools import cache
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -13,9 +15,19 @@ import ivobs
 from ivobs import Box, IvobsError, LinearSystem, image_bounds, scenarios
 from ivobs.estimators import Estimator
 from ivobs.estimators.intersect import DEFAULT_METHODS
+from ivobs.estimators.state import OnlineState, Step
 from ivobs.testing import adversarial_run, assert_contains, random_system
 
 RTOL = 1e-12  # "contained in a member": up to the rounding margin of a crossing
+
+
+@dataclass(frozen=True)
+class BoxState(OnlineState):
+    """The predicted box of ``x[k]``."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"),)
 
 
 class OpenLoop(Estimator):
@@ -28,16 +40,16 @@ class OpenLoop(Estimator):
         self.valid_from = start
 
     def _initial_state(self):
-        return {"lo": self.x0.lo.copy(), "hi": self.x0.hi.copy()}
+        return BoxState(lo=self.x0.lo.copy(), hi=self.x0.hi.copy())
 
-    def _step(self, state, k, u_k, y_k, t_k):
-        lo, hi = state["lo"].copy(), state["hi"].copy()
-        A, B, _, _, E, _ = self.sys.matrices_at(k)
-        d = self.sys.d_at(k, y_k)
+    def _step(self, state, u_k, y_k, t_k):
+        lo, hi = state.lo, state.hi
+        A, B, _, _, E, _ = self.sys.matrices_at(state.k)
+        d = self.sys.d_at(state.k, y_k)
         a_lo, a_hi = image_bounds(A, lo, hi)
         e_lo, e_hi = image_bounds(E, d.lo, d.hi)
-        state["lo"], state["hi"] = a_lo + B @ u_k + e_lo, a_hi + B @ u_k + e_hi
-        return lo, hi
+        nxt = replace(state, lo=a_lo + B @ u_k + e_lo, hi=a_hi + B @ u_k + e_hi)
+        return Step(nxt, lo.copy(), hi.copy())
 
 
 def need(*names):

@@ -3,7 +3,9 @@ every method), alarms within a few steps of realistic faults, method-agnostic pl
 ``ivobs monitor`` command."""
 
 import io
+from dataclasses import dataclass, replace
 from functools import cache
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ import ivobs
 from ivobs import Box, DesignError, IvobsError, image_bounds, scenarios
 from ivobs.cli import main
 from ivobs.estimators import Estimator
+from ivobs.estimators.state import OnlineState, Step
 from ivobs.io import save_system, write_log
 from ivobs.monitor import Monitor
 from ivobs.simulate import simulate, vertex_disturbance
@@ -200,6 +203,15 @@ def test_dead_actuator_is_detected(method):
 
 
 # -- plumbing, with estimators defined here ----------------------------------------------------
+@dataclass(frozen=True)
+class BoxState(OnlineState):
+    """The predicted box of ``x[k]``."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"),)
+
+
 class OpenLoop(Estimator):
     """x[k+1] ∈ A[x[k]] + B u[k] + E[d[k]]; flags y[k] as inconsistent at the steps in ``flag``
     and can return a box shifted by ``shift`` (to test the monitor, not a method)."""
@@ -211,18 +223,18 @@ class OpenLoop(Estimator):
         self.flag, self.shift = set(flag), shift
 
     def _initial_state(self):
-        return {"lo": self.x0.lo.copy(), "hi": self.x0.hi.copy()}
+        return BoxState(lo=self.x0.lo.copy(), hi=self.x0.hi.copy())
 
-    def _step(self, state, k, u_k, y_k, t_k):
-        lo, hi = state["lo"].copy(), state["hi"].copy()
+    def _step(self, state, u_k, y_k, t_k):
+        k, lo, hi = state.k, state.lo, state.hi
         A, B, _, _, E, _ = self.sys.matrices_at(k)
         d = self.sys.d_at(k, y_k)
         a_lo, a_hi = image_bounds(A, lo, hi)
         e_lo, e_hi = image_bounds(E, d.lo, d.hi)
-        state["lo"], state["hi"] = a_lo + B @ u_k + e_lo, a_hi + B @ u_k + e_hi
-        if k in self.flag and not np.isnan(y_k).all():
-            state["_inconsistent"] = True
-        return lo + (self.shift if k == 5 else 0.0), hi + (self.shift if k == 5 else 0.0)
+        nxt = replace(state, lo=a_lo + B @ u_k + e_lo, hi=a_hi + B @ u_k + e_hi)
+        flag = k in self.flag and not np.isnan(y_k).all()
+        shift = self.shift if k == 5 else 0.0
+        return Step(nxt, lo + shift, hi + shift, flag)
 
 
 def test_estimator_inconsistency_is_an_alarm_and_not_a_warning(recwarn):

@@ -2,6 +2,8 @@
 predictor by Lemma 1, not registered): run/step agreement, state and restore, batches, errors."""
 
 import json
+from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -10,7 +12,17 @@ import ivobs
 from ivobs import Box, IvobsError, LinearSystem, image_bounds, make_estimator
 from ivobs.estimators import ROUNDING, Estimator
 from ivobs.estimators.base import outward
+from ivobs.estimators.state import OnlineState, Step
 from ivobs.testing import adversarial_run, random_system
+
+
+@dataclass(frozen=True)
+class BoxState(OnlineState):
+    """The predicted box of ``x[k]``."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"),)
 
 
 class OpenLoop(Estimator):
@@ -22,17 +34,16 @@ class OpenLoop(Estimator):
         super().__init__(sys, x0, on_inconsistent=on_inconsistent)
 
     def _initial_state(self):
-        return {"lo": self.x0.lo.copy(), "hi": self.x0.hi.copy()}
+        return BoxState(lo=self.x0.lo.copy(), hi=self.x0.hi.copy())
 
-    def _step(self, state, k, u_k, y_k, t_k):
-        lo, hi = state["lo"].copy(), state["hi"].copy()
-        A, B, _, _, E, _ = self.sys.matrices_at(k)
-        d = self.sys.d_at(k, y_k)
+    def _step(self, state, u_k, y_k, t_k):
+        lo, hi = state.lo, state.hi
+        A, B, _, _, E, _ = self.sys.matrices_at(state.k)
+        d = self.sys.d_at(state.k, y_k)
         a_lo, a_hi = image_bounds(A, lo, hi)
         e_lo, e_hi = image_bounds(E, d.lo, d.hi)
-        state["lo"] = a_lo + B @ u_k + e_lo
-        state["hi"] = a_hi + B @ u_k + e_hi
-        return lo, hi
+        nxt = replace(state, lo=a_lo + B @ u_k + e_lo, hi=a_hi + B @ u_k + e_hi)
+        return Step(nxt, lo.copy(), hi.copy())
 
 
 class Late(OpenLoop):
@@ -159,10 +170,9 @@ def test_inconsistency_reporting_policy():
     class Flagging(OpenLoop):
         name = "flagging-test"
 
-        def _step(self, state, k, u_k, y_k, t_k):
-            if k == 2:
-                state["_inconsistent"] = True
-            return super()._step(state, k, u_k, y_k, t_k)
+        def _step(self, state, u_k, y_k, t_k):
+            res = super()._step(state, u_k, y_k, t_k)
+            return res._replace(inconsistent=state.k == 2)
 
     sys, x0, tr = _setup(T=6)
     with pytest.warns(UserWarning, match=r"step\(s\) \[2\] is inconsistent"):

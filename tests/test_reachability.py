@@ -89,8 +89,9 @@ def test_box_is_the_exact_interval_hull_theorem2():
             # the outward margin of base.py: ROUNDING (1 + |bound| + s_k), s_k the data scale
             # (largest |y_j| and |E| |d|, |F| |d| up to step k)
             md = np.maximum(np.abs(s.d.lo), np.abs(s.d.hi))
-            s_k = max(np.abs(tr.y[: k + 1]).max(), (np.abs(s.E) @ md).max(),
-                      (np.abs(s.F) @ md).max())
+            s_k = max(
+                np.abs(tr.y[: k + 1]).max(), (np.abs(s.E) @ md).max(), (np.abs(s.F) @ md).max()
+            )
             assert abs(bound - tr.x[k, i]) <= 2e-10 * (1 + abs(tr.x[k, i]) + s_k)
 
 

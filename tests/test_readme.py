@@ -52,7 +52,14 @@ def test_methods_command_prints_every_method_with_its_metadata(capsys):
     assert main(["methods"]) == 0
     out = capsys.readouterr().out
     assert out.splitlines()[0].split() == [
-        "method", "paper", "data", "used", "needs", "x0", "time-varying", "continuous"
+        "method",
+        "paper",
+        "data",
+        "used",
+        "needs",
+        "x0",
+        "time-varying",
+        "continuous",
     ]
     listed = [ln.split()[0] for ln in out.splitlines()[1:] if not ln.startswith(" ")]
     assert listed == ivobs.methods()

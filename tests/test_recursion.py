@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ivobs._recursion import affine_recursion
+from ivobs.estimators._recursion import affine_recursion
 
 
 def _loop(M, v, x0):

@@ -19,8 +19,9 @@ def test_contains_and_metrics():
     assert e.contains(x, tol=0.6).all()
     np.testing.assert_allclose(e.mean_width(), [1.0, 1.5])
     np.testing.assert_allclose(e.mean_width(burn_in=2), [1.0, 1.0])
-    ref = Estimate(e.lower * 0 + np.array([0.25, -0.25]), e.upper * 0 + np.array([0.75, 0.25]),
-                   valid_from=1)
+    ref = Estimate(
+        e.lower * 0 + np.array([0.25, -0.25]), e.upper * 0 + np.array([0.75, 0.25]), valid_from=1
+    )
     np.testing.assert_allclose(e.tightness_ratio(ref), [2.0, 3.0])
     assert e.box(0).is_unknown and e.box(1).hi[0] == 1.0
     assert e.T == 3 and e.nx == 2 and e.valid.tolist() == [False, True, True]

@@ -15,8 +15,9 @@ from ivobs.estimators.base import ROUNDING
 
 def _feedthrough():
     """|D u| = 1e8 carries a state of size 1: y is only known to eps * 1e8."""
-    sys = LinearSystem([[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]],
-                       d=Box(-1.0, 1.0))
+    sys = LinearSystem(
+        [[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]], d=Box(-1.0, 1.0)
+    )
     T = 30
     u = np.ones((T, 1))
     u[T // 2 :] = -1.0
@@ -47,8 +48,9 @@ def test_step_equals_run_with_the_data_scale(method):
 
 def test_margin_grows_with_the_data_not_only_the_bounds():
     sys, tr = _feedthrough()
-    small = LinearSystem([[0.5]], [[0.0]], [[1.0]], D=[[1.0]], E=[[1e-3]], F=[[0.0]],
-                         d=Box(-1.0, 1.0))
+    small = LinearSystem(
+        [[0.5]], [[0.0]], [[1.0]], D=[[1.0]], E=[[1e-3]], F=[[0.0]], d=Box(-1.0, 1.0)
+    )
     tr_small = ivobs.simulate(small, [1.0], u=tr.u, d=np.ones((30, 1)))
     big = ivobs.make_estimator("reachability", sys, x0=Box(-1.0, 1.0)).run(tr.u, tr.y)
     ref = ivobs.make_estimator("reachability", small, x0=Box(-1.0, 1.0)).run(tr.u, tr_small.y)

@@ -6,8 +6,16 @@ import pytest
 import ivobs
 from ivobs import IvobsError, scenarios
 
-PAPERS = ["dinh2019", "servo-motor", "tang-example2", "efimov-planar", "henon", "kkl-random8",
-          "pendulum", "kkl-ltv-dt"]
+PAPERS = [
+    "dinh2019",
+    "servo-motor",
+    "tang-example2",
+    "efimov-planar",
+    "henon",
+    "kkl-random8",
+    "pendulum",
+    "kkl-ltv-dt",
+]
 CORA = ["cora-2dim", "cora-vehicle6", "cora-pedestrian4", "cora-slip4"]
 
 
@@ -31,10 +39,13 @@ def test_scenarios_simulate_within_their_bounds(name, kind):
 
 def test_paper_002_example_1_numbers():
     sc = scenarios.get("servo-motor")
-    np.testing.assert_array_equal(sc.system.A, [[1, 0.1, 0], [0, 0.8495, 0.4977],
-                                                [0, -0.0357, 0.9995]])
-    assert sc.system.d == ivobs.Box(-np.array([0.0225, 0.0225, 0.0404, 0.0564, 0.0564]),
-                                    np.array([0.0225, 0.0225, 0.0404, 0.0564, 0.0564]))
+    np.testing.assert_array_equal(
+        sc.system.A, [[1, 0.1, 0], [0, 0.8495, 0.4977], [0, -0.0357, 0.9995]]
+    )
+    assert sc.system.d == ivobs.Box(
+        -np.array([0.0225, 0.0225, 0.0404, 0.0564, 0.0564]),
+        np.array([0.0225, 0.0225, 0.0404, 0.0564, 0.0564]),
+    )
     assert sc.x0 == ivobs.Box.symmetric(0.2 * np.ones(3))
     assert sc.reference["L1"].shape == (3, 2) and sc.reference["L2"][1, 0] == -2.5012
     np.testing.assert_array_equal(sc.u, 2.0)
@@ -87,8 +98,9 @@ def test_continuous_and_time_varying_scenarios():
     p = scenarios.get("pendulum")
     assert p.system.is_continuous and p.system.is_time_varying and p.t.size == p.horizon
     k = scenarios.get("kkl-ltv-dt")
-    np.testing.assert_allclose(k.system.A_at(1), [[1.2, -1 + 0.5 * np.cos(1)],
-                                                  [0, 0.5 + 0.2 * np.sin(1)]])
+    np.testing.assert_allclose(
+        k.system.A_at(1), [[1.2, -1 + 0.5 * np.cos(1)], [0, 0.5 + 0.2 * np.sin(1)]]
+    )
     r8 = scenarios.get("kkl-random8")
     assert r8.system.is_observable() and (r8.system.nx, r8.system.ny) == (8, 6)
     r8c = scenarios.get("kkl-random8", continuous=True)

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from .._recursion import SplitFilter, within_band
 from ..design.hinf import observer_gain
+from ._recursion import SplitFilter, within_band
 from .base import Design, Estimator
 
 __all__ = [

@@ -33,6 +33,7 @@ its own prior ``x0``); the strip uses ``u[k]``, ``y[k]``.
 from __future__ import annotations
 
 import hashlib
+import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -42,10 +43,10 @@ from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
 from . import _REGISTRY, get, make_estimator, register
-from ._legacy_state import _copy_state
-from .base import Design, Estimator, _inconsistent
+from .base import Design, Estimator
+from .intersect_state import check_members, save_members
 from .rounding import ROUNDING, outward
-from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step
+from .state import OnlineState, Step
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -294,15 +295,10 @@ class Intersect(Estimator):
         los, his, members = [], [], []
         flagged = False
         for m, ms in zip(self.members, state.members, strict=True):
-            # each member's box rounded by its own margin (the same data scale)
-            if isinstance(ms, dict):  # a member not yet typed (transitional: in place)
-                if self._branching:
-                    ms = _copy_state(ms)
-                ms, box = m._advance_any(ms, u_k, y_k, t_k, in_place=True, finite=False)
-            else:
-                ms, box = m.advance(ms, u_k, y_k, t_k, finite=False, keep=not self._branching)
+            # each member's box rounded by its own margin (its data scale, its rounding model)
+            ms, box = m.advance(ms, u_k, y_k, t_k, finite=False, keep=not self._branching)
             members.append(ms)
-            flagged |= _inconsistent(ms)
+            flagged |= ms.inconsistent
             los.append(box.lo)
             his.append(box.hi)
         if k < self.valid_from:
@@ -323,101 +319,46 @@ class Intersect(Estimator):
         strip = self._strip_run(u, y)
         if strip is None:
             return None
-        scale = self._data_scale(u, y, t)
-        strip = outward(*strip, scale)
+        strip = outward(*strip, self._data_scale(u, y, t))
         los, his = [], []
         for m in self.members:
-            out = self._member_raw(m, u, y, t)
+            out = _member_run(m, u, y, t)
             if out is None:
                 return None
-            lo, hi = outward(*out, scale)  # each member rounded by its own margin
-            lo[..., : m.valid_from, :] = np.nan
-            hi[..., : m.valid_from, :] = np.nan
-            los.append(lo)
-            his.append(hi)
+            los.append(out[0])
+            his.append(out[1])
         lo, hi, empty = self._combine(np.array(los), np.array(his), *strip)
         if np.any(empty):
             return None
         return lo, hi
 
-    @staticmethod
-    def _member_raw(
-        m: Estimator, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray] | None:
-        """A member's raw bounds (fresh arrays; the caller rounds them outward)."""
-        out = m._run(u, y, t)
-        if out is not None:
-            if len(out) > 2 and np.any(out[2]):  # the member flagged a sample: the loop reports
-                return None
-            return np.array(out[0], dtype=float), np.array(out[1], dtype=float)
-        if y.ndim == 2:
-            lo, hi, inc = m._loop(u, y, t)
-            return None if np.any(inc) else (lo, hi)
-        los, his = [], []
-        for b in range(y.shape[0]):
-            lo, hi, inc = m._loop(u[b], y[b], t)
-            if np.any(inc):
-                return None
-            los.append(lo)
-            his.append(hi)
-        return np.stack(los), np.stack(his)
-
     # -- persistence ----------------------------------------------------------------------
-    def _fingerprint(self) -> str:
-        parts = [self.name, str(self.design.strip)] + [m._fingerprint() for m in self.members]
+    def fingerprint(self) -> str:
+        parts = [self.name, str(self.design.strip)] + [m.fingerprint() for m in self.members]
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
     def save_state(self, st: Any) -> dict[str, Any]:
         """The online state (JSON-serialisable): the members' saved states, nested."""
-        return {
-            "format": STATE_FORMAT,
-            "version": STATE_VERSION,
-            "method": self.name,
-            "fingerprint": self._fingerprint(),
-            "state": {
-                "k": st.k,
-                "scale": st.scale,
-                "inconsistent": st.inconsistent,
-                "members": [
-                    m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)
-                ],
-            },
-        }
+        return save_members(self, st)
 
     def check_state(self, state: Any) -> IntersectState:
         """The state saved by :meth:`state`, checked (same members, same designs)."""
-        if not isinstance(state, dict) or not isinstance(state.get("state"), dict):
-            raise IvobsError("state: expected the dict returned by Estimator.state()")
-        if state.get("method") != self.name or state.get("fingerprint") != self._fingerprint():
-            raise IvobsError(
-                f"state: saved by method {state.get('method')!r} with other members or designs; "
-                f"it can only be restored into the same {self.name!r} estimator"
-            )
-        if state.get("version", 1) != STATE_VERSION:
-            raise IvobsError(
-                f"state: saved in state format version {state.get('version', 1)!r}; this ivobs "
-                f"reads version {STATE_VERSION}; re-run from the start of the record"
-            )
-        saved = state["state"]
-        k, scale = saved.get("k"), saved.get("scale", 0.0)
-        if (
-            isinstance(k, bool)
-            or not isinstance(k, int)
-            or k < 0
-            or not isinstance(scale, (int, float))
-            or not np.isfinite(scale)
-            or scale < 0
-        ):
-            raise IvobsError(
-                "state: expected a step count 'k' (integer >= 0) and a data scale; the state "
-                "was altered or is not from Estimator.state()"
-            )
-        members = saved.get("members")
-        if not isinstance(members, list) or len(members) != len(self.members):
-            raise IvobsError(f"state: expected the states of {len(self.members)} members")
-        return IntersectState(
-            members=tuple(m.check_state(s) for m, s in zip(self.members, members, strict=True)),
-            k=k,
-            scale=float(scale),
-            inconsistent=bool(saved.get("inconsistent", False)),
-        )
+        return IntersectState(**check_members(self, state))
+
+
+def _member_run(
+    m: Estimator, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """A member's own run (its vectorised path where it has one), rounded by its own margin, NaN
+    before its ``valid_from``; None when anything needs the loop: a sample the member flags (the
+    loop reports it once, as the intersection's) or bounds that left the float range (the other
+    members may still bound the state)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = m.run(u, y, t=t, vectorize=True)
+    except IvobsError:  # overflow, or a member told to raise on inconsistent data
+        return None
+    if np.any(res.inconsistent):
+        return None
+    return res.lower, res.upper

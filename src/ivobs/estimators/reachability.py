@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from .._recursion import SplitFilter, redo_streams
 from .._validate import as_int
 from ..model import LinearSystem
 from ..sets import Box
@@ -24,6 +23,7 @@ from ._luenberger import (
     observer_bounds,
     observer_filter,
 )
+from ._recursion import SplitFilter, redo_streams
 from .base import check_size
 from .state import OnlineState, Step
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._recursion import LinearFilter, is_shared, scratch, within_band
 from ...sets import Box
+from .._recursion import LinearFilter, is_shared, scratch, within_band
 from ..rounding import outward
 from .gains import WindowGain, WindowGains
 from .recursion import Bounds, combine, no_box_error, predict

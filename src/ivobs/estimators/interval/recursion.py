@@ -15,8 +15,8 @@ from typing import ClassVar, TypeVar
 
 import numpy as np
 
-from ..._recursion import csr_accumulate
 from ...sets import Box
+from .._recursion import csr_accumulate
 from ..state import OnlineState, Step
 from .operators import SplitOperators, hull
 from .rounding import largest

@@ -16,14 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from ..._recursion import (
+from ...sets import Box, image_bounds
+from .._recursion import (
     LinearFilter,
     SplitFilter,
     matrix_product,
     redo_streams,
     within_band,
 )
-from ...sets import Box, image_bounds
 from ..rounding import ROUNDING
 from .operators import SplitOperators
 from .rounding import largest, norm_inf

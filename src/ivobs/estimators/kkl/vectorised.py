@@ -17,7 +17,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..._recursion import (
+from ...model import LinearSystem
+from ...sets import Box, image_bounds
+from .._recursion import (
     LinearFilter,
     SplitFilter,
     matrix_product,
@@ -25,8 +27,6 @@ from ..._recursion import (
     scratch,
     within_band,
 )
-from ...model import LinearSystem
-from ...sets import Box, image_bounds
 from .design import KKLDesign, ObserverMatrices
 from .observer import prior_box
 

@@ -1,0 +1,57 @@
+"""Checks of the per-step and per-record arguments of an estimator (they name the argument)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_float_array, as_vector
+from ..errors import IvobsError
+
+__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k"]
+
+
+def check_u_k(sys: Any, u_k: Any) -> np.ndarray:
+    """``u[k]``: ``nu`` numbers (``None`` when the system has no input)."""
+    if u_k is None:
+        if sys.nu:
+            raise IvobsError(f"u_k: expected {sys.nu} input value(s), got None")
+        return np.zeros(0)
+    return as_vector("u_k", u_k, sys.nu)
+
+
+def check_y_k(sys: Any, y_k: Any) -> np.ndarray:
+    """``y[k]``: ``ny`` numbers, NaN for a missing component (``None``: all missing)."""
+    if y_k is None:
+        return np.full(sys.ny, np.nan)
+    arr = as_float_array("y_k", y_k).ravel()
+    if arr.shape[0] != sys.ny:
+        raise IvobsError(f"y_k: expected {sys.ny} measurement value(s), got {arr.shape[0]}")
+    if np.any(np.isinf(arr)):
+        raise IvobsError("y_k: infinite measurement; use NaN for a missing sample")
+    return arr
+
+
+def check_t_k(sys: Any, t: Any) -> float | None:
+    """The sample time of one step (needed in continuous time)."""
+    if t is None:
+        if sys.is_continuous:
+            raise IvobsError("t: continuous-time estimation needs the sample time of each step")
+        return None
+    arr = as_float_array("t", t)
+    if arr.size != 1 or not np.isfinite(arr).all():
+        raise IvobsError(f"t: expected one finite sample time, got {t!r}")
+    return float(arr.reshape(()))
+
+
+def check_t(sys: Any, t: Any, T: int) -> np.ndarray | None:
+    """The sample times of a record of ``T`` steps (needed in continuous time)."""
+    if t is None:
+        if sys.is_continuous:
+            raise IvobsError("t: continuous-time estimation needs the sample times t (T,)")
+        return None
+    t_arr = as_float_array("t", t).ravel()
+    if t_arr.shape[0] != T or np.any(~np.isfinite(t_arr)) or np.any(np.diff(t_arr) <= 0):
+        raise IvobsError(f"t: expected {T} finite, strictly increasing sample times")
+    return t_arr

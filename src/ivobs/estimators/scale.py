@@ -1,0 +1,79 @@
+"""The data scale ``s_k`` of the rounding margin (:mod:`ivobs.estimators.rounding`).
+
+``s_k`` is the running maximum, over steps ``j <= k``, of the magnitudes of the data terms of a
+step: ``|y_j|``, ``g_i |u_j,i|`` (``g_i`` the largest entry of column ``i`` of ``|B|`` and
+``|D|``) and the disturbance terms ``|E| |d|``, ``|F| |d|`` (0 for bounds computed from ``y``).
+The online path (one step) and the record path (a whole record or batch) give the same numbers.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..sets import Box
+
+__all__ = ["DataScale"]
+
+
+class DataScale:
+    """The data-scale terms of one model (cached when they do not depend on the step)."""
+
+    def __init__(self, sys: Any):
+        self.sys = sys
+        self._steady: tuple[np.ndarray, float] | None = None
+
+    def terms(self, k: Any) -> tuple[np.ndarray, float]:
+        """``(g, c)`` at step (or time) ``k``: the input gains ``g`` and the disturbance term
+        ``c`` (see the module docstring)."""
+        if self._steady is not None:
+            return self._steady
+        sys = self.sys
+        _A, B, _C, D, E, F = sys.matrices_at(k)
+        g = np.max(np.abs(np.vstack([B, D])), axis=0) if sys.nu else np.zeros(0)
+        c = 0.0
+        if sys.nd and isinstance(sys.d, Box):
+            box = sys.d_at(int(k) if sys.is_discrete else 0)
+            md = np.maximum(np.abs(box.lo), np.abs(box.hi))
+            c = float(max(np.max(np.abs(E) @ md, initial=0.0), np.max(np.abs(F) @ md, initial=0.0)))
+        out = (g, c)
+        if not sys.is_time_varying and sys.has_constant_bounds:
+            self._steady = out
+        return out
+
+    def of_step(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
+        """The magnitude of the data terms of one step (its running maximum is ``s_k``)."""
+        g, c = self.terms(k if t_k is None else t_k)
+        a = c
+        if y_k.size:
+            m = np.fmax.reduce(np.abs(y_k))
+            if m == m:  # not all missing
+                a = max(a, float(m))
+        if u_k.size:
+            a = max(a, float(np.max(np.abs(u_k) * g)))
+        return a
+
+    def of_record(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
+        """``s_k`` over a record or batch, ``(..., T)``: the running maximum of
+        :meth:`of_step` (the same numbers as the online path)."""
+        T = y.shape[-2]
+        a = np.zeros(y.shape[:-1])
+        for i in range(y.shape[-1]):  # columns: a reduction over a short last axis is slow
+            np.fmax(a, np.abs(y[..., i]), out=a)  # fmax: a missing sample (NaN) counts as 0
+        sys = self.sys
+        if not sys.is_time_varying and sys.has_constant_bounds:
+            g, c = self.terms(0 if t is None else t[0])
+            G, cs = g, np.full(T, c)
+        else:
+            terms = [self.terms(k if t is None else t[k]) for k in range(T)]
+            G = np.array([gc[0] for gc in terms]).reshape(T, sys.nu)
+            cs = np.array([gc[1] for gc in terms])
+        if sys.nu:
+            if u.ndim == 3 and u.strides[0] == 0:
+                au = np.max(np.abs(u[0]) * G, axis=-1)  # one input for the whole batch
+            else:
+                au = np.max(np.abs(u) * G, axis=-1)
+            np.maximum(a, au, out=a)
+        np.maximum(a, cs, out=a)
+        return np.asarray(np.maximum.accumulate(a, axis=-1))
