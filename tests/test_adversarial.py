@@ -41,8 +41,13 @@ def _quiet_run(est, u, y, **kw):
 def test_fixed_time_vectorised_run_without_inputs():
     """nu = 0: every batch, and every single record of >= 2000 steps, takes the vectorised
     path, which crashes with a raw NumPy ValueError."""
-    sys = LinearSystem([[0.5, 1.0], [0.0, 0.4]], C=[[1.0, 0.0]], E=0.1 * np.eye(2),
-                       F=[[0.0, 0.0]], d=Box.symmetric([1.0, 1.0]))
+    sys = LinearSystem(
+        [[0.5, 1.0], [0.0, 0.4]],
+        C=[[1.0, 0.0]],
+        E=0.1 * np.eye(2),
+        F=[[0.0, 0.0]],
+        d=Box.symmetric([1.0, 1.0]),
+    )
     est = ivobs.make_estimator("fixed-time", sys)
     res = est.run(None, np.zeros((2000, 1)))  # long record: vectorised by default
     assert np.isfinite(res.lower[1:]).all()
@@ -62,13 +67,21 @@ def test_fixed_time_s0_predicts_a_missing_sample_with_the_previous_input():
 
 
 def test_fixed_time_nearly_singular_A():
-    A = np.array([[0.12609559714027987, 0.32010332880987175, -1.0651677453570858],
-                  [-0.05129062982893862, -0.1007573188128995, -0.7896390780376499],
-                  [-0.10299442591650111, -0.25134455581851856, 0.4499763881251059]])
+    A = np.array(
+        [
+            [0.12609559714027987, 0.32010332880987175, -1.0651677453570858],
+            [-0.05129062982893862, -0.1007573188128995, -0.7896390780376499],
+            [-0.10299442591650111, -0.25134455581851856, 0.4499763881251059],
+        ]
+    )
     C = np.array([[-0.4939342302351804, -0.3677137240199963, -1.8067903895865323]])
-    E = np.array([[0.5037622402465411, -0.06728726351786307],
-                  [0.40118322914862325, 0.12523967814215592],
-                  [0.5831888323874747, 0.46113299283844916]])
+    E = np.array(
+        [
+            [0.5037622402465411, -0.06728726351786307],
+            [0.40118322914862325, 0.12523967814215592],
+            [0.5831888323874747, 0.46113299283844916],
+        ]
+    )
     F = np.array([[0.0318298439352904, 0.1480763419858435]])
     r = np.array([0.970565750012428, 0.20560291645898518])
     sys = LinearSystem(A, None, C, E=E, F=F, d=Box(-r, r))  # eigenvalues 1e-7, 0.83, -0.35
@@ -78,7 +91,7 @@ def test_fixed_time_nearly_singular_A():
     d = np.where(rng.random((25, 2)) < 0.5, -r, r)
     tr = ivobs.simulate(sys, x0, None, d)
     res = est.run(None, tr.y)
-    assert res.contains(tr.x)[res.valid_from:].all()  # x[7] leaves the box by 2.9
+    assert res.contains(tr.x)[res.valid_from :].all()  # x[7] leaves the box by 2.9
 
 
 def test_fixed_time_output_injection_rounding():
@@ -93,13 +106,17 @@ def test_fixed_time_output_injection_rounding():
     x0 = rng.uniform(-5, 5, 3)
     tr = ivobs.simulate(sys, x0, rng.normal(size=(200, 1)), d)
     res = est.run(tr.u, tr.y)
-    assert res.contains(tr.x)[res.valid_from:].all()
+    assert res.contains(tr.x)[res.valid_from :].all()
 
 
 def test_exact_safe_bound_rounding_compounds():
-    sys = LinearSystem([[1.02]], C=[[-2.0]], E=[[0.5654947821624227, -0.4344598025301682]],
-                       F=[[-0.02959681857860406, -0.06036165972136037]],
-                       d=Box.symmetric([329.84765770643713, 672.0568907545257]))
+    sys = LinearSystem(
+        [[1.02]],
+        C=[[-2.0]],
+        E=[[0.5654947821624227, -0.4344598025301682]],
+        F=[[-0.02959681857860406, -0.06036165972136037]],
+        d=Box.symmetric([329.84765770643713, 672.0568907545257]),
+    )
     x0 = Box([-388149.2789262264], [-388149.2789262264])
     r = np.array([329.84765770643713, 672.0568907545257])
     signs = np.array([[1, -1]] * 8 + [[-1, 1], [1, -1], [-1, -1], [1, 1]])
@@ -109,7 +126,7 @@ def test_exact_safe_bound_rounding_compounds():
     # every other method contains this trajectory
     for m in ("reachability", "interval-split", "kkl", "fixed-time"):
         other = _quiet_run(ivobs.make_estimator(m, sys, x0=x0), None, tr.y)
-        assert other.contains(tr.x)[other.valid_from:].all()
+        assert other.contains(tr.x)[other.valid_from :].all()
 
 
 def test_exact_does_not_flag_valid_data_as_inconsistent():
@@ -123,8 +140,13 @@ def test_exact_does_not_flag_valid_data_as_inconsistent():
 
 def test_intersect_margin_covers_each_members_rounding():
     lo1, hi1 = -199999999.80468366, 0.7128333002200049
-    sys = LinearSystem([[0.5, 0.2], [0.0, 0.6]], C=np.eye(2), E=0.1 * np.eye(2),
-                       F=0.01 * np.eye(2), d=Box.symmetric([1.0, 1.0]))
+    sys = LinearSystem(
+        [[0.5, 0.2], [0.0, 0.6]],
+        C=np.eye(2),
+        E=0.1 * np.eye(2),
+        F=0.01 * np.eye(2),
+        d=Box.symmetric([1.0, 1.0]),
+    )
     x0 = Box([lo1, -1.0], [hi1, 1.0])
     d = np.zeros((5, 2))
     d[0] = [-1.0, 0.0]
@@ -135,33 +157,45 @@ def test_intersect_margin_covers_each_members_rounding():
     assert est.run(None, tr.y).contains(tr.x).all()
 
 
-_FEEDTHROUGH_FAILS = ["reachability", "zonotope", "interval", "interval-split",
-                      "interval-transformed", "kkl", "exact", "strip", "constrained-zonotope",
-                      "intersect"]
+_FEEDTHROUGH_FAILS = [
+    "reachability",
+    "zonotope",
+    "interval",
+    "interval-split",
+    "interval-transformed",
+    "kkl",
+    "exact",
+    "strip",
+    "constrained-zonotope",
+    "intersect",
+]
 
 
 @pytest.mark.parametrize("method", _FEEDTHROUGH_FAILS)
 def test_large_feedthrough_rounding(method):
-    sys = LinearSystem([[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]],
-                       d=Box(-1.0, 1.0))
+    sys = LinearSystem(
+        [[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]], d=Box(-1.0, 1.0)
+    )
     T = 20
     tr = ivobs.simulate(sys, [1.0], u=np.ones((T, 1)), d=np.ones((T, 1)))
     res = _quiet_run(ivobs.make_estimator(method, sys, x0=Box(-1.0, 1.0)), tr.u, tr.y)
-    assert res.contains(tr.x)[res.valid_from:].all()
+    assert res.contains(tr.x)[res.valid_from :].all()
 
 
 def test_large_feedthrough_fixed_time_is_sound():
     """The control case of the large feedthrough: fixed-time's rounding term covers the large data
     terms."""
-    sys = LinearSystem([[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]],
-                       d=Box(-1.0, 1.0))
+    sys = LinearSystem(
+        [[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]], d=Box(-1.0, 1.0)
+    )
     tr = ivobs.simulate(sys, [1.0], u=np.ones((20, 1)), d=np.ones((20, 1)))
     assert ivobs.make_estimator("fixed-time", sys).run(tr.u, tr.y).contains(tr.x).all()
 
 
 def test_interval_split_degenerate_width_gain_with_missing_component():
-    sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]],
-                       d=Box([0.5], [0.5]))
+    sys = LinearSystem(
+        [[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.2], [-0.1]], d=Box([0.5], [0.5])
+    )
     T = 10
     tr = ivobs.simulate(sys, [0.7], u=np.sin(np.arange(T))[:, None], d=np.full((T, 1), 0.5))
     y = tr.y.copy()
@@ -174,8 +208,9 @@ def test_interval_split_degenerate_width_gain_with_missing_component():
 
 @pytest.mark.parametrize("method", ["interval", "interval-split"])
 def test_interval_gain_with_redundant_noise_free_sensors(method):
-    sys = LinearSystem([[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.0], [0.0]],
-                       d=Box([-1.0], [1.0]))
+    sys = LinearSystem(
+        [[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.0], [0.0]], d=Box([-1.0], [1.0])
+    )
     T = 12
     d = np.where(np.random.default_rng(0).random((T, 1)) < 0.5, -1.0, 1.0)
     tr = ivobs.simulate(sys, [0.7], np.sin(np.arange(T))[:, None], d)
@@ -187,8 +222,15 @@ def test_interval_gain_with_redundant_noise_free_sensors(method):
 
 
 def test_kkl_continuous_time_long_record():
-    sys = LinearSystem([[-1.92, 1.36], [1.22, -2.46]], None, [[-0.53, 0.57]],
-                       E=0.1 * np.eye(2), F=np.zeros((1, 2)), d=Box.symmetric([1.0, 1.0]), dt=0)
+    sys = LinearSystem(
+        [[-1.92, 1.36], [1.22, -2.46]],
+        None,
+        [[-0.53, 0.57]],
+        E=0.1 * np.eye(2),
+        F=np.zeros((1, 2)),
+        d=Box.symmetric([1.0, 1.0]),
+        dt=0,
+    )
     est = ivobs.make_estimator("kkl", sys, x0=Box(-np.ones(2), np.ones(2)))
     t = np.arange(200) * 1.0
     tr = ivobs.simulate(sys, [0.3, -0.2], d=np.zeros((200, 2)), t=t)
@@ -199,11 +241,24 @@ def test_kkl_continuous_time_long_record():
 def test_batch_with_time_varying_bounds(method):
     T = 30
     r = np.linspace(0.5, 1.0, T)[:, None]
-    sys = LinearSystem([[0.5, 0.2], [-0.1, 0.6]], [[1.0], [0.0]], [[1.0, 0.0]], E=[[0.3], [0.1]],
-                       F=[[0.1]], d=Box(-r, r))
+    sys = LinearSystem(
+        [[0.5, 0.2], [-0.1, 0.6]],
+        [[1.0], [0.0]],
+        [[1.0, 0.0]],
+        E=[[0.3], [0.1]],
+        F=[[0.1]],
+        d=Box(-r, r),
+    )
     x0 = Box([-1.0, -1.0], [1.0, 1.0])
-    trs = [ivobs.simulate(sys, [0.5, -0.5], np.sin(np.arange(T) + b)[:, None],
-                          np.where(np.arange(T)[:, None] % (b + 2) == 0, r, -r)) for b in range(3)]
+    trs = [
+        ivobs.simulate(
+            sys,
+            [0.5, -0.5],
+            np.sin(np.arange(T) + b)[:, None],
+            np.where(np.arange(T)[:, None] % (b + 2) == 0, r, -r),
+        )
+        for b in range(3)
+    ]
     u = np.array([tr.u for tr in trs])
     y = np.array([tr.y for tr in trs])
     res = ivobs.make_estimator(method, sys, x0=x0).run(u, y)
@@ -211,8 +266,14 @@ def test_batch_with_time_varying_bounds(method):
 
 
 def test_strip_rounding_when_the_measurements_pin_the_state():
-    sys = LinearSystem([[1.57, 1.41], [-0.59, -0.34]], None, [[-0.53, 0.57], [-0.06, 0.75]],
-                       E=[[-0.92], [0.78]], F=[[-0.02], [0.14]], d=Box([-1.0], [1.0]))
+    sys = LinearSystem(
+        [[1.57, 1.41], [-0.59, -0.34]],
+        None,
+        [[-0.53, 0.57], [-0.06, 0.75]],
+        E=[[-0.92], [0.78]],
+        F=[[-0.02], [0.14]],
+        d=Box([-1.0], [1.0]),
+    )
     x0 = Box(np.full(2, 1e5 - 1.0), np.full(2, 1e5 + 1.0))
     signs = "--++++++-+--+-++----+--+-+----"
     d = np.array([[1.0 if c == "+" else -1.0] for c in signs])
@@ -222,8 +283,14 @@ def test_strip_rounding_when_the_measurements_pin_the_state():
 
 
 def test_constrained_zonotope_does_not_flag_valid_data():
-    sys = LinearSystem([[1.57, 1.41], [-0.59, -0.34]], None, [[-0.53, 0.57], [-0.06, 0.75]],
-                       E=[[-0.92], [0.78]], F=[[-0.02], [0.14]], d=Box([-1.0], [1.0]))
+    sys = LinearSystem(
+        [[1.57, 1.41], [-0.59, -0.34]],
+        None,
+        [[-0.53, 0.57], [-0.06, 0.75]],
+        E=[[-0.92], [0.78]],
+        F=[[-0.02], [0.14]],
+        d=Box([-1.0], [1.0]),
+    )
     x0 = Box(np.full(2, 1e5 - 1.0), np.full(2, 1e5 + 1.0))
     signs = "--++++++-+--+-++----+--+-+----"
     d = np.array([[1.0 if c == "+" else -1.0] for c in signs])
@@ -234,6 +301,7 @@ def test_constrained_zonotope_does_not_flag_valid_data():
 
 
 # -- error handling ---------------------------------------------------------------------------
+
 
 def _small():
     sys = random_system(3, nx=2, ny=1, nu=1)
@@ -327,8 +395,10 @@ def _records(sys, x0, T, seed, n_random=3, n_extreme=3):
         tr = ivobs.simulate(sys, tr.x[0], u, tr.d)
         xs.append(tr.x)
         ys.append(tr.y)
-    targets = [(int(rng.integers(1, T)), int(rng.integers(sys.nx)), float(rng.choice([-1, 1])))
-               for _ in range(n_extreme)]
+    targets = [
+        (int(rng.integers(1, T)), int(rng.integers(sys.nx)), float(rng.choice([-1, 1])))
+        for _ in range(n_extreme)
+    ]
     for x0v, d in zip(*_open_loop_extremes(sys, x0, u, targets, rng)):
         tr = ivobs.simulate(sys, x0v, u, d)
         xs.append(tr.x)
@@ -337,8 +407,17 @@ def _records(sys, x0, T, seed, n_random=3, n_extreme=3):
     return U, np.array(xs), np.array(ys)
 
 
-_FAST = ["fixed-time", "reachability", "zonotope", "interval", "interval-transformed",
-         "interval-split", "kkl", "strip", "intersect"]
+_FAST = [
+    "fixed-time",
+    "reachability",
+    "zonotope",
+    "interval",
+    "interval-transformed",
+    "interval-split",
+    "kkl",
+    "strip",
+    "intersect",
+]
 _CASES = [  # (seed, nx, ny, options of random_system)
     (0, 2, 1, {}),
     (1, 3, 2, {"symmetric_bounds": False}),
@@ -375,7 +454,7 @@ def test_adversarial_containment_all_methods(seed, nx, ny, opts):
             for vec in (False, True):
                 res = _quiet_run(est, U, Yin, vectorize=vec)
                 assert _excess(res, X) <= 0.0, (m, vec)
-                assert np.isfinite(res.lower[:, res.valid_from:]).all(), m
+                assert np.isfinite(res.lower[:, res.valid_from :]).all(), m
         full = _quiet_run(est, U, Y, vectorize=False)
         for res, b in zip(exact, (0, 3)):  # exact is the tightest box from the same data
             vf = full.valid_from
@@ -392,8 +471,20 @@ def test_adversarial_containment_all_methods(seed, nx, ny, opts):
     assert checked >= 5
 
 
-@pytest.mark.parametrize("method", ["fixed-time", "reachability", "zonotope", "interval-split",
-                                    "kkl", "strip", "constrained-zonotope", "exact", "intersect"])
+@pytest.mark.parametrize(
+    "method",
+    [
+        "fixed-time",
+        "reachability",
+        "zonotope",
+        "interval-split",
+        "kkl",
+        "strip",
+        "constrained-zonotope",
+        "exact",
+        "intersect",
+    ],
+)
 def test_step_with_state_restore_matches_run_under_missing_samples(method):
     """Online use through a JSON state round trip, missing samples, and a worst-case record."""
     sys = random_system(7, nx=2, ny=2, nu=1, symmetric_bounds=False)
