@@ -1,6 +1,6 @@
 """Batch throughput of the recursive methods, and the memory of a long record (issue 9).
 
-A batch of ``B`` streams x ``T`` steps of the servo motor (paper 002), vertex disturbances, one
+A batch of ``B`` streams x ``T`` steps of the servo motor ([Tang2019]), vertex disturbances, one
 input signal for the whole fleet, run in one call ``est.run(u, Y)`` with ``Y`` of shape
 ``(B, T, ny)``. Prints, per method, the best wall and CPU time of a few runs, the throughput in
 streams x steps per second, and whether the target (10,000 x 1,000 in under 2 s) is met. The

@@ -1,6 +1,6 @@
 """Fault detection delay of the streaming monitor (``ivobs.monitor.Monitor``), per method.
 
-DC servo motor (paper 002, Example 1), vertex (bang-bang) disturbances, fault from step
+DC servo motor ([Tang2019, Example 1]), vertex (bang-bang) disturbances, fault from step
 ``ONSET`` on:
 
 * a bias of 2, 3, 5 noise bounds (v̄ = 0.0564) on the speed sensor ``y2``;

@@ -1,4 +1,4 @@
-"""Speed of the `fixed-time` estimator (paper 001).
+"""Speed of the `fixed-time` estimator ([Wang2020]).
 
 Prints steps/s for: the dinh2019 example on one long record (vectorised `run`: one product per
 lag over the sliding window of the record), with 10% missing samples (one kernel per missing

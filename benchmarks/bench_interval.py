@@ -1,6 +1,6 @@
 """Speed of the interval-observer family (`interval`, `interval-split`, `interval-transformed`).
 
-Servo motor of paper 002. Prints the designed gains, then steps/s for one long record
+Servo motor of [Tang2019]. Prints the designed gains, then steps/s for one long record
 (vectorised `run`), a batch of independent streams, the online `step()` loop and the loop path of
 `run` with 10% missing samples. Targets for `interval` and `interval-split`: >= 1,000,000
 steps/s on a 200,000-step record; 10,000 streams x 1,000 steps in < 2 s.

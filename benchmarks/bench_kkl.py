@@ -1,4 +1,4 @@
-"""Speed of the KKL / Sylvester observers (method ``kkl``, paper 004).
+"""Speed of the KKL / Sylvester observers (method ``kkl``, [Dinh2024]).
 
 Prints steps per second for
 

@@ -1,4 +1,4 @@
-"""Speed of the `reachability` and `zonotope` estimators (paper 002) on the servo motor.
+"""Speed of the `reachability` and `zonotope` estimators ([Tang2019]) on the servo motor.
 
 Prints steps/s for: one long record (vectorised `run`), a batch of streams, and the online
 `step()` loop (also the loop path of `run`, used with missing samples or time-varying bounds).
@@ -52,7 +52,7 @@ def main(quick: bool = False) -> None:
     tr = sc.simulate("vertex", seed=0)
     U, Y, X = batch_record(sc, B, T_b)
     s = sc.system
-    print(f"servo motor (002 Example 1): nx={s.nx}, ny={s.ny}, nd={s.nd}")
+    print(f"servo motor ([Tang2019, Example 1]): nx={s.nx}, ny={s.ny}, nd={s.nd}")
     if hasattr(os, "getloadavg"):  # wall times on a shared machine: compare with CPU times
         print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     rng = np.random.default_rng(1)
@@ -61,7 +61,8 @@ def main(quick: bool = False) -> None:
     for method in ("reachability", "zonotope"):
         t0 = time.perf_counter()
         est = ivobs.make_estimator(method, s, x0=sc.x0)
-        print(f"{method:>12}: design (H∞ LMI, 002 problem (20)) {time.perf_counter() - t0:.3f} s")
+        dt = time.perf_counter() - t0
+        print(f"{method:>12}: design (H∞ LMI, [Tang2019, problem (20)]) {dt:.3f} s")
         assert est.run(tr.u, tr.y).contains(tr.x).all()
         t = _best(lambda est=est: est.run(tr.u, tr.y))
         print(

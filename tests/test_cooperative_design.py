@@ -1,5 +1,5 @@
-"""Gains for cooperative interval observers (ivobs.design.cooperative): LMI (41) of paper 002 /
-LMIs (7)-(8) of 003, the LP for |A - LC| Schur, the width refinement and the checks."""
+"""Gains for cooperative interval observers (ivobs.design.cooperative): [Tang2019, LMI (41)] /
+[Efimov2013, LMIs (7)-(8)], the LP for |A - LC| Schur, the width refinement and the checks."""
 
 import numpy as np
 import pytest
@@ -54,7 +54,7 @@ def test_lmi41_infeasible_without_a_structural_reason():
     # A − LC >= 0 is possible (column 1 of C is zero but A[:, 0] >= 0), Schur is not: A[1,1] = 1.2
     A = np.array([[1.2, 0.3], [0.4, 0.5]])
     C = np.array([[0.0, 1.0]])
-    with pytest.raises(DesignError, match=r"LMI \(41\) of 002 is infeasible \(best margin"):
+    with pytest.raises(DesignError, match=r"\[Tang2019, LMI \(41\)\] is infeasible \(best margin"):
         nonnegative_gain(A, C)
 
 
@@ -73,8 +73,9 @@ def test_check_messages_name_the_entry_and_the_spectral_radius():
 
 
 def test_margin_lp_finds_the_optimum_of_the_planar_example():
-    """003 §IV.A: |A − LC| = [[|0.3 − l1|, 0.7], [|0.6 − l2|, 0.5]] has ρ >= 0.5 for every L
-    (its entry (2, 2) is fixed); L = (0.3, 0.6) attains it (the paper's gain)."""
+    """[Efimov2013, Section IV.A]: |A − LC| = [[|0.3 − l1|, 0.7], [|0.6 − l2|, 0.5]] has
+    ρ >= 0.5 for every L (its entry (2, 2) is fixed); L = (0.3, 0.6) attains it (the paper's
+    gain)."""
     _, A, C, *_ = mats("efimov-planar")
     L, r = abs_schur_gain(A, C)
     assert r == pytest.approx(0.5, abs=1e-7)
@@ -132,47 +133,47 @@ def test_refinement_never_widens_and_keeps_the_structure(seed):
     assert np.all(w_ref <= w_lmi * (1 + 1e-9)) and w_ref.sum() < 0.999 * w_lmi.sum()
 
 
-# -- audit A8: the smallest gain among the optimal ones --------------------------------------------
-A8_A, A8_C = np.array([[0.9]]), np.array([[1.0], [1.0]])  # two sensors of one state
+# -- redundant outputs: the smallest gain among the optimal ones ----------------------------------
+A_R, C_R = np.array([[0.9]]), np.array([[1.0], [1.0]])  # two sensors of one state (redundant)
 
 
-def test_a8_margin_lp_returns_the_smallest_gain_with_redundant_outputs():
+def test_margin_lp_returns_the_smallest_gain_with_redundant_outputs():
     """ρ(|A − LC|) = |0.9 − l1 − l2| is 0 on a whole line of gains: HiGHS used to return the
     vertex (−999999.1, 10⁶) of the |L| <= 1e6 box; the second stage picks (0.45, 0.45)."""
-    L, r = abs_schur_gain(A8_A, A8_C)
+    L, r = abs_schur_gain(A_R, C_R)
     assert r < 1e-9
     np.testing.assert_allclose(L, [[0.45, 0.45]], atol=1e-9)
-    np.testing.assert_allclose(missing_radius(A8_A, A8_C, L), [0.45, 0.45], atol=1e-9)
+    np.testing.assert_allclose(missing_radius(A_R, C_R, L), [0.45, 0.45], atol=1e-9)
 
 
 @pytest.mark.parametrize("nonnegative", [True, False])
-def test_a8_width_refinement_returns_the_smallest_gain_with_noise_free_outputs(nonnegative):
+def test_width_refinement_returns_the_smallest_gain_with_noise_free_outputs(nonnegative):
     """F = 0: the width (I − |D|)⁻¹|E|Δ does not depend on the part of L with LC = 0."""
     E, F, delta = np.array([[0.1]]), np.zeros((2, 1)), np.array([2.0])
-    L = refine_width(A8_A, A8_C, E, F, delta, np.array([[0.3, 0.3]]), nonnegative=nonnegative)
+    L = refine_width(A_R, C_R, E, F, delta, np.array([[0.3, 0.3]]), nonnegative=nonnegative)
     np.testing.assert_allclose(L, [[0.45, 0.45]], atol=1e-9)
-    np.testing.assert_allclose(steady_width(A8_A - L @ A8_C, E, delta), [0.2], rtol=1e-9)
+    np.testing.assert_allclose(steady_width(A_R - L @ C_R, E, delta), [0.2], rtol=1e-9)
 
 
-def test_a8_output_weights_make_the_gain_scale_invariant():
+def test_output_weights_make_the_gain_scale_invariant():
     """Sensor 2 reads 1000 x: the gain's column 2 shrinks by 1000, L C is the same."""
     C = np.array([[1.0], [1000.0]])
     np.testing.assert_allclose(output_weights(C), [1.0, 1000.0])
-    L, _ = abs_schur_gain(A8_A, C)
+    L, _ = abs_schur_gain(A_R, C)
     np.testing.assert_allclose(L, [[0.45, 0.45e-3]], atol=1e-9)
 
 
-def test_a8_refinement_keeps_single_output_gaps_bounded():
+def test_refinement_keeps_single_output_gaps_bounded():
     """Sensor 1 sees the disturbance (F = 1e-3): G = E − LF vanishes only for l1 = 100, and
     then l2 = 0.9 − 100 and a gap of either sensor multiplies the width by ~100 per step. The
     start gain rides out both gaps, so the refinement stops before that gain."""
     E, F, delta = np.array([[0.1]]), np.array([[1e-3], [0.0]]), np.array([2.0])
     L0 = np.array([[0.45, 0.45]])
     for nonneg in (True, False):
-        L = refine_width(A8_A, A8_C, E, F, delta, L0, nonnegative=nonneg)
-        assert np.all(missing_radius(A8_A, A8_C, L) < 1.0)
-        w0 = steady_width(A8_A - L0 @ A8_C, E - L0 @ F, delta)
-        assert np.all(steady_width(A8_A - L @ A8_C, E - L @ F, delta) <= w0 * (1 + 1e-9))
+        L = refine_width(A_R, C_R, E, F, delta, L0, nonnegative=nonneg)
+        assert np.all(missing_radius(A_R, C_R, L) < 1.0)
+        w0 = steady_width(A_R - L0 @ C_R, E - L0 @ F, delta)
+        assert np.all(steady_width(A_R - L @ C_R, E - L @ F, delta) <= w0 * (1 + 1e-9))
 
 
 @pytest.mark.parametrize(
@@ -183,7 +184,7 @@ def test_a8_refinement_keeps_single_output_gaps_bounded():
         ("henon", [[0.0], [0.3]]),
     ],
 )
-def test_a8_second_stage_keeps_the_papers_optimal_gains(name, L_expected):
+def test_second_stage_keeps_the_papers_optimal_gains(name, L_expected):
     """Where the LP optimum is a single gain the second stage does not move it (1e-12 slack)."""
     sc = scenarios.get(name)
     A, _, C, _, E, F = sc.system.matrices_at(0)
@@ -194,7 +195,7 @@ def test_a8_second_stage_keeps_the_papers_optimal_gains(name, L_expected):
     np.testing.assert_allclose(L, L_expected, atol=1e-10)
 
 
-def test_a8_missing_radius():
+def test_missing_radius_without_a_sensor():
     """Servo motor: without sensor 1 the first state (an integrator) is unobserved."""
     _, A, C, *_ = mats("servo-motor")
     L = np.array([[1.0, 0.1], [0.0, 0.8495], [0.0, -0.0357]])

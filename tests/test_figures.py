@@ -1,5 +1,5 @@
 """The papers' figures (``ivobs.figures``, ``ivobs figures``): files written, checks that can fail,
-and the numbers behind 002 Fig. 5 (Theorem 8)."""
+and the numbers behind [Tang2019, Fig. 5] (Theorem 8)."""
 
 from __future__ import annotations
 
@@ -26,52 +26,52 @@ def _assert_png(path, min_bytes=15_000):
     assert len(data) > min_bytes, f"{path.name}: only {len(data)} bytes"
 
 
-def test_generate_paper001_writes_both_figures(tmp_path):
-    paths = figures.generate(tmp_path / "out", papers=["001"])
-    assert [p.name for p in paths] == ["paper001_fig1.png", "paper001_fig2.png"]
+def test_generate_wang2020_writes_both_figures(tmp_path):
+    paths = figures.generate(tmp_path / "out", papers=["Wang2020"])
+    assert [p.name for p in paths] == ["wang2020_fig1.png", "wang2020_fig2.png"]
     for p in paths:
         _assert_png(p)
 
 
 def test_cli_writes_figures_and_rejects_unknown_papers(tmp_path, capsys):
-    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "1"]) == 0
+    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "wang2020"]) == 0
     assert "2 figure(s)" in capsys.readouterr().out
-    _assert_png(tmp_path / "paper001_fig2.png")
-    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "001,007"]) == 2
-    assert "007" in capsys.readouterr().err
+    _assert_png(tmp_path / "wang2020_fig2.png")
+    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "Wang2020,Smith2007"]) == 2
+    assert "Smith2007" in capsys.readouterr().err
     assert cli_main(["figures", "--out", str(tmp_path), "--paper", ","]) == 2
 
 
 def test_every_paper_has_its_figures():
     stems = [s.stem for s in figures.figure_specs()]
     assert stems == [
-        "paper001_fig1",
-        "paper001_fig2",
-        "paper002_fig1",
-        "paper002_fig2",
-        "paper002_fig3",
-        "paper002_fig4",
-        "paper002_fig5",
-        "paper003_fig1",
-        "paper003_fig2",
-        "paper004_fig1_ct",
-        "paper004_fig1_dt",
-        "paper004_fig4",
-        "paper004_fig5",
+        "wang2020_fig1",
+        "wang2020_fig2",
+        "tang2019_fig1",
+        "tang2019_fig2",
+        "tang2019_fig3",
+        "tang2019_fig4",
+        "tang2019_fig5",
+        "efimov2013_fig1",
+        "efimov2013_fig2",
+        "dinh2024_fig1_ct",
+        "dinh2024_fig1_dt",
+        "dinh2024_fig4",
+        "dinh2024_fig5",
     ]
-    assert [s.stem for s in figures.figure_specs("paper003")] == stems[7:9]
+    assert [s.stem for s in figures.figure_specs("EFIMOV2013")] == stems[7:9]
 
 
 @pytest.mark.parametrize(
     "make",
     [
-        lambda: figures.paper002_fig2(horizon=30),
-        lambda: figures.paper002_fig4(horizon=15),
-        lambda: figures.paper003_fig2(horizon=40),
-        lambda: figures.paper004_fig4(t_final=2.0, dt=0.05),
-        lambda: figures.paper004_fig5(horizon=12),
+        lambda: figures.tang2019_fig2(horizon=30),
+        lambda: figures.tang2019_fig4(horizon=15),
+        lambda: figures.efimov2013_fig2(horizon=40),
+        lambda: figures.dinh2024_fig4(t_final=2.0, dt=0.05),
+        lambda: figures.dinh2024_fig5(horizon=12),
     ],
-    ids=["002-fig2", "002-fig4", "003-fig2", "004-fig4", "004-fig5"],
+    ids=["tang2019-fig2", "tang2019-fig4", "efimov2013-fig2", "dinh2024-fig4", "dinh2024-fig5"],
 )
 def test_short_figures_render(tmp_path, make):
     fig = make()
@@ -92,7 +92,7 @@ def test_containment_check_raises_on_a_missed_state():
         check_contains("shifted", res, x)
 
 
-def test_error_sets_of_paper002_fig5():
+def test_error_sets_of_tang2019_fig5():
     """Theorem 8 on Example 2 at k = 40: Box(Ω_k) ⊆ Box(P̃), samples in Ω_k, S of eq. (48)."""
     s = figures.error_sets(k=40, runs=200, seed=1)
     # S from the paper's R, e1, e2 by (48) reproduces its printed S
@@ -133,3 +133,12 @@ def test_zonotope_polygon():
     assert not in_planar_zonotope(Z, Z.center + 1.01 * (P - Z.center)).any()
     with pytest.raises(ivobs.IvobsError, match="planar"):
         figures.zonotope_polygon(ivobs.Zonotope(np.zeros(3), np.eye(3)))
+
+
+def test_unknown_paper_names_the_argument_and_the_keys(tmp_path, capsys):
+    with pytest.raises(ivobs.IvobsError, match=r"^papers: expected some of Wang2020, Tang2019, "):
+        figures.generate(tmp_path, papers=["Tang2019", "Tang2018"])
+    assert not list(tmp_path.iterdir())  # nothing drawn before the check
+    assert cli_main(["figures", "--out", str(tmp_path), "--paper", "dinh2024,Dinh"]) == 2
+    err = capsys.readouterr().err
+    assert "--paper" in err and "Efimov2013" in err and "'Dinh'" in err

@@ -1,7 +1,8 @@
-"""The interval-observer family: `interval` (002 eq. 36 / 003 eq. 3), `interval-transformed`
-(002 Theorem 5 / 003 Theorem 2) and `interval-split` (003 Theorem 3): the papers' examples,
-soundness under vertex disturbances at every step, step/run/vectorised agreement, missing
-samples, batches, the ordering theorems 7-8 of 002 and the error messages."""
+"""The interval-observer family: `interval` ([Tang2019, eq. (36)] / [Efimov2013, eq. (3)]),
+`interval-transformed` ([Tang2019, Theorem 5] / [Efimov2013, Theorem 2]) and `interval-split`
+([Efimov2013, Theorem 3]): the papers' examples, soundness under vertex disturbances at every
+step, step/run/vectorised agreement, missing samples, batches, the ordering theorems 7-8 of
+[Tang2019] and the error messages."""
 
 import json
 import warnings
@@ -45,7 +46,7 @@ def check_paths(est, tr, rtol=1e-9):
 
 # -- paper examples -------------------------------------------------------------------------------
 def test_servo_with_the_papers_lmi41_gain():
-    """002 Example 1: L2 from LMI (41) makes A − L2 C nonnegative with ρ ≈ 0.99977."""
+    """[Tang2019, Example 1]: L2 from LMI (41) makes A − L2 C nonnegative with ρ ≈ 0.99977."""
     sc, est = servo("interval")
     assert est.design.D.min() >= 0
     assert est.design.spectral_radius == pytest.approx(0.99977, abs=5e-6)
@@ -109,7 +110,7 @@ def test_tang_example2_transformed_with_the_papers_design():
 
 
 def test_planar_example_split_observer_with_the_papers_gain():
-    """003 §IV.A: L = (0.3, 0.6) gives λ(D) = {0, −0.5}, λ(|D|) = {0, 0.5}."""
+    """[Efimov2013, Section IV.A]: L = (0.3, 0.6) gives λ(D) = {0, −0.5}, λ(|D|) = {0, 0.5}."""
     sc = scenarios.get("efimov-planar", horizon=150)
     est = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, L=sc.reference["L"])
     assert est.design.spectral_radius == pytest.approx(0.5, abs=1e-12)
@@ -143,8 +144,8 @@ def test_planar_example_transformed_default_design():
 
 @pytest.mark.parametrize("method", ["interval", "interval-split"])
 def test_henon_bounds_from_measurements_long_vertex_run(method):
-    """003 §IV.B (Remark 1): b(t) bounded from y(t); the paper's L = (−0.1, 0.1) for Theorem 1;
-    adversarial a(t), d(t), v(t) on their vertices for 1500 steps."""
+    """[Efimov2013, Section IV.B, Remark 1]: b(t) bounded from y(t); the paper's
+    L = (−0.1, 0.1) for Theorem 1; adversarial a(t), d(t), v(t) on their vertices for 1500 steps."""
     sc = scenarios.get("henon", horizon=1500)
     L = sc.reference["L"]
     est = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=L)
@@ -352,7 +353,7 @@ def test_inconsistent_measurement_is_reported_and_ignored():
         )
 
 
-# -- ordering theorems 7 and 8 of paper 002 -----------------------------------------------------
+# -- ordering theorems 7 and 8 of [Tang2019] ---------------------------------------------------
 def _reachability(sys, x0, L):
     if "reachability" not in ivobs.methods():
         pytest.skip("the reachability method is not available")
@@ -385,7 +386,7 @@ def test_theorem8_reachability_inside_transformed_with_the_same_gain():
     a, b = est.run(tr.u, tr.y), reach.run(tr.u, tr.y)
     tol = 1e-8 * (1 + np.abs(a.upper))
     assert np.all(b.upper <= a.upper + tol) and np.all(b.lower >= a.lower - tol)
-    assert a.mean_width(20).sum() > 2 * b.mean_width(20).sum()  # 002 Fig. 4: much looser
+    assert a.mean_width(20).sum() > 2 * b.mean_width(20).sum()  # [Tang2019, Fig. 4]: much looser
 
 
 # -- bad input ------------------------------------------------------------------------------------
@@ -444,7 +445,7 @@ def test_given_S_and_R_from_a_nonnegative_gain():
         tr_.run(tr.u, tr.y, vectorize=True)
 
 
-# -- audit A8: redundant noise-free outputs, gaps, large gains and rounding ----------------
+# -- redundant noise-free outputs, gaps, large gains and rounding -------------------------
 def redundant_system(seed, zero_width=False):
     """ny > nx: every state is read by two (scaled) sensors; F = 0 (noise-free) or zero-width
     bounds, the layouts where the width objective leaves part of L free."""
@@ -467,8 +468,9 @@ def redundant_system(seed, zero_width=False):
 
 
 @pytest.mark.parametrize("method", ["interval", "interval-split"])
-def test_a8_redundant_noise_free_sensors_with_a_gap(method):
-    """The audit's example: a gap of sensor 2 used to take the width 0.2 -> 2e17 (|L| = 1e6)."""
+def test_redundant_noise_free_sensors_with_a_gap(method):
+    """Two noise-free sensors of one state: a gap of sensor 2 used to take the width
+    0.2 -> 2e17 (|L| = 1e6)."""
     sys = LinearSystem(
         [[0.9]], [[1.0]], [[1.0], [1.0]], E=[[0.1]], F=[[0.0], [0.0]], d=Box([-1.0], [1.0])
     )
@@ -487,7 +489,7 @@ def test_a8_redundant_noise_free_sensors_with_a_gap(method):
 
 
 @pytest.mark.parametrize("seed", range(8))
-def test_a8_redundant_sensors_random_systems_gaps_vertex_disturbances(seed):
+def test_redundant_sensors_random_systems_gaps_vertex_disturbances(seed):
     """Property test around the weak spot: bounded gains, containment at every step and no
     false inconsistency with 10% missing components and a 20-step gap of one sensor."""
     sys = redundant_system(seed, zero_width=seed % 3 == 0)
@@ -512,7 +514,7 @@ def test_a8_redundant_sensors_random_systems_gaps_vertex_disturbances(seed):
 
 
 @pytest.mark.parametrize("method", ["interval", "interval-split"])
-def test_a8_a_large_given_gain_stays_sound_under_a_gap(method):
+def test_a_large_given_gain_stays_sound_under_a_gap(method):
     """The gain the old design returned, given explicitly, with zero-width bounds: a gap of
     sensor 2 makes |A − L_k C| = 1e6, which amplified the rounding of L y (|L||y| ~ 1e6) into a
     miss of 3.5e-6 and a permanent false inconsistency. The loop now carries each step's
@@ -535,7 +537,7 @@ def test_a8_a_large_given_gain_stays_sound_under_a_gap(method):
     assert res.contains(tr.x[None]).all() and not res.inconsistent.any()
 
 
-def test_a8_rounding_bound_numbers():
+def test_rounding_bound_factors_on_the_servo_motor():
     """kappa = ‖(I − |A − LC|)⁻¹‖_∞ and the factors on the servo motor (paper's L2: rho =
     0.99977): mu, nu > 1, so the margin of the vectorised path grows (by ~2e-10 relative)."""
     sc = scenarios.get("servo-motor", horizon=50)
@@ -552,7 +554,7 @@ def test_a8_rounding_bound_numbers():
 
 
 @pytest.mark.parametrize("big", [1.5e6, 3e6, 6e6])
-def test_a8_vectorised_margin_covers_the_terms_of_a_large_gain(big):
+def test_vectorised_margin_covers_the_terms_of_a_large_gain(big):
     """Complete data, batches (the vectorised path), |L| ~ 1e6 and |x| ~ 1e3: the terms L y
     are ~1e9 while the base margin is 1e-10 (1 + |x| + |y|): misses of 4e-8 ... 4e-7 before the
     margin was enlarged by mu, nu (module docstring, "Rounding")."""
@@ -609,8 +611,8 @@ def test_transformed_contains_the_state_with_a_large_gain_and_ill_conditioned_S(
 
 
 def test_transformed_step_error_is_negligible_on_the_paper_example():
-    """On 002's servo motor the rounding terms of ``z = S x`` change nothing visible: the
-    paper's widths are kept (relative change below 1e-12)."""
+    """On the servo motor of [Tang2019] the rounding terms of ``z = S x`` change nothing
+    visible: the paper's widths are kept (relative change below 1e-12)."""
     sc = scenarios.get("servo-motor")
     est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0)
     m = est.operators.matrices(np.ones(sc.system.ny, dtype=bool))
@@ -622,8 +624,8 @@ def test_transformed_step_error_is_negligible_on_the_paper_example():
 
 
 def test_transformed_regression_large_gain_far_from_the_origin():
-    """Audit A13: ``L ≈ (5.4e6, −1.8e6)``, ``cond(S) ≈ 1.2e7``, ``|x| ≈ 1e6``: the true state was
-    4231 outside a box 1164 wide at step 2."""
+    """A large default gain far from the origin: ``L ≈ (5.4e6, −1.8e6)``, ``cond(S) ≈ 1.2e7``,
+    ``|x| ≈ 1e6``: the true state was 4231 outside a box 1164 wide at step 2."""
     A = [[0.021076483834902654, 1.296600609653334], [0.05440529898189982, -0.2652197859523413]]
     C = [[-0.6981669039978192, -2.034870354896757]]
     E = [[-0.4361806017959113, -0.5284829050220129], [0.13777619470524255, -0.4373513334001146]]

@@ -1,6 +1,6 @@
-"""Similarity transformations to a nonnegative R (ivobs.design.similarity): eq. (48) of paper 002
+"""Similarity transformations to a nonnegative R (ivobs.design.similarity): [Tang2019, eq. (48)]
 against its Example 2, the nonnegative inverse eigenvalue constructions, and their limits
-(003's planar example)."""
+(the planar example of [Efimov2013])."""
 
 import numpy as np
 import pytest
@@ -31,10 +31,10 @@ def S_from_printed(p, A, C, e1, e2):
 
 
 def test_eq48_reproduces_tang_example2():
-    """002 Example 2 prints L, R, e1, e2 and S to four decimals. S is sensitive to the rounding
-    of its inputs (|∂S/∂R11| up to 15, |∂S/∂R22| up to 15: R22 = 0.0003 is printed with one
-    significant digit), so the tolerance is the first-order effect of rounding every input by
-    half a unit of the last printed digit, plus the rounding of S itself."""
+    """[Tang2019, Example 2] prints L, R, e1, e2 and S to four decimals. S is sensitive to the
+    rounding of its inputs (|∂S/∂R11| up to 15, |∂S/∂R22| up to 15: R22 = 0.0003 is printed with
+    one significant digit), so the tolerance is the first-order effect of rounding every input
+    by half a unit of the last printed digit, plus the rounding of S itself."""
     sc, A, C = tang2()
     ref = sc.reference
     p0 = np.array([ref["L"][0, 0], ref["L"][1, 0], ref["R"][0, 0], ref["R"][0, 1], ref["R"][1, 1]])
@@ -91,7 +91,7 @@ def test_unobservable_pairs_are_named():
 
 
 def test_planar_example_spectrum_has_no_nonnegative_realisation():
-    """003 §IV.A with L = (0.3, 0.6): λ(A − LC) = {0, −0.5}. The paper prints
+    """[Efimov2013, Section IV.A] with L = (0.3, 0.6): λ(A − LC) = {0, −0.5}. The paper prints
     R = [[−0.5, 0], [1, 0]], which is not nonnegative; no nonnegative R exists (trace < 0)."""
     sc = scenarios.get("efimov-planar")
     A, _, C, *_ = sc.system.matrices_at(0)

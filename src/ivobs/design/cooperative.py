@@ -182,8 +182,8 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
     reason = _structural_obstruction(A, C)
     if reason:
         raise DesignError(
-            f"{who}: no gain L makes A − LC nonnegative and Schur{reason} (LMI (41) of 002 is "
-            "infeasible); use 'interval-split' or 'interval-transformed'"
+            f"{who}: no gain L makes A − LC nonnegative and Schur{reason} ([Tang2019, LMI (41)] "
+            "is infeasible); use 'interval-split' or 'interval-transformed'"
         )
     pvec = cp.Variable(n)
     Y = cp.Variable((n, p))
@@ -198,7 +198,7 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
     mu_val = float(mu.value)
     if mu_val <= _MU_MIN:
         raise DesignError(
-            f"{who}: no gain L makes A − LC nonnegative and Schur: LMI (41) of 002 is "
+            f"{who}: no gain L makes A − LC nonnegative and Schur: [Tang2019, LMI (41)] is "
             f"infeasible (best margin μ = {mu_val:.3g}); use 'interval-split' or "
             "'interval-transformed'"
         )

@@ -1,12 +1,12 @@
 """The papers' figures, regenerated with ivobs' methods: ``ivobs figures --out DIR``.
 
 One function per figure of [Wang2020], [Tang2019], [Efimov2013] and [Dinh2024]
-(``paper002_fig5()``, ...; the numbers 001-004 name the papers in that order, as in
-``ivobs figures --paper 002``), each returning a matplotlib figure drawn from a fresh run of the
-paper's scenario (:mod:`ivobs.scenarios`), one module per paper. Every function checks that the
-bounds it draws contain the true state at every step and raises :class:`FigureCheckError`
-otherwise (a figure of a broken guarantee is a bug, never a picture). :func:`generate` writes
-them all (or those of some papers) as PNG files.
+(``tang2019_fig5()``, ...; the papers are named by their reference keys, as in
+``ivobs figures --paper Tang2019``), each returning a matplotlib figure drawn from a fresh run
+of the paper's scenario (:mod:`ivobs.scenarios`), one module per paper. Every function checks
+that the bounds it draws contain the true state at every step and raises
+:class:`FigureCheckError` otherwise (a figure of a broken guarantee is a bug, never a picture).
+:func:`generate` writes them all (or those of some papers) as PNG files.
 
 What each figure shows, and what differs from the paper and why: ``docs/figures.md``.
 """
@@ -23,19 +23,19 @@ from typing import Any
 
 from ...errors import IvobsError
 from .common import DPI, FigureCheckError, pyplot
-from .dinh2024 import paper004_fig1, paper004_fig4, paper004_fig5
-from .efimov2013 import paper003_fig1, paper003_fig2
+from .dinh2024 import dinh2024_fig1, dinh2024_fig4, dinh2024_fig5
+from .efimov2013 import efimov2013_fig1, efimov2013_fig2
 from .tang2019 import (
     ErrorSets,
     error_sets,
-    paper002_fig1,
-    paper002_fig2,
-    paper002_fig3,
-    paper002_fig4,
-    paper002_fig5,
+    tang2019_fig1,
+    tang2019_fig2,
+    tang2019_fig3,
+    tang2019_fig4,
+    tang2019_fig5,
     zonotope_polygon,
 )
-from .wang2020 import paper001_fig1, paper001_fig2
+from .wang2020 import wang2020_fig1, wang2020_fig2
 
 __all__ = [
     "DPI",
@@ -43,32 +43,32 @@ __all__ = [
     "ErrorSets",
     "FigureCheckError",
     "FigureSpec",
+    "dinh2024_fig1",
+    "dinh2024_fig4",
+    "dinh2024_fig5",
+    "efimov2013_fig1",
+    "efimov2013_fig2",
     "error_sets",
     "figure_specs",
     "generate",
-    "paper001_fig1",
-    "paper001_fig2",
-    "paper002_fig1",
-    "paper002_fig2",
-    "paper002_fig3",
-    "paper002_fig4",
-    "paper002_fig5",
-    "paper003_fig1",
-    "paper003_fig2",
-    "paper004_fig1",
-    "paper004_fig4",
-    "paper004_fig5",
+    "tang2019_fig1",
+    "tang2019_fig2",
+    "tang2019_fig3",
+    "tang2019_fig4",
+    "tang2019_fig5",
+    "wang2020_fig1",
+    "wang2020_fig2",
     "zonotope_polygon",
 ]
 
-PAPERS = ("001", "002", "003", "004")
-"""The papers whose figures :func:`generate` can draw: [Wang2020], [Tang2019], [Efimov2013],
-[Dinh2024]."""
+PAPERS = ("Wang2020", "Tang2019", "Efimov2013", "Dinh2024")
+"""The papers whose figures :func:`generate` can draw, by their keys in docs/references.md."""
 
 
 @dataclass(frozen=True)
 class FigureSpec:
-    """One output file: ``paper``, file ``stem`` (``<stem>.png``) and the function drawing it."""
+    """One output file: ``paper`` (a key of :data:`PAPERS`), file ``stem`` (``<stem>.png``) and
+    the function drawing it."""
 
     paper: str
     stem: str
@@ -76,36 +76,42 @@ class FigureSpec:
 
 
 _SPECS = (
-    FigureSpec("001", "paper001_fig1", paper001_fig1),
-    FigureSpec("001", "paper001_fig2", paper001_fig2),
-    FigureSpec("002", "paper002_fig1", paper002_fig1),
-    FigureSpec("002", "paper002_fig2", paper002_fig2),
-    FigureSpec("002", "paper002_fig3", paper002_fig3),
-    FigureSpec("002", "paper002_fig4", paper002_fig4),
-    FigureSpec("002", "paper002_fig5", paper002_fig5),
-    FigureSpec("003", "paper003_fig1", paper003_fig1),
-    FigureSpec("003", "paper003_fig2", paper003_fig2),
-    FigureSpec("004", "paper004_fig1_ct", partial(paper004_fig1, continuous=True)),
-    FigureSpec("004", "paper004_fig1_dt", partial(paper004_fig1, continuous=False)),
-    FigureSpec("004", "paper004_fig4", paper004_fig4),
-    FigureSpec("004", "paper004_fig5", paper004_fig5),
+    FigureSpec("Wang2020", "wang2020_fig1", wang2020_fig1),
+    FigureSpec("Wang2020", "wang2020_fig2", wang2020_fig2),
+    FigureSpec("Tang2019", "tang2019_fig1", tang2019_fig1),
+    FigureSpec("Tang2019", "tang2019_fig2", tang2019_fig2),
+    FigureSpec("Tang2019", "tang2019_fig3", tang2019_fig3),
+    FigureSpec("Tang2019", "tang2019_fig4", tang2019_fig4),
+    FigureSpec("Tang2019", "tang2019_fig5", tang2019_fig5),
+    FigureSpec("Efimov2013", "efimov2013_fig1", efimov2013_fig1),
+    FigureSpec("Efimov2013", "efimov2013_fig2", efimov2013_fig2),
+    FigureSpec("Dinh2024", "dinh2024_fig1_ct", partial(dinh2024_fig1, continuous=True)),
+    FigureSpec("Dinh2024", "dinh2024_fig1_dt", partial(dinh2024_fig1, continuous=False)),
+    FigureSpec("Dinh2024", "dinh2024_fig4", dinh2024_fig4),
+    FigureSpec("Dinh2024", "dinh2024_fig5", dinh2024_fig5),
 )
 
 
-def figure_specs(papers: str | Iterable[str] | None = None) -> list[FigureSpec]:
-    """The figures of the given papers (``"001"``, ``"2"``, ``"paper003"`` ...; all by default)."""
+def figure_specs(
+    papers: str | Iterable[str] | None = None, *, name: str = "papers"
+) -> list[FigureSpec]:
+    """The figures of the given papers, by reference key in any case (``"Tang2019"``,
+    ``"dinh2024"``, a comma-separated string or a list; all by default). An unknown key raises
+    :class:`IvobsError` naming ``name`` (the argument as the caller knows it, e.g. ``--paper``)."""
     if papers is None:
         return list(_SPECS)
     if isinstance(papers, str):
         papers = papers.split(",")
+    keys = {p.lower(): p for p in PAPERS}
+    expected = f"expected some of {', '.join(PAPERS)} (any case)"
     wanted = []
     for p in papers:
-        digits = str(p).strip().lower().removeprefix("paper")
-        if not digits.isdigit() or f"{int(digits):03d}" not in PAPERS:
-            raise IvobsError(f"papers: expected some of {', '.join(PAPERS)}, got {p!r}")
-        wanted.append(f"{int(digits):03d}")
+        key = keys.get(str(p).strip().lower())
+        if key is None:
+            raise IvobsError(f"{name}: {expected}, got {p!r}")
+        wanted.append(key)
     if not wanted:
-        raise IvobsError(f"papers: expected some of {', '.join(PAPERS)}, got none")
+        raise IvobsError(f"{name}: {expected}, got none")
     return [s for s in _SPECS if s.paper in wanted]
 
 

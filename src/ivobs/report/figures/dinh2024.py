@@ -14,7 +14,7 @@ from ...sets import Box
 from ...simulate import simulate
 from .common import check_contains, pyplot
 
-__all__ = ["paper004_fig1", "paper004_fig4", "paper004_fig5"]
+__all__ = ["dinh2024_fig1", "dinh2024_fig4", "dinh2024_fig5"]
 
 
 def _quiet(sysm: LinearSystem) -> LinearSystem:
@@ -78,7 +78,7 @@ def _kkl_panel(ax: Any, res: Estimate, traj: Any, i: int, legend: bool = False) 
         ax.legend(fontsize=7, ncol=3, loc="upper right")
 
 
-def paper004_fig1(
+def dinh2024_fig1(
     continuous: bool = True, t_final: float = 10.0, dt: float = 0.02, horizon: int = 60
 ) -> Any:
     """[Dinh2024, Fig. 1] (Example 1): all 8 states of the random system, observer (3) in ``z``
@@ -120,7 +120,7 @@ def _x2_figure(sc: scenarios.Scenario, title: str) -> Any:
     return fig
 
 
-def paper004_fig4(t_final: float = 15.0, dt: float = 0.02) -> Any:
+def dinh2024_fig4(t_final: float = 15.0, dt: float = 0.02) -> Any:
     """[Dinh2024, Fig. 4] (Example 2): the pendulum with varying length (CT LTV), state ``x2 = θ'``,
     observer (10) with ``Ã = diag(−1, −2)``, ``B̃ = (1, 1)``, ``ℓ = 2``; measurements every
     ``dt`` (the sampled-data form of (10), see :mod:`ivobs.estimators.kkl`)."""
@@ -128,7 +128,7 @@ def paper004_fig4(t_final: float = 15.0, dt: float = 0.02) -> Any:
     return _x2_figure(sc, "[Dinh2024] Fig. 4: pendulum (CT LTV), $x_2$, observer (10)")
 
 
-def paper004_fig5(horizon: int = 30) -> Any:
+def dinh2024_fig5(horizon: int = 30) -> Any:
     """[Dinh2024, Fig. 5] (Example 3): the discrete-time LTV system, state ``x2``, observer (15)
     with ``Ã = diag(0.1, 0.2)``, ``B̃ = (1, 1)``, ``γ = 1`` (bounds from ``k* = 2``)."""
     sc = scenarios.get("kkl-ltv-dt", horizon=horizon)

@@ -8,10 +8,10 @@ from ... import scenarios
 from ..plot import plot_estimates
 from .common import pyplot, run_checked
 
-__all__ = ["paper003_fig1", "paper003_fig2"]
+__all__ = ["efimov2013_fig1", "efimov2013_fig2"]
 
 
-def paper003_fig1(horizon: int = 50) -> Any:
+def efimov2013_fig1(horizon: int = 50) -> Any:
     """[Efimov2013, Fig. 1]: ``x2`` by observer (4) (``interval-transformed``, automatic design: the
     paper's ``R`` is not nonnegative) in (a) and by observer (5) (``interval-split``,
     ``L = (0.3, 0.6)``) in (b)."""
@@ -39,7 +39,7 @@ def paper003_fig1(horizon: int = 50) -> Any:
     return fig
 
 
-def paper003_fig2(horizon: int = 100) -> Any:
+def efimov2013_fig2(horizon: int = 100) -> Any:
     """[Efimov2013, Fig. 2]: the Hénon map, interval observer (3) with ``L = (−0.1, 0.1)``,
     bounds of the nonlinear term from the measurement [Efimov2013, Remark 1]."""
     sc = scenarios.get("henon", horizon=horizon)

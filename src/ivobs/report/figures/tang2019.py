@@ -23,11 +23,11 @@ __all__ = [
     "ErrorSets",
     "error_sets",
     "in_planar_zonotope",
-    "paper002_fig1",
-    "paper002_fig2",
-    "paper002_fig3",
-    "paper002_fig4",
-    "paper002_fig5",
+    "tang2019_fig1",
+    "tang2019_fig2",
+    "tang2019_fig3",
+    "tang2019_fig4",
+    "tang2019_fig5",
     "zonotope_polygon",
 ]
 
@@ -96,17 +96,17 @@ def _servo_figure(state: int, horizon: int) -> Any:
     return fig
 
 
-def paper002_fig1(horizon: int = 100) -> Any:
+def tang2019_fig1(horizon: int = 100) -> Any:
     """[Tang2019, Fig. 1]: servo-motor position θ: Algorithm 1 vs zonotope (L1), vs (36) (L2)."""
     return _servo_figure(0, horizon)
 
 
-def paper002_fig2(horizon: int = 100) -> Any:
+def tang2019_fig2(horizon: int = 100) -> Any:
     """[Tang2019, Fig. 2]: servo-motor speed n: Algorithm 1 vs zonotope (L1), vs (36) (L2)."""
     return _servo_figure(1, horizon)
 
 
-def paper002_fig3(horizon: int = 100) -> Any:
+def tang2019_fig3(horizon: int = 100) -> Any:
     """[Tang2019, Fig. 3]: armature current i: Algorithm 1 vs zonotope (L1), vs (36) (L2)."""
     return _servo_figure(2, horizon)
 
@@ -117,7 +117,7 @@ def _tang2_options(sc: scenarios.Scenario) -> dict[str, Any]:
     return {"L": ref["L"], "R": ref["R"], "e1": ref["e1"], "e2": ref["e2"]}
 
 
-def paper002_fig4(horizon: int = 25) -> Any:
+def tang2019_fig4(horizon: int = 25) -> Any:
     """[Tang2019, Fig. 4] (Example 2): Algorithm 1 (H∞ gain) vs the transformed observer (42),
     with the paper's ``L``, ``R``, ``e1``, ``e2``. ``A`` is unstable (``|λ| = 1.118``) and
     ``u = 0``: the state grows like ``1.118^k``, so a short horizon keeps the bounds' widths
@@ -311,7 +311,7 @@ def _box_xy(b: Box) -> tuple[list[float], list[float]]:
     )
 
 
-def paper002_fig5(k: int = 40, runs: int = 1000, seed: int = 0) -> Any:
+def tang2019_fig5(k: int = 40, runs: int = 1000, seed: int = 0) -> Any:
     """[Tang2019, Fig. 5]: at step ``k``, Ω_k (solid polygon), P̃ of (72) (dash-dotted),
     ``[e̲_k, ē_k]`` (dashed), the box of (42) (dotted) and ``e_k`` of ``runs`` independent runs
     (dots)."""

@@ -8,7 +8,7 @@ from ... import scenarios
 from ..plot import plot_estimates
 from .common import run_checked
 
-__all__ = ["paper001_fig1", "paper001_fig2"]
+__all__ = ["wang2020_fig1", "wang2020_fig2"]
 
 
 def _fixed_time_figure(state: int, horizon: int) -> Any:
@@ -27,13 +27,13 @@ def _fixed_time_figure(state: int, horizon: int) -> Any:
     return fig
 
 
-def paper001_fig1(horizon: int = 50) -> Any:
+def wang2020_fig1(horizon: int = 50) -> Any:
     """[Wang2020, Fig. 1]: bounds of ``x1`` by the fixed-time estimator (s = 2, the paper's T),
     truth."""
     return _fixed_time_figure(0, horizon)
 
 
-def paper001_fig2(horizon: int = 50) -> Any:
+def wang2020_fig2(horizon: int = 50) -> Any:
     """[Wang2020, Fig. 2]: bounds of ``x2`` by the fixed-time estimator (s = 2, the paper's T),
     truth."""
     return _fixed_time_figure(1, horizon)

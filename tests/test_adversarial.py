@@ -1,11 +1,10 @@
-"""Adversarial audit of soundness and of the error-handling promises (see docs/dev/audit.md).
+"""Adversarial tests of soundness and of the error-handling promises
+(docs/dev/soundness-review.md).
 
-Part 1 pins the audit's findings as regression tests. Each one fails today and is marked
-``xfail(strict=True)``: the fix makes it pass, strict mode then turns the XPASS into a failure,
-and whoever fixed it removes the mark. Part 2 is a compact adversarial containment test over
-every registered method that passes today (worst-case disturbances built from the model, vertex
-priors, missing samples, batches, ``step()`` with ``state()``/``restore()``, and the orderings
-``exact ⊆ every method`` and ``intersect ⊆ every member``).
+Part 1 pins the review's findings as regression tests, one or more per finding. Part 2 is a
+compact adversarial containment test over every registered method (worst-case disturbances built
+from the model, vertex priors, missing samples, batches, ``step()`` with ``state()``/``restore()``,
+and the orderings ``exact ⊆ every method`` and ``intersect ⊆ every member``).
 """
 
 from __future__ import annotations
@@ -35,7 +34,7 @@ def _quiet_run(est, u, y, **kw):
 
 
 # =============================================================================================
-# Part 1: findings (xfail until fixed)
+# Part 1: the soundness review's findings
 # =============================================================================================
 
 
@@ -184,7 +183,8 @@ def test_large_feedthrough_rounding(method):
 
 
 def test_large_feedthrough_fixed_time_is_sound():
-    """The control case of A7: fixed-time's rounding term covers the large data terms."""
+    """The control case of the large feedthrough: fixed-time's rounding term covers the large data
+    terms."""
     sys = LinearSystem(
         [[0.5]], [[0.0]], [[1.0]], D=[[1e8]], E=[[1e-3]], F=[[0.0]], d=Box(-1.0, 1.0)
     )
@@ -361,7 +361,7 @@ def test_kkl_non_numeric_option_is_an_ivobs_error():
 
 
 # =============================================================================================
-# Part 2: compact adversarial containment (passes today)
+# Part 2: compact adversarial containment
 # =============================================================================================
 
 
