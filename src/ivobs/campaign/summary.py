@@ -39,7 +39,7 @@ def summarize(rows: Iterable[dict[str, Any]]) -> list[SummaryRow]:
     over seeds with its 95 % confidence half-width ``t_{0.975, n-1} s / √n``, containment
     counts, mean design and run times, and the most frequent error of the failed jobs."""
     import numpy as np
-    from scipy import stats  # type: ignore[import-untyped]  # scipy ships no stubs
+    from scipy import stats
 
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in rows:

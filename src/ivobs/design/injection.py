@@ -48,7 +48,7 @@ def _place(A: np.ndarray, C: np.ndarray, poles: np.ndarray) -> np.ndarray | None
     """``L`` with the eigenvalues of ``A - LC`` at ``poles`` (``scipy.signal.place_poles`` on
     the dual pair ``(Aᵀ, C_rᵀ)``, ``C_r`` an orthonormal-row factor of ``C``: place_poles needs
     full column rank), or None when the placement fails."""
-    from scipy.signal import place_poles  # type: ignore[import-untyped]  # SciPy has no stubs
+    from scipy.signal import place_poles
 
     U, sv, Vt = np.linalg.svd(C, full_matrices=False)
     r = int(np.sum(sv > max(C.shape) * _EPS * (sv[0] if sv.size else 0.0)))

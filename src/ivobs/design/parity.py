@@ -253,7 +253,7 @@ def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
     satisfies ``T Mx = I`` only to the solver's tolerance, so it is projected back,
     ``T ← T + (I - T Mx) Mx†``, which restores ``T Mx = I`` to rounding.
     """
-    from scipy.optimize import linprog  # type: ignore[import-untyped]  # SciPy has no stubs
+    from scipy.optimize import linprog
 
     Mx = np.asarray(Mx, dtype=float)
     Md = np.asarray(Md, dtype=float)

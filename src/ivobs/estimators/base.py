@@ -118,7 +118,7 @@ def _arrays(state: OnlineState) -> list[np.ndarray]:
 class Estimator(Persistence):
     """Base class of all guaranteed estimators (see the module docstring for the contract)."""
 
-    name: ClassVar[str] = ""  # type: ignore[misc]  # Persistence reads it as an attribute
+    name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     reference: ClassVar[str] = ""
     """Where the method comes from, as reference keys of docs/references.md

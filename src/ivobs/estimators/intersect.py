@@ -102,6 +102,7 @@ class Intersect(Estimator):
     """
 
     name = "intersect"
+    design: IntersectDesign
     order = 110
     summary = "intersection of several guaranteed estimates (and the measurement strip)"
     reference = "intersection of guaranteed enclosures; output strips by [Efimov2013, Lemma 1]"

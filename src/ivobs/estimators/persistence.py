@@ -4,7 +4,7 @@ versioned envelope with the method's name and a fingerprint of its design."""
 from __future__ import annotations
 
 import hashlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -21,7 +21,7 @@ class Persistence:
     """Saving and restoring the online state (a mix-in of :class:`~ivobs.estimators.Estimator`,
     which provides the attributes declared here)."""
 
-    name: str
+    name: ClassVar[str]
     sys: Any
     design: Design
     _state: OnlineState | None

@@ -122,7 +122,7 @@ class _SystemReader(TomlReader):
 
     def sparse(self, key: tuple[str, ...], spec: dict[str, Any]) -> Any:
         """A sparse matrix from ``shape``, ``rows``, ``cols``, ``values`` (0-based indices)."""
-        from scipy.sparse import coo_matrix  # type: ignore[import-untyped]  # no stubs
+        from scipy.sparse import coo_matrix
 
         unknown = sorted(set(spec) - {"shape", "rows", "cols", "values"})
         if unknown:

@@ -43,7 +43,7 @@ def _heat_1d(
     noise ``|v| <= 0.02``; ``sensors`` point sensors at equal spacing; heater profile ``b``
     around the middle, input ``u[k] = 1 + 0.5 sin(2 pi k / 100)``.
     """
-    from scipy.sparse import csr_matrix, diags  # type: ignore[import-untyped]  # no stubs here
+    from scipy.sparse import csr_matrix, diags
 
     T = check_horizon(horizon)
     if isinstance(nx, bool) or not isinstance(nx, (int, np.integer)) or nx < 3:
