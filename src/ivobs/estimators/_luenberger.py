@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..design.hinf import observer_gain
-from ._recursion import SplitFilter, within_band
+from ._recursion import SplitFilter, centre_band, within_band
 from .base import Design, Estimator
 
 __all__ = [
@@ -135,13 +135,7 @@ def observer_bounds(
                 return None
             bad = np.asarray(fail.any(axis=-1))
     del innov
-    lo = np.empty_like(hi)
-    if s_x is None:
-        np.subtract(xh, rad, out=lo)
-        xh += rad
-    else:
-        np.add(xh, s_x - rad, out=lo)
-        xh += s_x + rad
+    lo, xh = centre_band(xh, rad, s_x)
     return (lo, xh) if bad is None else (lo, xh, bad)
 
 

@@ -31,6 +31,7 @@ The package: :mod:`.kernels` (sparse products, reusable temporaries, batch helpe
 from __future__ import annotations
 
 from .kernels import (
+    centre_band,
     csr_accumulate,
     is_shared,
     matrix_product,
@@ -46,6 +47,7 @@ __all__ = [
     "LinearFilter",
     "SplitFilter",
     "affine_recursion",
+    "centre_band",
     "csr_accumulate",
     "is_shared",
     "matrix_product",

@@ -134,3 +134,19 @@ def redo_streams(
     for b in np.flatnonzero(bad):
         lo[b], hi[b], inc[b] = est._loop(u[b], y[b], t)
     return lo, hi, inc
+
+
+def centre_band(
+    xc: np.ndarray, rad: np.ndarray, shift: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(xc + shift - rad, xc + shift + rad)``, the upper bound written over ``xc``: the bounds
+    of a vectorised run from its centres, a batch's shared offset ``shift`` (a common input,
+    folded here) and the radii. One operation order for every method that uses it."""
+    lo = np.empty_like(xc)
+    if shift is None:
+        np.subtract(xc, rad, out=lo)
+        xc += rad
+    else:
+        np.add(xc, shift - rad, out=lo)
+        xc += shift + rad
+    return lo, xc

@@ -20,6 +20,7 @@ from ...sets import Box, image_bounds
 from .._recursion import (
     LinearFilter,
     SplitFilter,
+    centre_band,
     matrix_product,
     redo_streams,
     within_band,
@@ -108,13 +109,7 @@ class VectorPath:
             if bad is True:
                 return None
         del innov
-        lo = np.empty_like(hi)
-        if s_x is None:
-            np.subtract(xc, vec.rad, out=lo)
-            xc += vec.rad
-        else:
-            np.add(xc, s_x - vec.rad, out=lo)
-            xc += s_x + vec.rad
+        lo, xc = centre_band(xc, vec.rad, s_x)
         self._widen(lo, xc)
         if ops.S is not None:
             extra = self._transform_margin(lo, xc, u, y)

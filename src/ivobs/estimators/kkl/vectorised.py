@@ -22,6 +22,7 @@ from ...sets import Box, image_bounds
 from .._recursion import (
     LinearFilter,
     SplitFilter,
+    centre_band,
     matrix_product,
     redo_streams,
     scratch,
@@ -88,13 +89,7 @@ class VectorisedLTI:
         np.abs(zc, out=zc)
         xr = matrix_product(zc, self.m.margin.T, out=scratch(self, "xr", hi.shape))
         del zc
-        lo = np.empty_like(hi)
-        if s_x is None:
-            np.subtract(xc, tm.xr0, out=lo)
-            xc += tm.xr0
-        else:
-            np.add(xc, s_x - tm.xr0, out=lo)
-            xc += s_x + tm.xr0
+        lo, xc = centre_band(xc, tm.xr0, s_x)
         lo -= xr
         xc += xr
         lo[..., 0, :], xc[..., 0, :] = prior_box(self.x0, lo[..., 0, :], xc[..., 0, :])
