@@ -12,9 +12,10 @@ A subclass provides
   :class:`~ivobs.estimators.state.OnlineState` (arrays named as in the paper).
 * ``_step(state, u_k, y_k, t_k) -> Step[S]``: the method's recursion, written once: from the
   state at step ``k = state.k``, the next state and the bounds of ``x[k]`` from ``u[0..k]``,
-  ``y[0..k]`` (before outward rounding). It never modifies ``state``. ``y_k`` may contain NaN
-  (missing components: predict without them). A measurement that contradicts the model is
-  reported by ``Step(..., inconsistent=True)`` and not used.
+  ``y[0..k]`` (before outward rounding). It never modifies ``state``; the state it returns is
+  built in that step (``dataclasses.replace``), and the base class sets its counters. ``y_k``
+  may contain NaN (missing components: predict without them). A measurement that contradicts
+  the model is reported by ``Step(..., inconsistent=True)`` and not used.
 * optionally ``_run(u, y, t) -> (lo, hi) | (lo, hi, inconsistent) | None``: the whole record
   at once (vectorised; batch ``(B, T, n)`` inputs allowed) from a shared kernel, tested equal to
   the loop over ``_step``; fresh arrays the base class may modify in place; ``inconsistent`` a
@@ -231,7 +232,7 @@ class Estimator(Persistence):
             new, lo, hi, _ = self._advance(state, u_k, y_k, t_k)
         finally:
             self._branching = before
-        return new, self._box(state.k, lo, hi, new.scale, _arrays(new), finite)
+        return new, self._box(state.k, lo, hi, new, finite)
 
     def _advance(
         self,
@@ -251,7 +252,13 @@ class Estimator(Persistence):
                 state = dataclasses.replace(state, scale=scale)
         res: Step[Any] = self._step(state, u_k, y_k, t_k)
         flag = bool(res.inconsistent)
-        new = dataclasses.replace(res.state, k=state.k + 1, scale=scale, inconsistent=flag)
+        new = res.state
+        if new is state:  # the method kept its state: a new object for the new counters
+            new = dataclasses.replace(new, k=state.k + 1, scale=scale, inconsistent=flag)
+        else:  # a fresh state the method just built and nobody else holds: set its counters
+            object.__setattr__(new, "k", state.k + 1)
+            object.__setattr__(new, "scale", scale)
+            object.__setattr__(new, "inconsistent", flag)
         return new, res.lo, res.hi, flag
 
     def _box(
@@ -259,19 +266,19 @@ class Estimator(Persistence):
         k: int,
         lo: np.ndarray,
         hi: np.ndarray,
-        scale: float,
-        arrays: list[np.ndarray],
+        state: OnlineState,
         finite: bool = True,
     ) -> Box:
-        """The returned box of step ``k``: rounded outwards, NaN before ``valid_from``."""
+        """The returned box of step ``k`` (``state``: the state after it): rounded outwards,
+        NaN before ``valid_from``."""
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
         if not self.rounds_itself:
-            outward(lo, hi, scale)
-        if finite and not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            outward(lo, hi, state.scale)
+        if finite and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
             what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"
-            raise self._non_finite_error(k, overflowed(lo, hi, *arrays), what)
+            raise self._non_finite_error(k, overflowed(lo, hi, *_arrays(state)), what)
         return Box._trusted(lo, hi)
 
     def predict(self, u_k: Any = None, t: float | None = None) -> Box:
