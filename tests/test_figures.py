@@ -81,6 +81,43 @@ def test_short_figures_render(tmp_path, make):
     _assert_png(path, 8_000)
 
 
+def test_tang2019_fig1_draws_the_theta_bands_on_their_own_scale():
+    """θ grows to about 37 rad while its bands are 0.17-0.31 rad wide: on θ's axis they collapse
+    onto one line. Fig. 1 adds the bounds minus the true θ, on an axis of the order of the
+    widths, and a magnified inset of the paper's view."""
+    fig = figures.tang2019_fig1()
+    sc = ivobs.scenarios.get("servo-motor", horizon=100)
+    traj = sc.simulate("paper")
+    theta = traj.x[:, 0]
+    (err,) = [ax for ax in fig.axes if ax.get_ylabel().startswith("bounds minus θ")]
+    lo, hi = err.get_ylim()
+    assert -0.35 < lo < -0.2 and 0.2 < hi < 0.35, (lo, hi)  # the widths' scale, not θ's
+    assert theta.max() > 35  # (what the paper's axis has to span)
+    # the plotted quantity: every method's bounds minus θ, upper >= 0 >= lower
+    runs = {
+        "Algorithm 1, $L_1$": ("reachability", sc.reference["L1"]),
+        "zonotope (34), $L_1$": ("zonotope", sc.reference["L1"]),
+        "Algorithm 1, $L_2$": ("reachability", sc.reference["L2"]),
+        "interval observer (36), $L_2$": ("interval", sc.reference["L2"]),
+    }
+    lines = err.get_lines()
+    for label, (method, L) in runs.items():
+        res = ivobs.make_estimator(method, sc.system, x0=sc.x0, L=L).run(traj.u, traj.y)
+        i = next(j for j, ln in enumerate(lines) if ln.get_label() == label)
+        up, down = lines[i].get_ydata(), lines[i + 1].get_ydata()
+        np.testing.assert_allclose(up, res.upper[:, 0] - theta, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(down, res.lower[:, 0] - theta, rtol=0, atol=1e-12)
+        assert up.min() >= 0 >= down.max()
+        width = float(np.mean(up[10:] - down[10:]))
+        assert 0.15 < width < 0.35 and (hi - lo) < 4 * width, (label, width)
+    # the paper's view stays, with a magnified window where the four bands separate
+    (paper,) = [ax for ax in fig.axes if ax.get_ylabel() == "θ (rad)" and ax is not err]
+    assert paper.get_ylim()[1] > 35
+    (inset,) = paper.child_axes
+    assert 1.0 < np.ptp(inset.get_ylim()) < 3.0 and np.ptp(inset.get_xlim()) < 5
+    plt.close(fig)
+
+
 def test_containment_check_raises_on_a_missed_state():
     sc = ivobs.scenarios.get("dinh2019", horizon=20)
     traj = sc.simulate("paper")
