@@ -166,3 +166,68 @@ def test_suleimanova_and_circulant_blocks():
         atol=1e-12,
     )
     assert circulant_block(1.0, complex(0.2, 0.5)).min() < 0  # 0.2 + √3·0.5 > 1
+
+
+def _notation_cell(row_start: str, paper: str) -> str:
+    """The cell of docs/notation.md's table in the row starting with ``row_start`` and the
+    column of ``paper``."""
+    from pathlib import Path
+
+    lines = (Path(__file__).parents[1] / "docs" / "notation.md").read_text().splitlines()
+    header = next(ln for ln in lines if ln.startswith("| ivobs |"))
+    col = next(i for i, c in enumerate(header.split("|")) if paper in c)
+    rows = [ln for ln in lines if ln.startswith("| " + row_start)]
+    assert len(rows) == 1, f"docs/notation.md: no single row starting with {row_start!r}"
+    return rows[0].split("|")[col].strip()
+
+
+def test_efimov_transformation_is_the_inverse_of_ivobs_as_the_notation_table_says():
+    """[Efimov2013, Theorem 2] uses z = S⁻¹ x (observer (4): x̲ = S⁺ z̲ − S⁻ z̄, F = S⁻¹ L), so its
+    S is ivobs' S⁻¹. The table states the orientation; ivobs' design on the planar example
+    satisfies the paper's relation in it, the paper's printed S does too, and observer (4)
+    written as in the paper with that S gives ivobs' boxes."""
+    cell = _notation_cell("`interval-transformed`: `S`, `z = S x`", "[Efimov2013]")
+    inverse = cell.startswith("`S⁻¹`")
+    relations = {
+        "R = S⁻¹ (A − LC) S": lambda S, M: np.linalg.solve(S, M @ S),
+        "R = S (A − LC) S⁻¹": lambda S, M: S @ M @ np.linalg.inv(S),
+    }
+    stated = [rel for rel in relations if rel in cell]
+    assert len(stated) == 1, cell
+    relation = relations[stated[0]]
+
+    sc = scenarios.get("efimov-planar", horizon=60)
+    A, B, C, *_ = sc.system.matrices_at(0)
+    est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0)
+    d = est.design
+    S_paper = np.linalg.inv(d.S) if inverse else d.S
+    M = A - d.L @ C
+    np.testing.assert_allclose(relation(S_paper, M), d.R, atol=1e-12)
+    assert d.R.min() >= -1e-15
+    # the paper's printed S (§IV.A, L = (0.3, 0.6)) in the stated orientation: triangular with
+    # λ(A − LC) = {0, −0.5} on the diagonal, to its printed digits
+    Mp = A - sc.reference["L"] @ C
+    Rp = relation(sc.reference["S"], Mp)
+    np.testing.assert_allclose(Rp, [[0.0, 0.0], [1.0, -0.5]], atol=1.5e-3)
+
+    # observer (4) as the paper writes it, with S = S_paper
+    traj = sc.simulate("paper")
+    res = est.run(traj.u, traj.y)
+    Si = np.linalg.inv(S_paper)
+    F = Si @ d.L
+    Fbar = np.abs(F) @ np.ones(1)
+    delta, V = 0.5, 0.1
+    pos, neg = np.maximum(Si, 0), np.maximum(-Si, 0)
+    zlo = pos @ sc.x0.lo - neg @ sc.x0.hi
+    zhi = pos @ sc.x0.hi - neg @ sc.x0.lo
+    for k in range(traj.y.shape[0] - 1):
+        b0 = B @ traj.u[k]
+        zlo, zhi = (
+            d.R @ zlo + F @ traj.y[k] - Fbar * V + pos @ (b0 - delta) - neg @ (b0 + delta),
+            d.R @ zhi + F @ traj.y[k] + Fbar * V + pos @ (b0 + delta) - neg @ (b0 - delta),
+        )
+        Sp, Sn = np.maximum(S_paper, 0), np.maximum(-S_paper, 0)
+        xlo, xhi = Sp @ zlo - Sn @ zhi, Sp @ zhi - Sn @ zlo
+        np.testing.assert_allclose(res.lower[k + 1], xlo, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.upper[k + 1], xhi, rtol=0, atol=1e-9)
+        assert np.all(xlo <= traj.x[k + 1]) and np.all(traj.x[k + 1] <= xhi)

@@ -8,7 +8,8 @@ Given a Schur ``M = A − LC`` and a nonnegative ``R`` with the same eigenvalues
 
 gives ``S M S⁻¹ = R`` whenever ``(M, e1)`` and ``(R, e2)`` are observable ([Tang2019, Lemma 4]): by
 Cayley–Hamilton ``O_X X = Φ O_X`` with the same companion matrix ``Φ`` for both (same
-characteristic polynomial), so ``S M = O_R⁻¹ Φ O_M = R S``.
+characteristic polynomial), so ``S M = O_R⁻¹ Φ O_M = R S``. ``z = S x`` as in [Tang2019] and
+[Efimov2013, Lemma 2]; [Efimov2013, Theorem 2] uses ``z = S⁻¹ x`` (its ``S`` is this ``S⁻¹``).
 
 **Which spectra have a nonnegative realisation** (the nonnegative inverse eigenvalue problem,
 [Efimov2013, §II.B] and its ref. [18] §11.2). Necessary: the spectral radius is itself an

@@ -16,7 +16,8 @@ play the role of [Tang2019]'s ``d̲, d̄`` (eq. (37): for ``d = [w; v]``, ``E = 
 * ``interval`` — [Tang2019, eq. (36)] = [Efimov2013, eq. (3)]: ``A − LC`` nonnegative and Schur
   ([Tang2019, Theorem 4] / [Efimov2013, Theorem 1]);
 * ``interval-transformed`` — [Tang2019, Theorem 5, eqs. (42)–(43)] = [Efimov2013, Theorem 2]:
-  observer (36) for ``z = S x`` with ``R = S (A − LC) S⁻¹ >= 0``, bounds mapped back by Lemma 1;
+  observer (36) for ``z = S x`` with ``R = S (A − LC) S⁻¹ >= 0``, bounds mapped back by Lemma 1
+  ([Efimov2013, Theorem 2] writes ``z = S⁻¹ x``: its ``S`` is ivobs' ``S⁻¹``, docs/notation.md);
 * ``interval-split`` — [Efimov2013, Theorem 3, eq. (5)]: same coordinates,
   ``D = A − LC = D⁺ − D⁻`` of any sign, stable iff ``|D| = D⁺ + D⁻`` is Schur.
 
