@@ -19,7 +19,7 @@ from ivobs.report import compare
 SPEC = """
 name = "small"
 scenarios = ["servo-motor", "efimov-planar"]
-methods = ["interval-split", { name = "zonotope", options = { order = [4, 8] } }]
+methods = ["interval-split", { name = "zonotope", options = { order = [5, 8] } }]
 seeds = [0, 1]
 horizon = 40
 burn_in = 5
@@ -54,7 +54,7 @@ def test_grid_expansion_and_stable_ids(tmp_path):
     assert [j.id for j in campaign.loads_spec(text).jobs()] == [j.id for j in jobs]
     assert spec.output == tmp_path / "g.csv"
     assert {j.scenario_options["horizon"] for j in jobs} == {40}
-    assert sorted({tuple(j.options.items()) for j in jobs}) == [(), (("order", 4),),
+    assert sorted({tuple(j.options.items()) for j in jobs}) == [(), (("order", 5),),
                                                                 (("order", 8),)]  # fmt: skip
     # the id is a hash of the parameters only: key order does not matter, every value does
     a = campaign.Job("servo-motor", "zonotope", 3, options={"order": 4, "weight": "trace"})
@@ -154,10 +154,10 @@ def test_rows_hold_the_numbers_of_ivobs_compare(reference, tmp_path):
         _, (res,) = compare(sc, [r["method"]], disturbance="vertex", seed=r["seed"],
                             burn_in=5, options={r["method"]: r["options"]})  # fmt: skip
         np.testing.assert_allclose(r["widths"], res.mean_width, rtol=1e-12)
-    # a real ordering: the zonotope with 8 generators is tighter than with 4
+    # a real ordering: the zonotope with 8 generators is tighter than with 5
     by = {(r["scenario"], r["method"], r["options"].get("order"), r["seed"]): r for r in rows}
     for sc in ("servo-motor", "efimov-planar"):
-        assert by[sc, "zonotope", 8, 0]["mean_width"] < by[sc, "zonotope", 4, 0]["mean_width"]
+        assert by[sc, "zonotope", 8, 0]["mean_width"] < by[sc, "zonotope", 5, 0]["mean_width"]
     # seeds share a design: the second seed reuses it
     reused = [r["design_reused"] for r in rows if r["method"] == "interval-split"]
     assert sorted(reused) == [False, False, True, True]

@@ -179,3 +179,52 @@ def test_inconsistency_state_and_bad_inputs():
         make_estimator("zonotope", s, x0=sc.x0, L=sc.reference["L1"], weight=-np.eye(3))
     with pytest.raises(IvobsError, match=r"weight: expected shape \(3, 3\)"):
         make_estimator("zonotope", s, x0=sc.x0, L=sc.reference["L1"], weight=np.eye(2))
+
+
+# --- orders whose reduced recursion is not bounded are refused ------------------------------
+def _summed_widths(est, T):
+    """Summed widths ``2 Σ |H[k]| 1`` of the data-independent recursion (34b), k < T."""
+    rad, _ = est._generator_radii(est.sys.C, est._G * est._const[1], T)
+    return 2.0 * rad.sum(axis=1)
+
+
+@pytest.mark.parametrize("gain", ["L1", "default"])
+def test_orders_whose_boxes_grow_are_refused_with_the_widths(gain):
+    """Servo motor: |A − LC| is not Schur (spectral radius 1.69), so the boxed part of the
+    reduction can grow. q = 4 keeps one generator: its summed width grew without settling
+    (44.7 at k = 50, 1,518 at k = 2,000 with the default gain); q = 5 and the default settle
+    (cycle or fixed point of (34b)) and keep their widths."""
+    sc = ivobs.scenarios.get("servo-motor", horizon=50)
+    kw = {"L": sc.reference["L1"]} if gain == "L1" else {}
+    with pytest.raises(DesignError) as info:
+        make_estimator("zonotope", sc.system, x0=sc.x0, order=4, **kw)
+    msg = str(info.value)
+    assert "q = 4 keeps 1 generator(s)" in msg and "spectral radius 1.68" in msg
+    assert "neither settled nor stopped growing" in msg and "order = 5 settles at k = 12" in msg
+    if gain == "default":
+        assert "44.75 at k = 50" in msg and "1518 at k = 2000" in msg
+    T = 2000
+    for q, total in ((5, 2.9104578), (None, 1.1412443)):
+        opts = dict(kw, **({} if q is None else {"order": q}))
+        est = make_estimator("zonotope", sc.system, x0=sc.x0, **opts)
+        w = _summed_widths(est, T)
+        assert w.max() < 3.0 and w[-1] in (w[-2], w[-3])  # settled: a fixed point or a cycle
+        if gain == "L1":
+            np.testing.assert_allclose(w[-1], total, rtol=1e-6)
+    # the run's boxes are the recursion's: q = 5 over 2,000 steps, paper's signals
+    sc = ivobs.scenarios.get("servo-motor", horizon=T)
+    tr = sc.simulate("paper")
+    res = make_estimator("zonotope", sc.system, x0=sc.x0, order=5, **kw).run(tr.u, tr.y)
+    assert_contains(res, tr.x)
+    summed = (res.upper - res.lower).sum(axis=1)
+    assert summed[50:].max() < 3.0 and abs(summed[-1] - summed[1000]) < 0.01
+
+
+def test_orders_are_not_checked_when_abs_M_is_schur():
+    """|A − LC| Schur: the reduction's box is propagated by a contraction, every order is
+    bounded (no iteration needed); q = nx is then accepted too."""
+    sc = ivobs.scenarios.get("efimov-planar", horizon=50)
+    L = np.array([[0.3], [0.6]])  # A − LC = [[0, −0.7], [0, −0.5]]: |·| has radius 0.5
+    for q in (2, 3, 4):
+        est = make_estimator("zonotope", sc.system, x0=sc.x0, L=L, order=q)
+        assert _summed_widths(est, 400)[-1] < 10
