@@ -122,7 +122,8 @@ class ZonotopeEstimator(ObserverEstimator):
         data-independent recursion (34b), exactly as the run computes it, for 2,000 steps (up
         to 40,000 when ``A - LC`` converges slowly; systems too large for 2e9 multiply-adds are
         not checked) and accepts ``q`` when ``H`` repeats an earlier value (a fixed point or a
-        cycle: the recursion then repeats itself forever) or its widths stop growing; otherwise
+        cycle: the recursion then repeats itself forever) or its widths stopped growing (the
+        last no larger than the largest of the second quarter: a sign, not a proof); otherwise
         it raises ``DesignError`` with the widths seen and the next order that settles.
         ``q = nx`` (a box at every step, propagated by ``|A - LC|``) is refused when
         ``|A - LC|`` is not Schur
@@ -187,7 +188,7 @@ class ZonotopeEstimator(ObserverEstimator):
         if spectral_radius(np.abs(M)) < 1.0 or steps * nx * nx * (q + GR.shape[1]) > SETTLE_WORK:
             return  # |A - LC| Schur: bounded for every order (docs); too large: not checked
         at, sums = settle(M, GR, self._H0, self._reduce, steps)
-        if at is not None or sums[-1] <= sums[: steps // 2 + 1].max() * (1.0 + 1e-9):
+        if at is not None or sums[-1] <= sums[steps // 4 : steps // 2 + 1].max() * (1.0 + 1e-9):
             return
         hint = ""
         for q2 in range(q + 1, min(q + 8, ORDER_PER_STATE * nx) + 1):
