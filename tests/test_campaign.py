@@ -110,7 +110,10 @@ GOOD = 'scenarios = ["servo-motor"]\nmethods = ["zonotope"]\n'
             'scenarios = ["servo-motor"]\nmethods = ["zonotope", { name = "zonotope" }]\n',
             ["line 2", "same jobs"],
         ),
-        (GOOD + 'imports = ["no_such_module_xyz"]\n', ["line 3", "cannot import"]),
+        (
+            GOOD + 'imports = ["no_such_module_xyz"]\n',
+            ["line 3", "imports Python module 'no_such_module_xyz'", "allow_code=True"],
+        ),
     ],
 )
 def test_malformed_specs_name_key_and_line(tmp_path, text, expected):
@@ -239,7 +242,14 @@ def test_failures_are_rows_and_errors_can_be_retried(tmp_path, plugin, capsys):
         summary = "summary.md"
         """,
     )
-    assert main(["campaign", str(path), "--workers", "0"]) == 1  # an unexpected error
+    # the spec imports a module: refused (nothing run, nothing written) until trusted
+    assert main(["campaign", str(path), "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "line 5: imports: imports Python module 'ivobs_campaign_test_plugin'" in err
+    assert "--allow-code" in err and not (tmp_path / "spec.csv").exists()
+    assert plugin not in sys.modules
+    trusted = ["--allow-code"]
+    assert main(["campaign", str(path), "--workers", "0", *trusted]) == 1  # an unexpected error
     out = capsys.readouterr().out
     rows = campaign.read_results(tmp_path / "spec.csv")
     assert len(rows) == 8
@@ -257,12 +267,12 @@ def test_failures_are_rows_and_errors_can_be_retried(tmp_path, plugin, capsys):
     assert "0/2" in out and "DesignError" in out and "2 failed, 2 errors" in out
     assert "| tang-example2 | interval | 0/2 |" in (tmp_path / "summary.md").read_text()
 
-    assert main(["campaign", str(path), "--dry-run"]) == 0
+    assert main(["campaign", str(path), "--dry-run", *trusted]) == 0
     assert "8 jobs = 2 scenarios x 1 disturbances x 2 method settings x 2 seeds; 8 already" in (
         capsys.readouterr().out
     )
     # --retry-errors reruns the 2 error rows only (failed designs would fail again)
-    assert main(["campaign", str(path), "--workers", "0", "--retry-errors", "-q"]) == 1
+    assert main(["campaign", str(path), "--workers", "0", "--retry-errors", "-q", *trusted]) == 1
     assert "6 already done, 2 run now" in capsys.readouterr().out
     assert len((tmp_path / "spec.csv").read_text().splitlines()) == 1 + 8 + 2
     assert len(campaign.read_results(tmp_path / "spec.csv")) == 8

@@ -352,10 +352,10 @@ BAD_SYSTEMS = {
     "callable not importable": (
         _edit(
             "A = [[1.0, 0.1, 0.0], [0.0, 0.8495, 0.4977], [0.0, -0.0357, 0.9995]]",
-            'A = { python = "ivobs.nowhere:A_of_k" }',
+            'A = { python = "ivobs.scenarios.nowhere:A_of_k" }',
         ),
         "A = ",
-        "cannot import module 'ivobs.nowhere'",
+        "cannot import module 'ivobs.scenarios.nowhere'",
     ),
     "E and F columns differ": (
         _edit("[0.0, 0.0, 0.0, 0.0, 1.0]]", "[0.0, 0.0, 0.0, 1.0]]"),

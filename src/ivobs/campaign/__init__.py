@@ -38,8 +38,11 @@ ran it, and the error if it failed. The metrics are those of :func:`ivobs.report
   worker keeps the estimators it designed (:data:`DESIGN_CACHE`) and reuses them for the other
   seeds; the row then records the original design time and ``design_reused = true``.
 
-Loading a spec with ``imports = ["my_package.my_estimators"]`` imports those modules (in this
-process and in every worker): that runs their code, so load specs from trusted sources only.
+**Trust**: a spec with ``imports = ["my_package.my_estimators"]`` would import those modules
+(in this process and in every worker), running their code: it is refused unless
+``load_spec(path, allow_code=True)`` (``--allow-code``). ``output`` and ``summary`` must lie in
+the spec's folder unless ``allow_outside=True`` (``--allow-outside``); the results table and the
+summary are two files, neither of them the spec.
 """
 
 from __future__ import annotations

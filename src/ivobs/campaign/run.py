@@ -60,6 +60,8 @@ def run_campaign(
     progress: bool | None = None,
     connect_timeout: float = 10.0,
     on_row: Callable[[dict[str, Any]], None] | None = None,
+    allow_code: bool = False,
+    allow_outside: bool = False,
 ) -> CampaignResult:
     """Run the jobs of ``spec`` not yet in its results table and return the whole table's rows.
 
@@ -75,12 +77,17 @@ def run_campaign(
         declined a system declines it again).
     progress : progress bar on stderr (``None``: on a terminal).
     on_row : called with every new row (in the parent process).
+    allow_code, allow_outside : when ``spec`` is a path, as in :func:`~ivobs.campaign.load_spec`
+        (a spec that imports modules, or writes outside its folder, is refused without them).
+
+    The results table and the summary must be two files, neither of them the spec itself.
     """
     from .._progress import Progress
 
     if not isinstance(spec, CampaignSpec):
-        spec = load_spec(spec)
+        spec = load_spec(spec, allow_code=allow_code, allow_outside=allow_outside)
     out = Path(output) if output is not None else spec.output
+    check_outputs(spec, {"output": out, "summary": spec.summary})
     _check_engine(scheduler, workers, limit)
     jobs = spec.jobs()
     t0 = time.perf_counter()
@@ -124,6 +131,14 @@ def run_campaign(
 
         write_text_atomic(spec.summary, _summary_document(result))
     return result
+
+
+def check_outputs(spec: CampaignSpec, outputs: dict[str, Any]) -> None:
+    """Refuse outputs that are the spec file itself, or one file twice (links included)."""
+    from ..io.atomic import check_distinct
+
+    source = Path(spec.source)
+    check_distinct(outputs, {"the spec": source if source.is_file() else None})
 
 
 def _check_engine(scheduler: Any, workers: int | None, limit: int | None) -> None:

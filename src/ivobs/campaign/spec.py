@@ -121,6 +121,23 @@ class _SpecReader(TomlReader):
             return {k: self.plain((*key, k), x) for k, x in v.items()}
         return v
 
+    def __init__(self, text: str, source: str, allow_code: bool, allow_outside: bool):
+        super().__init__(text, source)
+        self.allow_code = _flag("allow_code", allow_code)
+        self.allow_outside = _flag("allow_outside", allow_outside)
+
+    def output(self, key: tuple[str, ...], v: Any, base_dir: Path) -> Path:
+        """An output of the spec: relative to its folder, and inside it (after following
+        symbolic links) unless ``allow_outside``."""
+        path = base_dir / self.string(key, v)
+        if not self.allow_outside and not _inside(path, base_dir):
+            raise self.fail(
+                key,
+                f"{v!r} is outside the spec's folder ({str(base_dir)!r}); a spec writes only "
+                "there unless you pass --allow-outside (CLI) or allow_outside=True (API)",
+            )
+        return path
+
     # -- the parts of the spec ------------------------------------------------------------
     def read(self, base_dir: Path, stem: str) -> CampaignSpec:
         doc = self.doc
@@ -148,12 +165,12 @@ class _SpecReader(TomlReader):
         if "burn_in" in doc:
             burn_in = self.integer(("burn_in",), doc["burn_in"])
             self.check_burn_in(scen, sopts, burn_in)
-        output = base_dir / self.string(("output",), doc.get("output", f"{stem}.csv"))
+        output = self.output(("output",), doc.get("output", f"{stem}.csv"), base_dir)
         summary = doc.get("summary")
         spec = CampaignSpec(
             scenarios=scen, methods=methods, seeds=seeds, disturbances=dists,
             scenario_options=sopts, burn_in=burn_in, output=output,
-            summary=None if summary is None else base_dir / self.string(("summary",), summary),
+            summary=None if summary is None else self.output(("summary",), summary, base_dir),
             imports=imports, name=str(doc.get("name", "")),
             description=str(doc.get("description", "")), source=self.source,
         )  # fmt: skip
@@ -165,6 +182,12 @@ class _SpecReader(TomlReader):
             return []
         mods = self.strings(("imports",), v)
         for m in mods:
+            if not self.allow_code:
+                raise self.fail(
+                    ("imports",),
+                    f"imports Python module {m!r}; loading the spec would run its code: pass "
+                    "--allow-code (CLI) or allow_code=True (API) if you trust this spec",
+                )
             try:
                 importlib.import_module(m)
             except Exception as exc:
@@ -348,21 +371,48 @@ def _builder_params(name: str) -> list[str]:
     return scenarios.options(name)
 
 
+def _flag(name: str, v: Any) -> bool:
+    if not isinstance(v, bool):
+        raise IvobsError(f"{name}: expected True or False, got {v!r}")
+    return v
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether ``path`` lies in ``folder`` or below, symbolic links followed."""
+    try:
+        return path.resolve().is_relative_to(folder.resolve())
+    except (OSError, RuntimeError):  # pragma: no cover - a symbolic link loop
+        return False
+
+
 def loads_spec(text: str, source: str = "<spec>", base_dir: str | os.PathLike[str] = ".",
-               stem: str = "campaign") -> CampaignSpec:  # fmt: skip
-    """Parse and validate a spec given as text (paths relative to ``base_dir``)."""
-    return _SpecReader(text, source).read(Path(base_dir), stem)
+               stem: str = "campaign", *, allow_code: bool = False,
+               allow_outside: bool = False) -> CampaignSpec:  # fmt: skip
+    """Parse and validate a spec given as text (paths relative to ``base_dir``;
+    ``allow_code``, ``allow_outside``: as in :func:`load_spec`)."""
+    reader = _SpecReader(text, source, allow_code, allow_outside)
+    return reader.read(Path(base_dir), stem)
 
 
-def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:
+def load_spec(
+    path: str | os.PathLike[str], *, allow_code: bool = False, allow_outside: bool = False
+) -> CampaignSpec:
     """Read and validate a spec file; ``output`` and ``summary`` are relative to its folder.
-    Errors (:class:`~ivobs.IvobsError`) name the file, the line and the key."""
+    Errors (:class:`~ivobs.IvobsError`) name the file, the line and the key.
+
+    Loading runs no code and writes nowhere but the spec's folder by default: a spec with
+    ``imports = [...]`` is refused unless ``allow_code=True`` (importing a module runs its
+    code, here and in every worker), and an ``output`` or ``summary`` outside the spec's folder
+    (absolute, ``../``, or through a symbolic link) unless ``allow_outside=True``."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise IvobsError(f"spec: cannot read {str(path)!r}: {exc.strerror or exc}") from None
-    return loads_spec(text, source=str(path), base_dir=path.parent, stem=path.stem)
+    return loads_spec(
+        text, source=str(path), base_dir=path.parent, stem=path.stem, allow_code=allow_code,
+        allow_outside=allow_outside,
+    )  # fmt: skip
 
 
 def check_designs(spec: CampaignSpec) -> list[str]:

@@ -76,6 +76,18 @@ def check_out_dir(path: str, what: str) -> None:
         raise IvobsError(f"{what}: cannot create {path!r}: the folder {parent!r} does not exist")
 
 
+def add_trust_option(p: argparse.ArgumentParser) -> None:
+    """``--allow-code``: let a system file or a campaign spec run Python code (callables
+    ``{ python = "module:function" }`` outside ``ivobs.scenarios``, ``imports = [...]``)."""
+    p.add_argument(
+        "--allow-code",
+        action="store_true",
+        help='trust the file: allow the Python code it names (python = "module:function" '
+        "callables outside ivobs.scenarios, a spec's imports); off by default, loading a file "
+        "runs no code",
+    )
+
+
 def parse_states(text: str, nx: int) -> list[int]:
     """``--states 1,3``: 1-based state numbers -> 0-based indices, each in ``1..nx``."""
     out: list[int] = []

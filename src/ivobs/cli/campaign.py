@@ -18,6 +18,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from . import add_trust_option
+
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     p: argparse.ArgumentParser = sub.add_parser(
@@ -58,16 +60,33 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="progress bar (default: on a terminal only)",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no summary table")
+    add_trust_option(p)
+    p.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="let the spec's output and summary lie outside the spec's folder (absolute paths, "
+        "../, symbolic links); --output and --summary given here may lie anywhere",
+    )
     return p
 
 
 def main(args: argparse.Namespace) -> int:
     from .. import campaign
+    from ..campaign.run import check_outputs
 
-    spec = campaign.load_spec(args.spec)
+    spec = campaign.load_spec(
+        args.spec, allow_code=args.allow_code, allow_outside=args.allow_outside
+    )
     if args.summary:
         spec.summary = Path(args.summary)
     output = Path(args.output) if args.output else spec.output
+    check_outputs(
+        spec,
+        {
+            "--output" if args.output else "output": output,
+            "--summary" if args.summary else "summary": spec.summary,
+        },
+    )
     jobs = spec.jobs()
     title = f"campaign {spec.name!r}" if spec.name else f"campaign {args.spec}"
     if args.dry_run:

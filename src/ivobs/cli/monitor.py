@@ -20,6 +20,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from ..errors import IvobsError
+from . import add_trust_option
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -48,6 +49,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--save-every", type=int, default=1, metavar="N", help="save the state every N steps"
     )
+    add_trust_option(p)
     p.add_argument(
         "--no-tight",
         action="store_true",
@@ -85,7 +87,7 @@ class _Session:
         from ..io.systemfile import load_system
         from ..monitor import Monitor
 
-        self.spec = load_system(args.system)
+        self.spec = load_system(args.system, allow_code=args.allow_code)
         method = args.method or self.spec.method
         if method is None:
             raise IvobsError(
@@ -95,9 +97,12 @@ class _Session:
         self.monitor = Monitor(self.spec.system, est, x0=self.spec.x0, tight=not args.no_tight)
         self.state_path = None
         if args.state:  # checked before the first row is printed
-            from ..io.atomic import check_output_path
+            from ..io.atomic import check_distinct, check_output_path
 
             self.state_path = check_output_path(args.state, "--state")
+            inputs = {"--system": args.system, "--input": args.input}
+            inputs.update({"--system's [disturbance] csv": next(iter(self.spec.files), None)})
+            check_distinct({"--state": self.state_path}, inputs)
         self.rows = 0  # data rows consumed (processed or skipped as already done)
         self.last_step: int | None = None
         self.last_t: float | None = None
@@ -220,7 +225,8 @@ def main(args: argparse.Namespace) -> int:
             if session.already_done(row, index - 1, bool(args.input)):
                 continue
             in_step = True
-            step = mon.update(row.u if sys_.nu else None, row.y, row.t)
+            t_k = row.t if sys_.is_continuous else None  # discrete time counts steps
+            step = mon.update(row.u if sys_.nu else None, row.y, t_k)
             alarms += step.alarm
             out.writerow(
                 [

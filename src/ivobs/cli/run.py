@@ -11,14 +11,13 @@ file behind.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
-from . import check_disturbance, check_seed
+from . import add_trust_option, check_disturbance, check_seed
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -55,6 +54,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         metavar="FILE",
         help="write a figure of the bounds (format from the extension; none: .png is added)",
     )
+    add_trust_option(p)
     p.add_argument(
         "--progress",
         action=argparse.BooleanOptionalAction,
@@ -87,7 +87,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Check every output path before any work: an error in one never leaves another written."""
-    from ..io.atomic import check_output_path
+    from ..io.atomic import check_distinct, check_output_path
 
     if args.csv:
         args.csv = str(check_output_path(args.csv, "--csv"))
@@ -95,8 +95,11 @@ def _check_outputs(args: argparse.Namespace) -> None:
         from ..report.plot import figure_path
 
         args.plot = str(figure_path(args.plot, "--plot"))
-        if args.csv and Path(args.csv).resolve() == Path(args.plot).resolve():
-            raise IvobsError(f"--csv, --plot: both write {args.plot!r}; give two files")
+    check_distinct(_outputs(args), {"--system": args.system, "--log": args.log})
+
+
+def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
+    return {"--csv": args.csv, "--plot": args.plot}
 
 
 def _run_scenario(args: argparse.Namespace) -> int:
@@ -123,13 +126,15 @@ def _run_scenario(args: argparse.Namespace) -> int:
 
 
 def _run_system(args: argparse.Namespace) -> int:
+    from ..io.atomic import check_distinct
     from ..io.logs import read_log
     from ..io.systemfile import load_system
     from ..monitor import Monitor
 
     if not args.log:
         raise IvobsError("--system: needs --log FILE (a CSV log with k, u1.., y1.. columns)")
-    spec = load_system(args.system)
+    spec = load_system(args.system, allow_code=args.allow_code)
+    check_distinct(_outputs(args), {"--system's [disturbance] csv": next(iter(spec.files), None)})
     log = read_log(args.log, spec.system)
     method = args.method or spec.method
     if method is None:
@@ -142,8 +147,11 @@ def _run_system(args: argparse.Namespace) -> int:
             f"{args.log}: the system is continuous-time (dt = 0): the log needs a time column t"
         )
     est.on_inconsistent = "ignore"  # reported below, once, as ALARMS (from the Monitor)
-    res = _estimate(est, log.u, log.y, log.t, args)
-    record = Monitor(spec.system, est, x0=spec.x0).check(log.u, log.y, t=log.t, estimate=res)
+    # a discrete-time system counts steps: a time column only labels the rows of the output
+    t = log.t if spec.system.is_continuous else None
+    res = _estimate(est, log.u, log.y, t, args)
+    record = Monitor(spec.system, est, x0=spec.x0).check(log.u, log.y, t=t, estimate=res)
+    res.t = log.t
     alarms = np.flatnonzero(record.alarm)
     name = spec.name or args.system
     print(f"{est.name} on {name} ({args.log})")

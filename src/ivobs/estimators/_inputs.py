@@ -33,12 +33,25 @@ def check_y_k(sys: Any, y_k: Any) -> np.ndarray:
     return arr
 
 
+def _discrete_t(sys: Any, what: str) -> IvobsError:
+    """The error of a sample time given to a discrete-time system (it would be ignored)."""
+    dt_ = getattr(sys, "dt", True)
+    dt = "" if dt_ is True else f" (dt = {dt_})"
+    return IvobsError(
+        f"t: this system is discrete-time{dt}: its steps are counted by k, and t, the sample "
+        f"time{what}, applies to continuous-time systems (dt = 0) only; leave t out"
+    )
+
+
 def check_t_k(sys: Any, t: Any) -> float | None:
-    """The sample time of one step (needed in continuous time)."""
+    """The sample time of one step: needed in continuous time, refused in discrete time (the
+    step counter ``k`` is the time there)."""
     if t is None:
         if sys.is_continuous:
             raise IvobsError("t: continuous-time estimation needs the sample time of each step")
         return None
+    if not sys.is_continuous:
+        raise _discrete_t(sys, " of the step")
     arr = as_float_array("t", t)
     if arr.size != 1 or not np.isfinite(arr).all():
         raise IvobsError(f"t: expected one finite sample time, got {t!r}")
@@ -46,11 +59,17 @@ def check_t_k(sys: Any, t: Any) -> float | None:
 
 
 def check_t(sys: Any, t: Any, T: int) -> np.ndarray | None:
-    """The sample times of a record of ``T`` steps (needed in continuous time)."""
+    """The sample times of a record of ``T`` steps: needed in continuous time, refused in
+    discrete time (to label a discrete-time result with times, set its ``Estimate.t``)."""
     if t is None:
         if sys.is_continuous:
             raise IvobsError("t: continuous-time estimation needs the sample times t (T,)")
         return None
+    if not sys.is_continuous:
+        raise IvobsError(
+            str(_discrete_t(sys, "s of the record"))
+            + " (to label the result with times, set Estimate.t afterwards)"
+        )
     t_arr = as_float_array("t", t).ravel()
     if t_arr.shape[0] != T or np.any(~np.isfinite(t_arr)) or np.any(np.diff(t_arr) <= 0):
         raise IvobsError(f"t: expected {T} finite, strictly increasing sample times")

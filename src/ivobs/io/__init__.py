@@ -28,10 +28,12 @@
   in the same folder and is then renamed, so a crash or an error never leaves a half-written
   file behind.
 
-**Security**: a matrix or a bound may name a Python callable by import path
+**Trust**: a matrix or a bound may name a Python callable by import path
 (``A = { python = "ivobs.scenarios:pendulum_A", params = { L0 = 1.0, L1 = 0.5, omega = 1.0 } }``).
-Loading such a file imports that module, which runs its code: load system files from trusted
-sources only.
+Loading a file runs no code by default: only functions of ivobs' own scenarios
+(``ivobs.scenarios`` and below) are resolved; any other callable is refused, naming the file,
+the line and the path, unless ``load_system(path, allow_code=True)`` (``--allow-code`` on the
+command line) says that you trust the file.
 
 The names below are imported on first use (:pep:`562`): importing :mod:`ivobs.io.atomic` (as
 the result and plot modules do) loads no estimator.
@@ -43,7 +45,13 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .atomic import atomic_path, check_output_path, write_text_atomic
+    from .atomic import (
+        atomic_path,
+        check_distinct,
+        check_output_path,
+        same_file,
+        write_text_atomic,
+    )
     from .callables import callable_ref
     from .logs import Log, LogParser, LogRow, not_utf8, read_log, write_log
     from .reader import KeyLines
@@ -58,6 +66,7 @@ __all__ = [
     "SystemFile",
     "atomic_path",
     "callable_ref",
+    "check_distinct",
     "check_output_path",
     "dumps_system",
     "equal_systems",
@@ -65,6 +74,7 @@ __all__ = [
     "loads_system",
     "not_utf8",
     "read_log",
+    "same_file",
     "save_system",
     "write_log",
     "write_text_atomic",
@@ -73,6 +83,8 @@ __all__ = [
 _WHERE = {
     "atomic_path": "atomic",
     "check_output_path": "atomic",
+    "check_distinct": "atomic",
+    "same_file": "atomic",
     "write_text_atomic": "atomic",
     "callable_ref": "callables",
     "Log": "logs",

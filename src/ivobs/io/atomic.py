@@ -11,12 +11,12 @@ import contextlib
 import os
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from ..errors import IvobsError
 
-__all__ = ["atomic_path", "check_output_path", "write_text_atomic"]
+__all__ = ["atomic_path", "check_distinct", "check_output_path", "same_file", "write_text_atomic"]
 
 
 def _file_mode(path: Path) -> int:
@@ -56,6 +56,42 @@ def check_output_path(path: str | os.PathLike[str], what: str | None = None) -> 
     if not os.access(folder, os.W_OK):
         raise IvobsError(f"{prefix}cannot write {str(path)!r}: the folder is not writable")
     return path
+
+
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether two paths name the same file: by device and inode when both exist (symbolic and
+    hard links included), else by their resolved paths (symbolic links followed)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        pass
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except (OSError, RuntimeError):  # pragma: no cover - a symbolic link loop
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_distinct(
+    outputs: Mapping[str, str | os.PathLike[str] | None],
+    inputs: Mapping[str, str | os.PathLike[str] | None] | None = None,
+) -> None:
+    """Refuse an output that is the same file as an input, or as another output (also through
+    symbolic or hard links), before anything is written. Keys name the options (``"--out"``,
+    ``"--log"``); ``None`` values are skipped."""
+    outs = [(k, v) for k, v in outputs.items() if v is not None and str(v) != ""]
+    ins = [(k, v) for k, v in (inputs or {}).items() if v is not None and str(v) != ""]
+    for i, (name, path) in enumerate(outs):
+        for other, src in ins:
+            if same_file(path, src):
+                raise IvobsError(
+                    f"{name}, {other}: {str(path)!r} is the input {other} ({str(src)!r}); "
+                    f"writing {name} there would overwrite it: give another file for {name}"
+                )
+        for other, dst in outs[i + 1 :]:
+            if same_file(path, dst):
+                raise IvobsError(
+                    f"{name}, {other}: both write {str(path)!r}; give two different files"
+                )
 
 
 @contextlib.contextmanager

@@ -1,7 +1,10 @@
 """Callables by import path: a matrix or a bound of a system file may name a module-level
 function (``{ python = "package.module:function", params = {...} }``).
 
-**Security**: resolving a path imports its module, which runs its code.
+**Trust**: resolving a path imports its module, which runs its code. Only the functions that
+ivobs' own scenarios define (modules ``ivobs.scenarios`` and below: the callables
+:func:`~ivobs.io.save_system` writes for the built-in scenarios) are resolved by default; any
+other path needs ``allow_code=True`` (``--allow-code`` on the command line).
 """
 
 from __future__ import annotations
@@ -14,7 +17,10 @@ import numpy as np
 
 from ..errors import IvobsError
 
-__all__ = ["callable_ref", "make_callable", "plain"]
+__all__ = ["TRUSTED", "callable_ref", "make_callable", "plain", "refused"]
+
+TRUSTED = "ivobs.scenarios"
+"""The package whose functions a file may name without ``allow_code`` (ivobs' own code)."""
 
 
 def callable_ref(fn: Any) -> tuple[str, dict[str, Any]] | None:
@@ -68,6 +74,34 @@ def resolve(path: str) -> Any:
     return obj
 
 
-def make_callable(path: str, params: dict[str, Any]) -> Any:
-    fn = resolve(path)
+def _trusted_module(name: str) -> bool:
+    return name == TRUSTED or name.startswith(TRUSTED + ".")
+
+
+def refused(path: str) -> str:
+    """The message of a callable refused without ``allow_code``."""
+    return (
+        f"refers to Python code {path}; loading it would run that code: pass --allow-code "
+        "(CLI) or allow_code=True (API) if you trust this file"
+    )
+
+
+def make_callable(path: str, params: dict[str, Any], *, allow_code: bool = False) -> Any:
+    """The callable named by ``path`` (with keyword ``params``). Without ``allow_code`` only a
+    function defined in ``ivobs.scenarios`` (or below) is resolved: no other module is
+    imported, and no name re-exported there from elsewhere (``numpy``, ``os``) is reached."""
+    if not allow_code:
+        if not isinstance(path, str) or path.count(":") != 1:
+            raise IvobsError(f"expected 'package.module:function', got {path!r}")
+        mod_name, qualname = path.split(":")
+        if not _trusted_module(mod_name):
+            raise IvobsError(refused(path))
+        fn = resolve(path)
+        if not (
+            _trusted_module(getattr(fn, "__module__", None) or "")
+            and getattr(fn, "__qualname__", None) == qualname
+        ):
+            raise IvobsError(refused(path))
+    else:
+        fn = resolve(path)
     return functools.partial(fn, **params) if params else fn

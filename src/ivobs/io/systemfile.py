@@ -22,7 +22,6 @@ import csv
 import math
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +31,8 @@ from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box
 from .callables import make_callable
-from .options import read_method, same_method
+from .loaded import SystemFile
+from .options import read_method
 from .reader import TomlReader
 
 __all__ = ["FORMAT", "MATRICES", "SystemFile", "load_system", "loads_system"]
@@ -48,42 +48,14 @@ _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
 }
 
 
-@dataclass
-class SystemFile:
-    """What a system file holds: the model, the prior box, a method and its options."""
-
-    system: LinearSystem
-    x0: Box | None = None
-    method: str | None = None
-    options: dict[str, Any] = field(default_factory=dict)
-    name: str = ""
-    description: str = ""
-    source: str = ""
-
-    def make_estimator(self, method: str | None = None, **options: Any) -> Any:
-        """The estimator of the file's method (or ``method``) with the file's prior box.
-
-        The file's options apply to the file's method only; ``options`` are added to them.
-        """
-        from ..estimators import make_estimator
-
-        name = method or self.method
-        if name is None:
-            raise IvobsError(
-                f"method: {self.source or 'the system file'} names no method ([method] name = "
-                "...); give one (e.g. --method interval-split)"
-            )
-        opts = dict(self.options) if (self.method and same_method(name, self.method)) else {}
-        opts.update(options)
-        return make_estimator(name, self.system, x0=self.x0, **opts)
-
-
 class _SystemReader(TomlReader):
     """Validate a parsed system file, raising errors that name the file, the line and the key."""
 
-    def __init__(self, text: str, source: str, base_dir: Path):
+    def __init__(self, text: str, source: str, base_dir: Path, allow_code: bool):
         super().__init__(text, source)
         self.base_dir = base_dir
+        self.allow_code = allow_code
+        self.files: list[str] = []
 
     def check_keys(self, table: dict[str, Any], key: tuple[str, ...]) -> None:
         allowed = _KEYS[key]
@@ -189,7 +161,7 @@ class _SystemReader(TomlReader):
         if not isinstance(params, dict):
             raise self.fail((*key, "params"), f"expected a table, got {params!r}")
         try:
-            return make_callable(path, params)
+            return make_callable(path, params, allow_code=self.allow_code)
         except IvobsError as exc:
             raise self.fail((*key, "python"), str(exc)) from None
 
@@ -235,7 +207,11 @@ class _SystemReader(TomlReader):
             raise self.fail(key, str(exc)) from None
         x0 = self.x0(system.nx)
         method, options = self.method()
-        return SystemFile(system, x0, method, options, name, desc, self.source)
+        lines = {o: self.lines.line(("method", "options", o)) for o in options}
+        return SystemFile(
+            system, x0, method, options, name, desc, self.source, tuple(self.files),
+            {o: n for o, n in lines.items() if n is not None},
+        )  # fmt: skip
 
     def string(self, key: tuple[str, ...], value: Any) -> str:
         if not isinstance(value, str):
@@ -377,6 +353,7 @@ class _SystemReader(TomlReader):
         path = Path(name) if Path(name).is_absolute() else self.base_dir / name
         if not path.is_file():
             raise self.fail(key, f"bounds file {str(path)!r} not found")
+        self.files.append(str(path))
         with open(path, newline="", encoding="utf-8") as fh:
             rows = [
                 (i, r)
@@ -443,16 +420,30 @@ class _SystemReader(TomlReader):
         return read_method(self, tab)
 
 
-def loads_system(text: str, *, source: str = "<string>", base_dir: Any = ".") -> SystemFile:
-    """Read a system file from its text (``base_dir``: where relative CSV paths point)."""
-    return _SystemReader(text, source, Path(base_dir)).read()
+def loads_system(
+    text: str, *, source: str = "<string>", base_dir: Any = ".", allow_code: bool = False
+) -> SystemFile:
+    """Read a system file from its text (``base_dir``: where relative CSV paths point;
+    ``allow_code``: as in :func:`load_system`)."""
+    return _SystemReader(text, source, Path(base_dir), _flag(allow_code)).read()
 
 
-def load_system(path: str | os.PathLike[str]) -> SystemFile:
+def _flag(allow_code: Any) -> bool:
+    if not isinstance(allow_code, bool):
+        raise IvobsError(f"allow_code: expected True or False, got {allow_code!r}")
+    return allow_code
+
+
+def load_system(path: str | os.PathLike[str], *, allow_code: bool = False) -> SystemFile:
     """Read a system file (TOML). Returns a :class:`SystemFile` (``.system``, ``.x0``,
     ``.method``, ``.options``). Raises :class:`~ivobs.IvobsError` naming the line and the key of
-    anything malformed. Loading a file that names a Python callable imports its module: load
-    trusted files only."""
+    anything malformed.
+
+    Loading runs no code by default: a callable ``{ python = "module:function" }`` is resolved
+    only when it is one of ivobs' scenario functions (``ivobs.scenarios``); any other is
+    refused unless ``allow_code=True`` (resolving it imports its module and the estimator
+    calls it: pass it for files you trust only)."""
+    allow_code = _flag(allow_code)
     path = Path(path)
     if path.is_dir():
         raise IvobsError(f"system file {str(path)!r} is a directory; expected a TOML file")
@@ -462,4 +453,4 @@ def load_system(path: str | os.PathLike[str]) -> SystemFile:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise IvobsError(f"{path}: not a UTF-8 text file ({exc})") from None
-    return loads_system(text, source=str(path), base_dir=path.parent)
+    return loads_system(text, source=str(path), base_dir=path.parent, allow_code=allow_code)
