@@ -57,12 +57,15 @@ from scipy.optimize import linprog
 from ..errors import DesignError
 from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
+from .balance import state_scaling
 from .cooperative_lp import (
+    COPOSITIVE_TOL,
     L_BOUND,
     LP,
     OPT_TOL,
     REG_L1,
     abs_bound_rows,
+    copositive_lp,
     output_weights,
     solve_lp,
 )
@@ -171,25 +174,41 @@ def check_abs_schur(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> np
 # -- LMI (41) ---------------------------------------------------------------------------------
 def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.ndarray:
     """Gain ``L`` with ``A − LC`` nonnegative and Schur from LMI (41) of [Tang2019] (LMIs (7)–(8)
-    of [Efimov2013]), maximising the margin ``μ`` (see the module docstring). Raises
-    :class:`DesignError` when no such gain exists."""
-    import cvxpy as cp
-
+    of [Efimov2013]), maximising the margin ``μ`` (see the module docstring), solved in balanced
+    coordinates (:func:`ivobs.design.balance.state_scaling`). Where the LMI route refuses (solver
+    trouble, a margin below its threshold, or a gain that fails the check), the linear program
+    :func:`~ivobs.design.cooperative_lp.copositive_lp` decides: its gain (checked) is returned,
+    or :class:`DesignError` says what it proved (no gain exists, certified by its optimum) or
+    that HiGHS failed."""
     A = np.asarray(A, dtype=float)
     C = np.asarray(C, dtype=float)
-    n, p = A.shape[0], C.shape[0]
-    check_size(n, f"{who}: LMI (41)")
+    check_size(A.shape[0], f"{who}: LMI (41)")
     reason = _structural_obstruction(A, C)
     if reason:
         raise DesignError(
             f"{who}: no gain L makes A − LC nonnegative and Schur{reason} ([Tang2019, LMI (41)] "
             "is infeasible); use 'interval-split' or 'interval-transformed'"
         )
+    try:
+        return _lmi41_gain(A, C, who)
+    except DesignError as exc:
+        lmi_error = str(exc)
+    return _lp_gain(A, C, who, lmi_error)
+
+
+def _lmi41_gain(A: np.ndarray, C: np.ndarray, who: str) -> np.ndarray:
+    """LMI (41) in the balanced coordinates ``x = diag(dv) x̃`` (``Ã = D⁻¹AD``, ``C̃ = CD``,
+    ``L = D L̃``: ``A − LC = D (Ã − L̃C̃) D⁻¹``, same signs and spectrum), checked."""
+    import cvxpy as cp
+
+    dv = state_scaling(A, C)
+    At, Ct = A * dv[None, :] / dv[:, None], C * dv[None, :]
+    n, p = A.shape[0], C.shape[0]
     pvec = cp.Variable(n)
     Y = cp.Variable((n, p))
     mu = cp.Variable()
     P = cp.diag(pvec)  # type: ignore[attr-defined]  # cvxpy exports its atoms by a star import
-    X = P @ A - Y @ C
+    X = P @ At - Y @ Ct
     big = cp.bmat([[P, X], [X.T, P]])  # type: ignore[attr-defined]  # (the same)
     cons = [sym(big) >> mu * np.eye(2 * n), X >= 0, pvec <= 1.0, mu <= 1.0]
     prob = cp.Problem(cp.Maximize(mu), cons)
@@ -197,17 +216,60 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
     assert mu.value is not None and pvec.value is not None and Y.value is not None  # solved
     mu_val = float(mu.value)
     if mu_val <= _MU_MIN:
-        raise DesignError(
-            f"{who}: no gain L makes A − LC nonnegative and Schur: [Tang2019, LMI (41)] is "
-            f"infeasible (best margin μ = {mu_val:.3g}); use 'interval-split' or "
-            "'interval-transformed'"
-        )
-    L = np.linalg.solve(np.diag(pvec.value), Y.value)
+        raise DesignError(f"{who}: LMI (41) margin μ = {mu_val:.3g} <= {_MU_MIN:g}")
+    L = dv[:, None] * np.linalg.solve(np.diag(pvec.value), Y.value)
+    return _finish(A, C, L, who)
+
+
+def _finish(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> np.ndarray:
+    """``L`` moved to the nearest gain with ``A − LC >= 0`` if round-off left it slightly
+    negative, then checked (:func:`check_nonnegative_schur`)."""
     tol = NONNEG_TOL * max(1.0, float(np.max(np.abs(A), initial=0.0)))
     if np.any(A - L @ C < -tol):
         L = _nearest_nonnegative_gain(A, C, L)
     check_nonnegative_schur(A, C, L, who)
     return L
+
+
+def _lp_gain(A: np.ndarray, C: np.ndarray, who: str, lmi_error: str) -> np.ndarray:
+    """The gain of :func:`copositive_lp` (checked), or the :class:`DesignError` it justifies."""
+    L, s, status = copositive_lp(A, C)
+    if L is not None:
+        try:
+            return _finish(A, C, L, who)
+        except DesignError as exc:
+            raise DesignError(
+                f"{who}: the linear program (copositive Lyapunov function, module "
+                f"ivobs.design.cooperative_lp) proves that a gain making A − LC nonnegative and "
+                f"Schur exists (margin {s:.3g} > 0), but the gain extracted from it fails its "
+                f"check ({exc}); LMI (41) failed as well ({lmi_error}). Rescale the states "
+                "(e.g. to comparable magnitudes) or pass a gain L=..."
+            ) from None
+    if np.isnan(s):
+        raise DesignError(
+            f"{who}: neither LMI (41) ({lmi_error}) nor the linear program deciding whether a "
+            f"gain making A − LC nonnegative and Schur exists could be solved (HiGHS: {status}); "
+            "rescale the states or pass a gain L=..., or use 'interval-split'"
+        )
+    if s == -np.inf:
+        raise DesignError(
+            f"{who}: no gain L makes A − LC nonnegative (let alone Schur): the linear program "
+            "L_i C <= A_i (row i of L and of A) is infeasible, proved by HiGHS ([Tang2019, LMI "
+            "(41)] is infeasible); use 'interval-split' or 'interval-transformed'"
+        )
+    if s < -COPOSITIVE_TOL:
+        raise DesignError(
+            f"{who}: no gain L makes A − LC nonnegative and Schur: the linear program (q >= 1, "
+            "Y = diag(q) L, diag(q) A − YC >= 0, qᵀA − 1ᵀYC <= qᵀ − s·1ᵀ) has the optimal "
+            f"margin s = {s:.3g} < 0, which proves it ([Tang2019, LMI (41)] is infeasible); use "
+            "'interval-split' or 'interval-transformed'"
+        )
+    raise DesignError(
+        f"{who}: whether a gain makes A − LC nonnegative and Schur is undecided: the linear "
+        f"program's optimal margin s = {s:.3g} is within HiGHS's tolerance of 0 (any such gain "
+        "leaves A − LC with a spectral radius within about that of 1), and LMI (41) refused "
+        f"({lmi_error}); use 'interval-split' or 'interval-transformed', or pass a gain L=..."
+    )
 
 
 def _nearest_nonnegative_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np.ndarray:

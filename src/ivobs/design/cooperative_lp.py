@@ -10,7 +10,17 @@ from typing import Any
 import numpy as np
 from scipy.optimize import linprog
 
-__all__ = ["LP", "L_BOUND", "OPT_TOL", "REG_L1", "abs_bound_rows", "output_weights", "solve_lp"]
+__all__ = [
+    "COPOSITIVE_TOL",
+    "LP",
+    "L_BOUND",
+    "OPT_TOL",
+    "REG_L1",
+    "abs_bound_rows",
+    "copositive_lp",
+    "output_weights",
+    "solve_lp",
+]
 
 L_BOUND = 1e6  # box on the gain entries in the LPs (keeps HiGHS away from unbounded rays)
 
@@ -148,3 +158,62 @@ def _smallest_gain(
         method="highs",
     )
     return res.x[:N] if res.status == 0 else None
+
+
+COPOSITIVE_TOL = 1e-7
+"""Margins ``|s| <= COPOSITIVE_TOL`` of :func:`copositive_lp` are within HiGHS's own tolerances:
+neither a gain nor a proof of infeasibility."""
+
+
+def copositive_lp(A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray | None, float, str]:
+    """Decide exactly whether some ``L`` makes ``A − LC`` nonnegative and Schur, by one LP.
+
+    For a nonnegative ``D`` (here ``D = A − LC``), ``ρ(D) < 1`` iff some ``q > 0`` has
+    ``Dᵀq < q`` (a linear copositive Lyapunov function ``V(e) = qᵀe`` on ``e >= 0``; Perron–
+    Frobenius). With ``Y = diag(q) L`` both conditions are linear in ``(q, Y)``:
+    ``diag(q) A − Y C >= 0`` and ``Aᵀq − Cᵀ Yᵀ 1 <= q − s 1``. The conditions are homogeneous
+    in ``(q, Y)``, so ``q >= 1`` loses nothing; the LP maximises the margin ``s`` (capped at 1,
+    which keeps it bounded). A gain exists iff the optimum ``s* > 0``.
+
+    The LP is infeasible only when no ``L`` makes ``A − LC`` nonnegative at all (the margin row
+    can always be met by a small enough ``s``): ``s* = −inf`` then.
+
+    Returns ``(L, s*, status)``: ``L = diag(q)⁻¹ Y`` when ``s* > COPOSITIVE_TOL``, else None;
+    ``status`` is HiGHS's message (``s* = nan`` when it neither solved the LP nor proved it
+    infeasible)."""
+    n, p = A.shape[0], C.shape[0]
+    nY = n * p
+    size = n + nY + 1  # q, Y (row-major), s
+    # −(q_i A_ij − Σ_l Y_il C_lj) <= 0
+    nonneg = np.zeros((n * n, size))
+    for i in range(n):
+        for j in range(n):
+            nonneg[i * n + j, i] = -A[i, j]
+            nonneg[i * n + j, n + i * p : n + (i + 1) * p] = C[:, j]
+    # Σ_i q_i A_ij − Σ_i Σ_l Y_il C_lj − q_j + s <= 0
+    decay = np.zeros((n, size))
+    decay[:, :n] = A.T - np.eye(n)
+    for i in range(n):
+        decay[:, n + i * p : n + (i + 1) * p] = -C.T
+    decay[:, -1] = 1.0
+    c = np.zeros(size)
+    c[-1] = -1.0
+    bounds = [(1.0, None)] * n + [(None, None)] * nY + [(None, 1.0)]
+    res = linprog(
+        c,
+        A_ub=np.vstack([nonneg, decay]),
+        b_ub=np.zeros(n * n + n),
+        bounds=bounds,
+        method="highs",
+        options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10},
+    )
+    if res.status == 2:  # infeasible: no L makes A − LC >= 0
+        return None, float("-inf"), str(res.message)
+    if res.status != 0:
+        return None, float("nan"), str(res.message)
+    s = float(res.x[-1])
+    if s <= COPOSITIVE_TOL:
+        return None, s, str(res.message)
+    q = res.x[:n]
+    L: np.ndarray = res.x[n : n + nY].reshape(n, p) / q[:, None]
+    return L, s, str(res.message)

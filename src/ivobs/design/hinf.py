@@ -33,6 +33,7 @@ from .._validate import as_matrix
 from ..errors import DesignError
 from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
+from .balance import state_scaling
 
 __all__ = ["check_gain", "hinf_gain", "observer_gain"]
 
@@ -79,13 +80,18 @@ def hinf_gain(
     check_size(nx, "hinf_gain ([Tang2019] LMI (16))")
     margin = float(margin)
 
+    # balanced coordinates x = D x̃ (ivobs.design.balance): the congruence diag(D, I, D) maps
+    # (16) for (P, Y) onto the same LMI for P̃ = DPD, Ỹ = DY, Ã = D⁻¹AD, C̃ = CD, Ẽ = D⁻¹E with
+    # D² in place of I: the same problem (same γ, same gain L = P⁻¹Y = D P̃⁻¹Ỹ), better scaled
+    dv = state_scaling(A, C, E, F)
+    At, Ct, Et = A * dv[None, :] / dv[:, None], C * dv[None, :], E / dv[:, None]
     P = cp.Variable((nx, nx), symmetric=True)
     Y = cp.Variable((nx, ny))
     g = cp.Variable(nonneg=True)  # γ²
-    I = np.eye(nx)
-    blocks = [[I - P, np.zeros((nx, nd)), (P @ A - Y @ C).T]]
-    blocks.append([np.zeros((nd, nx)), -g * np.eye(nd), (P @ E - Y @ F).T])
-    blocks.append([P @ A - Y @ C, P @ E - Y @ F, -P])
+    W = np.diag(dv**2)
+    blocks = [[W - P, np.zeros((nx, nd)), (P @ At - Y @ Ct).T]]
+    blocks.append([np.zeros((nd, nx)), -g * np.eye(nd), (P @ Et - Y @ F).T])
+    blocks.append([P @ At - Y @ Ct, P @ Et - Y @ F, -P])
     if nd == 0:
         blocks = [
             [b for j, b in enumerate(row) if j != 1] for i, row in enumerate(blocks) if i != 1
@@ -93,13 +99,15 @@ def hinf_gain(
     # cvxpy re-exports its (unannotated) atoms implicitly, which strict typing does not see
     lmi = sym(cp.bmat(blocks))  # type: ignore[attr-defined]
     size = 2 * nx + nd
-    cons = [lmi << -margin * np.eye(size)]
-    objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P))  # type: ignore[attr-defined]
+    Dm = np.concatenate([dv, np.ones(nd), dv])[:size] if nd else np.concatenate([dv, dv])
+    cons = [lmi << -margin * np.diag(Dm**2)]
+    objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P / dv[:, None] / dv[None, :]))  # type: ignore[attr-defined]
     solve(cp.Problem(objective, cons), "hinf_gain: problem (20) of [Tang2019] (LMI (16))")
 
-    Pv = np.asarray(P.value, dtype=float)
-    Pv = 0.5 * (Pv + Pv.T)
-    L = np.linalg.solve(Pv, np.asarray(Y.value, dtype=float))
+    Pt = np.asarray(P.value, dtype=float)
+    Pt = 0.5 * (Pt + Pt.T)
+    L = dv[:, None] * np.linalg.solve(Pt, np.asarray(Y.value, dtype=float))
+    Pv = Pt / dv[:, None] / dv[None, :]
     check_gain(A, C, L, "hinf_gain: the solver's gain L = P⁻¹Y")
     gamma = float(np.sqrt(max(float(np.asarray(g.value, dtype=float)), 0.0))) if nd else 0.0
     return L, gamma, Pv
