@@ -11,15 +11,16 @@ with ``O = [C; CA; …; CA^(N−1)]``. Any ``M`` with ``M O = A^N`` gives
                                              R = A^N − M O  (round-off sized)
 
 so Lemma 1 of [Efimov2013] on the ``d`` box bounds ``x[s+N]`` from the window's data alone:
-whatever happened before the window (a gap of any length) no longer counts. The round-off
-sized ``R x_s`` needs a bound of ``‖x_s‖∞``, also from the window: with ``P = O⁺`` and
-``P O = I − Δ`` (``‖Δ‖∞ < 1``), ``x_s = P (Y − T_u U − T_d D) + Δ x_s`` gives
-``‖x_s‖∞ <= ‖P (Y − T_u U − T_d D)‖∞ / (1 − ‖Δ‖∞)``. ``N`` is the
+whatever happened before the window (a gap of any length) no longer counts. ``N`` is the
 observability index of ``(A, C)`` (the smallest with ``rank O = n``); each row of ``M`` is the
-one of least width ``|K_d| Δ`` (a linear program, HiGHS), corrected by least squares so that
-``R`` is at round-off level. ``R x_s`` and the floating-point error of every matrix here and of
-the evaluation are bounded (``γ_n`` of [Higham2002, Lemma 3.1] on the same expressions in
-absolute values, doubled) and added to the radius (:meth:`WindowBound.box`).
+one of least width ``|K_d| Δ`` (a linear program, HiGHS; least squares above
+:data:`MAX_LP_STATES` states), corrected by least squares so that ``R`` is at round-off level.
+The round-off sized ``R x_s`` needs a bound of ``‖x_s‖∞``, also from the window: with
+``P = O⁺`` and ``P O = I − Θ`` (``‖Θ‖∞ < 1/2``, else no bound is designed),
+``x_s = P (Y − T_u U − T_d D) + Θ x_s`` gives
+``‖x_s‖∞ <= ‖P (Y − T_u U − T_d D)‖∞ / (1 − ‖Θ‖∞)``. ``R x_s`` and the floating-point error
+of every matrix here and of the evaluation are bounded (``γ_n`` of [Higham2002, Lemma 3.1] on
+the same expressions in absolute values, doubled) and added to the radius (:meth:`WindowBound.box`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,15 @@ from scipy.optimize import linprog
 
 from ..linalg import gamma
 
-__all__ = ["WindowBound", "window_bound"]
+__all__ = ["MAX_LP_STATES", "MAX_WINDOW_STATES", "WindowBound", "window_bound"]
+
+MAX_WINDOW_STATES = 50
+"""Above this many states no window bound is designed (the design's dense algebra grows as
+``n⁴``)."""
+
+MAX_LP_STATES = 10
+"""Above this many states ``M`` is the least-squares one (no linear programs: the design stays
+fast for every estimator built)."""
 
 
 @dataclass(frozen=True)
@@ -42,7 +51,7 @@ class WindowBound:
     coefficient of ``‖x_s‖∞`` (``|R|`` and the round-off of ``R``, ``K_u``, ``K_d``);
     ``eu``, ``ed``: per row, the coefficients of ``‖U‖∞``, ``‖d‖∞`` from the round-off of
     ``K_u``, ``K_d``; ``g``: ``γ`` of one evaluation (doubled); ``p_y``, ``p_u``, ``p_d``
-    and ``delta``: the bound of ``‖x_s‖∞`` (module docstring) is
+    and ``delta`` (``‖Θ‖∞``): the bound of ``‖x_s‖∞`` (module docstring) is
     ``(p_y ‖Y‖∞ + p_u ‖U‖∞ + p_d ‖d‖∞) / (1 − delta)``."""
 
     N: int
@@ -86,9 +95,12 @@ def window_bound(
     d_hi: np.ndarray,
 ) -> WindowBound | None:
     """The :class:`WindowBound` of the model (module docstring); None when ``(A, C)`` is not
-    observable (no window determines the state) or a matrix is not finite."""
+    observable (no window determines the state), a matrix is not finite, or above
+    :data:`MAX_WINDOW_STATES` states."""
     ny, n = C.shape
     nu, nd = B.shape[1], E.shape[1]
+    if n > MAX_WINDOW_STATES:
+        return None
     if not all(np.all(np.isfinite(m)) for m in (A, B, C, Du, E, F, d_lo, d_hi)):
         return None
     N = _index(A, C)
@@ -110,7 +122,8 @@ def window_bound(
     Pd = np.hstack([powers[N - 1 - i] @ E for i in range(N)])
     aPd = np.hstack([apow[N - 1 - i] @ np.abs(E) for i in range(N)])
     AN = powers[N]
-    dc, dr = 0.5 * (d_lo + d_hi), 0.5 * (d_hi - d_lo)
+    dc = 0.5 * (d_lo + d_hi)
+    dr = np.nextafter(np.maximum(d_hi - dc, dc - d_lo), np.inf)  # [dc ± dr] ⊇ [d_lo, d_hi]
     M = _least_width(O, AN, Pd, Td, np.tile(dr, N))
     M = M + (AN - M @ O) @ np.linalg.pinv(O)
     R = AN - M @ O
@@ -125,7 +138,10 @@ def window_bound(
     eu = gK * (aPu + absM @ aTu).sum(axis=1)
     ed_mat = gK * (aPd + absM @ aTd)
     kc = Kd @ np.tile(dc, N)
-    kr = np.abs(Kd) @ np.tile(dr, N)
+    # (+ the rounding of the product kc)
+    kr = np.abs(Kd) @ np.tile(dr, N) + 2.0 * gamma(N * nd + 2) * (
+        np.abs(Kd) @ np.tile(np.abs(dc), N)
+    )
     ed = ed_mat.sum(axis=1)
     g = 2.0 * gamma(N * (ny + nu + nd) + 4)
     # ‖x_s‖∞ from the window itself (module docstring), P = O⁺ (any matrix would do)
@@ -180,11 +196,12 @@ def _least_width(
 ) -> np.ndarray:
     """Per row ``a`` of ``A^N``: ``m`` with ``m O = a`` minimising ``|p − m T_d| d_r`` (a linear
     program in ``(m, t)``, ``−t <= p − m T_d <= t``); the least-squares ``A^N O⁺`` for a row
-    whose program HiGHS does not solve."""
+    whose program HiGHS does not solve, and for every row above :data:`MAX_LP_STATES`
+    states."""
     n = AN.shape[0]
     p, q = O.shape[0], Td.shape[1]
     M = AN @ np.linalg.pinv(O)
-    if q == 0 or not np.any(dr > 0):
+    if q == 0 or not np.any(dr > 0) or n > MAX_LP_STATES:
         return M
     c = np.concatenate([np.zeros(p), dr])
     # p − m T_d <= t  <=>  −T_dᵀ m − t <= −p ;  −(p − m T_d) <= t  <=>  T_dᵀ m − t <= p
