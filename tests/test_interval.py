@@ -308,15 +308,19 @@ def test_missing_samples_random_and_gap(method):
     assert_contains(res, tr.x)
     assert np.all(np.isfinite(res.upper))
     full = est.run(tr.u, tr.y)
-    assert np.all(res.width[119] > full.width[119])
+    # the measured states widen in the gap; the current i can be narrower than without gaps:
+    # after earlier missing samples the bounds were intersected with a finite-memory bound
+    # (ivobs.estimators.interval.window), tighter on i than the complete observer
+    assert np.all(res.width[119, :2] > full.width[119, :2])
     # in the gap the prediction is the model's: x+ ∈ A[x] + B u + E[d] (gain zero)
     A, B, _, _, E, _ = sc.system.matrices_at(0)
     k = 110
     lo, hi = ivobs.image_bounds(A, res.lower[k], res.upper[k])
     elo, ehi = ivobs.image_bounds(E, sc.system.d.lo, sc.system.d.hi)
     if method != "interval-transformed":  # (its box is the image of the z box, not of this one)
-        np.testing.assert_allclose(res.upper[k + 1], hi + B @ tr.u[k] + ehi, rtol=1e-9)
-        np.testing.assert_allclose(res.lower[k + 1], lo + B @ tr.u[k] + elo, rtol=1e-9)
+        # (atol: the reported bounds carry the outward margin ROUNDING s_k, s_k ~ 40 here)
+        np.testing.assert_allclose(res.upper[k + 1], hi + B @ tr.u[k] + ehi, rtol=1e-9, atol=1e-8)
+        np.testing.assert_allclose(res.lower[k + 1], lo + B @ tr.u[k] + elo, rtol=1e-9, atol=1e-8)
 
 
 def test_missing_component_breaks_nonnegativity_and_stays_sound():

@@ -56,6 +56,9 @@ class OnlineState:
     bounds: ClassVar[tuple[tuple[str, str], ...]] = ()
     """Pairs of fields ``(lower, upper)`` that must satisfy ``lower <= upper`` (checked on
     restore)."""
+    optional: ClassVar[tuple[str, ...]] = ()
+    """Fields added after states were first saved: absent from a saved state, they take the
+    value of a fresh state."""
 
 
 S = TypeVar("S", bound=OnlineState)
@@ -112,6 +115,7 @@ def load_state(saved: Any, fresh: S) -> S:
             f"Estimator.state(), got {type(saved).__name__}"
         )
     names = [f.name for f in dataclasses.fields(fresh)]
+    names = [n for n in names if n in saved or n not in fresh.optional]
     missing = sorted(set(names) - set(saved))
     if missing:
         raise IvobsError(f"state: missing entries {missing}" + _TAMPERED)

@@ -45,7 +45,11 @@ the split form covers it) stays sound; with every component missing it is the mo
 treated as missing. The width of the bounds grows during a gap of output ``j`` alone at the rate
 ``ρ(|A − L_(j) C|)`` (``design.missing_radius``); the default gains are the smallest among the
 width-optimal ones (:mod:`ivobs.design.cooperative`), so that no gap multiplies the bounds by the
-size of a needlessly large gain.
+size of a needlessly large gain. **After a gap** (``S = I``: ``interval``, ``interval-split``;
+dense, time-invariant, constant bounds, ``(A, C)`` observable) the bounds are intersected once,
+``N`` complete steps after it, with the finite-memory bound of those steps
+(:mod:`.window`, :mod:`ivobs.design.finite_memory`): the width is back within that bound ``N``
+steps after a gap of any length (docs/operating.md, "After a gap").
 
 **Rounding**: the floating-point error of the recursion is bounded and covered by the loop
 (inside every step) and by the vectorised path (an enlarged margin): :mod:`.rounding`.
@@ -53,7 +57,7 @@ size of a needlessly large gain.
 The package: :mod:`.design` (offline: gains, ``S``; no time loop), :mod:`.operators` (the
 matrices derived from the design, once), :mod:`.recursion` (the typed state and the step),
 :mod:`.vectorised` (whole records and batches), :mod:`.rounding`, :mod:`.observers` (the three
-registered estimators).
+registered estimators), :mod:`.window` (recovery after missing samples).
 """
 
 from __future__ import annotations

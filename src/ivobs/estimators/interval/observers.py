@@ -31,6 +31,7 @@ from .recursion import (
 )
 from .rounding import margins
 from .vectorised import VectorPath
+from .window import empty_window
 
 __all__ = ["IntervalObserver", "SplitIntervalObserver", "TransformedIntervalObserver"]
 
@@ -56,8 +57,10 @@ class CooperativeObserver(Estimator, Generic[S]):
         self.valid_from = 0
 
     def _initial_state(self) -> S:
-        lo, hi = self.operators.initial_bounds()
-        return self.state_type(lo=lo, hi=hi)  # type: ignore[return-value]  # state_type is S
+        ops = self.operators
+        lo, hi = ops.initial_bounds()
+        window = empty_window(ops.window, ops.ny, self.sys.nu)
+        return self.state_type(lo=lo, hi=hi, window=window)  # type: ignore[return-value]
 
     def _step(self, state: S, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> Step[S]:
         return cooperative_step(self.operators, state, u_k, y_k)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ...design.finite_memory import WindowBound, window_bound
 from ...linalg import gamma
 from ...model import LinearSystem
 from ...sets import Box, image_bounds, neg, pos
@@ -120,6 +121,13 @@ class SplitOperators:
         if self.sparse and self.d_const is not None:
             self.full_inputs = self.input_bounds(self.full, observed, self.d_const)
         self.kappa_z = np.inf if S is None else self._transform_kappa()
+        self.window: WindowBound | None = None
+        """The finite-memory bound used after missing samples (:mod:`.window`): dense,
+        time-invariant systems with constant bounds, ``S = I``."""
+        if S is None and self.A is not None and self.const and not sys.is_time_varying:
+            db = self.d_const
+            dlo, dhi = (np.zeros(0), np.zeros(0)) if db is None else (db.lo, db.hi)
+            self.window = window_bound(self.A, self.B, self.C, self.Du, self.E, self.F, dlo, dhi)
 
     # -- design-time helpers -----------------------------------------------------------------
     def _point_sensors(self) -> None:

@@ -11,15 +11,16 @@ compiled product of the stacked matrix ``[[Q⁺, −Q⁻], [−Q⁻, Q⁺]]`` on
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import ClassVar, TypeVar
+from typing import TypeVar
 
 import numpy as np
 
 from ...sets import Box
 from .._recursion import csr_accumulate
-from ..state import OnlineState, Step
+from ..state import Step
 from .operators import SplitOperators, hull
 from .rounding import largest
+from .window import CooperativeState, after_gap
 
 __all__ = [
     "CooperativeState",
@@ -28,17 +29,6 @@ __all__ = [
     "TransformedState",
     "cooperative_step",
 ]
-
-
-@dataclass(frozen=True)
-class CooperativeState(OnlineState):
-    """``lo``, ``hi``: the bounds ``z̲[k] <= z[k] <= z̄[k]`` of ``z = S x`` (``x`` itself when
-    ``S = I``) at step ``k`` (before ``y[k]`` is used)."""
-
-    lo: np.ndarray
-    hi: np.ndarray
-
-    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"),)
 
 
 @dataclass(frozen=True)
@@ -73,7 +63,10 @@ def cooperative_step(ops: SplitOperators, state: S, u_k: np.ndarray, y_k: np.nda
         lo, hi = _stacked_update(ops, zlo, zhi, u_k, y_k, obs, dbox)
     else:
         lo, hi = _split_update(ops, zlo, zhi, xlo, xhi, u_k, y_k, obs, dbox)
-    return Step(replace(state, lo=lo, hi=hi), xlo, xhi, inconsistent)
+    new = replace(state, lo=lo, hi=hi)
+    if ops.window is not None:
+        new = after_gap(ops.window, ops.dmax, new, state, u_k, y_k, bool(obs.all()))
+    return Step(new, xlo, xhi, inconsistent)
 
 
 def _split_update(

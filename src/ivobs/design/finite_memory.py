@@ -1,0 +1,223 @@
+"""A finite-memory bound of the state from ``N`` consecutive complete measurements (design).
+
+For a time-invariant model ``x+ = A x + B u + E d``, ``y = C x + D_u u + F d`` and a window of
+``N`` steps starting at ``x_s`` (the observability matrix and block-Toeplitz maps)::
+
+    Y = O x_s + T_u U + T_d D,      x[s+N] = A^N x_s + P_u U + P_d D
+
+with ``O = [C; CA; …; CA^(N−1)]``. Any ``M`` with ``M O = A^N`` gives
+
+    x[s+N] = M Y + K_u U + K_d D + R x_s,    K_u = P_u − M T_u,  K_d = P_d − M T_d,
+                                             R = A^N − M O  (round-off sized)
+
+so Lemma 1 of [Efimov2013] on the ``d`` box bounds ``x[s+N]`` from the window's data alone:
+whatever happened before the window (a gap of any length) no longer counts. ``N`` is the
+observability index of ``(A, C)`` (the smallest with ``rank O = n``); each row of ``M`` is the
+one of least width ``|K_d| Δ`` (a linear program, HiGHS; least squares above
+:data:`MAX_LP_STATES` states), corrected by least squares so that ``R`` is at round-off level.
+The round-off sized ``R x_s`` needs a bound of ``‖x_s‖∞``, also from the window: with
+``P = O⁺`` and ``P O = I − Θ`` (``‖Θ‖∞ < 1/2``, else no bound is designed),
+``x_s = P (Y − T_u U − T_d D) + Θ x_s`` gives
+``‖x_s‖∞ <= ‖P (Y − T_u U − T_d D)‖∞ / (1 − ‖Θ‖∞)``. ``R x_s`` and the floating-point error
+of every matrix here and of the evaluation are bounded (``γ_n`` of [Higham2002, Lemma 3.1] on
+the same expressions in absolute values, doubled) and added to the radius (:meth:`WindowBound.box`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+from ..linalg import gamma
+
+__all__ = ["MAX_LP_STATES", "MAX_WINDOW_STATES", "WindowBound", "window_bound"]
+
+MAX_WINDOW_STATES = 50
+"""Above this many states no window bound is designed (the design's dense algebra grows as
+``n⁴``)."""
+
+MAX_LP_STATES = 10
+"""Above this many states ``M`` is the least-squares one (no linear programs: the design stays
+fast for every estimator built)."""
+
+
+@dataclass(frozen=True)
+class WindowBound:
+    """The finite-memory bound of ``x[s+N]`` (module docstring): ``N`` steps; ``M`` (rows act on
+    the window's outputs, step-major), ``Ku`` (on its inputs), ``kc = K_d d_c`` and
+    ``kr = |K_d| d_r`` (centre and radius of the disturbance bounds), ``ex``: per row, the
+    coefficient of ``‖x_s‖∞`` (``|R|`` and the round-off of ``R``, ``K_u``, ``K_d``);
+    ``eu``, ``ed``: per row, the coefficients of ``‖U‖∞``, ``‖d‖∞`` from the round-off of
+    ``K_u``, ``K_d``; ``g``: ``γ`` of one evaluation (doubled); ``p_y``, ``p_u``, ``p_d``
+    and ``delta`` (``‖Θ‖∞``): the bound of ``‖x_s‖∞`` (module docstring) is
+    ``(p_y ‖Y‖∞ + p_u ‖U‖∞ + p_d ‖d‖∞) / (1 − delta)``."""
+
+    N: int
+    M: np.ndarray
+    Ku: np.ndarray
+    kc: np.ndarray
+    kr: np.ndarray
+    ex: np.ndarray
+    eu: np.ndarray
+    ed: np.ndarray
+    absM: np.ndarray
+    absKu: np.ndarray
+    g: float
+    p_y: float
+    p_u: float
+    p_d: float
+    delta: float
+
+    def box(self, Y: np.ndarray, U: np.ndarray, d_mag: float) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``x[s+N]`` from the window's outputs ``Y`` and inputs ``U`` (flattened,
+        step-major) and ``‖d‖∞ <= d_mag``."""
+        c = self.M @ Y + self.Ku @ U + self.kc
+        u_mag = float(np.max(np.abs(U))) if U.size else 0.0
+        y_mag = float(np.max(np.abs(Y))) if Y.size else 0.0
+        xs_mag = (self.p_y * y_mag + self.p_u * u_mag + self.p_d * d_mag) / (1.0 - self.delta)
+        xs_mag *= 1.0 + self.g
+        r = self.kr + self.ex * xs_mag + self.eu * u_mag + self.ed * d_mag
+        ev = self.absM @ np.abs(Y) + self.absKu @ np.abs(U) + np.abs(self.kc) + np.abs(c) + r
+        r = r + self.g * ev
+        return c - r, c + r
+
+
+def window_bound(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    Du: np.ndarray,
+    E: np.ndarray,
+    F: np.ndarray,
+    d_lo: np.ndarray,
+    d_hi: np.ndarray,
+) -> WindowBound | None:
+    """The :class:`WindowBound` of the model (module docstring); None when ``(A, C)`` is not
+    observable (no window determines the state), a matrix is not finite, or above
+    :data:`MAX_WINDOW_STATES` states."""
+    ny, n = C.shape
+    nu, nd = B.shape[1], E.shape[1]
+    if n > MAX_WINDOW_STATES:
+        return None
+    if not all(np.all(np.isfinite(m)) for m in (A, B, C, Du, E, F, d_lo, d_hi)):
+        return None
+    N = _index(A, C)
+    if N is None:
+        return None
+    powers = [np.eye(n)]
+    for _ in range(N):
+        powers.append(powers[-1] @ A)
+    absA = np.abs(A)
+    apow = [np.eye(n)]
+    for _ in range(N):
+        apow.append(apow[-1] @ absA)
+    O = np.vstack([C @ powers[j] for j in range(N)])
+    aO = np.vstack([np.abs(C) @ apow[j] for j in range(N)])
+    Tu, aTu = _toeplitz(powers, apow, C, B, Du, N)
+    Td, aTd = _toeplitz(powers, apow, C, E, F, N)
+    Pu = np.hstack([powers[N - 1 - i] @ B for i in range(N)])
+    aPu = np.hstack([apow[N - 1 - i] @ np.abs(B) for i in range(N)])
+    Pd = np.hstack([powers[N - 1 - i] @ E for i in range(N)])
+    aPd = np.hstack([apow[N - 1 - i] @ np.abs(E) for i in range(N)])
+    AN = powers[N]
+    dc = 0.5 * (d_lo + d_hi)
+    dr = np.nextafter(np.maximum(d_hi - dc, dc - d_lo), np.inf)  # [dc ± dr] ⊇ [d_lo, d_hi]
+    M = _least_width(O, AN, Pd, Td, np.tile(dr, N))
+    M = M + (AN - M @ O) @ np.linalg.pinv(O)
+    R = AN - M @ O
+    Ku = Pu - M @ Tu
+    Kd = Pd - M @ Td
+    absM = np.abs(M)
+    # every matrix above passed through at most K roundings per term (products of N + 2 factors
+    # of at most n + p terms each, then one difference): γ_K on the absolute-value expressions
+    K = (N + 3) * (n + N * (ny + nu + nd) + 2)
+    gK = 2.0 * gamma(K)
+    ex = np.abs(R).sum(axis=1) + gK * (apow[N] + absM @ aO).sum(axis=1)
+    eu = gK * (aPu + absM @ aTu).sum(axis=1)
+    ed_mat = gK * (aPd + absM @ aTd)
+    kc = Kd @ np.tile(dc, N)
+    # (+ the rounding of the product kc)
+    kr = np.abs(Kd) @ np.tile(dr, N) + 2.0 * gamma(N * nd + 2) * (
+        np.abs(Kd) @ np.tile(np.abs(dc), N)
+    )
+    ed = ed_mat.sum(axis=1)
+    g = 2.0 * gamma(N * (ny + nu + nd) + 4)
+    # ‖x_s‖∞ from the window itself (module docstring), P = O⁺ (any matrix would do)
+    P = np.linalg.pinv(O)
+    absP = np.abs(P)
+    delta = float(np.max(np.abs(np.eye(n) - P @ O).sum(axis=1) + gK * (absP @ aO).sum(axis=1)))
+    if not delta < 0.5:
+        return None
+    p_y = float(np.max(absP.sum(axis=1))) * (1.0 + gK)
+    p_u = float(np.max((absP @ aTu).sum(axis=1), initial=0.0)) * (1.0 + gK)
+    p_d = float(np.max((absP @ aTd).sum(axis=1), initial=0.0)) * (1.0 + gK)
+    return WindowBound(N, M, Ku, kc, kr, ex, eu, ed, absM, np.abs(Ku), g, p_y, p_u, p_d, delta)
+
+
+def _index(A: np.ndarray, C: np.ndarray) -> int | None:
+    """The smallest ``N`` with ``rank [C; …; CA^(N−1)] = n`` (None: not observable)."""
+    n = A.shape[0]
+    blocks = [C]
+    for N in range(1, n + 1):
+        O = np.vstack(blocks)
+        s = np.linalg.svd(O, compute_uv=False)
+        if s.size >= n and s[n - 1] > s[0] * max(O.shape) * np.finfo(float).eps * 10:
+            return N
+        blocks.append(blocks[-1] @ A)
+    return None
+
+
+def _toeplitz(
+    powers: list[np.ndarray],
+    apow: list[np.ndarray],
+    C: np.ndarray,
+    X: np.ndarray,
+    X0: np.ndarray,
+    N: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``[C A^(j−1−i) X]`` below the diagonal and ``X0`` on it (and the same in absolute
+    values): how the window's inputs enter its outputs."""
+    ny, m = X0.shape
+    T = np.zeros((N * ny, N * m))
+    aT = np.zeros_like(T)
+    for j in range(N):
+        T[j * ny : (j + 1) * ny, j * m : (j + 1) * m] = X0
+        aT[j * ny : (j + 1) * ny, j * m : (j + 1) * m] = np.abs(X0)
+        for i in range(j):
+            T[j * ny : (j + 1) * ny, i * m : (i + 1) * m] = C @ powers[j - 1 - i] @ X
+            aT[j * ny : (j + 1) * ny, i * m : (i + 1) * m] = np.abs(C) @ apow[j - 1 - i] @ np.abs(X)
+    return T, aT
+
+
+def _least_width(
+    O: np.ndarray, AN: np.ndarray, Pd: np.ndarray, Td: np.ndarray, dr: np.ndarray
+) -> np.ndarray:
+    """Per row ``a`` of ``A^N``: ``m`` with ``m O = a`` minimising ``|p − m T_d| d_r`` (a linear
+    program in ``(m, t)``, ``−t <= p − m T_d <= t``); the least-squares ``A^N O⁺`` for a row
+    whose program HiGHS does not solve, and for every row above :data:`MAX_LP_STATES`
+    states."""
+    n = AN.shape[0]
+    p, q = O.shape[0], Td.shape[1]
+    M = AN @ np.linalg.pinv(O)
+    if q == 0 or not np.any(dr > 0) or n > MAX_LP_STATES:
+        return M
+    c = np.concatenate([np.zeros(p), dr])
+    # p − m T_d <= t  <=>  −T_dᵀ m − t <= −p ;  −(p − m T_d) <= t  <=>  T_dᵀ m − t <= p
+    A_ub = np.block([[-Td.T, -np.eye(q)], [Td.T, -np.eye(q)]])
+    A_eq = np.hstack([O.T, np.zeros((n, q))])
+    bounds = [(None, None)] * p + [(0, None)] * q
+    for i in range(n):
+        res = linprog(
+            c,
+            A_ub=A_ub,
+            b_ub=np.concatenate([-Pd[i], Pd[i]]),
+            A_eq=A_eq,
+            b_eq=AN[i],
+            bounds=bounds,
+            method="highs",
+        )
+        if res.status == 0 and res.x is not None:
+            M[i] = res.x[:p]
+    return M
