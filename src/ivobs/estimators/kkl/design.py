@@ -79,12 +79,14 @@ class KKLDesign(Design):
 
 @dataclass(frozen=True)
 class Transform:
-    """``T[k]``, its pseudo-inverse, condition number and whether it counts as left-invertible."""
+    """``T[k]``, its pseudo-inverse ``P`` (with ``|P|``, used by every recovery), condition
+    number and whether it counts as left-invertible."""
 
     T: np.ndarray
     P: np.ndarray
     cond: float
     ok: bool
+    absP: np.ndarray
 
 
 def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
@@ -97,12 +99,13 @@ def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
     norms = np.linalg.norm(T, axis=1)
     nz, nx = T.shape
     if np.any(norms == 0) or not np.all(np.isfinite(norms)):
-        return Transform(T=T, P=np.zeros((nx, nz)), cond=float("inf"), ok=False)
+        P0 = np.zeros((nx, nz))
+        return Transform(T=T, P=P0, cond=float("inf"), ok=False, absP=P0)
     U, s, Vt = np.linalg.svd(T / norms[:, None], full_matrices=False)
     cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
     ok = bool(np.isfinite(cond) and cond <= max_cond)
     P = ((Vt.T / s) @ U.T) / norms[None, :] if ok else np.zeros((nx, nz))
-    return Transform(T=T, P=P, cond=cond, ok=ok)
+    return Transform(T=T, P=P, cond=cond, ok=ok, absP=np.abs(P))
 
 
 def x0_required(x0: Box | None, why: str) -> Box:
@@ -240,7 +243,6 @@ class ObserverMatrices:
     g_const: tuple[np.ndarray, np.ndarray] | None
     margin: np.ndarray
     Mx: np.ndarray | None
-    every: OutputRows
 
 
 def observer_matrices(
@@ -265,7 +267,6 @@ def observer_matrices(
         g_const=g_const,
         margin=rec * tr.cond * np.abs(tr.P),
         Mx=Mx,
-        every=output_rows((C, D, F), np.ones(sys.ny, dtype=bool)),
     )
 
 
