@@ -40,8 +40,8 @@ import numpy as np
 from ...errors import DesignError, IvobsError
 from ...sets import Box
 from ..state import Step
-from .design import Transform, left_inverse
-from .observer import Observer, Setting, ZState, every
+from .design import Transform, every, left_inverse
+from .observer import Observer, Setting, ZState
 
 __all__ = ["ContinuousLTV", "ContinuousObserver", "ContinuousState", "Flowed", "InputHold", "Span"]
 

@@ -45,10 +45,10 @@ from typing import ClassVar, NamedTuple, TypeVar
 import numpy as np
 
 from ...errors import IvobsError
-from ...sets import Box, image_bounds
+from ...sets import Box
 from ..state import OnlineState, Step
-from .design import ObserverMatrices, Transform, TransformSequence
-from .observer import Observer, Setting, ZState, every, finite
+from .design import ObserverMatrices, Transform, TransformSequence, every, finite, image
+from .observer import Observer, Setting, ZState
 
 __all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatState"]
 
@@ -136,18 +136,18 @@ class DiscreteObserver(Observer[S]):
         Az, Bz, obs = self.design.A_z, self.design.B_z, s.obs
         Bo, Bm = Bz[:, obs], Bz[:, ~obs]
         v = Bo @ s.y[obs] + (s.tn.T @ B - Bo @ D[obs]) @ s.u
-        glo, ghi = image_bounds(s.tn.T @ E - Bo @ F[obs], s.d.lo, s.d.hi)
+        glo, ghi = image(s.tn.T @ E - Bo @ F[obs], s.d.lo, s.d.hi)
         if every(obs):
             mlo, mhi = Az @ s.zlo, Az @ s.zhi
         elif s.tk.ok:  # x[k] = T[k]⁺ z[k] exactly: B_m C_m x = B_m C_m T⁺ z
-            mlo, mhi = image_bounds(Az + Bm @ C[~obs] @ s.tk.P, s.zlo, s.zhi)
+            mlo, mhi = image(Az + Bm @ C[~obs] @ s.tk.P, s.zlo, s.zhi)
         else:
             if not (finite(s.lo) and finite(s.hi)):
                 raise IvobsError(
                     f"y: measurement missing at step {s.k}, before T[k] is left-invertible, and "
                     "no prior box on x[0]: pass x0 to predict through missing samples there"
                 )
-            clo, chi = image_bounds(Bm @ C[~obs], s.lo, s.hi)
+            clo, chi = image(Bm @ C[~obs], s.lo, s.hi)
             mlo, mhi = Az @ s.zlo + clo, Az @ s.zhi + chi
         return mlo + v + glo, mhi + v + ghi
 
@@ -169,7 +169,7 @@ class DiscreteLTI(DiscreteObserver[S]):
         """With every output observed: ``B_z y + L_u u`` and the bounds ``g̲, ḡ`` of ``G d``."""
         m = self.m
         v = self.design.B_z @ s.y + m.Lu @ s.u
-        glo, ghi = m.g_const if m.g_const is not None else image_bounds(m.G, s.d.lo, s.d.hi)
+        glo, ghi = m.g_const if m.g_const is not None else image(m.G, s.d.lo, s.d.hi)
         return v, glo, ghi
 
 
@@ -263,8 +263,8 @@ class DiscreteLTV(DiscreteObserver[DiscreteLTVState]):
         nlo, nhi = self.update_z(s)
         # the open-loop box, for steps where T[k+1] is not left-invertible
         A, B, _, _, E, _ = s.mats
-        alo, ahi = image_bounds(A, s.lo, s.hi)
-        elo, ehi = image_bounds(E, s.d.lo, s.d.hi)
+        alo, ahi = image(A, s.lo, s.hi)
+        elo, ehi = image(E, s.d.lo, s.d.hi)
         Bu = B @ s.u
         return DiscreteLTVState(
             zlo=nlo,

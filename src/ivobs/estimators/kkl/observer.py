@@ -17,24 +17,13 @@ import numpy as np
 from ...model import LinearSystem
 from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
-from .design import KKLDesign, OutputRows, Transform, output_rows
+from .design import KKLDesign, OutputRows, Transform, every, finite, output_rows
 
-__all__ = ["Measured", "Observer", "Setting", "ZState", "every", "finite", "prior_box"]
+__all__ = ["Measured", "Observer", "Setting", "ZState", "prior_box"]
 
 EPS = float(np.finfo(float).eps)
 PATTERNS = 256
 """Patterns of observed components whose output rows a time-invariant observer keeps."""
-
-
-def every(mask: np.ndarray) -> bool:
-    """``mask.all()`` for a boolean vector, without the Python wrapper of the reduction (the
-    per-step paths run it on vectors of a few entries)."""
-    return bool(np.count_nonzero(mask) == mask.size)
-
-
-def finite(v: np.ndarray) -> bool:
-    """Whether every entry of ``v`` is finite (``np.isfinite(v).all()``)."""
-    return bool(np.count_nonzero(np.isfinite(v)) == v.size)
 
 
 @dataclass(frozen=True)
