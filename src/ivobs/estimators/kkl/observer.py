@@ -157,7 +157,10 @@ class Observer(Generic[S]):
         ``[lo, hi]`` of ``x[k]`` (then none is used): ``|y - C x_c - D u - F d_c| <= |C| x_r +
         |F| d_r`` up to rounding on the observed rows."""
         obs = ~np.isnan(y_k)
-        if not np.count_nonzero(obs) or not (finite(lo) and finite(hi)):
+        width = hi - lo
+        # a non-finite width: lo or hi not finite, or (lo, hi finite) a width beyond the float
+        # range, whose test below could not fail: nothing to test either way
+        if not np.count_nonzero(obs) or not finite(width):
             return obs, False
         m = self.measured(CDF, obs)
         r = m.rows
@@ -165,7 +168,7 @@ class Observer(Generic[S]):
         if Fdc is None or Fdr is None:
             Fdc, Fdr = r.F @ (0.5 * (d.lo + d.hi)), r.absF @ (0.5 * (d.hi - d.lo))
         yc = r.C @ (0.5 * (lo + hi)) + Fdc + r.D @ u_k
-        yr = r.absC @ (0.5 * (hi - lo)) + Fdr
+        yr = r.absC @ (0.5 * width) + Fdr
         yo = y_k if m.full else y_k[obs]
         if np.count_nonzero(np.abs(yo - yc) > yr + 1e-9 * (1.0 + np.abs(yc) + yr)):
             return np.zeros_like(obs), True
