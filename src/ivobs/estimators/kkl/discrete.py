@@ -55,12 +55,14 @@ __all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatSta
 
 @dataclass(frozen=True)
 class XHatState(OnlineState):
-    """Observer (6): the bounds ``x̲̂ = T⁻¹ z̲``, ``x̂̄ = T⁻¹ z̄`` (``xh_lo``, ``xh_hi``)."""
+    """Observer (6): ``T⁻¹ z̲`` and ``T⁻¹ z̄`` (``xh_lo``, ``xh_hi``). ``T⁻¹`` has entries of both
+    signs, so the two are not ordered (``xh_lo > xh_hi`` in a component is normal): no
+    ``lower <= upper`` check on restore."""
 
     xh_lo: np.ndarray
     xh_hi: np.ndarray
 
-    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("xh_lo", "xh_hi"),)
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = ()
 
 
 @dataclass(frozen=True)
