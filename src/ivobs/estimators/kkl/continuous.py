@@ -130,7 +130,7 @@ class ContinuousObserver(Observer[S]):
         assert t_k is not None
         k = state.k
         _, _, C, D, _, F = self.sys.matrices_at(t_k)
-        d = self.sys.d_at(k, y_k)
+        d = self.bounds_d(k, y_k)
         fl = Flowed(state.T, state.zlo, state.zhi, None, None)
         h = 0.0
         if state.t_prev is not None:

@@ -127,7 +127,7 @@ class DiscreteObserver(Observer[S]):
         lo, hi = self.box(state, k, tk, zlo, zhi)
         if k == 0:
             lo, hi = self.first_box(lo, hi)
-        d = self.sys.d_at(k, y_k)
+        d = self.bounds_d(k, y_k)
         obs, bad = self.usable(y_k, lo, hi, (mats[2], mats[3], mats[5]), u_k, d)
         s = StepData(k, u_k, y_k, d, obs, lo, hi, zlo, zhi, tk, tn, mats)
         return Step(self.advance(state, s), lo, hi, bad)

@@ -123,6 +123,10 @@ class Observer(Generic[S]):
     def first_box(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return prior_box(self.x0, lo, hi)
 
+    def bounds_d(self, k: int, y_k: np.ndarray) -> Box:
+        """The bounds of ``d[k]`` (constant ones kept)."""
+        return self._dfix if self._dfix is not None else self.sys.d_at(k, y_k)
+
     def measured(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Measured:
         """:class:`Measured` for the observed components ``obs`` (kept per pattern when
         ``(C, D, F)`` are constant)."""
