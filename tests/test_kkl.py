@@ -251,6 +251,27 @@ def test_state_restore_continues_identically():
         np.testing.assert_array_equal(other.step(None, tr.y[k]).lo, box.lo)
 
 
+def test_observer_6_state_restores_mid_run_although_its_two_vectors_are_not_ordered():
+    # T⁻¹ z̲ and T⁻¹ z̄ are not lower/upper bounds (T⁻¹ has mixed signs): the saved state of
+    # observer (6) has xh_lo > xh_hi in some component and must still restore
+    sc = ivobs.scenarios.get("servo-motor", horizon=200)
+    tr = sc.simulate("vertex", seed=2)
+    est = make_estimator("kkl", sc.system, x0=sc.x0, coordinates="x")
+    est.reset()
+    for k in range(37):
+        est.step(tr.u[k], tr.y[k])
+    saved = json.loads(json.dumps(est.state()))
+    xh = [np.array(saved["state"][n]["array"]) for n in ("xh_lo", "xh_hi")]
+    assert np.any(xh[0] > xh[1])
+    rest = [est.step(tr.u[k], tr.y[k]) for k in range(37, 80)]
+    other = make_estimator("kkl", sc.system, x0=sc.x0, coordinates="x")
+    other.restore(saved)
+    for k, box in zip(range(37, 80), rest):
+        got = other.step(tr.u[k], tr.y[k])
+        np.testing.assert_array_equal(got.lo, box.lo)
+        np.testing.assert_array_equal(got.hi, box.hi)
+
+
 # ------------------------------------------------------------------ property tests -------------
 @settings(max_examples=20, deadline=None, derandomize=True)
 @given(

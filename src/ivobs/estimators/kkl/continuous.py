@@ -32,7 +32,7 @@ left out of the jump (``T`` and ``z`` jump by ``h B_o C_o``, ``h B_o y_o`` only)
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
@@ -40,7 +40,7 @@ import numpy as np
 from ...errors import DesignError, IvobsError
 from ...sets import Box
 from ..state import Step
-from .design import Transform, left_inverse
+from .design import Transform, every, left_inverse
 from .observer import Observer, Setting, ZState
 
 __all__ = ["ContinuousLTV", "ContinuousObserver", "ContinuousState", "Flowed", "InputHold", "Span"]
@@ -130,7 +130,7 @@ class ContinuousObserver(Observer[S]):
         assert t_k is not None
         k = state.k
         _, _, C, D, _, F = self.sys.matrices_at(t_k)
-        d = self.sys.d_at(k, y_k)
+        d = self.bounds_d(k, y_k)
         fl = Flowed(state.T, state.zlo, state.zhi, None, None)
         h = 0.0
         if state.t_prev is not None:
@@ -143,7 +143,7 @@ class ContinuousObserver(Observer[S]):
             fl = self.flow(state, Span(t0, t_k, state.u_prev, u_k, dlo, dhi))
         T, zlo, zhi, an, model = fl
         bad = False
-        if h > 0 and (~np.isnan(y_k)).any():  # the sampled form of B_z y in (3)/(10)
+        if h > 0 and np.count_nonzero(np.isnan(y_k)) < y_k.size:  # sampled B_z y in (3)/(10)
             T, zlo, zhi, bad = self.jump(h, fl, y_k, u_k, d, (C, D, F))
         tr = an.tr if an is not None and T is an.T else left_inverse(T, self.max_cond)
         box, crossed = self.x_box(tr, zlo, zhi, model)
@@ -156,8 +156,7 @@ class ContinuousObserver(Observer[S]):
         lo, hi = box
         if k == 0:
             lo, hi = self.first_box(lo, hi)
-        new = replace(
-            state,
+        new = type(state)(
             T=T,
             zlo=zlo,
             zhi=zhi,
@@ -165,6 +164,9 @@ class ContinuousObserver(Observer[S]):
             u_prev=u_k.copy(),
             dlo_prev=d.lo.copy(),
             dhi_prev=d.hi.copy(),
+            k=k,
+            scale=state.scale,
+            inconsistent=state.inconsistent,
             **self.kept(lo, hi),
         )
         return Step(new, lo, hi, bad or crossed)
@@ -180,7 +182,6 @@ class ContinuousObserver(Observer[S]):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
         """``T(t_k+)``, ``z̲, z̄`` at ``t_k+`` and whether ``y_k`` contradicted the box at
         ``t_k-`` (then it is not used)."""
-        C, D, F = CDF
         T, zlo, zhi, an, model = fl
         tr = an.trm if an is not None else left_inverse(T, self.max_cond)
         box, bad = self.x_box(tr, zlo, zhi, model)
@@ -188,13 +189,19 @@ class ContinuousObserver(Observer[S]):
         if box is not None:
             obs, inconsistent = self.usable(y_k, box[0], box[1], CDF, u_k, d)
             bad = bad or inconsistent
+        if self._patterns is None:  # time-varying matrices: the rows of this step
+            full = every(obs)
+            Co, Do, Fo = (M[obs] for M in CDF)
+        else:
+            r = self.measured(CDF, obs)
+            full, (Co, Do, Fo) = r.full, r.rows[:3]
         Bo = h * self.design.B_z[:, obs]
-        if an is not None and obs.all():
+        if an is not None and full:
             T = an.T  # = T(t_k-) + h B_z C exactly (see ContinuousLTI.anchor)
         else:
-            T = T + Bo @ C[obs]
-        v = Bo @ (y_k[obs] - D[obs] @ u_k)
-        BF = Bo @ F[obs]
+            T = T + Bo @ Co
+        v = Bo @ ((y_k if full else y_k[obs]) - Do @ u_k)
+        BF = Bo @ Fo
         v = v - BF @ (0.5 * (d.lo + d.hi))
         gr = np.abs(BF) @ (0.5 * (d.hi - d.lo))
         return T, zlo + v - gr, zhi + v + gr, bad
@@ -222,7 +229,7 @@ class ContinuousObserver(Observer[S]):
         lo, hi = np.maximum(lo, model[0]), np.minimum(hi, model[1])
         cross = lo > hi
         bad = False
-        if cross.any():
+        if np.count_nonzero(cross):
             bad = bool(np.any(lo - hi > 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))))
             lo, hi = np.where(cross, hi, lo), np.where(cross, lo, hi)
         return (lo, hi), bad

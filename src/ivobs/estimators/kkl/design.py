@@ -32,7 +32,7 @@ from ...design.sylvester import (
 from ...errors import DesignError, IvobsError
 from ...linalg import is_observable, observability_rank
 from ...model import LinearSystem
-from ...sets import Box, image_bounds
+from ...sets import Box, image_bounds, neg, pos
 from ..base import Design
 
 __all__ = [
@@ -43,6 +43,9 @@ __all__ = [
     "TransformSequence",
     "design_lti",
     "design_ltv",
+    "every",
+    "finite",
+    "image",
     "left_inverse",
     "observer_matrices",
     "output_rows",
@@ -77,14 +80,36 @@ class KKLDesign(Design):
     tuned: bool = False
 
 
+def every(mask: np.ndarray) -> bool:
+    """``mask.all()`` for a boolean array, without the Python wrapper of the reduction (the
+    per-step paths run it on arrays of a few entries)."""
+    return bool(np.count_nonzero(mask) == mask.size)
+
+
+def finite(v: np.ndarray) -> bool:
+    """Whether every entry of ``v`` is finite (``np.isfinite(v).all()``)."""
+    return bool(np.count_nonzero(np.isfinite(v)) == v.size)
+
+
+def image(M: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`ivobs.sets.image_bounds` of one step (float arrays, vector bounds): the same
+    operations, without its conversions and error-state guard when the bounds are finite."""
+    if not (finite(lo) and finite(hi)):
+        return image_bounds(M, lo, hi)
+    Mp, Mn = pos(M), neg(M)
+    return lo @ Mp.T - hi @ Mn.T, hi @ Mp.T - lo @ Mn.T
+
+
 @dataclass(frozen=True)
 class Transform:
-    """``T[k]``, its pseudo-inverse, condition number and whether it counts as left-invertible."""
+    """``T[k]``, its pseudo-inverse ``P`` (with ``|P|``, used by every recovery), condition
+    number and whether it counts as left-invertible."""
 
     T: np.ndarray
     P: np.ndarray
     cond: float
     ok: bool
+    absP: np.ndarray
 
 
 def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
@@ -96,13 +121,14 @@ def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
     """
     norms = np.linalg.norm(T, axis=1)
     nz, nx = T.shape
-    if np.any(norms == 0) or not np.all(np.isfinite(norms)):
-        return Transform(T=T, P=np.zeros((nx, nz)), cond=float("inf"), ok=False)
+    if np.count_nonzero(norms == 0) or not finite(norms):
+        P0 = np.zeros((nx, nz))
+        return Transform(T=T, P=P0, cond=float("inf"), ok=False, absP=P0)
     U, s, Vt = np.linalg.svd(T / norms[:, None], full_matrices=False)
     cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
-    ok = bool(np.isfinite(cond) and cond <= max_cond)
+    ok = cond <= max_cond  # False for inf
     P = ((Vt.T / s) @ U.T) / norms[None, :] if ok else np.zeros((nx, nz))
-    return Transform(T=T, P=P, cond=cond, ok=ok)
+    return Transform(T=T, P=P, cond=cond, ok=ok, absP=np.abs(P))
 
 
 def x0_required(x0: Box | None, why: str) -> Box:
@@ -240,7 +266,6 @@ class ObserverMatrices:
     g_const: tuple[np.ndarray, np.ndarray] | None
     margin: np.ndarray
     Mx: np.ndarray | None
-    every: OutputRows
 
 
 def observer_matrices(
@@ -265,7 +290,6 @@ def observer_matrices(
         g_const=g_const,
         margin=rec * tr.cond * np.abs(tr.P),
         Mx=Mx,
-        every=output_rows((C, D, F), np.ones(sys.ny, dtype=bool)),
     )
 
 
@@ -390,7 +414,7 @@ class TransformSequence:
         while len(seq) <= k:
             j = len(seq) - 1
             Aj, Cj = self.sys.A_at(j), self.sys.C_at(j)
-            if not np.all(np.isfinite(Aj)) or np.linalg.cond(Aj) > 1e13:
+            if not finite(Aj) or np.linalg.cond(Aj) > 1e13:
                 raise DesignError(
                     f"A[{j}] is singular (cond {np.linalg.cond(Aj):.2e}); the time-varying "
                     "KKL observer (15.b) needs invertible A[k] ([Dinh2024, Assumption 3 (VIII)])"

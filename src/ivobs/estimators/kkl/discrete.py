@@ -39,15 +39,15 @@ bounded on the open-loop box propagated from ``x0`` (needs ``x0``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 
 from ...errors import IvobsError
-from ...sets import Box, image_bounds
+from ...sets import Box
 from ..state import OnlineState, Step
-from .design import ObserverMatrices, OutputRows, Transform, TransformSequence
+from .design import ObserverMatrices, Transform, TransformSequence, every, finite, image
 from .observer import Observer, Setting, ZState
 
 __all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatState"]
@@ -55,12 +55,14 @@ __all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatSta
 
 @dataclass(frozen=True)
 class XHatState(OnlineState):
-    """Observer (6): the bounds ``x̲̂ = T⁻¹ z̲``, ``x̂̄ = T⁻¹ z̄`` (``xh_lo``, ``xh_hi``)."""
+    """Observer (6): ``T⁻¹ z̲`` and ``T⁻¹ z̄`` (``xh_lo``, ``xh_hi``). ``T⁻¹`` has entries of both
+    signs, so the two are not ordered (``xh_lo > xh_hi`` in a component is normal): no
+    ``lower <= upper`` check on restore."""
 
     xh_lo: np.ndarray
     xh_hi: np.ndarray
 
-    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("xh_lo", "xh_hi"),)
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = ()
 
 
 @dataclass(frozen=True)
@@ -111,10 +113,6 @@ class DiscreteObserver(Observer[S]):
     def advance(self, state: S, s: StepData) -> S:
         raise NotImplementedError
 
-    def every(self) -> OutputRows | None:
-        """The output rows of a complete measurement, when the matrices are constant."""
-        return None
-
     def box(
         self, state: S, k: int, tk: Transform, zlo: np.ndarray, zhi: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -129,9 +127,8 @@ class DiscreteObserver(Observer[S]):
         lo, hi = self.box(state, k, tk, zlo, zhi)
         if k == 0:
             lo, hi = self.first_box(lo, hi)
-        d = self.sys.d_at(k, y_k)
-        _, _, C, D, _, F = mats
-        obs, bad = self.usable(y_k, lo, hi, (C, D, F), u_k, d, self.every())
+        d = self.bounds_d(k, y_k)
+        obs, bad = self.usable(y_k, lo, hi, (mats[2], mats[3], mats[5]), u_k, d)
         s = StepData(k, u_k, y_k, d, obs, lo, hi, zlo, zhi, tk, tn, mats)
         return Step(self.advance(state, s), lo, hi, bad)
 
@@ -141,18 +138,18 @@ class DiscreteObserver(Observer[S]):
         Az, Bz, obs = self.design.A_z, self.design.B_z, s.obs
         Bo, Bm = Bz[:, obs], Bz[:, ~obs]
         v = Bo @ s.y[obs] + (s.tn.T @ B - Bo @ D[obs]) @ s.u
-        glo, ghi = image_bounds(s.tn.T @ E - Bo @ F[obs], s.d.lo, s.d.hi)
-        if obs.all():
+        glo, ghi = image(s.tn.T @ E - Bo @ F[obs], s.d.lo, s.d.hi)
+        if every(obs):
             mlo, mhi = Az @ s.zlo, Az @ s.zhi
         elif s.tk.ok:  # x[k] = T[k]⁺ z[k] exactly: B_m C_m x = B_m C_m T⁺ z
-            mlo, mhi = image_bounds(Az + Bm @ C[~obs] @ s.tk.P, s.zlo, s.zhi)
+            mlo, mhi = image(Az + Bm @ C[~obs] @ s.tk.P, s.zlo, s.zhi)
         else:
-            if not (np.all(np.isfinite(s.lo)) and np.all(np.isfinite(s.hi))):
+            if not (finite(s.lo) and finite(s.hi)):
                 raise IvobsError(
                     f"y: measurement missing at step {s.k}, before T[k] is left-invertible, and "
                     "no prior box on x[0]: pass x0 to predict through missing samples there"
                 )
-            clo, chi = image_bounds(Bm @ C[~obs], s.lo, s.hi)
+            clo, chi = image(Bm @ C[~obs], s.lo, s.hi)
             mlo, mhi = Az @ s.zlo + clo, Az @ s.zhi + chi
         return mlo + v + glo, mhi + v + ghi
 
@@ -170,14 +167,11 @@ class DiscreteLTI(DiscreteObserver[S]):
     def transform(self, k: int) -> Transform:
         return self.m.tr
 
-    def every(self) -> OutputRows:
-        return self.m.every
-
     def known(self, s: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """With every output observed: ``B_z y + L_u u`` and the bounds ``g̲, ḡ`` of ``G d``."""
         m = self.m
         v = self.design.B_z @ s.y + m.Lu @ s.u
-        glo, ghi = m.g_const if m.g_const is not None else image_bounds(m.G, s.d.lo, s.d.hi)
+        glo, ghi = m.g_const if m.g_const is not None else image(m.G, s.d.lo, s.d.hi)
         return v, glo, ghi
 
 
@@ -192,12 +186,15 @@ class ObserverZ(DiscreteLTI[ZState]):
         return state.zlo, state.zhi
 
     def advance(self, state: ZState, s: StepData) -> ZState:
-        if s.obs.all():
+        if every(s.obs):
             v, glo, ghi = self.known(s)
             Az = self.design.A_z
-            return replace(state, zlo=Az @ s.zlo + v + glo, zhi=Az @ s.zhi + v + ghi)  # (3.a)
-        nlo, nhi = self.update_z(s)
-        return replace(state, zlo=nlo, zhi=nhi)
+            nlo, nhi = Az @ s.zlo + v + glo, Az @ s.zhi + v + ghi  # (3.a)
+        else:
+            nlo, nhi = self.update_z(s)
+        return ZState(
+            zlo=nlo, zhi=nhi, k=state.k, scale=state.scale, inconsistent=state.inconsistent
+        )
 
 
 class ObserverX(DiscreteLTI[XHatState]):
@@ -215,14 +212,18 @@ class ObserverX(DiscreteLTI[XHatState]):
 
     def advance(self, state: XHatState, s: StepData) -> XHatState:
         P = self.m.tr.P
-        if s.obs.all():
+        if every(s.obs):
             v, glo, ghi = self.known(s)
             Mx = self.m.Mx
             assert Mx is not None
             xh_lo = Mx @ state.xh_lo + P @ (v + glo)  # (6.a)
-            return replace(state, xh_lo=xh_lo, xh_hi=Mx @ state.xh_hi + P @ (v + ghi))
-        nlo, nhi = self.update_z(s)
-        return replace(state, xh_lo=P @ nlo, xh_hi=P @ nhi)
+            xh_hi = Mx @ state.xh_hi + P @ (v + ghi)
+        else:
+            nlo, nhi = self.update_z(s)
+            xh_lo, xh_hi = P @ nlo, P @ nhi
+        return XHatState(
+            xh_lo=xh_lo, xh_hi=xh_hi, k=state.k, scale=state.scale, inconsistent=state.inconsistent
+        )
 
 
 class DiscreteLTV(DiscreteObserver[DiscreteLTVState]):
@@ -253,7 +254,7 @@ class DiscreteLTV(DiscreteObserver[DiscreteLTVState]):
         if tk.ok:
             return self.recover(tk, zlo, zhi)
         lo, hi = state.xlo.copy(), state.xhi.copy()
-        if k >= self.design.k_star and not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        if k >= self.design.k_star and not (finite(lo) and finite(hi)):
             raise IvobsError(
                 f"kkl: T[{k}] is not left-invertible (cond {tk.cond:.2e}) and no finite "
                 "prior is available; pass x0 so the observer can bridge such steps"
@@ -264,7 +265,15 @@ class DiscreteLTV(DiscreteObserver[DiscreteLTVState]):
         nlo, nhi = self.update_z(s)
         # the open-loop box, for steps where T[k+1] is not left-invertible
         A, B, _, _, E, _ = s.mats
-        alo, ahi = image_bounds(A, s.lo, s.hi)
-        elo, ehi = image_bounds(E, s.d.lo, s.d.hi)
+        alo, ahi = image(A, s.lo, s.hi)
+        elo, ehi = image(E, s.d.lo, s.d.hi)
         Bu = B @ s.u
-        return replace(state, zlo=nlo, zhi=nhi, xlo=alo + Bu + elo, xhi=ahi + Bu + ehi)
+        return DiscreteLTVState(
+            zlo=nlo,
+            zhi=nhi,
+            xlo=alo + Bu + elo,
+            xhi=ahi + Bu + ehi,
+            k=state.k,
+            scale=state.scale,
+            inconsistent=state.inconsistent,
+        )

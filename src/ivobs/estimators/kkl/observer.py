@@ -10,18 +10,20 @@ step to it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Generic, TypeVar
+from typing import ClassVar, Generic, NamedTuple, TypeVar
 
 import numpy as np
 
 from ...model import LinearSystem
 from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
-from .design import KKLDesign, OutputRows, Transform, output_rows
+from .design import KKLDesign, OutputRows, Transform, every, finite, output_rows
 
-__all__ = ["Observer", "Setting", "ZState", "prior_box"]
+__all__ = ["Measured", "Observer", "Setting", "ZState", "prior_box"]
 
 EPS = float(np.finfo(float).eps)
+PATTERNS = 256
+"""Patterns of observed components whose output rows a time-invariant observer keeps."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +38,17 @@ class ZState(OnlineState):
 
 
 S = TypeVar("S", bound=OnlineState)
+
+
+class Measured(NamedTuple):
+    """One pattern of observed components of ``y``: its output rows, whether it is complete
+    and, for constant bounds of ``d``, the terms ``F_o d_c`` and ``|F_o| d_r`` of the
+    consistency test (None: computed at each step from the bounds of the step)."""
+
+    rows: OutputRows
+    full: bool
+    Fdc: np.ndarray | None
+    Fdr: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -69,6 +82,11 @@ class Observer(Generic[S]):
         self.design = setting.design
         self.max_cond = setting.max_cond
         self.rec = setting.rec
+        sys = setting.sys
+        # constant bounds of d (or none): the same box at every step
+        self._dfix = sys.d_at(0) if sys.has_constant_bounds else None
+        # constant (C, D, F): the rows of each pattern of observed components, kept
+        self._patterns: dict[bytes, Measured] | None = None if sys.is_time_varying else {}
 
     def initial_state(self) -> S:
         raise NotImplementedError
@@ -97,7 +115,7 @@ class Observer(Generic[S]):
         """(3.c-d)/(15.d): bounds of ``x = T⁺ z`` plus the rounding margin of the recovery,
         ``rec cond(T) |T⁺| (|z_c| + z_r)``."""
         zc, zr = 0.5 * (zlo + zhi), 0.5 * (zhi - zlo)
-        aP = np.abs(tr.P)
+        aP = tr.absP
         xr = aP @ zr + (self.rec * tr.cond) * (aP @ (np.abs(zc) + zr))
         xc = tr.P @ zc
         return xc - xr, xc + xr
@@ -105,28 +123,57 @@ class Observer(Generic[S]):
     def first_box(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return prior_box(self.x0, lo, hi)
 
-    @staticmethod
+    def bounds_d(self, k: int, y_k: np.ndarray) -> Box:
+        """The bounds of ``d[k]`` (constant ones kept)."""
+        return self._dfix if self._dfix is not None else self.sys.d_at(k, y_k)
+
+    def measured(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Measured:
+        """:class:`Measured` for the observed components ``obs`` (kept per pattern when
+        ``(C, D, F)`` are constant)."""
+        cache = self._patterns
+        if cache is None:
+            return self._measure(CDF, obs)
+        key = obs.tobytes()
+        m = cache.get(key)
+        if m is None:
+            if len(cache) >= PATTERNS:
+                cache.clear()
+            m = cache[key] = self._measure(CDF, obs)
+        return m
+
+    def _measure(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Measured:
+        r = output_rows(CDF, obs)
+        d = self._dfix
+        if d is None:
+            return Measured(r, every(obs), None, None)
+        return Measured(r, every(obs), r.F @ (0.5 * (d.lo + d.hi)), r.absF @ (0.5 * (d.hi - d.lo)))
+
     def usable(
+        self,
         y_k: np.ndarray,
         lo: np.ndarray,
         hi: np.ndarray,
         CDF: tuple[np.ndarray, ...],
         u_k: np.ndarray,
         d: Box,
-        every: OutputRows | None = None,
     ) -> tuple[np.ndarray, bool]:
         """The observed components of ``y[k]`` and whether ``y[k]`` contradicts the box
         ``[lo, hi]`` of ``x[k]`` (then none is used): ``|y - C x_c - D u - F d_c| <= |C| x_r +
-        |F| d_r`` up to rounding on the observed rows. ``every``: the rows of ``(C, D, F)`` for
-        a complete measurement, when kept (constant matrices)."""
+        |F| d_r`` up to rounding on the observed rows."""
         obs = ~np.isnan(y_k)
-        if not obs.any() or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        width = hi - lo
+        # a non-finite width: lo or hi not finite, or (lo, hi finite) a width beyond the float
+        # range, whose test below could not fail: nothing to test either way
+        if not np.count_nonzero(obs) or not finite(width):
             return obs, False
-        full = every is not None and obs.all()
-        r = every if full and every is not None else output_rows(CDF, obs)
-        yc = r.C @ (0.5 * (lo + hi)) + r.F @ (0.5 * (d.lo + d.hi)) + r.D @ u_k
-        yr = r.absC @ (0.5 * (hi - lo)) + r.absF @ (0.5 * (d.hi - d.lo))
-        yo = y_k if full else y_k[obs]
-        if (np.abs(yo - yc) > yr + 1e-9 * (1.0 + np.abs(yc) + yr)).any():
+        m = self.measured(CDF, obs)
+        r = m.rows
+        Fdc, Fdr = m.Fdc, m.Fdr
+        if Fdc is None or Fdr is None:
+            Fdc, Fdr = r.F @ (0.5 * (d.lo + d.hi)), r.absF @ (0.5 * (d.hi - d.lo))
+        yc = r.C @ (0.5 * (lo + hi)) + Fdc + r.D @ u_k
+        yr = r.absC @ (0.5 * width) + Fdr
+        yo = y_k if m.full else y_k[obs]
+        if np.count_nonzero(np.abs(yo - yc) > yr + 1e-9 * (1.0 + np.abs(yc) + yr)):
             return np.zeros_like(obs), True
         return obs, False
