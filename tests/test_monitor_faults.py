@@ -210,3 +210,15 @@ def test_cli_monitor_refuses_a_bad_poll(files, capsys):
         assert "--poll: expected the seconds between checks of --follow, a number > 0" in err
     code = main(["monitor", "-s", str(files / "tank.toml"), "--clear-after", "0"])
     assert code == 2 and "--clear-after: expected an integer >= 1" in capsys.readouterr().err
+
+
+def test_missing_samples_of_the_faulty_sensor_neither_count_nor_restart():
+    tr = record(300)
+    y = tr.y.copy()
+    y[100:160, 0] += BIAS
+    y[163:166, 0] = np.nan  # during the count: the alarm clears 3 steps later
+    y[180:200] = np.nan  # after: fault-free missing samples raise nothing
+    rec = Monitor(quadtank(), "interval-split", x0=X0, clear_after=10).run(tr.u, y)
+    assert [(f.start, f.outputs, f.end) for f in rec.faults] == [(100, (0,), 172)]
+    assert "consistent again for 3 of 10 steps" in rec.reasons[164]
+    assert contained(rec, tr.x)
