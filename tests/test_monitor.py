@@ -104,12 +104,16 @@ def test_offline_check_is_the_online_test_with_a_wider_band():
     y[30:33] = np.nan
     off = mon.check(tr.u, y)
     on = mon.run(tr.u, y)
-    np.testing.assert_allclose(off.lower, on.lower, rtol=1e-12)
-    tol = 1e-9 * (1 + np.abs(on.band_lower))
-    assert np.all(off.band_lower <= on.band_lower + tol)
-    assert np.all(on.band_upper <= off.band_upper + tol)
+    # the same boxes until the fault; from step 60 on the online monitor leaves y2 out
+    np.testing.assert_allclose(off.lower[:60], on.lower[:60], rtol=1e-12)
+    tol = 1e-9 * (1 + np.abs(on.band_lower[:60]))
+    assert np.all(off.band_lower[:60] <= on.band_lower[:60] + tol)
+    assert np.all(on.band_upper[:60] <= off.band_upper[:60] + tol)
     assert np.all(on.alarm[off.alarm])  # every offline alarm is an online alarm
     assert off.first_alarm == on.first_alarm == 60 and "y2 = " in off.reasons[60]
+    assert on.alarm[60:].all() and [(f.start, f.outputs, f.end) for f in on.faults] == [
+        (60, (1,), None)
+    ]
     assert mon.k == 120  # check() left the online state alone
     # at step 1 both bands are Lemma 1 of the same box (the estimate at 0 inside the prior)
     np.testing.assert_allclose(off.band_lower[:2], on.band_lower[:2], rtol=1e-9)
@@ -241,9 +245,12 @@ def test_estimator_inconsistency_is_an_alarm_and_not_a_warning(recwarn):
     sc = servo(100)
     tr = sc.simulate("vertex", seed=0)
     est = OpenLoop(sc.system, sc.x0, flag=[7])
-    rec = Monitor(sc.system, est).run(tr.u[:12], tr.y[:12])
-    assert np.flatnonzero(rec.alarm).tolist() == [7]
-    assert "measurement inconsistent with the model" in rec.reasons[7]
+    rec = Monitor(sc.system, est, clear_after=3).run(tr.u[:12], tr.y[:12])
+    # raised at 7, held until both outputs have been consistent again for 3 steps (8, 9, 10)
+    assert np.flatnonzero(rec.alarm).tolist() == [7, 8, 9]
+    assert np.flatnonzero(rec.evidence).tolist() == [7]
+    assert "measurement of y1;y2 inconsistent with the model" in rec.reasons[7]
+    assert [(f.start, f.outputs, f.end, f.duration) for f in rec.faults] == [(7, (0, 1), 10, 3)]
     assert not [w for w in recwarn if "inconsistent" in str(w.message)]
 
 
@@ -251,10 +258,11 @@ def test_estimate_disjoint_from_the_prediction_is_an_alarm():
     sc = servo(100)
     tr = sc.simulate("vertex", seed=0)
     est = OpenLoop(sc.system, sc.x0, shift=50.0)
-    rec = Monitor(sc.system, est, tight=False).run(tr.u[:8], tr.y[:8])
+    rec = Monitor(sc.system, est, tight=False, clear_after=2).run(tr.u[:10], tr.y[:10])
     # step 5: the estimate jumps away from the prediction; step 6: back, away from the
-    # prediction made from the step-5 box
-    assert np.flatnonzero(rec.alarm).tolist() == [5, 6]
+    # prediction made from the step-5 box; held for 2 consistent steps (7, 8)
+    assert np.flatnonzero(rec.evidence).tolist() == [5, 6]
+    assert np.flatnonzero(rec.alarm).tolist() == [5, 6, 7]
     assert "estimate disjoint from the model's prediction in x1" in rec.reasons[5]
     tight = Monitor(sc.system, est, tight=True).run(tr.u[:8], tr.y[:8])
     assert "the estimator's prediction disjoint from the model's" in tight.reasons[5]
@@ -319,7 +327,10 @@ def test_cli_monitor_reads_stdin_and_prints_one_line_per_step(files, monkeypatch
     code = main(["monitor", "--system", str(tmp / "servo.toml")])
     lines = capsys.readouterr().out.splitlines()
     assert code == 1  # alarms were raised
-    assert lines[0] == "step,lower_1,lower_2,lower_3,upper_1,upper_2,upper_3,alarm,reason"
+    assert lines[0] == (
+        "step,lower_1,lower_2,lower_3,upper_1,upper_2,upper_3,alarm,reason,"
+        "fault_start,fault_duration,fault_outputs"
+    )
     assert len(lines) == 101
     rows = [ln.split(",", 8) for ln in lines[1:]]
     alarms = [int(r[0]) for r in rows if r[7] == "1"]

@@ -2,7 +2,9 @@
 
 Reads log rows (CSV with a header: ``k``/``t``, ``u1..``, ``y1..``) from standard input or from
 ``--input FILE`` (``--follow`` keeps reading a file that is being appended to, like
-``tail -f``), and writes one CSV line per step: ``step, lower_1.., upper_1.., alarm, reason``.
+``tail -f``), and writes one CSV line per step: ``step, lower_1.., upper_1.., alarm, reason,
+fault_start, fault_duration, fault_outputs`` (the alarm is latched while a fault persists:
+:class:`ivobs.monitor.Monitor`).
 ``--state FILE`` keeps the monitor's state on disk (written atomically after every step, or
 every ``--save-every N`` steps): a restarted monitor continues with the same boxes.
 """
@@ -22,14 +24,20 @@ import numpy as np
 from ..errors import IvobsError
 from . import add_trust_option
 
+FAULT_COLUMNS = ("fault_start", "fault_duration", "fault_outputs")
+"""After the existing columns: the open fault's first step, its duration so far (steps, this one
+included; 0 without alarm) and the outputs it found inconsistent (``y1;y3``)."""
+
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     p: argparse.ArgumentParser = sub.add_parser(
         "monitor",
         help="stream measurements through a guaranteed estimator and raise fault alarms",
         description="Read log rows (header k|t, u1.., y1..) from stdin or --input, print one line "
-        "per step: step, lower_1.., upper_1.., alarm, reason. An alarm means the measurement "
-        "contradicts the model and its bounds: under the model's assumptions it is never false.",
+        "per step: step, lower_1.., upper_1.., alarm, reason, fault_start, fault_duration, "
+        "fault_outputs. An alarm means the measurements contradict the model and its bounds: "
+        "under the model's assumptions it is never false. It stays raised, with the inconsistent "
+        "outputs left out of the bounds, until they are consistent again for --clear-after steps.",
     )
     p.add_argument("--system", "-s", required=True, metavar="FILE", help="system file (TOML)")
     p.add_argument("--method", "-m", help="method (default: the system file's [method])")
@@ -50,6 +58,13 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "--save-every", type=int, default=1, metavar="N", help="save the state every N steps"
     )
     add_trust_option(p)
+    p.add_argument(
+        "--clear-after",
+        type=int,
+        default=10,
+        metavar="M",
+        help="clear an alarm after M consecutive steps consistent again (default 10)",
+    )
     p.add_argument(
         "--no-tight",
         action="store_true",
@@ -94,7 +109,13 @@ class _Session:
                 f"--method: {args.system} names no method ([method] name = ...); give --method"
             )
         est = self.spec.make_estimator(method)
-        self.monitor = Monitor(self.spec.system, est, x0=self.spec.x0, tight=not args.no_tight)
+        self.monitor = Monitor(
+            self.spec.system,
+            est,
+            x0=self.spec.x0,
+            tight=not args.no_tight,
+            clear_after=args.clear_after,
+        )
         self.state_path = None
         if args.state:  # checked before the first row is printed
             from ..io.atomic import check_distinct, check_output_path
@@ -156,13 +177,14 @@ def _probe(mon: Any, name: str, t: Any) -> None:
     from ..io.statefile import malformed
 
     est, sys_ = mon.estimator, mon.sys
-    if est.k < est.valid_from:
+    if mon.k < est.valid_from:
         return
     t_k = None
     if sys_.is_continuous:
         t_k = (0.0 if t is None else float(t)) + 1e-3
     try:
-        box = est.predict(np.zeros(sys_.nu) if sys_.nu else None, t_k)
+        u0 = np.zeros(sys_.nu) if sys_.nu else None
+        box = est.advance(mon.estimator_state, u0, None, t_k, keep=False)[1]
     except IvobsError as exc:
         if "NaN" in str(exc):
             raise malformed(name, "monitor.estimator.state", "gives NaN bounds") from None
@@ -177,7 +199,15 @@ def _probe(mon: Any, name: str, t: Any) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from ..io.logs import LogParser
+    from ..monitor.records import output_names
 
+    if not (np.isfinite(args.poll) and args.poll > 0):
+        raise IvobsError(
+            f"--poll: expected the seconds between checks of --follow, a number > 0, got "
+            f"{args.poll!r}"
+        )
+    if args.clear_after < 1:
+        raise IvobsError(f"--clear-after: expected an integer >= 1 (steps), got {args.clear_after}")
     if args.save_every < 1:
         raise IvobsError(f"--save-every: expected an integer >= 1, got {args.save_every}")
     if args.follow and not args.input:
@@ -197,7 +227,7 @@ def main(args: argparse.Namespace) -> int:
         cols = [f"lower_{i + 1}" for i in range(sys_.nx)] + [
             f"upper_{i + 1}" for i in range(sys_.nx)
         ]
-        out.writerow(["step", *cols, "alarm", "reason"])
+        out.writerow(["step", *cols, "alarm", "reason", *FAULT_COLUMNS])
         sys.stdout.flush()
     fh: TextIO
     if args.input:
@@ -235,6 +265,9 @@ def main(args: argparse.Namespace) -> int:
                     *map(_fmt, step.upper),
                     int(step.alarm),
                     step.reason,
+                    "" if step.fault_start is None else step.fault_start,
+                    step.fault_duration,
+                    output_names(step.outputs),
                 ]
             )
             sys.stdout.flush()

@@ -31,14 +31,31 @@ an alarm is never false. Floating-point rounding is covered by widening the band
 ``margin * (1 + |bound|)`` (``margin = 1e-9`` by default). An alarm therefore proves that the
 data contradict the model: a sensor or actuator fault, a wrong model or wrong bounds.
 
-The monitor uses the estimator protocol only (``step``, ``state``/``restore``), so it works with
-every method; its state (``state()`` / ``restore()``) is JSON-serialisable, so a restarted
-monitor continues with the same boxes and the same alarms as one that never stopped.
+**Faults that persist.** Inconsistent data never enter the estimate: the outputs outside the
+band, or found inconsistent by the method (each measured output tried alone; all of them when
+only their combination is), are treated as missing samples at that step and while the fault is
+open (the policy is exclusion: the estimate continues from the fault-free data). The alarm is
+latched: a fault episode opens at the first contradiction and stays open until the held outputs
+have been consistent for ``clear_after`` consecutive steps with the *reference* (the estimate
+without them: its band) and with a *trial* estimate that uses them again, started from the
+reference (band, the method's check, boxes meeting the reference's); then the trial becomes the
+estimate. A step where a held output is missing does not count; a contradiction restarts the
+count. Data that obey the model are always consistent with an estimate that never used the
+faulty samples, so a fault that ends is cleared ``clear_after`` measured steps later; a fault
+that persists keeps the alarm raised as long as the other outputs and the model can tell. Each
+step reports the episode's start, duration and outputs (:class:`MonitorStep`), a record lists
+the episodes (:class:`Fault`).
+
+The monitor uses the public estimator interface only (``initial_state``, ``advance`` and its
+look-ahead form, ``save_state``/``check_state``, ``run``), keeping the estimator's online
+state itself, so it works with every method; its state (``state()`` / ``restore()``) is
+JSON-serialisable, so a restarted monitor continues with the same boxes and the same alarms as
+one that never stopped.
 """
 
 from __future__ import annotations
 
 from .online import Monitor
-from .records import MonitorRecord, MonitorStep
+from .records import Fault, MonitorRecord, MonitorStep
 
-__all__ = ["Monitor", "MonitorRecord", "MonitorStep"]
+__all__ = ["Fault", "Monitor", "MonitorRecord", "MonitorStep"]

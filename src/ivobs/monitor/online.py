@@ -7,15 +7,17 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_float_array, as_signal, as_vector
+from .._validate import as_float_array, as_signal
 from ..errors import IvobsError
 from ..estimators import Estimator, make_estimator
 from ..io.systemwrite import equal_systems
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box, image_bounds, neg, pos
+from ._codec import _decode, _encode_prev, _vector
+from .latch import Latch
 from .offline import check_record
-from .records import MonitorRecord, MonitorStep, stack_steps
+from .records import MonitorRecord, MonitorStep, output_names, stack_steps
 
 __all__ = ["Monitor"]
 
@@ -32,13 +34,15 @@ class Monitor:
         for ``sys``.
     x0 : prior box on ``x[0]`` (passed to the method, and the first prediction).
     tight : also intersect the prediction with the estimator's own prediction (one extra
-        estimator step per step, with ``y[k]`` missing, on a copy of its state; switched off by
-        itself when the state cannot be copied, as the ``exact`` method's LP solver).
+        estimator step per step, with ``y[k]`` missing, from the same state).
     margin : relative widening of the band against floating-point rounding.
+    clear_after : consecutive steps the held outputs of an open fault must be consistent again
+        before the alarm clears (see :mod:`ivobs.monitor`).
     **options : the method's design options (an explicit gain ``L``, ...).
 
     The monitor takes over the estimator's reports of inconsistent measurements: they become
-    alarms instead of warnings.
+    alarms instead of warnings. It keeps the estimator's online state itself
+    (:attr:`estimator_state`); the estimator's own ``step()`` state is left alone.
 
     >>> import ivobs
     >>> from ivobs.monitor import Monitor
@@ -56,6 +60,7 @@ class Monitor:
         *,
         tight: bool = True,
         margin: float = 1e-9,
+        clear_after: int = 10,
         **options: Any,
     ):
         if not isinstance(sys, LinearSystem):
@@ -82,9 +87,12 @@ class Monitor:
         self.x0 = x0
         self.tight = bool(tight)
         self.margin = float(margin)
+        if isinstance(clear_after, bool) or not isinstance(clear_after, int) or clear_after < 1:
+            raise IvobsError(f"clear_after: expected an integer >= 1 (steps), got {clear_after!r}")
+        self.latch = Latch(clear_after)
         self._split: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._dimg: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        # The estimator's own inconsistency reports become alarms (est.last_inconsistent), not
+        # The estimator's inconsistency reports (in check(), through run()) become alarms, not
         # warnings.
         est.on_inconsistent = "ignore"
         self.reset()
@@ -92,7 +100,9 @@ class Monitor:
     # -- online ---------------------------------------------------------------------------
     def reset(self) -> None:
         """Back to step 0."""
-        self.estimator.reset()
+        self._est: Any = self.estimator.initial_state()
+        self.latch.reset()
+        self._trial: tuple[Any, dict[str, Any] | None] | None = None
         self._k = 0
         self._prev: dict[str, Any] | None = None  # box of x[k-1], u[k-1], y[k-1]
         self.alarms = 0
@@ -114,31 +124,10 @@ class Monitor:
             raise IvobsError("t: a continuous-time system needs the sample time of each step")
         u = np.zeros(0) if (u_k is None and sys.nu == 0) else _vector("u_k", u_k, sys.nu)
         y = self._check_y(y_k)
-        probe = self._probe(u, t) if self.tight else None
-        box = self.estimator.step(u if sys.nu else None, y, t)
-        flagged = self.estimator.last_inconsistent
-        return self._advance(u, y, t, box.lo, box.hi, probe, flagged)
-
-    def _advance(
-        self,
-        u: np.ndarray,
-        y: np.ndarray,
-        t: float | None,
-        lo: np.ndarray,
-        hi: np.ndarray,
-        probe: tuple[np.ndarray, np.ndarray] | None,
-        flagged: bool,
-    ) -> MonitorStep:
-        """The consistency test of step ``k`` given the estimator's box and flag."""
-        k = self._k
+        k, st = self._k, self._est
+        u_e = u if sys.nu else None
         reasons: list[str] = []
-        pred = self._predict(k)
-        if probe is not None:
-            pred = (
-                probe
-                if pred is None
-                else self._meet(pred, probe, reasons, "the estimator's prediction")
-            )
+        pred = self._prediction(k, self._prev, st, u, t, reasons)
         band_lo, band_hi = self._band(k, t, pred, u, y)
         out = (y < band_lo) | (y > band_hi)  # False where y is NaN (missing)
         for i in np.flatnonzero(out)[:3]:
@@ -146,18 +135,166 @@ class Monitor:
                 f"y{i + 1} = {y[i]:.6g} outside the predicted band "
                 f"[{band_lo[i]:.6g}, {band_hi[i]:.6g}]"
             )
-        if flagged:
-            reasons.append(f"{self.method}: measurement inconsistent with the model and bounds")
+        # the policy: outputs of an open fault, and outputs outside the band, never enter the
+        # estimate; outputs the method finds inconsistent are traced and left out as well
+        bad = set(np.flatnonzero(out).tolist())
+        held = self.latch.outputs
+        y_use = y.copy()
+        y_use[sorted(bad | set(held))] = np.nan
+        new, box = self._use(st, u_e, y_use, y, t, reasons)
+        if new.inconsistent:
+            culprits = self._trace(st, u_e, y_use, t)
+            reasons.append(
+                f"{self.method}: measurement of {output_names(culprits)} inconsistent with "
+                "the model and bounds"
+            )
+            bad |= set(culprits)
+            y_use[list(culprits)] = np.nan
+            new, box = self._use(st, u_e, y_use, y, t, reasons)
+        lo, hi = box.lo, box.hi
+        n_reasons = len(reasons)
+        cur = self._current(pred, lo, hi, reasons)
+        if len(reasons) > n_reasons:  # disjoint boxes, not traceable: all the outputs used
+            bad |= set(np.flatnonzero(~np.isnan(y_use)).tolist())
+        prev = None if cur is None else {"lo": cur[0], "hi": cur[1], "u": u, "y": y}
+        # an open fault: the held outputs readmitted in a trial beside the reference estimate
+        # (which keeps pace when they are missing: such a step does not count)
+        held_missing = bool(held) and bool(np.isnan(y[list(held)]).any())
+        if held and not reasons:
+            trial = self._trial or (st, self._prev)
+            why: list[str] = []
+            t_new, t_prev = self._trial_step(k, trial, (pred, cur), u, y_use, y, t, why)
+            if why:
+                reasons.append(f"{output_names(held)} readmitted: {'; '.join(why)}; held out again")
+                self._trial = None
+            else:
+                self._trial = (t_new, t_prev)
+        evidence = bool(reasons)
+        start = self.latch.start
+        self.latch.observe(k, tuple(sorted(bad)), evidence, held_missing)
+        if evidence:
+            self._trial = None
+        alarm = self.latch.start is not None
+        if alarm and not evidence:
+            reasons.append(self.latch.describe())
+        elif not alarm and start is not None:
+            reasons.append(f"cleared: the fault of {output_names(held)} since step {start}")
+            if self._trial is not None:  # verified for clear_after steps: it continues
+                new, prev = self._trial
+            self._trial = None
+        self.alarms += alarm
+        self._est, self._prev, self._k = new, prev, k + 1
+        return MonitorStep(
+            k,
+            lo,
+            hi,
+            alarm,
+            "; ".join(reasons),
+            band_lo,
+            band_hi,
+            evidence,
+            tuple(sorted(bad)),
+            self.latch.start,
+            self.latch.outputs if alarm else (),
+        )
+
+    def _prediction(
+        self,
+        k: int,
+        prev: dict[str, Any] | None,
+        st: Any,
+        u: np.ndarray,
+        t: float | None,
+        reasons: list[str],
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``P_k``: Lemma 1 from ``prev`` met with the estimator's prediction from ``st``."""
+        pred = self._predict(k, prev)
+        probe = self._probe(st, u, t) if self.tight else None
+        if probe is not None:
+            pred = (
+                probe
+                if pred is None
+                else self._meet(pred, probe, reasons, "the estimator's prediction")
+            )
+        return pred
+
+    def _current(
+        self,
+        pred: tuple[np.ndarray, np.ndarray] | None,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        reasons: list[str],
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``X_k``: the estimator's box met with the prediction."""
         cur = None if np.isnan(lo).any() else (lo.copy(), hi.copy())
         if cur is not None and pred is not None:
-            cur = self._meet(pred, cur, reasons, "estimate")
-        elif cur is None:
-            cur = pred
-        alarm = bool(reasons)
-        self.alarms += alarm
-        self._prev = None if cur is None else {"lo": cur[0], "hi": cur[1], "u": u, "y": y}
-        self._k = k + 1
-        return MonitorStep(k, lo, hi, alarm, "; ".join(reasons), band_lo, band_hi)
+            return self._meet(pred, cur, reasons, "estimate")
+        return pred if cur is None else cur
+
+    def _trial_step(
+        self,
+        k: int,
+        trial: tuple[Any, dict[str, Any] | None],
+        ref: tuple[tuple[np.ndarray, np.ndarray] | None, tuple[np.ndarray, np.ndarray] | None],
+        u: np.ndarray,
+        y_use: np.ndarray,
+        y: np.ndarray,
+        t: float | None,
+        why: list[str],
+    ) -> tuple[Any, dict[str, Any] | None]:
+        """One step of the trial estimate that uses the held outputs again (the same test as
+        the reference's: band, the method's own check, disjoint boxes); ``why`` collects
+        what contradicts."""
+        st, prev = trial
+        held = list(self.latch.outputs)
+        y_all = y_use.copy()
+        y_all[held] = y[held]
+        pred = self._prediction(k, prev, st, u, t, why)
+        if pred is not None and ref[0] is not None:  # both hold x[k] if the data are fault-free
+            pred = self._meet(ref[0], pred, why, "the trial's prediction", "the reference's")
+        b_lo, b_hi = self._band(k, t, pred, u, y_all)
+        for i in np.flatnonzero((y_all < b_lo) | (y_all > b_hi))[:3]:
+            why.append(f"y{i + 1} = {y_all[i]:.6g} outside [{b_lo[i]:.6g}, {b_hi[i]:.6g}]")
+        new, box = self.estimator.advance(st, u if self.sys.nu else None, y_all, t)
+        if new.inconsistent:
+            why.append(f"{self.method}: inconsistent with the model and bounds")
+        cur = self._current(pred, box.lo, box.hi, why)
+        if cur is not None and ref[1] is not None:
+            cur = self._meet(ref[1], cur, why, "the trial's estimate", "the reference's")
+        return new, None if cur is None else {"lo": cur[0], "hi": cur[1], "u": u, "y": y}
+
+    def _use(
+        self,
+        st: Any,
+        u: np.ndarray | None,
+        y_use: np.ndarray,
+        y: np.ndarray,
+        t: float | None,
+        reasons: list[str],
+    ) -> tuple[Any, Box]:
+        """The estimator's step without the excluded outputs; with them when the model cannot
+        predict without them (bounds computed from ``y[k]``), said in the reasons."""
+        try:
+            return self.estimator.advance(st, u, y_use, t)
+        except IvobsError:
+            if np.array_equal(np.isnan(y_use), np.isnan(y)):
+                raise
+            reasons.append("the model's bounds need the measurement: used although inconsistent")
+            return self.estimator.advance(st, u, y, t)
+
+    def _trace(
+        self, st: Any, u: np.ndarray | None, y: np.ndarray, t: float | None
+    ) -> tuple[int, ...]:
+        """The measured outputs the method finds inconsistent on their own (look-ahead steps
+        from the same state); all of them when only their combination is."""
+        measured = np.flatnonzero(~np.isnan(y)).tolist()
+        alone = []
+        for i in measured:
+            yi = np.full_like(y, np.nan)
+            yi[i] = y[i]
+            if self.estimator.advance(st, u, yi, t, keep=False)[0].inconsistent:
+                alone.append(i)
+        return tuple(alone or measured)
 
     def run(self, u: Any = None, y: Any = None, *, t: Any = None) -> MonitorRecord:
         """:meth:`update` over a record, continuing from the current state (exactly what a
@@ -211,14 +348,14 @@ class Monitor:
             raise IvobsError("y_k: infinite measurement; use NaN for a missing sample")
         return y
 
-    def _predict(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
+    def _predict(self, k: int, prev: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray] | None:
         """``A[X_{k-1}] + B u[k-1] + E[d[k-1]]`` ([Efimov2013, Lemma 1]), or the prior box at
         ``k = 0``."""
         if k == 0:
             return None if self.x0 is None else (self.x0.lo.copy(), self.x0.hi.copy())
-        if self._prev is None or self.sys.is_continuous:
+        if prev is None or self.sys.is_continuous:
             return None
-        p = self._prev
+        p = prev
         lo, hi = self._image("A", k - 1, p["lo"], p["hi"])
         e_lo, e_hi = self._disturbance_image("E", k - 1, p["y"])
         bu = self.sys.B_at(k - 1) @ p["u"]
@@ -251,14 +388,14 @@ class Monitor:
             self._dimg[name] = out
         return out
 
-    def _probe(self, u: np.ndarray, t: float | None) -> tuple[np.ndarray, np.ndarray] | None:
+    def _probe(
+        self, st: Any, u: np.ndarray, t: float | None
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """The estimator's own box of ``x[k]`` without ``y[k]`` (:meth:`Estimator.predict`)."""
         try:
-            box = self.estimator.predict(u if self.sys.nu else None, t)
-        except IvobsError as exc:
-            if "cannot be copied" in str(exc):  # e.g. a live LP solver: Lemma 1 only from now
-                self.tight = False
-            return None  # also bounds computed from y[k] ([Efimov2013, Remark 1]): no prediction
+            box = self.estimator.advance(st, u if self.sys.nu else None, None, t, keep=False)[1]
+        except IvobsError:
+            return None  # bounds computed from y[k] ([Efimov2013, Remark 1]): no prediction
         return None if box.is_unknown else (box.lo, box.hi)
 
     def _meet(
@@ -267,6 +404,7 @@ class Monitor:
         b: tuple[np.ndarray, np.ndarray],
         reasons: list[str],
         what: str,
+        other: str = "the model's prediction",
     ) -> tuple[np.ndarray, np.ndarray]:
         """``a ∩ b``; when they do not meet (beyond rounding), an alarm and ``b``."""
         lo, hi = np.maximum(a[0], b[0]), np.minimum(a[1], b[1])
@@ -274,7 +412,7 @@ class Monitor:
         if bad.any():
             i = int(np.argmax(bad))
             reasons.append(
-                f"{what} disjoint from the model's prediction in x{i + 1} "
+                f"{what} disjoint from {other} in x{i + 1} "
                 f"([{b[0][i]:.6g}, {b[1][i]:.6g}] vs [{a[0][i]:.6g}, {a[1][i]:.6g}])"
             )
             return b[0].copy(), b[1].copy()
@@ -301,17 +439,23 @@ class Monitor:
 
     # -- persistence ---------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
-        """The monitor's state (estimator state, previous box, counters): JSON-serialisable."""
-        prev = None
-        if self._prev is not None:
-            prev = {key: _encode(val) for key, val in self._prev.items()}
+        """The monitor's state (estimator state, previous box, counters, the open fault):
+        JSON-serialisable."""
+        prev = _encode_prev(self._prev)
         return {
             "version": STATE_VERSION,
             "method": self.method,
             "k": self._k,
             "alarms": self.alarms,
             "prev": prev,
-            "estimator": self.estimator.state(),
+            "fault": self.latch.state(),
+            "trial": None
+            if self._trial is None
+            else {
+                "estimator": self.estimator.save_state(self._trial[0]),
+                "prev": _encode_prev(self._trial[1]),
+            },
+            "estimator": self.estimator.save_state(self._est),
         }
 
     def restore(self, state: dict[str, Any]) -> None:
@@ -319,36 +463,34 @@ class Monitor:
         if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
             raise IvobsError("state: expected the dict returned by Monitor.state()")
         try:
-            self.estimator.restore(state["estimator"])
+            est = self.estimator.check_state(state["estimator"])
             prev = state["prev"]
-            self._prev = None if prev is None else {k: _decode(v) for k, v in prev.items()}
-            self._k = int(state["k"])
-            self.alarms = int(state["alarms"])
+            prev = None if prev is None else {k: _decode(v) for k, v in prev.items()}
+            k, alarms = int(state["k"]), int(state["alarms"])
+            trial = state.get("trial")
+            if trial is not None:
+                t_prev = trial["prev"]
+                trial = (
+                    self.estimator.check_state(trial["estimator"]),
+                    None if t_prev is None else {k: _decode(v) for k, v in t_prev.items()},
+                )
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, IvobsError):
                 raise
             raise IvobsError(f"state: malformed monitor state ({exc!r})") from None
-        if self.estimator.k != self._k:
-            raise IvobsError(
-                f"state: the estimator is at step {self.estimator.k}, the monitor at {self._k}"
-            )
+        if est.k != k:
+            raise IvobsError(f"state: the estimator is at step {est.k}, the monitor at {k}")
+        self.latch.restore(state.get("fault"), self.sys.ny, k)
+        if trial is not None and (self.latch.start is None or trial[0].k != k):
+            raise IvobsError("state: trial: a trial estimate needs an open fault at the same step")
+        self._est, self._prev, self._k, self.alarms = est, prev, k, alarms
+        self._trial = trial
+
+    @property
+    def estimator_state(self) -> Any:
+        """The estimator's online state the monitor continues from (the estimator's own
+        ``step()`` state is not used)."""
+        return self._est
 
     def __repr__(self) -> str:
         return f"<Monitor {self.method!r} k={self._k} alarms={self.alarms}>"
-
-
-def _vector(name: str, v: Any, n: int) -> np.ndarray:
-    if isinstance(v, np.ndarray) and v.shape == (n,) and v.dtype == float:
-        if not np.all(np.isfinite(v)):
-            raise IvobsError(f"{name}: expected finite numbers, got {v}")
-        return v.copy()
-    return as_vector(name, v, n)
-
-
-def _encode(v: np.ndarray) -> list[Any]:
-    """Arrays as lists, with non-finite values spelled out (strict JSON has no NaN/inf)."""
-    return [x if np.isfinite(x) else str(x) for x in np.asarray(v, dtype=float).tolist()]
-
-
-def _decode(v: list[Any]) -> np.ndarray:
-    return np.array([float(x) for x in v], dtype=float)
