@@ -661,3 +661,58 @@ def test_time_varying_with_nearly_singular_steps():
     assert np.linalg.cond(sys.A_at(3)) > 1e6
     tr = adversarial_run(sys, Box(-20 * np.ones(3), 20 * np.ones(3)), 60, seed=4)
     _check(sys, tr, s=3)
+
+
+# -- [Wang2020, Remark 1]: a singular A through the output injection ----------------------------
+def _remark1_system(noise):
+    """A = [[0, 1], [0, 0.5]] (singular), C = [1, 0]: x_k lies in the range of A, so y_k alone
+    gives x_k; the injected window (A - LC invertible) shows it through its parity relation."""
+    A, C = np.array([[0.0, 1.0], [0.0, 0.5]]), np.array([[1.0, 0.0]])
+    if not noise:
+        return LinearSystem(A, None, C)
+    return LinearSystem(
+        A, None, C, E=0.01 * np.eye(2), F=[[0.0, 0.02]], d=Box.symmetric([1.0, 1.0])
+    )
+
+
+@pytest.mark.parametrize("with_x0", [False, True])
+def test_remark1_singular_A_is_exact_after_s_steps_without_noise(with_x0):
+    """The default s = nx - 1 = 1: from k = s on the box is the state itself (fixed time,
+    Remark 3), with or without a prior (before: 'too many missing samples' without x0, and with
+    x0 the open-loop prediction of x0, width 10 / 2^k)."""
+    sys = _remark1_system(noise=False)
+    x0 = Box([-5.0, -5.0], [5.0, 5.0]) if with_x0 else None
+    est = ivobs.make_estimator("fixed-time", sys, x0=x0)
+    assert est.s == 1 and est.design.L is not None
+    assert abs(np.linalg.det(sys.A - est.design.L @ sys.C)) > 0.1  # A - LC invertible
+    tr = ivobs.simulate(sys, [3.0, -2.0], T=12)
+    for vectorize in (False, True):
+        res = est.run(None, tr.y, vectorize=vectorize)
+        assert_contains(res, tr.x)
+        # exact up to the rounding margins of the bounds (ROUNDING and the certified gain)
+        assert np.max(res.width[1:]) < 1e-8
+        assert np.all(res.width[1:] <= 1e-9 * (1.0 + np.abs(tr.x[1:])))
+    est.reset()
+    for k in range(4):
+        box = est.step(None, tr.y[k])
+        if k >= 1:
+            np.testing.assert_allclose(box.lo, tr.x[k], atol=1e-9)
+            np.testing.assert_allclose(box.hi, tr.x[k], atol=1e-9)
+
+
+def test_remark1_singular_A_with_noise_constant_widths_and_containment():
+    """With bounded noise: every box of k >= s has the width of eq. (11) for the injected
+    window: x1_k = y_k - 0.02 d2_k and x2_k = 0.5 y_k - 0.01 d2_k - 0.005 d1_(k-1) + 0.01 d2_(k-1)
+    (0.04 and 0.05 wide),
+    whatever the state (no open-loop growth), and contains the truth under vertex disturbances
+    (loop and vectorised paths, with and without a prior)."""
+    sys = _remark1_system(noise=True)
+    for x0 in (None, Box([-50.0, -50.0], [50.0, 50.0])):
+        est = ivobs.make_estimator("fixed-time", sys, x0=x0)
+        assert est.s == 1 and est.design.L is not None
+        for seed in range(4):
+            tr = adversarial_run(sys, Box([-50.0, -50.0], [50.0, 50.0]), 300, seed=seed)
+            _, loop = _check(sys, tr, x0=x0)
+            w = loop.width[1:]
+            # up to the rounding margins (relative to the data, ~1e-8 here)
+            np.testing.assert_allclose(w, np.broadcast_to([0.04, 0.05], w.shape), atol=1e-6)

@@ -502,13 +502,60 @@ def test_default_target_is_faster_than_the_plant_and_long_records_run(h):
     assert np.all(np.isfinite(res.lower)) and np.max(res.width[t.size // 2 :]) < 2.0
 
 
-def test_user_target_with_an_unstable_flow_is_refused_at_construction():
+def test_target_slower_than_a_plant_mode_is_accepted_as_proposition_1_allows():
+    """[Dinh2024, Proposition 1] asks A_z Metzler and Hurwitz, eig(A_z) disjoint from eig(A),
+    (A_z, B_z) controllable and T invertible; not every target mode faster than every plant
+    mode (the rule applied before, which refused these targets)."""
     sys = _two_mode_plant()
     x0 = Box(-np.ones(2), np.ones(2))
-    with pytest.raises(DesignError, match=r"flow dT/dt = A_z T - T A .*unstable.*-1\.15.*-3\.50"):
-        make_estimator("kkl", sys, x0=x0, A_z=np.diag([-1.15, -5.0]), B_z=np.ones((2, 1)))
-    est = make_estimator("kkl", sys, x0=x0, A_z=np.diag([-4.0, -5.0]), B_z=np.ones((2, 1)))
-    assert _max_re(est.design.A_z) < _min_re(sys.A)
+    est = make_estimator("kkl", sys, x0=x0, A_z=np.diag([-1.15, -5.0]), B_z=np.ones((2, 1)))
+    assert _max_re(est.design.A_z) > _min_re(sys.A)  # -1.15 > -3.51
+    # the conditions Proposition 1 does ask are still checked
+    with pytest.raises(DesignError, match="shares an eigenvalue with A"):
+        make_estimator("kkl", sys, x0=x0, A_z=np.diag([_min_re(sys.A), -5.0]), B_z=[[1], [1]])
+    with pytest.raises(DesignError, match="must be Metzler"):
+        make_estimator("kkl", sys, x0=x0, A_z=[[-1.15, -0.1], [0.0, -5.0]], B_z=[[1], [1]])
+
+
+def _unstable_fast_plant():
+    # modes +0.2 (unstable: the open-loop prediction diverges) and -6
+    return LinearSystem(
+        [[0.2, 1.0], [0.0, -6.0]], None, [[1.0, 0.3]], E=0.05 * np.eye(2), F=[[0.0, 0.02]],
+        d=Box.symmetric([1.0, 1.0]), dt=0,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("missing", [False, True])
+def test_slow_target_is_sound_with_disturbances_switching_inside_intervals(missing):
+    """Target modes -1, -2 on a plant with modes 0.2 and -6 (refused before): the flow of T
+    between samples is unstable, the regular grid keeps T at T_h, and after a missing sample
+    the state is brought back onto T_h (sampled.ContinuousLTI.restart). Vertex disturbances
+    switching 4x per interval, 10 % missing and a 15-sample gap: the box contains the state
+    at every sample and stays bounded (without the restart: width 38 from the unstable mode)."""
+    sys = _unstable_fast_plant()
+    x0 = Box(-np.ones(2), np.ones(2))
+    est = make_estimator("kkl", sys, x0=x0, A_z=np.diag([-1.0, -2.0]), B_z=np.ones((2, 1)))
+    rng = np.random.default_rng(0)
+    h, m, n = 0.05, 4, 400
+    t = np.arange(n) * h
+    fine = np.arange((n - 1) * m + 1) * (h / m)
+    for rep in range(2):
+        tr = simulate(
+            sys, [1.0, -1.0] if rep else [-1.0, 1.0], None,
+            ivobs.vertex_disturbance(sys.d, fine.size, seed=rng), t=fine,
+        )  # fmt: skip
+        y = tr.y[::m].copy()
+        if missing:
+            y[rng.random(y.shape) < 0.1] = np.nan
+            y[60:75] = np.nan
+        res = est.run(None, y, t=t)
+        assert_contains(res, tr.x[::m])
+        w = res.width[100:]
+        assert np.all(np.isfinite(w))
+        if missing:
+            assert w[:, 0].max() < 8.0 and w[-100:, 0].mean() < 2.5 and w[:, 1].max() < 0.02
+        else:  # T constant at T_h: the observer's own width
+            assert w[:, 0].max() < 0.85 and w[:, 1].max() < 0.02
 
 
 def test_time_varying_flow_rule_at_t0_and_default_ell():
@@ -695,6 +742,24 @@ def test_other_options_are_checked_and_named():
         make_estimator("kkl", sc.system, x0=sc.x0, coordinates=np.array(["z", "x"]))
     with pytest.raises(IvobsError, match="input_hold: expected"):
         make_estimator("kkl", sc.system, x0=sc.x0, input_hold=np.zeros(3))
+
+
+@pytest.mark.parametrize("steps", [550, 1])
+def test_ltv_transform_never_left_invertible_in_the_stacked_horizon_is_a_design_error(steps):
+    """T[k] (15.b) needs A[0..k-1]: a stack that keeps x1 unobserved (550 steps), or too short
+    for T[k] to gain rank (1 step), never gives a box: a DesignError saying so and what to try
+    (before: 'A: step 550 is beyond the 550 stacked matrices')."""
+    C = [[0.0, 1.0]] if steps > 1 else [[1.0, 0.0]]
+    sys = LinearSystem(np.stack([np.array([[1.0, 0.1], [0.0, 1.0]])] * steps), None, C)
+    with pytest.raises(
+        DesignError,
+        match=rf"never becomes valid in the horizon given.*k = 0\.\.{steps} .*"
+        rf"{steps} stacked matrices.*give more steps of A and C",
+    ):
+        make_estimator("kkl", sys, x0=Box([-1, -1], [1, 1]))
+    # long enough and observable: T[k] is left-invertible from k = 2 on
+    ok = LinearSystem(np.stack([np.array([[1.0, 0.1], [0.0, 1.0]])] * 3), None, [[1.0, 0.0]])
+    assert make_estimator("kkl", ok, x0=Box([-1, -1], [1, 1])).design.k_star == 2
 
 
 def test_singular_A_k_in_time_varying_discrete_time():

@@ -12,7 +12,7 @@ are immediate ([Dinh2024, Proposition 1]). Nothing here loops over time.
 
 * :mod:`.equation`: the equation (4), the conditions of Proposition 1 on a target pair, the
   predicted width of the bounds;
-* :mod:`.flow`: the flow rule of the continuous-time observer;
+* :mod:`.flow`: the flow of ``T`` in the continuous-time observer (the default target's rule);
 * :mod:`.targets`: the default diagonal target of a time-invariant system and the block targets
   of time-varying systems.
 """

@@ -1,17 +1,23 @@
-"""The flow rule of the continuous-time KKL observer ([Dinh2024], sampled-data form).
+"""The flow of ``T`` in the continuous-time KKL observer ([Dinh2024], sampled-data form).
 
 With sampled measurements the observer carries ``T(t)``, which between samples follows
 ``dT/dt = A_z T - T A`` (the sampled-data form of (10.b), see
 :mod:`ivobs.estimators.kkl.continuous`). That flow is the linear map ``T ↦ A_z T - T A`` whose
-eigenvalues are ``λ_i(A_z) - λ_j(A)``, so it is stable iff (:func:`flow_gap`, :func:`check_flow`)::
+eigenvalues are ``λ_i(A_z) - λ_j(A)``, so it is stable iff (:func:`flow_gap`)::
 
     max Re λ(A_z) < min Re λ(A)          (every target mode faster than every plant mode)
 
-Otherwise any deviation of ``T`` from its periodic solution (rounding, a missing sample, an
-irregular grid) grows like ``exp((max Re λ(A_z) - min Re λ(A)) t)``, the rows of ``T`` align
-and ``T`` stops being invertible. The default target keeps a margin: ``a_max = min(-0.05 s,
-min Re λ(A) - 0.05 s)`` (:data:`FLOW_MARGIN`), so deviations decay at least like
-``exp(-0.05 s t)``.
+This is *not* a condition of [Dinh2024, Proposition 1] (time-invariant: ``T`` is constant),
+and a user's target need not obey it there: with an unstable flow the time-invariant observer
+keeps ``T`` at its fixed point on a regular grid and brings it back after a missing sample
+(:meth:`ivobs.estimators.kkl.sampled.ContinuousLTI.restart`). Where it is used:
+
+* the default time-invariant target obeys it with a margin, ``a_max = min(-0.05 s,
+  min Re λ(A) - 0.05 s)`` (:func:`flow_cap`, :data:`FLOW_MARGIN`), so that deviations of ``T``
+  decay by themselves (at least like ``exp(-0.05 s t)``);
+* time-varying systems (observer (10), ``T(t)`` integrated over the whole run; Proposition 3
+  asks ``ell`` above an ``ell*`` that cannot be computed) check it with ``A(t)`` frozen at
+  ``t = 0`` (:func:`check_flow`).
 """
 
 from __future__ import annotations
@@ -55,7 +61,8 @@ def flow_cap(A: Any) -> float:
 
 
 def check_flow(A_z: Any, A: Any, *, who: str = "A_z", frozen: str = "") -> float:
-    """Raise :class:`DesignError` unless ``max Re λ(A_z) < min Re λ(A)`` (continuous time).
+    """Raise :class:`DesignError` unless ``max Re λ(A_z) < min Re λ(A)`` (continuous time;
+    used for time-varying systems, with ``A(t)`` frozen, see the module docstring).
 
     The sampled-data observer integrates ``dT/dt = A_z T - T A`` between samples; that flow is
     stable iff this holds (module docstring). ``frozen`` (e.g. ``" at t = 0"``) says where a

@@ -424,19 +424,40 @@ class TransformSequence:
         return seq[k]
 
     def first_left_invertible(self) -> tuple[int, float]:
-        """Offline: the first ``k`` with ``cond(T[k]) <= max_cond``, and that condition number."""
-        A = self.sys.A
-        stacked = isinstance(A, np.ndarray) and A.ndim == 3
-        # T[k] needs A[0..k-1]: a stack of N matrices determines T[0..N]; one step further,
-        # LinearSystem's own error says that the stack is too short (not "not observable")
-        limit = A.shape[0] + 2 if stacked else 100 + 20 * self._seq[0].T.shape[0]
+        """Offline: the first ``k`` with ``cond(T[k]) <= max_cond``, and that condition number.
+
+        ``T[k]`` needs ``A[0..k-1]`` and ``C[0..k-1]``: stacked matrices of ``N`` steps
+        determine ``T[0..N]``, and all of them are checked; a :class:`DesignError` says so when
+        none is left-invertible (the observer would never give a box within the horizon
+        given)."""
+        stacks = [M.shape[0] for M in (self.sys.A, self.sys.C) if _is_stack(M)]
+        horizon = min(stacks) if stacks else None
+        limit = horizon + 1 if horizon is not None else 100 + 20 * self._seq[0].T.shape[0]
+        best = float("inf")
         for k in range(limit):
             tr = self.at(k)
             if tr.ok:
                 return k, tr.cond
-        raise DesignError(
-            f"T[k] (eq. 15.b) did not become left-invertible within {limit} steps "
-            f"(cond(T[k]) > max_cond = {self.max_cond:.0e}): the pair (A[k], C[k]) may not be "
-            "uniformly observable; try a smaller gamma or another A_z, B_z "
-            "([Dinh2024, Proposition 4])"
+            best = min(best, tr.cond)
+        advice = (
+            "try a smaller gamma (faster forgetting), another A_z, B_z, or a larger max_cond "
+            "if the pair (A[k], C[k]) is uniformly observable ([Dinh2024, Proposition 4])"
         )
+        if horizon is not None:
+            raise DesignError(
+                f"kkl: the observer never becomes valid in the horizon given: T[k] (eq. 15.b) "
+                f"is not left-invertible for any k = 0..{horizon} determined by the "
+                f"{horizon} stacked matrices A[k], C[k] (smallest cond(T[k]) = {best:.3e} > "
+                f"max_cond = {self.max_cond:.0e}); give more steps of A and C (a longer stack "
+                f"or a function of k) if the pair becomes observable later, or {advice}"
+            )
+        raise DesignError(
+            f"kkl: T[k] (eq. 15.b) did not become left-invertible within {limit} steps "
+            f"(smallest cond(T[k]) = {best:.3e} > max_cond = {self.max_cond:.0e}): the pair "
+            f"(A[k], C[k]) may not be uniformly observable; {advice}"
+        )
+
+
+def _is_stack(M: Any) -> bool:
+    """Stacked matrices ``(N, rows, cols)`` (a time-varying matrix given for ``N`` steps)."""
+    return isinstance(M, np.ndarray) and M.ndim == 3

@@ -16,7 +16,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..._validate import as_vector
+from ...design.sylvester import flow_gap
 from ...errors import DesignError
+from ...linalg import gamma
 from ...sets import image_bounds
 from .continuous import ContinuousObserver, ContinuousState, Flowed, InputHold, Span
 from .design import left_inverse
@@ -54,6 +56,9 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
     def __init__(self, setting: Setting, hold: InputHold, rtol: float, atol: float):
         super().__init__(setting, hold, rtol, atol)
         self._periods: dict[float, PeriodData] = {}
+        # a target slower than a plant mode ([Dinh2024, Proposition 1] allows it): the flow of T
+        # between samples is unstable, so T is brought back onto T_h from the last box
+        self._restart = flow_gap(self.design.A_z, self.sys.A_at(0)) >= 0.0
 
     def initial_state(self) -> ContinuousLTIState:
         xlo, xhi = self.initial_x()
@@ -83,7 +88,7 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
         an = self.anchor(c, first=k == 1)
         model = self.predict_box(c, state.xlo, state.xhi, span)
         if an is not None:
-            T, zlo, zhi = self.to_anchor(an, k, T, zlo, zhi)
+            T, zlo, zhi = self.to_anchor(an, k, T, zlo, zhi, (state.xlo, state.xhi))
         if an is not None and T is an.T:  # constant T: nothing propagated
             return Flowed(*self.flow_anchored(c, an, zlo, zhi, span), an, model)
         return Flowed(*self.flow_exact(T, zlo, zhi, span), None, model)
@@ -174,7 +179,13 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
         return c.anchor
 
     def to_anchor(
-        self, an: Anchor, k: int, T: np.ndarray, zlo: np.ndarray, zhi: np.ndarray
+        self,
+        an: Anchor,
+        k: int,
+        T: np.ndarray,
+        zlo: np.ndarray,
+        zhi: np.ndarray,
+        box: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Switch the state ``(T, z̲, z̄)`` at ``t_(k-1)+`` to ``T_h`` when that costs nothing.
 
@@ -182,7 +193,10 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
         interval (``k = 1``, nothing measured yet): ``z`` is re-initialised from ``x0`` by (3.b)
         with ``T_h``. ``T`` within ``1e-9`` (relative) of ``T_h`` (back after missing samples or a
         change of period, the flow being stable): ``T_h x = z + (T_h - T) T⁻¹ z``, bounded by
-        Lemma 1. Otherwise the state is returned unchanged.
+        Lemma 1. Otherwise, when the flow of ``T`` is unstable (a target mode slower than a
+        plant mode, which [Dinh2024, Proposition 1] allows: the deviation of ``T`` from ``T_h``
+        would grow), ``z`` is re-initialised from the last box ``box`` of ``x`` by (3.b) with
+        ``T_h``; else the state is returned unchanged.
         """
         Th = an.T
         if T is Th:
@@ -197,7 +211,35 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
             if tr.ok:
                 clo, chi = image_bounds((Th - T) @ tr.P, zlo, zhi)
                 return Th, zlo + clo, zhi + chi
+        if self._restart and box is not None and np.all(np.isfinite(box[0] + box[1])):
+            return (Th, *self.restart(Th, T, zlo, zhi, box))
         return T, zlo, zhi
+
+    def restart(
+        self,
+        Th: np.ndarray,
+        T: np.ndarray,
+        zlo: np.ndarray,
+        zhi: np.ndarray,
+        box: tuple[np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``T_h x`` from ``z̲ <= T x <= z̄`` and the box of ``x``: (3.b) with ``T_h``
+        on the box, intersected (when ``T`` is left-invertible, ``P T = I``) with
+        ``T_h x = (I + (T_h - T) P) T x`` by Lemma 1, plus ``|T_h - T| |P T - I| |x|`` for the
+        rounding of ``P`` (its residual bounded with ``γ_n``, [Higham2002, Lemma 3.1])."""
+        lo, hi = image_bounds(Th, box[0], box[1])
+        tr = left_inverse(T, self.max_cond)
+        if tr.ok:
+            n = T.shape[1]
+            M = np.eye(T.shape[0]) + (Th - T) @ tr.P
+            clo, chi = image_bounds(M, zlo, zhi)
+            res = np.abs(tr.P @ T - np.eye(n)) + gamma(n + 2) * (np.abs(tr.P) @ np.abs(T))
+            xabs = np.maximum(np.abs(box[0]), np.abs(box[1]))
+            m = np.abs(Th - T) @ (res @ xabs) * (1.0 + gamma(2 * n + 2))
+            nlo, nhi = np.maximum(lo, clo - m), np.minimum(hi, chi + m)
+            ok = nlo <= nhi  # crossed only on data inconsistent with the model: keep (3.b)
+            lo, hi = np.where(ok, nlo, lo), np.where(ok, nhi, hi)
+        return lo, hi
 
     def flow_anchored(
         self, c: PeriodData, an: Anchor, zlo: np.ndarray, zhi: np.ndarray, span: Span
