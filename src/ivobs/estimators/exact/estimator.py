@@ -95,10 +95,14 @@ class Exact(Estimator):
     docstring for the formulation and the safe (solver-tolerance independent) bounds.
 
     Online, the program is kept warm-started from step to step (:meth:`step`, :meth:`run`, and
-    :meth:`advance` from the state the previous call returned); a state restored by
-    :meth:`restore`, or passed to :meth:`advance` otherwise, has its program rebuilt from the
-    kept history, solved from a cold start (the boxes then agree to the solver's dual
-    tolerance, not bit for bit).
+    :meth:`advance` from the state the previous call returned). Every step starts from the
+    simplex bases the previous one ended on, and nothing else, and :meth:`state` saves those
+    bases: a restored state rebuilds the same program and continues bit for bit like the run
+    that saved it. A state saved without bases (by an older ivobs) continues from a cold start:
+    its boxes agree with the run's to the solver's tolerances (both are safe bounds; typically
+    1e-8 relative to ``1 + |x|``). Each solve is capped at 20,000 simplex iterations; a program
+    stopped there still gives a guaranteed (possibly wider) box, and a ``RuntimeWarning`` says
+    at which step.
     """
 
     name = "exact"

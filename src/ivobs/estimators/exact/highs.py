@@ -45,8 +45,9 @@ _PRIMAL_TOL = 1e-9
 
 _DUAL_TOL = 1e-10
 """HiGHS dual feasibility tolerance: the safe bound loses up to this times the sum of the
-widths of the variables (two runs that end on different optimal bases, e.g. ``step()`` after
-``restore()`` and ``run()``, then agree to about that much: 5e-9 for 16 steps of 2 states)."""
+widths of the variables (two solves of one program that end on different optimal bases agree to
+about that much, e.g. a state saved without bases and restored: 5e-9 for 16 steps of 2
+states)."""
 
 _ITERATION_LIMIT = 20_000
 """Simplex iterations allowed per program (typically 60-110 here, a few thousand on unstable
