@@ -25,10 +25,17 @@ block dropped in a moving window) and handed to two HiGHS models (``highspy``), 
 minimisations and one for the ``nx`` maximisations, solved in two threads. Each model keeps its
 basis from program to program and from step to step (only the cost, the bounds or appended rows
 change), so every solve is warm-started: a chain of neighbouring objectives
-``min x[k][0], ..., min x[k][n-1]`` (and the maxima in reverse order). HiGHS sees the program
-shifted to the centres of the variable bounds (``z = m + z'``; ``m``: the centre of the interval
-prediction of ``x[j]`` and of the box of ``d[j]``), so that its absolute tolerances act at the
-scale of the widths, not of ``|x|`` (a state near ``1e9`` with a width of 10 is an ordinary LP).
+``min x[k][0], ..., min x[k][n-1]`` (and the maxima in reverse order). Each step starts from the
+bases alone (no factorisation or pricing weights kept from the previous step), and HiGHS's own
+scaling is off (it was computed once and extended row by row, so a program rebuilt in one go
+was scaled differently): a state saved with its bases (``state()``) therefore continues, once
+restored, with exactly the solves of the run that saved it, bit for bit. Each solve is capped
+at 20,000 simplex iterations (a stalled or very long solve); a capped program still gives the
+safe bound (S) of its last multipliers, and the step warns (``RuntimeWarning``).
+HiGHS sees the program shifted to the centres of the variable bounds (``z = m + z'``; ``m``:
+the centre of the interval prediction of ``x[j]`` and of the box of ``d[j]``), so that its
+absolute tolerances act at the scale of the widths, not of ``|x|`` (a state near ``1e9`` with a
+width of 10 is an ordinary LP).
 
 Soundness under floating point. The data are floating-point numbers, so each equation is kept up
 to the rounding of one floating-point evaluation of it: row ``i`` is the range

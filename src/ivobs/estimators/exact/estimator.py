@@ -4,7 +4,8 @@ its step (push a block, solve, prove, remember). The formulation is in the packa
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import warnings
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -16,7 +17,7 @@ from ...sets import Box
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from .highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts
+from .highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts, basis_array, basis_of
 from .program import TrajectoryLP
 from .rows import dynamics, measurement, outside_prediction, prediction, widen
 
@@ -42,6 +43,11 @@ class ExactState(OnlineState):
     the program (False: dropped as inconsistent); ``p_lo``, ``p_hi`` (·, nx): the interval
     prediction of ``x[j]`` (the row ranges and shifts of the program). ``relaxed``: HiGHS needs
     the row ranges (not the equalities) since a rounding made the equalities infeasible.
+    ``basis_min``, ``basis_max``: the simplex bases the next step of the two chains starts from
+    (HiGHS status codes of the columns, then of the rows), so that a restored state continues
+    with the same solves as the run that saved it. Filled when the state is saved (while
+    running, the warm-started models hold them); empty: a cold start. A basis is only a
+    starting point: any basis gives the same guaranteed bounds (S).
 
     The warm-started HiGHS models are not part of the state (:class:`~.highs.WarmStarts`)."""
 
@@ -55,6 +61,8 @@ class ExactState(OnlineState):
     p_lo: np.ndarray
     p_hi: np.ndarray
     relaxed: bool = False
+    basis_min: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
+    basis_max: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
 
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (
         ("x_lo", "x_hi"),
@@ -87,10 +95,14 @@ class Exact(Estimator):
     docstring for the formulation and the safe (solver-tolerance independent) bounds.
 
     Online, the program is kept warm-started from step to step (:meth:`step`, :meth:`run`, and
-    :meth:`advance` from the state the previous call returned); a state restored by
-    :meth:`restore`, or passed to :meth:`advance` otherwise, has its program rebuilt from the
-    kept history, solved from a cold start (the boxes then agree to the solver's dual
-    tolerance, not bit for bit).
+    :meth:`advance` from the state the previous call returned). Every step starts from the
+    simplex bases the previous one ended on, and nothing else, and :meth:`state` saves those
+    bases: a restored state rebuilds the same program and continues bit for bit like the run
+    that saved it. A state saved without bases (by an older ivobs) continues from a cold start:
+    its boxes agree with the run's to the solver's tolerances (both are safe bounds; typically
+    1e-8 relative to ``1 + |x|``). Each solve is capped at 20,000 simplex iterations; a program
+    stopped there still gives a guaranteed (possibly wider) box, and a ``RuntimeWarning`` says
+    at which step.
     """
 
     name = "exact"
@@ -148,8 +160,11 @@ class Exact(Estimator):
         k, sys = state.k, self.sys
         warm = None if self._branching else self._warm.take(state.history, (k, state.relaxed))
         if warm is None:
+            bases = self._bases(state)
             warm = self._rebuild(state)
-        lp = warm.lp
+            if bases is not None:
+                warm.start(bases)
+        lp, capped = warm.lp, warm.capped
         d_k = sys.d_at(k, y_k)
         if k > 0:
             prev = (state.x_lo[-1], state.x_hi[-1], state.d_lo[-1], state.d_hi[-1])
@@ -178,6 +193,14 @@ class Exact(Estimator):
             lo, hi, _ = warm.last_x_box()  # if still not OK: the variable bounds (the prediction)
         # both bounds are proven: if they cross, the data are inconsistent; the hull stays valid
         lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+        if warm.capped > capped:
+            warnings.warn(
+                f"exact: step {k}: {warm.capped - capped} linear program(s) stopped at the "
+                "iteration budget; the box is guaranteed (safe bound of the last multipliers) "
+                "but may be wider than the exact hull",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         x_lo, x_hi = lp.tighten_last_x(*widen(lo, hi))
         rows = {"x_lo": x_lo, "x_hi": x_hi, "y": y_k, "u": u_k, "d_lo": d_k.lo, "d_hi": d_k.hi,
                 "p_lo": p_lo, "p_hi": p_hi}  # fmt: skip
@@ -221,6 +244,46 @@ class Exact(Estimator):
             x_b = (state.x_lo[i], state.x_hi[i])
             lp.push(dyn, meas, x_b, (d_lo, d_hi), 0.5 * (p_lo + p_hi))
         return warm
+
+    def _bases(self, state: ExactState) -> tuple[Any, Any] | None:
+        """The bases the next step of ``state`` starts from: saved with it, or those of its
+        warm-started program; None if neither (a cold start)."""
+        if state.basis_min.size and state.basis_max.size:
+            # the chain's program: the kept steps, and in a full moving window the one before
+            N = self.design.window
+            n_col = (state.k if N is None else min(state.k, N + 1)) * (self.sys.nx + self.sys.nd)
+            return basis_of(state.basis_min, n_col), basis_of(state.basis_max, n_col)
+        bases = self._warm.bases(state.history, (state.k, state.relaxed))
+        return None if bases is None else (bases[0], bases[1])
+
+    def save_state(self, st: Any) -> dict[str, Any]:
+        """The state with the bases of its warm-started program (see :class:`ExactState`)."""
+        if isinstance(st, ExactState) and not st.basis_min.size:
+            bases = self._bases(st)
+            if bases is not None and all(b.valid for b in bases):
+                st = replace(st, basis_min=basis_array(bases[0]), basis_max=basis_array(bases[1]))
+        return super().save_state(st)
+
+    def check_state(self, state: Any) -> ExactState:
+        """As :meth:`Estimator.check_state`; a state saved without bases (before they were
+        saved) is accepted and continues from a cold start. The bases are checked (status
+        codes 0-4)."""
+        if isinstance(state, dict) and isinstance(state.get("state"), dict):
+            inner = dict(state["state"])
+            for key in ("basis_min", "basis_max"):
+                inner.setdefault(key, {"shape": [0], "array": [], "dtype": "|i1"})
+            state = {**state, "state": inner}
+        st = super().check_state(state)
+        assert isinstance(st, ExactState)
+        for key in ("basis_min", "basis_max"):
+            codes = getattr(st, key)
+            if codes.ndim != 1 or (codes.size and (codes.min() < 0 or codes.max() > 4)):
+                raise IvobsError(
+                    f"state: entry {key!r}: expected HiGHS basis status codes 0-4, got "
+                    f"{codes[:8]!r}; the state was altered or is not from Estimator.state() "
+                    "of this estimator"
+                )
+        return st
 
     # -- offline loop with a progress bar --------------------------------------------------
     def _loop(

@@ -25,7 +25,17 @@ import numpy as np
 from .program import TrajectoryLP
 from .safe import SafeBoundData, certifies_infeasibility, safe_min
 
-__all__ = ["INFEASIBLE", "OK", "PARALLEL", "UNSURE", "Chain", "WarmStartedLP", "WarmStarts"]
+__all__ = [
+    "INFEASIBLE",
+    "OK",
+    "PARALLEL",
+    "UNSURE",
+    "Chain",
+    "WarmStartedLP",
+    "WarmStarts",
+    "basis_array",
+    "basis_of",
+]
 
 PARALLEL = (os.cpu_count() or 1) > 1
 """Solve the min and the max programs in two threads."""
@@ -35,11 +45,14 @@ _PRIMAL_TOL = 1e-9
 
 _DUAL_TOL = 1e-10
 """HiGHS dual feasibility tolerance: the safe bound loses up to this times the sum of the
-widths of the variables (two runs that end on different optimal bases, e.g. ``step()`` after
-``restore()`` and ``run()``, then agree to about that much: 5e-9 for 16 steps of 2 states)."""
+widths of the variables (two solves of one program that end on different optimal bases agree to
+about that much, e.g. a state saved without bases and restored: 5e-9 for 16 steps of 2
+states)."""
 
-_ITERATION_LIMIT = 100_000
-"""Simplex iterations allowed per program (typically 60-110 here)."""
+_ITERATION_LIMIT = 20_000
+"""Simplex iterations allowed per program (typically 60-110 here, a few thousand on unstable
+systems over a long horizon). A program stopped by it still gives a safe bound (S) from its last
+multipliers; :attr:`WarmStartedLP.capped` counts them."""
 
 OK, INFEASIBLE, UNSURE = "ok", "infeasible", "unsure"
 """Verdicts of a solve: bounds found; infeasible with a certificate; infeasible says HiGHS, but
@@ -107,7 +120,26 @@ def _new_highs() -> highspy.Highs:
     # and dropped: cora-vehicle6 never finished) ends as not optimal, and the safe bound (S)
     # of its last multipliers (or the variable bounds) is used; ~100 iterations are typical
     h.setOptionValue("simplex_iteration_limit", _ITERATION_LIMIT)
+    # no HiGHS scaling: it is kept from the first solve and extended row by row as the program
+    # grows, so a program rebuilt after restore() would be scaled (and solved) differently from
+    # the one built step by step; the shift to the centres already scales the program
+    h.setOptionValue("simplex_scale_strategy", 0)
     return h
+
+
+def basis_array(b: highspy.HighsBasis) -> np.ndarray:
+    """A HiGHS basis as int8 codes (the column statuses, then the row statuses)."""
+    codes = [int(v) for v in b.col_status] + [int(v) for v in b.row_status]
+    return np.array(codes, dtype=np.int8)
+
+
+def basis_of(codes: np.ndarray, n_col: int) -> highspy.HighsBasis:
+    """The HiGHS basis of :func:`basis_array` codes (``n_col`` columns)."""
+    b = highspy.HighsBasis()
+    status = [highspy.HighsBasisStatus(int(v)) for v in codes]
+    b.col_status, b.row_status = status[:n_col], status[n_col:]
+    b.valid, b.alien = True, False
+    return b
 
 
 _POOL: ThreadPoolExecutor | None = None
@@ -129,6 +161,24 @@ class WarmStartedLP:
         self.lp = lp
         self.chains = (Chain(lp, 1.0), Chain(lp, -1.0))
         self.parallel = PARALLEL if parallel is None else parallel
+
+    def bases(self) -> tuple[highspy.HighsBasis, ...]:
+        """The bases the next step of each chain starts from."""
+        return tuple(c.h.getBasis() for c in self.chains)
+
+    def start(self, bases: tuple[highspy.HighsBasis, highspy.HighsBasis]) -> None:
+        """Start the chains of a rebuilt program from ``bases`` (saved by :meth:`bases`): now
+        if they fit the program, else at the first solve whose program they fit (a moving
+        window keeps one block more than the state: the basis is that of the next program)."""
+        for c, b in zip(self.chains, bases, strict=True):
+            c.pending = b
+            if _fits(b, self.lp.lo.size, self.lp.row_lo.size):
+                c.sync()
+
+    @property
+    def capped(self) -> int:
+        """Programs stopped by the iteration budget so far."""
+        return sum(c.capped for c in self.chains)
 
     def last_x_box(self) -> tuple[np.ndarray, np.ndarray, str]:
         """Bounds of ``x`` of the newest block: ``(lower, upper, verdict)``.
@@ -153,39 +203,64 @@ class WarmStartedLP:
         return np.maximum(lower, lo_b), np.minimum(upper, -hi_b), OK
 
 
-_Entry = tuple[tuple["weakref.ref[np.ndarray]", ...], tuple[object, ...], WarmStartedLP]
+def _fits(b: highspy.HighsBasis | None, n_col: int, n_row: int) -> bool:
+    return b is not None and len(b.col_status) == n_col and len(b.row_status) == n_row
+
+
+_Entry = tuple[
+    tuple["weakref.ref[np.ndarray]", ...],
+    tuple[object, ...],
+    "WarmStartedLP | None",
+    tuple[highspy.HighsBasis, ...],
+]
 
 
 class WarmStarts:
-    """The warm-started programs of the states an estimator advanced to: a cache, not part of
-    any state (a state holds data only).
+    """The warm-started programs of the states an estimator advanced to, and the bases each
+    such state's next step starts from: a cache, not part of any state (a state holds data
+    only; its bases are written out when it is saved).
 
     A program belongs to the data it was last advanced to: the arrays of a state (a step makes
     new arrays, and never modifies them once in a state) and a tag of its scalars. A state
     with other arrays (restored from a saved state, or built otherwise) has no program here
-    and gets one rebuilt from its history, solved from a cold start. Taking a program removes
-    it (advancing modifies it); an entry goes when its first array does.
+    and gets one rebuilt from its history (from the bases saved with it, if any). Taking a
+    program removes it (advancing modifies it) but keeps the state's bases (copies); an entry
+    goes when its first array does.
     """
 
     def __init__(self) -> None:
         self._entries: dict[int, _Entry] = {}
 
+    def _find(self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...]) -> _Entry | None:
+        entry = self._entries.get(id(arrays[0]))
+        if entry is None:
+            return None
+        refs, saved_tag = entry[0], entry[1]
+        if saved_tag != tag or any(r() is not a for r, a in zip(refs, arrays, strict=True)):
+            return None
+        return entry
+
     def take(self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...]) -> WarmStartedLP | None:
         """The program of exactly these arrays (the same objects) and tag, removed from the
         cache; None if there is none."""
-        entry = self._entries.pop(id(arrays[0]), None)
+        entry = self._find(arrays, tag)
         if entry is None:
             return None
-        refs, saved_tag, warm = entry
-        if saved_tag != tag or any(r() is not a for r, a in zip(refs, arrays, strict=True)):
-            return None
-        return warm
+        self._entries[id(arrays[0])] = (entry[0], entry[1], None, entry[3])
+        return entry[2]
+
+    def bases(
+        self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...]
+    ) -> tuple[highspy.HighsBasis, ...] | None:
+        """The bases the next step from these arrays and tag starts from; None if unknown."""
+        entry = self._find(arrays, tag)
+        return None if entry is None else entry[3]
 
     def put(
         self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...], warm: WarmStartedLP
     ) -> None:
-        """Keep ``warm`` as the program of ``arrays`` and ``tag``, as long as ``arrays[0]``
-        lives."""
+        """Keep ``warm`` (and a copy of its bases) as the program of ``arrays`` and ``tag``, as
+        long as ``arrays[0]`` lives."""
         key = id(arrays[0])
         cache = weakref.ref(self)  # no reference cycle: the models go with the estimator
 
@@ -195,7 +270,8 @@ class WarmStarts:
                 owner._forget(key, ref)
 
         first = weakref.ref(arrays[0], forget)
-        self._entries[key] = ((first, *(weakref.ref(a) for a in arrays[1:])), tag, warm)
+        refs = (first, *(weakref.ref(a) for a in arrays[1:]))
+        self._entries[key] = (refs, tag, warm, warm.bases())
 
     def _forget(self, key: int, ref: weakref.ref[np.ndarray]) -> None:
         entry = self._entries.get(key)
@@ -203,7 +279,8 @@ class WarmStarts:
             del self._entries[key]
 
     def __len__(self) -> int:
-        return len(self._entries)
+        """The programs held (states whose program was taken do not count)."""
+        return sum(e[2] is not None for e in self._entries.values())
 
 
 class Chain:
@@ -223,13 +300,21 @@ class Chain:
         self._synced: tuple[np.ndarray, np.ndarray, np.ndarray, int, int] | None = None
         self._cost_col: int | None = None  # the one column with a nonzero cost in the model
         self.relaxed = lp.relaxed  # rows given to HiGHS as ranges (else equalities)
+        self.pending: highspy.HighsBasis | None = None  # a saved basis for the rebuilt model
+        self.capped = 0  # programs stopped by the iteration budget
 
     def solve(self, first: int, data: SafeBoundData) -> tuple[np.ndarray, str]:
         """Safe lower bounds of ``sense * x[first + i]`` and the verdict (OK, INFEASIBLE with a
         certificate, UNSURE)."""
         self.relaxed = self.lp.relaxed
-        self._sync()
+        self.sync()
         lp, h = self.lp, self.h
+        # every step starts from the basis alone (no factorisation or pricing weights kept from
+        # the previous step): the same start as the program rebuilt from a saved state
+        basis = h.getBasis()
+        h.clearSolver()
+        if basis.valid:
+            h.setBasis(basis)
         out = np.full(lp.nx, -np.inf)
         order = range(lp.nx) if self.sense > 0 else reversed(range(lp.nx))
         for n, i in enumerate(order):
@@ -247,7 +332,9 @@ class Chain:
                 verdict, status = self._second_opinions(status, data)
                 if verdict is not None:
                     return out, verdict
-            if status != highspy.HighsModelStatus.kOptimal:
+            if status == highspy.HighsModelStatus.kIterationLimit:
+                self.capped += 1  # the budget is spent: the bound of the last multipliers
+            elif status != highspy.HighsModelStatus.kOptimal:
                 h.clearSolver()  # numerical trouble: a second opinion from the primal simplex
                 status = self._run(4)
                 if status in _INFEASIBLE and self._certified(data):
@@ -296,7 +383,8 @@ class Chain:
         self.h.run()
         return self.h.getModelStatus()
 
-    def _sync(self) -> None:
+    def sync(self) -> None:
+        """Bring the HiGHS model up to date with the program."""
         lp, h = self.lp, self.h
         n_row, n_col = lp.row_lo.size, lp.lo.size
         old = self._synced
@@ -338,6 +426,8 @@ class Chain:
         lo, hi, rlo, rhi = lp.shifted(self.relaxed)
         empty = np.zeros(0, np.int32)
         basis = h.getBasis() if h.getNumCol() == n_col and h.getNumRow() == m else None
+        if _fits(self.pending, n_col, m):
+            basis, self.pending = self.pending, None  # the basis saved with a restored state
         h.clearModel()
         h.addCols(n_col, np.zeros(n_col), lo, hi, 0, empty, empty, np.zeros(0))
         h.addRows(m, rlo, rhi, vals.size, starts, idx, vals)
