@@ -404,7 +404,8 @@ def test_a_solver_stopped_by_its_iteration_limit_still_gives_guaranteed_boxes(mo
     ref = ivobs.make_estimator("exact", sys, x0=x0, progress=False).run(tr.u, tr.y)
     monkeypatch.setattr(exact_mod, "_ITERATION_LIMIT", 3)
     est = ivobs.make_estimator("exact", sys, x0=x0, progress=False, on_inconsistent="raise")
-    res = est.run(tr.u, tr.y)
+    with pytest.warns(RuntimeWarning, match="stopped at the iteration budget"):
+        res = est.run(tr.u, tr.y)
     assert_contains(res, tr.x)
     assert not res.inconsistent.any()
     assert np.all(res.lower <= ref.lower + 1e-9) and np.all(res.upper >= ref.upper - 1e-9)
