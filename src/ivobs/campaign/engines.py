@@ -108,7 +108,7 @@ def dask_client(scheduler: Any, timeout: float) -> tuple[Any, bool]:
     if isinstance(scheduler, Client):
         return scheduler, False
     try:
-        client = Client(  # type: ignore[no-untyped-call]  # distributed is untyped
+        client = Client(
             str(scheduler), timeout=timeout, set_as_default=False
         )
     except (OSError, TimeoutError, ValueError) as exc:
@@ -128,7 +128,7 @@ def run_dask(jobs: Sequence[Job], client: Any, emit: Callable[[dict[str, Any]], 
     by_key = {f.key: j for f, j in zip(futures, jobs)}
     try:
         with client.as_current():  # as_completed looks for the current client
-            done = as_completed(futures)  # type: ignore[no-untyped-call]  # untyped
+            done = as_completed(futures)
         for fut in done:
             job = by_key[fut.key]
             try:
