@@ -108,9 +108,7 @@ def dask_client(scheduler: Any, timeout: float) -> tuple[Any, bool]:
     if isinstance(scheduler, Client):
         return scheduler, False
     try:
-        client = Client(
-            str(scheduler), timeout=timeout, set_as_default=False
-        )
+        client = Client(str(scheduler), timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         raise IvobsError(
             f"scheduler: cannot connect to the Dask scheduler at {scheduler!r} ({exc}); start "
