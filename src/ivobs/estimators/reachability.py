@@ -233,12 +233,13 @@ class Reachability(ObserverEstimator):
                 state, xh=xh_next, s=state.s + np.abs(state.X[:, nx:]).sum(axis=1), X=Mk @ state.X
             )
         else:
-            new = self._window_step(replace(state, xh=xh_next), rho, r, Mk, Gk)
+            new = self._window_step(state, xh_next, rho, r, Mk, Gk)
         return Step(new, lo, hi, inconsistent)
 
     def _window_step(
         self,
         state: ReachabilityState,
+        xh_next: np.ndarray,
         rho: np.ndarray,
         r: np.ndarray,
         Mk: np.ndarray,
@@ -262,7 +263,7 @@ class Reachability(ObserverEstimator):
         if slots.shape[0] > self.design.memory:  # oldest slot leaves: Z loses a term
             slots = slots[1:]
             Z = np.zeros((nx, 0))
-        return replace(state, slots=slots, Z=Z)
+        return replace(state, xh=xh_next, slots=slots, Z=Z)
 
     # -- offline, vectorised --------------------------------------------------------------------
     def _run(
