@@ -265,7 +265,8 @@ def test_batch_with_time_varying_bounds(method):
     assert res.contains(np.array([tr.x for tr in trs])).all()
 
 
-def test_strip_rounding_when_the_measurements_pin_the_state():
+def _pinned_far_from_the_origin() -> tuple[LinearSystem, Box, ivobs.Trajectory]:
+    """Two outputs that pin a 2-state unstable plant at |x| ~ 1e5, bang-bang disturbance."""
     sys = LinearSystem(
         [[1.57, 1.41], [-0.59, -0.34]],
         None,
@@ -277,24 +278,17 @@ def test_strip_rounding_when_the_measurements_pin_the_state():
     x0 = Box(np.full(2, 1e5 - 1.0), np.full(2, 1e5 + 1.0))
     signs = "--++++++-+--+-++----+--+-+----"
     d = np.array([[1.0 if c == "+" else -1.0] for c in signs])
-    tr = ivobs.simulate(sys, x0.hi, None, d)
+    return sys, x0, ivobs.simulate(sys, x0.hi, None, d)
+
+
+def test_strip_rounding_when_the_measurements_pin_the_state():
+    sys, x0, tr = _pinned_far_from_the_origin()
     res = _quiet_run(ivobs.make_estimator("strip", sys, x0=x0), None, tr.y)
     assert res.contains(tr.x).all()
 
 
 def test_constrained_zonotope_does_not_flag_valid_data():
-    sys = LinearSystem(
-        [[1.57, 1.41], [-0.59, -0.34]],
-        None,
-        [[-0.53, 0.57], [-0.06, 0.75]],
-        E=[[-0.92], [0.78]],
-        F=[[-0.02], [0.14]],
-        d=Box([-1.0], [1.0]),
-    )
-    x0 = Box(np.full(2, 1e5 - 1.0), np.full(2, 1e5 + 1.0))
-    signs = "--++++++-+--+-++----+--+-+----"
-    d = np.array([[1.0 if c == "+" else -1.0] for c in signs])
-    tr = ivobs.simulate(sys, x0.hi, None, d)
+    sys, x0, tr = _pinned_far_from_the_origin()
     res = _quiet_run(ivobs.make_estimator("constrained-zonotope", sys, x0=x0), None, tr.y)
     assert res.contains(tr.x).all()
     assert not res.inconsistent.any()

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from ..errors import IvobsError
 from .persistence import check_version
-from .state import STATE_FORMAT, STATE_VERSION
+from .state import STATE_FORMAT, STATE_VERSION, check_counters
 
 if TYPE_CHECKING:
     from .intersect import Intersect
@@ -45,25 +43,14 @@ def check_members(est: Intersect, state: Any) -> dict[str, Any]:
         )
     check_version(state)
     saved = state["state"]
-    k, scale = saved.get("k"), saved.get("scale", 0.0)
-    if (
-        isinstance(k, bool)
-        or not isinstance(k, int)
-        or k < 0
-        or not isinstance(scale, (int, float))
-        or not np.isfinite(scale)
-        or scale < 0
-    ):
-        raise IvobsError(
-            "state: expected a step count 'k' (integer >= 0) and a data scale; the state "
-            "was altered or is not from Estimator.state()"
-        )
+    counters = {"k": saved.get("k"), "scale": saved.get("scale", 0.0)}
+    check_counters(counters)
     members = saved.get("members")
     if not isinstance(members, list) or len(members) != len(est.members):
         raise IvobsError(f"state: expected the states of {len(est.members)} members")
     return {
         "members": tuple(m.check_state(s) for m, s in zip(est.members, members, strict=True)),
-        "k": k,
-        "scale": float(scale),
+        "k": counters["k"],
+        "scale": counters["scale"],
         "inconsistent": bool(saved.get("inconsistent", False)),
     }

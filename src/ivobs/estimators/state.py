@@ -30,6 +30,7 @@ __all__ = [
     "STATE_VERSION",
     "OnlineState",
     "Step",
+    "check_counters",
     "dump_state",
     "load_state",
 ]
@@ -120,7 +121,7 @@ def load_state(saved: Any, fresh: S) -> S:
     if missing:
         raise IvobsError(f"state: missing entries {missing}" + _TAMPERED)
     values = {name: _load_value(name, saved[name], getattr(fresh, name)) for name in names}
-    _check_counters(values)
+    check_counters(values)
     for lo_name, hi_name in fresh.bounds:
         _check_pair(lo_name, hi_name, values[lo_name], values[hi_name])
     return dataclasses.replace(fresh, **values)
@@ -139,7 +140,7 @@ def _load_value(key: str, val: Any, fresh: Any) -> Any:
     if isinstance(fresh, np.ndarray):
         return _load_array(key, val, fresh)
     if key in ("k", "scale"):
-        return val  # checked by _check_counters
+        return val  # checked by check_counters
     if isinstance(fresh, (bool, np.bool_)):
         if not isinstance(val, (bool, np.bool_)):
             raise IvobsError(
@@ -207,7 +208,9 @@ def _load_array(key: str, val: Any, fresh: np.ndarray) -> np.ndarray:
     return arr
 
 
-def _check_counters(values: dict[str, Any]) -> None:
+def check_counters(values: dict[str, Any]) -> None:
+    """The step counter ``k`` and the data scale ``scale`` of a saved state, checked and
+    converted in place (every state has them, nested or not)."""
     k = values["k"]
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
         raise IvobsError(

@@ -39,6 +39,22 @@ def box_generators(r: np.ndarray) -> np.ndarray:
     return out
 
 
+def center_and_generators(who: str, center: Any, generators: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The checked centre ``c`` (n,) and generator matrix ``G`` (n, m) of a zonotope-like set
+    (``who``: the class named in errors); ``None`` generators: a point."""
+    c = as_vector(f"{who} center", center)
+    n = c.shape[0]
+    if generators is None:
+        return c, np.zeros((n, 0))
+    G = as_float_array(f"{who} generators", generators)
+    if G.ndim == 1 and n == 1:
+        G = G.reshape(1, -1)
+    if G.ndim != 2 or G.shape[0] != n:
+        raise IvobsError(f"{who} generators: expected shape ({n}, m), got {G.shape}")
+    check_finite(f"{who} generators", G)
+    return c, G
+
+
 class Zonotope:
     """``<c, G> = {c + G b : ||b||_inf <= 1}`` ([Tang2019, Definition 3], [Wang2020,
     Definition 3]).
@@ -53,19 +69,7 @@ class Zonotope:
     __array_priority__ = 100
 
     def __init__(self, center: Any, generators: Any = None) -> None:
-        c = as_vector("Zonotope center", center)
-        n = c.shape[0]
-        if generators is None:
-            G = np.zeros((n, 0))
-        else:
-            G = as_float_array("Zonotope generators", generators)
-            if G.ndim == 1 and n == 1:
-                G = G.reshape(1, -1)
-            if G.ndim != 2 or G.shape[0] != n:
-                raise IvobsError(f"Zonotope generators: expected shape ({n}, m), got {G.shape}")
-            check_finite("Zonotope generators", G)
-        self.c = c
-        self.G = G
+        self.c, self.G = center_and_generators("Zonotope", center, generators)
 
     @classmethod
     def _trusted(cls, c: np.ndarray, G: np.ndarray) -> Zonotope:

@@ -14,7 +14,7 @@ import numpy as np
 from ..._validate import as_float_array, as_matrix, as_vector, check_finite
 from ...errors import InconsistentDataError, IvobsError
 from ..box import Box
-from ..zonotope import Zonotope
+from ..zonotope import Zonotope, center_and_generators
 from .elimination import _drop_zero_idx, _normalise_rows_s, _rescale, eliminate_constraints
 from .hull import _feasibility_radius, certified_empty, hull_bounds
 from .reduction import reduce_generators
@@ -41,19 +41,7 @@ class ConstrainedZonotope:
     __array_priority__ = 100
 
     def __init__(self, center: Any, generators: Any = None, A: Any = None, b: Any = None):
-        c = as_vector("ConstrainedZonotope center", center)
-        n = c.shape[0]
-        if generators is None:
-            G = np.zeros((n, 0))
-        else:
-            G = as_float_array("ConstrainedZonotope generators", generators)
-            if G.ndim == 1 and n == 1:
-                G = G.reshape(1, -1)
-            if G.ndim != 2 or G.shape[0] != n:
-                raise IvobsError(
-                    f"ConstrainedZonotope generators: expected shape ({n}, m), got {G.shape}"
-                )
-            check_finite("ConstrainedZonotope generators", G)
+        c, G = center_and_generators("ConstrainedZonotope", center, generators)
         m = G.shape[1]
         if (A is None) != (b is None):
             raise IvobsError("ConstrainedZonotope: give both A and b (A ξ = b), or neither")
