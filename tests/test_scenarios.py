@@ -16,7 +16,7 @@ PAPERS = [
     "pendulum",
     "kkl-ltv-dt",
 ]
-CORA = ["cora-2dim", "cora-vehicle6", "cora-pedestrian4", "cora-slip4"]
+CORA = ["cora-2dim", "cora-vehicle6", "cora-pedestrian4", "cora-slip4", "cora-tank30"]
 
 
 def test_all_names_present():
@@ -116,3 +116,14 @@ def test_cora_records():
     assert np.max(np.abs(res)) <= 0.1 + 1e-12
     two = scenarios.get("cora-2dim").simulate("recorded")
     assert np.isnan(two.x).all() and two.y.shape == (20, 1)
+
+
+def test_cora_tank30_matches_its_description():
+    sc = scenarios.get("cora-tank30")
+    A, C = sc.system.A, sc.system.C
+    assert A.shape == (30, 30) and C.shape == (21, 30) and sc.u.shape == (235, 15)
+    assert np.allclose(np.triu(A, 1), 0) and np.allclose(np.tril(A, -2), 0)  # lower bidiagonal
+    assert abs(np.linalg.eigvals(A)).max() == pytest.approx(0.997, abs=5e-4)
+    unmeasured = np.flatnonzero(~np.abs(C).any(axis=0))
+    assert unmeasured.tolist() == [0, 2, 5, 8, 11, 14, 17, 23, 29]
+    assert sc.x0 == ivobs.Box.symmetric(4 * np.ones(30))

@@ -37,6 +37,10 @@ _FILES = {
         "CORA pedestrian (double integrator): 4 states, 2 outputs, 240 steps",
     ),
     "cora-slip4": ("cora_slip4.npz", "CORA side-slip model: 4 states, 3 outputs, 700 steps"),
+    "cora-tank30": (
+        "cora_tank30.npz",
+        "CORA linearised 30-tank cascade of [Althoff2021]: 30 states, 21 outputs, 235 steps",
+    ),
 }
 
 
