@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
 from . import add_trust_option, check_disturbance, check_seed
+from ._plant import check_log_times, discretized
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -32,6 +33,14 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "--system", "-s", metavar="FILE", help="system file (TOML) instead of a scenario"
     )
     p.add_argument("--log", "-l", metavar="FILE", help="measurement log (CSV) for --system")
+    p.add_argument(
+        "--discretize",
+        type=float,
+        metavar="TS",
+        default=None,
+        help="--system: discretise a continuous-time system (zero-order hold, period TS); the "
+        "log's time column must then be sampled every TS",
+    )
     p.add_argument(
         "--method",
         "-m",
@@ -74,8 +83,8 @@ def main(args: argparse.Namespace) -> int:
                 "--disturbance/--seed: only with a scenario (a log gives the measurements)"
             )
         return _run_system(args)
-    if args.log:
-        raise IvobsError("--log: needs --system FILE (the model of the logged plant)")
+    if args.log or args.discretize is not None:
+        raise IvobsError("--log/--discretize: need --system FILE (the model of the logged plant)")
     if not args.scenario:
         raise IvobsError("give a scenario name (see `ivobs scenarios`) or --system FILE --log FILE")
     if not args.method:
@@ -83,6 +92,19 @@ def main(args: argparse.Namespace) -> int:
     args.disturbance = check_disturbance(args.disturbance or "paper")
     args.seed = check_seed(0 if args.seed is None else args.seed)
     return _run_scenario(args)
+
+
+def _check_time_base(system: Any, method: str, where: str) -> None:
+    """A continuous-time file with a discrete-time method: point to ``--discretize``."""
+    from ..estimators import get, methods
+
+    if system.is_continuous and not get(method).supports_continuous:
+        continuous = [m for m in methods() if get(m).supports_continuous]
+        raise IvobsError(
+            f"--method: {method} is for discrete-time systems and {where} is continuous-time "
+            f"(dt = 0): give --discretize TS (the log's sampling period) or a continuous-time "
+            f"method ({', '.join(continuous)})"
+        )
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -134,13 +156,17 @@ def _run_system(args: argparse.Namespace) -> int:
     if not args.log:
         raise IvobsError("--system: needs --log FILE (a CSV log with k, u1.., y1.. columns)")
     spec = load_system(args.system, allow_code=args.allow_code)
+    spec.system = discretized(spec.system, args.discretize, args.system)
     check_distinct(_outputs(args), {"--system's [disturbance] csv": next(iter(spec.files), None)})
     log = read_log(args.log, spec.system)
+    if args.discretize is not None:
+        check_log_times(log.t, args.discretize, args.log)
     method = args.method or spec.method
     if method is None:
         raise IvobsError(
             f"--method: {args.system} names no method ([method] name = ...); give --method"
         )
+    _check_time_base(spec.system, method, args.system)
     est = spec.make_estimator(method)
     if spec.system.is_continuous and log.t is None:
         raise IvobsError(
