@@ -56,6 +56,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--states", help="comma-separated state numbers to plot (1..nx)")
     p.add_argument(
+        "--html",
+        metavar="FILE",
+        help="write a self-contained interactive HTML report (zoomable bands per state, the "
+        "method table; needs plotly: ivobs[html])",
+    )
+    p.add_argument(
         "--json",
         metavar="FILE",
         help="also write the table as JSON (one object per method; '-' for standard output)",
@@ -111,6 +117,12 @@ def main(args: argparse.Namespace) -> int:
         from ..report.plot import figure_path
 
         plot_path = figure_path(args.plot, "--plot")
+    from ..io.atomic import check_output_path
+
+    for opt in ("html", "json"):  # checked before any work: a bad path fails fast
+        value = getattr(args, opt)
+        if value and value != "-":
+            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
     left_out: list[str] = []
     if args.methods:
         names = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -137,21 +149,24 @@ def main(args: argparse.Namespace) -> int:
     print_reasons(results)
     if args.json:
         _write_json(args.json, sc, results, traj.has_truth)
+    if args.html:
+        _write_html(args.html, sc, traj, results)
     if plot_path is not None:
         from . import use_agg
 
         use_agg()
-        from ..report.plot import plot_estimates, save_figure
+        from ..report.compare_figure import comparison_figure
+        from ..report.plot import save_figure
 
         good = {r.method: r.estimate for r in results if r.estimate is not None}
         if not good:
             raise IvobsError("--plot: no method gave an estimate; nothing to plot")
         truth = traj.x if traj.has_truth else None
-        fig = plot_estimates(
+        fig = comparison_figure(
             good,
             truth=truth,
             states=states,
-            t=traj.t,
+            t=traj.t if sc.system.sampling_period != 1 or sc.t is not None else None,
             state_names=sc.state_names,
             title=f"{sc.name}",
         )
@@ -186,6 +201,25 @@ def _write_json(path: str, sc: Any, results: Any, has_truth: bool) -> None:
     from ..io.atomic import write_text_atomic
 
     write_text_atomic(path, text + "\n")
+
+
+def _write_html(path: str, sc: Any, traj: Any, results: Any) -> None:
+    from ..report.html import html_report, results_table
+
+    good = {r.method: r.estimate for r in results if r.estimate is not None}
+    if not good:
+        raise IvobsError("--html: no method gave an estimate; nothing to show")
+    page = html_report(
+        path,
+        good,
+        title=f"ivobs compare: {sc.name}",
+        truth=traj.x if traj.has_truth else None,
+        t=traj.t,
+        state_names=sc.state_names,
+        table=results_table(results, sc.state_names),
+        notes=[f"{sc.source}; {sc.horizon} steps"],
+    )
+    print(f"\nreport: {page}")
 
 
 def _num(v: Any) -> float | None:

@@ -63,6 +63,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         metavar="FILE",
         help="write a figure of the bounds (format from the extension; none: .png is added)",
     )
+    p.add_argument(
+        "--html",
+        metavar="FILE",
+        help="write a self-contained interactive HTML report (zoomable bands, alarms; needs "
+        "plotly: ivobs[html])",
+    )
     add_trust_option(p)
     p.add_argument(
         "--progress",
@@ -113,6 +119,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
     if args.csv:
         args.csv = str(check_output_path(args.csv, "--csv"))
+    if args.html:
+        args.html = str(check_output_path(args.html, "--html"))
     if args.plot:
         from ..report.plot import figure_path
 
@@ -121,7 +129,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
-    return {"--csv": args.csv, "--plot": args.plot}
+    return {"--csv": args.csv, "--plot": args.plot, "--html": args.html}
 
 
 def _run_scenario(args: argparse.Namespace) -> int:
@@ -191,7 +199,7 @@ def _run_system(args: argparse.Namespace) -> int:
         print(f"first: step {int(alarms[0])}: {record.reasons[int(alarms[0])]}")
     else:
         print("alarms: none (every measurement is consistent with the model and bounds)")
-    _write(res, args, t=log.t, title=f"{est.name} on {name}")
+    _write(res, args, t=log.t, alarms=alarms, title=f"{est.name} on {name}")
     return 1 if alarms.size else 0
 
 
@@ -205,7 +213,13 @@ def _estimate(est: Any, u: Any, y: Any, t: Any, args: argparse.Namespace) -> Any
     return est.run(u, y, t=t, progress=args.progress)
 
 
-def _write(res: Any, args: argparse.Namespace, truth: Any = None, **plot_kw: Any) -> None:
+def _write(
+    res: Any,
+    args: argparse.Namespace,
+    truth: Any = None,
+    alarms: Any = None,
+    **plot_kw: Any,
+) -> None:
     if args.csv:
         res.to_csv(args.csv)
         print(f"bounds written to {args.csv}")
@@ -218,3 +232,18 @@ def _write(res: Any, args: argparse.Namespace, truth: Any = None, **plot_kw: Any
         fig = plot_estimates({res.method: res}, truth=truth, **plot_kw)
         path = save_figure(fig, args.plot)
         print(f"figure written to {path}")
+    if args.html:
+        from ..report.html import html_report
+
+        if alarms is None:
+            alarms = np.flatnonzero(res.inconsistent)
+        page = html_report(
+            args.html,
+            {res.method: res},
+            title=plot_kw.get("title") or res.method,
+            truth=truth,
+            t=plot_kw.get("t"),
+            state_names=plot_kw.get("state_names"),
+            alarms=[int(k) for k in alarms],
+        )
+        print(f"report written to {page}")
