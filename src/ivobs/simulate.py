@@ -49,7 +49,8 @@ class Trajectory:
 
     @property
     def T(self) -> int:
-        return int(self.x.shape[0])
+        """Number of steps (a batch from :func:`~ivobs.simulate_batch` is ``(B, T, ·)``)."""
+        return int(self.x.shape[-2])
 
     @property
     def has_truth(self) -> bool:
@@ -68,6 +69,8 @@ class Trajectory:
         from .frames import _import
 
         pd = _import("pandas", "pandas")
+        if self.x.ndim != 2:
+            raise IvobsError("to_pandas: a batch of records; take one, e.g. Trajectory of x[b]")
         cols: dict[str, Any] = {"t": self.t}
         for name, arr in (("x", self.x), ("y", self.y), ("u", self.u), ("d", self.d)):
             for i in range(arr.shape[-1]):
