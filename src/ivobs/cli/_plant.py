@@ -101,7 +101,7 @@ def plant_scenario(args: argparse.Namespace, disturbance: str = "vertex", seed: 
             horizon=T,
             source=f"{args.system} + {log_path}",
             t=log.t if system.is_continuous else None,
-            state_names=getattr(system.names, "states", None),
+            state_names=system.names.state_labels(),
             recorded=recorded,
         )
     horizon = getattr(args, "horizon", None)
@@ -123,5 +123,5 @@ def plant_scenario(args: argparse.Namespace, disturbance: str = "vertex", seed: 
         u=np.zeros((horizon, system.nu)),
         horizon=horizon,
         source=str(args.system),
-        state_names=getattr(system.names, "states", None),
+        state_names=system.names.state_labels(),
     )

@@ -199,7 +199,14 @@ def _run_system(args: argparse.Namespace) -> int:
         print(f"first: step {int(alarms[0])}: {record.reasons[int(alarms[0])]}")
     else:
         print("alarms: none (every measurement is consistent with the model and bounds)")
-    _write(res, args, t=log.t, alarms=alarms, title=f"{est.name} on {name}")
+    _write(
+        res,
+        args,
+        t=log.t,
+        alarms=alarms,
+        title=f"{est.name} on {name}",
+        state_names=spec.system.names.state_labels(),
+    )
     return 1 if alarms.size else 0
 
 

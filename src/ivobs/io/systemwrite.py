@@ -208,6 +208,11 @@ def dumps_system(
                     "functools.partial of one with keyword parameters"
                 )
             out += [f"python = {_scalar(ref[0])}", f"params = {_value(ref[1])}"]
+    names = getattr(system, "names", None)
+    labelled = {k: getattr(names, k) for k in ("states", "units", "inputs", "outputs",
+                "disturbances") if getattr(names, k, None)}  # fmt: skip
+    if labelled:
+        out += ["", "[names]"] + [f"{k} = {_value(list(v))}" for k, v in labelled.items()]
     if x0 is not None:
         if not isinstance(x0, Box) or x0.is_time_varying:
             raise IvobsError(f"save_system: x0 must be a constant ivobs.Box, got {x0!r}")

@@ -28,6 +28,15 @@ class SignalNames:
     inputs: tuple[str, ...] | None = None
     outputs: tuple[str, ...] | None = None
     disturbances: tuple[str, ...] | None = None
+    units: tuple[str, ...] | None = None
+    """Units of the states (``"rad"``, ``"m/s"``)."""
+
+    def state_labels(self) -> tuple[str, ...] | None:
+        """``"name (unit)"`` per state (plots, tables), or None when the states are unnamed."""
+        if self.states is None:
+            return None
+        units = self.units or ("",) * len(self.states)
+        return tuple(f"{n} ({u})" if u else n for n, u in zip(self.states, units))
 
 
 def is_statespace(obj: Any) -> bool:
