@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import IvobsError
 from ..model import LinearSystem
+from ..model.uncertain import INTERVAL_MATRICES
 from ..sets import Box
 from .callables import make_callable
 from .loaded import SystemFile
@@ -84,6 +85,8 @@ class _SystemReader(TomlReader):
         if isinstance(value, dict):
             if "python" not in value and ("shape" in value or "values" in value):
                 return self.sparse(key, value)
+            if "python" not in value and ("lower" in value or "upper" in value):
+                return self.interval(key, value)
             return self.python(key, value)
         arr = self.numbers(key, value, (2, 3))
         bad = ~np.isfinite(arr)
@@ -91,6 +94,40 @@ class _SystemReader(TomlReader):
             idx = "".join(f"[{int(i)}]" for i in np.argwhere(bad)[0])
             raise self.fail(key, f"entry {idx} is {arr[bad][0]}; matrices must be finite")
         return arr
+
+    def interval(self, key: tuple[str, ...], spec: dict[str, Any]) -> Box:
+        """An interval matrix ``{ lower = [[...]], upper = [[...]] }`` (A, B, C, D only): the
+        plant may use any matrix between the two at every step (docs/uncertain.md)."""
+        if key[-1] not in INTERVAL_MATRICES:
+            raise self.fail(
+                key,
+                "an interval matrix (lower, upper) is accepted for A, B, C and D only; an "
+                f"uncertain {key[-1]} is a wider box of the disturbance d",
+            )
+        unknown = sorted(set(spec) - {"lower", "upper"})
+        if unknown:
+            raise self.fail(
+                (*key, unknown[0]),
+                "unknown key; an interval matrix is given as lower = [[...]], upper = [[...]]",
+            )
+        bounds = []
+        for part in ("lower", "upper"):
+            if part not in spec:
+                raise self.fail(key, f"interval matrix: missing {part} = [[...]]")
+            arr = self.numbers((*key, part), spec[part], (2,))
+            if not np.all(np.isfinite(arr)):
+                raise self.fail((*key, part), "an interval matrix needs finite bounds")
+            bounds.append(arr)
+        lo, hi = bounds
+        if lo.shape != hi.shape:
+            raise self.fail((*key, "upper"), f"lower has shape {lo.shape}, upper {hi.shape}")
+        bad = lo > hi
+        if np.any(bad):
+            i, j = (int(v) for v in np.argwhere(bad)[0])
+            raise self.fail(
+                (*key, "lower"), f"lower > upper at entry [{i}][{j}]: {lo[i, j]} > {hi[i, j]}"
+            )
+        return Box(lo, hi)
 
     def sparse(self, key: tuple[str, ...], spec: dict[str, Any]) -> Any:
         """A sparse matrix from ``shape``, ``rows``, ``cols``, ``values`` (0-based indices)."""
@@ -240,7 +277,8 @@ class _SystemReader(TomlReader):
         arrays = {m: v for m, v in mats.items() if not callable(v)}  # dense or sparse
 
         def dims(m: str) -> tuple[int, ...] | None:
-            return tuple(arrays[m].shape[-2:]) if m in arrays else None
+            v = arrays.get(m)
+            return None if v is None else tuple((v.lo if isinstance(v, Box) else v).shape[-2:])
 
         A = dims("A")
         if A is not None and A[0] != A[1]:
