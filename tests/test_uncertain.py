@@ -366,3 +366,42 @@ upper = [1.0]
 """
     with pytest.raises(ivobs.IvobsError, match="A, B, C and D only"):
         loads_system(text)
+
+
+# -- monitor and command line --------------------------------------------------------------
+def test_monitor_refuses_uncertain_systems():
+    from ivobs.monitor import Monitor
+
+    sc = ivobs.scenarios.get("servo-uncertain")
+    with pytest.raises(ivobs.IvobsError, match="monitor's prediction and output band need"):
+        Monitor(sc.system, "strip", x0=sc.x0)
+
+
+def test_cli_run_system_file_reports_the_methods_alarms(tmp_path, capsys):
+    """``ivobs run --system`` on an uncertain plant: the method's own consistency test gives
+    the alarms (the monitor's bands need exact matrices)."""
+    from ivobs.cli import main
+    from ivobs.io import save_system
+
+    sc = ivobs.scenarios.get("servo-uncertain")
+    save_system(tmp_path / "s.toml", sc, method="strip")
+    traj = sc.simulate("vertex", seed=0)
+    for name, fault in (("ok.csv", 0.0), ("fault.csv", 5.0)):
+        y = traj.y.copy()
+        y[50, 0] += fault
+        rows = [",".join(map(repr, [k, *map(float, (traj.u[k, 0], *y[k]))])) for k in range(traj.T)]
+        (tmp_path / name).write_text("k,u1,y1,y2\n" + "\n".join(rows) + "\n")
+    system = str(tmp_path / "s.toml")
+    assert main(["run", "--system", system, "--log", str(tmp_path / "ok.csv")]) == 0
+    assert "alarms: none" in capsys.readouterr().out
+    assert main(["run", "--system", system, "--log", str(tmp_path / "fault.csv")]) == 1
+    out = capsys.readouterr().out
+    assert "ALARMS: 1 step(s)" in out and "step 50: strip" in out
+
+
+def test_cli_compare_lists_refusals(capsys):
+    from ivobs.cli import main
+
+    assert main(["compare", "servo-uncertain", "--methods", "interval-split,kkl"]) == 0
+    out = capsys.readouterr().out
+    assert "| interval-split |" in out and "the kkl method needs exactly known matrices" in out
