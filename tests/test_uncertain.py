@@ -405,3 +405,37 @@ def test_cli_compare_lists_refusals(capsys):
     assert main(["compare", "servo-uncertain", "--methods", "interval-split,kkl"]) == 0
     out = capsys.readouterr().out
     assert "| interval-split |" in out and "the kkl method needs exactly known matrices" in out
+
+
+@pytest.mark.parametrize("method", ["interval-transformed", "reachability", "zonotope", "strip"])
+def test_missing_samples_and_batches(method):
+    """10 % of the measurements missing (the gain's columns set to zero: the term is then
+    ``|S| w̄`` alone), and a batch of two records equal to the records run one by one."""
+    sys = uncertain_system()
+    T = 1000
+    u = inputs(T)
+    rng = np.random.default_rng(8)
+    ys, xs = [], []
+    for seed in (6, 7):
+        x, y = simulate_vertices(sys, T, seed, np.zeros(3), u)
+        y[rng.random(y.shape) < 0.1] = np.nan
+        xs.append(x)
+        ys.append(y)
+    est = ivobs.make_estimator(method, sys, x0=X0)
+    batch = est.run(u, np.stack(ys))
+    for b in range(2):
+        one = est.run(u, ys[b])
+        assert one.contains(xs[b]).all() and not one.inconsistent.any()
+        np.testing.assert_array_equal(batch.lower[b], one.lower)
+        np.testing.assert_array_equal(batch.upper[b], one.upper)
+
+
+def test_intersect_strips_only_exact_rows():
+    """Row 0 of C is uncertain: its measurement strip would not be guaranteed."""
+    base = exact_system()
+    RC = np.array([[0.02, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    sys = ivobs.LinearSystem(A0, B0, box(C0, RC), D=D0, E=base.E, F=base.F, d=base.d)
+    est = ivobs.make_estimator("intersect", sys, x0=X0)
+    assert est.design.strip_rows == (1,)
+    assert ivobs.make_estimator("intersect", base, x0=X0).design.strip_rows == (0, 1)
+    assert "fixed-time" in " ".join(est.design.skipped)  # refused, so skipped with the reason

@@ -466,7 +466,11 @@ class ConstrainedZonotopeEstimator(Estimator):
         out = eliminate_constraints(np.zeros(nx), G, A, b, self.design.max_constraints, cert)
         if out is None:  # numerically empty: restart from the box (sound, not a fault)
             A_k, B, _, _, E, _ = data.mats
-            c, G, A, b = _restart(A_k, B @ data.u + E @ data.cd, upd.ER, upd.lo, upd.hi)
+            ER = upd.ER
+            if self.sys.uncertainty is not None:  # the interval matrices' w̄, as in _predict
+                w = uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0]
+                ER = np.hstack([ER, box_generators(w)])
+            c, G, A, b = _restart(A_k, B @ data.u + E @ data.cd, ER, upd.lo, upd.hi)
         else:
             shift, G, A, b = out
             e = gamma(2) * (np.abs(c) + np.abs(shift))
