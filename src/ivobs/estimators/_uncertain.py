@@ -6,7 +6,8 @@ A system with interval matrices (:mod:`ivobs.model.uncertain`) is its nominal sy
 
 with ``|ΔM| <= R_M`` entrywise. For ``x`` in the box ``[x̲, x̄]`` (an enclosure of ``x[k]``
 the method already has) the interval product of ``[-R_M, R_M]`` with the box is exactly
-``[-R_M m, R_M m]``, ``m = max(|x̲|, |x̄|)`` ([Efimov2013, Lemma 1] with ``ΔM⁺ = ΔM⁻ = R_M``), so
+``[-R_M m, R_M m]``, ``m = max(|x̲|, |x̄|)`` (the exact hull: never wider than the interval-matrix
+bound of [Efimov2012, Lemma 1]), so
 
     |w| <= R_A m + R_B |u|,        |v| <= R_C m + R_D |u|.
 

@@ -16,9 +16,11 @@ so that the plant is the nominal one with two extra, state-dependent bounded ter
 
 with ``|x|`` the entrywise largest magnitude over the current enclosure of ``x[k]``: for the
 symmetric interval matrix ``[-R, R]`` and ``x ∈ [x̲, x̄]`` the interval product is exactly
-``[-R m, R m]``, ``m = max(|x̲|, |x̄|)`` (the interval-product lemma of [Efimov2013, Lemma 1]
-with ``ΔA⁺ = ΔA⁻ = R``). The estimators that accept interval matrices add these terms to their
-own recursion (``ivobs.estimators._uncertain``, rounded upwards); docs/uncertain.md.
+``[-R m, R m]``, ``m = max(|x̲|, |x̄|)`` (each entry ``ΔA_ij x_j`` ranges over
+``±R_ij max |x_j|`` independently): the exact hull, so never wider than the interval-matrix
+bound of [Efimov2012, Lemma 1] (the matrix form of [Efimov2013, Lemma 1]). The estimators that
+accept interval matrices add these terms to their own recursion
+(``ivobs.estimators._uncertain``, rounded upwards); docs/uncertain.md.
 
 Only ``A``, ``B``, ``C``, ``D`` may be interval matrices (an uncertain ``E`` or ``F`` is a wider
 box ``d``); the system must then be discrete-time, dense and time-invariant otherwise.
