@@ -439,3 +439,16 @@ def test_intersect_strips_only_exact_rows():
     assert est.design.strip_rows == (1,)
     assert ivobs.make_estimator("intersect", base, x0=X0).design.strip_rows == (0, 1)
     assert "fixed-time" in " ".join(est.design.skipped)  # refused, so skipped with the reason
+
+
+def test_adversarial_run_puts_the_matrices_on_vertices():
+    sys = uncertain_system()
+    from ivobs.testing import adversarial_run
+
+    traj = adversarial_run(sys, X0, 300, seed=3)
+    # the state equation with the nominal matrices does not explain the record
+    pred = traj.x[:-1] @ sys.A.T + traj.u[:-1] @ sys.B.T + traj.d[:-1] @ sys.E.T
+    assert np.abs(traj.x[1:] - pred).max() > 1e-3
+    for method in ("interval-split", "zonotope"):
+        res = ivobs.make_estimator(method, sys, x0=X0).run(traj.u, traj.y)
+        assert res.contains(traj.x).all()
