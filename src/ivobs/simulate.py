@@ -174,6 +174,7 @@ def simulate(
     T: int | None = None,
     t: Any = None,
     check_bounds: bool = True,
+    matrices: Any = None,
 ) -> Trajectory:
     """Simulate ``sys`` from the true initial state ``x0``.
 
@@ -189,6 +190,9 @@ def simulate(
     t : continuous time only: increasing sample times ``(T,)``.
     check_bounds : raise :class:`IvobsError` if ``d`` leaves the system's bounds (constant or
         time-varying Box bounds; a callable bound is checked against the simulated ``y``).
+    matrices : systems with interval matrices: the matrices the plant uses at each step, a dict
+        ``name -> (T, r, c)`` (e.g. ``sys.realisation("vertex", T, seed)``), checked inside
+        their boxes (with ``check_bounds``); default: the nominal matrices.
     """
     if not isinstance(sys, LinearSystem):
         raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
@@ -207,8 +211,10 @@ def simulate(
     y = np.empty((T, sys.ny))
     dd = np.empty((T, sys.nd))
     xk = x0.copy()
+    real = _realised(sys, matrices, T, check_bounds)
     for k in range(T):
-        A, B, C, D, E, F = sys.matrices_at(k)
+        A, B, C, D, E, F = (real[n][k] if n in real else m
+                            for n, m in zip("ABCDEF", sys.matrices_at(k)))  # fmt: skip
         dk = d_arr[k] if d_fn is None else as_vector(f"d({k}, x)", d_fn(k, xk.copy()), sys.nd)
         x[k], dd[k] = xk, dk
         y[k] = C @ xk + D @ u_arr[k] + F @ dk
@@ -218,6 +224,32 @@ def simulate(
     if check_bounds:
         _check_d(sys, dd, y)
     return Trajectory(x=x, y=y, u=u_arr, d=dd, t=np.arange(T) * sys.sampling_period)
+
+
+def _realised(sys: LinearSystem, matrices: Any, T: int, check: bool) -> dict[str, np.ndarray]:
+    """The stacks of ``matrices=`` (:func:`simulate`), checked against the interval matrices."""
+    if matrices is None:
+        return {}
+    boxes = sys.interval_matrices()
+    if not isinstance(matrices, dict) or not set(matrices) <= set(boxes):
+        raise IvobsError(
+            f"matrices: expected a dict of stacked matrices for the interval matrices of the "
+            f"system ({', '.join(boxes) or 'none: every matrix is exact'}), got {matrices!r:.80}"
+        )
+    out = {}
+    for name, stack in matrices.items():
+        box = boxes[name]
+        arr = as_float_array(f"matrices[{name!r}]", stack)
+        if arr.ndim != 3 or arr.shape[0] < T or arr.shape[1:] != box.lo.shape:
+            raise IvobsError(
+                f"matrices[{name!r}]: expected shape ({T}, {box.lo.shape[0]}, "
+                f"{box.lo.shape[1]}), got {arr.shape}"
+            )
+        if check and not np.all((box.lo <= arr[:T]) & (arr[:T] <= box.hi)):
+            k = int(np.argwhere(~((box.lo <= arr[:T]) & (arr[:T] <= box.hi)))[0][0])
+            raise IvobsError(f"matrices[{name!r}]: step {k} leaves the interval matrix {name}")
+        out[name] = arr
+    return out
 
 
 def _infer_T(T: Any, u: Any, d: Any) -> int:

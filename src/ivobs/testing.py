@@ -74,7 +74,8 @@ def random_system(
 def adversarial_run(
     sys: LinearSystem, x0: Box, T: int, seed: Any = None, hold: int = 1
 ) -> Trajectory:
-    """Simulate from a random vertex of ``x0`` with vertex disturbances and random inputs."""
+    """Simulate from a random vertex of ``x0`` with vertex disturbances and random inputs (and
+    interval matrices on vertices of their boxes, redrawn every step: ``sys.realisation``)."""
     rng = np.random.default_rng(seed)
     x_true0 = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
     u = rng.normal(size=(T, sys.nu))
@@ -84,7 +85,8 @@ def adversarial_run(
         if not isinstance(box, Box):
             raise IvobsError("adversarial_run: expected constant disturbance bounds (a Box)")
         d = vertex_disturbance(box, T, seed=rng, hold=hold)
-    return simulate(sys, x_true0, u, d)
+    matrices = sys.realisation("vertex", T, rng) if sys.is_uncertain else None
+    return simulate(sys, x_true0, u, d, matrices=matrices)
 
 
 def assert_contains(est: Estimate, x: Any, tol: float = 0.0) -> None:

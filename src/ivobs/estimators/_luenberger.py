@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..design.hinf import observer_gain
+from . import _uncertain as uncertain
 from ._recursion import SplitFilter, centre_band, within_band
 from .base import Design, Estimator
 
@@ -60,23 +61,41 @@ class ObserverEstimator(Estimator):
         self._G = E - Lm @ F
         self._absC, self._absF = np.abs(C), np.abs(F)
         self._const: tuple[np.ndarray, np.ndarray] | None = None
-        if self.sys.has_constant_bounds:
+        self._unc = self.sys.uncertainty
+        if self._unc is not None:  # interval matrices: d̃ = [d; w; v] with data-dependent w, v
+            nx, ny = A.shape[0], C.shape[0]
+            self._G = np.hstack([self._G, np.eye(nx), -Lm])
+            self._absF = np.hstack([self._absF, np.zeros((ny, nx)), np.eye(ny)])
+        elif self.sys.has_constant_bounds:
             box = self.sys.d_at(0)
             self._const = (box.center, box.radius)
         return ObserverDesign(L=Lm, gamma=gamma, P=P, spectral_radius=rho)
 
-    def _bounds(self, k: int, y_k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Centre and radius of the bounds of ``d[k]`` (kept when constant)."""
+    def _bounds(
+        self, k: int, y_k: np.ndarray, lo: np.ndarray, hi: np.ndarray, u_k: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Centre and radius of the bounds of ``d[k]`` (kept when constant). Interval matrices
+        (``supports_uncertain``): the radius of ``d̃ = [d; w; v]`` (``w``, ``v`` centred at 0),
+        ``w = ΔA x + ΔB u``, ``v = ΔC x + ΔD u`` bounded from the box ``[lo, hi]`` of ``x[k]``
+        (:mod:`ivobs.estimators._uncertain`), which enter ``x+`` through ``[E, I, 0]`` and
+        ``y`` through ``[F, 0, I]``: the error ``e+ = M e + G̃ δ̃``, ``G̃ = [E − LF, I, −L]``."""
         if self._const is not None:
             return self._const
         box = self.sys.d_at(k, y_k)
-        return box.center, box.radius
+        if self._unc is None:
+            return box.center, box.radius
+        w, v = uncertain.terms(self._unc, lo, hi, u_k)  # centred at 0: c is that of d alone
+        return box.center, np.concatenate([box.radius, w, v])
 
     def _gain_at(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(L_k, M_k, G_k)`` for the outputs observed at a step (:func:`gain_without`)."""
+        """``(L_k, M_k, G_k)`` for the outputs observed at a step (:func:`gain_without`;
+        ``G̃_k = [E − L_k F, I, −L_k]`` with interval matrices)."""
         if obs.all():
             return self._L, self._M, self._G
-        return gain_without(self._mats, self._L, obs)
+        Lk, Mk, Gk = gain_without(self._mats, self._L, obs)
+        if self._unc is not None:
+            Gk = np.hstack([Gk, np.eye(Mk.shape[0]), -Lk])
+        return Lk, Mk, Gk
 
 
 def observer_filter(

@@ -106,6 +106,25 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
+def _refusal(name: str, sys: Any) -> str:
+    """Why ``name`` refuses a system with interval matrices, and which methods accept it."""
+    todo, seen, ok = list(Estimator.__subclasses__()), set(), []
+    while todo:  # the registered classes that accept interval matrices (no registry import)
+        cls = todo.pop()
+        if cls not in seen:
+            seen.add(cls)
+            todo += cls.__subclasses__()
+            if cls.name and cls.supports_uncertain:
+                ok.append((cls.order, cls.name))
+    which = ", ".join(sys.interval_matrices())
+    return (
+        f"sys: the {name} method needs exactly known matrices; this system has interval "
+        f"matrices ({which}). Methods that accept them: {', '.join(n for _, n in sorted(ok))} "
+        "(docs/uncertain.md), or estimate the nominal system sys.nominal() (not guaranteed for "
+        "the uncertain plant)"
+    )
+
+
 def _arrays(state: OnlineState) -> list[np.ndarray]:
     """The float arrays of a state (to tell an overflow from a bug)."""
     out = []
@@ -132,6 +151,9 @@ class Estimator(Persistence):
     supports_nonlinear: ClassVar[bool] = False
     supports_continuous: ClassVar[bool] = False
     supports_time_varying: ClassVar[bool] = False
+    supports_uncertain: ClassVar[bool] = False
+    """True for methods that accept interval matrices (``LinearSystem(ivobs.Box(A_lo, A_hi),
+    ...)``), each saying why in its docstring; the others refuse such a system."""
     needs_x0: ClassVar[bool] = True
     rounds_itself: ClassVar[bool] = False
     """True for methods that apply the rounding margin themselves (``intersect``: its members'
@@ -151,6 +173,8 @@ class Estimator(Persistence):
                 f"sys: the {self.name} method needs a time-invariant system; this one has "
                 "time-varying matrices. Use 'fixed-time', 'kkl' or 'exact'"
             )
+        if getattr(sys, "is_uncertain", False) and not self.supports_uncertain:
+            raise IvobsError(_refusal(self.name, sys))
         if on_inconsistent not in ("warn", "raise", "ignore"):
             raise IvobsError(
                 f"on_inconsistent: expected 'warn', 'raise' or 'ignore', got {on_inconsistent!r}"

@@ -74,6 +74,7 @@ from ..sets.czonotope import (
     reduce_generators,
     safe_radius,
 )
+from . import _uncertain as uncertain
 from . import register
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
@@ -242,6 +243,7 @@ class _StepData:
     xmag: np.ndarray
     dmag: np.ndarray
     n: int
+    v: np.ndarray | None = None  # interval matrices: |ΔC x + ΔD u| <= v (a wider slack)
 
 
 @dataclass(frozen=True)
@@ -285,6 +287,12 @@ class ConstrainedZonotopeEstimator(Estimator):
     elimination : ``"certificates"`` (default) or ``"hausdorff"``
         How the factor to eliminate is chosen: the least loss of the LP-certified box bounds
         (see the module docstring), or the paper's smallest Hausdorff-error estimate.
+
+    **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the plant is the nominal
+    one plus ``w = ΔA x + ΔB u`` in the state and ``v = ΔC x + ΔD u`` in the output. Each
+    measured row's slack ``ρ_i`` grows by ``v̄_i >= |v_i|`` (from the predicted set's box), and
+    the prediction adds the box ``diag(w̄)`` (``w̄ >= |w|`` from the certified box of ``x[k]``)
+    as generators: :mod:`ivobs.estimators._uncertain`, rounded upwards.
     """
 
     name = "constrained-zonotope"
@@ -293,6 +301,7 @@ class ConstrainedZonotopeEstimator(Estimator):
     reference = "[Scott2016, Sections 4-5]"
     data_used = "filter"
     supports_time_varying = True
+    supports_uncertain = True  # see "Interval matrices" in the docstring
     design: ConstrainedZonotopeDesign
 
     def __init__(
@@ -357,6 +366,9 @@ class ConstrainedZonotopeEstimator(Estimator):
             dmag=np.abs(cd) + rd,
             n=state.G.shape[0] + state.G.shape[1] + u_k.shape[0] + dbox.dim,
         )
+        if self.sys.uncertainty is not None:  # from the predicted box |x| <= xmag
+            xm = np.nextafter(data.xmag * (1.0 + gamma(data.n)), np.inf)
+            data = replace(data, v=uncertain.terms(self.sys.uncertainty, -xm, xm, u_k)[1])
         upd = self._update(state, data, y_k)
         c, G, A, b, e = self._predict(k, state, data, upd)
         # C order, as after a state() / restore() round trip (BLAS results depend on layout)
@@ -380,6 +392,8 @@ class ConstrainedZonotopeEstimator(Estimator):
         rho = 3.0 * gamma(data.n + 3) * (
             np.abs(y_k) + np.abs(D) @ np.abs(data.u) + aC @ data.xmag + np.abs(F) @ data.dmag
         ) + (aC @ e) * (1.0 + gamma(nx + 1))
+        if data.v is not None:
+            rho = np.nextafter(rho + data.v, np.inf)
         A_new, b_new, p, status, full = _measurement_update(Ac, b, C @ G, data.FR, rhs, rho)
         if status == "check" and certified_empty(*full):
             status = "empty"
@@ -418,6 +432,9 @@ class ConstrainedZonotopeEstimator(Estimator):
         err = 2.0 * gamma(data.n + 2) * upd.scale * (
             aA @ data.xmag + np.abs(B) @ np.abs(data.u) + np.abs(E) @ data.dmag
         ) + (aA @ e) * (1.0 + gamma(nx + 1))
+        if self.sys.uncertainty is not None:  # w = ΔA x + ΔB u from the certified box of x[k]
+            w = uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0]
+            err = np.nextafter(err + w, np.inf)
         box = box_generators(err)
         G_next = np.hstack([A @ upd.G[:, :m], upd.ER, box])
         self._check_overflow(k + 1, c_next, G_next)
@@ -449,7 +466,11 @@ class ConstrainedZonotopeEstimator(Estimator):
         out = eliminate_constraints(np.zeros(nx), G, A, b, self.design.max_constraints, cert)
         if out is None:  # numerically empty: restart from the box (sound, not a fault)
             A_k, B, _, _, E, _ = data.mats
-            c, G, A, b = _restart(A_k, B @ data.u + E @ data.cd, upd.ER, upd.lo, upd.hi)
+            ER = upd.ER
+            if self.sys.uncertainty is not None:  # the interval matrices' w̄, as in _predict
+                w = uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0]
+                ER = np.hstack([ER, box_generators(w)])
+            c, G, A, b = _restart(A_k, B @ data.u + E @ data.cd, ER, upd.lo, upd.hi)
         else:
             shift, G, A, b = out
             e = gamma(2) * (np.abs(c) + np.abs(shift))

@@ -98,6 +98,10 @@ class Intersect(Estimator):
     on_inconsistent : 'warn', 'raise' or 'ignore' (empty intersection, or a member's report)
 
     ``valid_from`` is the earliest member's; before a member's own ``valid_from`` it is ignored.
+
+    **Interval matrices** (docs/uncertain.md): sound as its members are; the default members
+    are those that accept them (the others are skipped with the reason), and the measurement
+    strip uses only the rows whose ``C`` and ``D`` rows are exact.
     See the module docstring for what is returned when the data are inconsistent.
     """
 
@@ -110,6 +114,7 @@ class Intersect(Estimator):
     supports_time_varying = True
     needs_x0 = False
     rounds_itself = True  # members rounded before intersecting (base.outward)
+    supports_uncertain = True  # members that accept interval matrices; exact rows' strips
 
     def __init__(
         self,
@@ -128,6 +133,9 @@ class Intersect(Estimator):
         else:
             self.members, skipped = self._explicit_members(methods), []
         rows = _pinning_rows(sys.C_at(0)) if not sys.is_time_varying else []
+        if sys.uncertainty is not None:  # interval matrices: strips of the exact rows only
+            exact = sys.uncertainty.exact_rows()
+            rows = [row for row in rows if exact[row[0]]]
         self.design = IntersectDesign(
             methods=tuple(m.name for m in self.members),
             strip=bool(strip),

@@ -124,6 +124,13 @@ class Reachability(ObserverEstimator):
     boxes the accumulated disturbance part (``<0, [M^k H0, diag s_k]>``, ``s_k`` its exact
     interval hull radius) and continues with the window.
 
+    **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the gain is designed for
+    the nominal matrices; the plant adds ``w = ΔA x + ΔB u`` to the state and ``v = ΔC x +
+    ΔD u`` to the output, so ``e+ = M e + G δ + w − L v``: a disturbance ``[d; w; v]`` through
+    ``[G, I, −L]`` whose radii ``w̄``, ``v̄`` come from the box of ``x[k]`` at each step
+    (:mod:`ivobs.estimators._uncertain`, rounded upwards). Time-varying radii are what the
+    finite-memory form handles (sound for every window): it runs from the first step.
+
     **Inconsistent data:** ``y[k]`` is consistent only if
     ``|y[k] - C x̂[k] - D u[k] - F c[k]| <= |C| ρ[k] + |F| r[k]``; otherwise it is reported and
     treated as missing.
@@ -143,6 +150,7 @@ class Reachability(ObserverEstimator):
     summary = "H∞ observer + exact interval hull of the error's reachable set"
     reference = "[Tang2019, Algorithm 1, Theorems 1-2, eqs. (10), (13), (21)-(26)]"
     data_used = "prediction"
+    supports_uncertain = True  # see "Interval matrices" in the docstring
     design: ReachabilityDesign
 
     def __init__(
@@ -172,7 +180,7 @@ class Reachability(ObserverEstimator):
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ReachabilityState:
-        nx, nd = self.sys.nx, self.sys.nd
+        nx, nd = self.sys.nx, self._G.shape[1]  # d̃ = [d; w; v] with interval matrices
         if self._const is not None:  # exact Algorithm 1: X = [M^k H0, M^k G diag r]
             X = np.hstack([np.diag(self._h0), self._G * self._const[1]])
             Z = np.zeros((nx, 0))
@@ -211,7 +219,7 @@ class Reachability(ObserverEstimator):
         lo, hi = xh - rho, xh + rho
 
         A, B, C, D, E, F = self._mats
-        c, r = self._bounds(state.k, y_k)
+        c, r = self._bounds(state.k, y_k, lo, hi, u_k)
         obs = ~np.isnan(y_k)
         full = bool(obs.all())
         innov = (y_k if full else np.where(obs, y_k, 0.0)) - C @ xh - D @ u_k - F @ c
@@ -255,7 +263,7 @@ class Reachability(ObserverEstimator):
                 X=np.zeros((nx, 0)),
                 s=np.zeros(nx),
             )
-        slots = np.concatenate([state.slots, np.zeros((1, nx, nx + self.sys.nd))])
+        slots = np.concatenate([state.slots, np.zeros((1, nx, nx + self._G.shape[1]))])
         slots[-1, :, :nx] = np.diag(rho)
         slots = Mk @ slots
         slots[-1, :, nx:] = Gk * r  # d[k] enters e[k+1] unpropagated

@@ -67,6 +67,7 @@ from ..sets.czonotope import (
     reduce_generators,
     safe_radius,
 )
+from . import _uncertain as uncertain
 from . import register
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
@@ -109,11 +110,13 @@ class _Joint:
     acc: np.ndarray
 
     def intersect(
-        self, h: np.ndarray, t: float, y_i: float, du: float, g_meas: float, nx: int
-    ) -> bool:
+        self, h: np.ndarray, t: float, y_i: float, du: float, g_meas: float, nx: int,
+        v_i: float = 0.0,
+    ) -> bool:  # fmt: skip
         """Intersect with the strip ``|hᵀ(x, d) - t| <= σ`` of one measured component
-        (``t = y_i - D_i u``, ``du = |D_i| |u|``); False when it certainly misses the set
-        (inconsistent: the set is left as it was)."""
+        (``t = y_i - D_i u``, ``du = |D_i| |u|``; ``v_i`` widens it by the interval matrices'
+        ``|ΔC_i x + ΔD_i u|``); False when it certainly misses the set (inconsistent: the set
+        is left as it was)."""
         z, Hz, acc = self.z, self.Hz, self.acc
         nz = z.shape[0]
         ah = np.abs(h)
@@ -126,6 +129,7 @@ class _Joint:
             g_meas * (abs(y_i) + du + ah @ wmax)
             + gamma(nz + 1) * (abs(t) + ah @ np.abs(z))
             + gamma(nz) * float((ah @ np.abs(Hz)).sum())
+            + v_i
         ) * (1.0 + 4.0 * UNIT_ROUNDOFF)
         # the point of <z, Hz> that is (x_k, d_k) minus the rounding: in a wider strip
         sigma_z = (sigma + ah @ acc) * (1.0 + gamma(nz + 2))
@@ -175,6 +179,13 @@ class StripEstimator(Estimator):
         [Combastel2015].
     weight : (nx, nx) array, optional
         Positive definite weight of the box reduction (which generators are kept).
+
+    **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the plant is the nominal
+    one plus ``w = ΔA x + ΔB u`` in the state and ``v = ΔC x + ΔD u`` in the output. Each strip
+    is that of the nominal row widened by ``v̄_i >= |v_i|`` (bounded from the predicted box of
+    ``x[k]``), and the prediction adds the box ``diag(w̄)`` (``w̄ >= |w|`` from the filtered box)
+    as generators, which later strips can contract: :mod:`ivobs.estimators._uncertain`, rounded
+    upwards.
     """
 
     name = "strip"
@@ -183,6 +194,7 @@ class StripEstimator(Estimator):
     reference = "[Alamo2005]"
     data_used = "filter"
     supports_time_varying = True
+    supports_uncertain = True  # see "Interval matrices" in the docstring
     design: StripDesign
 
     def __init__(
@@ -234,17 +246,21 @@ class StripEstimator(Estimator):
         au = np.abs(u_k)
         g_meas = 2.0 * gamma(joint.z.shape[0] + u_k.shape[0] + 2)
         inconsistent = False
+        unc = self.sys.uncertainty  # interval matrices: |v| <= v̄ widens each strip (class doc)
+        v = None if unc is None else uncertain.terms(unc, joint.lo[:nx], joint.hi[:nx], u_k)[1]
         for i in np.flatnonzero(~np.isnan(y_k)):
             t = float(y_k[i] - D[i] @ u_k)
             h = np.concatenate([C[i], F[i]])
-            if not joint.intersect(h, t, float(y_k[i]), np.abs(D[i]) @ au, g_meas, nx):
+            v_i = 0.0 if v is None else float(v[i])
+            if not joint.intersect(h, t, float(y_k[i]), np.abs(D[i]) @ au, g_meas, nx, v_i):
                 inconsistent = True
         joint.acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
         r = np.abs(joint.Hz[:nx]).sum(axis=1) + joint.acc[:nx]
         lo = np.maximum(joint.z[:nx] - r, joint.lo[:nx])
         hi = np.minimum(joint.z[:nx] + r, joint.hi[:nx])
         hi = np.maximum(hi, lo)  # equal up to rounding when a state is pinned down exactly
-        p, H, e = self._predict(k, A, B, E, joint, u_k)
+        w = None if unc is None else uncertain.terms(unc, lo, hi, u_k)[0]  # |w| <= w̄
+        p, H, e = self._predict(k, A, B, E, joint, u_k, w)
         return Step(replace(state, p=p, H=H, e=e), lo, hi, inconsistent)
 
     def _joint(self, state: StripState, dbox: Box, E: np.ndarray, F: np.ndarray) -> _Joint:
@@ -275,10 +291,11 @@ class StripEstimator(Estimator):
         E: np.ndarray,
         joint: _Joint,
         u_k: np.ndarray,
+        w: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(p, H, e)`` of ``x[k+1]``: the joint set mapped by ``[A E]``, then reduced. A box
         covers the rounding of ``M z + B u``, of ``M H`` and of the plant's own float64
-        arithmetic, and the image of the box aside."""
+        arithmetic, the image of the box aside, and ``w̄`` (interval matrices)."""
         nx = self.sys.nx
         z, Hz, acc = joint.z, joint.Hz, joint.acc
         M = np.hstack([A, E])
@@ -287,6 +304,8 @@ class StripEstimator(Estimator):
         err = 2.0 * gamma(z.shape[0] + u_k.shape[0] + 1) * (
             aM @ (np.abs(z) + np.abs(Hz).sum(axis=1) + acc) + np.abs(B) @ np.abs(u_k)
         ) + (aM @ acc) * (1.0 + gamma(z.shape[0] + 1))
+        if w is not None:  # the interval matrices' w = ΔA x + ΔB u: generators of the box
+            err = np.nextafter(err + w, np.inf)
         H_next = np.hstack([H_next, box_generators(err)])
         H_next = H_next[:, np.any(H_next != 0, axis=0)]
         self._check_overflow(k + 1, p_next, H_next)

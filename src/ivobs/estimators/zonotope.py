@@ -103,6 +103,14 @@ class ZonotopeEstimator(ObserverEstimator):
     **Inconsistent data:** ``y[k]`` must satisfy ``|y - C p - D u - F c| <= |C H| 1 + |F| r``;
     otherwise it is reported and treated as missing.
 
+    **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the gain is designed for
+    the nominal matrices and the matrix uncertainty is a generator term. The plant is the
+    nominal one plus ``w = ΔA x + ΔB u`` in the state and ``v = ΔC x + ΔD u`` in the output,
+    so the error obeys ``e+ = M e + G δ + w − L v``: (34b) appends ``[diag(w̄), −L diag(v̄)]``
+    with ``w̄ >= |w|``, ``v̄ >= |v|`` bounded from the box of ``x[k]``
+    (:mod:`ivobs.estimators._uncertain`, rounded upwards), and the consistency test widens by
+    ``v̄``. Every step is the loop (the term depends on the box).
+
     **Vectorised run** (constant bounds, no missing sample): ``H[k]`` does not depend on the
     data, so its radii are computed once (stopping at a fixed point of (34b)) and ``p[k]`` by a
     vectorised recursion; batches ``(B, T, n)`` share them.
@@ -135,6 +143,7 @@ class ZonotopeEstimator(ObserverEstimator):
     summary = "zonotope set-membership observer with order reduction"
     reference = "[Tang2019, Proposition 1, eqs. (33)-(35), Remark 2]; [Combastel2015]"
     data_used = "prediction"
+    supports_uncertain = True  # see "Interval matrices" in the docstring
     design: ZonotopeDesign
 
     def __init__(
@@ -224,7 +233,7 @@ class ZonotopeEstimator(ObserverEstimator):
         rad = np.abs(H).sum(axis=1)
         lo, hi = p - rad, p + rad
         A, B, C, D, E, F = self._mats
-        c, r = self._bounds(state.k, y_k)
+        c, r = self._bounds(state.k, y_k, lo, hi, u_k)
         obs = ~np.isnan(y_k)
         innov = np.where(obs, y_k, 0.0) - C @ p - D @ u_k - F @ c
         inconsistent = False

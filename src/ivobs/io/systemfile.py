@@ -29,12 +29,12 @@ import numpy as np
 
 from ..errors import IvobsError
 from ..model import LinearSystem
-from ..model.statespace import SignalNames
+from ..model.uncertain import INTERVAL_MATRICES
 from ..sets import Box
 from .callables import make_callable
 from .loaded import SystemFile
 from .options import read_method
-from .reader import TomlReader
+from .sections import PlantSections
 
 __all__ = ["FORMAT", "MATRICES", "SystemFile", "load_system", "loads_system"]
 
@@ -50,7 +50,7 @@ _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
 }
 
 
-class _SystemReader(TomlReader):
+class _SystemReader(PlantSections):
     """Validate a parsed system file, raising errors that name the file, the line and the key."""
 
     def __init__(self, text: str, source: str, base_dir: Path, allow_code: bool):
@@ -86,6 +86,8 @@ class _SystemReader(TomlReader):
         if isinstance(value, dict):
             if "python" not in value and ("shape" in value or "values" in value):
                 return self.sparse(key, value)
+            if "python" not in value and ("lower" in value or "upper" in value):
+                return self.interval(key, value)
             return self.python(key, value)
         arr = self.numbers(key, value, (2, 3))
         bad = ~np.isfinite(arr)
@@ -93,6 +95,40 @@ class _SystemReader(TomlReader):
             idx = "".join(f"[{int(i)}]" for i in np.argwhere(bad)[0])
             raise self.fail(key, f"entry {idx} is {arr[bad][0]}; matrices must be finite")
         return arr
+
+    def interval(self, key: tuple[str, ...], spec: dict[str, Any]) -> Box:
+        """An interval matrix ``{ lower = [[...]], upper = [[...]] }`` (A, B, C, D only): the
+        plant may use any matrix between the two at every step (docs/uncertain.md)."""
+        if key[-1] not in INTERVAL_MATRICES:
+            raise self.fail(
+                key,
+                "an interval matrix (lower, upper) is accepted for A, B, C and D only; an "
+                f"uncertain {key[-1]} is a wider box of the disturbance d",
+            )
+        unknown = sorted(set(spec) - {"lower", "upper"})
+        if unknown:
+            raise self.fail(
+                (*key, unknown[0]),
+                "unknown key; an interval matrix is given as lower = [[...]], upper = [[...]]",
+            )
+        bounds = []
+        for part in ("lower", "upper"):
+            if part not in spec:
+                raise self.fail(key, f"interval matrix: missing {part} = [[...]]")
+            arr = self.numbers((*key, part), spec[part], (2,))
+            if not np.all(np.isfinite(arr)):
+                raise self.fail((*key, part), "an interval matrix needs finite bounds")
+            bounds.append(arr)
+        lo, hi = bounds
+        if lo.shape != hi.shape:
+            raise self.fail((*key, "upper"), f"lower has shape {lo.shape}, upper {hi.shape}")
+        bad = lo > hi
+        if np.any(bad):
+            i, j = (int(v) for v in np.argwhere(bad)[0])
+            raise self.fail(
+                (*key, "lower"), f"lower > upper at entry [{i}][{j}]: {lo[i, j]} > {hi[i, j]}"
+            )
+        return Box(lo, hi)
 
     def sparse(self, key: tuple[str, ...], spec: dict[str, Any]) -> Any:
         """A sparse matrix from ``shape``, ``rows``, ``cols``, ``values`` (0-based indices)."""
@@ -243,7 +279,8 @@ class _SystemReader(TomlReader):
         arrays = {m: v for m, v in mats.items() if not callable(v)}  # dense or sparse
 
         def dims(m: str) -> tuple[int, ...] | None:
-            return tuple(arrays[m].shape[-2:]) if m in arrays else None
+            v = arrays.get(m)
+            return None if v is None else tuple((v.lo if isinstance(v, Box) else v).shape[-2:])
 
         A = dims("A")
         if A is not None and A[0] != A[1]:
@@ -390,52 +427,6 @@ class _SystemReader(TomlReader):
                         f"must be finite, got {cell!r}",
                     )
         return {h: data[:, c] for c, h in enumerate(header)}
-
-    def names(self, system: LinearSystem) -> SignalNames:
-        """``[names]``: labels of the states (and their ``units``), inputs, outputs and
-        disturbance components, for plots and tables."""
-        tab = self.table(("names",))
-        if tab is None:
-            return SignalNames()
-        self.check_keys(tab, ("names",))
-        sizes = {"states": system.nx, "units": system.nx, "inputs": system.nu,
-                 "outputs": system.ny, "disturbances": system.nd}  # fmt: skip
-        out: dict[str, tuple[str, ...]] = {}
-        for k, n in sizes.items():
-            if k not in tab:
-                continue
-            v = tab[k]
-            if not isinstance(v, list) or not all(isinstance(e, str) for e in v):
-                raise self.fail(("names", k), f"expected a list of strings, got {v!r}")
-            if len(v) != n:
-                raise self.fail(("names", k), f"expected {n} names (the system's), got {len(v)}")
-            out[k] = tuple(v)
-        return SignalNames(**out)
-
-    def x0(self, nx: int) -> Box | None:
-        tab = self.table(("x0",))
-        if tab is None:
-            return None
-        vec = {}
-        for k in ("lower", "upper"):
-            if k not in tab:
-                raise self.fail(("x0",), f"missing {k} (the prior box is [lower, upper])")
-            v = self.numbers(("x0", k), tab[k], (1,))
-            if v.shape[0] != nx:
-                raise self.fail(
-                    ("x0", k), f"expected {nx} values (one per state), got {v.shape[0]}"
-                )
-            if not np.all(np.isfinite(v)):
-                raise self.fail(("x0", k), "the prior box must be finite")
-            vec[k] = v
-        bad = vec["lower"] > vec["upper"]
-        if np.any(bad):
-            i = int(np.argmax(bad))
-            raise self.fail(
-                ("x0", "lower"),
-                f"lower > upper in component {i}: {vec['lower'][i]} > {vec['upper'][i]}",
-            )
-        return Box(vec["lower"], vec["upper"])
 
     def method(self) -> tuple[str | None, dict[str, Any]]:
         tab = self.table(("method",))

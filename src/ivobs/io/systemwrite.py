@@ -34,6 +34,8 @@ def _same_value(a: Any, b: Any) -> bool:
         return ra[0] == rb[0] and _same_params(ra[1], rb[1])
     if isinstance(a, Box) or isinstance(b, Box):
         return isinstance(a, Box) and isinstance(b, Box) and a == b
+    if isinstance(a, dict) or isinstance(b, dict):  # interval matrices, name -> Box
+        return isinstance(a, dict) and isinstance(b, dict) and _same_params(a, b)
     a, b = np.asarray(a), np.asarray(b)
     return a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
 
@@ -71,6 +73,8 @@ def equal_systems(a: LinearSystem, b: LinearSystem) -> bool:
                 return False
         elif not _same_value(getattr(a, m), getattr(b, m)):
             return False
+    if not _same_value(a.interval_matrices(), b.interval_matrices()):
+        return False
     return _same_value(a.d, b.d)
 
 
@@ -189,7 +193,11 @@ def dumps_system(
         if skip.get(m, False):
             continue
         sp = _sparse_of(system, m)
-        if sp is not None:  # a sub-table, after the other keys of [system]
+        box = system.interval_matrices().get(m)
+        if box is not None:  # an interval matrix: a sub-table too (docs/uncertain.md)
+            sparse_tables += ["", f"[system.{m}]", f"lower = {_value(box.lo)}",
+                              f"upper = {_value(box.hi)}"]  # fmt: skip
+        elif sp is not None:  # a sub-table, after the other keys of [system]
             sparse_tables += ["", f"[system.{m}]", *_sparse_lines(sp)]
         else:
             out.append(f"{m} = {_matrix_value(m, getattr(system, m))}")

@@ -35,6 +35,7 @@ from ..sets import Box
 from ._matrix import Matrix, MatrixLike, is_scipy_sparse
 from .protocol import BoundsLike
 from .statespace import SignalNames, from_statespace, is_statespace
+from .uncertain import IntervalMatrices
 
 if TYPE_CHECKING:
     from .protocol import LinearModel
@@ -70,21 +71,31 @@ def _radius_box(name: str, value: Any, n: int, matrix: str) -> Box:
     return Box._trusted(0.0 - arr, 0.0 + arr)  # as Box.symmetric: no -0.0
 
 
-class LinearSystem:
+class LinearSystem(IntervalMatrices):
     """``x+ = A x + B u + E d``, ``y = C x + D u + F d``, ``d ∈ d``.
 
     Parameters
     ----------
-    A : (nx, nx) array, stacked ``(T, nx, nx)`` array, or callable ``k -> (nx, nx)``
-    B : (nx, nu), optional (no known input when omitted)
-    C : (ny, nx), required
-    D : (ny, nu), optional (zero)
+    A : (nx, nx) array, stacked ``(T, nx, nx)`` array, or callable ``k -> (nx, nx)``; or an
+        interval matrix ``ivobs.Box(A_lo, A_hi)`` (bounds of shape ``(nx, nx)``): ``A[k]`` may
+        be any matrix in the box, changing from step to step (see below)
+    B : (nx, nu), optional (no known input when omitted); or an interval matrix
+    C : (ny, nx), required; or an interval matrix
+    D : (ny, nu), optional (zero); or an interval matrix
     E : (nx, nd), optional; requires ``d``
     F : (ny, nd), optional; requires ``d``
     d : Box of dimension ``nd`` (constant or with ``(T, nd)`` bounds), or callable
         ``(k, y_k) -> Box``. Required when ``E`` or ``F`` is given, and one of them must be given
         when ``d`` is.
     dt : ``True`` or a sampling period ``> 0`` for discrete time, ``0`` for continuous time.
+
+    **Interval matrices** (:mod:`ivobs.model.uncertain`, docs/uncertain.md): a :class:`~ivobs.Box`
+    in the place of ``A``, ``B``, ``C`` or ``D`` (in any other place a Box with 2-D bounds is a
+    time-varying box of vectors; here it is a box of matrices) makes the system *uncertain*
+    (:attr:`is_uncertain`). ``sys.A`` etc. are then the nominal (midpoint) matrices, which every
+    design uses; :attr:`A_box` etc. the interval matrices; :attr:`uncertainty` their radii. Such
+    a system is discrete-time with constant, dense matrices; the methods that accept it say so
+    (``supports_uncertain``), the others refuse it.
 
     Raises
     ------
@@ -113,7 +124,8 @@ class LinearSystem:
                 "disturbances=[...], d=ivobs.Box(...)) (make_estimator also accepts it directly)"
             )
         self.dt = self._check_dt(dt)
-        self._A = Matrix("A", A, None, None, "col")
+        self._boxes: dict[str, tuple[Box, np.ndarray]] = {}
+        self._A = Matrix("A", self._interval("A", A, None, None, "col"), None, None, "col")
         nx = int(self._A.shape[0])
         if self._A.shape != (nx, nx) or nx == 0:
             raise IvobsError(
@@ -122,11 +134,15 @@ class LinearSystem:
             )
         if C is None:
             raise IvobsError("C: the output matrix is required (y = C x + D u + F d)")
-        self._C = Matrix("C", C, None, nx, "row")
+        self._C = Matrix("C", self._interval("C", C, None, nx, "row"), None, nx, "row")
         ny = self._C.shape[0]
-        self._B = Matrix("B", np.zeros((nx, 0)) if B is None else B, nx, None, "col")
+        B = np.zeros((nx, 0)) if B is None else self._interval("B", B, nx, None, "col")
+        self._B = Matrix("B", B, nx, None, "col")
         nu = self._B.shape[1]
-        self._D = Matrix("D", np.zeros((ny, nu)) if D is None else D, ny, nu, "col")
+        D = np.zeros((ny, nu)) if D is None else self._interval("D", D, ny, nu, "col")
+        self._D = Matrix("D", D, ny, nu, "col")
+        for name, value in (("E", E), ("F", F)):
+            self._interval(name, value, None, None, "col")  # refused: a wider d instead
         self._d, nd = self._check_bounds(d, E, F)
         self._E = Matrix("E", np.zeros((nx, nd)) if E is None else E, nx, nd, "col")
         self._F = Matrix("F", np.zeros((ny, nd)) if F is None else F, ny, nd, "row")
@@ -141,6 +157,7 @@ class LinearSystem:
             raise IvobsError(
                 f"d: expected a Box of dimension {self.nd} (columns of E and F), got {self._d.dim}"
             )
+        self._uncertainty = self._check_uncertain()
 
     # -- validation helpers ---------------------------------------------------------------
     @staticmethod
@@ -399,6 +416,11 @@ class LinearSystem:
                 "to_statespace: python-control is not installed; pip install 'ivobs[control]'"
             ) from None
         self._require_lti("to_statespace")
+        if self.is_uncertain:
+            raise IvobsError(
+                "to_statespace: the system has interval matrices; python-control has no such "
+                "model. Use sys.nominal().to_statespace() for the nominal (midpoint) system"
+            )
         return control.ss(
             self.A, np.hstack([self.B, self.E]), self.C, np.hstack([self.D, self.F]), self.dt
         )
@@ -437,6 +459,8 @@ class LinearSystem:
     def __repr__(self) -> str:
         kind = "continuous" if self.is_continuous else "discrete"
         tv = ", time-varying" if self.is_time_varying else ""
+        if self._boxes:
+            tv += f", interval {', '.join(self._boxes)}"
         return f"LinearSystem({kind}{tv}, nx={self.nx}, nu={self.nu}, ny={self.ny}, nd={self.nd})"
 
 

@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import IvobsError
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box, image_bounds
 from .records import MonitorRecord
 
-__all__ = ["check_record"]
+__all__ = ["check_record", "refuse_uncertain"]
 
 
 def check_record(
@@ -84,6 +85,17 @@ def check_record(
             )
         reasons[int(k)] = "; ".join(why)
     return MonitorRecord(X_lo.copy(), X_hi.copy(), alarm, reasons, b_lo, b_hi)
+
+
+def refuse_uncertain(sys: LinearSystem) -> None:
+    """The monitor's prediction and output band use the exact matrices (Lemma 1 of ``A`` and
+    ``C``): with interval matrices they would not be guaranteed, so an alarm could be false."""
+    if sys.is_uncertain:
+        raise IvobsError(
+            f"sys: the monitor's prediction and output band need exactly known matrices; this "
+            f"system has interval matrices ({', '.join(sys.interval_matrices())}). Estimate "
+            "with ivobs.make_estimator(...).run (methods that accept them: docs/uncertain.md)"
+        )
 
 
 def _images(

@@ -16,7 +16,7 @@ from ..result import Estimate
 from ..sets import Box, image_bounds, neg, pos
 from ._codec import _decode, _encode_prev, _vector
 from .latch import Latch
-from .offline import check_record
+from .offline import check_record, refuse_uncertain
 from .records import MonitorRecord, MonitorStep, output_names, stack_steps
 
 __all__ = ["Monitor"]
@@ -65,6 +65,7 @@ class Monitor:
     ):
         if not isinstance(sys, LinearSystem):
             raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
+        refuse_uncertain(sys)
         if isinstance(method, Estimator):
             if options:
                 raise IvobsError(

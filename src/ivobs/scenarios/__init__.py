@@ -8,7 +8,8 @@ The registry (:class:`Scenario`, :func:`register_scenario`, :func:`get`, :func:`
 - :mod:`~ivobs.scenarios.efimov2013`: ``efimov-planar``, ``henon`` ([Efimov2013, Section IV]);
 - :mod:`~ivobs.scenarios.dinh2024`: ``kkl-random8``, ``pendulum``, ``kkl-ltv-dt`` ([Dinh2024]);
 - :mod:`~ivobs.scenarios.heat`: ``heat-1d`` (large sparse systems, not from a paper);
-- :mod:`~ivobs.scenarios.cora`: the CORA benchmarks ``cora-*`` ([Althoff2021]).
+- :mod:`~ivobs.scenarios.cora`: the CORA benchmarks ``cora-*`` ([Althoff2021]);
+- :mod:`~ivobs.scenarios.uncertain`: ``servo-uncertain`` (interval matrices, docs/uncertain.md).
 
 They are imported below in that order, which is the order of :func:`names`.
 """
@@ -29,7 +30,7 @@ from .registry import (
 
 # The import order is the registration order, hence that of names(): not sorted.
 # isort: off
-from . import wang2020, tang2019, efimov2013, dinh2024, heat, cora
+from . import wang2020, tang2019, efimov2013, dinh2024, heat, cora, uncertain
 # isort: on
 
 from .dinh2024 import kkl_ltv_A, pendulum_A
@@ -60,5 +61,6 @@ __all__ = [
     "registry",
     "summaries",
     "tang2019",
+    "uncertain",
     "wang2020",
 ]

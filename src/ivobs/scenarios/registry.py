@@ -65,6 +65,9 @@ class Scenario:
     _disturbance: DisturbanceFactory | None = None
     _u_fn: Callable[[float], np.ndarray] | None = None
     recorded: Trajectory | None = None
+    _matrices: DisturbanceFactory | None = None
+    """Systems with interval matrices: ``(kind, seed, T) -> {name: (T, r, c)}``, the matrices
+    the plant uses at each step under a disturbance of that kind (``simulate(matrices=)``)."""
 
     @property
     def u_fn(self) -> Callable[[float], np.ndarray] | None:
@@ -110,7 +113,10 @@ class Scenario:
         if self.system.is_continuous:
             u = self._u_fn if self._u_fn is not None else self.u
             return simulate(self.system, self.x_true0, u, d, t=self.t)
-        return simulate(self.system, self.x_true0, self.u, d, T=self.horizon)
+        kw = {}
+        if self._matrices is not None:  # interval matrices: the plant's at each step
+            kw["matrices"] = self._matrices(disturbance, seed, self.horizon)
+        return simulate(self.system, self.x_true0, self.u, d, T=self.horizon, **kw)
 
     def __repr__(self) -> str:
         return f"Scenario({self.name!r}, {self.system!r}, horizon={self.horizon}, {self.source})"

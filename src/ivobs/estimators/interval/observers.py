@@ -45,6 +45,14 @@ class CooperativeObserver(Estimator, Generic[S]):
 
     needs_x0: ClassVar[bool] = True
     data_used: ClassVar[str] = "prediction"
+    supports_uncertain: ClassVar[bool] = True
+    """Interval matrices ([Efimov2013]'s uncertain ``A = A0 + ΔA``, docs/uncertain.md): the gain
+    is designed for the nominal matrices; with ``w = ΔA x + ΔB u``, ``v = ΔC x + ΔD u`` the
+    plant obeys ``x+ = (A0 − L C0) x + (B0 − L D0) u + L y + (E − LF) d + (w − L v)``, so the
+    same Lemma-1 step stays sound with ``S (w − L_k v)`` as one more bounded input, bounded from
+    the box of ``x[k]`` (``|w| <= R_A |x| + R_B |u|``, :mod:`ivobs.estimators._uncertain`,
+    rounded upwards); the consistency test widens by ``|v|``. The loop only (the term depends
+    on the box), no window after gaps (its bound assumes the exact ``A``)."""
     state_type: ClassVar[type[CooperativeState]] = CooperativeState
 
     def _build(self, L: np.ndarray, D: Any, S_: np.ndarray | None = None) -> None:

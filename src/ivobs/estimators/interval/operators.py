@@ -90,6 +90,8 @@ class SplitOperators:
             self.Si_pm = (pos(self.Si), neg(self.Si))
             self.tconv = transform_conversion(S, self.Si, who)
         self.margins = margins
+        self.unc = sys.uncertainty
+        """The radii of the interval matrices (None: exact matrices), ivobs.model.uncertain."""
         self.mu = 1.0 if margins is None else margins.mu
         self.nu = 1.0 if margins is None else margins.nu
         self.ctol = CONSISTENCY_TOL if margins is None else margins.ctol
@@ -124,7 +126,8 @@ class SplitOperators:
         self.window: WindowBound | None = None
         """The finite-memory bound used after missing samples (:mod:`.window`): dense,
         time-invariant systems with constant bounds, ``S = I``."""
-        if S is None and self.A is not None and self.const and not sys.is_time_varying:
+        exact = self.unc is None  # the bound of a window uses the exact A
+        if S is None and self.A is not None and self.const and not sys.is_time_varying and exact:
             db = self.d_const
             dlo, dhi = (np.zeros(0), np.zeros(0)) if db is None else (db.lo, db.hi)
             self.window = window_bound(self.A, self.B, self.C, self.Du, self.E, self.F, dlo, dhi)
@@ -253,8 +256,10 @@ class SplitOperators:
         y: np.ndarray,
         obs: np.ndarray,
         dbox: Box,
+        v: np.ndarray | None = None,
     ) -> bool:
-        """``y`` (observed components) ∈ ``C[lo, hi] + D_u u + F[d]`` up to round-off."""
+        """``y`` (observed components) ∈ ``C[lo, hi] + D_u u + F[d]`` (``+ [−v, v]``: the
+        interval matrices' term, ivobs.estimators._uncertain) up to round-off."""
         if self.sparse:
             if obs.all():
                 return self._consistent_stacked(lo, hi, u, y, dbox)
@@ -266,6 +271,8 @@ class SplitOperators:
             flo, fhi = hull(*self.F_pm, dbox.lo, dbox.hi)
         du = self.Du @ u
         plo, phi = plo + du + flo, phi + du + fhi
+        if v is not None:
+            plo, phi = plo - v, phi + v
         tol = self.ctol * (1.0 + np.abs(y) + (phi - plo))  # NaN (missing) compares False
         bad = ((y < plo - tol) | (y > phi + tol)) & obs
         return not bool(np.any(bad))

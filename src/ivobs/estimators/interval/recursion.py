@@ -16,6 +16,7 @@ from typing import TypeVar
 import numpy as np
 
 from ...sets import Box
+from .. import _uncertain as uncertain
 from .._recursion import csr_accumulate
 from ..state import Step
 from .operators import SplitOperators, hull
@@ -56,13 +57,18 @@ def cooperative_step(ops: SplitOperators, state: S, u_k: np.ndarray, y_k: np.nda
     xlo, xhi = ops.to_x(state.k, zlo, zhi)
     obs = ~np.isnan(y_k)
     dbox = ops.disturbance(state.k, y_k)
-    inconsistent = bool(obs.any()) and not ops.consistent(xlo, xhi, u_k, y_k, obs, dbox)
+    w = v = None
+    if ops.unc is not None:  # interval matrices: w = ΔA x + ΔB u, v = ΔC x + ΔD u (_uncertain)
+        w, v = uncertain.terms(ops.unc, xlo, xhi, u_k)
+    inconsistent = bool(obs.any()) and not ops.consistent(xlo, xhi, u_k, y_k, obs, dbox, v)
     if inconsistent:
         obs = np.zeros_like(obs)
     if ops.sparse:
         lo, hi = _stacked_update(ops, zlo, zhi, u_k, y_k, obs, dbox)
     else:
         lo, hi = _split_update(ops, zlo, zhi, xlo, xhi, u_k, y_k, obs, dbox)
+    if w is not None and v is not None:  # S (w − L_k v) enters z[k+1] as a bounded input
+        lo, hi = uncertain.widen(lo, hi, uncertain.observer_term(w, v, ops.matrices(obs).Lz, ops.S))
     new = replace(state, lo=lo, hi=hi)
     if ops.window is not None:
         new = after_gap(ops.window, ops.dmax, new, state, u_k, y_k, bool(obs.all()))

@@ -77,7 +77,7 @@ class VectorPath:
             return None  # (an empty record: the loop)
         if box is not None and box.is_time_varying and box.lo.shape[0] < T:
             return None
-        if np.isnan(y).any():
+        if np.isnan(y).any() or ops.unc is not None:  # interval matrices: terms from the box
             return None
         if ops.sparse:
             return self._run_sparse(est, u, y, T)

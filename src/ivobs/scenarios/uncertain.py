@@ -1,0 +1,85 @@
+"""Examples with interval matrices (docs/uncertain.md): a friction known to ±5 %.
+
+``servo-uncertain`` is the DC servo motor of [Tang2019, Section VII, Example 1] whose viscous
+friction is known to ±5 % only. The Euler-discretised speed equation has
+``A22 = 1 − Ts b / J = 0.8495``: the friction term ``Ts b / J = 0.1505`` within ±5 % gives the
+interval matrix entry ``A22 ∈ [1 − 1.05 · 0.1505, 1 − 0.95 · 0.1505] = [0.841975, 0.857025]``,
+every other entry exact. The plant may use any ``A22`` in that interval at every step.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import IvobsError
+from ..model import LinearSystem
+from ..sets import Box
+from ..simulate import disturbance
+from .registry import Scenario, bounds_box, check_horizon, constant_input, register_scenario
+
+FRICTION = 0.1505
+"""``Ts b / J`` of the servo motor's speed equation ([Tang2019]'s ``A22 = 1 − 0.1505``)."""
+
+SPREAD = 0.05
+"""The relative uncertainty of the friction (±5 %)."""
+
+_KINDS = {"paper": "sinusoidal", "sinusoidal": "sinusoidal", "vertex": "vertex",
+          "uniform": "uniform", "zero": "nominal", "center": "nominal"}  # fmt: skip
+"""The realisation of the interval matrix under each disturbance kind."""
+
+
+def servo_uncertain_system() -> LinearSystem:
+    """The servo motor of [Tang2019, Section VII, Example 1] with ``A22`` the interval
+    ``1 − 0.1505 [0.95, 1.05]`` (module docstring)."""
+    A = np.array([[1, 0.1, 0], [0, 1 - FRICTION, 0.4977], [0, -0.0357, 0.9995]])
+    lo, hi = A.copy(), A.copy()
+    lo[1, 1] = 1 - (1 + SPREAD) * FRICTION
+    hi[1, 1] = 1 - (1 - SPREAD) * FRICTION
+    B = np.array([[0.0], [0.0], [0.0729]])
+    C = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    w_bar = np.array([0.0225, 0.0225, 0.0404])
+    v_bar = np.array([0.0564, 0.0564])
+    exact = LinearSystem.from_process_measurement(A, B, C, np.eye(3), np.eye(2), w_bar, v_bar)
+    return LinearSystem(Box(lo, hi), B, C, E=exact.E, F=exact.F, d=exact.d)
+
+
+@register_scenario(
+    "servo-uncertain", "[Tang2019] servo motor, viscous friction known to ±5 % (interval A)"
+)
+def _servo_uncertain(horizon: int = 200) -> Scenario:
+    T = check_horizon(horizon)
+    sys = servo_uncertain_system()
+
+    def matrices(kind: str, seed: Any, T: int) -> dict[str, np.ndarray]:
+        if kind not in _KINDS:
+            raise IvobsError(
+                f"servo-uncertain: disturbance kind {kind!r} is not available "
+                f"(use one of {', '.join(_KINDS)})"
+            )
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0:
+            seed = np.random.SeedSequence([int(seed), 7])  # not the disturbance's own stream
+        return sys.realisation(_KINDS[kind], T, seed)
+
+    return Scenario(
+        name="servo-uncertain",
+        system=sys,
+        x0=Box.symmetric(0.2 * np.ones(3)),
+        x_true0=np.array([0.0015, 0.0148, 0.0]),
+        u=constant_input([2.0], T),
+        horizon=T,
+        source="[Tang2019, Section VII, Example 1] with an interval friction entry",
+        description="Euler-discretised DC servo motor (Ts = 0.1 s), x = (θ, n, i), viscous "
+        "friction ±5 %: A22 in [0.841975, 0.857025]; |w| <= (0.0225, 0.0225, 0.0404), "
+        "|v| <= 0.0564, u = 2 V",
+        reference={"A22": (1 - (1 + SPREAD) * FRICTION, 1 - (1 - SPREAD) * FRICTION)},
+        state_names=("θ (rad)", "n (rad/s)", "i (A)"),
+        _disturbance=lambda kind, seed, T: (
+            disturbance("sinusoidal", bounds_box(sys), T) if kind == "paper" else None
+        ),
+        _matrices=matrices,
+        notes="'paper' moves A22 as a sinusoid across its interval and the disturbances as "
+        "sinusoids filling their bounds; 'vertex' puts A22 and every disturbance on a bound, "
+        "redrawn at every step; horizon 200 steps chosen by ivobs",
+    )
