@@ -177,7 +177,7 @@ class _Joint:
         if contracted is None:
             return False
         lo, hi = contracted
-        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z)
+        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rows[:nx])
         pad = acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
         np.maximum(lo[:nx], lo_j - pad, out=lo[:nx])
         np.minimum(hi[:nx], hi_j + pad, out=hi[:nx])
@@ -379,7 +379,12 @@ class StripEstimator(Estimator):
 
 
 def _section_hull(
-    z: np.ndarray, H: np.ndarray, s: np.ndarray, e: float, sigma: float = 0.0
+    z: np.ndarray,
+    H: np.ndarray,
+    s: np.ndarray,
+    e: float,
+    sigma: float = 0.0,
+    absH: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-coordinate hull of ``{z + H ξ : ‖ξ‖∞ <= 1, |sᵀξ - e| <= σ}`` without a solver.
 
@@ -391,18 +396,24 @@ def _section_hull(
     (``O(m log m)`` per coordinate, all coordinates at once). The lower bound is the same
     with ``e -> -e``. ``f_j`` is evaluated at the chosen ``μ`` and increased by the bound
     ``γ_{m+4} (|z_j| + |μ| (|e| + σ + ‖s‖₁) + ‖H_j‖₁)`` of its rounding, so the returned bounds
-    hold for the exact set whatever the rounding of the sort keys.
+    hold for the exact set whatever the rounding of the sort keys. ``absH``: ``‖H_j‖₁`` when
+    the caller has it.
     """
     n, m = H.shape
-    absH = np.abs(H).sum(axis=1)
+    if absH is None:
+        absH = np.abs(H).sum(axis=1)
     a_s = np.abs(s)
     smax = float(a_s.max()) if m else 0.0
     if not smax > 0.0:
         r = absH + gamma(m + 2) * (np.abs(z) + absH)
         return z - r, z + r
     keep = a_s > 1e-14 * smax  # tiny s_l: a breakpoint far away of negligible weight
-    b = np.empty((n, int(keep.sum()) + 1))
-    np.divide(H[:, keep], s[keep], out=b[:, :-1])
+    n_keep = int(keep.sum())
+    b = np.empty((n, n_keep + 1))
+    if n_keep == m:
+        np.divide(H, s, out=b[:, :-1])
+    else:
+        np.divide(H[:, keep], s[keep], out=b[:, :-1])
     b[:, -1] = 0.0
     w = np.append(a_s[keep], sigma)
     idx = np.argsort(b, axis=1)
