@@ -81,8 +81,8 @@ def test_every_order_stays_bounded(name: str, reduction: str) -> None:
     nx = sc.system.nx
     r0 = float(np.mean(0.5 * (sc.x0.hi - sc.x0.lo)))
     orders = [nx, nx + 1, 2 * nx, 3 * nx, 10 * nx] if nx < 30 else [nx, 2 * nx, 5 * nx]
-    if reduction != "parallelotope":  # nx < order < 2 nx is refused (test_bad_orders)
-        orders = [q for q in orders if not nx < q < 2 * nx]
+    if reduction != "parallelotope":  # order < 2 nx is refused
+        orders = [q for q in orders if q >= 2 * nx]
     limit = 10.0 if reduction == "parallelotope" else 100.0
     for order in orders:
         est = ivobs.make_estimator("strip", sc.system, x0=sc.x0, order=order, reduction=reduction)
@@ -114,16 +114,22 @@ def test_tank30_default_is_tighter_than_cora_frad_a() -> None:
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_random_systems_300_steps_low_order(seed: int) -> None:
-    """Vertex disturbances at every step, order nx (the reduction works hardest)."""
+    """Vertex disturbances at every step, every reduction, at the smallest orders it accepts
+    (the reduction works hardest). Measured widths (parallelotope, rows 150-299): at most 3.0,
+    4.5, 8.7 at order nx; Girard's box reached 1e11 and 1e82 at order nx, now refused."""
     nx = 4 + seed
     sys = random_system(seed + 20, nx=nx, ny=2, nu=1, feedthrough=bool(seed % 2))
     x0 = Box(-np.ones(nx), np.ones(nx))
     u = np.random.default_rng(seed).normal(size=(300, 1))
     x, y = vertex_run(sys, -np.ones(nx), u, seed=seed)
-    for order in (nx, 3 * nx):
-        res = ivobs.make_estimator("strip", sys, x0=x0, order=order).run(u, y)
-        assert not outside(res, x)
-        assert np.all(np.isfinite(res.upper)) and res.width[150:].max() < 1e3
+    for reduction, order in (("parallelotope", nx), ("parallelotope", 3 * nx),
+                             ("girard", 2 * nx), ("box", 3 * nx)):  # fmt: skip
+        est = ivobs.make_estimator("strip", sys, x0=x0, order=order, reduction=reduction)
+        res = est.run(u, y)
+        assert not outside(res, x), (reduction, order)
+        assert np.all(np.isfinite(res.upper))
+        if reduction == "parallelotope":  # the boxes may diverge on such systems (docs)
+            assert res.width[150:].max() < 1e2
 
 
 def _contained(G: np.ndarray, G2: np.ndarray, rho: np.ndarray, rng: np.random.Generator) -> bool:
@@ -158,7 +164,7 @@ def test_an_ill_conditioned_basis_falls_back_to_girard() -> None:
 def test_box_reductions_refuse_the_orders_where_they_diverge() -> None:
     sc = scenarios.get("cora-vehicle6")
     for reduction in ("girard", "box"):
-        with pytest.raises(ivobs.IvobsError, match="order.*2 nx = 12, got 7"):
-            ivobs.make_estimator("strip", sc.system, x0=sc.x0, order=7, reduction=reduction)
-        for q in (6, 12):
-            ivobs.make_estimator("strip", sc.system, x0=sc.x0, order=q, reduction=reduction)
+        for q in (6, 7, 11):
+            with pytest.raises(ivobs.IvobsError, match=f"order.*2 nx = 12, got {q}"):
+                ivobs.make_estimator("strip", sc.system, x0=sc.x0, order=q, reduction=reduction)
+        ivobs.make_estimator("strip", sc.system, x0=sc.x0, order=12, reduction=reduction)
