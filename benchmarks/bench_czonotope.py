@@ -57,7 +57,7 @@ def drift(names: list[str], **options: object) -> None:
         dt = time.perf_counter() - t0
         w, wr = res.upper - res.lower, ref[name]
         T = w.shape[0]
-        ks = sorted(set(list(range(0, T, 50)) + [T - 1]))
+        ks = sorted({*range(0, T, 50), T - 1})
         ratio = [float(np.mean(w[k]) / np.mean(wr[k])) for k in ks]
         worst = float(np.max(w.mean(axis=1) / wr.mean(axis=1)))
         inside = bool(np.all(res.contains(tr.x)[~np.isnan(tr.x).any(axis=1)]))

@@ -385,13 +385,16 @@ class ConstrainedZonotopeEstimator(Estimator):
             status = "empty"
         ER = np.hstack([data.ER, np.zeros((nx, p - data.ER.shape[1]))])  # slacks: not in x
         G_aug = np.hstack([G, np.zeros((nx, p))])
+        # the certificates also keep the hull of the prediction x[k+1] = A x[k] + E d[k] (same
+        # factors): the box of x[k] alone lets an elimination blow up a predicted coordinate
+        pred = None if self.design.elimination == "hausdorff" else np.hstack([data.mats[0] @ G, ER])
         hull: tuple[np.ndarray, np.ndarray, Certificates | None] | None = None
         if status != "empty":
-            hull = hull_certificates(c, G_aug, A_new, b_new)
+            hull = hull_certificates(c, G_aug, A_new, b_new, pred)
         inconsistent = hull is None
         if hull is None:  # certainly inconsistent: report, predict without y_k
             A_new, b_new = np.hstack([Ac, np.zeros((Ac.shape[0], p))]), b
-            hull = hull_certificates(c, G_aug, A_new, b_new)
+            hull = hull_certificates(c, G_aug, A_new, b_new, pred)
             if hull is None:  # pragma: no cover - the prior set is never certainly empty
                 r = np.abs(G).sum(axis=1) * (1.0 + gamma(m + 2))
                 hull = (c - r, c + r, None)

@@ -83,31 +83,30 @@ def _model(A: np.ndarray, b: np.ndarray, radius: float) -> Any:
     return lp
 
 
-def chain_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray | str:
+def chain_duals(
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float, chains: list[list[int]]
+) -> np.ndarray | str:
     """Equality multipliers ``μ`` (K, nc) of the ``K`` programs
     ``min {Gs_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``, in the sign convention of
     :func:`~.hull._dual_bounds` (``μᵀb - r ‖g - Aᵀμ‖₁`` is the bound).
 
-    The feasible set is the same for all: it is passed to HiGHS once per chain and only the
-    cost changes, so each solve starts from the optimal basis of the previous objective. The
-    rows are split in two chains, the first half in order and the second in reverse (for a
-    hull, ``Gs = [G; -G]``: the minima of ``x_1 .. x_n``, then the maxima of ``x_n .. x_1``;
-    neighbouring coordinates have close optima, opposite objectives do not). ``"infeasible"``
-    when HiGHS calls the set infeasible, ``"failed"`` on any other outcome."""
+    The feasible set is the same for all: it is passed to HiGHS once per chain (``chains``:
+    lists of rows of ``Gs`` that cover them all) and only the cost changes along a chain, so
+    each solve starts from the optimal basis of the previous objective (for a hull: the minima
+    of ``x_1 .. x_n`` in one chain, the maxima of ``x_n .. x_1`` in the other; neighbouring
+    objectives have close optima, opposite ones do not). ``"infeasible"`` when HiGHS calls
+    the set infeasible, ``"failed"`` on any other outcome."""
     import highspy
 
-    K, m = Gs.shape
-    mu = np.empty((K, A.shape[0]))
+    m = Gs.shape[1]
+    mu = np.empty((Gs.shape[0], A.shape[0]))
     lp = _model(A, b, radius)
     idx = np.arange(m, dtype=np.int32)
-    half = (K + 1) // 2
-    for chain, rows in enumerate((range(half), range(K - 1, half - 1, -1))):
-        h = _solver(chain)
-        lp.col_cost_ = np.ascontiguousarray(Gs[rows[0]]) if len(rows) else lp.col_cost_
+    for n_chain, rows in enumerate(chains):
+        h = _solver(n_chain % 2)
         h.passModel(lp)
-        for n, i in enumerate(rows):
-            if n:
-                h.changeColsCost(m, idx, np.ascontiguousarray(Gs[i]))
+        for i in rows:
+            h.changeColsCost(m, idx, np.ascontiguousarray(Gs[i]))
             h.run()
             status = h.getModelStatus()
             if status == highspy.HighsModelStatus.kInfeasible:

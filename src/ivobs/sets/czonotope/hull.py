@@ -159,7 +159,11 @@ def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
 
 
 def _certified_mins(
-    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float = 1.0
+    Gs: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    radius: float = 1.0,
+    chains: list[list[int]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
 
@@ -174,7 +178,7 @@ def _certified_mins(
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
     from ._highs import chain_duals
 
-    out = chain_duals(Gs, A, b, radius)
+    out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
     if isinstance(out, np.ndarray):
         return _dual_bounds(Gs, A, b, out, radius), out, True
     mu = np.zeros((K, nc))
@@ -269,14 +273,30 @@ class Certificates:
         self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])
 
 
+def _hull_chains(n: int, k: int) -> list[list[int]]:
+    """Two warm-start chains over the rows ``[G; -G; P; -P]`` (``G`` n rows, ``P`` k rows):
+    the minima in order, the maxima in reverse order."""
+    lo = list(range(n)) + list(range(2 * n, 2 * n + k))
+    hi = list(range(2 * n - 1, n - 1, -1)) + list(range(2 * n + 2 * k - 1, 2 * n + k - 1, -1))
+    return [lo, hi]
+
+
 def hull_certificates(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+    c: np.ndarray,
+    G: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    extra: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
     """Certified interval hull of ``<c, G, A, b>`` and the certificates of its ``2 n`` bounds
     (weighted by the inverse width of each coordinate, so that losses are relative), or
     ``None`` when the set is certainly empty (:func:`certified_empty`: a dual certificate,
     checked in floating point, that even the box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the
     constraints).
+
+    ``extra`` (n', m): more objectives in the factors whose bounds the certificates should
+    also keep (the rows ``P`` and ``-P`` are appended, weighted by the inverse widths of
+    ``P ξ``); the filter passes the hull of its prediction, ``[A G, E R]``.
 
     When HiGHS calls the set infeasible without such a certificate (a set that is thin, or
     empty only by rounding), the bounds are those of the *softened* set with the box
@@ -286,21 +306,27 @@ def hull_certificates(
     which the caller should keep instead of the original.
     """
     n = G.shape[0]
-    Gs = np.vstack([G, -G])
-    vals, mu, ok = _certified_mins(Gs, A, b)
+    P = np.zeros((0, G.shape[1])) if extra is None else extra
+    k = P.shape[0]
+    Gs = np.vstack([G, -G, P, -P])
+    chains = _hull_chains(n, k)
+    vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains)
     radius = 1.0
     if not ok:
         r, r_low = radius_certificate(A, b)
         if r_low > 1.0 + EMPTY_TOL:
             return None
         radius = (max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)
-        vals, mu, ok = _certified_mins(Gs, A, b, radius)
+        vals, mu, ok = _certified_mins(Gs, A, b, radius, chains)
         if not ok:  # HiGHS contradicting itself: the bound of the zonotope (any μ is valid)
             mu = np.zeros_like(mu)
             vals = _dual_bounds(Gs, A, b, mu, radius)
     lo = c + vals[:n]
-    hi = c - vals[n:]
+    hi = c - vals[n : 2 * n]
     width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
-    cert = Certificates(Gs * radius, mu, np.concatenate([1.0 / width, 1.0 / width]))
+    p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
+    p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
+    weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
+    cert = Certificates(Gs * radius, mu, weight)
     cert.radius = radius
     return lo, hi, cert
