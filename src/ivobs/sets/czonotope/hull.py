@@ -1,8 +1,10 @@
 """Questions to a constrained zonotope ``<c, G, A, b>`` answered by linear programs in its
 factors ``ξ``: interval hull, emptiness and membership ([Scott2016]).
 
-The LPs are solved with HiGHS (``scipy.optimize.linprog``), and every bound is certified by LP
-duality, so it is a valid bound whatever the solver's tolerances: for any multiplier ``μ``,
+The LPs are solved with HiGHS (the hull's through ``highspy`` directly, :mod:`._highs`; the
+rare fallbacks and the other questions through ``scipy.optimize.linprog``), and every bound is
+certified by LP duality, so it is a valid bound whatever the solver's tolerances: for any
+multiplier ``μ``,
 ``min {gᵀξ : Aξ = b, |ξ| <= 1} >= μᵀb - ‖g - Aᵀμ‖₁``, evaluated with the ``γ_n`` bounds of its
 rounding ([Higham2002, Lemma 3.1]) — safe bounds from an approximate dual, as in
 [Neumaier2004]. Emptiness is claimed only with a dual certificate checked the same way.
