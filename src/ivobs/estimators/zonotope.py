@@ -93,7 +93,10 @@ class ZonotopeEstimator(ObserverEstimator):
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``.
 
-    **Gain.** By default the H∞ gain of [Tang2019, Theorem 1, problem (20)]; ``L=`` explicitly
+    **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
+    :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
+    (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
+    docs/gains.md. Or ``L=`` explicitly
     (e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the reachability box is inside this one
     with the same gain); ``A - LC`` must be Schur.
 
@@ -111,7 +114,9 @@ class ZonotopeEstimator(ObserverEstimator):
     ----------
     sys : time-invariant discrete-time :class:`~ivobs.LinearSystem`
     x0 : Box, prior box on ``x[0]``
-    L : (nx, ny) observer gain, optional (default: H∞ gain)
+    L : (nx, ny) observer gain, optional (default: designed, see ``gain``)
+    gain : ``"radius"`` (default), ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not
+        given (docs/gains.md)
     order : ``q >= nx``, generators kept by the reduction (default ``10 nx``: on the paper's
         servo motor the widths are within a few per mille of much larger orders from ``q = 10 nx``
         on, while the cost per step grows with ``q``). Larger ``q`` approaches Algorithm 1
@@ -145,6 +150,7 @@ class ZonotopeEstimator(ObserverEstimator):
         L: Any = None,
         order: int | None = None,
         weight: Any = None,
+        gain: str | None = None,
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
@@ -164,7 +170,7 @@ class ZonotopeEstimator(ObserverEstimator):
             W = as_matrix("weight", weight, nx, nx)
             if not np.allclose(W, W.T) or np.linalg.eigvalsh(0.5 * (W + W.T)).min() <= 0:
                 raise IvobsError("weight: expected a symmetric positive definite matrix W")
-        observer = self._design_observer(L)
+        observer = self._design_observer(L, gain)
         if q == nx and spectral_radius(np.abs(self._M)) >= 1.0:
             raise DesignError(
                 f"order: q = nx = {nx} boxes the set at every step, so the boxes grow like "
