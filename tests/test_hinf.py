@@ -80,9 +80,7 @@ def test_bad_shapes_and_sizes():
     with pytest.raises(IvobsError, match="F: expected shape"):
         hinf_gain(A, C, E, np.ones((1, 2)))
     with pytest.raises(DesignError, match="does not scale"):
-        hinf_gain(
-            0.5 * np.eye(201), np.eye(201)[:1], np.eye(201), np.zeros((1, 201)), method="lmi"
-        )
+        hinf_gain(0.5 * np.eye(201), np.eye(201)[:1], np.eye(201), np.zeros((1, 201)), method="lmi")
     with pytest.raises(IvobsError, match="method: expected 'riccati' or 'lmi'"):
         hinf_gain(A, C, E, F, method="sdp")
 

@@ -105,15 +105,16 @@ def _smoothed(
     L = x.reshape(n, ny)
     M = A - L @ C
     GR = (E - L @ F) * r
-    with np.errstate(over="ignore", invalid="ignore"):  # a non-Schur trial: J = inf below
+    # a trial gain far from Schur overflows: J = inf (returned as 1e300) for the line search
+    with np.errstate(over="ignore", invalid="ignore"):
         X = _powers(M, np.hstack([GR, np.eye(n)]), K)
-    if not np.all(np.isfinite(X)):
+        Xd = X[:K, :, :nd]
+        Rt = np.sqrt(Xd * Xd + eps * eps)
+        s = (Rt - eps).sum(axis=(0, 2))
+        NK = X[K, :, nd:]
+        RN = np.sqrt(NK * NK + eps * eps)
+    if not (np.all(np.isfinite(Rt)) and np.all(np.isfinite(RN))):
         return 1e300, np.zeros_like(x)
-    Xd = X[:K, :, :nd]
-    Rt = np.sqrt(Xd * Xd + eps * eps)
-    s = (Rt - eps).sum(axis=(0, 2))
-    NK = X[K, :, nd:]
-    RN = np.sqrt(NK * NK + eps * eps)
     f, v, lam = _bound(RN - eps, s)
     if not np.isfinite(f):
         return 1e300, np.zeros_like(x)

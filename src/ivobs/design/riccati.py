@@ -116,9 +116,7 @@ def _hinf_central(
             return None
         XD = X * dv[None, :]
         Xt = X + XD @ np.linalg.solve(Gm, XD.T)
-        Lt: np.ndarray = np.linalg.solve(
-            R[n:, n:] + Ct @ Xt @ Ct.T, Ct @ Xt @ At.T + F @ Et.T
-        ).T
+        Lt: np.ndarray = np.linalg.solve(R[n:, n:] + Ct @ Xt @ Ct.T, Ct @ Xt @ At.T + F @ Et.T).T
     except (np.linalg.LinAlgError, ValueError):
         return None
     return Lt if np.all(np.isfinite(Lt)) else None
@@ -203,8 +201,9 @@ def hinf_riccati_gain(
         hi *= 10.0
     if Lhi is None:
         raise DesignError(
-            "hinf_riccati_gain (problem (20) of [Tang2019]): no γ up to 1e40 gives a stabilising solution of the H∞ Riccati "
-            "equation; (A, C) may not be detectable: pass an explicit gain L=..."
+            "hinf_riccati_gain (problem (20) of [Tang2019]): no γ up to 1e40 gives a "
+            "stabilising solution of the H∞ Riccati equation; (A, C) may not be detectable: "
+            "pass an explicit gain L=..."
         )
     lo = 0.0
     while lo == 0.0 or hi > lo * (1.0 + rtol):

@@ -49,9 +49,9 @@ class ObserverDesign(Design):
 
 class ObserverEstimator(Estimator):
     """What ``reachability`` and ``zonotope`` share: the gain ``L`` (``L=`` or a design,
-    ``gain=``: :func:`ivobs.design.hinf.observer_gain`), the error dynamics ``M = A - LC``, ``G = E - LF``, and
-    the bounds of ``d`` (kept when constant). A subclass calls :meth:`_design_observer` from its
-    ``__init__``."""
+    ``gain=``: :func:`ivobs.design.hinf.observer_gain`), the error dynamics ``M = A - LC``,
+    ``G = E - LF``, and the bounds of ``d`` (kept when constant). A subclass calls
+    :meth:`_design_observer` from its ``__init__``."""
 
     def _design_observer(self, L: Any, gain: str | None = None) -> ObserverDesign:
         """The gain (checked: ``A - LC`` Schur) and the matrices of the error dynamics."""
