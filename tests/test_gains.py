@@ -227,3 +227,15 @@ def test_cora_benchmarks_contain_vertex_trajectories_with_the_default_gain(name)
     xs, ys = vertex_run(sc.system, sc.x0, u, 1, T)
     for method in ("reachability", "zonotope"):
         check_contains(make_estimator(method, sc.system, x0=sc.x0), xs, u, ys)
+
+
+def test_without_disturbance_the_default_gain_shrinks_the_box_onto_the_state():
+    """No disturbance: ρ∞ = 0 for every gain, so the radius design takes the Kalman gain with
+    Q = I (here A is Schur, and the Q = 0 Kalman gain L = 0 would converge at 0.98 per step)."""
+    sys = LinearSystem([[1.0, 0.2], [-0.3, 0.9]], [[0.0], [1.0]], [[1.0, 0.0]])
+    est = make_estimator("reachability", sys, x0=Box([-1.0, -1.0], [1.0, 1.0]))
+    assert est.design.spectral_radius == pytest.approx(0.7904, abs=1e-3)
+    tr = ivobs.simulate(sys, [0.7, -0.4], np.ones((80, 1)))
+    res = est.run(tr.u, tr.y)
+    assert res.contains(tr.x).all()
+    assert (res.upper - res.lower)[79].max() < 1e-7

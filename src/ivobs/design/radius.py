@@ -141,6 +141,9 @@ def radius_gain(
 
     n, ny = C.shape[1], C.shape[0]
     r = np.asarray(r, dtype=float)
+    if not E.shape[1] or not np.any(r):  # no disturbance: ρ∞ = 0 for every gain; the
+        # Kalman gain with Q = I makes the prior box shrink at a rate set by the Riccati weight
+        return kalman_gain(A, C, np.eye(n), np.zeros((ny, n)), 1.0), 0.0
     K = HORIZON
     best: tuple[float, np.ndarray] | None = None
     errors = []
