@@ -4,7 +4,7 @@ CORA's saved values, in the same time convention.
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_cora.py
         [--methods m1,m2] [--benchmarks cora-tank30,cora-vehicle6,...] [--budget 120]
         [--out benchmarks/results] [--figure docs/img/cora_tank30_radius.png | --no-figure]
-        [--recompute-exact]
+        [--recompute-exact] [--merge]
 
 For every CORA benchmark (scenarios ``cora-tank30``, ``cora-vehicle6``, ``cora-pedestrian4``,
 ``cora-slip4``, ``cora-2dim``; CORA's recorded data, ``scenario.simulate("recorded")``) and every
@@ -26,7 +26,8 @@ marked); a design that does not return within the budget is stopped. A method th
 system is listed with its reason. ``misses``: steps whose box does not contain CORA's recorded
 state (pedestrian4's record leaves its own bounds at 3 samples: CORA_README).
 
-Writes ``<out>/cora_table.md`` and ``<out>/cora_table.json`` (and prints the table), and the
+Writes ``<out>/cora_table.md`` and ``<out>/cora_table.json`` (and prints the table; ``--merge``
+keeps the rows of the benchmarks not run this time), and the
 figure (radius over time per method on tank30, log scale, exact hull as the floor, CORA's
 values as markers).
 """
@@ -318,6 +319,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--figure", default=str(ROOT / "docs/img/cora_tank30_radius.png"))
     p.add_argument("--no-figure", action="store_true")
     p.add_argument("--recompute-exact", action="store_true")
+    p.add_argument(
+        "--merge",
+        action="store_true",
+        help="keep the other benchmarks' rows of <out>/cora_table.json",
+    )
     a = p.parse_args(argv)
     methods = a.methods.split(",") if a.methods else [m for m in ivobs.methods() if m != "exact"]
     benches = a.benchmarks.split(",")
@@ -343,6 +349,13 @@ def main(argv: list[str] | None = None) -> None:
             )
         if bench == "cora-tank30":
             rows += cora_rows()
+    saved = out / "cora_table.json"
+    if a.merge and saved.exists():
+        kept = [r for r in json.loads(saved.read_text()) if r["benchmark"] not in benches]
+        for bench in dict.fromkeys(r["benchmark"] for r in kept):
+            exacts[bench] = exact_hull(bench, out)
+        rows = kept + rows
+        rows.sort(key=lambda r: BENCHMARKS.index(r["benchmark"]))
     table = markdown(rows, exacts)
     print(table)
     out.mkdir(parents=True, exist_ok=True)
