@@ -27,7 +27,7 @@ system is listed with its reason. ``misses``: steps whose box does not contain C
 state (pedestrian4's record leaves its own bounds at 3 samples: CORA_README).
 
 Writes ``<out>/cora_table.md`` and ``<out>/cora_table.json`` (and prints the table; ``--merge``
-keeps the rows of the benchmarks not run this time), and the
+keeps the saved rows of the method/benchmark pairs not run this time), and the
 figure (radius over time per method on tank30, log scale, exact hull as the floor, CORA's
 values as markers).
 """
@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--merge",
         action="store_true",
-        help="keep the other benchmarks' rows of <out>/cora_table.json",
+        help="keep the rows of <out>/cora_table.json not run this time",
     )
     a = p.parse_args(argv)
     methods = a.methods.split(",") if a.methods else [m for m in ivobs.methods() if m != "exact"]
@@ -351,11 +351,18 @@ def main(argv: list[str] | None = None) -> None:
             rows += cora_rows()
     saved = out / "cora_table.json"
     if a.merge and saved.exists():
-        kept = [r for r in json.loads(saved.read_text()) if r["benchmark"] not in benches]
+        done = {(r["benchmark"], r["method"]) for r in rows}
+        kept = [
+            r
+            for r in json.loads(saved.read_text())
+            if (r["benchmark"], r["method"]) not in done
+            and not (r["status"] == "CORA (saved)" and r["benchmark"] in benches)
+        ]
         for bench in dict.fromkeys(r["benchmark"] for r in kept):
             exacts[bench] = exact_hull(bench, out)
         rows = kept + rows
-        rows.sort(key=lambda r: BENCHMARKS.index(r["benchmark"]))
+        order = {m: i for i, m in enumerate(ivobs.methods())}
+        rows.sort(key=lambda r: (BENCHMARKS.index(r["benchmark"]), order.get(r["method"], 999)))
     table = markdown(rows, exacts)
     print(table)
     out.mkdir(parents=True, exist_ok=True)
