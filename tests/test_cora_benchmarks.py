@@ -166,3 +166,44 @@ def test_the_pedestrian_defect_is_where_the_readme_says() -> None:
     w = x[1:] - x[:-1] @ s.A.T - u[:-1] @ s.B.T
     assert norm(w[185]) > 1.0 and norm(w[230]) > 1.0
     assert norm(w[184]) <= 1.0 and norm(w[217]) <= 1.0
+
+
+# -- the benchmark script's metric and time convention (benchmarks/bench_cora.py) ---------------
+def _bench_cora() -> Any:
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_cora.py"
+    spec = importlib.util.spec_from_file_location("bench_cora", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_metric_is_althoff_and_raths() -> None:
+    b = _bench_cora()
+    r = np.array([[1.0, 2.0], [3.0, 2.0]] * 10)  # 20 points: state 0 alternates 1, 3
+    m = b.metric(r)
+    assert m["rms"] == pytest.approx((np.sqrt(5.0) + 2.0) / 2)
+    assert m["r_early"] == pytest.approx(2.5) and m["r_final"] == pytest.approx(2.5)
+
+
+def test_cora_rows_and_the_cached_exact_hull_share_cora_time_convention() -> None:
+    """CORA's saved values as CORA_README states them, and the cached exact hull of tank30 at
+    rows 19 and 234 equal to the exact hulls of time points 20 and 235 saved with CORA's results
+    (time point k = row k - 1)."""
+    b = _bench_cora()
+    rows = {r["method"]: r for r in b.cora_rows()}
+    assert rows["CORA FRad-A"]["r_early"] == pytest.approx(1.0103, abs=1e-4)
+    assert rows["CORA FRad-A"]["r_final"] == pytest.approx(0.6109, abs=1e-4)
+    assert rows["CORA Hinf-G"]["r_final"] == pytest.approx(0.4317, abs=1e-4)
+    assert rows["CORA Nom-G"]["final_ratio"] == pytest.approx(3.82, abs=0.01)
+    cached = b.ROOT / "benchmarks" / "results" / "cora_exact_cora-tank30.npz"
+    if not cached.exists():
+        pytest.skip("tank30's exact hull is not cached (benchmarks/bench_cora.py computes it)")
+    z = np.load(cached)
+    saved = np.load(b.ROOT / "src" / "ivobs" / "data" / "cora_tank30_results.npz")
+    for k in (20, 235):
+        np.testing.assert_allclose(z["lo"][k - 1], saved[f"exact_k{k}_lo"], atol=1e-6)
+        np.testing.assert_allclose(z["hi"][k - 1], saved[f"exact_k{k}_hi"], atol=1e-6)
