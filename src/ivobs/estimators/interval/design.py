@@ -27,6 +27,7 @@ from ...design.cooperative import (
     refine_width,
     steady_width,
 )
+from ...design.schur_transform import schur_design
 from ...design.similarity import (
     check_transform,
     default_design,
@@ -36,6 +37,7 @@ from ...design.similarity import (
     similarity_transform,
     transformed_width,
 )
+from ...design.width_lp import MAX_LP_STATES, width_gain
 from ...errors import DesignError, IvobsError
 from ...linalg import observability_matrix, spectral_radius
 from ...model import LinearSystem
@@ -215,18 +217,22 @@ def _missing_radius(sys: LinearSystem, L: np.ndarray) -> np.ndarray | None:
 
 
 def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalDesign:
-    """The design of ``interval``: a given gain, or LMI (41) ([Tang2019]) refined for width
-    (``gain="width"``); :class:`DesignError` when no gain makes ``A − LC`` nonnegative and
-    Schur."""
+    """The design of ``interval``: a given gain, the steady-state-width-optimal gain of one
+    linear program (``gain="width"``, :func:`ivobs.design.width_lp.width_gain`), LMI (41) of
+    [Tang2019] (``"lmi"``) or that gain refined by the local width LPs (``"lmi+width"``);
+    :class:`DesignError` when no gain makes ``A − LC`` nonnegative and Schur."""
     if L is None:
-        if gain not in ("lmi", "width"):
-            raise IvobsError(f"gain: expected 'lmi' or 'width', got {gain!r}")
-        check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
+        if gain not in ("lmi", "width", "lmi+width"):
+            raise IvobsError(f"gain: expected 'width', 'lmi+width' or 'lmi', got {gain!r}")
         A, _, C, _, E, F = sys.matrices_at(0)
-        L = nonnegative_gain(A, C, who)
         if gain == "width":
-            L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
-            gain = "lmi+width"
+            _lp_size(sys, who)
+            L, _ = width_gain(A, C, E, F, design_delta(sys), nonnegative=True, who=who)
+        else:
+            check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
+            L = nonnegative_gain(A, C, who)
+            if gain == "lmi+width":
+                L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
     else:
         gain = "given"
     return _checked(IntervalDesign, sys, L, gain, who, nonnegative=True)
@@ -237,11 +243,17 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
     (``"lmi"``), the smallest ``ρ(|A − LC|)`` found (``"margin"``), then refined for width
     (``"width"``); :class:`DesignError` when no gain with ``|A − LC|`` Schur is found."""
     if L is None:
-        if gain not in ("lmi", "margin", "width"):
-            raise IvobsError(f"gain: expected 'width', 'margin' or 'lmi', got {gain!r}")
+        if gain not in ("lmi", "margin", "width", "margin+width"):
+            raise IvobsError(
+                f"gain: expected 'width', 'margin+width', 'margin' or 'lmi', got {gain!r}"
+            )
+        A, _, C, _, E, F = sys.matrices_at(0)
+        if gain == "width":
+            _lp_size(sys, who)
+            L, _ = width_gain(A, C, E, F, design_delta(sys), nonnegative=False, who=who)
+            return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
         what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
         check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
-        A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "lmi":
             L = nonnegative_gain(A, C, who)
         else:
@@ -259,11 +271,21 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
                     f"radius of |A − LC| found is {rho:.6g} >= 1 ([Efimov2013, Theorem 3]){why}; "
                     "try 'interval-transformed' (needs only A − LC Schur)"
                 )
-            if gain == "width":
+            if gain == "margin+width":
                 L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=False)
     else:
         gain = "given"
     return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
+
+
+def _lp_size(sys: LinearSystem, who: str) -> None:
+    """The width LP is sparse but has ``O(nx²)`` variables: refused above
+    :data:`~ivobs.design.width_lp.MAX_LP_STATES` states."""
+    if sys.nx > MAX_LP_STATES:
+        raise DesignError(
+            f"{who}: the width linear program has O(nx^2) variables and does not scale to "
+            f"nx = {sys.nx} > {MAX_LP_STATES} states; {_SCALES}"
+        )
 
 
 D = TypeVar("D", IntervalDesign, SplitDesign)
@@ -313,24 +335,41 @@ def transformed_design(
     S: Any,
     e1: Any,
     e2: Any,
+    transform: str = "auto",
 ) -> TransformedDesign:
     """The design of ``interval-transformed`` ([Tang2019, Theorem 5, eq. (48)], [Efimov2013,
     Theorem 2]): the gain (given, placed poles or ivobs' search), then ``S`` (given, or by
-    eq. (48) from a nonnegative realisation ``R`` of the spectrum of ``A − LC``), checked."""
-    # every step here (pole placement, the realisation R, S by eq. (48), the dense n x n
-    # transform used at every step) is dense
-    check_design_size(sys, who, "the similarity transform ([Tang2019, eq. (48)])")
+    eq. (48) from a nonnegative realisation ``R`` of the spectrum of ``A − LC``), checked.
+    ``transform="schur"`` (and ``"auto"`` above :data:`SEARCH_MAX_STATES` states or where the
+    search fails): real Schur coordinates (:mod:`ivobs.design.schur_transform`)."""
+    if transform not in ("auto", "search", "schur"):
+        raise IvobsError(f"transform: expected 'auto', 'search' or 'schur', got {transform!r}")
     A, _, C, _, E, F = sys.matrices_at(0)
     delta = design_delta(sys)
     if L is not None and poles is not None:
         raise IvobsError("L, poles: give the gain L or the poles to place, not both")
     if S is not None and (e1 is not None or e2 is not None):
         raise IvobsError("e1, e2: they only serve to compute S by eq. (48); S was given")
+    paper_options = R is not None or S is not None or e1 is not None or e2 is not None
+    if transform == "schur" and paper_options:
+        raise IvobsError("transform: 'schur' computes S and R itself; do not pass R, S, e1, e2")
+    if transform == "schur" or (
+        transform == "auto" and not paper_options and sys.nx > SEARCH_MAX_STATES
+    ):
+        return _schur(sys, who, L, poles)
+    # every step here (pole placement, the realisation R, S by eq. (48), the dense n x n
+    # transform used at every step) is dense
+    check_design_size(sys, who, "the similarity transform ([Tang2019, eq. (48)])")
     e1_search = None
     if L is not None:
         L, gain = check_gain(sys, L), "given"
     elif poles is None:
-        L, e1_search = default_design(A, C, lambda L_: E - L_ @ F, delta, who)
+        try:
+            L, e1_search = default_design(A, C, lambda L_: E - L_ @ F, delta, who)
+        except DesignError:
+            if transform == "search" or paper_options:
+                raise
+            return _schur(sys, who, None, None)
         gain = "search"
     else:
         poles = as_vector("poles", poles, sys.nx)
@@ -359,6 +398,41 @@ def transformed_design(
         S=S,
         e1=e1_,
         e2=e2_,
+        poles=np.linalg.eigvals(M),
+        spectral_radius=spectral_radius(np.abs(Rs)),
+        gain=gain,
+        steady_width=steady,
+    )
+
+
+SEARCH_MAX_STATES = 8
+"""Above this many states ``transform="auto"`` uses Schur coordinates: eq. (48) goes through
+observability matrices whose condition number grows exponentially with ``nx``."""
+
+
+def _schur(sys: LinearSystem, who: str, L: Any, poles: Any) -> TransformedDesign:
+    """The design in real Schur coordinates (:func:`ivobs.design.schur_transform.schur_design`):
+    ``S = Zᵀ`` orthogonal, ``R`` quasi-triangular with ``ρ(|R|) < 1``, checked."""
+    A, _, C, _, E, F = sys.matrices_at(0)
+    delta = design_delta(sys)
+    gain = "schur"
+    if L is not None:
+        L, gain = check_gain(sys, L), "given"
+    elif poles is not None:
+        poles = as_vector("poles", poles, sys.nx)
+        L, gain = place_real_poles(A, C, poles, who), "given-poles"
+    L, S, _ = schur_design(A, C, E, F, delta, who, L)
+    M = A - L @ C
+    Rs = check_transform(M, S, who, None, nonnegative=False)
+    steady = None
+    if not (sys.nd and not isinstance(sys.d, Box)):
+        steady = transformed_width(M, E - L @ F, delta, S)
+    return TransformedDesign(
+        L=L,
+        R=Rs,
+        S=S,
+        e1=None,
+        e2=None,
         poles=np.linalg.eigvals(M),
         spectral_radius=spectral_radius(np.abs(Rs)),
         gain=gain,

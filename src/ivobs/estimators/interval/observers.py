@@ -230,9 +230,12 @@ class TransformedIntervalObserver(CooperativeObserver[TransformedState]):
         S: Any = None,
         e1: Any = None,
         e2: Any = None,
+        transform: str = "auto",
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
-        design = transformed_design(sys, self.name, L=L, poles=poles, R=R, S=S, e1=e1, e2=e2)
+        design = transformed_design(
+            sys, self.name, L=L, poles=poles, R=R, S=S, e1=e1, e2=e2, transform=transform
+        )
         self._build(design.L, None, design.S)
         self.design: TransformedDesign = design
