@@ -16,10 +16,8 @@ from ..state import Step
 from .design import (
     IntervalDesign,
     SplitDesign,
-    TransformedDesign,
     interval_design,
     split_design,
-    transformed_design,
 )
 from .operators import SplitOperators
 from .recursion import (
@@ -30,6 +28,7 @@ from .recursion import (
     cooperative_step,
 )
 from .rounding import margins
+from .transformed import TransformedDesign, transformed_design
 from .vectorised import VectorPath
 from .window import empty_window
 
