@@ -1,10 +1,11 @@
-"""The offline design of the interval observers: the gain ``L`` (and ``S`` for
-``interval-transformed``), checked, with the numbers the papers report about it.
+"""The offline design of ``interval`` and ``interval-split``: the gain ``L``, checked, with the
+numbers the papers report about it (``interval-transformed``: :mod:`.transformed`).
 
-Nothing here loops over time: the gains come from :mod:`ivobs.design.cooperative` (LMI (41) of
-[Tang2019] = LMIs (7)–(8) of [Efimov2013], the linear programs on ``|A − LC|`` and the width
-refinement) and :mod:`ivobs.design.similarity` ([Tang2019, eq. (48)], [Efimov2013, Theorem 2]);
-user gains of ``scipy.sparse`` systems are checked with sparse algebra.
+Nothing here loops over time: the default gains come from the width-optimal linear program of
+:mod:`ivobs.design.width_lp`; the papers' LMI (41) of [Tang2019] (= LMIs (7)–(8) of
+[Efimov2013]), the alternating LPs on ``|A − LC|`` and the local width refinement from
+:mod:`ivobs.design.cooperative`; user gains of ``scipy.sparse`` systems are checked with sparse
+algebra.
 """
 
 from __future__ import annotations
