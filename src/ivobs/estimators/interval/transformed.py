@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..._validate import as_matrix, as_vector
-from ...design.cooperative import steady_width
+from ...design.cooperative import NONNEG_TOL, steady_width
 from ...design.schur_transform import schur_design
 from ...design.similarity import (
     check_transform,
@@ -161,6 +161,9 @@ def _schur(sys: LinearSystem, who: str, L: Any, poles: Any) -> TransformedDesign
             return _identity(sys, L, delta)
     if L is not None:
         L, gain = check_gain(sys, L), "given"
+        M = A - L @ C
+        if M.min() >= -NONNEG_TOL * max(1.0, float(np.abs(A).max())) and spectral_radius(M) < 1:
+            return _identity(sys, L, delta, gain)  # a cooperative gain: S = I
     elif poles is not None:
         poles = as_vector("poles", poles, sys.nx)
         L, gain = place_real_poles(A, C, poles, who), "given-poles"
@@ -183,7 +186,9 @@ def _schur(sys: LinearSystem, who: str, L: Any, poles: Any) -> TransformedDesign
     )
 
 
-def _identity(sys: LinearSystem, L: np.ndarray, delta: np.ndarray) -> TransformedDesign:
+def _identity(
+    sys: LinearSystem, L: np.ndarray, delta: np.ndarray, gain: str = "identity"
+) -> TransformedDesign:
     """The design with ``S = I``, ``R = A − LC >= 0`` (checked by the caller's gain check)."""
     A, _, C, _, E, F = sys.matrices_at(0)
     M = A - L @ C
@@ -198,7 +203,7 @@ def _identity(sys: LinearSystem, L: np.ndarray, delta: np.ndarray) -> Transforme
         e2=None,
         poles=np.linalg.eigvals(M),
         spectral_radius=spectral_radius(np.abs(M)),
-        gain="identity",
+        gain=gain,
         steady_width=steady,
     )
 
