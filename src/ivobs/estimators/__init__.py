@@ -11,8 +11,8 @@ import pkgutil
 from typing import Any
 
 from ..errors import IvobsError
-from ..model import LinearSystem
-from .base import ROUNDING, Design, Estimator
+from ..model import LinearSystem, NonlinearSystem
+from .base import ROUNDING, Design, Estimator, nonlinear_refusal
 
 __all__ = ["ROUNDING", "Design", "Estimator", "get", "make_estimator", "methods", "register"]
 
@@ -49,7 +49,9 @@ def get(name: str) -> type[Estimator]:
     return _REGISTRY[key]
 
 
-def make_estimator(name: str, sys: LinearSystem, x0: Any = None, **options: Any) -> Estimator:
+def make_estimator(
+    name: str, sys: LinearSystem | NonlinearSystem, x0: Any = None, **options: Any
+) -> Estimator:
     """Build the estimator ``name`` for ``sys`` (design happens here, once).
 
     ``x0`` is the prior box on ``x[0]`` (methods that need it); ``options`` are the method's
@@ -57,6 +59,8 @@ def make_estimator(name: str, sys: LinearSystem, x0: Any = None, **options: Any)
     docstring, or ``ivobs.estimators.get(name).options()``.
     """
     cls = get(name)
+    if isinstance(sys, NonlinearSystem) and not cls.supports_nonlinear:
+        raise IvobsError(nonlinear_refusal(cls.name))
     allowed = cls.options()
     unknown = sorted(set(options) - set(allowed))
     if unknown:

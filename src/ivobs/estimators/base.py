@@ -39,7 +39,7 @@ import numpy as np
 
 from .._validate import as_bool
 from ..errors import DesignError, InconsistentDataError, IvobsError
-from ..model import LinearSystem
+from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
 from ..sets import Box
 from ._inputs import check_t, check_t_k, check_u_k, check_y_k
@@ -57,6 +57,7 @@ __all__ = [
     "Estimator",
     "check_size",
     "check_x0",
+    "nonlinear_refusal",
 ]
 
 
@@ -106,6 +107,23 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
+def nonlinear_refusal(name: str) -> str:
+    """The message refusing a :class:`~ivobs.NonlinearSystem` to a linear-only method, naming
+    the methods that take one (every subclass with ``supports_nonlinear``)."""
+    found: list[str] = []
+    todo = list(Estimator.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        todo += cls.__subclasses__()
+        if cls.supports_nonlinear and cls.name and cls.name not in found:
+            found.append(cls.name)
+    can = ", ".join(repr(n) for n in sorted(found)) or "(none installed)"
+    return (
+        f"sys: the {name} method is for linear systems (ivobs.LinearSystem); this one is an "
+        f"ivobs.NonlinearSystem. Methods for nonlinear systems: {can}"
+    )
+
+
 def _arrays(state: OnlineState) -> list[np.ndarray]:
     """The float arrays of a state (to tell an overflow from a bug)."""
     out = []
@@ -138,9 +156,15 @@ class Estimator(Persistence):
     boxes are rounded before they are intersected, which needs no arithmetic); the data scale
     ``s_k`` is then in ``state.scale`` when ``_step`` runs."""
 
-    def __init__(self, sys: LinearSystem, x0: Box | None = None, *, on_inconsistent: str = "warn"):
-        if not isinstance(sys, LinearSystem):
-            raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
+    def __init__(self, sys: Any, x0: Box | None = None, *, on_inconsistent: str = "warn"):
+        if isinstance(sys, NonlinearSystem):
+            if not self.supports_nonlinear:
+                raise IvobsError(nonlinear_refusal(self.name))
+        elif not isinstance(sys, LinearSystem):
+            raise IvobsError(
+                "sys: expected an ivobs.LinearSystem or ivobs.NonlinearSystem, got "
+                f"{type(sys).__name__}"
+            )
         if sys.is_continuous and not self.supports_continuous:
             raise IvobsError(
                 f"sys: the {self.name} method is for discrete-time systems; this one is "

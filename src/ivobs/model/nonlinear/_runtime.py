@@ -76,7 +76,8 @@ def _fix(v: float) -> float:
 
 
 def mul(al: float, ah: float, bl: float, bh: float) -> tuple[float, float]:
-    """``[a] * [b]`` by sign cases (two products where the signs are known)."""
+    """``[a] * [b]`` by sign cases (two products where the signs are known); a ``0 * inf``
+    corner (a zero bound times an unbounded one) counts as 0 (IEEE 1788)."""
     if al >= 0.0:
         if bl >= 0.0:
             lo, hi = al * bl, ah * bh
@@ -98,7 +99,11 @@ def mul(al: float, ah: float, bl: float, bh: float) -> tuple[float, float]:
     else:
         lo = min(_fix(al * bh), _fix(ah * bl))
         hi = max(_fix(al * bl), _fix(ah * bh))
-    return _nx(_fix(lo), NINF), _nx(_fix(hi), INF)
+    if lo != lo:
+        lo = 0.0
+    if hi != hi:
+        hi = 0.0
+    return _nx(lo, NINF), _nx(hi, INF)
 
 
 def recip(bl: float, bh: float, site: int) -> tuple[float, float]:

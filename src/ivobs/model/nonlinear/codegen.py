@@ -31,6 +31,17 @@ def _lit(v: float) -> str:
     return repr(float(v))
 
 
+def _exact(p: Pair) -> bool:
+    """A pair of equal finite non-zero literals (a thin constant)."""
+    if p[0] != p[1] or p[0].startswith(("t", "x", "u", "w", "c", "d", "v", "_")):
+        return False
+    try:
+        v = float(p[0])
+    except ValueError:
+        return False
+    return math.isfinite(v) and v != 0.0
+
+
 def _enclose_fraction(q: Fraction) -> tuple[float, float]:
     try:
         f = float(q)  # correctly rounded
@@ -171,6 +182,11 @@ class Emitter:
         if a == ("-1.0", "-1.0") or b == ("-1.0", "-1.0"):
             o = b if a == ("-1.0", "-1.0") else a
             return self.assign(f"-{o[1]}, -{o[0]}")
+        c, o = (a, b) if _exact(a) else (b, a)
+        if _exact(c):  # a thin constant: its sign decides which bound is which
+            v = float(c[0])
+            lo, hi = (o[0], o[1]) if v > 0 else (o[1], o[0])
+            return self.assign(f"_nx({v!r} * {lo}, _NI), _nx({v!r} * {hi}, _PI)")
         return self.assign(f"_mul({a[0]}, {a[1]}, {b[0]}, {b[1]})")
 
     def _product(self, e: Any) -> Pair:

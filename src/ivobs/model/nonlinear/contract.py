@@ -1,5 +1,5 @@
 """Generated forward-backward contractors for a constraint ``g(v, u) in [y]`` (HC4-revise,
-[Jaulin2001, Sec. 4.2]).
+[Jaulin2001, Ch. 4]).
 
 Forward: the natural extension of ``g`` node by node (the same rounded operations as
 :mod:`.forms`). Backward: from the root, intersected with ``[y]``, each node's enclosure is

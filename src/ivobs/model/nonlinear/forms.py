@@ -1,7 +1,7 @@
 """Generated inclusion functions of a vector of expressions ``g(x, u, w)``: the natural
 extension, its Jacobian, and the natural extension intersected with the mean-value form.
 
-Mean-value (centred) form [Moore2009, Sec. 6.4]: for ``z = (x, w)`` in the box ``[z]`` and a
+Mean-value (centred) form [Moore2009, Ch. 6]: for ``z = (x, w)`` in the box ``[z]`` and a
 centre ``c`` in it,
 
     g(z) in g(c) + J([z]) ([z] - c),          J = dg/dz over the box,
@@ -10,7 +10,7 @@ with ``g(c)`` enclosed by the natural extension at the point. It is tighter than
 extension on wide boxes with repeated variables and looser when each variable occurs once (the
 Hénon map), so the two are always intersected. Non-smooth functions differentiate to their
 generalised (Clarke) derivatives (``abs -> sign`` with ``[-1, 1]`` at 0), for which the
-mean-value inclusion still holds (Lebourg's theorem).
+mean-value inclusion still holds ([Clarke1983, Theorem 2.3.7], Lebourg).
 
 All generated functions take Python lists ``(xl, xh, u, wl, wh)`` and return lists.
 """

@@ -329,8 +329,8 @@ class NonlinearSystem:
         self, vl: list[float], vh: list[float], u: list[float], y: list[float]
     ) -> bool:
         """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place); two
-        sweeps over the outputs."""
-        for _ in range(2):
+        sweeps over the outputs when there are several."""
+        for _ in range(1 if len(self._hc) == 1 else 2):
             for (fn, sites), yi in zip(self._hc, y):
                 if yi == yi and not self._call(fn, sites, vl, vh, u, yi):
                     return False
@@ -357,6 +357,15 @@ class NonlinearSystem:
         return self._hf
 
     # -- conversions ---------------------------------------------------------------------
+    @classmethod
+    def from_linear(cls, lin: Any, who: str = "NonlinearSystem.from_linear") -> NonlinearSystem:
+        """The same model as a time-invariant discrete-time :class:`~ivobs.LinearSystem` with
+        constant bounds (states ``x1..``, inputs ``u1..``, signals ``d1..``; the matrices'
+        entries taken exactly as the doubles they are)."""
+        from .convert import linear_spec
+
+        return cls(**linear_spec(lin, who))
+
     def __repr__(self) -> str:
         return (
             f"NonlinearSystem(nx={self.nx}, nu={self.nu}, ny={self.ny}, "
