@@ -34,7 +34,7 @@ def _points(kind: str) -> list[float]:
     base = [0.0, 5e-324, -5e-324, 1e-310, -1e-310, 1e-300, -1e-300, 1e-20, -1e-20, 1e-8, -1e-8]
     base += [0.5, -0.5, 1.0, -1.0, 2.0, -3.0]
     if kind == "periodic":
-        for k in list(range(-40, 41)) + [10**5, -(10**5), 10**9, 10**12]:
+        for k in [*list(range(-40, 41)), 10**5, -(10**5), 10**9, 10**12]:
             base += _ulps(float(k * PI / 2), 2)
         base += [1e10, -1e10, 1e15, 1e22, -1e22, 1e100, 1e300, -1e300, 1.7e308, 6.28, 3.14159]
         base += RNG.uniform(-20, 20, 1200).tolist() + RNG.uniform(-1e6, 1e6, 200).tolist()
@@ -188,7 +188,7 @@ def test_cosh_and_abs_are_even_with_their_minimum_inside() -> None:
 
 
 def test_arithmetic_is_outward_rounded_and_never_nan() -> None:
-    vals = _points("wide") + [math.inf, -math.inf]
+    vals = [*_points("wide"), math.inf, -math.inf]
     pairs = []
     for i in range(3000):
         a, b = sorted(RNG.choice(vals, 2))

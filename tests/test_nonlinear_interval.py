@@ -11,10 +11,10 @@ import warnings
 import mpmath as mp
 import numpy as np
 import pytest
-from nlsystems import HENON_X0, henon, henon_mp, simulate, violations
 
 import ivobs
 from ivobs import nlmath
+from nlsystems import HENON_X0, henon, henon_mp, simulate, violations
 
 T = 10_000
 
