@@ -78,10 +78,10 @@ class _Reader:
         self.text, self.names, self.where = text, names, where
         self.funcs = _sympy_functions()
 
-    def fail(self, node: ast.AST | None, what: str) -> IvobsError:
+    def fail(self, node: ast.AST | None, what: str, hint: str = "") -> IvobsError:
         col = getattr(node, "col_offset", None)
         at = f" at column {col + 1}" if col is not None else ""
-        return IvobsError(f"{self.where} = {self.text!r}: {what}{at}")
+        return IvobsError(f"{self.where} = {self.text!r}: {what}{at}{hint}")
 
     def read(self, node: ast.AST) -> Any:
         sp = self.sp
@@ -121,7 +121,7 @@ class _Reader:
             if node.id in FUNCTIONS:
                 raise self.fail(node, f"function {node.id!r} used without arguments")
             known = ", ".join(sorted(self.names)) or "(none)"
-            raise self.fail(node, f"unknown name {node.id!r} (known names: {known}; pi, e)")
+            raise self.fail(node, f"unknown name {node.id!r}", f" (known names: {known}; pi, e)")
         if isinstance(node, ast.Call):
             return self.call(node)
         raise self.fail(node, f"{type(node).__name__} is not allowed in an expression")
@@ -142,7 +142,7 @@ class _Reader:
             raise self.fail(node, "only calls of the listed functions are allowed")
         if fn.id not in FUNCTIONS:
             allowed = ", ".join(FUNCTIONS)
-            raise self.fail(node, f"unknown function {fn.id!r} (allowed: {allowed})")
+            raise self.fail(node, f"unknown function {fn.id!r}", f" (allowed: {allowed})")
         if node.keywords:
             raise self.fail(node, f"{fn.id}() takes no keyword arguments")
         if any(isinstance(a, ast.Starred) for a in node.args):
@@ -184,7 +184,7 @@ def parse_expression(text: Any, names: dict[str, Any], where: str) -> Any:
     try:
         tree = ast.parse(stripped, mode="eval")
     except SyntaxError as exc:
-        col = f" at column {exc.offset}" if exc.offset else ""
+        col = f" at column {exc.offset}" if exc.offset else " at the end"
         raise IvobsError(f"{where} = {text!r}: not a valid expression{col} ({exc.msg})") from None
     except (ValueError, RecursionError, MemoryError) as exc:
         raise IvobsError(f"{where} = {text!r}: not a valid expression ({exc})") from None
