@@ -152,7 +152,7 @@ def test_a_linear_system_converts_exactly() -> None:
     sc = ivobs.scenarios.get("servo-motor")
     lin = sc.system
     nl = ivobs.NonlinearSystem.from_linear(lin)
-    A, B, C, D, E, F = lin.matrices_at(0)
+    A, B, _C, _D, E, _F = lin.matrices_at(0)
     rng = np.random.default_rng(0)
     for _ in range(20):
         x, u, d = rng.normal(size=lin.nx), rng.normal(size=lin.nu), rng.uniform(-1, 1, lin.nd)
