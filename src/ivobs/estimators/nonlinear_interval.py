@@ -50,23 +50,17 @@ class NonlinearIntervalDesign(Design):
 
 @dataclass(frozen=True)
 class NonlinearIntervalState(OnlineState):
-    """``lo``, ``hi``: the predicted box ``[x]_k^-``; ``prev_*``: the corrected box of
-    ``x[k-1]``, of ``w[k-1]`` and ``u[k-1]`` (for the step back; ``back`` says whether there
-    is one)."""
+    """``lo``, ``hi``: the predicted box ``[x]_k^-``; ``prev_lo``, ``prev_hi``: the corrected
+    box of ``(x[k-1], w[k-1])`` and ``prev_u`` = ``u[k-1]``, for the step back (``back`` says
+    whether there is one)."""
 
     lo: np.ndarray
     hi: np.ndarray
     prev_lo: np.ndarray
     prev_hi: np.ndarray
-    prev_wlo: np.ndarray
-    prev_whi: np.ndarray
     prev_u: np.ndarray
     back: bool = False
-    bounds: ClassVar[tuple[tuple[str, str], ...]] = (
-        ("lo", "hi"),
-        ("prev_lo", "prev_hi"),
-        ("prev_wlo", "prev_whi"),
-    )
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"), ("prev_lo", "prev_hi"))
 
 
 @register
@@ -111,15 +105,13 @@ class NonlinearIntervalEstimator(Estimator):
 
     def _initial_state(self) -> NonlinearIntervalState:
         assert self.x0 is not None
-        nx, nw, nu = self.model.nx, self.model.nw, self.model.nu
+        m = self.model
         return NonlinearIntervalState(
             lo=self.x0.lo.copy(),
             hi=self.x0.hi.copy(),
-            prev_lo=np.zeros(nx),
-            prev_hi=np.zeros(nx),
-            prev_wlo=np.zeros(nw),
-            prev_whi=np.zeros(nw),
-            prev_u=np.zeros(nu),
+            prev_lo=np.zeros(m.nx + m.nw),
+            prev_hi=np.zeros(m.nx + m.nw),
+            prev_u=np.zeros(m.nu),
         )
 
     def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
@@ -139,29 +131,22 @@ class NonlinearIntervalEstimator(Estimator):
         """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place); False when
         the measurement is found inconsistent."""
         sys, nx, nw = self.model, self.model.nx, self.model.nw
-        bl = st.prev_lo.tolist() + st.prev_wlo.tolist() + vl[nx:]
-        bh = st.prev_hi.tolist() + st.prev_whi.tolist() + vh[nx:]
-        uu = st.prev_u.tolist() + u
+        bl = st.prev_lo.tolist() + vl[nx:]
+        bh = st.prev_hi.tolist() + vh[nx:]
+        pu = st.prev_u.tolist()
         assert self._hf is not None
         for (fn, sites), yi in zip(self._hf, y):
-            if yi == yi and not sys._call(fn, sites, bl, bh, uu, yi):
+            if yi == yi and not sys._call(fn, sites, bl, bh, pu + u, yi):
                 return False
-        fl, fh = sys._call(
-            sys._f.tight,
-            sys._f.sites,
-            bl[:nx],
-            bh[:nx],
-            st.prev_u.tolist(),
-            bl[nx : nx + nw],
-            bh[nx : nx + nw],
-        )
+        m = nx + nw
+        f = sys._f
+        fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
         for i in range(nx):
             lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
             if lo > hi:
                 return False
             vl[i], vh[i] = lo, hi
-        for j in range(nw):
-            vl[nx + j], vh[nx + j] = bl[nx + nw + j], bh[nx + nw + j]
+        vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, y))
 
     def _step(
@@ -179,17 +164,15 @@ class NonlinearIntervalEstimator(Estimator):
             if not ok:
                 inconsistent = True
                 vl, vh = xl + self._wl, xh + self._wh
-        Xl, Xh, Wl, Wh = vl[:nx], vh[:nx], vl[nx:], vh[nx:]
-        pl, ph = sys._call(sys._f.tight, sys._f.sites, Xl, Xh, u, Wl, Wh)
-        lo, hi = np.array(Xl), np.array(Xh)
+        f = sys._f
+        pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
+        prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         new = NonlinearIntervalState(  # fresh (faster than replace): the base sets k and scale
             lo=np.array(pl),
             hi=np.array(ph),
-            prev_lo=lo,
-            prev_hi=hi,
-            prev_wlo=np.array(Wl, dtype=float),
-            prev_whi=np.array(Wh, dtype=float),
+            prev_lo=prev_lo,
+            prev_hi=prev_hi,
             prev_u=u_k.copy(),
             back=True,
         )
-        return Step(new, lo, hi, inconsistent)
+        return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
