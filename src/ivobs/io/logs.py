@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import IvobsError
-from ..model import LinearSystem
+from ..model import SystemModel
 from .atomic import write_text_atomic
 
 __all__ = ["Log", "LogParser", "LogRow", "not_utf8", "read_log", "write_log"]
@@ -238,7 +238,7 @@ class Log:
         return rows
 
 
-def read_log(path: str | os.PathLike[str], system: LinearSystem) -> Log:
+def read_log(path: str | os.PathLike[str], system: SystemModel) -> Log:
     """Read a CSV log for ``system`` (its ``nu`` inputs and ``ny`` measurements).
 
     Lines starting with ``#`` and blank lines are skipped. Errors name the line and the column:
