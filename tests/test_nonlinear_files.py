@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from nlsystems import HENON_X0, henon, henon_mp, simulate
 
 import ivobs
 from ivobs.cli import main
 from ivobs.io.logs import write_log
+from nlsystems import HENON_X0, henon, henon_mp, simulate
 
 HENON_TOML = """\
 format = 1
