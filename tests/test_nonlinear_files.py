@@ -86,7 +86,7 @@ def test_ivobs_run_estimates_a_nonlinear_system_from_a_log(
 ) -> None:
     (tmp_path / "henon.toml").write_text(HENON_TOML)
     f, g = henon_mp("x2")
-    X, Y = simulate(
+    _, Y = simulate(
         f,
         g,
         [0.3, 0.1],
