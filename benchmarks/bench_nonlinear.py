@@ -8,7 +8,7 @@ on the Hénon map (speed, soundness over >= 10^5 steps, widths).
   enclosures of each engine that miss the 40-digit value (2,000 thin arguments in [-20, 20]);
 * ``speed``: ``nl-interval`` ``run()`` and ``step()`` on the Hénon map (y = x1 and y = x2),
   best of 3;
-* ``sound``: ``nl-interval`` on ``steps`` (default 100,000) Hénon steps simulated in 80 digits
+* ``sound``: ``nl-interval`` on ``steps`` (default 100,000) Hénon steps simulated in 40 digits
   with ``a``, ``w1`` and ``v1`` on random vertices at every step (tests/nlsystems.py): the
   number of steps whose exact state leaves the box (must be 0) and the widths.
 """

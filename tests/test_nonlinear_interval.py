@@ -1,4 +1,4 @@
-"""``nl-interval`` on nonlinear systems: containment of the exact (80-digit) state at every step
+"""``nl-interval`` on nonlinear systems: containment of the exact (40-digit) state at every step
 with parameters and signals switching between the vertices of their bounds, widths bounded over
 10^4 steps, the step back through h∘f (Hénon with y = x2), inconsistent and missing
 measurements, state save/restore, and the refusal of linear-only methods."""
