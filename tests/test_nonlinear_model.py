@@ -163,3 +163,16 @@ def test_a_linear_system_converts_exactly() -> None:
     tv = ivobs.LinearSystem(lambda k: np.eye(2), C=np.eye(2))
     with pytest.raises(IvobsError, match="time-invariant discrete-time"):
         ivobs.NonlinearSystem.from_linear(tv)
+
+
+def test_evaluations_check_their_arguments() -> None:
+    s = _sys()
+    w = (s.w_box.lo, s.w_box.hi)
+    with pytest.raises(IvobsError, match=r"xlo: expected 2 values, got 3"):
+        s.f_box([0, 0, 0], [1, 1], [], *w)
+    with pytest.raises(IvobsError, match=r"u: expected 0 values, got 1"):
+        s.h_box([0, 0], [1, 1], [1.0], *w)
+    with pytest.raises(IvobsError, match=r"wlo: expected 3 values, got 2"):
+        s.f_jac_box([0, 0], [1, 1], [], [0, 0], [1, 1, 1])
+    with pytest.raises(IvobsError, match=r"y: expected 1 values, got 2"):
+        s.h_contract([0, 0], [1, 1], [], *w, [0.1, 0.2])

@@ -59,7 +59,12 @@ def _number(what: str, v: Any) -> float:
 
 
 def _bounds(what: str, v: Any) -> Pair:
-    if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)) or len(v) != 2:
+    if (
+        isinstance(v, (str, bytes))
+        or not isinstance(v, (Sequence, np.ndarray))
+        or np.ndim(v) != 1
+        or len(v) != 2
+    ):
         raise IvobsError(f"{what}: expected a pair (lo, hi), got {v!r}")
     lo, hi = _number(f"{what}[0]", v[0]), _number(f"{what}[1]", v[1])
     if lo > hi:
@@ -128,7 +133,7 @@ class NonlinearSystem:
         self.known_params: dict[str, float] = {}
         self.param_bounds: dict[str, Pair] = {}
         for name, v in params.items():
-            if isinstance(v, (Sequence, np.ndarray)) and not isinstance(v, str):
+            if isinstance(v, (Sequence, np.ndarray)) and not isinstance(v, str) and np.ndim(v):
                 self.param_bounds[name] = _bounds(f"params[{name!r}]", v)
             else:
                 self.known_params[name] = _number(f"params[{name!r}]", v)
