@@ -14,7 +14,11 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
    intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
 
-Every bound is rounded outward by the generated code (the method rounds itself). The box of
+Every bound is rounded outward by the generated code (the method rounds itself). Besides, as
+the linear methods do (:mod:`ivobs.estimators.rounding`), the measurement is taken as
+``y ± ROUNDING (1 + |y|)`` and the predicted box is widened by ``ROUNDING (1 + |bound|)``
+(``ROUNDING = 1e-10``): records from double-precision simulators, whose states and outputs
+carry their own rounding, are covered as they are for the linear methods. The box of
 ``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output component is
 skipped; a measurement that no point of the box can produce (an empty contraction) is reported
 inconsistent and not used: the step continues from the prediction.
@@ -33,6 +37,7 @@ from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from . import register
 from .base import Design, Estimator
+from .rounding import ROUNDING, outward
 from .state import OnlineState, Step
 
 __all__ = ["NonlinearIntervalDesign", "NonlinearIntervalEstimator", "NonlinearIntervalState"]
@@ -126,7 +131,7 @@ class NonlinearIntervalEstimator(Estimator):
         vl: list[float],
         vh: list[float],
         u: list[float],
-        y: list[float],
+        y: tuple[list[float], list[float]],
     ) -> bool:
         """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place); False when
         the measurement is found inconsistent."""
@@ -135,8 +140,8 @@ class NonlinearIntervalEstimator(Estimator):
         bh = st.prev_hi.tolist() + vh[nx:]
         pu = st.prev_u.tolist()
         assert self._hf is not None
-        for (fn, sites), yi in zip(self._hf, y):
-            if yi == yi and not sys._call(fn, sites, bl, bh, pu + u, yi):
+        for (fn, sites), a, b in zip(self._hf, *y):
+            if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
                 return False
         m = nx + nw
         f = sys._f
@@ -147,18 +152,19 @@ class NonlinearIntervalEstimator(Estimator):
                 return False
             vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
-        return bool(sys.contract_lists(vl, vh, u, y))
+        return bool(sys.contract_lists(vl, vh, u, *y))
 
     def _step(
         self, state: NonlinearIntervalState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[NonlinearIntervalState]:
         sys, nx = self.model, self.model.nx
         xl, xh = state.lo.tolist(), state.hi.tolist()
-        u, y = u_k.tolist(), y_k.tolist()
+        u = u_k.tolist()
         vl, vh = xl + self._wl, xh + self._wh
         inconsistent = False
-        if any(v == v for v in y):
-            ok = sys.contract_lists(vl, vh, u, y)
+        if not np.isnan(y_k).all():
+            y = _data(y_k.tolist())
+            ok = sys.contract_lists(vl, vh, u, *y)
             if ok and self._hf is not None and state.back:
                 ok = self._back(state, vl, vh, u, y)
             if not ok:
@@ -167,12 +173,20 @@ class NonlinearIntervalEstimator(Estimator):
         f = sys._f
         pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+        lo, hi = np.array(pl), np.array(ph)
+        outward(lo, hi)  # the library's data margin (module docstring)
         new = NonlinearIntervalState(  # fresh (faster than replace): the base sets k and scale
-            lo=np.array(pl),
-            hi=np.array(ph),
+            lo=lo,
+            hi=hi,
             prev_lo=prev_lo,
             prev_hi=prev_hi,
             prev_u=u_k.copy(),
             back=True,
         )
         return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
+
+
+def _data(y: list[float]) -> tuple[list[float], list[float]]:
+    """A measurement as the interval ``y ± ROUNDING (1 + |y|)`` (NaN stays NaN)."""
+    m = [ROUNDING * (1.0 + abs(v)) for v in y]
+    return [v - e for v, e in zip(y, m)], [v + e for v, e in zip(y, m)]

@@ -314,36 +314,38 @@ class NonlinearSystem:
         return self._jac(self._h, self.ny, xlo, xhi, u, wlo, whi)
 
     def h_contract(
-        self, xlo: Any, xhi: Any, u: Any, wlo: Any, whi: Any, y: Any
+        self, xlo: Any, xhi: Any, u: Any, wlo: Any, whi: Any, y: Any, y_hi: Any = None
     ) -> tuple[np.ndarray, ...] | None:
-        """Forward-backward contraction of the box ``(x, w)`` with ``h(x, u, w) = y`` (NaN
-        components of ``y`` are skipped): ``(xlo, xhi, wlo, whi)``, or None when no point of
-        the box is consistent with ``y`` (:mod:`.contract`)."""
+        """Forward-backward contraction of the box ``(x, w)`` with ``h(x, u, w) = y`` (or
+        ``h in [y, y_hi]``; NaN components of ``y`` are skipped): ``(xlo, xhi, wlo, whi)``, or
+        None when no point of the box is consistent with ``y`` (:mod:`.contract`)."""
         xl, xh, uu, wl, wh = self._args(xlo, xhi, u, wlo, whi)
         yv = np.asarray(y, dtype=float).reshape(-1)
-        if yv.shape[0] != self.ny:
+        yh = yv if y_hi is None else np.asarray(y_hi, dtype=float).reshape(-1)
+        if yv.shape[0] != self.ny or yh.shape[0] != self.ny:
             raise IvobsError(f"y: expected {self.ny} values, got {yv.shape[0]}")
         vl, vh = xl + wl, xh + wh
-        if not self.contract_lists(vl, vh, uu, yv.tolist()):
+        if not self.contract_lists(vl, vh, uu, yv.tolist(), yh.tolist()):
             return None
         nx = self.nx
         a = np.array
         return a(vl[:nx]), a(vh[:nx]), a(vl[nx:], dtype=float), a(vh[nx:], dtype=float)
 
     def contract_lists(
-        self, vl: list[float], vh: list[float], u: list[float], y: list[float]
+        self, vl: list[float], vh: list[float], u: list[float], ylo: list[float], yhi: list[float]
     ) -> bool:
-        """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place); two
-        sweeps over the outputs when there are several."""
+        """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place) with
+        ``h in [ylo, yhi]``; two sweeps over the outputs when there are several."""
         for _ in range(1 if len(self._hc) == 1 else 2):
-            for (fn, sites), yi in zip(self._hc, y):
-                if yi == yi and not self._call(fn, sites, vl, vh, u, yi):
+            for (fn, sites), a, b in zip(self._hc, ylo, yhi):
+                if a == a and not self._call(fn, sites, vl, vh, u, a, b):
                     return False
         return True
 
     def hf_contractors(self) -> list[tuple[Any, list[str]]]:
-        """Contractors of ``h(f(x', u', w'), u, w) = y`` over the leaves ``(x', w', w)`` with
-        inputs ``(u', u)``: one step back through the model (built on first use)."""
+        """Contractors of ``h(f(x', u', w'), u, w) in [ylo, yhi]`` over the leaves
+        ``(x', w', w)`` with inputs ``(u', u)``: one step back through the model (built on
+        first use)."""
         if self._hf is None:
             import sympy as sp
 
