@@ -49,6 +49,13 @@ def test_a_nonlinear_system_file_loads_and_round_trips(tmp_path: Path) -> None:
     again = ivobs.load_system(path)
     assert ivobs.equal_systems(again.system, spec.system)
     assert again.x0 == spec.x0 and again.method == "nl-interval"
+    # units beside the model's own names, kept by a round trip
+    ivobs.io.save_system(
+        path, ivobs.io.loads_system(HENON_TOML + '\n[names]\nunits = ["m", "m"]\n')
+    )
+    labelled = ivobs.load_system(path).system
+    assert labelled.names.state_labels() == ("x1 (m)", "x2 (m)")
+    assert labelled.names.outputs == ("y1",)
     # a callable model is written as its expressions
     made = ivobs.NonlinearSystem(
         f=lambda x, u, p, d: [x[0] * u[0] + 0.25 * ivobs.nlmath.sin(x[0])],

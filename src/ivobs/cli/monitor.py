@@ -234,7 +234,7 @@ def main(args: argparse.Namespace) -> int:
         cols = [f"lower_{i + 1}" for i in range(sys_.nx)] + [
             f"upper_{i + 1}" for i in range(sys_.nx)
         ]
-        out.writerow(["step", *cols, "alarm", "reason", *FAULT_COLUMNS])
+        out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS])
         sys.stdout.flush()
     fh: TextIO
     if args.input:

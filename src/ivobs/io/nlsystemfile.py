@@ -22,6 +22,7 @@ nonlinear system file runs no code.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from typing import Any
 
@@ -46,7 +47,7 @@ def _table(reader: TomlReader, key: tuple[str, ...], value: Any) -> dict[str, An
     return dict(value)
 
 
-def read_nonlinear(reader: TomlReader, sysd: dict[str, Any], dt: bool | float) -> NonlinearSystem:
+def read_nonlinear(reader: Any, sysd: dict[str, Any], dt: bool | float) -> NonlinearSystem:
     """The :class:`~ivobs.NonlinearSystem` of a ``[system]`` table with ``f`` and ``h``;
     errors name the file, the line and the key."""
     other = sorted(set(sysd) - set(NONLINEAR_KEYS))
@@ -55,6 +56,11 @@ def read_nonlinear(reader: TomlReader, sysd: dict[str, Any], dt: bool | float) -
             ("system", other[0]),
             f"a nonlinear system (f, h) takes no matrix {other[0]}; allowed keys: "
             f"{', '.join(NONLINEAR_KEYS)}",
+        )
+    if "disturbance" in reader.doc:
+        raise reader.fail(
+            ("disturbance",),
+            "a nonlinear system gives its signal bounds in [system.d] (name = [lo, hi])",
         )
     for k in ("f", "h", "states"):
         if k not in sysd:
@@ -71,9 +77,13 @@ def read_nonlinear(reader: TomlReader, sysd: dict[str, Any], dt: bool | float) -
     if "outputs" in sysd:
         args["outputs"] = _strings(reader, ("system", "outputs"), sysd["outputs"], "names")
     try:
-        return NonlinearSystem(**args)
+        model = NonlinearSystem(**args)
     except IvobsError as exc:
         raise reader.fail(_key_of(str(exc)), str(exc)) from None
+    if "names" in reader.doc:  # units (and other labels) beside the model's own names
+        given = {k: v for k, v in vars(reader.names(model)).items() if v is not None}
+        model.names = dataclasses.replace(model.names, **given)
+    return model
 
 
 def _key_of(msg: str) -> tuple[str, ...]:

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import IvobsError
 from ..model import LinearSystem
+from ..model.statespace import SignalNames
 from ..sets import Box
 from .callables import make_callable
 from .loaded import SystemFile
@@ -42,11 +43,12 @@ __all__ = ["FORMAT", "MATRICES", "SystemFile", "load_system", "loads_system"]
 FORMAT = 1
 MATRICES = ("A", "B", "C", "D", "E", "F")
 _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
-    (): ("format", "name", "description", "system", "disturbance", "x0", "method"),
+    (): ("format", "name", "description", "system", "disturbance", "x0", "method", "names"),
     ("system",): ("dt", *MATRICES, "states", "inputs", "outputs", "f", "h", "params", "d"),
     ("disturbance",): ("lower", "upper", "csv", "python", "params"),
     ("x0",): ("lower", "upper"),
     ("method",): ("name", "options"),
+    ("names",): ("states", "units", "inputs", "outputs", "disturbances"),
 }
 
 
@@ -178,11 +180,6 @@ class _SystemReader(TomlReader):
         sysd = self.table(("system",), required=True)
         assert sysd is not None
         if "f" in sysd or "h" in sysd:  # a nonlinear model (expressions, no matrices)
-            if "disturbance" in self.doc:
-                raise self.fail(
-                    ("disturbance",),
-                    "a nonlinear system gives its signal bounds in [system.d] (name = [lo, hi])",
-                )
             return self.finish(read_nonlinear(self, sysd, self.dt(sysd)), name, desc)
         extra = sorted(set(sysd) - {"dt", *MATRICES})
         if extra:
@@ -220,6 +217,7 @@ class _SystemReader(TomlReader):
                 else (("disturbance",) if arg else ("system",))
             )
             raise self.fail(key, str(exc)) from None
+        system.names = self.names(system)
         return self.finish(system, name, desc)
 
     def finish(self, system: Any, name: str, desc: str) -> SystemFile:
@@ -406,6 +404,27 @@ class _SystemReader(TomlReader):
                         f"must be finite, got {cell!r}",
                     )
         return {h: data[:, c] for c, h in enumerate(header)}
+
+    def names(self, system: Any) -> SignalNames:
+        """``[names]``: labels of the states (and their ``units``), inputs, outputs and
+        disturbance components, for plots and tables."""
+        tab = self.table(("names",))
+        if tab is None:
+            return SignalNames()
+        self.check_keys(tab, ("names",))
+        sizes = {"states": system.nx, "units": system.nx, "inputs": system.nu,
+                 "outputs": system.ny, "disturbances": system.nd}  # fmt: skip
+        out: dict[str, tuple[str, ...]] = {}
+        for k, n in sizes.items():
+            if k not in tab:
+                continue
+            v = tab[k]
+            if not isinstance(v, list) or not all(isinstance(e, str) for e in v):
+                raise self.fail(("names", k), f"expected a list of strings, got {v!r}")
+            if len(v) != n:
+                raise self.fail(("names", k), f"expected {n} names (the system's), got {len(v)}")
+            out[k] = tuple(v)
+        return SignalNames(**out)
 
     def x0(self, nx: int) -> Box | None:
         tab = self.table(("x0",))

@@ -198,6 +198,8 @@ def dumps_system(
         out.append(f"description = {_scalar(description)}")
     if nonlinear:
         out += ["", *dump_nonlinear(system, _scalar, _value)]
+        if system.names.units:
+            out += ["", "[names]", f"units = {_value(list(system.names.units))}"]
         return "\n".join(out + _tail(x0, method, options)) + "\n"
     out += ["", "[system]", f"dt = {_scalar(system.dt)}"]
     skip = {"B": system.nu == 0, "D": system.nu == 0, "E": system.nd == 0, "F": system.nd == 0}
@@ -225,6 +227,11 @@ def dumps_system(
                     "functools.partial of one with keyword parameters"
                 )
             out += [f"python = {_scalar(ref[0])}", f"params = {_value(ref[1])}"]
+    names = getattr(system, "names", None)
+    labelled = {k: getattr(names, k) for k in ("states", "units", "inputs", "outputs",
+                "disturbances") if getattr(names, k, None)}  # fmt: skip
+    if labelled:
+        out += ["", "[names]"] + [f"{k} = {_value(list(v))}" for k, v in labelled.items()]
     return "\n".join(out + _tail(x0, method, options)) + "\n"
 
 

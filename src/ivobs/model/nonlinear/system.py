@@ -18,6 +18,7 @@ import numpy as np
 
 from ...errors import IvobsError
 from ...sets import Box
+from ..statespace import SignalNames
 from ._runtime import DomainError
 from .codegen import enclose_float
 from .contract import build_contractor
@@ -154,6 +155,14 @@ class NonlinearSystem:
         self.output_names = _names("outputs", outputs) or [f"y{i + 1}" for i in range(self.ny)]
         if len(self.output_names) != self.ny:
             raise IvobsError(f"outputs: expected {self.ny} names, got {len(self.output_names)}")
+        self.names = SignalNames(
+            states=tuple(self.state_names),
+            inputs=tuple(self.input_names) or None,
+            outputs=tuple(self.output_names),
+            disturbances=tuple(self.signal_names) or None,
+        )
+        """Labels for plots and tables (as ``LinearSystem.names``; a system file may add
+        ``units``)."""
         self._build()
 
     # -- construction -----------------------------------------------------------------------
