@@ -163,6 +163,8 @@ def test_step_matches_run_and_a_restored_state_continues_identically() -> None:
     boxes += [other.step(None, Y[k]) for k in range(25, 60)]
     np.testing.assert_array_equal(np.array([b.lo for b in boxes]), ref.lower)
     np.testing.assert_array_equal(np.array([b.hi for b in boxes]), ref.upper)
+    with pytest.raises(ivobs.IvobsError, match="fingerprint|another"):  # another model
+        ivobs.make_estimator("nl-interval", henon("x1"), x0=HENON_X0).restore(saved)
     saved["state"]["lo"]["array"][0] = 9.0  # lo > hi
     with pytest.raises(ivobs.IvobsError, match="lower <= upper"):
         other.restore(saved)

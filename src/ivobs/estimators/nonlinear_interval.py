@@ -26,6 +26,7 @@ inconsistent and not used: the step continues from the prediction.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -51,6 +52,9 @@ class NonlinearIntervalDesign(Design):
     lag: int
     w_lo: np.ndarray
     w_hi: np.ndarray
+    model: int
+    """A hash of the model's expressions and names (in the state's fingerprint: a state
+    restores only into an estimator of the same model)."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,10 @@ class NonlinearIntervalEstimator(Estimator):
         if lag > 1:
             raise IvobsError(f"lag: expected 0 or 1 (steps back through h∘f), got {lag}")
         w = sys.w_box
-        self.design = NonlinearIntervalDesign(lag=lag, w_lo=w.lo.copy(), w_hi=w.hi.copy())
+        digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
+        self.design = NonlinearIntervalDesign(
+            lag=lag, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
+        )
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
         self._hf = sys.hf_contractors() if lag and sys.ny else None
 
