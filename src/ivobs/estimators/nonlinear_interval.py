@@ -38,7 +38,7 @@ from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from . import register
 from .base import Design, Estimator
-from .rounding import ROUNDING, outward
+from .rounding import ROUNDING
 from .state import OnlineState, Step
 
 __all__ = ["NonlinearIntervalDesign", "NonlinearIntervalEstimator", "NonlinearIntervalState"]
@@ -169,8 +169,9 @@ class NonlinearIntervalEstimator(Estimator):
         u = u_k.tolist()
         vl, vh = xl + self._wl, xh + self._wh
         inconsistent = False
-        if not np.isnan(y_k).all():
-            y = _data(y_k.tolist())
+        yl = y_k.tolist()
+        if any(v == v for v in yl):
+            y = _data(yl)
             ok = sys.contract_lists(vl, vh, u, *y)
             if ok and self._hf is not None and state.back:
                 ok = self._back(state, vl, vh, u, y)
@@ -180,11 +181,11 @@ class NonlinearIntervalEstimator(Estimator):
         f = sys._f
         pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
-        lo, hi = np.array(pl), np.array(ph)
-        outward(lo, hi)  # the library's data margin (module docstring)
+        # the library's data margin (module docstring), as rounding.outward computes it
+        m = [ROUNDING * (1.0 + max(abs(a), abs(b))) for a, b in zip(pl, ph)]
         new = NonlinearIntervalState(  # fresh (faster than replace): the base sets k and scale
-            lo=lo,
-            hi=hi,
+            lo=np.array([a - e for a, e in zip(pl, m)]),
+            hi=np.array([b + e for b, e in zip(ph, m)]),
             prev_lo=prev_lo,
             prev_hi=prev_hi,
             prev_u=u_k.copy(),
