@@ -212,12 +212,14 @@ def _backward(em: Emitter, nd: _Node) -> None:
 def build_contractor(
     name: str, expr: Any, label: str, leaves: list[Any], inputs: list[Any], consts: dict[Any, Any]
 ) -> tuple[Any, list[str]]:
-    """Compile ``name(vl, vh, u, ylo, yhi) -> bool`` contracting the boxes of ``leaves`` (the
-    lists ``vl``, ``vh``) with ``expr in [ylo, yhi]``; ``inputs`` read from ``u`` (thin)."""
+    """Compile ``name(vl, vh, u, ylo, yhi=None) -> bool`` contracting the boxes of ``leaves``
+    (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
+    ``inputs`` read from ``u`` (thin)."""
     sites: list[str] = []
     em = Emitter(sites)
     em.label = label
-    em.lines.append(f"def {name}(vl, vh, u, ylo, yhi):")
+    em.lines.append(f"def {name}(vl, vh, u, ylo, yhi=None):")
+    em.line("if yhi is None: yhi = ylo")  # a thin measurement (the contract's call)
     env: dict[Any, tuple[str, str]] = dict(consts)
     lv: dict[Any, tuple[str, str]] = {}
     for i, s in enumerate(leaves):
