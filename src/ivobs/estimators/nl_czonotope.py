@@ -6,6 +6,12 @@ the uncertain parameters and bounded signals of the step), the filter keeps
 ``x[k]``, and works on the joint vector ``ζ = (x_k, w_k)`` (the same ``w_k`` enters ``h`` and
 ``f``): ``ζ ∈ Z = <(c, c_w), blkdiag(G, R_w), [A 0], b> ⊕ box(e, 0)``, ``ζ ∈ B``.
 
+Between steps the filter keeps the joint set of the last step after its measurement update;
+the prediction is done at the start of the next step, after that step's measurement has
+contracted the box of ``ζ_{k-1}`` one step back through ``h ∘ f`` (step 0 of
+:mod:`ivobs.estimators.nl_zonotope`); the measurement update first contracts ``B`` with the
+model's forward-backward contractor of ``h = y_k``.
+
 * **Measurement update** ([Rego2020], with the mean-value extension of ``h``,
   [Rego2020]): over ``B``, ``h(ζ) ∈ h0 + J (ζ - c̄) ± ρ``
   (:mod:`ivobs.estimators._meanvalue`); each measured ``y_i`` adds the constraint

@@ -1,35 +1,46 @@
 """Zonotopic filter for nonlinear systems by conservative linearisation, with strips.
 
 For ``x[k+1] = f(x, u, w)``, ``y[k] = h(x, u, w)`` (a :class:`~ivobs.NonlinearSystem`; ``w``:
-the uncertain parameters and bounded signals of the step, ``w ∈ W``), the filter keeps
-``x[k] ∈ <p, H> ⊕ box(e)`` and a box ``[lo, hi]`` of ``x[k]`` (the natural inclusion of the
-last prediction), and works, like the linear ``strip`` method, on the joint vector
-``ζ = (x_k, w_k)`` (the same ``w_k`` enters ``h`` and ``f``):
-``ζ ∈ Z = <z, H_z> ⊕ box(acc)``, ``z = (p, c_w)``, ``H_z = blkdiag(H, R_w)``, and ``ζ ∈ B``, the
-box ``[lo, hi] × W`` intersected with the interval hull of ``Z``.
+the uncertain parameters and bounded signals of the step, ``w ∈ W``), the filter works, like
+the linear ``strip`` method, on the joint vector ``ζ = (x_k, w_k)`` (the same ``w_k`` enters
+``h`` and ``f``): ``ζ ∈ Z = <z, H_z> ⊕ box(acc)`` and ``ζ ∈ B``, a box. Between steps it keeps
+the joint set of the last step *after* its measurement update; the prediction is done at the
+start of the next step, once that step's measurement is known.
 
-1. **Box strips.** Where ``[lo, hi]`` is tighter than the hull of ``Z`` (the natural inclusion
-   is exact for one step when each variable occurs once in ``f``, e.g. Hénon), ``Z`` is
-   intersected with the strip ``|x_j - mid_j| <= rad_j`` (below).
-2. **Measurement update.** ``h`` is linearised over ``B`` by the mean-value form
-   (:mod:`ivobs.estimators._meanvalue`, [Rego2020]; first order with the Lagrange
-   remainder bounded by the interval Jacobian over the box, [Althoff2008]):
-   ``h(ζ) ∈ h0 + J (ζ - c) ± ρ`` on ``B``, so each measured ``y_i`` gives the strip
-   ``|J_i ζ - t_i| <= σ_i``, ``t_i = y_i - h0_i + J_i c``, ``σ_i = ρ_i`` plus the rounding
-   of ``t_i``. ``Z`` is intersected with each strip by the F-radius optimal section of
-   [Alamo2005] (``λ* = H_z s / (sᵀ s + σ²)``, ``s = H_zᵀ J_iᵀ``), and ``B`` is contracted by
-   the section's interval hull and by propagating the strip over ``B`` (the exact enclosures
-   of the ``strip`` method).
-3. **Box of x[k]**: the ``x`` part of ``B``.
-4. **Prediction.** ``f`` is linearised over the contracted ``B`` at the centre ``c`` of ``Z``
-   (clipped into ``B``): ``x[k+1] ∈ <f0 + J (z - c), [J H_z, diag(ρ + |J| acc + err)]>``;
-   ``[lo, hi]`` of ``x[k+1]`` is the natural inclusion ``f(B)``.
-5. **Order reduction** to ``order`` generators (the parallelotope rule of [Chisci1998],
-   :func:`ivobs.czonotope.reduce_generators`), its rounding kept in the box ``e`` aside; done
-   in batches, when more than ``1.5 order`` generators have accumulated (a QR every few steps).
+0. **One step back.** ``y_k = h(f(x_{k-1}, u_{k-1}, w_{k-1}), u_k, w_k)`` contracts the box
+   of ``ζ_{k-1}`` (the model's forward-backward contractors of ``h ∘ f``,
+   :func:`~ivobs.estimators._meanvalue.contract_back`): when ``y_k`` does not determine the
+   states of step ``k`` but does those of step ``k - 1`` (Hénon with ``y = x2``), the box over
+   which ``f`` is linearised stays small (without it the remainder grows like the square of
+   the width and the set diverges).
+1. **Prediction.** ``f`` is linearised over that box at the centre ``z`` of ``Z`` (clipped into
+   the box) by the mean-value form (:mod:`ivobs.estimators._meanvalue`, [Rego2020]; first
+   order with the Lagrange remainder bounded by the interval Jacobian over the box,
+   [Althoff2008]): ``f(ζ) ∈ f0 + J (ζ - c) ± ρ``, so
+   ``x_k ∈ <p, H> = <f0 + J (z - c), [J H_z, diag(ρ + |J| acc + err)]>`` (the remainder as
+   box generators), and ``x_k ∈ [lo, hi]``, the natural inclusion of ``f`` over the box
+   tightened by the centred form and by monotonicity. Then the joint set of
+   ``(x_k, w_k)``: ``z = (p, c_w)``, ``H_z = blkdiag(H, R_w)``, ``B = ([lo, hi] ∩ hull) × W``.
+2. **Order reduction** of ``<p, H>`` to ``order`` generators (the parallelotope rule of
+   [Chisci1998], :func:`ivobs.czonotope.reduce_generators`), its rounding kept in the box
+   ``e`` aside; in batches, when more than ``1.5 order`` generators have accumulated.
+3. **Measurement update.** ``B`` is contracted by the model's forward-backward contractor of
+   ``h(x, u, w) = y_k``; ``h`` is linearised over ``B``, ``h(ζ) ∈ h0 + J (ζ - c) ± ρ``, so
+   each measured ``y_i`` gives the strip ``|J_i ζ - t_i| <= σ_i``, ``t_i = y_i - h0_i + J_i c``,
+   ``σ_i = ρ_i`` plus the rounding of ``t_i``. ``Z`` is intersected with each strip by the
+   F-radius optimal section of [Alamo2005] (``λ* = H_z s / (sᵀ s + σ²)``, ``s = H_zᵀ J_iᵀ``),
+   and ``B`` is contracted by the section's interval hull and by propagating the strip over
+   ``B`` (the exact enclosures of the ``strip`` method). A measurement found inconsistent is
+   reported and not used (the strips of that step undone).
+4. **Box of x[k]**: the ``x`` part of ``B``.
 
-**Soundness under rounding (proof).** Invariant: the true ``x[k]`` is in ``<p, H> ⊕ box(e)``
-and in ``[lo, hi]``, in exact arithmetic on the stored floats. (i) ``Z``, ``B``: the hull is
+Option ``box_strips``: also cut ``Z`` with ``|x_j - mid_j| <= rad_j`` where the box
+``[lo, hi]`` is tighter than the hull of ``Z``.
+
+**Soundness under rounding (proof).** Invariant: the true ``ζ_{k-1}`` is in the stored
+``<z, H_z> ⊕ box(acc)`` and box, in exact arithmetic on the stored floats; then the true
+``x_k`` is in ``<p, H> ⊕ box(e)`` and ``[lo, hi]`` (steps (v)-(vi)); the contractors of step 0
+and 3 only remove points that cannot explain ``y_k``. (i) ``Z``, ``B``: the hull is
 ``p ± (|H| 1 + e)`` enlarged by ``γ_{m+2} (|p| + |H| 1)`` (the rounding of the sums);
 ``W`` is re-centred by :func:`~ivobs.sets.zonotope.safe_radius` (``[wl, wh] ⊆ c_w ± R_w``
 exactly). (ii) Linearisation: :func:`~ivobs.estimators._meanvalue.linearise` returns
