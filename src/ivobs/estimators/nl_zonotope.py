@@ -262,7 +262,7 @@ class NonlinearZonotopeEstimator(Estimator):
         if self.design.box_strips and state.back:
             self._box_strips(joint, plo, phi)
         if not inconsistent:
-            saved = replace(joint)
+            saved = _Joint(joint.z, joint.Hz, joint.acc, joint.lo, joint.hi)  # never mutated
             inconsistent = not self._update(joint, u_k, y_k)
             if inconsistent:  # y_k contradicts the model: not used (the strips before undone)
                 joint = saved
