@@ -84,8 +84,14 @@ def linearise(
         delta = np.maximum(hi - c, c - lo) * _UP
         rem = (D @ delta) * (1.0 + gamma(c.shape[0] + 1))
         rho = (r + rem) * (1.0 + gamma(2))
-    bad = ~(np.isfinite(rho) & np.isfinite(g0) & np.all(np.isfinite(Jt), axis=1))
-    if natural or np.any(bad):
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = bool(np.isfinite(rho.sum() + g0.sum() + Jt.sum()))  # one test, usually true
+    bad = (
+        np.zeros(g0.shape, bool)
+        if finite
+        else ~(np.isfinite(rho) & np.isfinite(g0) & np.all(np.isfinite(Jt), axis=1))
+    )
+    if natural or not finite:
         nl, nh = value(xl, xh, u, wl, wh)
         if natural:
             nl, nh = _centred(g0, Jt, rho, lo, hi, c, nl, nh)
@@ -96,7 +102,7 @@ def linearise(
             nl, nh = _monotone(value, Jl[curved], Jh[curved], lo, hi, u, nx, nl, nh, curved)
     else:
         nl = nh = np.full(g0.shape, np.nan)
-    if np.any(bad):
+    if not finite and np.any(bad):
         Jt[bad] = 0.0
         g0_n, r_n = safe_radius(nl[bad], nh[bad])
         g0, rho = g0.copy(), rho.copy()
@@ -125,20 +131,18 @@ def _monotone(
     pattern share one pair of evaluations."""
     up = Jl >= 0
     down = (Jh <= 0) & ~up
-    mono = up | down
-    sel = np.flatnonzero(np.any(mono, axis=1))
+    sel = np.flatnonzero((up | down).any(axis=1))
     if sel.size == 0:
         return nl, nh
     nl, nh = nl.copy(), nh.copy()
     groups: dict[bytes, list[int]] = {}
     for r in sel.tolist():
-        groups.setdefault(np.packbits(np.concatenate([up[r], down[r]])).tobytes(), []).append(r)
+        groups.setdefault(up[r].tobytes() + down[r].tobytes(), []).append(r)
     for local in groups.values():
         i, members = local[0], rows[local]
-        a_lo, a_hi = lo.copy(), hi.copy()  # the box where g_i is smallest
-        b_lo, b_hi = lo.copy(), hi.copy()  # the box where g_i is largest
-        a_hi[up[i]], b_lo[up[i]] = lo[up[i]], hi[up[i]]
-        a_lo[down[i]], b_hi[down[i]] = hi[down[i]], lo[down[i]]
+        ui, di = up[i], down[i]
+        a_lo, a_hi = np.where(di, hi, lo), np.where(ui, lo, hi)  # where g_i is smallest
+        b_lo, b_hi = np.where(ui, hi, lo), np.where(di, lo, hi)  # where g_i is largest
         low = value(a_lo[:nx], a_hi[:nx], u, a_lo[nx:], a_hi[nx:])[0]
         high = value(b_lo[:nx], b_hi[:nx], u, b_lo[nx:], b_hi[nx:])[1]
         nl[members] = np.maximum(nl[members], low[members])
