@@ -264,3 +264,19 @@ def test_box_strips_option_sound_and_tighter_on_henon():
     assert _misses(X, lo, hi).size == 0
     lo0, hi0 = _run("nl-zonotope", henon_system(), X0_HENON, u, Y)
     assert (hi - lo)[10:].mean() <= (hi0 - lo0)[10:].mean() * 1.001
+
+
+@pytest.mark.parametrize(("method", "T"), [("nl-zonotope", 2000), ("nl-constrained-zonotope", 300)])
+def test_float64_simulator_record_covered(method, T):
+    """A record simulated in float64 (each step rounded: not a trajectory of the exact model)
+    is covered by the data margin, as with the linear methods."""
+    rng = np.random.default_rng(21)
+    X, Y = np.empty((T, 2)), np.empty((T, 1))
+    x = np.array([0.3, 0.1])
+    for k in range(T):
+        X[k] = x
+        Y[k, 0] = x[0] + rng.choice([-0.02, 0.02])
+        a, w = rng.choice([1.39, 1.41]), rng.choice([-0.005, 0.005])
+        x = np.array([1 - a * x[0] ** 2 + x[1] + w, 0.3 * x[0]])
+    lo, hi = _run(method, henon_system(), X0_HENON, np.zeros((T, 0)), Y)
+    assert _misses(X, lo, hi).size == 0

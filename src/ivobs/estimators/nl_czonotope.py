@@ -68,7 +68,7 @@ from ..sets.czonotope import (
 )
 from . import register
 from ._meanvalue import Linearisation, contract_back, linearise
-from .base import Design, Estimator, check_size
+from .base import ROUNDING, Design, Estimator, check_size
 from .constrained_zonotope import CONSOLIDATE_C, CONSOLIDATE_X, INFLATE, default_limits
 from .state import OnlineState, Step
 
@@ -338,6 +338,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         n = joint.z.shape[0]
         t = y_k[obs] - lin.g0[obs] + J @ lin.c
         t_err = gamma(n + 3) * (np.abs(y_k[obs]) + np.abs(lin.g0[obs]) + aJ @ np.abs(lin.c))
+        t_err += ROUNDING * (1.0 + np.abs(y_k[obs]))  # the data margin of a float64 record
         rhs = t - J @ joint.z
         coeff = J @ joint.Gz
         sigma = (
@@ -361,7 +362,9 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         c = lin.g0 + J @ d
         n = z.shape[0]
         err = (
-            2.0 * gamma(n + 3) * (np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Gz).sum(axis=1)))
+            # + the library's data margin: a float64 simulation of f is covered too
+            (2.0 * gamma(n + 3) + ROUNDING)
+            * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Gz).sum(axis=1)))
             + (aJ @ joint.acc) * (1.0 + gamma(n + 1))
             + lin.rho
         ) * (1.0 + gamma(4))

@@ -58,7 +58,10 @@ terms) is added to ``acc``. (v) Prediction: with ``ζ = z + H_z ξ + ε``,
 ``f(ζ) ∈ f0 + J (z - c) + J H_z ξ + J ε ± ρ``; the computed ``fl(f0 + J fl(z - c))`` and
 ``fl(J H_z)`` differ from the exact ones by at most ``2 γ_{n+3} (|f0| + |J| (|z - c| + |H_z| 1))``
 and ``|J ε| <= |J| acc (1 + γ_{n+1})``; these and ``ρ`` form the box appended as generators
-(their sum rounded up by ``1 + γ_4``). (vi) The reduction returns a superset with its rounding
+(their sum rounded up by ``1 + γ_4``), plus the library's data margin ``ROUNDING`` relative to
+the same terms (:mod:`ivobs.estimators.rounding`), and ``ROUNDING (1 + |y_i|)`` is added to
+each ``σ_i``: a record simulated in float64 (every step rounded) is covered as with the linear
+methods. (vi) The reduction returns a superset with its rounding
 in ``e`` (:func:`ivobs.czonotope.reduce_generators`). The base class then widens every
 returned bound by the documented margin (:mod:`ivobs.estimators.rounding`).
 """
@@ -83,7 +86,7 @@ from ..sets.czonotope import (
 )
 from . import register
 from ._meanvalue import contract_back, linearise
-from .base import Design, Estimator, check_size
+from .base import ROUNDING, Design, Estimator, check_size
 from .state import OnlineState, Step
 from .strip import _propagate_hyperplane, _section_hull
 
@@ -349,6 +352,7 @@ class NonlinearZonotopeEstimator(Estimator):
             Ji = lin.J[i]
             t = float(y_k[i] - lin.g0[i] + Ji @ lin.c)
             err = gamma(n + 3) * (abs(y_k[i]) + abs(lin.g0[i]) + float(np.abs(Ji) @ np.abs(lin.c)))
+            err += ROUNDING * (1.0 + abs(y_k[i]))  # the data margin of a float64 record
             sigma = (float(lin.rho[i]) + err) * (1.0 + gamma(2))
             if not joint.strip(Ji, t, sigma, nx):
                 return False
@@ -367,7 +371,9 @@ class NonlinearZonotopeEstimator(Estimator):
         H = J @ Hz
         n = z.shape[0]
         err = (
-            2.0 * gamma(n + 3) * (np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Hz).sum(axis=1)))
+            # + the library's data margin: a float64 simulation of f is covered too
+            (2.0 * gamma(n + 3) + ROUNDING)
+            * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Hz).sum(axis=1)))
             + (aJ @ acc) * (1.0 + gamma(n + 1))
             + lin.rho
         ) * (1.0 + gamma(4))
