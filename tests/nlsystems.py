@@ -1,8 +1,8 @@
 """Nonlinear test systems and a high-precision simulator written here (not ivobs.simulate).
 
-The simulator runs in 80-digit mpmath with the parameters and signals on the vertices of their
+The simulator runs in 40-digit mpmath with the parameters and signals on the vertices of their
 bounds, switching at random at every step. Its trajectory is a true trajectory of the model: each
-step's rounding (about 1e-80 relative) changes the constants by far less than the outward
+step's rounding (about 1e-40 relative) changes the constants by far less than the outward
 enclosures of the decimal bounds the estimators use (>= 1e-17 relative), and each measurement is
 rounded to the double on the side of the noise bound that keeps ``|y - h(x)| <= v`` exact.
 """
@@ -18,7 +18,7 @@ import numpy as np
 
 import ivobs
 
-DPS = 80
+DPS = 40
 
 
 def henon(output: str = "x1", a: tuple[float, float] = (1.39, 1.41)) -> ivobs.NonlinearSystem:

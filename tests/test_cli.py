@@ -3,8 +3,10 @@
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
+import ivobs
 from ivobs.cli import main
 
 
@@ -46,3 +48,63 @@ def test_console_entry_point_runs():
         timeout=120,
     )
     assert r.returncode == 0 and "henon" in r.stdout
+
+
+# -- your own plant on compare / run ---------------------------------------------------------
+def _servo_files(tmp_path):
+    sc = ivobs.scenarios.get("servo-motor")
+    ivobs.save_system(tmp_path / "servo.toml", sc)
+    tr = sc.simulate("vertex", seed=1)
+    ivobs.io.write_log(tmp_path / "log.csv", tr.u[:60], tr.y[:60])
+    return sc, tr
+
+
+def test_compare_takes_a_system_file_and_a_log(tmp_path, capsys):
+    import json
+
+    sc, tr = _servo_files(tmp_path)
+    argv = ["compare", "--system", str(tmp_path / "servo.toml"), "--log", str(tmp_path / "log.csv")]
+    argv += ["--methods", "interval-split,exact", "--json", str(tmp_path / "cmp.json")]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "| interval-split |" in out and "60 steps" in out
+    doc = json.loads((tmp_path / "cmp.json").read_text())
+    assert [m["method"] for m in doc["methods"]] == ["interval-split", "exact"]
+    assert doc["horizon"] == 60 and doc["methods"][0]["contains_truth"] is None  # a log: no truth
+    # the same numbers as the Python API on the log's data
+    ref = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0).run(tr.u[:60], tr.y[:60])
+    burn = 6
+    assert doc["methods"][0]["mean_width"] == pytest.approx(ref.mean_width(burn).tolist())
+
+
+def test_compare_simulates_a_system_file_and_refuses_mixtures(tmp_path, capsys):
+    _servo_files(tmp_path)
+    system = str(tmp_path / "servo.toml")
+    assert main(["compare", "--system", system, "--horizon", "40", "--methods", "exact"]) == 0
+    assert "40 steps, vertex disturbances" in capsys.readouterr().out
+    assert main(["compare", "servo-motor", "--log", str(tmp_path / "log.csv")]) == 2
+    assert "need --system FILE" in capsys.readouterr().err
+    assert main(["compare", "--system", system]) == 2
+    assert "give --log FILE" in capsys.readouterr().err
+    assert main(["compare", "servo-motor", "--system", system]) == 2
+
+
+def test_run_discretizes_a_continuous_system_file(tmp_path, capsys):
+    ct = ivobs.LinearSystem(
+        [[-1.0, 1.0], [0.0, -2.0]], [[0.0], [1.0]], [[1.0, 0.0]],
+        E=[[0.1], [0.0]], d=ivobs.Box([-1.0], [1.0]), dt=0,
+    )  # fmt: skip
+    ivobs.save_system(tmp_path / "ct.toml", ct, x0=ivobs.Box([-1.0, -1.0], [1.0, 1.0]))
+    sd = ct.discretize(0.1)
+    x, ys = np.zeros(2), []
+    for k in range(30):  # the test's own simulator, disturbance on a vertex
+        ys.append(sd.C @ x)
+        x = sd.A @ x + sd.B[:, 0] + sd.E[:, 0] * (-1) ** k
+    ivobs.io.write_log(tmp_path / "log.csv", np.ones((30, 1)), np.array(ys), t=0.1 * np.arange(30))
+    base = ["run", "--system", str(tmp_path / "ct.toml"), "--log", str(tmp_path / "log.csv")]
+    assert main([*base, "--method", "interval-split"]) == 2
+    assert "give --discretize TS" in capsys.readouterr().err
+    assert main([*base, "--method", "interval-split", "--discretize", "0.1"]) == 0
+    assert "alarms: none" in capsys.readouterr().out
+    assert main([*base, "--method", "interval-split", "--discretize", "0.2"]) == 2
+    assert "not sampled every --discretize 0.2" in capsys.readouterr().err

@@ -442,3 +442,30 @@ def test_malformed_log_names_the_row(case, tmp_path, capsys):
 def test_catalogue_is_large_enough():
     assert len(BAD_SYSTEMS) + len(BAD_LOGS) >= 15
     assert isinstance(ivobs.IvobsError("x"), ValueError)
+
+
+def test_names_and_units_in_a_system_file(tmp_path):
+    text = """
+[system]
+A = [[1.0, 0.1], [0.0, 0.9]]
+B = [[0.0], [0.1]]
+C = [[1.0, 0.0]]
+
+[names]
+states = ["position", "speed"]
+units = ["m", "m/s"]
+inputs = ["force"]
+outputs = ["odometer"]
+"""
+    spec = ivobs.io.loads_system(text)
+    names = spec.system.names
+    assert names.states == ("position", "speed") and names.inputs == ("force",)
+    assert names.state_labels() == ("position (m)", "speed (m/s)")
+    ivobs.save_system(tmp_path / "copy.toml", spec)
+    again = ivobs.load_system(tmp_path / "copy.toml").system.names
+    assert again == names
+    bad = text.replace('units = ["m", "m/s"]', 'units = ["m"]')
+    with pytest.raises(IvobsError, match=r"line 9: names.units: expected 2 names"):
+        ivobs.io.loads_system(bad)
+    with pytest.raises(IvobsError, match="unknown key 'colour'"):
+        ivobs.io.loads_system(text + 'colour = ["red"]\n')

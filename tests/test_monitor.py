@@ -328,7 +328,7 @@ def test_cli_monitor_reads_stdin_and_prints_one_line_per_step(files, monkeypatch
     lines = capsys.readouterr().out.splitlines()
     assert code == 1  # alarms were raised
     assert lines[0] == (
-        "step,lower_1,lower_2,lower_3,upper_1,upper_2,upper_3,alarm,reason,"
+        "k,lower_1,lower_2,lower_3,upper_1,upper_2,upper_3,alarm,reason,"
         "fault_start,fault_duration,fault_outputs"
     )
     assert len(lines) == 101

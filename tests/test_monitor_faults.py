@@ -181,7 +181,7 @@ def test_cli_monitor_reports_the_fault_start_duration_and_outputs(files, monkeyp
     code = main(["monitor", "--system", str(files / "tank.toml")])
     lines = capsys.readouterr().out.splitlines()
     assert code == 1
-    head = "step," + ",".join(f"lower_{i}" for i in range(1, 5)) + ","
+    head = "k," + ",".join(f"lower_{i}" for i in range(1, 5)) + ","
     head += ",".join(f"upper_{i}" for i in range(1, 5)) + ",alarm,reason"
     assert lines[0] == head + ",fault_start,fault_duration,fault_outputs"
     assert lines[100].endswith(",0,,,0,") and lines[100].startswith("99,")

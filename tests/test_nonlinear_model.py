@@ -163,3 +163,27 @@ def test_a_linear_system_converts_exactly() -> None:
     tv = ivobs.LinearSystem(lambda k: np.eye(2), C=np.eye(2))
     with pytest.raises(IvobsError, match="time-invariant discrete-time"):
         ivobs.NonlinearSystem.from_linear(tv)
+
+
+def test_evaluations_check_their_arguments() -> None:
+    s = _sys()
+    w = (s.w_box.lo, s.w_box.hi)
+    with pytest.raises(IvobsError, match=r"xlo: expected 2 values, got 3"):
+        s.f_box([0, 0, 0], [1, 1], [], *w)
+    with pytest.raises(IvobsError, match=r"u: expected 0 values, got 1"):
+        s.h_box([0, 0], [1, 1], [1.0], *w)
+    with pytest.raises(IvobsError, match=r"wlo: expected 3 values, got 2"):
+        s.f_jac_box([0, 0], [1, 1], [], [0, 0], [1, 1, 1])
+    with pytest.raises(IvobsError, match=r"y: expected 1 values, got 2"):
+        s.h_contract([0, 0], [1, 1], [], *w, [0.1, 0.2])
+
+
+def test_the_mean_value_form_tightens_repeated_variables_only() -> None:
+    s = ivobs.NonlinearSystem(f=["x1 - x1**2", "x2**2"], h=["x1"], states=["x1", "x2"])
+    nat = s.f_box([0.4, 0.4], [0.6, 0.6], [], [], [])
+    tight = s.f_tight_box([0.4, 0.4], [0.6, 0.6], [], [], [])
+    # natural [0.4 - 0.36, 0.6 - 0.16]; centred 0.25 + [-0.2, 0.2] [-0.1, 0.1] = [0.23, 0.27]
+    assert nat[0][0] == pytest.approx(0.04) and nat[1][0] == pytest.approx(0.44)
+    assert tight[0][0] == pytest.approx(0.23) and tight[1][0] == pytest.approx(0.27)
+    assert tight[0][0] <= 0.23 and tight[1][0] >= 0.27  # outward
+    assert (tight[0][1], tight[1][1]) == (nat[0][1], nat[1][1])  # single use: exact already

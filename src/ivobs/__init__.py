@@ -26,6 +26,7 @@ from .simulate import (
     uniform_disturbance,
     vertex_disturbance,
 )
+from .simulate_batch import simulate_batch
 
 __version__ = "0.1.0"
 
@@ -57,6 +58,7 @@ __all__ = [
     "save_system",
     "scenarios",
     "simulate",
+    "simulate_batch",
     "sinusoidal_disturbance",
     "uniform_disturbance",
     "vertex_disturbance",

@@ -222,6 +222,31 @@ class Estimate:
             {self.method or "estimate": self}, truth=truth, states=states, axes=ax, **kwargs
         )
 
+    # -- tables and notebooks (ivobs.frames) ------------------------------------------------
+    def to_pandas(self, truth: Any = None, names: Any = None) -> Any:
+        """A tidy ``pandas.DataFrame``: one row per step and state with columns ``k``, ``t``
+        (when sample times are known), ``state``, ``lower``, ``upper``, ``width``, ``missing``,
+        ``inconsistent`` (``stream`` first for a batch; ``truth`` and ``contained`` when the
+        true trajectory ``truth`` — a :class:`~ivobs.Trajectory` or an array — is given).
+        ``names``: state labels (default ``x1..xn``). Needs pandas (``ivobs[pandas]``)."""
+        from .frames import estimate_to_pandas
+
+        return estimate_to_pandas(self, truth, names)
+
+    def to_xarray(self, truth: Any = None, names: Any = None) -> Any:
+        """An ``xarray.Dataset`` with variables ``lower``, ``upper`` (and ``truth``) over
+        dimensions ``(stream,) k, state`` and the flags over ``(stream,) k``; ``t`` as a
+        coordinate when known. Needs xarray (``ivobs[xarray]``)."""
+        from .frames import estimate_to_xarray
+
+        return estimate_to_xarray(self, truth, names)
+
+    def _repr_html_(self) -> str:
+        """Jupyter: a short summary and an inline figure of the widths."""
+        from .frames import estimate_html
+
+        return estimate_html(self)
+
     def __repr__(self) -> str:
         shape = "x".join(str(s) for s in self.lower.shape)
         return f"Estimate(method={self.method!r}, shape={shape}, valid_from={self.valid_from})"

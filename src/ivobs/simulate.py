@@ -49,13 +49,33 @@ class Trajectory:
 
     @property
     def T(self) -> int:
-        return int(self.x.shape[0])
+        """Number of steps (a batch from :func:`~ivobs.simulate_batch` is ``(B, T, ·)``)."""
+        return int(self.x.shape[-2])
 
     @property
     def has_truth(self) -> bool:
         """Whether the record holds its true state (CORA's recorded 2-D record stores none:
         ``x`` is all NaN)."""
         return not bool(np.isnan(self.x).all())
+
+    def __repr__(self) -> str:  # shapes, not every array (a record has thousands of rows)
+        nx, ny, nu, nd = (a.shape[-1] for a in (self.x, self.y, self.u, self.d))
+        truth = "" if self.has_truth else ", no true state"
+        return f"Trajectory(T={self.T}, nx={nx}, ny={ny}, nu={nu}, nd={nd}{truth})"
+
+    def to_pandas(self) -> Any:
+        """A wide ``pandas.DataFrame`` indexed by step ``k``: columns ``t``, ``x1..``, ``y1..``,
+        ``u1..``, ``d1..`` (needs pandas: ``ivobs[pandas]``)."""
+        from .frames import _import
+
+        pd = _import("pandas", "pandas")
+        if self.x.ndim != 2:
+            raise IvobsError("to_pandas: a batch of records; take one, e.g. Trajectory of x[b]")
+        cols: dict[str, Any] = {"t": self.t}
+        for name, arr in (("x", self.x), ("y", self.y), ("u", self.u), ("d", self.d)):
+            for i in range(arr.shape[-1]):
+                cols[f"{name}{i + 1}"] = arr[:, i]
+        return pd.DataFrame(cols, index=pd.RangeIndex(self.T, name="k"))
 
 
 def _bounds_rows(box: Box, T: int) -> tuple[np.ndarray, np.ndarray]:

@@ -101,7 +101,7 @@ def run_campaign(
             engine = (f"Dask cluster {getattr(client.scheduler, 'address', scheduler)}"
                       if client is not None
                       else "this process" if n == 0 else f"{n} local processes")  # fmt: skip
-            with Progress(len(todo), "campaign", enabled=progress) as bar:
+            with Progress(len(todo), "campaign", enabled=progress, unit="job") as bar:
 
                 def emit(row: dict[str, Any]) -> None:
                     table.append(row)

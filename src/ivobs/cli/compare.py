@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
-from . import check_disturbance, check_seed, parse_states
+from . import add_trust_option, check_disturbance, check_seed, parse_states
+from ._plant import add_plant_options, plant_scenario
 
 #: Methods whose cost grows fast with the state dimension (LPs over the horizon, generators):
 #: left out of the default set for systems with more than ``LARGE_NX`` states (on heat-1d,
@@ -25,7 +27,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "their mean widths (and ratio to the exact hull when 'exact' is among them), "
         "containment and timings; optionally write an overlay figure like the papers'.",
     )
-    p.add_argument("scenario", help="scenario name (see `ivobs scenarios`)")
+    p.add_argument("scenario", nargs="?", help="scenario name (see `ivobs scenarios`)")
+    add_plant_options(p)
+    add_trust_option(p)
     p.add_argument(
         "--methods",
         help="comma-separated method names (default: all but intersect; "
@@ -34,8 +38,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--disturbance",
-        default="paper",
-        help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios; default: paper)",
+        default=None,
+        help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios and --log; default: "
+        "paper, or vertex for --system --horizon)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed for vertex/uniform (>= 0)")
     p.add_argument(
@@ -50,7 +55,38 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="write an overlay figure (format from the extension; none: .png is added)",
     )
     p.add_argument("--states", help="comma-separated state numbers to plot (1..nx)")
+    p.add_argument(
+        "--html",
+        metavar="FILE",
+        help="write a self-contained interactive HTML report (zoomable bands per state, the "
+        "method table; needs plotly: ivobs[html])",
+    )
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also write the table as JSON (one object per method; '-' for standard output)",
+    )
     return p
+
+
+def _scenario(args: argparse.Namespace) -> Any:
+    """The scenario, or the plant of ``--system`` (its log as the recorded trajectory)."""
+    from .. import scenarios
+
+    if args.system:
+        if args.scenario:
+            raise IvobsError(f"give either a scenario ({args.scenario!r}) or --system, not both")
+        if args.log and args.disturbance not in (None, "recorded"):
+            raise IvobsError("--disturbance: with --log the measurements are the log's")
+        args.disturbance = "recorded" if args.log else args.disturbance or "vertex"
+        check_disturbance(args.disturbance)
+        return plant_scenario(args)
+    if args.log or args.horizon is not None or args.discretize is not None:
+        raise IvobsError("--log/--horizon/--discretize: need --system FILE")
+    if not args.scenario:
+        raise IvobsError("give a scenario name (see `ivobs scenarios`) or --system FILE")
+    args.disturbance = check_disturbance(args.disturbance or "paper")
+    return scenarios.get(args.scenario)
 
 
 def default_methods(sc: Any) -> tuple[list[str], list[str]]:
@@ -64,12 +100,10 @@ def default_methods(sc: Any) -> tuple[list[str], list[str]]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from .. import scenarios
     from ..report import compare, markdown_table
 
-    check_disturbance(args.disturbance)
     check_seed(args.seed)
-    sc = scenarios.get(args.scenario)
+    sc = _scenario(args)
     states = parse_states(args.states, sc.system.nx) if args.states else None
     if args.states and not args.plot:
         raise IvobsError("--states: selects the states of the figure; give --plot FILE too")
@@ -83,6 +117,12 @@ def main(args: argparse.Namespace) -> int:
         from ..report.plot import figure_path
 
         plot_path = figure_path(args.plot, "--plot")
+    from ..io.atomic import check_output_path
+
+    for opt in ("html", "json"):  # checked before any work: a bad path fails fast
+        value = getattr(args, opt)
+        if value and value != "-":
+            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
     left_out: list[str] = []
     if args.methods:
         names = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -107,26 +147,85 @@ def main(args: argparse.Namespace) -> int:
     ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
     print(markdown_table(results, sc.state_names, reference=ref))
     print_reasons(results)
+    if args.json:
+        _write_json(args.json, sc, results, traj.has_truth)
+    if args.html:
+        _write_html(args.html, sc, traj, results)
     if plot_path is not None:
         from . import use_agg
 
         use_agg()
-        from ..report.plot import plot_estimates, save_figure
+        from ..report.compare_figure import comparison_figure
+        from ..report.plot import save_figure
 
         good = {r.method: r.estimate for r in results if r.estimate is not None}
         if not good:
             raise IvobsError("--plot: no method gave an estimate; nothing to plot")
         truth = traj.x if traj.has_truth else None
-        fig = plot_estimates(
+        fig = comparison_figure(
             good,
             truth=truth,
             states=states,
-            t=traj.t,
+            t=traj.t if sc.system.sampling_period != 1 or sc.t is not None else None,
             state_names=sc.state_names,
             title=f"{sc.name}",
         )
         print(f"\nfigure: {save_figure(fig, plot_path)}")
     return 1 if any(r.ok and r.contains is False for r in results) else 0
+
+
+def _write_json(path: str, sc: Any, results: Any, has_truth: bool) -> None:
+    """The comparison as JSON: per method its widths, containment, timings or its error."""
+    import json
+
+    rows = []
+    for r in results:
+        est = r.estimate
+        rows.append(
+            {
+                "method": r.method,
+                "ok": bool(r.ok),
+                "error": r.error or None,
+                "mean_width": None if r.mean_width is None else [_num(w) for w in r.mean_width],
+                "contains_truth": None if not has_truth or r.contains is None else bool(r.contains),
+                "design_time_s": _num(r.design_time),
+                "run_time_s": _num(r.run_time),
+                "valid_from": None if est is None else int(est.valid_from),
+            }
+        )
+    doc = {"scenario": sc.name, "source": sc.source, "horizon": sc.horizon, "methods": rows}
+    text = json.dumps(doc, indent=2, allow_nan=False)
+    if path == "-":
+        print(text)
+        return
+    from ..io.atomic import write_text_atomic
+
+    write_text_atomic(path, text + "\n")
+
+
+def _write_html(path: str, sc: Any, traj: Any, results: Any) -> None:
+    from ..report.html import html_report, results_table
+
+    good = {r.method: r.estimate for r in results if r.estimate is not None}
+    if not good:
+        raise IvobsError("--html: no method gave an estimate; nothing to show")
+    page = html_report(
+        path,
+        good,
+        title=f"ivobs compare: {sc.name}",
+        truth=traj.x if traj.has_truth else None,
+        t=traj.t,
+        state_names=sc.state_names,
+        table=results_table(results, sc.state_names),
+        notes=[f"{sc.source}; {sc.horizon} steps"],
+    )
+    print(f"\nreport: {page}")
+
+
+def _num(v: Any) -> float | None:
+    """A finite number, or None (JSON has no NaN or infinity)."""
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 def print_reasons(results: Any) -> None:

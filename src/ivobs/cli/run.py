@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
 from . import add_trust_option, check_disturbance, check_seed
+from ._plant import check_log_times, discretized
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -32,6 +33,14 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "--system", "-s", metavar="FILE", help="system file (TOML) instead of a scenario"
     )
     p.add_argument("--log", "-l", metavar="FILE", help="measurement log (CSV) for --system")
+    p.add_argument(
+        "--discretize",
+        type=float,
+        metavar="TS",
+        default=None,
+        help="--system: discretise a continuous-time system (zero-order hold, period TS); the "
+        "log's time column must then be sampled every TS",
+    )
     p.add_argument(
         "--method",
         "-m",
@@ -54,6 +63,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         metavar="FILE",
         help="write a figure of the bounds (format from the extension; none: .png is added)",
     )
+    p.add_argument(
+        "--html",
+        metavar="FILE",
+        help="write a self-contained interactive HTML report (zoomable bands, alarms; needs "
+        "plotly: ivobs[html])",
+    )
     add_trust_option(p)
     p.add_argument(
         "--progress",
@@ -74,8 +89,8 @@ def main(args: argparse.Namespace) -> int:
                 "--disturbance/--seed: only with a scenario (a log gives the measurements)"
             )
         return _run_system(args)
-    if args.log:
-        raise IvobsError("--log: needs --system FILE (the model of the logged plant)")
+    if args.log or args.discretize is not None:
+        raise IvobsError("--log/--discretize: need --system FILE (the model of the logged plant)")
     if not args.scenario:
         raise IvobsError("give a scenario name (see `ivobs scenarios`) or --system FILE --log FILE")
     if not args.method:
@@ -85,12 +100,27 @@ def main(args: argparse.Namespace) -> int:
     return _run_scenario(args)
 
 
+def _check_time_base(system: Any, method: str, where: str) -> None:
+    """A continuous-time file with a discrete-time method: point to ``--discretize``."""
+    from ..estimators import get, methods
+
+    if system.is_continuous and not get(method).supports_continuous:
+        continuous = [m for m in methods() if get(m).supports_continuous]
+        raise IvobsError(
+            f"--method: {method} is for discrete-time systems and {where} is continuous-time "
+            f"(dt = 0): give --discretize TS (the log's sampling period) or a continuous-time "
+            f"method ({', '.join(continuous)})"
+        )
+
+
 def _check_outputs(args: argparse.Namespace) -> None:
     """Check every output path before any work: an error in one never leaves another written."""
     from ..io.atomic import check_distinct, check_output_path
 
     if args.csv:
         args.csv = str(check_output_path(args.csv, "--csv"))
+    if args.html:
+        args.html = str(check_output_path(args.html, "--html"))
     if args.plot:
         from ..report.plot import figure_path
 
@@ -99,7 +129,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
-    return {"--csv": args.csv, "--plot": args.plot}
+    return {"--csv": args.csv, "--plot": args.plot, "--html": args.html}
 
 
 def _run_scenario(args: argparse.Namespace) -> int:
@@ -129,18 +159,23 @@ def _run_system(args: argparse.Namespace) -> int:
     from ..io.atomic import check_distinct
     from ..io.logs import read_log
     from ..io.systemfile import load_system
+    from ..model import NonlinearSystem
     from ..monitor import Monitor
 
     if not args.log:
         raise IvobsError("--system: needs --log FILE (a CSV log with k, u1.., y1.. columns)")
     spec = load_system(args.system, allow_code=args.allow_code)
+    spec.system = discretized(spec.system, args.discretize, args.system)
     check_distinct(_outputs(args), {"--system's [disturbance] csv": next(iter(spec.files), None)})
     log = read_log(args.log, spec.system)
+    if args.discretize is not None:
+        check_log_times(log.t, args.discretize, args.log)
     method = args.method or spec.method
     if method is None:
         raise IvobsError(
             f"--method: {args.system} names no method ([method] name = ...); give --method"
         )
+    _check_time_base(spec.system, method, args.system)
     est = spec.make_estimator(method)
     if spec.system.is_continuous and log.t is None:
         raise IvobsError(
@@ -150,9 +185,17 @@ def _run_system(args: argparse.Namespace) -> int:
     # a discrete-time system counts steps: a time column only labels the rows of the output
     t = log.t if spec.system.is_continuous else None
     res = _estimate(est, log.u, log.y, t, args)
-    record = Monitor(spec.system, est, x0=spec.x0).check(log.u, log.y, t=t, estimate=res)
+    if isinstance(spec.system, NonlinearSystem):  # the monitor's bands are linear: the
+        # method's own inconsistency reports are the alarms
+        alarms = np.flatnonzero(res.inconsistent)
+        reasons = {
+            int(k): "no state in the box is consistent with y (empty contraction)" for k in alarms
+        }
+    else:
+        record = Monitor(spec.system, est, x0=spec.x0).check(log.u, log.y, t=t, estimate=res)
+        alarms = np.flatnonzero(record.alarm)
+        reasons = {int(k): record.reasons[int(k)] for k in alarms[:1]}
     res.t = log.t
-    alarms = np.flatnonzero(record.alarm)
     name = spec.name or args.system
     print(f"{est.name} on {name} ({args.log})")
     print(f"steps: {res.T}, valid from step {res.valid_from}")
@@ -162,10 +205,17 @@ def _run_system(args: argparse.Namespace) -> int:
     if alarms.size:
         shown = ", ".join(str(int(k)) for k in alarms[:10]) + (" ..." if alarms.size > 10 else "")
         print(f"ALARMS: {alarms.size} step(s) inconsistent with the model: {shown}")
-        print(f"first: step {int(alarms[0])}: {record.reasons[int(alarms[0])]}")
+        print(f"first: step {int(alarms[0])}: {reasons[int(alarms[0])]}")
     else:
         print("alarms: none (every measurement is consistent with the model and bounds)")
-    _write(res, args, t=log.t, title=f"{est.name} on {name}")
+    _write(
+        res,
+        args,
+        t=log.t,
+        alarms=alarms,
+        title=f"{est.name} on {name}",
+        state_names=spec.system.names.state_labels(),
+    )
     return 1 if alarms.size else 0
 
 
@@ -179,7 +229,13 @@ def _estimate(est: Any, u: Any, y: Any, t: Any, args: argparse.Namespace) -> Any
     return est.run(u, y, t=t, progress=args.progress)
 
 
-def _write(res: Any, args: argparse.Namespace, truth: Any = None, **plot_kw: Any) -> None:
+def _write(
+    res: Any,
+    args: argparse.Namespace,
+    truth: Any = None,
+    alarms: Any = None,
+    **plot_kw: Any,
+) -> None:
     if args.csv:
         res.to_csv(args.csv)
         print(f"bounds written to {args.csv}")
@@ -192,3 +248,18 @@ def _write(res: Any, args: argparse.Namespace, truth: Any = None, **plot_kw: Any
         fig = plot_estimates({res.method: res}, truth=truth, **plot_kw)
         path = save_figure(fig, args.plot)
         print(f"figure written to {path}")
+    if args.html:
+        from ..report.html import html_report
+
+        if alarms is None:
+            alarms = np.flatnonzero(res.inconsistent)
+        page = html_report(
+            args.html,
+            {res.method: res},
+            title=plot_kw.get("title") or res.method,
+            truth=truth,
+            t=plot_kw.get("t"),
+            state_names=plot_kw.get("state_names"),
+            alarms=[int(k) for k in alarms],
+        )
+        print(f"report written to {page}")

@@ -12,6 +12,7 @@ from typing import Any
 
 from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
+from ..model.statespace import is_statespace
 from .base import ROUNDING, Design, Estimator, nonlinear_refusal
 
 __all__ = ["ROUNDING", "Design", "Estimator", "get", "make_estimator", "methods", "register"]
@@ -56,9 +57,13 @@ def make_estimator(
 
     ``x0`` is the prior box on ``x[0]`` (methods that need it); ``options`` are the method's
     design options (an explicit gain ``L``, a transformation, ``s``, ...): see each method's
-    docstring, or ``ivobs.estimators.get(name).options()``.
+    docstring, or ``ivobs.estimators.get(name).options()``. ``sys`` may be a python-control
+    ``StateSpace`` (all its inputs known; for disturbance inputs use
+    :meth:`LinearSystem.from_statespace` with ``disturbances=`` and ``d=``).
     """
     cls = get(name)
+    if is_statespace(sys):  # every input of a StateSpace is then a known input u
+        sys = LinearSystem.from_statespace(sys)
     if isinstance(sys, NonlinearSystem) and not cls.supports_nonlinear:
         raise IvobsError(nonlinear_refusal(cls.name))
     allowed = cls.options()

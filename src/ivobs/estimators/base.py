@@ -272,7 +272,7 @@ class Estimator(Persistence):
         scale = state.scale
         if online or self.rounds_itself:
             scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
-            if self.rounds_itself:  # it needs s_k inside its step
+            if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
                 state = dataclasses.replace(state, scale=scale)
         res: Step[Any] = self._step(state, u_k, y_k, t_k)
         flag = bool(res.inconsistent)

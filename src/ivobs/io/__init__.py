@@ -53,7 +53,7 @@ if TYPE_CHECKING:
         write_text_atomic,
     )
     from .callables import callable_ref
-    from .logs import Log, LogParser, LogRow, not_utf8, read_log, write_log
+    from .logs import Log, LogParser, LogRow, log_from_frame, not_utf8, read_log, write_log
     from .reader import KeyLines
     from .systemfile import SystemFile, load_system, loads_system
     from .systemwrite import dumps_system, equal_systems, save_system
@@ -72,6 +72,7 @@ __all__ = [
     "equal_systems",
     "load_system",
     "loads_system",
+    "log_from_frame",
     "not_utf8",
     "read_log",
     "same_file",
@@ -92,6 +93,7 @@ _WHERE = {
     "LogRow": "logs",
     "not_utf8": "logs",
     "read_log": "logs",
+    "log_from_frame": "logs",
     "write_log": "logs",
     "KeyLines": "reader",
     "SystemFile": "systemfile",

@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import IvobsError
-from ..model import LinearSystem
+from ..model import SystemModel
 from .atomic import write_text_atomic
 
-__all__ = ["Log", "LogParser", "LogRow", "not_utf8", "read_log", "write_log"]
+__all__ = ["Log", "LogParser", "LogRow", "log_from_frame", "not_utf8", "read_log", "write_log"]
 
 _STEP_COLS = ("k", "step")
 _TIME_COLS = ("t", "time")
@@ -238,7 +238,7 @@ class Log:
         return rows
 
 
-def read_log(path: str | os.PathLike[str], system: LinearSystem) -> Log:
+def read_log(path: str | os.PathLike[str], system: SystemModel) -> Log:
     """Read a CSV log for ``system`` (its ``nu`` inputs and ``ny`` measurements).
 
     Lines starting with ``#`` and blank lines are skipped. Errors name the line and the column:
@@ -274,6 +274,42 @@ def read_log(path: str | os.PathLike[str], system: LinearSystem) -> Log:
         steps=np.array([r.step for r in rows]) if parser.has_step else None,
         columns=parser.columns,
     )
+
+
+def log_from_frame(frame: Any, system: SystemModel) -> Log:
+    """A :class:`Log` from a ``pandas.DataFrame`` with the columns of a CSV log (``k``/``step``
+    or ``t``/``time``, ``u1..``, ``y1..``; NaN = missing sample). The rows go through the same
+    parser as a file (the same checks and messages; "line" counts the header as line 1). A
+    non-default index (e.g. a time index) is kept as a column only if it is named ``k``,
+    ``step``, ``t`` or ``time``."""
+    cols = getattr(frame, "columns", None)
+    if cols is None or not hasattr(frame, "itertuples"):
+        raise IvobsError(f"frame: expected a pandas DataFrame, got {type(frame).__name__}")
+    index_name = getattr(frame.index, "name", None)
+    if isinstance(index_name, str) and index_name.lower() in _STEP_COLS + _TIME_COLS:
+        frame = frame.reset_index()
+    parser = LogParser(system.nu, system.ny, "<DataFrame>")
+    parser.header(",".join(str(c) for c in frame.columns))
+    rows = [
+        parser.row(",".join("" if _blank(v) else repr(float(v)) for v in values), i)
+        for i, values in enumerate(frame.itertuples(index=False, name=None), start=2)
+    ]
+    if not rows:
+        raise IvobsError("<DataFrame>: no data rows")
+    return Log(
+        u=np.array([r.u for r in rows]).reshape(len(rows), system.nu),
+        y=np.array([r.y for r in rows]).reshape(len(rows), system.ny),
+        t=np.array([r.t for r in rows]) if parser.has_time else None,
+        steps=np.array([r.step for r in rows]) if parser.has_step else None,
+        columns=parser.columns,
+    )
+
+
+def _blank(v: Any) -> bool:
+    try:
+        return bool(math.isnan(float(v)))
+    except (TypeError, ValueError):
+        raise IvobsError(f"<DataFrame>: expected numbers in the log's cells, got {v!r}") from None
 
 
 def write_log(

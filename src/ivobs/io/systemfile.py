@@ -11,7 +11,8 @@ the sampling period ``dt``, the disturbance bounds (constant, per step inline or
 a CSV file, or a Python callable), the prior box on ``x[0]``, and a method with its options. A
 sparse matrix (``scipy.sparse``) is a table of its nonzero entries (``shape``, ``rows``,
 ``cols``, ``values``; 0-based, row-major) and is read back as a CSR matrix. The format is
-documented in ``docs/operating.md``; :func:`~ivobs.io.save_system` writes it.
+documented in ``docs/operating.md``; :func:`~ivobs.io.save_system` writes it. A nonlinear model
+(``f``, ``h`` expressions) is read by :mod:`.nlsystemfile`.
 
 Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line and the key.
 """
@@ -29,9 +30,11 @@ import numpy as np
 
 from ..errors import IvobsError
 from ..model import LinearSystem
+from ..model.statespace import SignalNames
 from ..sets import Box
 from .callables import make_callable
 from .loaded import SystemFile
+from .nlsystemfile import read_nonlinear
 from .options import read_method
 from .reader import TomlReader
 
@@ -40,11 +43,12 @@ __all__ = ["FORMAT", "MATRICES", "SystemFile", "load_system", "loads_system"]
 FORMAT = 1
 MATRICES = ("A", "B", "C", "D", "E", "F")
 _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
-    (): ("format", "name", "description", "system", "disturbance", "x0", "method"),
-    ("system",): ("dt", *MATRICES),
+    (): ("format", "name", "description", "system", "disturbance", "x0", "method", "names"),
+    ("system",): ("dt", *MATRICES, "states", "inputs", "outputs", "f", "h", "params", "d"),
     ("disturbance",): ("lower", "upper", "csv", "python", "params"),
     ("x0",): ("lower", "upper"),
     ("method",): ("name", "options"),
+    ("names",): ("states", "units", "inputs", "outputs", "disturbances"),
 }
 
 
@@ -175,6 +179,14 @@ class _SystemReader(TomlReader):
         desc = self.string(("description",), self.doc.get("description", ""))
         sysd = self.table(("system",), required=True)
         assert sysd is not None
+        if "f" in sysd or "h" in sysd:  # a nonlinear model (expressions, no matrices)
+            return self.finish(read_nonlinear(self, sysd, self.dt(sysd)), name, desc)
+        extra = sorted(set(sysd) - {"dt", *MATRICES})
+        if extra:
+            raise self.fail(
+                ("system", extra[0]),
+                f"{extra[0]} belongs to a nonlinear system, which needs f and h (expressions)",
+            )
         mats = self.system_matrices(sysd)
         dist = self.table(("disturbance",))
         d = self.disturbance(dist, mats) if dist is not None else None
@@ -205,6 +217,11 @@ class _SystemReader(TomlReader):
                 else (("disturbance",) if arg else ("system",))
             )
             raise self.fail(key, str(exc)) from None
+        system.names = self.names(system)
+        return self.finish(system, name, desc)
+
+    def finish(self, system: Any, name: str, desc: str) -> SystemFile:
+        """The prior box and the method, around the model."""
         x0 = self.x0(system.nx)
         method, options = self.method()
         lines = {o: self.lines.line(("method", "options", o)) for o in options}
@@ -387,6 +404,27 @@ class _SystemReader(TomlReader):
                         f"must be finite, got {cell!r}",
                     )
         return {h: data[:, c] for c, h in enumerate(header)}
+
+    def names(self, system: Any) -> SignalNames:
+        """``[names]``: labels of the states (and their ``units``), inputs, outputs and
+        disturbance components, for plots and tables."""
+        tab = self.table(("names",))
+        if tab is None:
+            return SignalNames()
+        self.check_keys(tab, ("names",))
+        sizes = {"states": system.nx, "units": system.nx, "inputs": system.nu,
+                 "outputs": system.ny, "disturbances": system.nd}  # fmt: skip
+        out: dict[str, tuple[str, ...]] = {}
+        for k, n in sizes.items():
+            if k not in tab:
+                continue
+            v = tab[k]
+            if not isinstance(v, list) or not all(isinstance(e, str) for e in v):
+                raise self.fail(("names", k), f"expected a list of strings, got {v!r}")
+            if len(v) != n:
+                raise self.fail(("names", k), f"expected {n} names (the system's), got {len(v)}")
+            out[k] = tuple(v)
+        return SignalNames(**out)
 
     def x0(self, nx: int) -> Box | None:
         tab = self.table(("x0",))

@@ -34,6 +34,7 @@ from ..errors import IvobsError
 from ..sets import Box
 from ._matrix import Matrix, MatrixLike, is_scipy_sparse
 from .protocol import BoundsLike
+from .statespace import SignalNames, from_statespace, is_statespace
 
 if TYPE_CHECKING:
     from .protocol import LinearModel
@@ -92,6 +93,9 @@ class LinearSystem:
         without bounds (or bounds without a matrix), an invalid ``dt``.
     """
 
+    names: SignalNames = SignalNames()
+    """Names of states, inputs, outputs and disturbances (plots and tables); unnamed by default."""
+
     def __init__(
         self,
         A: MatrixLike,
@@ -103,6 +107,11 @@ class LinearSystem:
         d: BoundsLike = None,
         dt: bool | float = True,
     ) -> None:
+        if is_statespace(A):  # callable, so it would be taken for a time-varying A(k)
+            raise IvobsError(
+                "A: got a control.StateSpace; use ivobs.LinearSystem.from_statespace(ss, "
+                "disturbances=[...], d=ivobs.Box(...)) (make_estimator also accepts it directly)"
+            )
         self.dt = self._check_dt(dt)
         self._A = Matrix("A", A, None, None, "col")
         nx = int(self._A.shape[0])
@@ -366,22 +375,20 @@ class LinearSystem:
 
     @classmethod
     def from_statespace(
-        cls, ss: Any, E: MatrixLike = None, F: MatrixLike = None, d: BoundsLike = None
+        cls,
+        ss: Any,
+        E: MatrixLike = None,
+        F: MatrixLike = None,
+        d: BoundsLike = None,
+        *,
+        disturbances: Any = (),
     ) -> LinearSystem:
-        """From a ``control.StateSpace`` (python-control) plus disturbance data."""
-        try:
-            A, B, C, D = (np.asarray(getattr(ss, k), dtype=float) for k in "ABCD")
-        except AttributeError:
-            raise IvobsError(
-                f"ss: expected a control.StateSpace (with A, B, C, D), got {type(ss).__name__}"
-            ) from None
-        dt = getattr(ss, "dt", True)
-        if dt is None:
-            raise IvobsError(
-                "ss.dt: python-control's unspecified timebase (None); set dt=0 (continuous) or "
-                "dt=True / a period (discrete)"
-            )
-        return cls(A, B, C, D=D, E=E, F=F, d=d, dt=dt)
+        """From a ``control.StateSpace`` (python-control): ``disturbances`` names the inputs of
+        ``ss`` that are bounded unknown disturbances (indices or labels) with bounds ``d``, or
+        ``E``, ``F``, ``d`` give disturbances outside ``ss``; names are kept in ``sys.names``
+        (:func:`ivobs.model.statespace.from_statespace`)."""
+        sys: LinearSystem = from_statespace(cls, ss, disturbances=disturbances, d=d, E=E, F=F)
+        return sys
 
     def to_statespace(self) -> Any:
         """A ``control.StateSpace`` with inputs ``[u; d]`` (needs python-control)."""

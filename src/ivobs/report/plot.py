@@ -47,7 +47,9 @@ def plot_estimates(
     if first.is_batch:
         raise IvobsError("plot_estimates: batch estimates cannot be plotted; pick one stream")
     nx, T = first.nx, first.T
-    states = list(range(nx)) if states is None else [int(s) for s in states]
+    from .compare_figure import check_states
+
+    states = check_states(states, nx)
     if t is None:
         t = first.t if first.t is not None else np.arange(T)
     t = np.asarray(t, dtype=float)

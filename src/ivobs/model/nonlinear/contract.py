@@ -10,7 +10,8 @@ bound rounded outward. Operations without a cheap inverse (``sin``, ``min``...) 
 below them, which is sound. An intersection that comes out empty proves that no ``v`` in the box
 satisfies the constraint: the function returns False (an inconsistent measurement).
 
-A generated contractor ``c(vl, vh, u, y) -> bool`` narrows the lists ``vl``, ``vh`` in place.
+A generated contractor ``c(vl, vh, u, ylo, yhi) -> bool`` narrows the lists ``vl``, ``vh`` in
+place (``g in [ylo, yhi]``).
 """
 
 from __future__ import annotations
@@ -211,12 +212,14 @@ def _backward(em: Emitter, nd: _Node) -> None:
 def build_contractor(
     name: str, expr: Any, label: str, leaves: list[Any], inputs: list[Any], consts: dict[Any, Any]
 ) -> tuple[Any, list[str]]:
-    """Compile ``name(vl, vh, u, y) -> bool`` contracting the boxes of ``leaves`` (the lists
-    ``vl``, ``vh``) with ``expr in [y, y]``; ``inputs`` read from ``u`` (thin)."""
+    """Compile ``name(vl, vh, u, ylo, yhi=None) -> bool`` contracting the boxes of ``leaves``
+    (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
+    ``inputs`` read from ``u`` (thin)."""
     sites: list[str] = []
     em = Emitter(sites)
     em.label = label
-    em.lines.append(f"def {name}(vl, vh, u, y):")
+    em.lines.append(f"def {name}(vl, vh, u, ylo, yhi=None):")
+    em.line("if yhi is None: yhi = ylo")  # a thin measurement (the contract's call)
     env: dict[Any, tuple[str, str]] = dict(consts)
     lv: dict[Any, tuple[str, str]] = {}
     for i, s in enumerate(leaves):
@@ -234,7 +237,7 @@ def build_contractor(
         nd = _Node("ident", lo, hi, [root])
         b.nodes.append(nd)
         root = nd
-    em.line(f"{root.lo} = _max({root.lo}, y); {root.hi} = _min({root.hi}, y)")
+    em.line(f"{root.lo} = _max({root.lo}, ylo); {root.hi} = _min({root.hi}, yhi)")
     em.line(f"if {root.lo} > {root.hi}: return False")
     for nd in reversed(b.nodes):
         if nd.kind == "ident":

@@ -33,6 +33,19 @@ class Forms:
         self.sites, self.source = sites, source
 
 
+def _repeats(e: Any, z: list[Any]) -> bool:
+    """Whether a variable of ``z`` occurs more than once in ``e``. If none does, the natural
+    extension is the exact range up to rounding [Moore2009, Ch. 6] (single-use expressions, as
+    in the Hénon map) and the mean-value form cannot tighten it: it is skipped."""
+    import sympy as sp
+
+    counts: dict[Any, int] = {}
+    for node in sp.preorder_traversal(e):
+        if node in z or (node.is_Symbol and node in set(z)):
+            counts[node] = counts.get(node, 0) + 1
+    return any(c > 1 for c in counts.values())
+
+
 def _header(name: str, em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]) -> None:
     em.lines.append(f"def {name}(xl, xh, u, wl, wh):")
     env: dict[Any, Pair] = dict(consts)
@@ -60,6 +73,57 @@ def _ret(em: Emitter, pairs: list[Pair]) -> None:
     em.line(f"return [{', '.join(p[0] for p in pairs)}], [{', '.join(p[1] for p in pairs)}]")
 
 
+def _mean_value(
+    em: Emitter,
+    exprs: list[Any],
+    nat: list[Pair],
+    jac: list[list[Any]],
+    repeated: list[bool],
+    syms: dict[str, list[Any]],
+    consts: dict[Any, Pair],
+    labels: list[str],
+) -> list[Pair]:
+    """Code of ``natural ∩ (g(c) + J([z]) ([z] - c))`` for the rows with a repeated variable
+    (the natural rows ``nat`` already emitted over the box)."""
+    z = syms["x"] + syms["w"]
+    zname = [f"x{i}" for i in range(len(syms["x"]))] + [f"w{i}" for i in range(len(syms["w"]))]
+    entries = {}
+    for i, row in enumerate(jac):
+        for j, d in enumerate(row):
+            if d != 0 and repeated[i]:
+                em.label = f"d {labels[i]} / d {z[j]}"
+                entries[i, j] = em.emit(d)
+    box = [f"{n}l" for n in zname] + [f"{n}h" for n in zname]
+    em.line(f"s = {' + '.join(box) if box else '0.0'}")
+    lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
+    em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")  # an infinite bound: natural only
+    cenv: dict[Any, Pair] = dict(consts)
+    for s, n in zip(z, zname):
+        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
+        em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
+        em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
+        cenv[s] = (f"c{n}", f"c{n}")
+    for i, s in enumerate(syms["u"]):
+        cenv[s] = (f"u{i}", f"u{i}")
+    em.scope(cenv)
+    out: list[Pair] = []
+    for i, nv in enumerate(nat):
+        if not repeated[i]:  # single-use: the natural extension is already the exact range
+            out.append(nv)
+            continue
+        em.label = f"{labels[i]} (at the centre)"
+        terms = [em.emit(exprs[i])] + [
+            em.mul(entries[i, j], (f"d{zname[j]}l", f"d{zname[j]}h"))
+            for j in range(len(z))
+            if (i, j) in entries
+        ]
+        m = em._sum(terms)
+        r = em.new()
+        em.line(f"{r[0]} = _max({nv[0]}, {m[0]}); {r[1]} = _min({nv[1]}, {m[1]})")
+        out.append(r)
+    return out
+
+
 def build_forms(
     name: str,
     exprs: list[Any],
@@ -75,7 +139,6 @@ def build_forms(
     sites: list[str] = []
     z = syms["x"] + syms["w"]
     jac = [[sp.diff(e, s) for s in z] for e in exprs]
-    zname = [f"x{i}" for i in range(len(syms["x"]))] + [f"w{i}" for i in range(len(syms["w"]))]
     chunks = []
 
     em = Emitter(sites)
@@ -94,37 +157,8 @@ def build_forms(
     em = Emitter(sites)
     _header(f"{name}_tight", em, syms, consts)
     nat = _rows(em, exprs, labels)
-    entries = {}
-    for i, row in enumerate(jac):
-        for j, d in enumerate(row):
-            if d != 0:
-                em.label = f"d {labels[i]} / d {z[j]}"
-                entries[i, j] = em.emit(d)
-    box = [f"{n}l" for n in zname] + [f"{n}h" for n in zname]
-    em.line(f"s = {' + '.join(box) if box else '0.0'}")
-    lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
-    em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")
-    cenv: dict[Any, Pair] = dict(consts)
-    for s, n in zip(z, zname):
-        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
-        em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
-        em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
-        cenv[s] = (f"c{n}", f"c{n}")
-    for i, s in enumerate(syms["u"]):
-        cenv[s] = (f"u{i}", f"u{i}")
-    em.scope(cenv)
-    mid = _rows(em, exprs, [f"{lab} (at the centre)" for lab in labels])
-    out: list[Pair] = []
-    for i, (nv, c) in enumerate(zip(nat, mid)):
-        terms = [c] + [
-            em.mul(entries[i, j], (f"d{zname[j]}l", f"d{zname[j]}h"))
-            for j in range(len(z))
-            if (i, j) in entries
-        ]
-        m = em._sum(terms)
-        r = em.new()
-        em.line(f"{r[0]} = _max({nv[0]}, {m[0]}); {r[1]} = _min({nv[1]}, {m[1]})")
-        out.append(r)
+    repeated = [_repeats(e, z) for e in exprs]
+    out = _mean_value(em, exprs, nat, jac, repeated, syms, consts, labels) if any(repeated) else nat
     _ret(em, out)
     chunks.append("\n".join(em.lines))
 

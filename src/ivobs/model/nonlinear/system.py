@@ -18,6 +18,7 @@ import numpy as np
 
 from ...errors import IvobsError
 from ...sets import Box
+from ..statespace import SignalNames
 from ._runtime import DomainError
 from .codegen import enclose_float
 from .contract import build_contractor
@@ -59,7 +60,12 @@ def _number(what: str, v: Any) -> float:
 
 
 def _bounds(what: str, v: Any) -> Pair:
-    if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)) or len(v) != 2:
+    if (
+        isinstance(v, (str, bytes))
+        or not isinstance(v, (Sequence, np.ndarray))
+        or np.ndim(v) != 1
+        or len(v) != 2
+    ):
         raise IvobsError(f"{what}: expected a pair (lo, hi), got {v!r}")
     lo, hi = _number(f"{what}[0]", v[0]), _number(f"{what}[1]", v[1])
     if lo > hi:
@@ -128,7 +134,7 @@ class NonlinearSystem:
         self.known_params: dict[str, float] = {}
         self.param_bounds: dict[str, Pair] = {}
         for name, v in params.items():
-            if isinstance(v, (Sequence, np.ndarray)) and not isinstance(v, str):
+            if isinstance(v, (Sequence, np.ndarray)) and not isinstance(v, str) and np.ndim(v):
                 self.param_bounds[name] = _bounds(f"params[{name!r}]", v)
             else:
                 self.known_params[name] = _number(f"params[{name!r}]", v)
@@ -149,6 +155,14 @@ class NonlinearSystem:
         self.output_names = _names("outputs", outputs) or [f"y{i + 1}" for i in range(self.ny)]
         if len(self.output_names) != self.ny:
             raise IvobsError(f"outputs: expected {self.ny} names, got {len(self.output_names)}")
+        self.names = SignalNames(
+            states=tuple(self.state_names),
+            inputs=tuple(self.input_names) or None,
+            outputs=tuple(self.output_names),
+            disturbances=tuple(self.signal_names) or None,
+        )
+        """Labels for plots and tables (as ``LinearSystem.names``; a system file may add
+        ``units``)."""
         self._build()
 
     # -- construction -----------------------------------------------------------------------
@@ -309,36 +323,38 @@ class NonlinearSystem:
         return self._jac(self._h, self.ny, xlo, xhi, u, wlo, whi)
 
     def h_contract(
-        self, xlo: Any, xhi: Any, u: Any, wlo: Any, whi: Any, y: Any
+        self, xlo: Any, xhi: Any, u: Any, wlo: Any, whi: Any, y: Any, y_hi: Any = None
     ) -> tuple[np.ndarray, ...] | None:
-        """Forward-backward contraction of the box ``(x, w)`` with ``h(x, u, w) = y`` (NaN
-        components of ``y`` are skipped): ``(xlo, xhi, wlo, whi)``, or None when no point of
-        the box is consistent with ``y`` (:mod:`.contract`)."""
+        """Forward-backward contraction of the box ``(x, w)`` with ``h(x, u, w) = y`` (or
+        ``h in [y, y_hi]``; NaN components of ``y`` are skipped): ``(xlo, xhi, wlo, whi)``, or
+        None when no point of the box is consistent with ``y`` (:mod:`.contract`)."""
         xl, xh, uu, wl, wh = self._args(xlo, xhi, u, wlo, whi)
         yv = np.asarray(y, dtype=float).reshape(-1)
-        if yv.shape[0] != self.ny:
+        yh = yv if y_hi is None else np.asarray(y_hi, dtype=float).reshape(-1)
+        if yv.shape[0] != self.ny or yh.shape[0] != self.ny:
             raise IvobsError(f"y: expected {self.ny} values, got {yv.shape[0]}")
         vl, vh = xl + wl, xh + wh
-        if not self.contract_lists(vl, vh, uu, yv.tolist()):
+        if not self.contract_lists(vl, vh, uu, yv.tolist(), yh.tolist()):
             return None
         nx = self.nx
         a = np.array
         return a(vl[:nx]), a(vh[:nx]), a(vl[nx:], dtype=float), a(vh[nx:], dtype=float)
 
     def contract_lists(
-        self, vl: list[float], vh: list[float], u: list[float], y: list[float]
+        self, vl: list[float], vh: list[float], u: list[float], ylo: list[float], yhi: list[float]
     ) -> bool:
-        """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place); two
-        sweeps over the outputs when there are several."""
+        """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place) with
+        ``h in [ylo, yhi]``; two sweeps over the outputs when there are several."""
         for _ in range(1 if len(self._hc) == 1 else 2):
-            for (fn, sites), yi in zip(self._hc, y):
-                if yi == yi and not self._call(fn, sites, vl, vh, u, yi):
+            for (fn, sites), a, b in zip(self._hc, ylo, yhi):
+                if a == a and not self._call(fn, sites, vl, vh, u, a, b):
                     return False
         return True
 
     def hf_contractors(self) -> list[tuple[Any, list[str]]]:
-        """Contractors of ``h(f(x', u', w'), u, w) = y`` over the leaves ``(x', w', w)`` with
-        inputs ``(u', u)``: one step back through the model (built on first use)."""
+        """Contractors of ``h(f(x', u', w'), u, w) in [ylo, yhi]`` over the leaves
+        ``(x', w', w)`` with inputs ``(u', u)``: one step back through the model (built on
+        first use)."""
         if self._hf is None:
             import sympy as sp
 
