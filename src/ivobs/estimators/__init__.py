@@ -55,6 +55,8 @@ METHODS: dict[str, Entry] = {
     "exact": Entry("exact.estimator", "Exact", 100),
     "intersect": Entry("intersect", "Intersect", 110),
     "nl-interval": Entry("nonlinear_interval", "NonlinearIntervalEstimator", 900),
+    "nl-zonotope": Entry("nl_zonotope", "NonlinearZonotopeEstimator", 910),
+    "nl-constrained-zonotope": Entry("nl_czonotope", "NonlinearConstrainedZonotopeEstimator", 920),
 }
 """The built-in methods, imported on first use (see the module docstring)."""
 
