@@ -136,8 +136,8 @@ def _absorb_in_basis(
     ``γ_{N+2} (|l| + |P| |α|)`` of its rounding, [Higham2002, Lemma 3.1]). The box and the
     rounding of the product ``P diag(t)`` itself are then absorbed by the basis:
     with ``X ≈ P⁻¹``, ``θ >= ‖I - X P‖∞ < 1/2``, ``|P⁻¹ v| <= τ`` on ``box(ρ)``
-    (:func:`_box_in_basis`) and ``μ >= u ‖P⁻¹‖∞ ‖P‖∞`` (``‖P⁻¹‖∞ <= ‖X‖∞ / (1 - θ)``), the
-    computed ``P' = fl(P diag(t))`` is ``P (diag(t) + F)`` with ``‖F diag(t)⁻¹‖∞ <= μ``,
+    (:func:`_box_in_basis`) and ``μ >= u ‖|P⁻¹| |P|‖∞``, the computed
+    ``P' = fl(P diag(t))`` is ``P (diag(t) + F)`` with ``|F diag(t)⁻¹| <= u |P⁻¹| |P|``,
     so ``t = z + μ / (1 - μ) ‖z‖∞``, ``z = s₀ + τ``, gives ``<0, P diag(s₀)> ⊕ box(ρ) ⊆
     <0, P'>`` (a Neumann-series bound on ``(I + F diag(t)⁻¹)⁻¹``)."""
     from scipy.linalg.lapack import dgeqp3, dtrtrs  # imported here: SciPy is slow to import
@@ -177,15 +177,16 @@ def _absorb_in_basis(
 
 
 def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """``(τ, μ)`` with ``τ >= 0``, ``box(ρ) ⊆ <0, P diag(τ)>`` and ``μ >= u ‖P⁻¹‖∞ ‖P‖∞``
+    """``(τ, μ)`` with ``τ >= 0``, ``box(ρ) ⊆ <0, P diag(τ)>`` and ``μ >= u ‖|P⁻¹| |P|‖∞``
     (plus the bound of an underflow in ``P diag(t)``, ``t >= 1``) for a square invertible
     ``P``, verified in floating point, or ``None`` (``P`` too ill-conditioned to verify).
 
     ``v ∈ box(ρ)`` has coordinates ``P⁻¹ v``. With ``X ≈ P⁻¹`` and ``θ >= ‖I - X P‖∞`` (the
     computed residual plus the bound ``γ_{n+1} (I + |X| |P|)`` of its rounding), ``θ < 1/2``
     gives ``P⁻¹ v = X v + (I - X P) P⁻¹ v``, so
-    ``|P⁻¹ v| <= |X| ρ + θ / (1 - θ) ‖|X| ρ‖∞`` and ``‖P⁻¹‖∞ <= ‖X‖∞ / (1 - θ)`` (Neumann-series
-    bounds, as in verified linear algebra)."""
+    ``|P⁻¹ v| <= |X| ρ + θ / (1 - θ) ‖|X| ρ‖∞``, and ``P⁻¹ = X + (I - X P) P⁻¹`` gives
+    ``‖|P⁻¹| |P|‖∞ <= ‖|X| |P|‖∞ / (1 - θ)`` (Skeel's condition number, invariant to the scaling
+    of the columns; Neumann-series bounds, as in verified linear algebra)."""
     n = P.shape[0]
     try:
         X = np.linalg.inv(P)
@@ -193,16 +194,17 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
         return None
     if not np.all(np.isfinite(X)):
         return None
-    aX, aP = np.abs(X), np.abs(P)
+    aX = np.abs(X)
     Rm = np.eye(n) - X @ P
-    row_sums = (np.abs(Rm) + gamma(n + 1) * (np.eye(n) + aX @ aP)).sum(axis=1)
+    aXaP = aX @ np.abs(P)
+    row_sums = (np.abs(Rm) + gamma(n + 1) * (np.eye(n) + aXaP)).sum(axis=1)
     theta = float(row_sums.max()) * (1.0 + gamma(n + 2))
     if not theta < 0.5:
         return None
-    up = 1.0 + gamma(n + 4)
+    up = 1.0 + gamma(2 * n + 4)
+    skeel = float(aXaP.sum(axis=1).max()) * up  # >= ‖|X| |P|‖∞ in exact arithmetic
     nX = float(aX.sum(axis=1).max()) * up
-    nP = float(aP.sum(axis=1).max()) * up
-    mu = (UNIT_ROUNDOFF * nX * nP + nX * n * 2.0**-1074) / (1.0 - theta) * up
+    mu = (UNIT_ROUNDOFF * skeel + nX * n * 2.0**-1074) / (1.0 - theta) * up
     if not mu < 0.5:
         return None
     v = (aX @ rho) * (1.0 + gamma(n + 1))
