@@ -108,7 +108,8 @@ CORA = [
 @pytest.mark.parametrize("limits", [(1, 1), (1, 4), (2, 8), (4, 16)])
 def test_every_limit_stays_bounded_on_every_cora_benchmark(name, steps, limits) -> None:
     """From one constraint per state and one generator asked (the lifted rank is kept) to
-    4 nx constraints and 16 nx generators, on every CORA record (slip4 shortened to 350 steps, tank30 to 12):
+    4 nx constraints and 16 nx generators, on every CORA record (slip4 shortened to 350
+    steps, tank30 to 12):
     finite, within 10x the first steps' width at the end, and containing the recorded state."""
     sc = scenarios.get(name)
     tr = sc.recorded
