@@ -41,8 +41,8 @@ class FixedTimeEstimator(Estimator):
     it is valid from ``k = s`` (``valid_from = s``); rows before are NaN. No prior on ``x[0]``
     is needed (``needs_x0 = False``).
 
-    Options
-    -------
+    Other Parameters
+    ----------------
     s : window length minus one, ``s >= nx - 1`` ([Wang2020, Lemma 2]). Default ``nx - 1``. A
         larger ``s`` starts later and gives ``T`` more freedom: ``‖T Md‖_F`` never grows with
         ``s``, but the boxes may (see ``criterion``).

@@ -34,8 +34,10 @@ __all__ = ["KKL"]
 class KKL(Estimator):
     """KKL / Sylvester interval observer of [Dinh2024] (LTI and LTV, discrete and continuous).
 
-    Parameters (keyword-only, all optional)
-    ----------------------------------------
+    The parameters are keyword-only, all optional.
+
+    Parameters
+    ----------
     A_z, B_z : target pair. Time-invariant: ``(A_z, B_z)`` of [Dinh2024, Proposition 1]
         (default: a tuned diagonal target, see :mod:`ivobs.design.sylvester`). Time-varying:
         ``Ã``, ``B̃`` of (16.a)/(11.a) (default: blocks from the observability indices); the
