@@ -111,6 +111,38 @@ def _on_include_read(
     content[0] = _site_links(content[0], root_file=relative_path.parent == Path(".."))
 
 
+# --- docstrings: prose after a Parameters list ---
+# numpydoc reads every unindented line of a Parameters section as a new parameter, so a paragraph
+# written after the list (without a "Notes" heading) is rendered as parameters named by its
+# sentences. Report it as a warning (an error with -W) naming the object.
+_SECTIONS = ("Parameters", "Other Parameters", "Returns", "Yields", "Raises", "Attributes")
+
+
+def _check_sections(
+    app: Any, what: str, name: str, obj: Any, options: Any, lines: list[str]
+) -> None:
+    from numpydoc.docscrape import NumpyDocString
+    from sphinx.util import logging
+
+    try:
+        doc = NumpyDocString("\n".join(lines))
+    except Exception:  # numpydoc itself reports what it cannot parse
+        return
+    for section in _SECTIONS:
+        for param in doc[section]:
+            if " " in param.name.strip() and "," not in param.name:
+                logging.getLogger(__name__).warning(
+                    "%s: the line %r is read as an item of its %s section (give the prose after "
+                    "the list a heading such as Notes)",
+                    name,
+                    param.name[:60],
+                    section,
+                    type="ivobs",
+                    subtype="docstring",
+                )
+
+
 def setup(app: Any) -> None:
     app.connect("source-read", _on_source_read)
     app.connect("include-read", _on_include_read)
+    app.connect("autodoc-process-docstring", _check_sections, priority=400)  # before numpydoc

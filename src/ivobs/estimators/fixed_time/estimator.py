@@ -69,6 +69,8 @@ class FixedTimeEstimator(Estimator):
         bounds ``|N Md| 𝐫``; a violation means the data contradict the model (reported as
         inconsistent, the box is then predicted from the previous one). Default True.
 
+    Notes
+    -----
     Asymmetric bounds ([Wang2020, Section 2]): ``d = c + δ``, ``|δ| <= r``; ``E c``, ``F c``
     enter as a known input (``Mc``). Time-varying systems (Remark 4): the stacked matrices and
     ``T_k`` are recomputed per window (closed form: one SVD), cached. ``D u`` in the output

@@ -55,6 +55,8 @@ class KKL(Estimator):
         callable ``t -> u(t)`` (e.g. the known input signal itself).
     rtol, atol : continuous time: integration tolerances.
 
+    Notes
+    -----
     The observer is chosen once, from the system: :class:`~.discrete.ObserverZ` /
     :class:`~.discrete.ObserverX` (discrete-time LTI, observers (3)/(6), with the vectorised run
     of :mod:`.vectorised`), :class:`~.discrete.DiscreteLTV` (observer (15)),
