@@ -202,3 +202,33 @@ def test_certificates_follow_the_reduction(seed: int) -> None:
     red = ConstrainedZonotope(c, G, A, b).interval_hull()
     assert np.all(c + bound[:3] <= red.lo + 1e-9) and np.all(c - bound[3:] >= red.hi - 1e-9)
     assert np.all(red.lo <= lo + 1e-9) and np.all(red.hi >= hi - 1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hull_with_extra_objectives_matches_linprog_and_certifies_them(seed: int) -> None:
+    """The hull solved on one warm-started HiGHS model (with the extra objectives the filter
+    adds for its prediction) equals ``linprog``'s optimum to LP tolerance, every certified
+    bound is below the optimum of its program, and the extra objectives' certificates survive
+    an elimination (the bound after it stays below the reduced set's optimum)."""
+    from scipy.optimize import linprog
+
+    from ivobs.sets import hull_certificates
+
+    rng = np.random.default_rng(300 + seed)
+    z = random_cz(rng, n=3, m=16, nc=6)
+    P = rng.normal(size=(2, z.G.shape[1]))
+    lo, _, cert = hull_certificates(z.c, z.G, z.A, z.b, P)
+    D = np.vstack([z.G, -z.G, P, -P])
+    assert cert.D.shape == D.shape and cert.mu.shape == (10, 6)
+    opt = np.array([linprog(g, A_eq=z.A, b_eq=z.b, bounds=(-1, 1), method="highs").fun for g in D])
+    bound = cert.mu @ z.b - np.abs(cert.D - cert.mu @ z.A).sum(axis=1)
+    assert np.all(bound <= opt + 1e-12 * (1 + np.abs(opt)))
+    np.testing.assert_allclose(bound, opt, atol=1e-7)
+    np.testing.assert_allclose(lo, z.c + opt[:3], atol=1e-7)
+    out = eliminate_constraints(z.c, z.G, z.A, z.b, 3, cert)
+    assert out is not None
+    _, _, A, b = out
+    after = cert.mu @ b - np.abs(cert.D - cert.mu @ A).sum(axis=1)
+    Pc = cert.D[6:8]  # the extra objectives, mapped to the reduced factors
+    opt2 = np.array([linprog(g, A_eq=A, b_eq=b, bounds=(-1, 1), method="highs").fun for g in Pc])
+    assert np.all(after[6:8] <= opt2 + 1e-9)

@@ -121,7 +121,7 @@ def test_servo_hinf_gain_is_optimal_for_problem_20_and_the_papers_l1_is_not():
     (docs/gains.md)."""
     sc = scenarios.get("servo-motor")
     A, _, C, _, E, F = sc.system.matrices_at(0)
-    L, gamma, _ = hinf_gain(A, C, E, F)
+    L, gamma, _ = hinf_gain(A, C, E, F, method="lmi")
     assert gamma == pytest.approx(3.2415, abs=5e-4)
     L1 = sc.reference["L1"]
     w = np.linspace(0.0, np.pi, 20001)
@@ -138,9 +138,9 @@ def test_servo_hinf_gain_is_optimal_for_problem_20_and_the_papers_l1_is_not():
     # the consequence on the widths of θ (mean after 10 steps, the figures' disturbance)
     tr = sc.simulate("paper")
     widths = {}
-    for name, gain in (("default", None), ("L1", L1)):
-        est = ivobs.make_estimator("reachability", sc.system, x0=sc.x0, L=gain)
+    for name, kw in (("hinf", {"gain": "hinf-lmi"}), ("L1", {"L": L1})):
+        est = ivobs.make_estimator("reachability", sc.system, x0=sc.x0, **kw)
         res = est.run(tr.u, tr.y)
         widths[name] = float(np.mean((res.upper - res.lower)[10:, 0]))
-    assert widths["default"] == pytest.approx(0.200, abs=2e-3)
+    assert widths["hinf"] == pytest.approx(0.200, abs=2e-3)
     assert widths["L1"] == pytest.approx(0.169, abs=2e-3)

@@ -40,7 +40,7 @@ def test_tang_example2_reproduces_the_papers_gain_and_eigenvalues():
 def test_servo_gain_is_optimal_and_at_least_as_good_as_the_papers_L1():
     sc = ivobs.scenarios.get("servo-motor")
     A, C, E, F = _mats("servo-motor")
-    L, gamma, _ = hinf_gain(A, C, E, F)
+    L, gamma, _ = hinf_gain(A, C, E, F, method="lmi")
     assert gamma == pytest.approx(3.2415, abs=1e-3)
     assert hinf_norm(A - L @ C, E - L @ F) < gamma + 1e-6
     L1 = sc.reference["L1"]
@@ -80,7 +80,9 @@ def test_bad_shapes_and_sizes():
     with pytest.raises(IvobsError, match="F: expected shape"):
         hinf_gain(A, C, E, np.ones((1, 2)))
     with pytest.raises(DesignError, match="does not scale"):
-        hinf_gain(0.5 * np.eye(201), np.eye(201)[:1], np.eye(201), np.zeros((1, 201)))
+        hinf_gain(0.5 * np.eye(201), np.eye(201)[:1], np.eye(201), np.zeros((1, 201)), method="lmi")
+    with pytest.raises(IvobsError, match="method: expected 'riccati' or 'lmi'"):
+        hinf_gain(A, C, E, F, method="sdp")
 
 
 def test_user_gain_is_checked():

@@ -48,7 +48,7 @@ def _exact_radius(M, G, h0, r_rows):
 # --- [Tang2019], Example 2 -----------------------------------------------------------------
 def test_tang_example2_gain_and_containment():
     sc = ivobs.scenarios.get("tang-example2", horizon=60)
-    est = make_estimator("reachability", sc.system, x0=sc.x0)
+    est = make_estimator("reachability", sc.system, x0=sc.x0, gain="hinf-lmi")
     np.testing.assert_allclose(est.design.L, sc.reference["L"], atol=1e-3)
     assert est.design.gamma == pytest.approx(3.4368, abs=1e-3)
     assert est.design.spectral_radius == pytest.approx(0.3258, abs=1e-3)
@@ -96,9 +96,9 @@ def test_box_is_the_exact_interval_hull_theorem2():
 
 
 # --- [Tang2019], Example 1: servo motor ---------------------------------------------------
-def test_servo_default_design_and_containment():
+def test_servo_hinf_design_and_containment():
     sc = ivobs.scenarios.get("servo-motor", horizon=300)
-    est = make_estimator("reachability", sc.system, x0=sc.x0)
+    est = make_estimator("reachability", sc.system, x0=sc.x0, gain="hinf-lmi")
     assert est.design.gamma == pytest.approx(3.2415, abs=1e-3)
     for kind in ("paper", "vertex"):
         tr = sc.simulate(kind, seed=2)
@@ -348,7 +348,7 @@ def test_no_disturbance_box_shrinks_onto_the_state():
     sys = LinearSystem(A, np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]))
     x0 = Box([-1.0, -1.0], [1.0, 1.0])
     tr = ivobs.simulate(sys, [0.7, -0.4], np.ones((80, 1)))
-    est = make_estimator("reachability", sys, x0=x0)
+    est = make_estimator("reachability", sys, x0=x0, gain="hinf")
     assert est.design.gamma == 0.0
     for vec in (False, True):
         res = est.run(tr.u, tr.y, vectorize=vec)

@@ -195,7 +195,7 @@ def test_orders_whose_boxes_grow_are_refused_with_the_widths(gain):
     (44.7 at k = 50, 1,518 at k = 2,000 with the default gain); q = 5 and the default settle
     (cycle or fixed point of (34b)) and keep their widths."""
     sc = ivobs.scenarios.get("servo-motor", horizon=50)
-    kw = {"L": sc.reference["L1"]} if gain == "L1" else {}
+    kw = {"L": sc.reference["L1"]} if gain == "L1" else {"gain": "hinf-lmi"}
     with pytest.raises(DesignError) as info:
         make_estimator("zonotope", sc.system, x0=sc.x0, order=4, **kw)
     msg = str(info.value)

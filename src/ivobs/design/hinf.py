@@ -1,4 +1,11 @@
-"""H∞ observer gain by an LMI [Tang2019, Theorem 1, problem (20)].
+"""H∞ observer gain [Tang2019, Theorem 1, problem (20)]: by Riccati equations (default) or by
+the LMI; and the gain of the Luenberger-type estimators (:func:`observer_gain`).
+
+``method="riccati"`` (default, :func:`ivobs.design.riccati.hinf_riccati_gain`): bisection on
+``γ`` with the H∞ Riccati equation, ``O(nx³)`` per ``γ``, certified by the bounded-real lemma
+(a ``P`` satisfying (16) strictly, checked). ``method="lmi"``: problem (20) as the paper states
+it, solved by CVXPY/Clarabel (below; refused above 200 states). Both reach the same ``γ`` on the
+paper's examples (docs/gains.md).
 
 For the Luenberger observer ``x̂+ = A x̂ + B u + L (y - C x̂ - D u)`` the estimation error
 ``e = x - x̂`` of the model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` obeys
@@ -30,19 +37,23 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_matrix
-from ..errors import DesignError
+from ..errors import DesignError, IvobsError
 from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
 from .balance import state_scaling
 
-__all__ = ["check_gain", "hinf_gain", "observer_gain"]
+__all__ = ["GAINS", "check_gain", "hinf_gain", "observer_gain"]
+
+GAINS = ("radius", "hinf", "hinf-lmi")
+"""Designs of :func:`observer_gain`: ``"radius"`` (default; :mod:`ivobs.design.radius`), the H∞
+gain by Riccati equations, the H∞ gain by the LMI."""
 
 MARGIN = 1e-8
 """Default margin of the strict LMI (16): the block matrix is required ``≼ -MARGIN I``."""
 
 
 def hinf_gain(
-    A: Any, C: Any, E: Any, F: Any, *, margin: float = MARGIN
+    A: Any, C: Any, E: Any, F: Any, *, margin: float = MARGIN, method: str = "riccati"
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """Observer gain minimising the H∞ norm from ``d`` to ``e`` [Tang2019, Theorem 1,
     problem (20)].
@@ -52,7 +63,8 @@ def hinf_gain(
     A : (nx, nx), C : (ny, nx), E : (nx, nd), F : (ny, nd)
         The model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` (``B``, ``D`` play no role).
     margin : float
-        The strict inequality (16) is imposed as ``≼ -margin I``.
+        The strict inequality (16) is imposed as ``≼ -margin I`` (``method="lmi"``).
+    method : ``"riccati"`` (default) or ``"lmi"`` (module docstring)
 
     Returns
     -------
@@ -66,8 +78,6 @@ def hinf_gain(
         The LMI has no solution (e.g. ``(A, C)`` not detectable), the solver is inaccurate, or
         the extracted ``A - LC`` is not Schur (the message gives its spectral radius).
     """
-    import cvxpy as cp
-
     A = as_matrix("A", A)
     nx = A.shape[0]
     if A.shape != (nx, nx):
@@ -77,8 +87,23 @@ def hinf_gain(
     E = as_matrix("E", E, nx, None)
     nd = E.shape[1]
     F = as_matrix("F", F, ny, nd, vector="row")
+    if method == "riccati":
+        from .riccati import hinf_riccati_gain
+
+        return hinf_riccati_gain(A, C, E, F)
+    if method != "lmi":
+        raise IvobsError(f"method: expected 'riccati' or 'lmi', got {method!r}")
+    return _hinf_lmi(A, C, E, F, float(margin))
+
+
+def _hinf_lmi(
+    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, margin: float
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Problem (20) by CVXPY (the LMI (16), balanced coordinates)."""
+    import cvxpy as cp
+
+    nx, ny, nd = A.shape[0], C.shape[0], E.shape[1]
     check_size(nx, "hinf_gain ([Tang2019] LMI (16))")
-    margin = float(margin)
 
     # balanced coordinates x = D x̃ (ivobs.design.balance): the congruence diag(D, I, D) maps
     # (16) for (P, Y) onto the same LMI for P̃ = DPD, Ỹ = DY, Ã = D⁻¹AD, C̃ = CD, Ẽ = D⁻¹E with
@@ -126,17 +151,44 @@ def check_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> float:
 
 
 def observer_gain(
-    sys: Any, L: Any, who: str
+    sys: Any, L: Any, who: str, gain: str | None = None
 ) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
-    """The gain of a Luenberger-type estimator: the user's ``L`` (checked) or the H∞ design.
+    """The gain of a Luenberger-type estimator: the user's ``L`` (checked) or the design
+    ``gain`` (:data:`GAINS`; default ``"radius"``), cached per system (:mod:`ivobs.design.cache`).
 
-    Returns ``(L, gamma, P, spectral radius of A - LC)``; ``gamma`` and ``P`` are None for a
-    user gain. ``sys`` is a time-invariant :class:`~ivobs.LinearSystem`.
+    Returns ``(L, gamma, P, spectral radius of A - LC)``; ``gamma`` and ``P`` are the H∞ bound
+    and its certificate for the H∞ designs, None otherwise. ``sys`` is a time-invariant
+    :class:`~ivobs.LinearSystem`.
     """
     A, _, C, _, E, F = sys.matrices_at(0)
-    if L is None:
-        Lm, gamma, P = hinf_gain(A, C, E, F)
-        return Lm, gamma, P, spectral_radius(A - Lm @ C)
-    Lm = as_matrix("L", L, sys.nx, sys.ny)
-    rho = check_gain(A, C, Lm, f"L ({who})")
-    return Lm, None, None, rho
+    if L is not None:
+        if gain is not None:
+            raise IvobsError(
+                f"gain: pass either an explicit gain L=... or a design gain={gain!r}, not both"
+            )
+        Lm = as_matrix("L", L, sys.nx, sys.ny)
+        rho = check_gain(A, C, Lm, f"L ({who})")
+        return Lm, None, None, rho
+    gain = "radius" if gain is None else gain
+    if gain not in GAINS:
+        raise IvobsError(f"gain: expected one of {', '.join(map(repr, GAINS))}, got {gain!r}")
+    from .cache import cached, fingerprint
+
+    r = sys.d_at(0).radius if gain == "radius" and sys.has_constant_bounds else None
+    key = fingerprint("observer_gain", gain, A, C, E, F, r)
+    return cached(key, lambda: _design(gain, A, C, E, F, r))
+
+
+def _design(
+    gain: str, A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, r: np.ndarray | None
+) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
+    """One design of :func:`observer_gain`, its certificate checked."""
+    if gain == "radius":
+        from .radius import radius_gain
+
+        # time-varying bounds: the design weighs every disturbance channel alike
+        Lm, _ = radius_gain(A, C, E, F, np.ones(E.shape[1]) if r is None else r)
+        rho = check_gain(A, C, Lm, "radius_gain: the optimised gain")
+        return Lm, None, None, rho
+    Lm, gamma, P = hinf_gain(A, C, E, F, method="lmi" if gain == "hinf-lmi" else "riccati")
+    return Lm, gamma, P, check_gain(A, C, Lm, f"hinf_gain ({gain})")

@@ -37,23 +37,26 @@ __all__ = [
 @dataclass(frozen=True)
 class ObserverDesign(Design):
     """``L``: observer gain; ``gamma``: its H∞ bound and ``P`` the Lyapunov matrix of
-    [Tang2019, Theorem 1] (None for a user gain); ``spectral_radius`` of ``A - LC``."""
+    [Tang2019, Theorem 1] (None for a user gain and the ``"radius"`` gain); ``spectral_radius``
+    of ``A - LC``; ``gain``: the design (``"radius"``, ``"hinf"``, ``"hinf-lmi"``; ``"user"``
+    for ``L=``)."""
 
     L: np.ndarray
     gamma: float | None
     P: np.ndarray | None
     spectral_radius: float
+    gain: str
 
 
 class ObserverEstimator(Estimator):
-    """What ``reachability`` and ``zonotope`` share: the gain ``L`` (``L=`` or the H∞ design of
-    [Tang2019, Theorem 1, problem (20)]), the error dynamics ``M = A - LC``, ``G = E - LF``, and
-    the bounds of ``d`` (kept when constant). A subclass calls :meth:`_design_observer` from its
-    ``__init__``."""
+    """What ``reachability`` and ``zonotope`` share: the gain ``L`` (``L=`` or a design,
+    ``gain=``: :func:`ivobs.design.hinf.observer_gain`), the error dynamics ``M = A - LC``,
+    ``G = E - LF``, and the bounds of ``d`` (kept when constant). A subclass calls
+    :meth:`_design_observer` from its ``__init__``."""
 
-    def _design_observer(self, L: Any) -> ObserverDesign:
+    def _design_observer(self, L: Any, gain: str | None = None) -> ObserverDesign:
         """The gain (checked: ``A - LC`` Schur) and the matrices of the error dynamics."""
-        Lm, gamma, P, rho = observer_gain(self.sys, L, self.name)
+        Lm, gamma, P, rho = observer_gain(self.sys, L, self.name, gain)
         self._L = Lm
         self._mats = self.sys.matrices_at(0)
         A, _, C, _, E, F = self._mats
@@ -69,7 +72,8 @@ class ObserverEstimator(Estimator):
         elif self.sys.has_constant_bounds:
             box = self.sys.d_at(0)
             self._const = (box.center, box.radius)
-        return ObserverDesign(L=Lm, gamma=gamma, P=P, spectral_radius=rho)
+        kind = "user" if L is not None else ("radius" if gain is None else gain)
+        return ObserverDesign(L=Lm, gamma=gamma, P=P, spectral_radius=rho, gain=kind)
 
     def _bounds(
         self, k: int, y_k: np.ndarray, lo: np.ndarray, hi: np.ndarray, u_k: np.ndarray

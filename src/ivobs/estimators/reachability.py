@@ -99,7 +99,10 @@ class Reachability(ObserverEstimator):
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``
     (the paper's convention); ``y[k]`` enters the box of ``x[k+1]``.
 
-    **Gain.** By default the H∞ gain of [Tang2019, Theorem 1, problem (20)]; ``L=`` gives it
+    **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
+    :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
+    (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
+    docs/gains.md. Or ``L=`` gives it
     explicitly (the papers' comparisons "with the same gain"); ``A - LC`` must be Schur.
 
     **Constant bounds, no missing sample:** Algorithm 1 exactly (``ρ`` by the running sums of
@@ -139,15 +142,16 @@ class Reachability(ObserverEstimator):
     ----------
     sys : time-invariant discrete-time :class:`~ivobs.LinearSystem`
     x0 : Box, prior box on ``x[0]`` ([Tang2019]: ``x0 ∈ <p0, H0>``)
-    L : (nx, ny) observer gain, optional (default: the H∞ gain of [Tang2019, Theorem 1,
-        problem (20)])
+    L : (nx, ny) observer gain, optional (default: designed, see ``gain``)
+    gain : ``"radius"`` (default), ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not
+        given (docs/gains.md)
     memory : window ``K`` for time-varying bounds / missing samples (default: smallest ``K``
         with ``‖ |M^K| ‖∞ <= 1e-3``, at most 500)
     """
 
     name = "reachability"
     order = 20
-    summary = "H∞ observer + exact interval hull of the error's reachable set"
+    summary = "Luenberger observer + exact interval hull of the error's reachable set"
     reference = "[Tang2019, Algorithm 1, Theorems 1-2, eqs. (10), (13), (21)-(26)]"
     data_used = "prediction"
     supports_uncertain = True  # see "Interval matrices" in the docstring
@@ -160,6 +164,7 @@ class Reachability(ObserverEstimator):
         *,
         L: Any = None,
         memory: int | None = None,
+        gain: str | None = None,
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
@@ -170,7 +175,7 @@ class Reachability(ObserverEstimator):
             "reachable set, nx x (nx + nd) matrices (O(nx^3) work)",
         )
         K = None if memory is None else as_int("memory", memory, 1)
-        observer = self._design_observer(L)
+        observer = self._design_observer(L, gain)
         K = default_memory(self._M) if K is None else K
         self.design = ReachabilityDesign(**observer.as_dict(), memory=K)
         assert self.x0 is not None

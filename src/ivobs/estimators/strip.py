@@ -43,10 +43,17 @@ state is measured the box is therefore the measurement box whenever the predicti
 
 **Order reduction.** After the prediction the zonotope keeps at most ``order`` generators.
 The default (``reduction="parallelotope"``) absorbs the generators to remove into a basis of
-``nx`` large, independent ones (the parallelotope rule of [Chisci1998]; see
-:func:`ivobs.czonotope.reduce_generators`): at the same order it is markedly tighter than
-the box reduction of [Combastel2015] (``reduction="box"``, :meth:`ivobs.Zonotope.reduce`,
-[Tang2019, Remark 2], which encloses the smallest generators in a box).
+``nx`` large, independent ones (the parallelotope rule of [Chisci1998];
+:func:`ivobs.sets.zonotope.reduce_parallelotope`), on the steps where that basis is well
+conditioned, and otherwise encloses them in Girard's box ([Girard2005], CORA's default,
+``reduction="girard"``): a basis picked among the generators can become nearly dependent, and
+without the check the boxes diverged (CORA's tank30 at ``order = 2 nx``: radius 10⁷).
+``reduction="box"`` is the box of [Combastel2015] ([Tang2019, Remark 2]).
+
+**Work per step.** Only the components of ``d`` that enter a measurement are in the joint set
+(the others are added at the prediction, exactly); the per-coordinate hull sorts the
+breakpoints once (``O(nx m log m)`` per strip, ``m`` the generators); the model's structure is
+derived once for a time-invariant system.
 """
 
 from __future__ import annotations
@@ -58,21 +65,18 @@ import numpy as np
 
 from .._validate import as_int, as_matrix
 from ..errors import IvobsError
+from ..linalg import UNIT_ROUNDOFF, gamma
 from ..model import LinearSystem
 from ..sets import Box, Zonotope
-from ..sets.czonotope import (
-    UNIT_ROUNDOFF,
-    box_generators,
-    gamma,
-    reduce_generators,
-    safe_radius,
-)
+from ..sets.zonotope import box_generators, reduce_girard, reduce_parallelotope, safe_radius
 from . import _uncertain as uncertain
 from . import register
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
 
-__all__ = ["StripDesign", "StripEstimator", "StripState"]
+__all__ = ["REDUCTIONS", "StripDesign", "StripEstimator", "StripState"]
+
+REDUCTIONS = ("parallelotope", "girard", "box")
 
 
 @dataclass(frozen=True)
@@ -97,30 +101,66 @@ class StripState(OnlineState):
     e: np.ndarray
 
 
+@dataclass(frozen=True)
+class _Structure:
+    """What the step needs of the model at one ``k``, derived once for a time-invariant system:
+    ``jc``, the components of ``d`` that enter a measurement (``F`` column nonzero) and so
+    are part of the joint set; ``pc``, those that enter only the state equation: the strips
+    never touch them (their entries of ``s = H_zᵀ h`` and ``λ`` are zero), so they are added at
+    the prediction, ``E_pc <c_d, R>``, exactly as in the joint set; ``mc``, the columns of
+    ``M = [A E_jc]`` that are nonzero; ``h[i] = (C_i, F_i,jc)``."""
+
+    A: np.ndarray
+    B: np.ndarray
+    D: np.ndarray
+    jc: np.ndarray
+    pc: np.ndarray
+    Ep: np.ndarray
+    M: np.ndarray
+    mc: np.ndarray
+    h: np.ndarray
+    ah: np.ndarray
+
+
+def _structure(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, E: np.ndarray,
+               F: np.ndarray) -> _Structure:  # fmt: skip
+    f_used = np.any(F != 0, axis=0)
+    jc = np.flatnonzero(f_used)
+    pc = np.flatnonzero(~f_used & np.any(E != 0, axis=0))
+    M = np.hstack([A, E[:, jc]])
+    mc = np.flatnonzero(np.any(M != 0, axis=0))
+    h = np.hstack([C, F[:, jc]])
+    return _Structure(A, B, D, jc, pc, E[:, pc], M[:, mc], mc, h, np.abs(h))
+
+
 @dataclass
 class _Joint:
-    """The pair ``(x_k, d_k)`` during the measurement update of one step: in the zonotope
-    ``<z, Hz>`` up to the rounding box ``acc`` kept aside, and in the box ``[lo, hi]`` (the
-    exact enclosures of the module docstring). Local to a step, updated strip by strip."""
+    """The pair ``(x_k, d_jc)`` during the measurement update of one step: in the zonotope
+    ``<z, Hz[:, :m]>`` up to the rounding box ``acc`` kept aside, and in the box ``[lo, hi]``
+    (the exact enclosures of the module docstring). ``Hz`` has room for the column each strip
+    appends. Local to a step, updated strip by strip."""
 
     z: np.ndarray
     Hz: np.ndarray
+    m: int
     lo: np.ndarray
     hi: np.ndarray
     acc: np.ndarray
 
     def intersect(
-        self, h: np.ndarray, t: float, y_i: float, du: float, g_meas: float, nx: int,
-        v_i: float = 0.0,
+        self, h: np.ndarray, ah: np.ndarray, t: float, y_i: float, du: float, g_meas: float,
+        nx: int, v_i: float = 0.0,
     ) -> bool:  # fmt: skip
         """Intersect with the strip ``|hᵀ(x, d) - t| <= σ`` of one measured component
-        (``t = y_i - D_i u``, ``du = |D_i| |u|``; ``v_i`` widens it by the interval matrices'
-        ``|ΔC_i x + ΔD_i u|``); False when it certainly misses the set (inconsistent: the set
-        is left as it was)."""
-        z, Hz, acc = self.z, self.Hz, self.acc
+        (``t = y_i - D_i u``, ``du = |D_i| |u|``, ``ah = |h|``; ``v_i`` widens it by the
+        interval matrices' ``|ΔC_i x + ΔD_i u|``); False when it certainly misses the set
+        (inconsistent: the set is left as it was)."""
+        z, acc, m = self.z, self.acc, self.m
+        Hz = self.Hz[:, :m]
         nz = z.shape[0]
-        ah = np.abs(h)
-        s = Hz.T @ h
+        aHz = np.abs(Hz)
+        rows = aHz.sum(axis=1)
+        s = h @ Hz
         e = float(t - h @ z)
         # the half-width of the strip that certainly holds (x_k, d_k): eq. (8) of the module
         # docstring with the rounding of y, of t, of e and of s ([Higham2002]'s γ_n bounds)
@@ -128,21 +168,22 @@ class _Joint:
         sigma = (
             g_meas * (abs(y_i) + du + ah @ wmax)
             + gamma(nz + 1) * (abs(t) + ah @ np.abs(z))
-            + gamma(nz) * float((ah @ np.abs(Hz)).sum())
+            + gamma(nz) * float(ah @ rows)
             + v_i
         ) * (1.0 + 4.0 * UNIT_ROUNDOFF)
         # the point of <z, Hz> that is (x_k, d_k) minus the rounding: in a wider strip
         sigma_z = (sigma + ah @ acc) * (1.0 + gamma(nz + 2))
         s1 = float(np.abs(s).sum())
-        if abs(e) > (s1 + sigma_z) * (1.0 + gamma(s.size + 2)):
+        if abs(e) > (s1 + sigma_z) * (1.0 + gamma(m + 2)):
             return False  # the strip misses the zonotope: certain
         contracted = _propagate_hyperplane(h, t, self.lo, self.hi, sigma)
         if contracted is None:
             return False
         lo, hi = contracted
-        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z)
-        lo[:nx] = np.maximum(lo[:nx], lo_j - acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF))
-        hi[:nx] = np.minimum(hi[:nx], hi_j + acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF))
+        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rows[:nx])
+        pad = acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
+        np.maximum(lo[:nx], lo_j - pad, out=lo[:nx])
+        np.minimum(hi[:nx], hi_j + pad, out=hi[:nx])
         self.lo, self.hi = lo, hi
         den = float(s @ s) + sigma_z * sigma_z
         if s1 == 0.0 or not den > 0.0:
@@ -150,11 +191,11 @@ class _Joint:
         lam = Hz @ s / den  # the F-radius optimal λ* of [Alamo2005] (joint space)
         al = np.abs(lam)
         # rounding of z + λ e and of H - λ sᵀ, σ λ: added to the box aside
-        self.acc = acc + gamma(3) * (
-            np.abs(z) + al * abs(e) + np.abs(Hz).sum(axis=1) + al * (s1 + sigma_z)
-        )
+        self.acc = acc + gamma(3) * (np.abs(z) + al * abs(e) + rows + al * (s1 + sigma_z))
         self.z = z + lam * e
-        self.Hz = np.hstack([Hz - np.outer(lam, s), (sigma_z * lam)[:, None]])
+        Hz -= np.outer(lam, s)  # in place: the view of the room in self.Hz
+        self.Hz[:, m] = sigma_z * lam
+        self.m = m + 1
         return True
 
 
@@ -173,10 +214,15 @@ class StripEstimator(Estimator):
     x0 : Box, the prior box on ``x[0]``
     order : int, optional
         Generators kept between steps (default ``10 nx``; at least ``nx``). More generators
-        give tighter boxes at a cost per step growing with ``order`` (``O(ny nx order²)``).
-    reduction : ``"parallelotope"`` (default) or ``"box"``
-        Order reduction: the parallelotope absorption of [Chisci1998], or the box of
-        [Combastel2015].
+        give tighter boxes at a cost per step growing with ``order`` (``O(ny nx order log
+        order)``).
+    reduction : ``"parallelotope"`` (default), ``"girard"`` or ``"box"``
+        Order reduction: the parallelotope absorption of [Chisci1998] with a conditioned basis
+        (Girard's box on the steps where the basis is ill-conditioned), the box of
+        [Girard2005] (CORA's default) or the box of [Combastel2015]. The two boxes refuse
+        ``order < 2 nx`` (they diverge there) and can diverge above it where ``|A|`` expands
+        (a random 7-state system at ``2 nx``): the default is the one that stayed bounded on
+        every system tried.
     weight : (nx, nx) array, optional
         Positive definite weight of the box reduction (which generators are kept).
 
@@ -216,12 +262,23 @@ class StripEstimator(Estimator):
             "multiplies and reduces a dense nx x q generator matrix "
             "(q = 10 nx by default, O(nx^3) work)",
         )
-        if reduction not in ("parallelotope", "box"):
-            raise IvobsError(f"reduction: expected 'parallelotope' or 'box', got {reduction!r}")
+        if reduction not in REDUCTIONS:
+            raise IvobsError(
+                f"reduction: expected one of {', '.join(map(repr, REDUCTIONS))}, got {reduction!r}"
+            )
         q = 10 * sys.nx if order is None else as_int("order", order, 1)
         if q < sys.nx:
             raise IvobsError(
                 f"order: the reduction keeps at least nx = {sys.nx} generators, got {q}"
+            )
+        if reduction != "parallelotope" and q < 2 * sys.nx:
+            raise IvobsError(
+                f"order: the {reduction!r} reduction needs order >= 2 nx = {2 * sys.nx}, got "
+                f"{q}: with fewer than nx generators kept beside its box the boxes diverge "
+                "(a kept generator is never reduced and Alamo's update does not keep it "
+                "bounded: CORA's vehicle6 at order nx + 1 reached 1e16; a plain box, "
+                "order = nx, grows like |A| where the strips do not cut it: 1e82 on a random "
+                "system); use reduction='parallelotope'"
             )
         W = None
         if weight is not None:
@@ -231,6 +288,7 @@ class StripEstimator(Estimator):
         if W is not None and reduction != "box":
             raise IvobsError("weight: only the 'box' reduction takes a weight")
         self.design = StripDesign(order=q, reduction=reduction, weight=W)
+        self._lti = None if sys.is_time_varying else _structure(*sys.matrices_at(0))
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> StripState:
@@ -242,115 +300,162 @@ class StripEstimator(Estimator):
         self, state: StripState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[StripState]:
         k = state.k
-        A, B, C, D, E, F = self.sys.matrices_at(k)
-        joint = self._joint(state, self.sys.d_at(k, y_k), E, F)
-        nx = self.sys.nx
+        st = self._lti if self._lti is not None else _structure(*self.sys.matrices_at(k))
+        dbox = self.sys.d_at(k, y_k)
+        cd, rd = safe_radius(dbox.lo, dbox.hi)
+        measured = np.flatnonzero(~np.isnan(y_k))
+        joint = self._joint(state, st, dbox, cd, rd, measured.size)
+        nx, nu = self.sys.nx, u_k.shape[0]
         au = np.abs(u_k)
-        g_meas = 2.0 * gamma(joint.z.shape[0] + u_k.shape[0] + 2)
+        g_meas = 2.0 * gamma(nx + cd.shape[0] + nu + 2)
+        t_all, du_all = y_k - st.D @ u_k, np.abs(st.D) @ au
         inconsistent = False
         unc = self.sys.uncertainty  # interval matrices: |v| <= v̄ widens each strip (class doc)
         v = None if unc is None else uncertain.terms(unc, joint.lo[:nx], joint.hi[:nx], u_k)[1]
-        for i in np.flatnonzero(~np.isnan(y_k)):
-            t = float(y_k[i] - D[i] @ u_k)
-            h = np.concatenate([C[i], F[i]])
-            v_i = 0.0 if v is None else float(v[i])
-            if not joint.intersect(h, t, float(y_k[i]), np.abs(D[i]) @ au, g_meas, nx, v_i):
+        for i in measured:
+            y_i, v_i = float(y_k[i]), 0.0 if v is None else float(v[i])
+            args = (float(t_all[i]), y_i, du_all[i], g_meas, nx, v_i)
+            if not joint.intersect(st.h[i], st.ah[i], *args):
                 inconsistent = True
         joint.acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
-        r = np.abs(joint.Hz[:nx]).sum(axis=1) + joint.acc[:nx]
+        Hz = joint.Hz[:, : joint.m]
+        rows = np.abs(Hz).sum(axis=1)
+        r = rows[:nx] + joint.acc[:nx]
         lo = np.maximum(joint.z[:nx] - r, joint.lo[:nx])
         hi = np.minimum(joint.z[:nx] + r, joint.hi[:nx])
         hi = np.maximum(hi, lo)  # equal up to rounding when a state is pinned down exactly
         w = None if unc is None else uncertain.terms(unc, lo, hi, u_k)[0]  # |w| <= w̄
-        p, H, e = self._predict(k, A, B, E, joint, u_k, w)
+        p, H, e = self._predict(k, st, joint.z, Hz, rows, joint.acc, u_k, cd, rd, w)
         return Step(replace(state, p=p, H=H, e=e), lo, hi, inconsistent)
 
-    def _joint(self, state: StripState, dbox: Box, E: np.ndarray, F: np.ndarray) -> _Joint:
-        """The joint zonotope of ``(x_k, d_k)`` and its box (the rounding of ``|H| 1`` and the
-        box aside added)."""
+    def _joint(
+        self, state: StripState, st: _Structure, dbox: Box, cd: np.ndarray, rd: np.ndarray,
+        room: int,
+    ) -> _Joint:  # fmt: skip
+        """The joint zonotope of ``(x_k, d_jc)`` (with ``room`` free generator columns for
+        the strips) and its box (the rounding of ``|H| 1`` and the box aside added)."""
         nx = self.sys.nx
         p, H = state.p, state.H
-        cd, rd = safe_radius(dbox.lo, dbox.hi)
-        cols = np.flatnonzero((rd > 0) & (np.any(E != 0, axis=0) | np.any(F != 0, axis=0)))
-        nz = nx + cd.shape[0]
-        z = np.concatenate([p, cd])
-        Hz = np.zeros((nz, H.shape[1] + cols.size))
+        jc = st.jc
+        cols = np.flatnonzero(rd[jc] > 0)
+        nz, m = nx + jc.size, H.shape[1] + cols.size
+        z = np.concatenate([p, cd[jc]])
+        Hz = np.zeros((nz, m + room))
         Hz[:nx, : H.shape[1]] = H
-        Hz[nx + cols, H.shape[1] + np.arange(cols.size)] = rd[cols]
+        Hz[nx + cols, H.shape[1] + np.arange(cols.size)] = rd[jc[cols]]
         r0 = np.abs(H).sum(axis=1)
         pad = gamma(H.shape[1] + 2) * (np.abs(p) + r0) + state.e * (1.0 + gamma(2))
-        box_lo = np.concatenate([p - r0 - pad, dbox.lo])
-        box_hi = np.concatenate([p + r0 + pad, dbox.hi])
+        box_lo = np.concatenate([p - r0 - pad, dbox.lo[jc]])
+        box_hi = np.concatenate([p + r0 + pad, dbox.hi[jc]])
         acc = np.zeros(nz)
         acc[:nx] = state.e
-        return _Joint(z=z, Hz=Hz, lo=box_lo, hi=box_hi, acc=acc)
+        return _Joint(z=z, Hz=Hz, m=m, lo=box_lo, hi=box_hi, acc=acc)
 
     def _predict(
         self,
         k: int,
-        A: np.ndarray,
-        B: np.ndarray,
-        E: np.ndarray,
-        joint: _Joint,
+        st: _Structure,
+        z: np.ndarray,
+        Hz: np.ndarray,
+        rows: np.ndarray,
+        acc: np.ndarray,
         u_k: np.ndarray,
+        cd: np.ndarray,
+        rd: np.ndarray,
         w: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(p, H, e)`` of ``x[k+1]``: the joint set mapped by ``[A E]``, then reduced. A box
-        covers the rounding of ``M z + B u``, of ``M H`` and of the plant's own float64
-        arithmetic, the image of the box aside, and ``w̄`` (interval matrices)."""
+        """``(p, H, e)`` of ``x[k+1]``: the joint set mapped by ``M = [A E_jc]`` plus
+        ``E_pc <c_d, R>``, then reduced. A box covers the rounding of ``M z + E_pc c_d + B u``,
+        of ``M H`` and ``E_pc R`` and of the plant's own float64 arithmetic, the image of the
+        box aside, and ``w̄`` (interval matrices)."""
         nx = self.sys.nx
-        z, Hz, acc = joint.z, joint.Hz, joint.acc
-        M = np.hstack([A, E])
+        mc, M, Ep = st.mc, st.M, st.Ep
         aM = np.abs(M)
-        p_next, H_next = M @ z + B @ u_k, M @ Hz
-        err = 2.0 * gamma(z.shape[0] + u_k.shape[0] + 1) * (
-            aM @ (np.abs(z) + np.abs(Hz).sum(axis=1) + acc) + np.abs(B) @ np.abs(u_k)
-        ) + (aM @ acc) * (1.0 + gamma(z.shape[0] + 1))
+        cp, rp = cd[st.pc], rd[st.pc]
+        p_next = M @ z[mc] + Ep @ cp + st.B @ u_k
+        n_terms = mc.size + cp.size + u_k.shape[0] + 1
+        err = 2.0 * gamma(n_terms) * (
+            aM @ (np.abs(z[mc]) + rows[mc] + acc[mc])
+            + np.abs(Ep) @ (np.abs(cp) + rp)
+            + np.abs(st.B) @ np.abs(u_k)
+        ) + (aM @ acc[mc]) * (1.0 + gamma(mc.size + 1))
         if w is not None:  # the interval matrices' w = ΔA x + ΔB u: generators of the box
             err = np.nextafter(err + w, np.inf)
-        H_next = np.hstack([H_next, box_generators(err)])
+        live = rp > 0
+        H_next = np.hstack([M @ Hz[mc], Ep[:, live] * rp[live], box_generators(err)])
         H_next = H_next[:, np.any(H_next != 0, axis=0)]
         self._check_overflow(k + 1, p_next, H_next)
         e_next = np.zeros(nx)
-        if self.design.reduction == "box":
+        q = self.design.order
+        if self.design.reduction == "parallelotope":
+            H_next, e_next = reduce_parallelotope(H_next, q)
+        elif self.design.reduction == "girard":
+            H_next = reduce_girard(H_next, q)
+        else:
             m = H_next.shape[1]
-            zp = Zonotope._trusted(p_next, H_next).reduce(self.design.order, self.design.weight)
+            zp = Zonotope._trusted(p_next, H_next).reduce(q, self.design.weight)
             p_next, H_next = zp.c, zp.G
-            if m > self.design.order:  # the box of the removed generators: a rounded sum
+            if m > q:  # the box of the removed generators: a rounded sum
                 H_next[:, -nx:] *= 1.0 + gamma(m + 1)
-        else:  # the box of what the basis misses is kept aside until the next prediction
-            none = np.zeros((0, H_next.shape[1]))
-            out = reduce_generators(p_next, H_next, none, np.zeros(0), self.design.order, True)
-            H_next, e_next = out[1], out[4]
         # C order, as after a state() / restore() round trip (BLAS results depend on layout)
         return p_next, np.ascontiguousarray(H_next), e_next
 
 
 def _section_hull(
-    z: np.ndarray, H: np.ndarray, s: np.ndarray, e: float, sigma: float = 0.0
+    z: np.ndarray,
+    H: np.ndarray,
+    s: np.ndarray,
+    e: float,
+    sigma: float = 0.0,
+    absH: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-coordinate hull of ``{z + H ξ : ‖ξ‖∞ <= 1, |sᵀξ - e| <= σ}`` without a solver.
 
-    By LP duality ``max_ξ H_j ξ = min_μ (μ e + |μ| σ + ‖H_j - μ s‖₁)`` (and any ``μ`` gives a
-    valid bound); the right-hand side is convex and piecewise linear in ``μ``, so its minimum
-    is at a breakpoint ``μ = H_jl / s_l`` or ``μ = 0``: evaluate them all (``O(n m²)``). Each
-    value is increased by the bound ``γ_{m+4} (|z_j| + |μ| (|e| + σ + ‖s‖₁) + ‖H_j‖₁)`` of its
-    rounding, so the returned bounds hold for the exact set.
+    By LP duality ``max_ξ H_j ξ = min_μ f_j(μ)``, ``f_j(μ) = μ e + |μ| σ + ‖H_j - μ s‖₁`` (and
+    any ``μ`` gives a valid bound). ``f_j = μ e + Σ_l w_l |μ - b_l|`` is convex and piecewise
+    linear, with breakpoints ``b_l = H_jl / s_l`` of weight ``w_l = |s_l|`` and ``b = 0`` of
+    weight ``σ``: its slope ``e - W + 2 Σ_{b_l < μ} w_l`` (``W = Σ w_l``) crosses zero at the
+    weighted quantile ``(W - e) / 2`` of the breakpoints, found by sorting them
+    (``O(m log m)`` per coordinate, all coordinates at once). The lower bound is the same
+    with ``e -> -e``. ``f_j`` is evaluated at the chosen ``μ`` and increased by the bound
+    ``γ_{m+4} (|z_j| + |μ| (|e| + σ + ‖s‖₁) + ‖H_j‖₁)`` of its rounding, so the returned bounds
+    hold for the exact set whatever the rounding of the sort keys. ``absH``: ``‖H_j‖₁`` when
+    the caller has it.
     """
-    absH = np.abs(H).sum(axis=1)
-    nz = np.abs(s) > 1e-14 * np.abs(s).max() if s.size and np.any(s) else np.zeros(s.shape, bool)
-    if not np.any(nz):
-        r = absH + gamma(H.shape[1] + 2) * (np.abs(z) + absH)
+    n, m = H.shape
+    if absH is None:
+        absH = np.abs(H).sum(axis=1)
+    a_s = np.abs(s)
+    smax = float(a_s.max()) if m else 0.0
+    if not smax > 0.0:
+        r = absH + gamma(m + 2) * (np.abs(z) + absH)
         return z - r, z + r
-    mu = np.concatenate([H[:, nz] / s[nz], np.zeros((H.shape[0], 1))], axis=1)  # (n, K)
-    spread = np.abs(H[:, None, :] - mu[:, :, None] * s[None, None, :]).sum(axis=2)  # (n, K)
-    am = np.abs(mu)
-    err = gamma(H.shape[1] + 4) * (
-        np.abs(z)[:, None] + am * (abs(e) + sigma + float(np.abs(s).sum())) + absH[:, None]
-    )
-    hi = z + np.min(mu * e + am * sigma + spread + err, axis=1)
-    lo = z + np.max(mu * e - am * sigma - spread - err, axis=1)
-    return lo, hi
+    keep = a_s > 1e-14 * smax  # tiny s_l: a breakpoint far away of negligible weight
+    n_keep = int(keep.sum())
+    b = np.empty((n, n_keep + 1))
+    if n_keep == m:
+        np.divide(H, s, out=b[:, :-1])
+    else:
+        np.divide(H[:, keep], s[keep], out=b[:, :-1])
+    b[:, -1] = 0.0
+    w = np.append(a_s[keep], sigma)
+    idx = np.argsort(b, axis=1)
+    cw = np.cumsum(w[idx], axis=1)
+    total = cw[:, -1]
+    rows = np.arange(n)
+    mu_hi = b[rows, idx[rows, np.argmax(cw >= 0.5 * (total - e)[:, None], axis=1)]]
+    mu_lo = b[rows, idx[rows, np.argmax(cw >= 0.5 * (total + e)[:, None], axis=1)]]
+    s1 = float(a_s.sum())
+    g = gamma(m + 4)
+    # f_j(μ) + its rounding bound for the upper bound; for the lower bound -f_j(-μ) with
+    # f_j(-μ) = -μ e + |μ| σ + ‖H_j - μ s‖₁ (the same breakpoints, e -> -e)
+    bounds = []
+    for mu, sign in ((mu_hi, 1.0), (mu_lo, -1.0)):
+        am = np.abs(mu)
+        spread = np.abs(H - mu[:, None] * s).sum(axis=1)
+        err = g * (np.abs(z) + am * (abs(e) + sigma + s1) + absH)
+        bounds.append(sign * mu * e + am * sigma + spread + err)
+    return z - bounds[1], z + bounds[0]
 
 
 def _propagate_hyperplane(

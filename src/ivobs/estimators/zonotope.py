@@ -28,6 +28,9 @@ ORDER_PER_STATE = 10
 SETTLE_STEPS = 2000
 """Steps of the generator recursion (34b) iterated at design (more when ``A - LC`` is slow)."""
 
+WIDTH_STEPS = 60
+"""Steps of (34b) over which the default gain is chosen when the reduction can grow."""
+
 SETTLE_WORK = 2e9
 """Budget (multiply-adds) of that iteration: larger systems are iterated for fewer steps."""
 
@@ -93,7 +96,10 @@ class ZonotopeEstimator(ObserverEstimator):
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``.
 
-    **Gain.** By default the H∞ gain of [Tang2019, Theorem 1, problem (20)]; ``L=`` explicitly
+    **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
+    :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
+    (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
+    docs/gains.md. Or ``L=`` explicitly
     (e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the reachability box is inside this one
     with the same gain); ``A - LC`` must be Schur.
 
@@ -119,7 +125,10 @@ class ZonotopeEstimator(ObserverEstimator):
     ----------
     sys : time-invariant discrete-time :class:`~ivobs.LinearSystem`
     x0 : Box, prior box on ``x[0]``
-    L : (nx, ny) observer gain, optional (default: H∞ gain)
+    L : (nx, ny) observer gain, optional (default: designed, see ``gain``)
+    gain : ``"radius"``, ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not given
+        (docs/gains.md). Default: the radius gain, or the H∞ gain when ``|A - LC|`` is not
+        Schur and the H∞ gain's reduced zonotope is narrower over 60 steps of (34b)
     order : ``q >= nx``, generators kept by the reduction (default ``10 nx``: on the paper's
         servo motor the widths are within a few per mille of much larger orders from ``q = 10 nx``
         on, while the cost per step grows with ``q``). Larger ``q`` approaches Algorithm 1
@@ -154,6 +163,7 @@ class ZonotopeEstimator(ObserverEstimator):
         L: Any = None,
         order: int | None = None,
         weight: Any = None,
+        gain: str | None = None,
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
@@ -173,19 +183,41 @@ class ZonotopeEstimator(ObserverEstimator):
             W = as_matrix("weight", weight, nx, nx)
             if not np.allclose(W, W.T) or np.linalg.eigvalsh(0.5 * (W + W.T)).min() <= 0:
                 raise IvobsError("weight: expected a symmetric positive definite matrix W")
-        observer = self._design_observer(L)
+        assert self.x0 is not None
+        self._p0 = self.x0.center.copy()
+        self._H0 = np.diag(self.x0.radius)
+        observer = self._design_observer(L, gain)
+        self.design = ZonotopeDesign(**observer.as_dict(), order=q, weight=W)
+        if L is None and gain is None and self._const is not None:
+            self._gain_by_width()
         if q == nx and spectral_radius(np.abs(self._M)) >= 1.0:
             raise DesignError(
                 f"order: q = nx = {nx} boxes the set at every step, so the boxes grow like "
                 f"|A - LC|^k, whose spectral radius is {spectral_radius(np.abs(self._M)):.4g} "
                 ">= 1 (they would diverge); use order > nx (default 10 nx)"
             )
-        self.design = ZonotopeDesign(**observer.as_dict(), order=q, weight=W)
-        assert self.x0 is not None
-        self._p0 = self.x0.center.copy()
-        self._H0 = np.diag(self.x0.radius)
         if self._const is not None:
             self._check_bounded()
+
+    def _gain_by_width(self) -> None:
+        """Default gain: the radius gain minimises the box of Algorithm 1, which the zonotope
+        reaches only up to its reduction; when ``|A - LC|`` is not Schur the boxed part of the
+        reduction can grow (``order``), and another gain may give the narrower zonotope. Then
+        the radius gain and the H∞ gain are both run through the data-independent recursion
+        (34b) for :data:`WIDTH_STEPS` steps and the one with the smaller mean radius over the
+        second half is kept (``design.gain`` says which)."""
+        C, r, T = self._mats[2], self._const[1], WIDTH_STEPS  # type: ignore[index]
+        work = T * self.sys.nx**2 * (self.design.order + self.sys.nd)
+        if spectral_radius(np.abs(self._M)) < 1.0 or work > SETTLE_WORK:
+            return
+        widths = {}
+        for gain in ("hinf", "radius"):  # the radius gain last: kept on a tie
+            observer = self._design_observer(None, gain)  # cached: no second design
+            self.design = replace(self.design, **observer.as_dict())
+            widths[gain] = float(self._generator_radii(C, self._G * r, T)[0][T // 2 :].mean())
+        if widths["hinf"] < widths["radius"]:
+            observer = self._design_observer(None, "hinf")
+            self.design = replace(self.design, **observer.as_dict())
 
     def _check_bounded(self) -> None:
         """Refuse an order whose reduced recursion (34b) is not shown bounded (see ``order``)."""

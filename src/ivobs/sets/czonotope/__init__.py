@@ -15,7 +15,7 @@ Proposition 1]):
 * ``Z ∩_R Y = <c_z, [G_z 0], [[A_z, 0], [0, A_y], [R G_z, -G_y]], [b_z; b_y; c_y - R c_z]>``
 
 What is not cheap is asking a question of the set: its interval hull, emptiness and membership
-are linear programs (solved with HiGHS, ``scipy.optimize.linprog``). Each bound is certified by
+are linear programs (solved with HiGHS). Each bound is certified by
 LP duality: for any multiplier ``μ``, ``min {gᵀξ : Aξ = b, |ξ| <= 1} >= μᵀb - ‖g - Aᵀμ‖₁``; the
 returned bound is this expression at HiGHS' multipliers, so it is a valid bound whatever the
 solver's tolerances (it equals the optimum when ``μ`` is optimal).

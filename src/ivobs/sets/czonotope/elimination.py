@@ -196,7 +196,7 @@ def _choose_factor(
         with np.errstate(invalid="ignore"):  # R = inf on the non-candidates
             shape = np.where(cand, R * np.linalg.norm(G, axis=0), np.inf)
     if cert is not None:
-        loss = np.where(cand, cert.elimination_loss(A, b, piv), np.inf)
+        loss = cert.elimination_loss(A, b, piv, cand)
         best = loss.min()
         ties = loss <= best + 1e-9 * (1.0 + abs(best))
         key = np.where(ties, shape, np.inf)

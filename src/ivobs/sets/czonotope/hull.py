@@ -1,8 +1,10 @@
 """Questions to a constrained zonotope ``<c, G, A, b>`` answered by linear programs in its
 factors ``ξ``: interval hull, emptiness and membership ([Scott2016]).
 
-The LPs are solved with HiGHS (``scipy.optimize.linprog``), and every bound is certified by LP
-duality, so it is a valid bound whatever the solver's tolerances: for any multiplier ``μ``,
+The LPs are solved with HiGHS (the hull's through ``highspy`` directly, :mod:`._highs`; the
+rare fallbacks and the other questions through ``scipy.optimize.linprog``), and every bound is
+certified by LP duality, so it is a valid bound whatever the solver's tolerances: for any
+multiplier ``μ``,
 ``min {gᵀξ : Aξ = b, |ξ| <= 1} >= μᵀb - ‖g - Aᵀμ‖₁``, evaluated with the ``γ_n`` bounds of its
 rounding ([Higham2002, Lemma 3.1]) — safe bounds from an approximate dual, as in
 [Neumaier2004]. Emptiness is claimed only with a dual certificate checked the same way.
@@ -159,31 +161,29 @@ def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
 
 
 def _certified_mins(
-    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float = 1.0
+    Gs: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    radius: float = 1.0,
+    chains: list[list[int]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
 
-    The independent programs are solved as one block-diagonal LP (one HiGHS call: the per-call
-    overhead dominates programs this small); should HiGHS fail on the big program (or call it
-    infeasible), they are solved one by one (degenerate, over-determined or ill-conditioned
-    constraints can fool it; see :data:`_LP_ATTEMPTS`).
+    The programs share their constraints and are solved by HiGHS as one chain of objectives,
+    each warm-started from the previous optimum (:func:`._highs.chain_duals`); should HiGHS
+    fail on one (or call the set infeasible), they are solved one by one with the fallbacks of
+    :data:`_LP_ATTEMPTS` (degenerate, over-determined or ill-conditioned constraints can fool
+    it).
     """
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
-    from scipy.optimize import linprog
-    from scipy.sparse import block_diag, csr_matrix
+    from ._highs import chain_duals
 
-    A_blk = block_diag([csr_matrix(A)] * K, format="csr")
-    res = linprog(
-        Gs.ravel(), A_eq=A_blk, b_eq=np.tile(b, K), bounds=(-radius, radius), method="highs"
-    )
+    out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
+    if isinstance(out, np.ndarray):
+        return _dual_bounds(Gs, A, b, out, radius), out, True
     mu = np.zeros((K, nc))
-    if res.status == 0 and getattr(res, "eqlin", None) is not None:
-        marg = np.asarray(res.eqlin.marginals, dtype=float)
-        if marg.size == K * nc and np.all(np.isfinite(marg)):
-            mu = marg.reshape(K, nc)
-            return _dual_bounds(Gs, A, b, mu, radius), mu, True
     vals = np.empty(K)
     for i in range(K):
         vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
@@ -199,6 +199,11 @@ def hull_bounds(
     ``None`` when the set is empty. See :func:`hull_certificates`."""
     out = hull_certificates(c, G, A, b)
     return None if out is None else (out[0], out[1])
+
+
+LOSS_CANDIDATES = 24
+"""Candidates whose exact elimination loss :meth:`Certificates.elimination_loss` evaluates
+(those with the smallest upper bound of it)."""
 
 
 class Certificates:
@@ -234,18 +239,33 @@ class Certificates:
         """Factor ``j`` was rescaled, ``ξ_j = m_j + rad_j ξ'_j`` (offsets go to constants)."""
         self.D = self.D * rad
 
-    def elimination_loss(self, A: np.ndarray, b: np.ndarray, piv: np.ndarray) -> np.ndarray:
+    def elimination_loss(
+        self, A: np.ndarray, b: np.ndarray, piv: np.ndarray, cand: np.ndarray | None = None
+    ) -> np.ndarray:
         """Weighted loosening of the certified bounds if factor ``j`` is eliminated with row
-        ``piv[j]`` (for every ``j``). The multipliers move to ``μ + (r_j / a_pj) e_p`` so that
-        the reduced cost ``r = D - Aᵀμ`` of ``ξ_j``, whose box is dropped, becomes zero."""
+        ``piv[j]`` (for every ``j``; ``inf`` outside the candidates ``cand``). The multipliers
+        move to ``μ + (r_j / a_pj) e_p`` so that the reduced cost ``r = D - Aᵀμ`` of ``ξ_j``,
+        whose box is dropped, becomes zero.
+
+        The exact loss costs ``O(K m)`` per candidate; it is evaluated for the
+        :data:`LOSS_CANDIDATES` candidates with the smallest upper bound
+        ``Σ_k w_k |t_kj| (‖A_p‖₁ + |b_p|)`` (``|r - t a| - |r| <= |t| |a|``), so that a step
+        costs ``O(K m)`` rather than ``O(K m²)``; a factor whose bound is zero loses nothing."""
         m = A.shape[1]
+        cand = np.ones(m, dtype=bool) if cand is None else cand
         Rc = self.D - self.mu @ A  # (K, m)
         apj = A[piv, np.arange(m)]
         t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
-        new = np.abs(Rc[:, None, :] - t[:, :, None] * A[piv][None, :, :]).sum(axis=2)
-        loss = new - t * b[piv][None, :] - np.abs(Rc).sum(axis=1, keepdims=True)
-        weighted: np.ndarray = self.weight @ loss
-        return weighted
+        upper = self.weight @ np.abs(t) * (np.abs(A[piv]).sum(axis=1) + np.abs(b[piv]))
+        idx = np.flatnonzero(cand)
+        if idx.size > LOSS_CANDIDATES:
+            idx = idx[np.argsort(upper[idx], kind="stable")[:LOSS_CANDIDATES]]
+        out = np.full(m, np.inf)
+        tj = t[:, idx]  # (K, c)
+        new = np.abs(Rc[:, None, :] - tj[:, :, None] * A[piv[idx]][None, :, :]).sum(axis=2)
+        loss = new - tj * b[piv[idx]][None, :] - np.abs(Rc).sum(axis=1, keepdims=True)
+        out[idx] = self.weight @ loss
+        return out
 
     def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
         """Factor ``j`` eliminated with row ``p`` (before the row and column are removed)."""
@@ -255,14 +275,30 @@ class Certificates:
         self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])
 
 
+def _hull_chains(n: int, k: int) -> list[list[int]]:
+    """Two warm-start chains over the rows ``[G; -G; P; -P]`` (``G`` n rows, ``P`` k rows):
+    the minima in order, the maxima in reverse order."""
+    lo = list(range(n)) + list(range(2 * n, 2 * n + k))
+    hi = list(range(2 * n - 1, n - 1, -1)) + list(range(2 * n + 2 * k - 1, 2 * n + k - 1, -1))
+    return [lo, hi]
+
+
 def hull_certificates(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+    c: np.ndarray,
+    G: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    extra: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
     """Certified interval hull of ``<c, G, A, b>`` and the certificates of its ``2 n`` bounds
     (weighted by the inverse width of each coordinate, so that losses are relative), or
     ``None`` when the set is certainly empty (:func:`certified_empty`: a dual certificate,
     checked in floating point, that even the box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the
     constraints).
+
+    ``extra`` (n', m): more objectives in the factors whose bounds the certificates should
+    also keep (the rows ``P`` and ``-P`` are appended, weighted by the inverse widths of
+    ``P ξ``); the filter passes the hull of its prediction, ``[A G, E R]``.
 
     When HiGHS calls the set infeasible without such a certificate (a set that is thin, or
     empty only by rounding), the bounds are those of the *softened* set with the box
@@ -272,21 +308,27 @@ def hull_certificates(
     which the caller should keep instead of the original.
     """
     n = G.shape[0]
-    Gs = np.vstack([G, -G])
-    vals, mu, ok = _certified_mins(Gs, A, b)
+    P = np.zeros((0, G.shape[1])) if extra is None else extra
+    k = P.shape[0]
+    Gs = np.vstack([G, -G, P, -P])
+    chains = _hull_chains(n, k)
+    vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains)
     radius = 1.0
     if not ok:
         r, r_low = radius_certificate(A, b)
         if r_low > 1.0 + EMPTY_TOL:
             return None
         radius = (max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)
-        vals, mu, ok = _certified_mins(Gs, A, b, radius)
+        vals, mu, ok = _certified_mins(Gs, A, b, radius, chains)
         if not ok:  # HiGHS contradicting itself: the bound of the zonotope (any μ is valid)
             mu = np.zeros_like(mu)
             vals = _dual_bounds(Gs, A, b, mu, radius)
     lo = c + vals[:n]
-    hi = c - vals[n:]
+    hi = c - vals[n : 2 * n]
     width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
-    cert = Certificates(Gs * radius, mu, np.concatenate([1.0 / width, 1.0 / width]))
+    p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
+    p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
+    weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
+    cert = Certificates(Gs * radius, mu, weight)
     cert.radius = radius
     return lo, hi, cert
