@@ -93,9 +93,8 @@ def test_a_reports_the_shape_passed_and_needs_a_state():
 
 
 # -- 4. an unobservable pair is a design impossibility for every method ------------------------
-@pytest.mark.parametrize("method", ["fixed-time", "kkl", "interval-transformed"])
-def test_unobservable_pair_is_a_design_error(method):
-    sys = LinearSystem(
+def _unobservable() -> LinearSystem:
+    return LinearSystem(
         [[0.5, 0], [0, 0.7]],
         None,
         [[1.0, 0.0]],
@@ -103,8 +102,25 @@ def test_unobservable_pair_is_a_design_error(method):
         F=np.zeros((1, 2)),
         d=Box.symmetric([1, 1]),
     )
+
+
+@pytest.mark.parametrize(
+    ("method", "opts"),
+    [("fixed-time", {}), ("kkl", {}), ("interval-transformed", {"transform": "search"})],
+)
+def test_unobservable_pair_is_a_design_error(method, opts):
     with pytest.raises(DesignError, match="not observable"):
-        ivobs.make_estimator(method, sys, x0=Box([-1, -1], [1, 1]))
+        ivobs.make_estimator(method, _unobservable(), x0=Box([-1, -1], [1, 1]), **opts)
+
+
+def test_detectable_pair_gets_an_interval_transformed_design_with_s_identity():
+    """Eq. (48) needs (A − LC, e1) observable; the default design then falls back to S = I,
+    since L = (0.5, 0) makes A − LC = diag(0, 0.7) nonnegative and Schur (the unobservable
+    mode 0.7 stays: the steady-state width of x2 is 2 / (1 − 0.7))."""
+    est = ivobs.make_estimator("interval-transformed", _unobservable(), x0=Box([-1, -1], [1, 1]))
+    assert est.design.gain == "identity"
+    assert est.design.spectral_radius == pytest.approx(0.7)
+    assert est.design.steady_width[1] == pytest.approx(2.0 / 0.3)
 
 
 # -- 5. restore of a corrupted state ------------------------------------------------------------

@@ -344,7 +344,7 @@ def test_errors_name_the_condition(dinh):
     unobs = LinearSystem(np.diag([0.5, 0.7]), None, [[1.0, 0.0]])
     with pytest.raises(IvobsError, match="not observable: rank 1 of 2"):
         ivobs.make_estimator("fixed-time", unobs)
-    with pytest.raises(IvobsError, match=r"s >= nx - 1 = 2.*got s = 1"):
+    with pytest.raises(IvobsError, match=r"\(s \+ 1\) ny >= nx, i.e. s >= 2 .*got s = 1"):
         ivobs.make_estimator("fixed-time", random_system(0, nx=3), s=1)
     with pytest.raises(IvobsError, match="at most one"):
         ivobs.make_estimator("fixed-time", sys, T=np.zeros((2, 3)), S=np.zeros((2, 3)))

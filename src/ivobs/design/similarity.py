@@ -458,10 +458,15 @@ def default_e1(
 
 
 def check_transform(
-    M: np.ndarray, S: np.ndarray, who: str, R: np.ndarray | None = None
+    M: np.ndarray,
+    S: np.ndarray,
+    who: str,
+    R: np.ndarray | None = None,
+    nonnegative: bool = True,
 ) -> np.ndarray:
     """Return ``S M S⁻¹`` after checking that ``S`` is invertible, that it is nonnegative (up to
-    round-off, ``1e-9`` relative) and that its absolute value is Schur. With ``R`` given (a
+    round-off, ``1e-9`` relative; not with ``nonnegative=False``: Schur coordinates, where the
+    split form needs only the last check) and that its absolute value is Schur. With ``R`` given (a
     user's ``R`` and ``S`` together), also that ``S M S⁻¹ ≈ R`` (``1e-3`` relative: papers print
     four decimals)."""
     cond = np.linalg.cond(S)
@@ -469,7 +474,7 @@ def check_transform(
         raise DesignError(f"{who}: S is singular or nearly so (condition number {cond:.3g})")
     Rs: np.ndarray = S @ M @ np.linalg.inv(S)
     scale = max(1.0, float(np.max(np.abs(Rs))))
-    if np.any(Rs < -1e-9 * scale):
+    if nonnegative and np.any(Rs < -1e-9 * scale):
         i, j = np.unravel_index(int(np.argmin(Rs)), Rs.shape)
         raise DesignError(
             f"{who}: S (A − LC) S⁻¹ is not nonnegative: entry ({i + 1}, {j + 1}) = "

@@ -1,23 +1,64 @@
 """Estimators: one module per method family, all following :class:`Estimator`.
 
-Modules in this package register their classes with :func:`register`; every public module is
-imported here, so adding a method means adding a module, nothing else.
+The built-in methods are listed in :data:`METHODS` (name -> module, class, position), so that
+``import ivobs`` imports none of them: a method's module (and the solvers it needs) is imported
+the first time the method is asked for (:func:`get`, :func:`make_estimator`). Modules register
+their classes with :func:`register`; a method defined outside ivobs registers itself the same
+way. tests/test_registry.py checks :data:`METHODS` against the classes, so adding a built-in
+method means adding its module and its line in :data:`METHODS`.
 """
 
 from __future__ import annotations
 
 import importlib
-import pkgutil
-from typing import Any
+from typing import Any, NamedTuple
 
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..model.statespace import is_statespace
 from .base import ROUNDING, Design, Estimator
 
-__all__ = ["ROUNDING", "Design", "Estimator", "get", "make_estimator", "methods", "register"]
+__all__ = [
+    "METHODS",
+    "ROUNDING",
+    "Design",
+    "Entry",
+    "Estimator",
+    "get",
+    "make_estimator",
+    "methods",
+    "register",
+]
+
+
+class Entry(NamedTuple):
+    """Where a built-in method lives: its module (relative to this package), its class and its
+    ``order`` (the class's position in :func:`methods`)."""
+
+    module: str
+    cls: str
+    order: int
+
+
+METHODS: dict[str, Entry] = {
+    "fixed-time": Entry("fixed_time.estimator", "FixedTimeEstimator", 10),
+    "reachability": Entry("reachability", "Reachability", 20),
+    "zonotope": Entry("zonotope", "ZonotopeEstimator", 30),
+    "interval": Entry("interval.observers", "IntervalObserver", 40),
+    "interval-transformed": Entry("interval.observers", "TransformedIntervalObserver", 50),
+    "interval-split": Entry("interval.observers", "SplitIntervalObserver", 60),
+    "kkl": Entry("kkl.estimator", "KKL", 70),
+    "strip": Entry("strip", "StripEstimator", 80),
+    "ellipsoid": Entry("ellipsoid", "EllipsoidEstimator", 85),
+    "constrained-zonotope": Entry("constrained_zonotope", "ConstrainedZonotopeEstimator", 90),
+    "exact": Entry("exact.estimator", "Exact", 100),
+    "intersect": Entry("intersect", "Intersect", 110),
+}
+"""The built-in methods, imported on first use (see the module docstring)."""
 
 _REGISTRY: dict[str, type[Estimator]] = {}
+"""The classes registered so far (built-in methods whose module was imported, and methods
+registered from outside)."""
 
 
 def register(cls: type[Estimator]) -> type[Estimator]:
@@ -34,15 +75,23 @@ def _normalise(name: Any) -> str:
     return name.strip().lower().replace("_", "-")
 
 
+def _order(name: str) -> int:
+    cls = _REGISTRY.get(name)
+    return cls.order if cls is not None else METHODS[name].order
+
+
 def methods() -> list[str]:
     """Names of the available methods, in the order their classes declare (``order``: the
     papers' order), then by name."""
-    return sorted(_REGISTRY, key=lambda name: (_REGISTRY[name].order, name))
+    return sorted(set(METHODS) | set(_REGISTRY), key=lambda name: (_order(name), name))
 
 
 def get(name: str) -> type[Estimator]:
-    """The estimator class registered as ``name``."""
+    """The estimator class registered as ``name`` (its module is imported here the first
+    time)."""
     key = _normalise(name)
+    if key not in _REGISTRY and key in METHODS:
+        importlib.import_module(f"{__name__}.{METHODS[key].module}")
     if key not in _REGISTRY:
         raise IvobsError(
             f"method: unknown method {name!r}; known methods: {', '.join(methods()) or '(none)'}"
@@ -70,12 +119,3 @@ def make_estimator(name: str, sys: LinearSystem, x0: Any = None, **options: Any)
             f"accepted options: {', '.join(allowed) or '(none)'}"
         )
     return cls(sys, x0, **options)
-
-
-def _import_all() -> None:
-    for mod in pkgutil.iter_modules(__path__):
-        if not mod.name.startswith("_") and mod.name != "base":
-            importlib.import_module(f"{__name__}.{mod.name}")
-
-
-_import_all()

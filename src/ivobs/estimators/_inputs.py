@@ -8,8 +8,34 @@ import numpy as np
 
 from .._validate import as_float_array, as_vector
 from ..errors import IvobsError
+from .scale import SHORT
 
-__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k"]
+__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k", "lean_u_y"]
+
+_NO_INPUT = np.zeros(0)
+_NO_INPUT.flags.writeable = False
+
+
+def lean_u_y(sys: Any, u_k: Any, y_k: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(u_k, y_k)`` when they are already what :func:`check_u_k` and :func:`check_y_k` would
+    return (float vectors of the right lengths, ``u_k`` finite, ``y_k`` finite: a cheap test
+    for the common case of one step), else ``None`` (then the full checks run and name what is
+    wrong). A finite sum of the values means every value is finite (NaN and infinities
+    propagate; an overflow of the sum only sends the call to the full checks)."""
+    if type(y_k) is not np.ndarray or y_k.dtype != np.float64 or y_k.shape != (sys.ny,):
+        return None
+    if sys.ny + sys.nu > SHORT:
+        return None
+    if u_k is None:
+        if sys.nu:
+            return None
+        u_k = _NO_INPUT
+    elif type(u_k) is not np.ndarray or u_k.dtype != np.float64 or u_k.shape != (sys.nu,):
+        return None
+    total = sum(y_k.tolist()) + sum(u_k.tolist())
+    if total - total != 0.0:  # NaN or an infinity somewhere (or an overflow): full checks
+        return None
+    return u_k, y_k
 
 
 def check_u_k(sys: Any, u_k: Any) -> np.ndarray:

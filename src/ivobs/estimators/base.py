@@ -42,10 +42,10 @@ from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box
-from ._inputs import check_t, check_t_k, check_u_k, check_y_k
+from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
 from .persistence import Persistence
 from .record import VECTOR_MIN_STEPS, check_record, run_record
-from .rounding import ROUNDING, outward, overflowed
+from .rounding import ROUNDING, lean_outward, outward, overflowed
 from .scale import DataScale
 from .state import OnlineState, Step
 
@@ -249,8 +249,12 @@ class Estimator(Persistence):
         composition whose other members still bound the state). ``keep=False``: the new state
         will not be continued (a look-ahead such as :meth:`predict`), so solver caches kept for
         ``state`` stay with it."""
-        u_k, y_k = check_u_k(self.sys, u_k), check_y_k(self.sys, y_k)
-        t_k = check_t_k(self.sys, t)
+        lean = lean_u_y(self.sys, u_k, y_k) if t is None and self.sys.dt != 0 else None
+        if lean is not None:  # the common case, checked cheaply (_inputs.lean_u_y)
+            (u_k, y_k), t_k = lean, None
+        else:
+            u_k, y_k = check_u_k(self.sys, u_k), check_y_k(self.sys, y_k)
+            t_k = check_t_k(self.sys, t)
         self._branching, before = not keep, self._branching
         try:
             new, lo, hi, _ = self._advance(state, u_k, y_k, t_k)
@@ -297,6 +301,10 @@ class Estimator(Persistence):
         NaN before ``valid_from``."""
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
+        if not self.rounds_itself:
+            box = lean_outward(lo, hi, state.scale)
+            if box is not None:  # short finite bounds, rounded in floats (rounding.py)
+                return Box._trusted(*box)
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
         if not self.rounds_itself:
             outward(lo, hi, state.scale)

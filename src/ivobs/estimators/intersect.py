@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
-from . import _REGISTRY, get, make_estimator, register
+from . import get, make_estimator, methods, register
 from .base import Design, Estimator
 from .intersect_state import check_members, save_members
 from .rounding import ROUNDING, outward
@@ -152,9 +152,9 @@ class Intersect(Estimator):
         members: list[Estimator] = []
         skipped: list[str] = []
         for name in DEFAULT_METHODS:
-            if name not in _REGISTRY:
+            if name not in methods():
                 continue
-            cls = _REGISTRY[name]
+            cls = get(name)
             reason = self._not_applicable(cls)
             if reason is None:
                 try:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ROUNDING", "outward", "overflowed"]
+__all__ = ["ROUNDING", "lean_outward", "outward", "overflowed"]
 
 ROUNDING = 1e-10
 """Relative outward widening of every bound (covers floating-point rounding)."""
@@ -62,6 +62,41 @@ def outward(
             L[r0:r1] -= mm
             H[r0:r1] += mm
     return lo, hi
+
+
+def lean_outward(
+    lo: np.ndarray, hi: np.ndarray, scale: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`outward` of one step's bounds of a short vector (up to :data:`LEAN` entries) in
+    Python floats, into new arrays: the same operations in the same order as :func:`outward`,
+    so the same numbers bit for bit, without a dozen NumPy calls on three numbers. ``None``
+    (use :func:`outward` and its checks) for other arrays and for bounds that are not all
+    finite after widening (NaN, infinities, overflow: their errors are raised by the caller)."""
+    if (
+        type(lo) is not np.ndarray
+        or type(hi) is not np.ndarray
+        or lo.dtype != np.float64
+        or hi.dtype != np.float64
+        or lo.ndim != 1
+        or lo.shape != hi.shape
+        or lo.shape[0] > LEAN
+    ):
+        return None
+    R = ROUNDING
+    los, his = [], []
+    for a, b in zip(lo.tolist(), hi.tolist()):
+        ma, mb = abs(a), abs(b)
+        m = ((mb if mb > ma else ma) + scale) * R + R  # max(|lo|, |hi|) + s, times R, plus R
+        los.append(a - m)
+        his.append(b + m)
+    total = sum(los) + sum(his)
+    if total - total != 0.0:  # not all finite (or the sum overflowed): the full path
+        return None
+    return np.array(los), np.array(his)
+
+
+LEAN = 32
+"""Longest bounds :func:`lean_outward` rounds in Python floats (beyond, NumPy is faster)."""
 
 
 _SLAB = 1 << 15

@@ -14,7 +14,12 @@ import numpy as np
 
 from ..sets import Box
 
-__all__ = ["DataScale"]
+__all__ = ["SHORT", "DataScale"]
+
+SHORT = 32
+"""Vectors up to this length are handled as Python floats in one step (a NumPy call on a short
+vector costs more than the arithmetic; the operations, ``abs``, ``*`` and ``max``, are exact or
+rounded alike, so the numbers are the same bit for bit)."""
 
 
 class DataScale:
@@ -23,6 +28,8 @@ class DataScale:
     def __init__(self, sys: Any):
         self.sys = sys
         self._steady: tuple[np.ndarray, float] | None = None
+        self._steady_list: tuple[list[float], float] | None = None
+        """``(g, c)`` with ``g`` as a list: the one-step path of short vectors in floats."""
 
     def terms(self, k: Any) -> tuple[np.ndarray, float]:
         """``(g, c)`` at step (or time) ``k``: the input gains ``g`` and the disturbance term
@@ -40,10 +47,13 @@ class DataScale:
         out = (g, c)
         if not sys.is_time_varying and sys.has_constant_bounds:
             self._steady = out
+            self._steady_list = (g.tolist(), c)
         return out
 
     def of_step(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
         """The magnitude of the data terms of one step (its running maximum is ``s_k``)."""
+        if self._steady_list is not None and y_k.size + u_k.size <= SHORT:
+            return _of_short_step(*self._steady_list, u_k.tolist(), y_k.tolist())
         g, c = self.terms(k if t_k is None else t_k)
         a = c
         if y_k.size:
@@ -77,3 +87,15 @@ class DataScale:
             np.maximum(a, au, out=a)
         np.maximum(a, cs, out=a)
         return np.asarray(np.maximum.accumulate(a, axis=-1))
+
+
+def _of_short_step(g: list[float], c: float, u: list[float], y: list[float]) -> float:
+    """:meth:`DataScale.of_step` on short vectors (:data:`SHORT`): the same numbers, in floats;
+    a missing sample (NaN) counts as 0 as in ``np.fmax``."""
+    a = c
+    ya = [abs(v) for v in y if v == v]
+    if ya:
+        a = max(a, max(ya))
+    if u:
+        a = max(a, max([abs(v) * gi for v, gi in zip(u, g)]))
+    return a

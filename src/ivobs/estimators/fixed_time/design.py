@@ -38,6 +38,8 @@ __all__ = [
     "check_design_options",
     "check_window",
     "injection",
+    "observability_index",
+    "rank_advice",
 ]
 
 CACHE_SIZE = 16384
@@ -82,10 +84,35 @@ class FixedTimeDesign(Design):
 
 
 # -- validation of the options ------------------------------------------------------------------
-def check_window(s: Any, nx: int) -> int:
-    """The window ``s`` (default ``nx - 1``, the minimum of [Wang2020, Lemma 2])."""
+PAPER_WINDOW_STATES = 10
+"""Up to this many states the default window is ``s = nx − 1`` ([Wang2020, Lemma 2])."""
+
+
+def observability_index(A: np.ndarray, C: np.ndarray) -> int:
+    """The smallest ``ν`` with ``rank [C; CA; …; CA^(ν−1)] = nx`` (forward powers, which stay
+    well conditioned for a stable ``A``; ``nx + 1`` when the pair is not observable)."""
+    nx = int(A.shape[0])
+    rows = np.zeros((0, nx))
+    blk = C
+    for nu in range(1, nx + 1):
+        rows = np.vstack([rows, blk / max(float(np.abs(blk).max(initial=0.0)), 1e-300)])
+        if int(np.linalg.matrix_rank(rows)) == nx:
+            return nu
+        blk = blk @ A
+    return nx + 1
+
+
+def check_window(s: Any, nx: int, ny: int = 1, index: int | None = None) -> int:
+    """The window ``s``. Default: ``nx − 1`` ([Wang2020, Lemma 2]) up to
+    :data:`PAPER_WINDOW_STATES` states; above, ``ν + 1`` with ``ν`` the observability index
+    (``index``): the stacked matrices of eq. (6) hold ``A⁻ʲ`` for ``j <= s``, whose conditioning
+    grows exponentially with ``s`` (``nx − 1`` on a random 30-state plant with 2 outputs leaves
+    ``Mx`` with numerical rank 2 of 30), while ``T Mx = I`` only needs ``s >= ν − 1``. A window
+    needs ``(s + 1) ny >= nx`` rows; whether ``Mx`` has rank ``nx`` is checked by the design."""
     if s is None:
-        return max(nx - 1, 0)
+        if nx <= PAPER_WINDOW_STATES or index is None or index > nx:
+            return max(nx - 1, 0)
+        return int(min(nx - 1, index + 1))
     s = as_int("s", s, 0)
     if s > MAX_WINDOW:
         raise IvobsError(
@@ -93,10 +120,11 @@ def check_window(s: Any, nx: int) -> int:
             f"matrices of [Wang2020, eq. (6)] have (s + 1) ny rows and as many columns per input "
             f"and disturbance), got s = {s}"
         )
-    if s < nx - 1:
+    need = -(-nx // max(ny, 1)) - 1
+    if s < need:
         raise IvobsError(
-            f"s: the fixed-time estimator needs s >= nx - 1 = {nx - 1} ([Wang2020, Lemma 2]: the "
-            f"window y[k-s..k] must observe the {nx} states), got s = {s}"
+            f"s: the fixed-time estimator needs (s + 1) ny >= nx, i.e. s >= {need} (the window "
+            f"y[k-s..k] must observe the {nx} states, [Wang2020, Lemma 2]), got s = {s}"
         )
     return int(s)
 
@@ -294,8 +322,8 @@ class WindowDesigner:
             where = "the window k = 0..s" if not self.tv else f"the window ending at k = {k}"
             raise DesignError(
                 f"pair (A, C) is not observable over {where}: the stacked matrix Mx ([Wang2020, "
-                f"eq. (6)]) has rank {rank} of {nx}; the fixed-time estimator needs rank nx "
-                "(increase s)"
+                f"eq. (6)]) has rank {rank} of {nx}; the fixed-time estimator needs rank nx. "
+                f"{rank_advice(sys, s)}"
             )
         T, opt = self.T_full(Mx, Md)
         if opt is None:
@@ -341,3 +369,27 @@ class WindowDesigner:
             weighted=self.weighted,
             criterion=self.criterion,
         )
+
+
+def rank_advice(sys: LinearSystem, s: int) -> str:
+    """What to do about a rank-deficient ``Mx``: a larger ``s`` if the window is shorter than
+    the observability index ``ν``, else a smaller one (the rank is numerical: ``A⁻ʲ`` for large
+    ``j`` swamps the other rows), else the pair is not observable."""
+    if sys.is_time_varying:
+        return "Increase s, or check the observability of the pair over the window"
+    nu = observability_index(sys.A_at(0), sys.C_at(0))
+    if nu > sys.nx:
+        return "(A, C) is not observable: no window determines the state"
+    if s < nu - 1:
+        return f"Increase s to at least ν − 1 = {nu - 1} (ν: the observability index)"
+    why = (
+        f"(A, C) is observable with index ν = {nu}, so the rank is lost numerically: the "
+        f"backward powers A⁻ʲ (j <= s = {s}) of eq. (6) are too ill-conditioned"
+    )
+    if s > nu + 1:
+        return f"{why}; use a smaller window, s = {nu - 1} .. {nu + 1}"
+    return (
+        f"{why}, and no shorter window observes the state (s >= ν − 1 = {nu - 1}): the "
+        "fixed-time estimator cannot be designed for this pair in floating point; use "
+        "'interval-transformed' or 'kkl'"
+    )

@@ -15,7 +15,15 @@ from ...sets import Box
 from .. import register
 from ..base import Estimator, check_size
 from ..state import Step
-from .design import FixedTimeDesign, WindowDesigner, check_design_options, check_window
+from .design import (
+    PAPER_WINDOW_STATES,
+    FixedTimeDesign,
+    WindowDesigner,
+    check_design_options,
+    check_window,
+    observability_index,
+    rank_advice,
+)
 from .gains import WindowGain, WindowGains, choose_injection
 from .recursion import FixedTimeRecursion, FixedTimeState
 from .vectorised import WindowBatch
@@ -135,7 +143,10 @@ class FixedTimeEstimator(Estimator):
             "uses the stacked matrices of [Wang2020, eq. (6)] over s + 1 >= nx "
             "samples (O(nx^2 ny) entries and work)",
         )
-        self.s = check_window(s, nx)
+        index = None
+        if s is None and not sys.is_time_varying and nx > PAPER_WINDOW_STATES:
+            index = observability_index(sys.A_at(0), sys.C_at(0))
+        self.s = check_window(s, nx, ny, index)
         weighted = as_bool("weighted", weighted)
         check_design_options(sys, criterion, T, S, weighted)
         check = as_bool("check_consistency", check_consistency)
@@ -149,6 +160,13 @@ class FixedTimeEstimator(Estimator):
         self.design = self._initial_design(
             choose=not sys.is_time_varying and L is None and T is None
         )
+        if not sys.is_time_varying and not self._gains.complete(self.s).ok:
+            raise DesignError(
+                f"{self.name}: the gain of the complete window (s = {self.s}) cannot be "
+                "certified: the window does not determine the state to within the rounding of "
+                "its stacked matrices (every box would be the model's prediction alone, which "
+                "diverges when |A| is not Schur). " + rank_advice(sys, self.s)
+            )
         self._recursion = FixedTimeRecursion(self._gains, self.x0)
         self._batch = WindowBatch(self._gains, self.x0)
         self.valid_from = self.s

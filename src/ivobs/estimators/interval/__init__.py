@@ -62,9 +62,10 @@ registered estimators), :mod:`.window` (recovery after missing samples).
 
 from __future__ import annotations
 
-from .design import IntervalDesign, SplitDesign, TransformedDesign
+from .design import IntervalDesign, SplitDesign
 from .observers import IntervalObserver, SplitIntervalObserver, TransformedIntervalObserver
 from .recursion import CooperativeState, IntervalState, SplitState, TransformedState
+from .transformed import TransformedDesign
 
 __all__ = [
     "CooperativeState",

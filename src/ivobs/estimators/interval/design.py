@@ -1,10 +1,11 @@
-"""The offline design of the interval observers: the gain ``L`` (and ``S`` for
-``interval-transformed``), checked, with the numbers the papers report about it.
+"""The offline design of ``interval`` and ``interval-split``: the gain ``L``, checked, with the
+numbers the papers report about it (``interval-transformed``: :mod:`.transformed`).
 
-Nothing here loops over time: the gains come from :mod:`ivobs.design.cooperative` (LMI (41) of
-[Tang2019] = LMIs (7)–(8) of [Efimov2013], the linear programs on ``|A − LC|`` and the width
-refinement) and :mod:`ivobs.design.similarity` ([Tang2019, eq. (48)], [Efimov2013, Theorem 2]);
-user gains of ``scipy.sparse`` systems are checked with sparse algebra.
+Nothing here loops over time: the default gains come from the width-optimal linear program of
+:mod:`ivobs.design.width_lp`; the papers' LMI (41) of [Tang2019] (= LMIs (7)–(8) of
+[Efimov2013]), the alternating LPs on ``|A − LC|`` and the local width refinement from
+:mod:`ivobs.design.cooperative`; user gains of ``scipy.sparse`` systems are checked with sparse
+algebra.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from ..._validate import as_matrix, as_vector
+from ..._validate import as_matrix
 from ...design._lmi import MAX_LMI_STATES
 from ...design.cooperative import (
     NONNEG_TOL,
@@ -27,17 +28,9 @@ from ...design.cooperative import (
     refine_width,
     steady_width,
 )
-from ...design.similarity import (
-    check_transform,
-    default_design,
-    default_e1,
-    nonnegative_realization,
-    place_real_poles,
-    similarity_transform,
-    transformed_width,
-)
+from ...design.width_lp import MAX_LP_STATES, width_gain
 from ...errors import DesignError, IvobsError
-from ...linalg import observability_matrix, spectral_radius
+from ...linalg import spectral_radius
 from ...model import LinearSystem
 from ...sets import Box
 from ..base import Design
@@ -46,14 +39,12 @@ __all__ = [
     "MAX_DENSE_DESIGN",
     "IntervalDesign",
     "SplitDesign",
-    "TransformedDesign",
     "check_design_size",
     "design_delta",
     "interval_design",
     "sparse_gain_check",
     "sparse_radius",
     "split_design",
-    "transformed_design",
 ]
 
 
@@ -215,18 +206,22 @@ def _missing_radius(sys: LinearSystem, L: np.ndarray) -> np.ndarray | None:
 
 
 def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalDesign:
-    """The design of ``interval``: a given gain, or LMI (41) ([Tang2019]) refined for width
-    (``gain="width"``); :class:`DesignError` when no gain makes ``A − LC`` nonnegative and
-    Schur."""
+    """The design of ``interval``: a given gain, the steady-state-width-optimal gain of one
+    linear program (``gain="width"``, :func:`ivobs.design.width_lp.width_gain`), LMI (41) of
+    [Tang2019] (``"lmi"``) or that gain refined by the local width LPs (``"lmi+width"``);
+    :class:`DesignError` when no gain makes ``A − LC`` nonnegative and Schur."""
     if L is None:
-        if gain not in ("lmi", "width"):
-            raise IvobsError(f"gain: expected 'lmi' or 'width', got {gain!r}")
-        check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
+        if gain not in ("lmi", "width", "lmi+width"):
+            raise IvobsError(f"gain: expected 'width', 'lmi+width' or 'lmi', got {gain!r}")
         A, _, C, _, E, F = sys.matrices_at(0)
-        L = nonnegative_gain(A, C, who)
         if gain == "width":
-            L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
-            gain = "lmi+width"
+            _lp_size(sys, who)
+            L, _ = width_gain(A, C, E, F, design_delta(sys), nonnegative=True, who=who)
+        else:
+            check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
+            L = nonnegative_gain(A, C, who)
+            if gain == "lmi+width":
+                L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
     else:
         gain = "given"
     return _checked(IntervalDesign, sys, L, gain, who, nonnegative=True)
@@ -237,11 +232,17 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
     (``"lmi"``), the smallest ``ρ(|A − LC|)`` found (``"margin"``), then refined for width
     (``"width"``); :class:`DesignError` when no gain with ``|A − LC|`` Schur is found."""
     if L is None:
-        if gain not in ("lmi", "margin", "width"):
-            raise IvobsError(f"gain: expected 'width', 'margin' or 'lmi', got {gain!r}")
+        if gain not in ("lmi", "margin", "width", "margin+width"):
+            raise IvobsError(
+                f"gain: expected 'width', 'margin+width', 'margin' or 'lmi', got {gain!r}"
+            )
+        A, _, C, _, E, F = sys.matrices_at(0)
+        if gain == "width":
+            _lp_size(sys, who)
+            L, _ = width_gain(A, C, E, F, design_delta(sys), nonnegative=False, who=who)
+            return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
         what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
         check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
-        A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "lmi":
             L = nonnegative_gain(A, C, who)
         else:
@@ -259,11 +260,21 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
                     f"radius of |A − LC| found is {rho:.6g} >= 1 ([Efimov2013, Theorem 3]){why}; "
                     "try 'interval-transformed' (needs only A − LC Schur)"
                 )
-            if gain == "width":
+            if gain == "margin+width":
                 L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=False)
     else:
         gain = "given"
     return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
+
+
+def _lp_size(sys: LinearSystem, who: str) -> None:
+    """The width LP is sparse but has ``O(nx²)`` variables: refused above
+    :data:`~ivobs.design.width_lp.MAX_LP_STATES` states."""
+    if sys.nx > MAX_LP_STATES:
+        raise DesignError(
+            f"{who}: the width linear program has O(nx^2) variables and does not scale to "
+            f"nx = {sys.nx} > {MAX_LP_STATES} states; {_SCALES}"
+        )
 
 
 D = TypeVar("D", IntervalDesign, SplitDesign)
@@ -281,140 +292,3 @@ def _checked(kind: type[D], sys: LinearSystem, L: Any, gain: str, who: str, nonn
         steady_width=_steady(sys, D_, L),
         missing_radius=_missing_radius(sys, L),
     )
-
-
-@dataclass(frozen=True)
-class TransformedDesign(Design):
-    """``L``: gain (``A − LC`` Schur); ``poles``: eigenvalues of ``A − LC``; ``S``: the
-    transformation ``z = S x``; ``R = S (A − LC) S⁻¹`` (nonnegative up to round-off; this is the
-    matrix the observer propagates); ``e1``, ``e2``: the rows of [Tang2019, eq. (48)] (None when
-    ``S`` was given); ``spectral_radius`` of ``|R|``; ``gain``: ``'search'`` (ivobs' default
-    design), ``'given-poles'`` or ``'given'``; ``steady_width``:
-    ``|S⁻¹|(I − |R|)⁻¹|S(E − LF)| Δ``."""
-
-    L: np.ndarray
-    R: np.ndarray
-    S: np.ndarray
-    e1: np.ndarray | None
-    e2: np.ndarray | None
-    poles: np.ndarray
-    spectral_radius: float
-    gain: str
-    steady_width: np.ndarray | None
-
-
-def transformed_design(
-    sys: LinearSystem,
-    who: str,
-    *,
-    L: Any,
-    poles: Any,
-    R: Any,
-    S: Any,
-    e1: Any,
-    e2: Any,
-) -> TransformedDesign:
-    """The design of ``interval-transformed`` ([Tang2019, Theorem 5, eq. (48)], [Efimov2013,
-    Theorem 2]): the gain (given, placed poles or ivobs' search), then ``S`` (given, or by
-    eq. (48) from a nonnegative realisation ``R`` of the spectrum of ``A − LC``), checked."""
-    # every step here (pole placement, the realisation R, S by eq. (48), the dense n x n
-    # transform used at every step) is dense
-    check_design_size(sys, who, "the similarity transform ([Tang2019, eq. (48)])")
-    A, _, C, _, E, F = sys.matrices_at(0)
-    delta = design_delta(sys)
-    if L is not None and poles is not None:
-        raise IvobsError("L, poles: give the gain L or the poles to place, not both")
-    if S is not None and (e1 is not None or e2 is not None):
-        raise IvobsError("e1, e2: they only serve to compute S by eq. (48); S was given")
-    e1_search = None
-    if L is not None:
-        L, gain = check_gain(sys, L), "given"
-    elif poles is None:
-        L, e1_search = default_design(A, C, lambda L_: E - L_ @ F, delta, who)
-        gain = "search"
-    else:
-        poles = as_vector("poles", poles, sys.nx)
-        if np.any(np.abs(poles) >= 1.0):
-            raise IvobsError(f"poles: expected values inside (−1, 1), got {poles}")
-        L, gain = place_real_poles(A, C, poles, who), "given-poles"
-    M = A - L @ C
-    rho = spectral_radius(M)
-    if rho >= 1.0:
-        raise DesignError(f"{who}: A − LC is not Schur: spectral radius {rho:.6g} >= 1")
-    G = E - L @ F
-    R_given = None if R is None else _check_R(sys, R, who)
-    if S is not None:
-        S = as_matrix("S", S, sys.nx, sys.nx)
-        e1_, e2_ = None, None
-    else:
-        S, e1_, e2_ = _transform(M, G, delta, R_given, e1, e2, e1_search, who)
-        R_given = None  # S was built from R: check_transform checks nonnegativity only
-    Rs = check_transform(M, S, who, R_given)
-    steady = None
-    if not (sys.nd and not isinstance(sys.d, Box)):
-        steady = transformed_width(M, G, delta, S)
-    return TransformedDesign(
-        L=L,
-        R=Rs,
-        S=S,
-        e1=e1_,
-        e2=e2_,
-        poles=np.linalg.eigvals(M),
-        spectral_radius=spectral_radius(np.abs(Rs)),
-        gain=gain,
-        steady_width=steady,
-    )
-
-
-def _transform(
-    M: np.ndarray,
-    G: np.ndarray,
-    delta: np.ndarray,
-    R_given: np.ndarray | None,
-    e1: Any,
-    e2: Any,
-    e1_search: np.ndarray | None,
-    who: str,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(S, e1, e2)`` of [Tang2019, eq. (48)]: ``S = O_R⁻¹ O_{A−LC}`` for the nonnegative
-    ``R`` (given, or :func:`~ivobs.design.similarity.nonnegative_realization` of the spectrum
-    of ``M = A − LC``) and the rows ``e1``, ``e2`` (given or default)."""
-    n = M.shape[0]
-    e2_default: np.ndarray | None
-    if R_given is None:
-        R_t, e2_default = nonnegative_realization(np.linalg.eigvals(M))
-        R_t = np.asarray(R_t)
-    else:
-        R_t, e2_default = R_given, None
-    if e2 is not None:
-        e2_ = as_vector("e2", e2, n)
-    elif e2_default is not None:
-        e2_ = e2_default
-    else:
-        e2_ = _default_e2(R_t)
-    if e1 is not None:
-        e1_ = as_vector("e1", e1, n)
-    elif e1_search is not None and R_given is None and e2 is None:
-        e1_ = e1_search
-    else:
-        e1_ = default_e1(M, R_t, e2_, G, delta, who)
-    return similarity_transform(M, R_t, e1_, e2_, who), e1_, e2_
-
-
-def _check_R(sys: LinearSystem, given: Any, who: str) -> np.ndarray:
-    R = as_matrix("R", given, sys.nx, sys.nx)
-    if np.any(R < 0):
-        i, j = np.unravel_index(int(np.argmin(R)), R.shape)
-        raise DesignError(
-            f"{who}: R is not nonnegative: entry ({i + 1}, {j + 1}) = {R[i, j]:.6g} "
-            "< 0 ([Tang2019, Theorem 5] / [Efimov2013, Theorem 2] need R >= 0)"
-        )
-    return R
-
-
-def _default_e2(R: np.ndarray) -> np.ndarray:
-    """A row making ``(R, e2)`` well observable: ones, then unit vectors (best conditioned)."""
-    n = R.shape[0]
-    cands: list[np.ndarray] = [np.ones(n), *np.eye(n)]
-    conds = [np.linalg.cond(observability_matrix(R, c[None, :])) for c in cands]
-    return cands[int(np.argmin(conds))]

@@ -16,10 +16,8 @@ from ..state import Step
 from .design import (
     IntervalDesign,
     SplitDesign,
-    TransformedDesign,
     interval_design,
     split_design,
-    transformed_design,
 )
 from .operators import SplitOperators
 from .recursion import (
@@ -30,6 +28,7 @@ from .recursion import (
     cooperative_step,
 )
 from .rounding import margins
+from .transformed import TransformedDesign, transformed_design
 from .vectorised import VectorPath
 from .window import empty_window
 
@@ -130,13 +129,17 @@ class IntervalObserver(_GainObserver[IntervalState]):
 
     **Gain** (``L=`` to give one; it must make ``A − LC`` nonnegative and Schur):
     ``gain="lmi"``: LMI (41) of [Tang2019] with diagonal ``P`` (a margin maximised,
-    :func:`ivobs.design.cooperative.nonnegative_gain`); ``gain="width"`` (default): that gain
-    refined by linear programs that lower the steady-state width ``(I − D)⁻¹|G|Δ`` while keeping
-    ``D >= 0`` (:func:`ivobs.design.cooperative.refine_width`; never wider than the LMI gain,
-    and among equally good gains the smallest, e.g. with redundant noise-free sensors; a gap of
-    one output that the LMI gain rides out stays bounded). When no gain makes ``A − LC``
-    nonnegative and Schur ([Tang2019, Example 2], [Efimov2013, §IV.A]) a
-    :class:`~ivobs.DesignError` says so: use ``interval-split`` or ``interval-transformed``.
+    :func:`ivobs.design.cooperative.nonnegative_gain`); ``gain="lmi+width"``: that gain
+    refined by local linear programs (:func:`ivobs.design.cooperative.refine_width`);
+    ``gain="width"`` (default): the global minimum of the (balanced) steady-state width
+    ``(I − D)⁻¹|G|Δ`` over every gain with ``D >= 0`` and Schur, by one sparse linear program in
+    ``(q, Y = diag(q) L)`` whose ``q`` is a copositive Lyapunov certificate
+    (:mod:`ivobs.design.width_lp`; hundreds of states in seconds; among equally good gains the
+    one without a component on the left null space of ``[C, F]``, e.g. with redundant
+    noise-free sensors). When no gain makes ``A − LC`` nonnegative and Schur ([Tang2019,
+    Example 2], [Efimov2013, §IV.A]) a :class:`~ivobs.DesignError` says so and what proves it
+    (a row that no ``L_i`` makes nonnegative, a kernel test, or the infeasible LP), distinct
+    from a solver failure: use ``interval-split`` or ``interval-transformed``.
 
     Missing samples, inconsistent data and the vectorised path: see the package docstring.
     """
@@ -168,11 +171,11 @@ class SplitIntervalObserver(_GainObserver[SplitState]):
     ``gain="lmi"``: LMIs (7)–(8) of [Efimov2013] (Corollary 1; they force ``D >= 0``, the same
     LMI as [Tang2019]'s (41)); ``gain="margin"``: a local minimum of ``ρ(|A − LC|)`` by linear
     programs on ``|A − LC| v <= s v`` alternating with the Perron vector ``v``
-    (:func:`ivobs.design.cooperative.abs_schur_gain`); ``gain="width"`` (default): that gain
-    refined to lower the steady-state width ``(I − |D|)⁻¹|G|Δ``
-    (:func:`ivobs.design.cooperative.refine_width`). Both linear programs return the smallest
-    gain among their optimal ones. :class:`~ivobs.DesignError` when no gain with
-    ``ρ(|A − LC|) < 1`` is found.
+    (:func:`ivobs.design.cooperative.abs_schur_gain`); ``gain="margin+width"``: that gain refined
+    by local LPs (:func:`ivobs.design.cooperative.refine_width`); ``gain="width"`` (default): the
+    global minimum of the steady-state width ``(I − |D|)⁻¹|G|Δ`` over every gain with ``|D|``
+    Schur, by one sparse LP (:mod:`ivobs.design.width_lp`), which also decides whether such a
+    gain exists: :class:`~ivobs.DesignError` with the proof when none does.
 
     Missing samples, rounding and the vectorised path: see the package docstring.
     """
@@ -216,6 +219,17 @@ class TransformedIntervalObserver(CooperativeObserver[TransformedState]):
     (defaults: observable choices with the smallest steady-state width). ``S=``: the
     transformation itself.
 
+    **Beyond the search** (``transform="auto"``, the default: above 8 states, or where the
+    search fails; ``transform="schur"`` to ask for it): eq. (48) goes through observability
+    matrices whose condition number grows exponentially with ``nx``, so ivobs takes ``S = I``
+    with the width-optimal gain of ``interval`` when some gain makes ``A − LC`` nonnegative and
+    Schur (``design.gain == 'identity'``, [Tang2019, Theorem 5] with ``S = I``), else real
+    Schur or modal coordinates for a decay-rate Kalman gain (``'schur'``,
+    :mod:`ivobs.design.schur_transform`): ``S`` orthogonal (or ``V⁻¹``), ``R`` of any sign with
+    ``ρ(|R|) < 1``, propagated in the split form ([Efimov2013, Theorem 3] in ``z``). Sound for
+    any detectable plant whose ``A − LC`` spectrum fits ``|Re λ| + |Im λ| < 1``, but loose: the
+    box of ``x`` is ``|S⁻¹|`` times that of ``z``.
+
     The observer propagates with ``S (A − LC) S⁻¹`` (``design.R``), which equals the requested
     ``R`` up to round-off; the split form makes any round-off-sized negative entry sound.
     Its rounding in ``z = S x``: :mod:`.rounding`.
@@ -238,9 +252,12 @@ class TransformedIntervalObserver(CooperativeObserver[TransformedState]):
         S: Any = None,
         e1: Any = None,
         e2: Any = None,
+        transform: str = "auto",
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
-        design = transformed_design(sys, self.name, L=L, poles=poles, R=R, S=S, e1=e1, e2=e2)
+        design = transformed_design(
+            sys, self.name, L=L, poles=poles, R=R, S=S, e1=e1, e2=e2, transform=transform
+        )
         self._build(design.L, None, design.S)
         self.design: TransformedDesign = design
