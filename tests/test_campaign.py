@@ -326,3 +326,28 @@ def test_scheduler_errors(tmp_path, monkeypatch):
     with pytest.raises(IvobsError, match=r"ivobs\[cluster\]"):
         campaign.run_campaign(path, scheduler="tcp://127.0.0.1:9")
     assert not (tmp_path / "spec.csv").exists()  # nothing written before connecting
+
+
+def test_a_system_file_as_a_campaign_scenario(tmp_path):
+    import ivobs
+
+    sc = scenarios.get("servo-motor")
+    ivobs.save_system(tmp_path / "plant.toml", sc)
+    spec = write(
+        tmp_path,
+        'scenarios = ["plant.toml", "servo-motor"]\nmethods = ["interval-split"]\n'
+        "seeds = [0, 1]\nhorizon = 40\n",
+    )
+    res = campaign.run_campaign(spec, workers=0)
+    rows = [r for r in res.rows if r["scenario"].endswith("plant.toml")]
+    assert len(rows) == 2 and all(r["status"] == "ok" for r in rows)
+    assert all(r["contains"] for r in rows)
+    # the same plant simulated from the file's prior box: the same numbers as the Python API
+    plant = ivobs.io.plant.file_scenario(tmp_path / "plant.toml", horizon=40)
+    tr = plant.simulate("vertex", 1)
+    est = ivobs.make_estimator("interval-split", plant.system, x0=plant.x0).run(tr.u, tr.y)
+    one = next(r for r in rows if r["seed"] == 1)
+    assert one["mean_width"] == pytest.approx(float(est.mean_width(4).mean()))
+    bad = write(tmp_path, 'scenarios = ["nope.toml"]\nmethods = ["interval-split"]\n', "b.toml")
+    with pytest.raises(IvobsError, match="system file 'nope.toml' not found"):
+        campaign.load_spec(bad)

@@ -148,7 +148,7 @@ class _SpecReader(TomlReader):
             if k not in doc:
                 raise self.fail((), f"missing key {k!r} (a list of names)")
         imports = self.imports(doc.get("imports", []))
-        scen = self.scenarios(doc["scenarios"])
+        scen = self.scenarios(doc["scenarios"], base_dir)
         methods = self.methods(doc["methods"], doc.get("options", {}))
         seeds = self.seeds(doc.get("seeds", [0]))
         dists = self.strings(("disturbance",), doc.get("disturbance", "vertex"), allow_one=True)
@@ -194,17 +194,29 @@ class _SpecReader(TomlReader):
                 raise self.fail(("imports",), f"cannot import {m!r}: {exc}") from None
         return mods
 
-    def scenarios(self, v: Any) -> list[str]:
+    def scenarios(self, v: Any, base_dir: Path) -> list[str]:
+        """Scenario names, or system files (``*.toml``, relative to the spec's folder: the
+        plant simulated from its prior box, :func:`ivobs.io.plant.file_scenario`)."""
         from .. import scenarios
 
         names = self.strings(("scenarios",), v)
         known = scenarios.names()
+        out = []
         for n in names:
-            if n not in known:
+            if n.endswith(".toml"):
+                path = (base_dir / n).resolve()
+                if not path.is_file():
+                    raise self.fail(("scenarios",), f"system file {n!r} not found ({path})")
+                out.append(str(path))
+            elif n not in known:
                 raise self.fail(
-                    ("scenarios",), f"unknown scenario {n!r}; known: {', '.join(known)}"
+                    ("scenarios",),
+                    f"unknown scenario {n!r}; known: {', '.join(known)} (or a system file "
+                    "ending in .toml)",
                 )
-        return names
+            else:
+                out.append(n)
+        return out
 
     def methods(self, v: Any, options: Any) -> list[MethodEntry]:
         key = ("methods",)
@@ -365,9 +377,12 @@ class _SpecReader(TomlReader):
 
 
 def _builder_params(name: str) -> list[str]:
-    """Keyword options of a scenario builder (``horizon``, ``seed``, ...)."""
+    """Keyword options of a scenario builder (``horizon``, ``seed``, ...); a system file takes
+    ``horizon``."""
     from .. import scenarios
 
+    if name.endswith(".toml"):
+        return ["horizon"]
     return scenarios.options(name)
 
 

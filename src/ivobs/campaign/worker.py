@@ -49,6 +49,11 @@ def cached_scenario(name: str, options: dict[str, Any]) -> Any:
     from .. import scenarios
 
     key = canonical([name, options, threading.get_ident()])
+    if name.endswith(".toml"):  # a system file: the plant simulated from its prior box
+        from ..io.plant import DEFAULT_HORIZON, file_scenario
+
+        horizon = options.get("horizon", DEFAULT_HORIZON)
+        return _lru(_SCENARIOS, key, lambda: file_scenario(name, horizon=horizon), 16)[0]
     return _lru(_SCENARIOS, key, lambda: scenarios.get(name, **options), 16)[0]
 
 

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import IvobsError
+from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
 from . import add_trust_option, check_disturbance, check_seed
-from ._plant import check_log_times, discretized
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
