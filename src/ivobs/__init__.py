@@ -10,11 +10,11 @@ returns at each step a box that is certain to contain the true state.
 >>> res = est.run(traj.u, traj.y)                                       # doctest: +SKIP
 """
 
-from . import io, linalg, monitor, scenarios
+from . import io, linalg, monitor, nlmath, scenarios
 from .errors import DesignError, InconsistentDataError, IvobsError
 from .estimators import Design, Estimator, make_estimator, methods
 from .io import equal_systems, load_system, save_system
-from .model import LinearSystem
+from .model import LinearSystem, NonlinearSystem
 from .monitor import Monitor, MonitorStep
 from .result import Estimate
 from .sets import Box, Zonotope, image_bounds
@@ -41,6 +41,7 @@ __all__ = [
     "LinearSystem",
     "Monitor",
     "MonitorStep",
+    "NonlinearSystem",
     "Trajectory",
     "Zonotope",
     "__version__",
@@ -53,6 +54,7 @@ __all__ = [
     "make_estimator",
     "methods",
     "monitor",
+    "nlmath",
     "save_system",
     "scenarios",
     "simulate",

@@ -22,6 +22,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from ..errors import IvobsError
+from ..model import LinearSystem
 from . import add_trust_option
 
 FAULT_COLUMNS = ("fault_start", "fault_duration", "fault_outputs")
@@ -107,6 +108,12 @@ class _Session:
         if method is None:
             raise IvobsError(
                 f"--method: {args.system} names no method ([method] name = ...); give --method"
+            )
+        if not isinstance(self.spec.system, LinearSystem):
+            raise IvobsError(
+                f"{args.system}: the monitor's predicted bands need a linear model; for a "
+                "nonlinear system use 'ivobs run --system FILE --log LOG' (its inconsistent "
+                "steps are the alarms)"
             )
         est = self.spec.make_estimator(method)
         self.monitor = Monitor(

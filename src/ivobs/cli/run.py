@@ -159,6 +159,7 @@ def _run_system(args: argparse.Namespace) -> int:
     from ..io.atomic import check_distinct
     from ..io.logs import read_log
     from ..io.systemfile import load_system
+    from ..model import NonlinearSystem
     from ..monitor import Monitor
 
     if not args.log:
@@ -184,9 +185,11 @@ def _run_system(args: argparse.Namespace) -> int:
     # a discrete-time system counts steps: a time column only labels the rows of the output
     t = log.t if spec.system.is_continuous else None
     res = _estimate(est, log.u, log.y, t, args)
-    if spec.system.is_uncertain:  # the monitor's bands need exact matrices: the method's test
+    if isinstance(spec.system, NonlinearSystem) or spec.system.is_uncertain:
+        # the monitor's bands need a linear model with exact matrices: the method's own
+        # inconsistency reports are the alarms
         alarms = np.flatnonzero(res.inconsistent)
-        reasons = {int(k): f"{est.name}: measurement inconsistent with the model" for k in alarms}
+        reasons = {int(k): f"{est.name}: no state in the box is consistent with y" for k in alarms}
     else:
         record = Monitor(spec.system, est, x0=spec.x0).check(log.u, log.y, t=t, estimate=res)
         alarms = np.flatnonzero(record.alarm)

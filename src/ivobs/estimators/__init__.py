@@ -14,9 +14,10 @@ import importlib
 from typing import Any, NamedTuple
 
 from ..errors import IvobsError
-from ..model import LinearSystem
+from ..model import LinearSystem, NonlinearSystem
 from ..model.statespace import is_statespace
-from .base import ROUNDING, Design, Estimator
+from . import base
+from .base import ROUNDING, Design, Estimator, nonlinear_refusal
 
 __all__ = [
     "METHODS",
@@ -53,6 +54,9 @@ METHODS: dict[str, Entry] = {
     "constrained-zonotope": Entry("constrained_zonotope", "ConstrainedZonotopeEstimator", 90),
     "exact": Entry("exact.estimator", "Exact", 100),
     "intersect": Entry("intersect", "Intersect", 110),
+    "nl-interval": Entry("nonlinear_interval", "NonlinearIntervalEstimator", 900),
+    "nl-zonotope": Entry("nl_zonotope", "NonlinearZonotopeEstimator", 910),
+    "nl-constrained-zonotope": Entry("nl_czonotope", "NonlinearConstrainedZonotopeEstimator", 920),
 }
 """The built-in methods, imported on first use (see the module docstring)."""
 
@@ -99,7 +103,9 @@ def get(name: str) -> type[Estimator]:
     return _REGISTRY[key]
 
 
-def make_estimator(name: str, sys: LinearSystem, x0: Any = None, **options: Any) -> Estimator:
+def make_estimator(
+    name: str, sys: LinearSystem | NonlinearSystem, x0: Any = None, **options: Any
+) -> Estimator:
     """Build the estimator ``name`` for ``sys`` (design happens here, once).
 
     ``x0`` is the prior box on ``x[0]`` (methods that need it); ``options`` are the method's
@@ -111,6 +117,8 @@ def make_estimator(name: str, sys: LinearSystem, x0: Any = None, **options: Any)
     cls = get(name)
     if is_statespace(sys):  # every input of a StateSpace is then a known input u
         sys = LinearSystem.from_statespace(sys)
+    if isinstance(sys, NonlinearSystem) and not cls.supports_nonlinear:
+        raise IvobsError(nonlinear_refusal(cls.name))
     allowed = cls.options()
     unknown = sorted(set(options) - set(allowed))
     if unknown:
@@ -119,3 +127,12 @@ def make_estimator(name: str, sys: LinearSystem, x0: Any = None, **options: Any)
             f"accepted options: {', '.join(allowed) or '(none)'}"
         )
     return cls(sys, x0, **options)
+
+
+def _methods_with(flag: str) -> list[str]:
+    """Names of the methods whose class flag is true (imports every built-in method: used for
+    error messages only)."""
+    return [name for name in methods() if getattr(get(name), flag)]
+
+
+base.methods_with = _methods_with

@@ -32,6 +32,7 @@ import dataclasses
 import inspect
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
@@ -39,7 +40,7 @@ import numpy as np
 
 from .._validate import as_bool
 from ..errors import DesignError, InconsistentDataError, IvobsError
-from ..model import LinearSystem
+from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
 from ..sets import Box
 from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
@@ -57,6 +58,7 @@ __all__ = [
     "Estimator",
     "check_size",
     "check_x0",
+    "nonlinear_refusal",
 ]
 
 
@@ -106,22 +108,48 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
-def _refusal(name: str, sys: Any) -> str:
-    """Why ``name`` refuses a system with interval matrices, and which methods accept it."""
-    todo, seen, ok = list(Estimator.__subclasses__()), set(), []
-    while todo:  # the registered classes that accept interval matrices (no registry import)
+def _loaded_with(flag: str) -> list[tuple[int, str]]:
+    """``(order, name)`` of the method classes imported so far whose ``flag`` is true."""
+    todo, seen, out = list(Estimator.__subclasses__()), set(), []
+    while todo:
         cls = todo.pop()
         if cls not in seen:
             seen.add(cls)
             todo += cls.__subclasses__()
-            if cls.name and cls.supports_uncertain:
-                ok.append((cls.order, cls.name))
+            if cls.name and getattr(cls, flag):
+                out.append((cls.order, cls.name))
+    return out
+
+
+def _loaded_names(flag: str) -> list[str]:
+    return [n for _, n in sorted(_loaded_with(flag))]
+
+
+methods_with: Callable[[str], list[str]] = _loaded_names
+"""Names of the registered methods whose class flag (``supports_nonlinear``, ...) is true; the
+registry (:mod:`ivobs.estimators`) replaces it by one that imports every method first (its
+imports are lazy, so the classes loaded so far are not all of them)."""
+
+
+def _refusal(name: str, sys: Any) -> str:
+    """Why ``name`` refuses a system with interval matrices, and which methods accept it."""
     which = ", ".join(sys.interval_matrices())
     return (
         f"sys: the {name} method needs exactly known matrices; this system has interval "
-        f"matrices ({which}). Methods that accept them: {', '.join(n for _, n in sorted(ok))} "
+        f"matrices ({which}). Methods that accept them: "
+        f"{', '.join(methods_with('supports_uncertain'))} "
         "(docs/uncertain.md), or estimate the nominal system sys.nominal() (not guaranteed for "
         "the uncertain plant)"
+    )
+
+
+def nonlinear_refusal(name: str) -> str:
+    """The message refusing a :class:`~ivobs.NonlinearSystem` to a linear-only method, naming
+    the methods that take one."""
+    can = ", ".join(repr(n) for n in methods_with("supports_nonlinear")) or "(none installed)"
+    return (
+        f"sys: the {name} method is for linear systems (ivobs.LinearSystem); this one is an "
+        f"ivobs.NonlinearSystem. Methods for nonlinear systems: {can}"
     )
 
 
@@ -160,9 +188,15 @@ class Estimator(Persistence):
     boxes are rounded before they are intersected, which needs no arithmetic); the data scale
     ``s_k`` is then in ``state.scale`` when ``_step`` runs."""
 
-    def __init__(self, sys: LinearSystem, x0: Box | None = None, *, on_inconsistent: str = "warn"):
-        if not isinstance(sys, LinearSystem):
-            raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
+    def __init__(self, sys: Any, x0: Box | None = None, *, on_inconsistent: str = "warn"):
+        if isinstance(sys, NonlinearSystem):
+            if not self.supports_nonlinear:
+                raise IvobsError(nonlinear_refusal(self.name))
+        elif not isinstance(sys, LinearSystem):
+            raise IvobsError(
+                "sys: expected an ivobs.LinearSystem or ivobs.NonlinearSystem, got "
+                f"{type(sys).__name__}"
+            )
         if sys.is_continuous and not self.supports_continuous:
             raise IvobsError(
                 f"sys: the {self.name} method is for discrete-time systems; this one is "
@@ -276,7 +310,7 @@ class Estimator(Persistence):
         scale = state.scale
         if online or self.rounds_itself:
             scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
-            if self.rounds_itself:  # it needs s_k inside its step
+            if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
                 state = dataclasses.replace(state, scale=scale)
         res: Step[Any] = self._step(state, u_k, y_k, t_k)
         flag = bool(res.inconsistent)

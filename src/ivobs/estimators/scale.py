@@ -2,7 +2,8 @@
 
 ``s_k`` is the running maximum, over steps ``j <= k``, of the magnitudes of the data terms of a
 step: ``|y_j|``, ``g_i |u_j,i|`` (``g_i`` the largest entry of column ``i`` of ``|B|`` and
-``|D|``) and the disturbance terms ``|E| |d|``, ``|F| |d|`` (0 for bounds computed from ``y``).
+``|D|``) and the disturbance terms ``|E| |d|``, ``|F| |d|`` (0 for bounds computed from ``y``);
+for a nonlinear model, ``|u_j|`` and the largest bound of its unknowns ``w``.
 The online path (one step) and the record path (a whole record or batch) give the same numbers.
 """
 
@@ -37,6 +38,11 @@ class DataScale:
         if self._steady is not None:
             return self._steady
         sys = self.sys
+        if not hasattr(sys, "matrices_at"):  # a nonlinear model: |u| and the bounds of w
+            box = sys.w_box
+            c = float(np.max(np.maximum(np.abs(box.lo), np.abs(box.hi)), initial=0.0))
+            self._steady = (np.ones(sys.nu), c)
+            return self._steady
         _A, B, _C, D, E, F = sys.matrices_at(k)
         g = np.max(np.abs(np.vstack([B, D])), axis=0) if sys.nu else np.zeros(0)
         c = 0.0

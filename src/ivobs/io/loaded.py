@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import IvobsError
-from ..model import LinearSystem
+from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from .options import same_method
 
@@ -17,7 +17,7 @@ __all__ = ["SystemFile"]
 class SystemFile:
     """What a system file holds: the model, the prior box, a method and its options."""
 
-    system: LinearSystem
+    system: LinearSystem | NonlinearSystem
     x0: Box | None = None
     method: str | None = None
     options: dict[str, Any] = field(default_factory=dict)

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import IvobsError
-from ..model import LinearSystem
+from ..model import SystemModel
 from .atomic import write_text_atomic
 
 __all__ = ["Log", "LogParser", "LogRow", "log_from_frame", "not_utf8", "read_log", "write_log"]
@@ -238,7 +238,7 @@ class Log:
         return rows
 
 
-def read_log(path: str | os.PathLike[str], system: LinearSystem) -> Log:
+def read_log(path: str | os.PathLike[str], system: SystemModel) -> Log:
     """Read a CSV log for ``system`` (its ``nu`` inputs and ``ny`` measurements).
 
     Lines starting with ``#`` and blank lines are skipped. Errors name the line and the column:
@@ -276,7 +276,7 @@ def read_log(path: str | os.PathLike[str], system: LinearSystem) -> Log:
     )
 
 
-def log_from_frame(frame: Any, system: LinearSystem) -> Log:
+def log_from_frame(frame: Any, system: SystemModel) -> Log:
     """A :class:`Log` from a ``pandas.DataFrame`` with the columns of a CSV log (``k``/``step``
     or ``t``/``time``, ``u1..``, ``y1..``; NaN = missing sample). The rows go through the same
     parser as a file (the same checks and messages; "line" counts the header as line 1). A

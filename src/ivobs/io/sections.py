@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from ..model import LinearSystem
 from ..model.statespace import SignalNames
 from ..sets import Box
 from .reader import TomlReader
@@ -25,7 +24,7 @@ class PlantSections(TomlReader):
     def check_keys(self, table: dict[str, Any], key: tuple[str, ...]) -> None:
         raise NotImplementedError
 
-    def names(self, system: LinearSystem) -> SignalNames:
+    def names(self, system: Any) -> SignalNames:
         """``[names]``: labels of the states (and their ``units``), inputs, outputs and
         disturbance components, for plots and tables."""
         tab = self.table(("names",))

@@ -11,7 +11,8 @@ the sampling period ``dt``, the disturbance bounds (constant, per step inline or
 a CSV file, or a Python callable), the prior box on ``x[0]``, and a method with its options. A
 sparse matrix (``scipy.sparse``) is a table of its nonzero entries (``shape``, ``rows``,
 ``cols``, ``values``; 0-based, row-major) and is read back as a CSR matrix. The format is
-documented in ``docs/operating.md``; :func:`~ivobs.io.save_system` writes it.
+documented in ``docs/operating.md``; :func:`~ivobs.io.save_system` writes it. A nonlinear model
+(``f``, ``h`` expressions) is read by :mod:`.nlsystemfile`.
 
 Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line and the key.
 """
@@ -33,6 +34,7 @@ from ..model.uncertain import INTERVAL_MATRICES
 from ..sets import Box
 from .callables import make_callable
 from .loaded import SystemFile
+from .nlsystemfile import read_nonlinear
 from .options import read_method
 from .sections import PlantSections
 
@@ -42,7 +44,7 @@ FORMAT = 1
 MATRICES = ("A", "B", "C", "D", "E", "F")
 _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
     (): ("format", "name", "description", "system", "disturbance", "x0", "method", "names"),
-    ("system",): ("dt", *MATRICES),
+    ("system",): ("dt", *MATRICES, "states", "inputs", "outputs", "f", "h", "params", "d"),
     ("disturbance",): ("lower", "upper", "csv", "python", "params"),
     ("x0",): ("lower", "upper"),
     ("method",): ("name", "options"),
@@ -213,6 +215,14 @@ class _SystemReader(PlantSections):
         desc = self.string(("description",), self.doc.get("description", ""))
         sysd = self.table(("system",), required=True)
         assert sysd is not None
+        if "f" in sysd or "h" in sysd:  # a nonlinear model (expressions, no matrices)
+            return self.finish(read_nonlinear(self, sysd, self.dt(sysd)), name, desc)
+        extra = sorted(set(sysd) - {"dt", *MATRICES})
+        if extra:
+            raise self.fail(
+                ("system", extra[0]),
+                f"{extra[0]} belongs to a nonlinear system, which needs f and h (expressions)",
+            )
         mats = self.system_matrices(sysd)
         dist = self.table(("disturbance",))
         d = self.disturbance(dist, mats) if dist is not None else None
@@ -244,6 +254,10 @@ class _SystemReader(PlantSections):
             )
             raise self.fail(key, str(exc)) from None
         system.names = self.names(system)
+        return self.finish(system, name, desc)
+
+    def finish(self, system: Any, name: str, desc: str) -> SystemFile:
+        """The prior box and the method, around the model."""
         x0 = self.x0(system.nx)
         method, options = self.method()
         lines = {o: self.lines.line(("method", "options", o)) for o in options}

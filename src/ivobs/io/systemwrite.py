@@ -12,10 +12,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import IvobsError
-from ..model import LinearSystem
+from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from .atomic import write_text_atomic
 from .callables import callable_ref
+from .nlsystemfile import dump_nonlinear
 from .options import plain_option
 from .systemfile import FORMAT, MATRICES, SystemFile
 
@@ -53,10 +54,16 @@ def _same_params(a: dict[str, Any], b: dict[str, Any]) -> bool:
     return True
 
 
-def equal_systems(a: LinearSystem, b: LinearSystem) -> bool:
+def equal_systems(a: Any, b: Any) -> bool:
     """Whether two systems are the same model: same ``dt``, the same matrices (arrays equal
     entry for entry, stacks equal, callables the same import path and parameters) and the same
-    disturbance bounds."""
+    disturbance bounds; for nonlinear systems, the same names, expressions and bounds."""
+    if isinstance(a, NonlinearSystem) or isinstance(b, NonlinearSystem):
+        return (
+            isinstance(a, NonlinearSystem)
+            and isinstance(b, NonlinearSystem)
+            and a.spec() == b.spec()
+        )
     if not (isinstance(a, LinearSystem) and isinstance(b, LinearSystem)):
         raise IvobsError(
             f"equal_systems: expected two LinearSystems, got {type(a).__name__} and "
@@ -176,16 +183,28 @@ def dumps_system(
     system, x0, method, options, name, description = _unpack(
         system, x0, method, options, name, description
     )
-    out = [
-        "# ivobs system file",
-        "#   x[k+1] = A x[k] + B u[k] + E d[k],  y[k] = C x[k] + D u[k] + F d[k]",
-        "#   d[k] in [disturbance.lower, disturbance.upper],  x[0] in [x0.lower, x0.upper]",
-        f"format = {FORMAT}",
-    ]
+    nonlinear = isinstance(system, NonlinearSystem)
+    model = (
+        [
+            "#   x[k+1] = f(x, u, p, d),  y[k] = h(x, u, p, d)  (expressions)",
+            "#   p in [system.params], d in [system.d],  x[0] in [x0.lower, x0.upper]",
+        ]
+        if nonlinear
+        else [
+            "#   x[k+1] = A x[k] + B u[k] + E d[k],  y[k] = C x[k] + D u[k] + F d[k]",
+            "#   d[k] in [disturbance.lower, disturbance.upper],  x[0] in [x0.lower, x0.upper]",
+        ]
+    )
+    out = ["# ivobs system file", *model, f"format = {FORMAT}"]
     if name:
         out.append(f"name = {_scalar(name)}")
     if description:
         out.append(f"description = {_scalar(description)}")
+    if nonlinear:
+        out += ["", *dump_nonlinear(system, _scalar, _value)]
+        if system.names.units:
+            out += ["", "[names]", f"units = {_value(list(system.names.units))}"]
+        return "\n".join(out + _tail(x0, method, options)) + "\n"
     out += ["", "[system]", f"dt = {_scalar(system.dt)}"]
     skip = {"B": system.nu == 0, "D": system.nu == 0, "E": system.nd == 0, "F": system.nd == 0}
     sparse_tables = []
@@ -221,6 +240,12 @@ def dumps_system(
                 "disturbances") if getattr(names, k, None)}  # fmt: skip
     if labelled:
         out += ["", "[names]"] + [f"{k} = {_value(list(v))}" for k, v in labelled.items()]
+    return "\n".join(out + _tail(x0, method, options)) + "\n"
+
+
+def _tail(x0: Any, method: str | None, options: dict[str, Any]) -> list[str]:
+    """The ``[x0]`` and ``[method]`` tables."""
+    out: list[str] = []
     if x0 is not None:
         if not isinstance(x0, Box) or x0.is_time_varying:
             raise IvobsError(f"save_system: x0 must be a constant ivobs.Box, got {x0!r}")
@@ -232,12 +257,12 @@ def dumps_system(
             out += [f"{_key(k)} = {_value(plain_option(v))}" for k, v in options.items()]
     elif options:
         raise IvobsError("save_system: options were given without a method")
-    return "\n".join(out) + "\n"
+    return out
 
 
 def _unpack(
     system: Any, x0: Any, method: Any, options: Any, name: str, description: str
-) -> tuple[LinearSystem, Box | None, str | None, dict[str, Any], str, str]:
+) -> tuple[Any, Box | None, str | None, dict[str, Any], str, str]:
     from ..scenarios import Scenario
 
     if isinstance(system, SystemFile):
@@ -252,9 +277,9 @@ def _unpack(
         name = name or system.name
         description = description or system.description
         system = system.system
-    if not isinstance(system, LinearSystem):
+    if not isinstance(system, (LinearSystem, NonlinearSystem)):
         raise IvobsError(
-            f"system: expected a LinearSystem, a SystemFile or a Scenario, got "
+            f"system: expected a LinearSystem, a NonlinearSystem, a SystemFile or a Scenario, got "
             f"{type(system).__name__}"
         )
     return system, x0, method, dict(options or {}), str(name), str(description)
@@ -272,7 +297,8 @@ def save_system(
 ) -> None:
     """Write a system file (TOML) atomically.
 
-    ``system`` is a :class:`~ivobs.LinearSystem`, a :class:`SystemFile` or a
+    ``system`` is a :class:`~ivobs.LinearSystem`, a :class:`~ivobs.NonlinearSystem` (written as
+    its expressions), a :class:`SystemFile` or a
     :class:`~ivobs.scenarios.Scenario` (its prior box, name and description are written too).
     Numbers are written with full precision (``repr``), so :func:`load_system` gives back the
     same system (:func:`equal_systems`). Callable matrices and bounds must be module-level

@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ...linalg import gamma
+from ...linalg import UNIT_ROUNDOFF, gamma
+from ..zonotope import MAX_BASIS_CONDITION, reduce_girard
 
 __all__ = ["consolidate_small", "reduce_generators"]
 
@@ -62,74 +63,130 @@ def reduce_generators(
     ``<[c; -b], [G; A]>`` ([Scott2016, Section 4.3]; its ``x`` part and constraint part
     shrink together, so the constrained zonotope it represents contains the original).
 
-    The lifted zonotope is reduced with a parallelotope enclosure ([Chisci1998]): a
-    basis ``P`` of ``r = rank [G; A]`` large, independent
-    generators is chosen (QR with column pivoting); each generator ``l`` to remove has
-    coordinates ``α = P⁺ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``, so the removed
-    generators are absorbed by rescaling the basis, ``P diag(1 + Σ|α|)``. Those with the
-    smallest ``‖α‖₁`` are removed. No generator is added, the directions of the kept ones are
-    unchanged (coordinates are invariant to the scaling of the constraint rows). What the
-    basis misses of the removed generators, ``Σ |l - P α|`` (the part outside the basis' span
-    when the lifted generators do not span the lifted space, and the error of the computed
-    ``α``), is enclosed in a box, enlarged by the bound ``γ_{r+2} (|l| + |P| |α|)`` of its
-    rounding; the scale factors are rounded up. The result contains the original in exact
-    arithmetic, whatever the rounding.
+    The lifted generators ``L = [G; A]`` (``N = n + nc`` rows) are first equilibrated by
+    powers of two, ``D L`` (exact: only exponents change), so that the choice and the
+    conditioning of the basis do not depend on the units of the states or the scaling of the
+    constraint rows; the result is scaled back by ``D⁻¹``, exactly again. Then a parallelotope
+    enclosure ([Chisci1998]; :func:`_absorb_in_basis`), or, when the ``N`` pivots of the QR
+    with column pivoting are ill-conditioned (estimate above
+    :data:`~ivobs.sets.zonotope.MAX_BASIS_CONDITION`) or do not span the lifted space,
+    [Girard2005]'s box (:func:`~ivobs.sets.zonotope.reduce_girard`, as the strip method).
+    An ill-conditioned basis is what lets the scale factors grow step after step without
+    bound. Either way the result contains the original in exact arithmetic, whatever the
+    rounding, and no box is left aside.
 
-    At least the ``r <= n + nc`` basis generators are kept, whatever ``max_generators``.
+    At least ``N`` generators are kept, whatever ``max_generators``.
 
-    With ``residual=True`` the box is not added: ``(c, G, A, b, box)`` is returned, ``box``
-    ``(n + nc,)`` the radii of the box the caller must add (Minkowski) to the result."""
+    With ``residual=True`` ``(c, G, A, b, box)`` is returned, ``box`` the zero radii of the
+    box aside (kept for callers of the earlier form)."""
     n, m = G.shape
-    if m <= max_generators:
-        return (c, G, A, b, np.zeros(n + A.shape[0])) if residual else (c, G, A, b)
-    from scipy.linalg import qr  # imported here: SciPy is slow to import
-
+    N = n + A.shape[0]
+    order = max(int(max_generators), N)
+    if m <= order:
+        return (c, G, A, b, np.zeros(N)) if residual else (c, G, A, b)
     L = np.vstack([G, A])
-    R, piv = qr(L, mode="r", pivoting=True)
-    diag = np.abs(np.diag(R))
-    rank = int(np.sum(diag > 1e-10 * diag[0])) if diag.size and diag[0] > 0 else 0
-    max_generators = max(max_generators, rank)  # the basis is always kept
-    basis, others = piv[:rank], piv[rank:]
-    # L[:, piv] = Q R: the others have coordinates α = R11⁻¹ R12 in the basis L[:, basis]
-    alpha = np.linalg.solve(R[:rank, :rank], R[:rank, rank:])  # (scipy trsm is slow here)
-    order = np.argsort(np.abs(alpha).sum(axis=0), kind="stable")
-    n_rm = m - max_generators
-    rm, kept = order[:n_rm], others[order[n_rm:]]
-    # rounding: the computed α are not the exact coordinates, so what the basis misses of each
-    # removed generator l is the residual l - P α, evaluated directly (in exact arithmetic the
-    # Q2 R22 part) plus the bound γ_{r+2} (|l| + |P| |α|) of its rounding; the scale factors
-    # are rounded up (γ_{k+3}) so that the scaled basis is never smaller than the exact one
-    Lb, a_rm = L[:, basis], alpha[:, rm]
-    L_rm = L[:, others[rm]]
-    resid = np.abs(L_rm - Lb @ a_rm).sum(axis=1) + gamma(rank + 2) * (
-        np.abs(L_rm).sum(axis=1) + np.abs(Lb) @ np.abs(a_rm).sum(axis=1)
-    )
-    scale = 1.0 + np.abs(a_rm).sum(axis=1)
-    if residual:
-        L2 = np.hstack([Lb * (scale * (1.0 + gamma(n_rm + 3))), L[:, kept]])
-        return c, L2[:n], L2[n:], b, resid
-    tau = _box_in_basis(Lb, resid) if rank == L.shape[0] else None
-    if tau is not None:  # the basis spans the space: absorb the box too
-        scale, resid = scale + tau, np.zeros_like(resid)
-    P = Lb * (scale * (1.0 + gamma(n_rm + 3)))
-    big = resid > 0
-    box = np.zeros((L.shape[0], int(big.sum())))
-    box[np.flatnonzero(big), np.arange(box.shape[1])] = resid[big]
-    L2 = np.hstack([P, L[:, kept], box])
-    return c, L2[:n], L2[n:], b
+    d = _pow2_scaling(L)
+    Ls = L * d[:, None] if d is not None else L
+    L2 = _absorb_in_basis(Ls, order)
+    if L2 is None:
+        L2 = reduce_girard(Ls, order)
+    if d is not None:
+        back = L2 / d[:, None]
+        if _exactly_scaled(back, L2):
+            L2 = back
+        else:  # an entry would leave the normal range: reduce the unscaled matrix instead
+            L2 = _absorb_in_basis(L, order)
+            L2 = reduce_girard(L, order) if L2 is None else L2
+    return (c, L2[:n], L2[n:], b, np.zeros(N)) if residual else (c, L2[:n], L2[n:], b)
 
 
-def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> np.ndarray | None:
-    """``τ >= 0`` with ``box(ρ) ⊆ <0, P diag(τ)>`` for a square invertible ``P``, verified in
-    floating point, or ``None`` (``P`` too ill-conditioned to verify).
+_TINY = float(np.finfo(float).tiny)
+
+
+def _pow2_scaling(L: np.ndarray) -> np.ndarray | None:
+    """Powers of two ``d`` with ``max_j |d_i L_ij|`` in ``[1, 2)`` (zero rows: 1), or ``None``
+    when scaling an entry would leave the normal range (then it would not be exact)."""
+    mx = np.abs(L).max(axis=1)
+    e = np.zeros(mx.shape[0])
+    nz = mx > 0
+    e[nz] = -np.frexp(mx[nz])[1] + 1
+    d = np.ldexp(1.0, e.astype(int))
+    Ls = L * d[:, None]
+    return d if _exactly_scaled(Ls, L) else None
+
+
+def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
+    """Whether ``S`` (``M`` scaled by powers of two) was computed exactly: every entry finite
+    and normal or zero where ``M`` is zero."""
+    aS = np.abs(S)
+    return bool(np.all(np.isfinite(S)) and np.all((aS >= _TINY) | ((aS == 0) & (M == 0))))
+
+
+def _absorb_in_basis(
+    L: np.ndarray, order: int, max_condition: float = MAX_BASIS_CONDITION
+) -> np.ndarray | None:
+    """``order >= N`` generators ``L'`` with ``<0, L> ⊆ <0, L'>`` in exact arithmetic, by a
+    parallelotope enclosure ([Chisci1998]), or ``None`` when the basis is ill-conditioned.
+
+    The basis ``P`` (``N`` generators) is chosen by QR with column pivoting; its condition
+    estimate ``|R_11| / |R_NN|`` must be at most ``max_condition``. Each generator ``l`` to
+    remove has coordinates ``α = P⁻¹ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``; those
+    with the smallest ``‖α‖₁`` are removed: ``<0, L> ⊆ <0, [P diag(s₀), L_kept]> ⊕ box(ρ)``
+    with ``s₀ >= 1 + Σ|α|`` (rounded up) and ``ρ >= Σ |l - P α|`` (evaluated, plus the bound
+    ``γ_{N+2} (|l| + |P| |α|)`` of its rounding, [Higham2002, Lemma 3.1]). The box and the
+    rounding of the product ``P diag(t)`` itself are then absorbed by the basis:
+    with ``X ≈ P⁻¹``, ``θ >= ‖I - X P‖∞ < 1/2``, ``|P⁻¹ v| <= τ`` on ``box(ρ)``
+    (:func:`_box_in_basis`) and ``μ >= u ‖|P⁻¹| |P|‖∞``, the computed
+    ``P' = fl(P diag(t))`` is ``P (diag(t) + F)`` with ``|F diag(t)⁻¹| <= u |P⁻¹| |P|``,
+    so ``t = z + μ / (1 - μ) ‖z‖∞``, ``z = s₀ + τ``, gives ``<0, P diag(s₀)> ⊕ box(ρ) ⊆
+    <0, P'>`` (a Neumann-series bound on ``(I + F diag(t)⁻¹)⁻¹``)."""
+    from scipy.linalg.lapack import dgeqp3, dtrtrs  # imported here: SciPy is slow to import
+
+    N, m = L.shape
+    if m <= order:
+        return L
+    R, jpvt, _, _, info = dgeqp3(L)
+    if info != 0 or m < N:
+        return None
+    dg = np.abs(np.diag(R[:N, :N]))
+    if not dg[N - 1] * max_condition >= dg[0] > 0.0:
+        return None
+    piv = jpvt - 1
+    basis, others = piv[:N], piv[N:]
+    alpha, info = dtrtrs(R[:N, :N], R[:N, N:])
+    if info != 0 or not np.all(np.isfinite(alpha)):
+        return None
+    srt = np.argsort(np.abs(alpha).sum(axis=0), kind="stable")
+    n_rm = m - order
+    rm, kept = srt[:n_rm], others[srt[n_rm:]]
+    P, a_rm, L_rm = L[:, basis], alpha[:, rm], L[:, others[rm]]
+    a1 = np.abs(a_rm).sum(axis=1)
+    up = 1.0 + gamma(n_rm + 3)
+    rho = (
+        np.abs(L_rm - P @ a_rm).sum(axis=1)
+        + gamma(N + 2) * (np.abs(L_rm).sum(axis=1) + np.abs(P) @ a1)
+    ) * up
+    s0 = (1.0 + a1) * up
+    absorbed = _box_in_basis(P, rho)
+    if absorbed is None:
+        return None
+    tau, mu = absorbed
+    z = (s0 + tau) * (1.0 + gamma(2))
+    t = (z + mu / (1.0 - mu) * float(z.max())) * (1.0 + gamma(6))
+    return np.hstack([P * t, L[:, kept]])
+
+
+def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """``(τ, μ)`` with ``τ >= 0``, ``box(ρ) ⊆ <0, P diag(τ)>`` and ``μ >= u ‖|P⁻¹| |P|‖∞``
+    (plus the bound of an underflow in ``P diag(t)``, ``t >= 1``) for a square invertible
+    ``P``, verified in floating point, or ``None`` (``P`` too ill-conditioned to verify).
 
     ``v ∈ box(ρ)`` has coordinates ``P⁻¹ v``. With ``X ≈ P⁻¹`` and ``θ >= ‖I - X P‖∞`` (the
-    computed residual plus the bound ``γ_{n+1} (I + |X| |P|)`` of its rounding), ``θ < 1``
+    computed residual plus the bound ``γ_{n+1} (I + |X| |P|)`` of its rounding), ``θ < 1/2``
     gives ``P⁻¹ v = X v + (I - X P) P⁻¹ v``, so
-    ``|P⁻¹ v| <= |X| ρ + θ / (1 - θ) ‖|X| ρ‖∞`` (a Neumann-series bound, as in verified
-    linear algebra)."""
-    if not np.any(rho):
-        return np.zeros_like(rho)
+    ``|P⁻¹ v| <= |X| ρ + θ / (1 - θ) ‖|X| ρ‖∞``, and ``P⁻¹ = X + (I - X P) P⁻¹`` gives
+    ``‖|P⁻¹| |P|‖∞ <= ‖|X| |P|‖∞ / (1 - θ)`` (Skeel's condition number, invariant to the scaling
+    of the columns; Neumann-series bounds, as in verified linear algebra)."""
     n = P.shape[0]
     try:
         X = np.linalg.inv(P)
@@ -139,10 +196,17 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> np.ndarray | None:
         return None
     aX = np.abs(X)
     Rm = np.eye(n) - X @ P
-    row_sums = (np.abs(Rm) + gamma(n + 1) * (np.eye(n) + aX @ np.abs(P))).sum(axis=1)
+    aXaP = aX @ np.abs(P)
+    row_sums = (np.abs(Rm) + gamma(n + 1) * (np.eye(n) + aXaP)).sum(axis=1)
     theta = float(row_sums.max()) * (1.0 + gamma(n + 2))
     if not theta < 0.5:
         return None
+    up = 1.0 + gamma(2 * n + 4)
+    skeel = float(aXaP.sum(axis=1).max()) * up  # >= ‖|X| |P|‖∞ in exact arithmetic
+    nX = float(aX.sum(axis=1).max()) * up
+    mu = (UNIT_ROUNDOFF * skeel + nX * n * 2.0**-1074) / (1.0 - theta) * up
+    if not mu < 0.5:
+        return None
     v = (aX @ rho) * (1.0 + gamma(n + 1))
     tau: np.ndarray = (v + theta / (1.0 - theta) * float(v.max())) * (1.0 + gamma(4))
-    return tau
+    return tau, mu

@@ -1,0 +1,200 @@
+"""Interval estimation for nonlinear systems: inclusion functions and contractors
+([Jaulin2001, Ch. 4 and 6], the mean-value form of [Moore2009, Ch. 6]).
+
+For ``x[k+1] = f(x[k], u[k], w[k])``, ``y[k] = h(x[k], u[k], w[k])`` with ``w = (unknown
+parameters, d)`` in the constant box ``[w]`` (:class:`~ivobs.NonlinearSystem`), one step from
+the predicted box ``[x]_k^-`` of ``x[k]``:
+
+1. **Correction** (forward-backward contractor, HC4-revise [Jaulin2001, Ch. 4]): contract
+   ``([x]_k^-, [w])`` with ``h(x, u_k, w) = y_k`` -> ``([x]_k, [w]_k)``;
+2. **One step back** (``lag=1``): contract ``([x]_{k-1}, [w]_{k-1}, [w]_k)`` with
+   ``h(f(x', u_{k-1}, w'), u_k, w) = y_k``, then ``[x]_k <- [x]_k ∩ F([x]_{k-1}, u_{k-1},
+   [w]_{k-1})`` and contract with ``y_k`` again. This bounds states the output sees only
+   through the dynamics (the Hénon map with ``y = x2``: ``x1[k-1] = x2[k]/b``);
+3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
+   intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
+
+Every bound is rounded outward by the generated code (the method rounds itself). Besides, as
+the linear methods do (:mod:`ivobs.estimators.rounding`), the measurement is taken as
+``y ± ROUNDING (1 + |y|)`` and the predicted box is widened by ``ROUNDING (1 + |bound|)``
+(``ROUNDING = 1e-10``): records from double-precision simulators, whose states and outputs
+carry their own rounding, are covered as they are for the linear methods. The box of
+``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output component is
+skipped; a measurement that no point of the box can produce (an empty contraction) is reported
+inconsistent and not used: the step continues from the prediction.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._validate import as_int
+from ..errors import IvobsError
+from ..model import LinearSystem, NonlinearSystem
+from ..sets import Box
+from . import register
+from .base import Design, Estimator
+from .rounding import ROUNDING
+from .state import OnlineState, Step
+
+__all__ = ["NonlinearIntervalDesign", "NonlinearIntervalEstimator", "NonlinearIntervalState"]
+
+
+@dataclass(frozen=True)
+class NonlinearIntervalDesign(Design):
+    """``lag``: steps back through the model at each correction (0 or 1); ``w_lo``, ``w_hi``:
+    the box ``[w]`` of the per-step unknowns."""
+
+    lag: int
+    w_lo: np.ndarray
+    w_hi: np.ndarray
+    model: int
+    """A hash of the model's expressions and names (in the state's fingerprint: a state
+    restores only into an estimator of the same model)."""
+
+
+@dataclass(frozen=True)
+class NonlinearIntervalState(OnlineState):
+    """``lo``, ``hi``: the predicted box ``[x]_k^-``; ``prev_lo``, ``prev_hi``: the corrected
+    box of ``(x[k-1], w[k-1])`` and ``prev_u`` = ``u[k-1]``, for the step back (``back`` says
+    whether there is one)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    prev_lo: np.ndarray
+    prev_hi: np.ndarray
+    prev_u: np.ndarray
+    back: bool = False
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"), ("prev_lo", "prev_hi"))
+
+
+@register
+class NonlinearIntervalEstimator(Estimator):
+    """Interval observer for nonlinear systems: natural ∩ mean-value prediction and
+    forward-backward contraction by the measurement, one step back through ``h∘f``
+    (module docstring).
+
+    Parameters
+    ----------
+    sys : :class:`~ivobs.NonlinearSystem` (a time-invariant discrete-time
+        :class:`~ivobs.LinearSystem` with constant bounds is converted)
+    x0 : prior box of ``x[0]`` (required)
+    lag : 1 (default) to contract one step back through ``h∘f``, 0 not to
+    """
+
+    name = "nl-interval"
+    order = 900
+    summary = (
+        "nonlinear systems: natural ∩ mean-value inclusion, forward-backward contraction by "
+        "y and one step back through h∘f"
+    )
+    reference = "[Jaulin2001, Ch. 4], [Moore2009, Ch. 6]"
+    data_used = "filter"
+    needs_x0 = True
+    supports_nonlinear = True
+    rounds_itself = True
+
+    def __init__(self, sys: Any, x0: Box | None = None, *, lag: int = 1, **options: Any):
+        super().__init__(sys, x0, **options)
+        # a linear model is converted; self.sys stays the model given (the monitor reads it)
+        if isinstance(sys, LinearSystem):
+            sys = NonlinearSystem.from_linear(sys, who=self.name)
+        self.model: NonlinearSystem = sys
+        lag = as_int("lag", lag, minimum=0)
+        if lag > 1:
+            raise IvobsError(f"lag: expected 0 or 1 (steps back through h∘f), got {lag}")
+        w = sys.w_box
+        digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
+        self.design = NonlinearIntervalDesign(
+            lag=lag, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
+        )
+        self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
+        self._hf = sys.hf_contractors() if lag and sys.ny else None
+
+    def _initial_state(self) -> NonlinearIntervalState:
+        assert self.x0 is not None
+        m = self.model
+        return NonlinearIntervalState(
+            lo=self.x0.lo.copy(),
+            hi=self.x0.hi.copy(),
+            prev_lo=np.zeros(m.nx + m.nw),
+            prev_hi=np.zeros(m.nx + m.nw),
+            prev_u=np.zeros(m.nu),
+        )
+
+    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
+        return 0.0  # the generated code rounds every operation: no data-scale margin
+
+    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
+        return np.zeros(y.shape[:-1])
+
+    def _back(
+        self,
+        st: NonlinearIntervalState,
+        vl: list[float],
+        vh: list[float],
+        u: list[float],
+        y: tuple[list[float], list[float]],
+    ) -> bool:
+        """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place); False when
+        the measurement is found inconsistent."""
+        sys, nx, nw = self.model, self.model.nx, self.model.nw
+        bl = st.prev_lo.tolist() + vl[nx:]
+        bh = st.prev_hi.tolist() + vh[nx:]
+        pu = st.prev_u.tolist()
+        assert self._hf is not None
+        for (fn, sites), a, b in zip(self._hf, *y):
+            if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
+                return False
+        m = nx + nw
+        f = sys._f
+        fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
+        for i in range(nx):
+            lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
+            if lo > hi:
+                return False
+            vl[i], vh[i] = lo, hi
+        vl[nx:], vh[nx:] = bl[m:], bh[m:]
+        return bool(sys.contract_lists(vl, vh, u, *y))
+
+    def _step(
+        self, state: NonlinearIntervalState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[NonlinearIntervalState]:
+        sys, nx = self.model, self.model.nx
+        xl, xh = state.lo.tolist(), state.hi.tolist()
+        u = u_k.tolist()
+        vl, vh = xl + self._wl, xh + self._wh
+        inconsistent = False
+        yl = y_k.tolist()
+        if any(v == v for v in yl):
+            y = _data(yl)
+            ok = sys.contract_lists(vl, vh, u, *y)
+            if ok and self._hf is not None and state.back:
+                ok = self._back(state, vl, vh, u, y)
+            if not ok:
+                inconsistent = True
+                vl, vh = xl + self._wl, xh + self._wh
+        f = sys._f
+        pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
+        prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+        # the library's data margin (module docstring), as rounding.outward computes it
+        m = [ROUNDING * (1.0 + max(abs(a), abs(b))) for a, b in zip(pl, ph)]
+        new = NonlinearIntervalState(  # fresh (faster than replace): the base sets k and scale
+            lo=np.array([a - e for a, e in zip(pl, m)]),
+            hi=np.array([b + e for b, e in zip(ph, m)]),
+            prev_lo=prev_lo,
+            prev_hi=prev_hi,
+            prev_u=u_k.copy(),
+            back=True,
+        )
+        return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
+
+
+def _data(y: list[float]) -> tuple[list[float], list[float]]:
+    """A measurement as the interval ``y ± ROUNDING (1 + |y|)`` (NaN stays NaN)."""
+    m = [ROUNDING * (1.0 + abs(v)) for v in y]
+    return [v - e for v, e in zip(y, m)], [v + e for v, e in zip(y, m)]

@@ -1,0 +1,246 @@
+"""SymPy expressions -> straight-line Python code over ``(lo, hi)`` float pairs, outward rounded.
+
+The generated source is ours: it is written from SymPy trees whose leaves are the model's
+symbols and exact numbers (read from a whitelisted AST, :mod:`.parse`), and calls only the
+operations of :mod:`._runtime`. It is compiled once per system. Identical subexpressions are
+computed once per function (the natural form, the Jacobian and the contractor share them).
+
+Numbers: an exact rational is enclosed by the floats around it (``0.1`` -> ``[fl(0.1),
+next(fl(0.1))]``), other constants (``pi``, ``sqrt(2)``) by the floats around a 60-digit value.
+"""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+from typing import Any
+
+from ...errors import IvobsError
+from ._runtime import NAMESPACE
+
+__all__ = ["Emitter", "compile_source", "enclose_constant"]
+
+Pair = tuple[str, str]
+
+
+def _lit(v: float) -> str:
+    if v == math.inf:
+        return "_PI"
+    if v == -math.inf:
+        return "_NI"
+    return repr(float(v))
+
+
+def _exact(p: Pair) -> bool:
+    """A pair of equal finite non-zero literals (a thin constant)."""
+    if p[0] != p[1] or p[0].startswith(("t", "x", "u", "w", "c", "d", "v", "_")):
+        return False
+    try:
+        v = float(p[0])
+    except ValueError:
+        return False
+    return math.isfinite(v) and v != 0.0
+
+
+def _enclose_fraction(q: Fraction) -> tuple[float, float]:
+    try:
+        f = float(q)  # correctly rounded
+    except OverflowError:
+        return (math.nextafter(math.inf, 0.0), math.inf) if q > 0 else (-math.inf, -1.7e308)
+    exact = Fraction(f) if math.isfinite(f) else None
+    if exact == q:
+        return f, f
+    if exact is not None and exact < q:
+        return f, math.nextafter(f, math.inf)
+    return math.nextafter(f, -math.inf), f
+
+
+def enclose_constant(expr: Any) -> tuple[float, float]:
+    """Floats ``lo <= expr <= hi`` for a constant SymPy expression."""
+    import sympy as sp
+
+    if expr.is_Rational:
+        return _enclose_fraction(Fraction(int(expr.p), int(expr.q)))
+    val = sp.N(expr, 60)
+    if not val.is_real or not val.is_finite:
+        raise IvobsError(f"constant {expr} is not a finite real number")
+    f = float(val)
+    return math.nextafter(f, -math.inf), math.nextafter(f, math.inf)
+
+
+def enclose_float(v: float) -> tuple[float, float]:
+    """The hull of a float and the decimal it prints as (a number a user typed: ``0.3`` is
+    both the double and 3/10)."""
+    dec = Fraction(repr(float(v)))
+    lo, hi = _enclose_fraction(dec)
+    return min(lo, v), max(hi, v)
+
+
+class Emitter:
+    """Writes the code of one function; ``env`` maps a symbol to its ``(lo, hi)`` variables or
+    literals; ``label`` names the expression being emitted (for domain errors)."""
+
+    def __init__(self, sites: list[str]):
+        import sympy as sp
+
+        self.sp = sp
+        self.lines: list[str] = []
+        self.sites = sites
+        self.label = ""
+        self._n = 0
+        self.cache: dict[Any, Pair] = {}
+        self.env: dict[Any, Pair] = {}
+
+    def new(self) -> Pair:
+        self._n += 1
+        return f"t{self._n}l", f"t{self._n}h"
+
+    def line(self, text: str) -> None:
+        self.lines.append("    " + text)
+
+    def site(self) -> int:
+        self.sites.append(self.label)
+        return len(self.sites) - 1
+
+    def scope(self, env: dict[Any, Pair]) -> None:
+        """Start emitting over another environment (a new cache)."""
+        self.env, self.cache = env, {}
+
+    def emit(self, expr: Any) -> Pair:
+        """Variables (or literals) holding an enclosure of ``expr``."""
+        if expr in self.cache:
+            return self.cache[expr]
+        out = self._emit(expr)
+        self.cache[expr] = out
+        return out
+
+    def assign(self, call: str) -> Pair:
+        lo, hi = self.new()
+        self.line(f"{lo}, {hi} = {call}")
+        return lo, hi
+
+    def _emit(self, e: Any) -> Pair:
+        sp = self.sp
+        if e.is_Symbol:
+            if e not in self.env:
+                raise IvobsError(f"{self.label}: symbol {e} has no value here (a bug)")
+            return self.env[e]
+        if not e.free_symbols:
+            c = enclose_constant(e)
+            return _lit(c[0]), _lit(c[1])
+        if e.is_Add:
+            return self._sum([self.emit(a) for a in e.args])
+        if e.is_Mul:
+            return self._product(e)
+        if e.is_Pow:
+            return self._pow(e.base, e.exp)
+        fn = type(e)
+        a = self.emit(e.args[0])
+        simple = {
+            sp.sin: "_sin",
+            sp.cos: "_cos",
+            sp.tan: "_tan",
+            sp.exp: "_exp",
+            sp.tanh: "_tanh",
+            sp.sinh: "_sinh",
+            sp.cosh: "_cosh",
+            sp.atan: "_atan",
+            sp.Abs: "_abs",
+            sp.sign: "_sign",
+            sp.Heaviside: "_heaviside",
+        }
+        if fn in simple:
+            return self.assign(f"{simple[fn]}({a[0]}, {a[1]})")
+        checked = {sp.log: "_log", sp.asin: "_asin", sp.acos: "_acos"}
+        if fn in checked:
+            return self.assign(f"{checked[fn]}({a[0]}, {a[1]}, {self.site()})")
+        if fn in (sp.Min, sp.Max):
+            parts = [a] + [self.emit(x) for x in e.args[1:]]
+            which = "_min" if fn is sp.Min else "_max"
+            lo, hi = self.new()
+            self.line(f"{lo} = {which}({', '.join(p[0] for p in parts)})")
+            self.line(f"{hi} = {which}({', '.join(p[1] for p in parts)})")
+            return lo, hi
+        raise IvobsError(
+            f"{self.label}: {fn.__name__} is not supported by the interval code generator"
+        )
+
+    def _sum(self, terms: list[Pair]) -> Pair:
+        acc = terms[0]
+        for t in terms[1:]:
+            lo, hi = self.new()
+            self.line(f"{lo} = _nx({acc[0]} + {t[0]}, _NI)")
+            self.line(f"{hi} = _nx({acc[1]} + {t[1]}, _PI)")
+            acc = (lo, hi)
+        return acc
+
+    def mul(self, a: Pair, b: Pair) -> Pair:
+        if a == ("1.0", "1.0"):
+            return b
+        if b == ("1.0", "1.0"):
+            return a
+        if a == ("-1.0", "-1.0") or b == ("-1.0", "-1.0"):
+            o = b if a == ("-1.0", "-1.0") else a
+            return self.assign(f"-{o[1]}, -{o[0]}")
+        c, o = (a, b) if _exact(a) else (b, a)
+        if _exact(c):  # a thin constant: its sign decides which bound is which
+            v = float(c[0])
+            lo, hi = (o[0], o[1]) if v > 0 else (o[1], o[0])
+            return self.assign(f"_nx({v!r} * {lo}, _NI), _nx({v!r} * {hi}, _PI)")
+        return self.assign(f"_mul({a[0]}, {a[1]}, {b[0]}, {b[1]})")
+
+    def _product(self, e: Any) -> Pair:
+        sp = self.sp
+        negate = False
+        num: list[Pair] = []
+        den: list[Any] = []
+        for f in e.args:
+            if f == sp.Integer(-1):
+                negate = not negate
+            elif f.is_Pow and f.exp.is_Integer and f.exp < 0:
+                den.append(sp.Pow(f.base, -f.exp))
+            else:
+                num.append(self.emit(f))
+        acc: Pair | None = None
+        for p in num:
+            acc = p if acc is None else self.mul(acc, p)
+        if den:
+            d = self.emit(sp.Mul(*den)) if len(den) > 1 else self.emit(den[0])
+            if acc is None:
+                acc = self.assign(f"_recip({d[0]}, {d[1]}, {self.site()})")
+            else:
+                acc = self.assign(f"_div({acc[0]}, {acc[1]}, {d[0]}, {d[1]}, {self.site()})")
+        assert acc is not None
+        if negate:
+            lo, hi = self.new()
+            self.line(f"{lo}, {hi} = -{acc[1]}, -{acc[0]}")
+            acc = (lo, hi)
+        return acc
+
+    def _pow(self, base: Any, ex: Any) -> Pair:
+        sp = self.sp
+        b = self.emit(base)
+        if ex.is_Integer:
+            n = int(ex)
+            if n == 2:
+                return self.assign(f"_sqr({b[0]}, {b[1]})")
+            if n == -1:
+                return self.assign(f"_recip({b[0]}, {b[1]}, {self.site()})")
+            return self.assign(f"_ipow({b[0]}, {b[1]}, {n}, {self.site()})")
+        if ex == sp.Rational(1, 2):
+            return self.assign(f"_sqrt({b[0]}, {b[1]}, {self.site()})")
+        if ex == sp.Rational(-1, 2):
+            s = self.assign(f"_sqrt({b[0]}, {b[1]}, {self.site()})")
+            return self.assign(f"_recip({s[0]}, {s[1]}, {self.site()})")
+        x = self.emit(ex)
+        return self.assign(f"_rpow({b[0]}, {b[1]}, {x[0]}, {x[1]}, {self.site()})")
+
+
+def compile_source(source: str, name: str, extra: dict[str, Any] | None = None) -> Any:
+    """Compile generated ``source`` defining function ``name`` with the runtime (and
+    ``extra``) as its only globals."""
+    namespace: dict[str, Any] = dict(NAMESPACE)
+    namespace.update(extra or {})
+    namespace["__builtins__"] = {}
+    exec(compile(source, f"<ivobs generated {name}>", "exec"), namespace)
+    return namespace[name]

@@ -1,0 +1,251 @@
+"""Generated forward-backward contractors for a constraint ``g(v, u) in [y]`` (HC4-revise,
+[Jaulin2001, Ch. 4]).
+
+Forward: the natural extension of ``g`` node by node (the same rounded operations as
+:mod:`.forms`). Backward: from the root, intersected with ``[y]``, each node's enclosure is
+projected onto its children through the inverse of its operation (``a + b = r`` gives
+``a in r - b``; ``a * b = r`` gives ``a in r / b`` where ``b`` excludes 0; ``a**2 = r`` gives
+``a in ±sqrt(r)``; ``exp``, ``log``, ``sqrt``, ``tanh``, ``sinh`` through their inverses), every
+bound rounded outward. Operations without a cheap inverse (``sin``, ``min``...) contract nothing
+below them, which is sound. An intersection that comes out empty proves that no ``v`` in the box
+satisfies the constraint: the function returns False (an inconsistent measurement).
+
+A generated contractor ``c(vl, vh, u, ylo, yhi) -> bool`` narrows the lists ``vl``, ``vh`` in
+place (``g in [ylo, yhi]``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ._runtime import ldn, lup
+from .codegen import Emitter, compile_source, enclose_constant
+
+__all__ = ["build_contractor"]
+
+
+def _proj_sqr(al: float, ah: float, rl: float, rh: float) -> tuple[float, float]:
+    """``a`` with ``a**2 in [rl, rh]`` (empty: lo > hi)."""
+    if rh < 0.0:
+        return 1.0, -1.0
+    s = math.nextafter(math.sqrt(rh), math.inf)
+    t = max(math.nextafter(math.sqrt(rl), -math.inf), 0.0) if rl > 0.0 else 0.0
+    if al > -t:
+        return max(al, t), min(ah, s)
+    if ah < t:
+        return max(al, -s), min(ah, -t)
+    return max(al, -s), min(ah, s)
+
+
+def _proj_sqrt(rl: float, rh: float) -> tuple[float, float]:
+    """``a`` with ``sqrt(a) in [rl, rh]``."""
+    if rh < 0.0:
+        return 1.0, -1.0
+    lo = math.nextafter(rl * rl, -math.inf) if rl > 0.0 else -math.inf
+    return lo, math.nextafter(rh * rh, math.inf)
+
+
+def _proj_exp(rl: float, rh: float) -> tuple[float, float]:
+    """``a`` with ``exp(a) in [rl, rh]``."""
+    if rh <= 0.0:
+        return 1.0, -1.0
+    lo = ldn(math.log(rl)) if rl > 0.0 else -math.inf
+    return lo, lup(math.log(rh)) if rh < math.inf else math.inf
+
+
+def _proj_tanh(rl: float, rh: float) -> tuple[float, float]:
+    if rh <= -1.0 or rl >= 1.0:
+        return 1.0, -1.0
+    lo = ldn(math.atanh(rl)) if rl > -1.0 else -math.inf
+    hi = lup(math.atanh(rh)) if rh < 1.0 else math.inf
+    return lo, hi
+
+
+def _proj_sinh(rl: float, rh: float) -> tuple[float, float]:
+    lo = ldn(math.asinh(rl)) if rl > -math.inf else -math.inf
+    hi = lup(math.asinh(rh)) if rh < math.inf else math.inf
+    return lo, hi
+
+
+def _excludes0(lo: float, hi: float) -> bool:
+    return lo > 0.0 or hi < 0.0
+
+
+EXTRA = {
+    "_proj_sqr": _proj_sqr,
+    "_proj_sqrt": _proj_sqrt,
+    "_proj_exp": _proj_exp,
+    "_proj_tanh": _proj_tanh,
+    "_proj_sinh": _proj_sinh,
+    "_x0": _excludes0,
+}
+
+
+class _Node:
+    __slots__ = ("args", "hi", "kind", "lo", "n")
+
+    def __init__(self, kind: str, lo: str, hi: str, args: list[_Node], n: int = 0):
+        self.kind, self.lo, self.hi, self.args, self.n = kind, lo, hi, args, n
+
+
+class _Builder:
+    """Forward code into ``em``, recording the nodes (emission order) for the backward pass."""
+
+    def __init__(self, em: Emitter, leaves: dict[Any, tuple[str, str]], consts: dict[Any, Any]):
+        import sympy as sp
+
+        self.sp, self.em = sp, em
+        self.leaves, self.consts = leaves, consts
+        self.nodes: list[_Node] = []
+        self.cache: dict[Any, _Node] = {}
+
+    def node(self, e: Any) -> _Node:
+        if e in self.cache:
+            return self.cache[e]
+        nd = self._node(e)
+        self.cache[e] = nd
+        return nd
+
+    def _new(self, kind: str, call: str, args: list[_Node], n: int = 0) -> _Node:
+        lo, hi = self.em.assign(call)
+        nd = _Node(kind, lo, hi, args, n)
+        self.nodes.append(nd)
+        return nd
+
+    def _binary(self, kind: str, parts: list[_Node]) -> _Node:
+        acc = parts[0]
+        for p in parts[1:]:
+            if kind == "add":
+                call = f"_nx({acc.lo} + {p.lo}, _NI), _nx({acc.hi} + {p.hi}, _PI)"
+            else:
+                call = f"_mul({acc.lo}, {acc.hi}, {p.lo}, {p.hi})"
+            acc = self._new(kind, call, [acc, p])
+        return acc
+
+    def _node(self, e: Any) -> _Node:
+        sp, em = self.sp, self.em
+        if e.is_Symbol and e in self.leaves:
+            lo, hi = self.leaves[e]
+            return _Node("leaf", lo, hi, [])
+        if e.is_Symbol and e in self.consts:
+            lo, hi = self.consts[e]
+            return _Node("const", lo, hi, [])
+        if not e.free_symbols:
+            lo, hi = (repr(v) for v in enclose_constant(e))
+            return _Node("const", lo, hi, [])
+        if e.is_Add:
+            return self._binary("add", [self.node(a) for a in e.args])
+        if e.is_Mul:
+            args = list(e.args)
+            if args[0] == -1:
+                a = self.node(sp.Mul(*args[1:]))
+                return self._new("neg", f"-{a.hi}, -{a.lo}", [a])
+            return self._binary("mul", [self.node(a) for a in args])
+        if e.is_Pow and e.exp.is_Integer and int(e.exp) == -1:
+            a = self.node(e.base)
+            return self._new("recip", f"_recip({a.lo}, {a.hi}, {em.site()})", [a])
+        if e.is_Pow and e.exp == 2:
+            a = self.node(e.base)
+            return self._new("sqr", f"_sqr({a.lo}, {a.hi})", [a])
+        if e.is_Pow and e.exp == sp.Rational(1, 2):
+            a = self.node(e.base)
+            return self._new("sqrt", f"_sqrt({a.lo}, {a.hi}, {em.site()})", [a])
+        fn = type(e)
+        if fn in (sp.exp, sp.log, sp.tanh, sp.sinh) and len(e.args) == 1:
+            a = self.node(e.args[0])
+            kind = fn.__name__
+            site = f", {em.site()}" if kind == "log" else ""
+            return self._new(kind, f"_{kind}({a.lo}, {a.hi}{site})", [a])
+        # anything else: its enclosure from the generic emitter, no projection below it
+        lo, hi = em.emit(e)
+        nd = _Node("opaque", lo, hi, [])
+        self.nodes.append(nd)
+        return nd
+
+
+def _narrow(em: Emitter, a: _Node, call: str) -> None:
+    """``a`` ∩ the pair ``call`` evaluates to; return False when empty."""
+    if a.kind == "const":
+        return
+    em.line(f"pl, ph = {call}")
+    em.line(f"{a.lo} = _max({a.lo}, pl); {a.hi} = _min({a.hi}, ph)")
+    em.line(f"if {a.lo} > {a.hi}: return False")
+
+
+def _backward(em: Emitter, nd: _Node) -> None:
+    r = nd
+    k = nd.kind
+    if k == "add":
+        a, b = nd.args
+        _narrow(em, a, f"_nx({r.lo} - {b.hi}, _NI), _nx({r.hi} - {b.lo}, _PI)")
+        _narrow(em, b, f"_nx({r.lo} - {a.hi}, _NI), _nx({r.hi} - {a.lo}, _PI)")
+    elif k == "mul":
+        a, b = nd.args
+        for x, o in ((a, b), (b, a)):
+            if x.kind == "const":
+                continue
+            em.line(f"if _x0({o.lo}, {o.hi}):")
+            em.lines.append("    " + f"    pl, ph = _div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
+            em.lines.append("    " + f"    {x.lo} = _max({x.lo}, pl); {x.hi} = _min({x.hi}, ph)")
+            em.lines.append("    " + f"    if {x.lo} > {x.hi}: return False")
+    elif k == "neg":
+        _narrow(em, nd.args[0], f"-{r.hi}, -{r.lo}")
+    elif k == "recip":
+        em.line(f"if _x0({r.lo}, {r.hi}):")
+        a = nd.args[0]
+        if a.kind != "const":
+            em.lines.append("    " + f"    pl, ph = _recip({r.lo}, {r.hi}, -1)")
+            em.lines.append("    " + f"    {a.lo} = _max({a.lo}, pl); {a.hi} = _min({a.hi}, ph)")
+            em.lines.append("    " + f"    if {a.lo} > {a.hi}: return False")
+        else:
+            em.lines.append("    " + "    pass")
+    elif k == "sqr":
+        a = nd.args[0]
+        _narrow(em, a, f"_proj_sqr({a.lo}, {a.hi}, {r.lo}, {r.hi})")
+    elif k in ("sqrt", "exp", "tanh", "sinh"):
+        _narrow(em, nd.args[0], f"_proj_{k}({r.lo}, {r.hi})")
+    elif k == "log":
+        _narrow(em, nd.args[0], f"_exp({r.lo}, {r.hi})")
+
+
+def build_contractor(
+    name: str, expr: Any, label: str, leaves: list[Any], inputs: list[Any], consts: dict[Any, Any]
+) -> tuple[Any, list[str]]:
+    """Compile ``name(vl, vh, u, ylo, yhi=None) -> bool`` contracting the boxes of ``leaves``
+    (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
+    ``inputs`` read from ``u`` (thin)."""
+    sites: list[str] = []
+    em = Emitter(sites)
+    em.label = label
+    em.lines.append(f"def {name}(vl, vh, u, ylo, yhi=None):")
+    em.line("if yhi is None: yhi = ylo")  # a thin measurement (the contract's call)
+    env: dict[Any, tuple[str, str]] = dict(consts)
+    lv: dict[Any, tuple[str, str]] = {}
+    for i, s in enumerate(leaves):
+        em.line(f"v{i}l = vl[{i}]; v{i}h = vh[{i}]")
+        env[s] = lv[s] = (f"v{i}l", f"v{i}h")
+    cin: dict[Any, tuple[str, str]] = dict(consts)
+    for i, s in enumerate(inputs):
+        em.line(f"u{i} = u[{i}]")
+        env[s] = cin[s] = (f"u{i}", f"u{i}")
+    em.scope(env)
+    b = _Builder(em, lv, cin)
+    root = b.node(expr)
+    if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
+        lo, hi = em.assign(f"{root.lo}, {root.hi}")
+        nd = _Node("ident", lo, hi, [root])
+        b.nodes.append(nd)
+        root = nd
+    em.line(f"{root.lo} = _max({root.lo}, ylo); {root.hi} = _min({root.hi}, yhi)")
+    em.line(f"if {root.lo} > {root.hi}: return False")
+    for nd in reversed(b.nodes):
+        if nd.kind == "ident":
+            _narrow(em, nd.args[0], f"{nd.lo}, {nd.hi}")
+        else:
+            _backward(em, nd)
+    for i in range(len(leaves)):
+        em.line(f"vl[{i}] = v{i}l; vh[{i}] = v{i}h")
+    em.line("return True")
+    source = "\n".join(em.lines) + "\n"
+    return compile_source(source, name, EXTRA), sites

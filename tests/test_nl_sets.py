@@ -1,0 +1,282 @@
+"""The set-based nonlinear methods: nl-zonotope and nl-constrained-zonotope.
+
+Soundness against simulators written here (tests/_nl_models.py: 200-bit mpmath, parameters
+and disturbances switching between the vertices of their bounds at every step), bounded widths
+over long runs, CORA's six-tank acceptance, state save/restore, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ivobs
+from _nl_models import (
+    cora_tank,
+    henon_system,
+    simulate_henon,
+    simulate_tank,
+    tank_system,
+)
+from ivobs.estimators import get
+
+METHODS = ["nl-zonotope", "nl-constrained-zonotope"]
+X0_HENON = ivobs.Box([0.2, 0.0], [0.4, 0.2])
+
+
+def _misses(X, lo, hi):
+    """Steps where the true state (rounded to float64: 1 ulp) leaves the box."""
+    tol = np.spacing(np.abs(X))
+    return np.flatnonzero(np.any((X < lo - tol) | (X > hi + tol), axis=1))
+
+
+def _run(method, sys, x0, U, Y, **opt):
+    est = ivobs.make_estimator(method, sys, x0=x0, **opt)
+    res = est.run(U, Y)
+    return res.lower, res.upper
+
+
+# -- registration ------------------------------------------------------------------------------
+@pytest.mark.parametrize("method", METHODS)
+def test_registered_flags(method):
+    cls = get(method)
+    assert cls.supports_nonlinear is True
+    assert cls.data_used == "filter"
+    assert cls.needs_x0 is True
+    assert method in ivobs.methods()
+
+
+# -- soundness -----------------------------------------------------------------------------------
+@pytest.mark.parametrize(("method", "T"), [("nl-zonotope", 3000), ("nl-constrained-zonotope", 600)])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_henon_sound_vertex_switching(method, T, seed):
+    X, Y = simulate_henon(T, seed)
+    lo, hi = _run(method, henon_system(), X0_HENON, np.zeros((T, 0)), Y)
+    assert _misses(X, lo, hi).size == 0
+    w = hi - lo
+    # x1 is measured to ±0.02: the box is never wider than the noise band, and x2 = 0.3 x1
+    assert w[10:, 0].max() <= 0.0400001
+    assert w[10:, 1].max() <= 0.3 * 0.0400001 + 0.011
+    assert w[10:, 1].mean() < 0.006
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_henon_sound_unmeasured_first_state(method):
+    """y = x2 + v: x1 is learned only through the dynamics (x2+ = 0.3 x1)."""
+    T = 1000
+    X, Y = simulate_henon(T, 3, out=1)
+    lo, hi = _run(method, henon_system(output="x2"), X0_HENON, np.zeros((T, 0)), Y)
+    assert _misses(X, lo, hi).size == 0
+    assert np.all(np.isfinite(hi - lo))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_tank_sound_vertex_switching(method):
+    T = 600 if method == "nl-zonotope" else 300
+    U = np.full((T, 3), 0.3)  # levels settle near 20-26: no tank runs dry
+    X, Y = simulate_tank(T, 5, U)
+    x0 = ivobs.Box(np.full(6, 16.0), np.full(6, 24.0))
+    lo, hi = _run(method, tank_system(), x0, U, Y)
+    assert _misses(X, lo, hi).size == 0
+    w = hi - lo
+    # vertex noise pins the measured tanks down, and through the cascade tanks 1 and 3
+    assert w[-1, :5].max() < 0.05
+    # tank 6 is seen by no output: its box only shrinks with its own slow outflow
+    assert w[-1, 5] < 0.6 * w[T // 6, 5] < 0.6 * 8.0
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_missing_samples_predict_soundly(method):
+    T = 400
+    X, Y = simulate_henon(T, 7)
+    Y = Y.copy()
+    Y[100:110] = np.nan
+    lo, hi = _run(method, henon_system(), X0_HENON, np.zeros((T, 0)), Y)
+    assert _misses(X, lo, hi).size == 0
+    w = hi - lo
+    assert w[109, 0] > w[99, 0]  # the gap widens the box ...
+    assert w[150:, 0].max() <= 0.0400001  # ... and the measurements pull it back
+
+
+# -- widths over a long run --------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("method", "T"), [("nl-zonotope", 10_000), ("nl-constrained-zonotope", 2000)]
+)
+def test_widths_bounded_long_run(method, T):
+    X, Y = simulate_henon(T, 11)
+    lo, hi = _run(method, henon_system(), X0_HENON, np.zeros((T, 0)), Y)
+    assert _misses(X, lo, hi).size == 0
+    w = (hi - lo).sum(axis=1)
+    early = w[T // 10 : T // 5].max()
+    late = w[-T // 10 :].max()
+    assert late <= early * 1.05  # no slow blow-up from wrapping
+    assert late < 0.06
+
+
+# -- CORA's six-tank acceptance ----------------------------------------------------------------
+CORA_FRAD_A = np.array([0.49, 0.49, 15.9, 0.63, 0.42, 7.54])
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_cora_tank_no_wider_than_frad_a(method):
+    """CORA's test_nonlinearSysDT_observe_01_tank: R0 = 20 ± 4, W = ±0.001, V = ±0.2, its u
+    and y; CORA's saved FRad-A box after the last measurement has widths
+    [0.49 0.49 15.9 0.63 0.42 7.54]. Both methods are no wider in any state."""
+    data = cora_tank()
+    x0 = ivobs.Box(data["R0_c"] - 4.0, data["R0_c"] + 4.0)
+    lo, hi = _run(method, tank_system(), x0, data["u"], data["y"])
+    w = hi[-1] - lo[-1]
+    cora = data["saved_hi"][0] - data["saved_lo"][0]
+    np.testing.assert_allclose(cora, CORA_FRAD_A, atol=0.03)
+    assert np.all(w <= cora), (w, cora)
+    # the measured tanks are pinned down far better than CORA's box, x3 by half
+    assert np.all(w[[0, 1, 3, 4]] <= 0.7 * cora[[0, 1, 3, 4]])
+    assert w[2] <= 0.55 * cora[2]
+    # the boxes are compatible with CORA's: they overlap
+    assert np.all(lo[-1] <= data["saved_hi"][0]) and np.all(data["saved_lo"][0] <= hi[-1])
+
+
+# -- state ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("method", METHODS)
+def test_state_save_restore_continues_bitwise(method):
+    T = 60
+    _, Y = simulate_henon(T, 2)
+    sys = henon_system()
+    ref = ivobs.make_estimator(method, sys, x0=X0_HENON)
+    boxes = [ref.step(None, Y[k]) for k in range(T)]
+    est = ivobs.make_estimator(method, sys, x0=X0_HENON)
+    for k in range(30):
+        est.step(None, Y[k])
+    saved = est.state()
+    other = ivobs.make_estimator(method, sys, x0=X0_HENON)
+    other.restore(saved)
+    for k in range(30, T):
+        b = other.step(None, Y[k])
+        np.testing.assert_array_equal(b.lo, boxes[k].lo)
+        np.testing.assert_array_equal(b.hi, boxes[k].hi)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_run_equals_step(method):
+    T = 50
+    _, Y = simulate_henon(T, 4)
+    est = ivobs.make_estimator(method, henon_system(), x0=X0_HENON)
+    res = est.run(np.zeros((T, 0)), Y)
+    for k in range(T):
+        b = est.step(None, Y[k])
+        np.testing.assert_array_equal(b.lo, res.lower[k])
+        np.testing.assert_array_equal(b.hi, res.upper[k])
+
+
+# -- faults and bad input --------------------------------------------------------------------
+@pytest.mark.parametrize("method", METHODS)
+def test_inconsistent_measurement_reported(method):
+    T = 40
+    X, Y = simulate_henon(T, 6)
+    Y = Y.copy()
+    Y[20, 0] = 5.0  # impossible: |x1| < 1.5
+    est = ivobs.make_estimator(method, henon_system(), x0=X0_HENON, on_inconsistent="ignore")
+    res = est.run(np.zeros((T, 0)), Y)
+    assert res.inconsistent[20] and res.inconsistent.sum() == 1
+    assert _misses(X, res.lower, res.upper).size == 0
+    assert np.all(res.lower <= res.upper)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_needs_x0(method):
+    with pytest.raises(ivobs.IvobsError, match="x0"):
+        ivobs.make_estimator(method, henon_system())
+
+
+def test_order_checked():
+    with pytest.raises(ivobs.IvobsError, match="order"):
+        ivobs.make_estimator("nl-zonotope", henon_system(), x0=X0_HENON, order=1)
+    with pytest.raises(ivobs.IvobsError, match="box_strips"):
+        ivobs.make_estimator("nl-zonotope", henon_system(), x0=X0_HENON, box_strips="yes")
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_linear_system_converted_and_sound(method):
+    """A LinearSystem is taken as the same model (NonlinearSystem.from_linear): sound on
+    vertex disturbances, and as tight as the linear strip filter within a few per cent."""
+    sc = ivobs.scenarios.get("servo-motor", horizon=150)
+    tr = sc.simulate("vertex", seed=1)
+    res = ivobs.make_estimator(method, sc.system, x0=sc.x0).run(tr.u, tr.y)
+    assert _misses(tr.x, res.lower, res.upper).size == 0
+    ref = ivobs.make_estimator("strip", sc.system, x0=sc.x0).run(tr.u, tr.y)
+    ratio = (res.upper - res.lower)[20:].mean() / (ref.upper - ref.lower)[20:].mean()
+    assert ratio < 1.05
+
+
+# -- the linearisation ------------------------------------------------------------------------
+def test_mean_value_form_encloses_every_point():
+    """linearise(): for random boxes (thin and wide) and random points of them, the exact
+    value (mpmath, 100 bits) is within g0 + J (ζ - c) ± ρ and within the natural ∩ centred ∩
+    monotone box."""
+    from mpmath import exp, mp, mpf, sin, sqrt
+
+    from ivobs.estimators._meanvalue import linearise
+
+    sys = ivobs.NonlinearSystem(
+        f=["sin(x1)*x2 + a*x1**2 + w1", "exp(-x2)*x1 + sqrt(x1 + 3)"],
+        h=["x1"],
+        states=["x1", "x2"],
+        params={"a": (0.9, 1.1)},
+        d={"w1": (-0.1, 0.1)},
+    )
+
+    def exact(z):
+        x1, x2, a, w1 = (mpf(float(v)) for v in z)
+        return [sin(x1) * x2 + a * x1**2 + w1, exp(-x2) * x1 + sqrt(x1 + 3)]
+
+    rng = np.random.default_rng(0)
+    u = np.zeros(0)
+    worst = 0.0
+    with mp.workprec(100):
+        for trial in range(300):
+            width = 10.0 ** rng.uniform(-12, 0.3)
+            c = np.array([rng.uniform(-1.5, 1.5), rng.uniform(-2, 2), 1.0, 0.0])
+            lo = c - width * rng.uniform(0, 1, 4)
+            hi = c + width * rng.uniform(0, 1, 4)
+            lo[2:], hi[2:] = np.maximum(lo[2:], [0.9, -0.1]), np.minimum(hi[2:], [1.1, 0.1])
+            lin = linearise(sys.f_box, sys.f_jac_box, lo, hi, rng.uniform(lo, hi), u, 2)
+            for _ in range(20):
+                z = rng.uniform(lo, hi)
+                if trial % 3 == 0:  # vertices
+                    z = np.where(rng.random(4) < 0.5, lo, hi)
+                g = exact(z)
+                for i in range(2):
+                    lin_part = sum(
+                        mpf(float(lin.J[i, j])) * (mpf(float(z[j])) - mpf(float(lin.c[j])))
+                        for j in range(4)
+                    )
+                    dev = abs(g[i] - mpf(float(lin.g0[i])) - lin_part)
+                    assert dev <= mpf(float(lin.rho[i])), (trial, i)
+                    assert mpf(float(lin.nat_lo[i])) <= g[i] <= mpf(float(lin.nat_hi[i]))
+                    worst = max(worst, float(dev / mpf(float(lin.rho[i]))) if lin.rho[i] else 0.0)
+    assert 0.01 < worst <= 1.0  # the remainder bound is not vacuous
+
+
+def test_box_strips_option_sound_and_tighter_on_henon():
+    T = 1500
+    X, Y = simulate_henon(T, 9)
+    u = np.zeros((T, 0))
+    lo, hi = _run("nl-zonotope", henon_system(), X0_HENON, u, Y, box_strips=True)
+    assert _misses(X, lo, hi).size == 0
+    lo0, hi0 = _run("nl-zonotope", henon_system(), X0_HENON, u, Y)
+    assert (hi - lo)[10:].mean() <= (hi0 - lo0)[10:].mean() * 1.001
+
+
+@pytest.mark.parametrize(("method", "T"), [("nl-zonotope", 2000), ("nl-constrained-zonotope", 300)])
+def test_float64_simulator_record_covered(method, T):
+    """A record simulated in float64 (each step rounded: not a trajectory of the exact model)
+    is covered by the data margin, as with the linear methods."""
+    rng = np.random.default_rng(21)
+    X, Y = np.empty((T, 2)), np.empty((T, 1))
+    x = np.array([0.3, 0.1])
+    for k in range(T):
+        X[k] = x
+        Y[k, 0] = x[0] + rng.choice([-0.02, 0.02])
+        a, w = rng.choice([1.39, 1.41]), rng.choice([-0.005, 0.005])
+        x = np.array([1 - a * x[0] ** 2 + x[1] + w, 0.3 * x[0]])
+    lo, hi = _run(method, henon_system(), X0_HENON, np.zeros((T, 0)), Y)
+    assert _misses(X, lo, hi).size == 0

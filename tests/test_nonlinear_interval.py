@@ -1,0 +1,217 @@
+"""``nl-interval`` on nonlinear systems: containment of the exact (40-digit) state at every step
+with parameters and signals switching between the vertices of their bounds, widths bounded over
+10^4 steps, the step back through h∘f (Hénon with y = x2), inconsistent and missing
+measurements, state save/restore, and the refusal of linear-only methods."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import mpmath as mp
+import numpy as np
+import pytest
+
+import ivobs
+from ivobs import nlmath
+from nlsystems import HENON_X0, henon, henon_mp, simulate, violations
+
+T = 10_000
+
+
+def _henon_record(output: str, T: int = T, seed: int = 1) -> tuple[list, np.ndarray]:
+    f, g = henon_mp(output)
+    return simulate(
+        f,
+        g,
+        [0.3, 0.1],
+        T,
+        params={"a": (1.39, 1.41)},
+        process={"w1": (-0.005, 0.005)},
+        noise=[(-0.02, 0.02)],
+        seed=seed,
+    )
+
+
+@pytest.mark.parametrize("output", ["x1", "x2"])
+def test_henon_contains_the_exact_state_for_10000_steps_with_bounded_widths(output: str) -> None:
+    X, Y = _henon_record(output)
+    res = ivobs.make_estimator("nl-interval", henon(output), x0=HENON_X0).run(None, Y)
+    assert violations(X, res.lower, res.upper) == []
+    w = res.upper - res.lower
+    late = w[T // 2 :].mean(axis=0)
+    if output == "x1":  # x1 measured to ±0.02; x2 = b x1 follows
+        assert w.max(axis=0) == pytest.approx([0.04, 0.2], abs=1e-9)  # the prior at k = 0
+        assert late[0] < 0.025 and late[1] < 0.005
+        assert w[100:].max() < 0.05
+    else:  # x1 only through y[k+1] = b x1[k]: the step back bounds it
+        assert late[0] < 0.15 and late[1] < 0.015
+        assert w[100:, 0].max() < 1.0
+    # no slow drift: the last thousand steps are no wider than the thousand after the start
+    assert w[-1000:].mean() <= 1.2 * w[1000:2000].mean()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # inf - inf in the base's overflow check
+def test_without_the_step_back_y_x2_leaves_x1_unbounded() -> None:
+    _, Y = _henon_record("x2", T=200)
+    est = ivobs.make_estimator("nl-interval", henon("x2"), x0=HENON_X0, lag=0)
+    with pytest.raises(ivobs.IvobsError, match="overflowed"):
+        est.run(None, Y)
+
+
+def test_pendulum_with_input_sine_and_uncertain_length_is_contained() -> None:
+    # x1 angle, x2 rate; Euler-discretised pendulum (the map itself is the model)
+    sys = ivobs.NonlinearSystem(
+        f=["x1 + 0.1*x2 + w1", "x2 - 0.1*(9.81/L)*sin(x1) - 0.02*x2 + 0.1*u1 + w2"],
+        h=["x1 + v1", "sin(x1) + 0.5*x2**2 + v2"],
+        states=["x1", "x2"],
+        inputs=["u1"],
+        params={"L": (0.95, 1.05)},
+        d={"w1": (-1e-3, 1e-3), "w2": (-1e-3, 1e-3), "v1": (-0.01, 0.01), "v2": (-0.05, 0.05)},
+    )
+    rng = np.random.default_rng(5)
+    U = rng.uniform(-2, 2, (T, 1))
+    a, g = mp.mpf("0.1"), mp.mpf("9.81")
+
+    def f(x, u, p, d):  # type: ignore[no-untyped-def]
+        return [
+            x[0] + a * x[1] + d["w1"],
+            x[1] - a * (g / p["L"]) * mp.sin(x[0]) - mp.mpf("0.02") * x[1] + a * u[0] + d["w2"],
+        ]
+
+    def h(x, u, p):  # type: ignore[no-untyped-def]
+        return [x[0], mp.sin(x[0]) + x[1] ** 2 / 2]
+
+    X, Y = simulate(
+        f,
+        h,
+        [0.5, 0.0],
+        T,
+        params={"L": (0.95, 1.05)},
+        process={"w1": (-1e-3, 1e-3), "w2": (-1e-3, 1e-3)},
+        noise=[(-0.01, 0.01), (-0.05, 0.05)],
+        u=U,
+        seed=2,
+    )
+    est = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box([0.3, -0.5], [0.7, 0.5]))
+    res = est.run(U, Y)
+    assert violations(X, res.lower, res.upper) == []
+    w = res.upper - res.lower
+    assert w[-5000:, 0].mean() < 0.021 and w[-5000:, 1].mean() < 0.5
+    assert w[-1000:].mean() <= 1.2 * w[1000:2000].mean()
+
+
+def test_a_callable_model_gives_the_same_bounds_as_its_expressions() -> None:
+    def f(x, u, p, d):  # type: ignore[no-untyped-def]
+        return [1 - p["a"] * x[0] ** 2 + x[1] + d["w1"], p["b"] * x[0]]
+
+    def h(x, u, p, d):  # type: ignore[no-untyped-def]
+        return [x[0] + d["v1"] + 0 * nlmath.sin(x[1])]
+
+    made = ivobs.NonlinearSystem(
+        f=f,
+        h=h,
+        states=["x1", "x2"],
+        params={"a": (1.39, 1.41), "b": 0.3},
+        d={"w1": (-0.005, 0.005), "v1": (-0.02, 0.02)},
+    )
+    _, Y = _henon_record("x1", T=500)
+    a = ivobs.make_estimator("nl-interval", made, x0=HENON_X0).run(None, Y)
+    b = ivobs.make_estimator("nl-interval", henon("x1"), x0=HENON_X0).run(None, Y)
+    # the callable's 0.3 is the double; the text's 0.3 is 3/10: both enclosed by the same floats
+    np.testing.assert_array_equal(a.lower, b.lower)
+    np.testing.assert_array_equal(a.upper, b.upper)
+
+
+def test_an_inconsistent_measurement_is_reported_and_not_used() -> None:
+    X, Y = _henon_record("x1", T=300)
+    Y = Y.copy()
+    Y[150, 0] = 5.0  # no state in the predicted box can give this
+    est = ivobs.make_estimator("nl-interval", henon("x1"), x0=HENON_X0)
+    with pytest.warns(UserWarning, match=r"step\(s\) \[150\]"):
+        res = est.run(None, Y)
+    assert res.inconsistent[150] and res.inconsistent.sum() == 1
+    assert np.all(res.lower <= res.upper) and np.isfinite(res.upper).all()
+    assert violations(X, res.lower, res.upper) == []
+    w = res.upper - res.lower
+    assert w[150, 0] > w[149, 0]  # the prediction, not corrected
+    with pytest.raises(ivobs.InconsistentDataError):
+        ivobs.make_estimator("nl-interval", henon("x1"), x0=HENON_X0, on_inconsistent="raise").run(
+            None, Y
+        )
+
+
+def test_missing_samples_predict_and_stay_sound() -> None:
+    X, Y = _henon_record("x2", T=2000)
+    Y = Y.copy()
+    Y[100:103] = np.nan
+    Y[500::7] = np.nan
+    res = ivobs.make_estimator("nl-interval", henon("x2"), x0=HENON_X0).run(None, Y)
+    assert violations(X, res.lower, res.upper) == []
+    assert (res.upper - res.lower)[-500:].max() < 1.5
+
+
+def test_step_matches_run_and_a_restored_state_continues_identically() -> None:
+    _, Y = _henon_record("x2", T=60)
+    sys = henon("x2")
+    ref = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0).run(None, Y)
+    est = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0)
+    boxes = [est.step(None, Y[k]) for k in range(25)]
+    saved = json.loads(json.dumps(est.state()))
+    other = ivobs.make_estimator("nl-interval", henon("x2"), x0=HENON_X0)
+    other.restore(saved)
+    boxes += [other.step(None, Y[k]) for k in range(25, 60)]
+    np.testing.assert_array_equal(np.array([b.lo for b in boxes]), ref.lower)
+    np.testing.assert_array_equal(np.array([b.hi for b in boxes]), ref.upper)
+    with pytest.raises(ivobs.IvobsError, match="fingerprint|another"):  # another model
+        ivobs.make_estimator("nl-interval", henon("x1"), x0=HENON_X0).restore(saved)
+    saved["state"]["lo"]["array"][0] = 9.0  # lo > hi
+    with pytest.raises(ivobs.IvobsError, match="lower <= upper"):
+        other.restore(saved)
+
+
+def test_linear_only_methods_refuse_a_nonlinear_system_naming_those_that_take_it() -> None:
+    sys = henon("x1")
+    for name in ivobs.methods():
+        if ivobs.estimators.get(name).supports_nonlinear:
+            continue
+        with pytest.raises(
+            ivobs.IvobsError, match="Methods for nonlinear systems: .*'nl-interval'"
+        ):
+            ivobs.make_estimator(name, sys, x0=HENON_X0)
+
+
+def test_bad_options_are_refused() -> None:
+    with pytest.raises(ivobs.IvobsError, match="lag: expected 0 or 1"):
+        ivobs.make_estimator("nl-interval", henon(), x0=HENON_X0, lag=3)
+    with pytest.raises(ivobs.IvobsError, match="x0: the nl-interval method needs"):
+        ivobs.make_estimator("nl-interval", henon())
+    with pytest.raises(ivobs.IvobsError, match="x0: expected a constant Box of dimension 2"):
+        ivobs.make_estimator("nl-interval", henon(), x0=ivobs.Box([0], [1]))
+    est = ivobs.make_estimator("nl-interval", henon(), x0=HENON_X0)
+    with pytest.raises(ivobs.IvobsError, match="y_k: expected 1"):
+        est.step(None, [1.0, 2.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        box = est.step(None, None)  # a missing sample: the prior box
+    np.testing.assert_array_equal(box.lo, HENON_X0.lo)
+
+
+def test_a_double_precision_simulator_is_covered_by_the_data_margin() -> None:
+    """A float64 run of the map is not a model trajectory (each step rounds), and its
+    measurements sit on the noise vertices to within an ulp: the library's data margin on y
+    and on the prediction covers that, as the linear methods' margin does."""
+    rng = np.random.default_rng(11)
+    for out in ("x1", "x2"):
+        x, X, Y = np.array([0.3, 0.1]), [], []
+        for _ in range(5000):
+            a, w, v = (
+                rng.choice([1.39, 1.41]),
+                rng.choice([-0.005, 0.005]),
+                rng.choice([-0.02, 0.02]),
+            )
+            X.append(x.copy())
+            Y.append([x[0 if out == "x1" else 1] + v])
+            x = np.array([1 - a * x[0] ** 2 + x[1] + w, 0.3 * x[0]])
+        res = ivobs.make_estimator("nl-interval", henon(out), x0=HENON_X0).run(None, np.array(Y))
+        assert res.contains(np.array(X)).all()
