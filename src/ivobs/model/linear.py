@@ -89,6 +89,8 @@ class LinearSystem(IntervalMatrices):
         when ``d`` is.
     dt : ``True`` or a sampling period ``> 0`` for discrete time, ``0`` for continuous time.
 
+    Notes
+    -----
     **Interval matrices** (:mod:`ivobs.model.uncertain`, docs/uncertain.md): a :class:`~ivobs.Box`
     in the place of ``A``, ``B``, ``C`` or ``D`` (in any other place a Box with 2-D bounds is a
     time-varying box of vectors; here it is a box of matrices) makes the system *uncertain*
