@@ -134,3 +134,18 @@ def test_statespace_where_a_system_is_expected():
         ivobs.LinearSystem(ss)
     est = ivobs.make_estimator("exact", ss, x0=ivobs.Box([-1, -1], [1, 1]), progress=False)
     assert est.sys.nu == 2 and est.sys.names.states == ("pos", "vel")
+
+
+def test_plot_takes_a_trajectory_and_read_log_a_system_file(servo, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    sc, tr, est = servo
+    fig = est.plot(truth=tr)  # a Trajectory as the truth, as to_pandas takes it
+    assert len(fig.axes) == 3
+    ivobs.save_system(tmp_path / "s.toml", sc)
+    write_log(tmp_path / "log.csv", tr.u, tr.y)
+    spec = ivobs.load_system(tmp_path / "s.toml")
+    np.testing.assert_array_equal(read_log(tmp_path / "log.csv", spec).y, tr.y)
+    with pytest.raises(IvobsError, match="system: expected an ivobs system"):
+        read_log(tmp_path / "log.csv", "servo")
