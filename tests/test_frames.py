@@ -149,3 +149,17 @@ def test_plot_takes_a_trajectory_and_read_log_a_system_file(servo, tmp_path):
     np.testing.assert_array_equal(read_log(tmp_path / "log.csv", spec).y, tr.y)
     with pytest.raises(IvobsError, match="system: expected an ivobs system"):
         read_log(tmp_path / "log.csv", "servo")
+
+
+def test_notebook_html_of_systems_and_sets():
+    sc = ivobs.scenarios.get("servo-motor")
+    page = sc.system._repr_html_()
+    assert "3 / 1 / 2 / 5" in page and "[-0.0225, -0.0225, -0.0404" in page
+    box = sc.x0._repr_html_()
+    assert "<th style='text-align:left'>width</th><td>[0.4, 0.4, 0.4]</td>" in box
+    nl = ivobs.NonlinearSystem(
+        f=["1 - a*x1**2 + x2 + w1", "0.3*x1"], h=["x1 + v1"], states=["x1", "x2"],
+        params={"a": (1.39, 1.41)}, d={"w1": (-0.005, 0.005), "v1": (-0.02, 0.02)},
+    )  # fmt: skip
+    page = nl._repr_html_()
+    assert "x1⁺ =" in page and "a, w1, v1" in page and "&lt;" not in page
