@@ -411,18 +411,18 @@ class LinearSystem(IntervalMatrices):
 
     def to_statespace(self) -> Any:
         """A ``control.StateSpace`` with inputs ``[u; d]`` (needs python-control)."""
+        self._require_lti("to_statespace")  # what the model is, before what is installed
+        if self.is_uncertain:
+            raise IvobsError(
+                "to_statespace: the system has interval matrices; python-control has no such "
+                "model. Use sys.nominal().to_statespace() for the nominal (midpoint) system"
+            )
         try:
             import control
         except ImportError:
             raise IvobsError(
                 "to_statespace: python-control is not installed; pip install 'ivobs[control]'"
             ) from None
-        self._require_lti("to_statespace")
-        if self.is_uncertain:
-            raise IvobsError(
-                "to_statespace: the system has interval matrices; python-control has no such "
-                "model. Use sys.nominal().to_statespace() for the nominal (midpoint) system"
-            )
         return control.ss(
             self.A, np.hstack([self.B, self.E]), self.C, np.hstack([self.D, self.F]), self.dt
         )
