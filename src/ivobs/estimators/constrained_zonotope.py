@@ -69,12 +69,11 @@ from ..sets.czonotope import (
     Certificates,
     box_generators,
     certified_empty,
-    consolidate_small,
     eliminate_constraints,
     gamma,
     hull_certificates,
     independent_constraints,
-    reduce_generators,
+    reduce_consolidated,
     safe_radius,
 )
 from . import _uncertain as uncertain
@@ -108,6 +107,8 @@ set (a few per step) until the generator limit. Larger thresholds cost tightness
 state is pinned down by more outputs than disturbances (``kkl-random8``: ``1e-11`` and
 ``1e-9`` widen its boxes from ``1e-8`` to ``2e-3``); on other sets these generators are
 negligible either way."""
+TOLS = (CONSOLIDATE_X, CONSOLIDATE_C)
+"""Both, for :func:`~ivobs.sets.czonotope.reduce_consolidated`."""
 
 
 def _inflate(center: np.ndarray, radius: np.ndarray) -> np.ndarray:
@@ -492,9 +493,4 @@ class ConstrainedZonotopeEstimator(Estimator):
             shift, G, A, b = out
             e = gamma(2) * (np.abs(c) + np.abs(shift))
             c = c + shift
-        tol_x = CONSOLIDATE_X * (1.0 + float(np.abs(c).max(initial=0.0)))
-        tol_c = CONSOLIDATE_C * float(np.abs(A).max(initial=0.0))
-        c, G, A, b = reduce_generators(
-            *consolidate_small(c, G, A, b, tol_x, tol_c), self.design.max_generators
-        )
-        return c, G, A, b, e
+        return (*reduce_consolidated(c, G, A, b, self.design.max_generators, TOLS), e)

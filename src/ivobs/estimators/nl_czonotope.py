@@ -59,17 +59,16 @@ from ..sets import Box
 from ..sets.czonotope import (
     UNIT_ROUNDOFF,
     box_generators,
-    consolidate_small,
     eliminate_constraints,
     gamma,
     hull_certificates,
-    reduce_generators,
+    reduce_consolidated,
     safe_radius,
 )
 from . import register
 from ._meanvalue import Linearisation, contract_back, linearise
 from .base import ROUNDING, Design, Estimator, check_size
-from .constrained_zonotope import CONSOLIDATE_C, CONSOLIDATE_X, INFLATE, default_limits
+from .constrained_zonotope import INFLATE, TOLS, default_limits
 from .state import OnlineState, Step
 
 __all__ = [
@@ -391,9 +390,4 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
             shift, G, A, b = out
             e = gamma(2) * (np.abs(c) + np.abs(shift))
             c = c + shift
-        tol_x = CONSOLIDATE_X * (1.0 + float(np.abs(c).max(initial=0.0)))
-        tol_c = CONSOLIDATE_C * float(np.abs(A).max(initial=0.0))
-        c, G, A, b = reduce_generators(
-            *consolidate_small(c, G, A, b, tol_x, tol_c), self.design.max_generators
-        )
-        return c, G, A, b, e
+        return (*reduce_consolidated(c, G, A, b, self.design.max_generators, TOLS), e)

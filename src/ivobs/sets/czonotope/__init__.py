@@ -53,7 +53,7 @@ from .hull import (
     hull_certificates,
     radius_certificate,
 )
-from .reduction import consolidate_small, reduce_generators
+from .reduction import consolidate_small, reduce_consolidated, reduce_generators
 
 __all__ = [
     "EMPTY_TOL",
@@ -72,6 +72,7 @@ __all__ = [
     "hull_certificates",
     "independent_constraints",
     "radius_certificate",
+    "reduce_consolidated",
     "reduce_generators",
     "safe_radius",
 ]

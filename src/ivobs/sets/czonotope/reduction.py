@@ -210,3 +210,24 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
     v = (aX @ rho) * (1.0 + gamma(n + 1))
     tau: np.ndarray = (v + theta / (1.0 - theta) * float(v.max())) * (1.0 + gamma(4))
     return tau, mu
+
+
+def reduce_consolidated(
+    c: np.ndarray,
+    G: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    max_generators: int,
+    tols: tuple[float, float],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`consolidate_small` with tolerances relative to the set (``tols = (tx, tc)``:
+    ``tx (1 + max |c|)`` for generators, ``tc max |A|`` for constraint entries), then
+    :func:`reduce_generators` to at most ``max_generators``: the last stage of every prediction
+    of the constrained-zonotope filters (linear and nonlinear)."""
+    tol_x = tols[0] * (1.0 + float(np.abs(c).max(initial=0.0)))
+    tol_c = tols[1] * float(np.abs(A).max(initial=0.0))
+    c, G, A, b = consolidate_small(c, G, A, b, tol_x, tol_c)
+    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = reduce_generators(
+        c, G, A, b, max_generators
+    )
+    return out
