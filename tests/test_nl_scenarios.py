@@ -126,3 +126,26 @@ def test_widths_stay_bounded_over_long_runs(name: str) -> None:
     early, late = w[200:1000].mean(axis=0), w[-800:].mean(axis=0)
     assert np.isfinite(w).all()
     assert np.all(late <= 1.2 * early + 1e-3)
+
+
+def test_compare_runs_the_nonlinear_methods_and_refuses_the_linear_ones() -> None:
+    from ivobs.report.comparison import compare, markdown_table
+
+    sc = ivobs.scenarios.get("henon-nl", horizon=60)
+    _, results = compare(sc, ["nl-interval", "zonotope", "nl-zonotope"], disturbance="vertex")
+    by = {r.method: r for r in results}
+    assert by["nl-interval"].contains and by["nl-zonotope"].contains
+    assert by["zonotope"].error is not None and "nl-interval" in by["zonotope"].error
+    assert by["nl-interval"].mean_width is not None
+    assert np.all(by["nl-interval"].mean_width < 0.05)
+    assert "for linear systems" in markdown_table(results)
+
+
+def test_simulate_nonlinear_checks_its_arguments() -> None:
+    sys = ivobs.scenarios.get("henon-nl").system
+    with pytest.raises(ivobs.IvobsError, match="p: the value at step 0"):
+        ivobs.simulate_nonlinear(sys, [0.3, 0.1], p=np.full((5, 1), 2.0))
+    with pytest.raises(ivobs.IvobsError, match="simulate_nonlinear"):
+        ivobs.simulate(sys, [0.3, 0.1], T=5)
+    with pytest.raises(ivobs.IvobsError, match="x0"):
+        ivobs.simulate_nonlinear(sys, [0.3], T=5)
