@@ -149,3 +149,20 @@ def test_simulate_nonlinear_checks_its_arguments() -> None:
         ivobs.simulate(sys, [0.3, 0.1], T=5)
     with pytest.raises(ivobs.IvobsError, match="x0"):
         ivobs.simulate_nonlinear(sys, [0.3], T=5)
+
+
+def test_inner_hull_lies_inside_every_method_and_is_not_a_point() -> None:
+    from ivobs.report.inner import inner_hull
+
+    k = 6
+    sc = ivobs.scenarios.get("pendulum-nl", horizon=k + 1)
+    tr = sc.simulate("paper", 0)
+    lo, hi, n = inner_hull(sc.system, sc.x0, tr.u, tr.y, k, truth=tr, starts=1)
+    assert n >= 2 and np.all(lo <= tr.x[k]) and np.all(tr.x[k] <= hi)
+    assert np.all(hi - lo > 1e-4)  # the optimiser moved away from the truth
+    for m in NL_METHODS:
+        res = ivobs.make_estimator(m, sc.system, x0=sc.x0).run(tr.u, tr.y)
+        assert np.all(res.lower[k] <= lo + 1e-6) and np.all(hi - 1e-6 <= res.upper[k])
+        assert np.all(res.upper[k] - res.lower[k] < 3.0 * (hi - lo))
+    with pytest.raises(ivobs.IvobsError, match="NonlinearSystem"):
+        inner_hull(ivobs.scenarios.get("dinh2019").system, sc.x0, tr.u, tr.y, k)
