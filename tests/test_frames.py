@@ -134,3 +134,32 @@ def test_statespace_where_a_system_is_expected():
         ivobs.LinearSystem(ss)
     est = ivobs.make_estimator("exact", ss, x0=ivobs.Box([-1, -1], [1, 1]), progress=False)
     assert est.sys.nu == 2 and est.sys.names.states == ("pos", "vel")
+
+
+def test_plot_takes_a_trajectory_and_read_log_a_system_file(servo, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    sc, tr, est = servo
+    fig = est.plot(truth=tr)  # a Trajectory as the truth, as to_pandas takes it
+    assert len(fig.axes) == 3
+    ivobs.save_system(tmp_path / "s.toml", sc)
+    write_log(tmp_path / "log.csv", tr.u, tr.y)
+    spec = ivobs.load_system(tmp_path / "s.toml")
+    np.testing.assert_array_equal(read_log(tmp_path / "log.csv", spec).y, tr.y)
+    with pytest.raises(IvobsError, match="system: expected an ivobs system"):
+        read_log(tmp_path / "log.csv", "servo")
+
+
+def test_notebook_html_of_systems_and_sets():
+    sc = ivobs.scenarios.get("servo-motor")
+    page = sc.system._repr_html_()
+    assert "3 / 1 / 2 / 5" in page and "[-0.0225, -0.0225, -0.0404" in page
+    box = sc.x0._repr_html_()
+    assert "<th style='text-align:left'>width</th><td>[0.4, 0.4, 0.4]</td>" in box
+    nl = ivobs.NonlinearSystem(
+        f=["1 - a*x1**2 + x2 + w1", "0.3*x1"], h=["x1 + v1"], states=["x1", "x2"],
+        params={"a": (1.39, 1.41)}, d={"w1": (-0.005, 0.005), "v1": (-0.02, 0.02)},
+    )  # fmt: skip
+    page = nl._repr_html_()
+    assert "x1⁺ =" in page and "a, w1, v1" in page and "&lt;" not in page

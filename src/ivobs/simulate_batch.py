@@ -58,6 +58,8 @@ def simulate_batch(
     T : number of steps when neither ``u`` nor ``d`` gives it.
     check_bounds : raise :class:`IvobsError` if ``d`` leaves the system's bounds.
 
+    Notes
+    -----
     Returns a :class:`~ivobs.Trajectory` whose ``x, y, u, d`` are ``(B, T, ·)`` (a batch that
     :meth:`~ivobs.Estimator.run` takes as is).
     """

@@ -57,6 +57,7 @@ __all__ = [
     "Design",
     "Estimator",
     "check_size",
+    "check_system",
     "check_x0",
     "nonlinear_refusal",
 ]
@@ -163,6 +164,32 @@ def _arrays(state: OnlineState) -> list[np.ndarray]:
     return out
 
 
+def check_system(method: Any, sys: Any) -> None:
+    """Refuse a model the method ``method`` (a class or instance with the ``supports_*``
+    flags) cannot handle, with the reason and what can."""
+    name = method.name
+    if isinstance(sys, NonlinearSystem):
+        if not method.supports_nonlinear:
+            raise IvobsError(nonlinear_refusal(name))
+    elif not isinstance(sys, LinearSystem):
+        raise IvobsError(
+            "sys: expected an ivobs.LinearSystem or ivobs.NonlinearSystem, got "
+            f"{type(sys).__name__}"
+        )
+    if sys.is_continuous and not method.supports_continuous:
+        raise IvobsError(
+            f"sys: the {name} method is for discrete-time systems; this one is "
+            "continuous-time (dt=0). Use 'kkl', or sys.discretize(Ts)"
+        )
+    if sys.is_time_varying and not method.supports_time_varying:
+        raise IvobsError(
+            f"sys: the {name} method needs a time-invariant system; this one has "
+            "time-varying matrices. Use 'fixed-time', 'kkl' or 'exact'"
+        )
+    if getattr(sys, "is_uncertain", False) and not method.supports_uncertain:
+        raise IvobsError(_refusal(name, sys))
+
+
 class Estimator(Persistence):
     """Base class of all guaranteed estimators (see the module docstring for the contract)."""
 
@@ -189,26 +216,7 @@ class Estimator(Persistence):
     ``s_k`` is then in ``state.scale`` when ``_step`` runs."""
 
     def __init__(self, sys: Any, x0: Box | None = None, *, on_inconsistent: str = "warn"):
-        if isinstance(sys, NonlinearSystem):
-            if not self.supports_nonlinear:
-                raise IvobsError(nonlinear_refusal(self.name))
-        elif not isinstance(sys, LinearSystem):
-            raise IvobsError(
-                "sys: expected an ivobs.LinearSystem or ivobs.NonlinearSystem, got "
-                f"{type(sys).__name__}"
-            )
-        if sys.is_continuous and not self.supports_continuous:
-            raise IvobsError(
-                f"sys: the {self.name} method is for discrete-time systems; this one is "
-                "continuous-time (dt=0). Use 'kkl', or sys.discretize(Ts)"
-            )
-        if sys.is_time_varying and not self.supports_time_varying:
-            raise IvobsError(
-                f"sys: the {self.name} method needs a time-invariant system; this one has "
-                "time-varying matrices. Use 'fixed-time', 'kkl' or 'exact'"
-            )
-        if getattr(sys, "is_uncertain", False) and not self.supports_uncertain:
-            raise IvobsError(_refusal(self.name, sys))
+        check_system(self, sys)
         if on_inconsistent not in ("warn", "raise", "ignore"):
             raise IvobsError(
                 f"on_inconsistent: expected 'warn', 'raise' or 'ignore', got {on_inconsistent!r}"

@@ -292,6 +292,8 @@ class ConstrainedZonotopeEstimator(Estimator):
         How the factor to eliminate is chosen: the least loss of the LP-certified box bounds
         (see the module docstring), or the paper's smallest Hausdorff-error estimate.
 
+    Notes
+    -----
     **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the plant is the nominal
     one plus ``w = ΔA x + ΔB u`` in the state and ``v = ΔC x + ΔD u`` in the output. Each
     measured row's slack ``ρ_i`` grows by ``v̄_i >= |v_i|`` (from the predicted set's box), and

@@ -97,6 +97,8 @@ class Intersect(Estimator):
     strip : also intersect with the measurement strip of the rows of ``C`` that pin a state
     on_inconsistent : 'warn', 'raise' or 'ignore' (empty intersection, or a member's report)
 
+    Notes
+    -----
     ``valid_from`` is the earliest member's; before a member's own ``valid_from`` it is ignored.
 
     **Interval matrices** (docs/uncertain.md): sound as its members are; the default members

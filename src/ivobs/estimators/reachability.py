@@ -89,7 +89,7 @@ class Reachability(ObserverEstimator):
 
     Its error ``e = x - x̂`` obeys ``e+ = M e + G δ``, ``M = A - L C``, ``|δ| <= r``, so
     [Tang2019, eqs. (21)-(26), Algorithm 1] ``x[k] ∈ x̂[k] ± ρ[k]`` with the exact interval hull
-    of the reachable set
+    of the reachable set::
 
         ρ[k] = |M^k| h0 + Σ_{i<k} |M^i G| r[k-1-i],        h0 = radius(x0)   (H0 = diag h0)
 

@@ -226,6 +226,8 @@ class StripEstimator(Estimator):
     weight : (nx, nx) array, optional
         Positive definite weight of the box reduction (which generators are kept).
 
+    Notes
+    -----
     **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the plant is the nominal
     one plus ``w = ΔA x + ΔB u`` in the state and ``v = ΔC x + ΔD u`` in the output. Each strip
     is that of the nominal row widened by ``v̄_i >= |v_i|`` (bounded from the predicted box of

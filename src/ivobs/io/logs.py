@@ -245,6 +245,9 @@ def read_log(path: str | os.PathLike[str], system: SystemModel) -> Log:
     a wrong number of fields, text where a number belongs, a missing input, a step or time that
     does not increase.
     """
+    system = getattr(system, "system", system)  # a loaded system file: its model
+    if not hasattr(system, "nu"):
+        raise IvobsError(f"system: expected an ivobs system, got {type(system).__name__}")
     path = Path(path)
     if path.is_dir():
         raise IvobsError(f"log file {str(path)!r} is a directory; expected a CSV file")

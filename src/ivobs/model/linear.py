@@ -89,6 +89,8 @@ class LinearSystem(IntervalMatrices):
         when ``d`` is.
     dt : ``True`` or a sampling period ``> 0`` for discrete time, ``0`` for continuous time.
 
+    Notes
+    -----
     **Interval matrices** (:mod:`ivobs.model.uncertain`, docs/uncertain.md): a :class:`~ivobs.Box`
     in the place of ``A``, ``B``, ``C`` or ``D`` (in any other place a Box with 2-D bounds is a
     time-varying box of vectors; here it is a box of matrices) makes the system *uncertain*
@@ -455,6 +457,26 @@ class LinearSystem(IntervalMatrices):
             d=self._d,
             dt=float(Ts),
         )
+
+    def _repr_html_(self) -> str:
+        """Jupyter: dimensions, time base, the disturbance bounds and the signal names."""
+        from .._html import summary_html, vector
+
+        d = self.d
+        if isinstance(d, Box) and not d.is_time_varying:
+            bounds = f"{vector(d.lo)} … {vector(d.hi)}"
+        else:
+            bounds = "none" if d is None else "per step"
+        kind = "time-varying" if self.is_time_varying else "constant"
+        rows = [
+            ("states / inputs / outputs / d", f"{self.nx} / {self.nu} / {self.ny} / {self.nd}"),
+            ("time", "continuous" if self.is_continuous else f"discrete, dt = {self.dt}"),
+            ("matrices", "interval" if self.is_uncertain else kind),
+            ("d bounds", bounds),
+        ]
+        if self.names.states:
+            rows.append(("states", ", ".join(self.names.state_labels() or ())))
+        return summary_html("ivobs LinearSystem", rows)
 
     def __repr__(self) -> str:
         kind = "continuous" if self.is_continuous else "discrete"

@@ -40,6 +40,8 @@ class Monitor:
         before the alarm clears (see :mod:`ivobs.monitor`).
     **options : the method's design options (an explicit gain ``L``, ...).
 
+    Notes
+    -----
     The monitor takes over the estimator's reports of inconsistent measurements: they become
     alarms instead of warnings. It keeps the estimator's online state itself
     (:attr:`estimator_state`); the estimator's own ``step()`` state is left alone.

@@ -62,7 +62,8 @@ def plot_estimates(
         axes = np.atleast_1d(axes)
         fig = axes[0].figure
     fill = len(estimates) == 1 if fill is None else fill
-    x = None if truth is None else np.asarray(truth, dtype=float)
+    # the true states: an array, or a Trajectory (its x)
+    x = None if truth is None else np.asarray(getattr(truth, "x", truth), dtype=float)
     if relative and x is None:
         raise IvobsError("plot_estimates: relative=True needs the truth")
     shift = x if relative else 0.0

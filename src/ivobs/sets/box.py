@@ -279,6 +279,21 @@ class Box:
 
     __hash__ = None  # type: ignore[assignment]
 
+    def _repr_html_(self) -> str:
+        """Jupyter: the bounds and widths."""
+        from .._html import summary_html, vector
+
+        if self.is_time_varying:
+            return summary_html(
+                "ivobs Box", [("time-varying", f"T = {self.lo.shape[0]}, n = {self.dim}")]
+            )
+        rows = [
+            ("lower", vector(self.lo)),
+            ("upper", vector(self.hi)),
+            ("width", vector(self.hi - self.lo)),
+        ]
+        return summary_html("ivobs Box", rows)
+
     def __repr__(self) -> str:
         if self.is_time_varying:
             return f"Box(time-varying, T={self.lo.shape[0]}, n={self.dim})"

@@ -91,6 +91,8 @@ class Exact(Estimator):
     progress : None (a progress bar in ``run()`` when stderr is a terminal), True or False
     on_inconsistent : 'warn', 'raise' or 'ignore' (measurements that make the LP infeasible)
 
+    Notes
+    -----
     Data used for the box of ``x[k]``: ``x0``, ``d``, ``u[0..k]``, ``y[0..k]``. See the package
     docstring for the formulation and the safe (solver-tolerance independent) bounds.
 

@@ -49,8 +49,8 @@ class FixedTimeEstimator(Estimator):
     it is valid from ``k = s`` (``valid_from = s``); rows before are NaN. No prior on ``x[0]``
     is needed (``needs_x0 = False``).
 
-    Options
-    -------
+    Other Parameters
+    ----------------
     s : window length minus one, ``s >= nx - 1`` ([Wang2020, Lemma 2]). Default ``nx - 1``. A
         larger ``s`` starts later and gives ``T`` more freedom: ``‖T Md‖_F`` never grows with
         ``s``, but the boxes may (see ``criterion``).
@@ -77,6 +77,8 @@ class FixedTimeEstimator(Estimator):
         bounds ``|N Md| 𝐫``; a violation means the data contradict the model (reported as
         inconsistent, the box is then predicted from the previous one). Default True.
 
+    Notes
+    -----
     Asymmetric bounds ([Wang2020, Section 2]): ``d = c + δ``, ``|δ| <= r``; ``E c``, ``F c``
     enter as a known input (``Mc``). Time-varying systems (Remark 4): the stacked matrices and
     ``T_k`` are recomputed per window (closed form: one SVD), cached. ``D u`` in the output

@@ -34,8 +34,10 @@ __all__ = ["KKL"]
 class KKL(Estimator):
     """KKL / Sylvester interval observer of [Dinh2024] (LTI and LTV, discrete and continuous).
 
-    Parameters (keyword-only, all optional)
-    ----------------------------------------
+    The parameters are keyword-only, all optional.
+
+    Parameters
+    ----------
     A_z, B_z : target pair. Time-invariant: ``(A_z, B_z)`` of [Dinh2024, Proposition 1]
         (default: a tuned diagonal target, see :mod:`ivobs.design.sylvester`). Time-varying:
         ``Ã``, ``B̃`` of (16.a)/(11.a) (default: blocks from the observability indices); the
@@ -53,6 +55,8 @@ class KKL(Estimator):
         callable ``t -> u(t)`` (e.g. the known input signal itself).
     rtol, atol : continuous time: integration tolerances.
 
+    Notes
+    -----
     The observer is chosen once, from the system: :class:`~.discrete.ObserverZ` /
     :class:`~.discrete.ObserverX` (discrete-time LTI, observers (3)/(6), with the vectorised run
     of :mod:`.vectorised`), :class:`~.discrete.DiscreteLTV` (observer (15)),

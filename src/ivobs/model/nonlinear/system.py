@@ -382,6 +382,16 @@ class NonlinearSystem:
 
         return cls(**linear_spec(lin, who))
 
+    def _repr_html_(self) -> str:
+        """Jupyter: the equations, the unknown parameters and signals with their bounds."""
+        from ..._html import summary_html
+
+        spec = self.spec()
+        rows = [(f"{x}⁺ =", str(e)) for x, e in zip(self.state_names, spec["f"])]
+        rows += [(f"y{i + 1} =", str(e)) for i, e in enumerate(spec["h"])]
+        rows += [("unknown", ", ".join(self.param_names + self.signal_names) or "none")]
+        return summary_html("ivobs NonlinearSystem", rows)
+
     def __repr__(self) -> str:
         return (
             f"NonlinearSystem(nx={self.nx}, nu={self.nu}, ny={self.ny}, "

@@ -251,7 +251,7 @@ def error_sets(k: int = 40, runs: int = 1000, seed: int = 0) -> ErrorSets:
     """The sets of [Tang2019, Fig. 5] on Example 2 at step ``k``, with ``runs`` independent runs.
 
     Algorithm 1 and observer (42) both use the paper's ``L`` (Theorem 8: same gain, same prior
-    box ``x0 = <p0, H0>``). With ``M = A − LC``, ``G = E − LF``, ``d = c + diag(r) δ``:
+    box ``x0 = <p0, H0>``). With ``M = A − LC``, ``G = E − LF``, ``d = c + diag(r) δ``::
 
         Ω_k = M^k <0, H0> ⊕ ⊕_{i<k} M^i G <0, diag r>                         (25)
         ẽᶻ+ = R⁺ ẽᶻ − R⁻ e̲ᶻ + (SG)⁺ d̄ − (SG)⁻ d̲ − S G c   (and e̲ᶻ+ symmetrically),

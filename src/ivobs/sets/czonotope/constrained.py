@@ -32,6 +32,8 @@ class ConstrainedZonotope:
     A : (nc, m), optional (no constraint: a zonotope)
     b : (nc,), required with ``A``
 
+    Notes
+    -----
     Answers the verbs of :class:`~ivobs.Box` and :class:`~ivobs.Zonotope` (``M @ Z``, ``Z + W``,
     ``interval_hull()``, ``reduce()``, ``contains()``) plus ``intersect``, ``intersect_strip``,
     ``intersect_hyperplane`` and ``is_empty``.
