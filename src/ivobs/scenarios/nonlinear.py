@@ -81,7 +81,7 @@ def _pendulum_nl(horizon: int = 200) -> Scenario:
     T = check_horizon(horizon)
     h = PENDULUM_STEP
     sys = NonlinearSystem(
-        f=[f"th + {h}*om", f"om + {h}*(-9.81/L*sin(th) - 0.2*om + u1/L**2) + w1"],
+        f=[f"th + {h}*om", f"om + {h}*(-9.81/L*sin(th) - om + u1/L**2) + w1"],
         h=["th + v1"],
         states=["th", "om"],
         inputs=["u1"],
@@ -98,11 +98,13 @@ def _pendulum_nl(horizon: int = 200) -> Scenario:
         x_true0=np.array([0.5, 0.0]),
         u=u,
         horizon=T,
-        source="textbook pendulum (m = 1 kg, g = 9.81, damping 0.2), explicit Euler step 0.05 s",
-        description="th+ = th + h om, om+ = om + h(-g/L sin th - 0.2 om + u/L^2) + w, "
+        source="textbook pendulum (m = 1 kg, g = 9.81, damping 1/s), explicit Euler step 0.05 s",
+        description="th+ = th + h om, om+ = om + h(-g/L sin th - om + u/L^2) + w, "
         "y = th + v; L in [0.95, 1.05] m unknown, |w| <= 0.01, |v| <= 0.01 rad",
         _disturbance=_paper_uniform(sys),
-        notes="the model is the Euler map with h = 0.05 s (not the ODE); torque u = 2 sin(0.05k)",
+        notes="the model is the Euler map with h = 0.05 s (not the ODE); torque u = 2 sin(0.05k); "
+        "the damping (1/s) exceeds the energy explicit Euler adds (1 + h^2 g/L per step), so "
+        "the map oscillates instead of spinning up",
     )
 
 
@@ -237,7 +239,7 @@ def _unicycle(horizon: int = 200) -> Scenario:
         dt=h,
     )
     k = np.arange(T)
-    u = np.column_stack([np.full(T, 1.0), 0.3 * np.sin(0.02 * k)])
+    u = np.column_stack([np.full(T, 1.0), 0.2 + 0.05 * np.sin(0.007 * k)])
     return Scenario(
         name="unicycle-range",
         system=sys,
@@ -249,7 +251,8 @@ def _unicycle(horizon: int = 200) -> Scenario:
         description="p+ = p + h s (cos th, sin th) + w, th+ = th + h om + w3; y = three ranges "
         "|p - b_i| + v_i (|v_i| <= 0.05) and a compass th + v4 (|v4| <= 0.05)",
         _disturbance=_paper_uniform(sys),
-        notes="speed 1 m/s, turn rate 0.3 sin(0.02k) rad/s; the model is the Euler map",
+        notes="speed 1 m/s, turn rate 0.2 + 0.05 sin(0.007k) rad/s (it circles around the beacon "
+        "at (0, 10)); the model is the Euler map",
     )
 
 
