@@ -116,7 +116,7 @@ def test_methods_contain_the_exact_vertex_trajectory(name: str, method: str) -> 
     assert np.isfinite(w[1:]).all()
 
 
-@pytest.mark.parametrize("name", ["henon-nl", "cora-tank6-nl"])
+@pytest.mark.parametrize("name", NL_SCENARIOS)
 def test_widths_stay_bounded_over_long_runs(name: str) -> None:
     T = 3000
     sc, X, Y = _truth(name, T, seed=11)
