@@ -27,6 +27,7 @@ from .simulate import (
     vertex_disturbance,
 )
 from .simulate_batch import simulate_batch
+from .simulate_nonlinear import simulate_nonlinear
 
 __version__ = "0.1.0"
 
@@ -59,6 +60,7 @@ __all__ = [
     "scenarios",
     "simulate",
     "simulate_batch",
+    "simulate_nonlinear",
     "sinusoidal_disturbance",
     "uniform_disturbance",
     "vertex_disturbance",

@@ -46,6 +46,9 @@ class Trajectory:
     u: np.ndarray
     d: np.ndarray
     t: np.ndarray
+    p: np.ndarray | None = None
+    """Nonlinear systems: the unknown parameters at each step ``(T, np)``
+    (:func:`~ivobs.simulate_nonlinear`); None otherwise."""
 
     @property
     def T(self) -> int:
@@ -195,7 +198,12 @@ def simulate(
         their boxes (with ``check_bounds``); default: the nominal matrices.
     """
     if not isinstance(sys, LinearSystem):
-        raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
+        hint = (
+            "; simulate a NonlinearSystem with ivobs.simulate_nonlinear"
+            if type(sys).__name__ == "NonlinearSystem"
+            else ""
+        )
+        raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}{hint}")
     x0 = as_vector("x0", x0, sys.nx)
     if sys.is_continuous:
         return _simulate_ct(sys, x0, u, d, t, check_bounds)

@@ -24,8 +24,10 @@ import numpy as np
 
 from ..errors import IvobsError
 from ..model import LinearSystem
+from ..model.nonlinear import NonlinearSystem
 from ..sets import Box
 from ..simulate import Trajectory, disturbance, simulate
+from ..simulate_nonlinear import simulate_nonlinear
 
 __all__ = [
     "DISTURBANCES",
@@ -51,7 +53,7 @@ class Scenario:
     """A paper example: system, prior box, true initial state, signals, horizon, provenance."""
 
     name: str
-    system: LinearSystem
+    system: LinearSystem | NonlinearSystem
     x0: Box
     x_true0: np.ndarray
     u: np.ndarray
@@ -110,6 +112,11 @@ class Scenario:
                 )
             return self.recorded
         d = self.disturbance(disturbance, seed)
+        if isinstance(self.system, NonlinearSystem):  # parameters of the same kind as d
+            kind = "uniform" if disturbance == "paper" else disturbance
+            return simulate_nonlinear(
+                self.system, self.x_true0, self.u, d, p=kind, T=self.horizon, seed=seed
+            )
         if self.system.is_continuous:
             u = self._u_fn if self._u_fn is not None else self.u
             return simulate(self.system, self.x_true0, u, d, t=self.t)
@@ -178,7 +185,7 @@ def constant_input(u: Any, T: int) -> np.ndarray:
     return np.tile(u, (T, 1))
 
 
-def bounds_box(system: LinearSystem) -> Box:
+def bounds_box(system: LinearSystem | NonlinearSystem) -> Box:
     """The system's disturbance bounds ``d`` when they are one constant box (the generic
     disturbance signals fill it); an :class:`~ivobs.IvobsError` otherwise."""
     box = system.d

@@ -26,6 +26,7 @@ def _quiet(sysm: LinearSystem) -> LinearSystem:
 def _kkl_run(sc: scenarios.Scenario, disturbed: bool, **options: Any) -> tuple[Estimate, Any, Any]:
     """The ``kkl`` method on the scenario, disturbed (paper signals, bounds known) or not (zero
     signals and the observer told so); returns the estimate, trajectory and design."""
+    assert isinstance(sc.system, LinearSystem)
     system = sc.system if disturbed else _quiet(sc.system)
     if system.is_continuous:
         u = sc.u_fn if sc.u_fn is not None else sc.u

@@ -14,6 +14,7 @@ import numpy as np
 from ... import scenarios
 from ...errors import IvobsError
 from ...estimators import make_estimator
+from ...model import LinearSystem
 from ...result import Estimate
 from ...sets import Box, Zonotope, image_bounds, neg, pos
 from ...simulate import simulate
@@ -263,6 +264,7 @@ def error_sets(k: int = 40, runs: int = 1000, seed: int = 0) -> ErrorSets:
     """
     sc = scenarios.get("tang-example2", horizon=k + 1)
     sys = sc.system
+    assert isinstance(sys, LinearSystem)
     rng = np.random.default_rng(seed)
     x0s = sc.x0.sample(runs, rng)
     trajs = [simulate(sys, x0s[j], sc.u, sc.disturbance("uniform", seed=rng)) for j in range(runs)]
