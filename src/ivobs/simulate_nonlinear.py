@@ -96,8 +96,10 @@ def simulate_nonlinear(
     seed : for the random kinds (``p`` uses ``seed + 1`` when ``seed`` is an integer).
     check_bounds : raise :class:`IvobsError` when ``d`` or ``p`` leave their bounds.
 
-    The returned :class:`~ivobs.Trajectory` holds the signals in ``d`` and the parameters in
-    ``p``.
+    Returns
+    -------
+    Trajectory
+        The signals in ``d`` and the parameters in ``p``.
     """
     if not isinstance(sys, NonlinearSystem):
         raise IvobsError(f"sys: expected an ivobs.NonlinearSystem, got {type(sys).__name__}")
