@@ -187,3 +187,22 @@ def test_the_mean_value_form_tightens_repeated_variables_only() -> None:
     assert tight[0][0] == pytest.approx(0.23) and tight[1][0] == pytest.approx(0.27)
     assert tight[0][0] <= 0.23 and tight[1][0] >= 0.27  # outward
     assert (tight[0][1], tight[1][1]) == (nat[0][1], nat[1][1])  # single use: exact already
+
+
+def test_sympy_expressions_are_read_through_the_same_whitelist():
+    sp = pytest.importorskip("sympy")
+    x1, x2, a, w1, v1 = sp.symbols("x1 x2 a w1 v1")
+    kw = dict(states=["x1", "x2"], params={"a": (1.39, 1.41)},
+              d={"w1": (-0.005, 0.005), "v1": (-0.02, 0.02)})  # fmt: skip
+    from_sympy = ivobs.NonlinearSystem(
+        f=[1 - a * x1**2 + x2 + w1 + 0 * sp.Abs(x2), sp.Rational(3, 10) * x1], h=[x1 + v1], **kw
+    )
+    from_text = ivobs.NonlinearSystem(f=["1 - a*x1**2 + x2 + w1", "0.3*x1"], h=["x1 + v1"], **kw)
+    lo, hi, w = np.array([0.1, 0.2]), np.array([0.3, 0.25]), from_text.w_box
+    for got, want in zip(
+        from_sympy.f_box(lo, hi, np.zeros(0), w.lo, w.hi),
+        from_text.f_box(lo, hi, np.zeros(0), w.lo, w.hi),
+    ):
+        np.testing.assert_array_equal(got, want)
+    with pytest.raises(ivobs.IvobsError, match="unknown function 'gamma'"):
+        ivobs.NonlinearSystem(f=[sp.gamma(x2), x1], h=[x1], states=["x1", "x2"])
