@@ -3,6 +3,7 @@ against the exact hull, online use, inconsistent data, options."""
 
 from __future__ import annotations
 
+import warnings
 from functools import cache
 
 import numpy as np
@@ -194,3 +195,23 @@ def test_correlated_disturbance_is_used() -> None:
     res = ivobs.make_estimator("strip", sys, x0=x0).run(tr.u, tr.y)
     assert_contains(res, tr.x)
     assert res.width[1, 0] < 1e-8 and np.mean(res.width[10:]) < 1e-3
+
+
+def test_section_hull_with_breakpoints_beyond_the_float_range():
+    """|H_jl / s_l| overflows: the hull stays finite where it can and contains the set."""
+    from ivobs.estimators.strip import _section_hull
+
+    rng = np.random.default_rng(5)
+    H = np.array([[1e300, 1.0, -2.0], [0.5, 1.0, 1.0]])
+    s = np.array([1e-10, 1.0, 0.5])
+    z, e, sigma = np.array([0.0, 1.0]), 0.2, 0.1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow warning escapes
+        lo, hi = _section_hull(z, H, s, e, sigma)
+    assert not np.isnan(lo).any() and not np.isnan(hi).any()
+    assert np.isfinite(lo[1]) and np.isfinite(hi[1])
+    for _ in range(2000):  # points of the set: contained
+        xi = rng.uniform(-1, 1, 3)
+        if abs(s @ xi - e) <= sigma:
+            x = z + H @ xi
+            assert np.all(lo <= x) and np.all(x <= hi)

@@ -433,10 +433,14 @@ def _section_hull(
     keep = a_s > 1e-14 * smax  # tiny s_l: a breakpoint far away of negligible weight
     n_keep = int(keep.sum())
     b = np.empty((n, n_keep + 1))
-    if n_keep == m:
-        np.divide(H, s, out=b[:, :-1])
-    else:
-        np.divide(H[:, keep], s[keep], out=b[:, :-1])
+    with np.errstate(over="ignore"):
+        if n_keep == m:
+            np.divide(H, s, out=b[:, :-1])
+        else:
+            np.divide(H[:, keep], s[keep], out=b[:, :-1])
+    # a breakpoint beyond the float range (|H_jl| huge against s_l): any finite μ gives a valid
+    # bound (weak duality), so it is taken as 0 — only the choice of μ, never the bound, changes
+    b[~np.isfinite(b)] = 0.0
     b[:, -1] = 0.0
     w = np.append(a_s[keep], sigma)
     idx = np.argsort(b, axis=1)
