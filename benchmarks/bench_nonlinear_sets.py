@@ -22,17 +22,9 @@ from importlib import resources
 import numpy as np
 
 import ivobs
+from ivobs.scenarios.nonlinear import tank6_system
 
 METHODS = {"nl-zonotope": 2000, "nl-constrained-zonotope": 500}
-
-TANK_F = [
-    "x1 + 0.5*(-k*sqrt(2*g)*sqrt(x1) + u1) + w1",
-    "x2 + 0.5*(sqrt(2*g)*(sqrt(x1) - sqrt(x2))) + w2",  # no factor k: as CORA writes it
-    "x3 + 0.5*(k*sqrt(2*g)*(sqrt(x2) - sqrt(x3))) + w3",
-    "x4 + 0.5*(k*sqrt(2*g)*(sqrt(x3) - sqrt(x4) + u2)) + w4",
-    "x5 + 0.5*(k*sqrt(2*g)*(sqrt(x4) - sqrt(x5) + u3)) + w5",
-    "x6 + 0.5*(k*sqrt(2*g)*(sqrt(x5) - sqrt(x6))) + w6",
-]
 
 
 def henon() -> ivobs.NonlinearSystem:
@@ -91,17 +83,7 @@ def speed() -> None:
 
 
 def tank_system() -> ivobs.NonlinearSystem:
-    d = {f"w{i}": (-0.001, 0.001) for i in range(1, 7)}
-    d.update({f"v{i}": (-0.2, 0.2) for i in range(1, 4)})
-    return ivobs.NonlinearSystem(
-        f=TANK_F,
-        h=["x2 + v1", "x4 + v2", "x5 + v3"],
-        states=[f"x{i}" for i in range(1, 7)],
-        inputs=["u1", "u2", "u3"],
-        params={"k": 0.015, "g": 9.81},
-        d=d,
-        dt=0.5,
-    )
+    return tank6_system()  # the cora-tank6-nl scenario's model
 
 
 def tank() -> None:

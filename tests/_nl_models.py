@@ -14,6 +14,7 @@ from mpmath import mp, mpf
 from mpmath import sqrt as msqrt
 
 import ivobs
+from ivobs.scenarios.nonlinear import tank6_system
 
 PREC = 200
 
@@ -50,29 +51,9 @@ def simulate_henon(T, seed, x0=("0.3", "0.1"), a=("1.39", "1.41"), w="0.005", v=
     return X, Y
 
 
-TANK_F = [
-    "x1 + 0.5*(-k*sqrt(2*g)*sqrt(x1) + u1) + w1",
-    "x2 + 0.5*(sqrt(2*g)*(sqrt(x1) - sqrt(x2))) + w2",
-    "x3 + 0.5*(k*sqrt(2*g)*(sqrt(x2) - sqrt(x3))) + w3",
-    "x4 + 0.5*(k*sqrt(2*g)*(sqrt(x3) - sqrt(x4) + u2)) + w4",
-    "x5 + 0.5*(k*sqrt(2*g)*(sqrt(x4) - sqrt(x5) + u3)) + w5",
-    "x6 + 0.5*(k*sqrt(2*g)*(sqrt(x5) - sqrt(x6))) + w6",
-]
-"""CORA's tank6EqDT_inflow4 (tank 2 without the factor k, as CORA writes it), W added to x+."""
-
-
-def tank_system(w=0.001, v=0.2):
-    d = {f"w{i}": (-w, w) for i in range(1, 7)}
-    d.update({f"v{i}": (-v, v) for i in range(1, 4)})
-    return ivobs.NonlinearSystem(
-        f=TANK_F,
-        h=["x2 + v1", "x4 + v2", "x5 + v3"],
-        states=[f"x{i}" for i in range(1, 7)],
-        inputs=["u1", "u2", "u3"],
-        params={"k": 0.015, "g": 9.81},
-        d=d,
-        dt=0.5,
-    )
+def tank_system():
+    """CORA's six tanks, as the ``cora-tank6-nl`` scenario builds them (one model, not two)."""
+    return tank6_system()
 
 
 def simulate_tank(T, seed, u, x0=20.0, w="0.001", v="0.2"):
