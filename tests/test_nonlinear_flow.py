@@ -230,8 +230,8 @@ def test_api_and_refusals() -> None:
     assert fs.spec()["discretize"] == {"Ts": 0.1, "order": 3, "substeps": 2}
 
 
-LIMIT = {"nl-interval": 1.2, "nl-zonotope": 0.3, "nl-constrained-zonotope": 0.1}
-"""Mean width of the rate after step 10 (measured 1.01, 0.15, 0.03)."""
+LIMIT = {"nl-interval": 0.2, "nl-zonotope": 0.2, "nl-constrained-zonotope": 0.1}
+"""Mean width of the rate after step 10 (measured 0.152, 0.139, 0.072)."""
 
 
 def simulate(rhs, x0, U, W, V, Ts, out):
@@ -245,20 +245,43 @@ def simulate(rhs, x0, U, W, V, Ts, out):
     return np.array(X), np.array(Y)
 
 
+def pendulum_record(T: int, Ts: float) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(11)  # the same record for every method
+    U = 0.3 * np.sin(0.2 * np.arange(T))[:, None]
+    L = rng.choice([0.95, 1.05], T)
+    D = rng.choice([-0.1, 0.1], T)
+    V = rng.choice([-0.01, 0.01], (T, 1))
+    X, Y = simulate(pendulum_rhs, [0.5, 0.0], U, np.c_[L, D, V[:, 0]], V, Ts, lambda x: x[:1])
+    return U, X, Y
+
+
+PEND_X0 = ivobs.Box([0.3, -0.3], [0.7, 0.3])
+
+
 @pytest.mark.parametrize("method", ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"])
 def test_estimators_contain_the_sampled_pendulum(method: str) -> None:
     T, Ts = 50, 0.1
     sys = pendulum().discretize(Ts, order=4)
-    U = 0.3 * np.sin(0.2 * np.arange(T))[:, None]
-    L = RNG.choice([0.95, 1.05], T)
-    D = RNG.choice([-0.1, 0.1], T)
-    V = RNG.choice([-0.01, 0.01], (T, 1))
-    X, Y = simulate(pendulum_rhs, [0.5, 0.0], U, np.c_[L, D, V[:, 0]], V, Ts, lambda x: x[:1])
-    est = ivobs.make_estimator(method, sys, x0=ivobs.Box([0.3, -0.3], [0.7, 0.3]))
-    res = est.run(U, Y)
+    U, X, Y = pendulum_record(T, Ts)
+    res = ivobs.make_estimator(method, sys, x0=PEND_X0).run(U, Y)
     assert np.all(res.lower - MARGIN <= X) and np.all(X <= res.upper + MARGIN)
     width = (res.upper - res.lower)[10:].mean(axis=0)
     assert width[0] < 0.021 and width[1] < LIMIT[method], width
+
+
+def test_the_step_back_through_the_flow_bounds_the_unmeasured_rate() -> None:
+    """``h ∘ Φ`` contracted through the flow's mean-value form (model/nonlinear/flowback.py):
+    the rate, seen only through the dynamics, is several times tighter than without it
+    (measured 0.152 against 1.008 with lag=0)."""
+    T, Ts = 50, 0.1
+    sys = pendulum().discretize(Ts, order=4)
+    U, X, Y = pendulum_record(T, Ts)
+    widths = []
+    for lag in (0, 1):
+        res = ivobs.make_estimator("nl-interval", sys, x0=PEND_X0, lag=lag).run(U, Y)
+        assert np.all(res.lower - MARGIN <= X) and np.all(X <= res.upper + MARGIN)
+        widths.append((res.upper - res.lower)[10:, 1].mean())
+    assert widths[1] < widths[0] / 4, widths
 
 
 def test_nl_interval_contains_the_sampled_six_tank() -> None:

@@ -113,9 +113,7 @@ class NonlinearIntervalEstimator(Estimator):
             lag=lag, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
         )
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
-        # a validated flow (NonlinearSystem.discretize) has no h∘f to contract: no step back
-        back = lag and sys.ny and not getattr(sys, "is_flow", False)
-        self._hf = sys.hf_contractors() if back else None
+        self._hf = sys.hf_contractors() if lag and sys.ny else None
 
     def _initial_state(self) -> NonlinearIntervalState:
         assert self.x0 is not None

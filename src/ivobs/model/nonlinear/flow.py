@@ -41,6 +41,7 @@ import numpy as np
 from ...errors import IvobsError
 from ._runtime import DomainError
 from .codegen import _enclose_fraction
+from .flowback import FlowBackContractor
 from .system import NonlinearSystem
 from .taylor import MAX_ORDER, build_taylor
 
@@ -91,8 +92,8 @@ class FlowSystem(NonlinearSystem):
     :class:`~ivobs.NonlinearSystem` (module docstring); made by
     :meth:`NonlinearSystem.discretize`. ``h`` and its members are those of the continuous
     system; ``f_box``, ``f_tight_box`` and ``f_jac_box`` enclose the flow and its Jacobian;
-    ``f_exprs`` stay the vector field. There is no ``h∘f`` contractor (``hf_contractors()``
-    contract nothing)."""
+    ``f_exprs`` stay the vector field. ``hf_contractors()`` step back through the flow
+    (:mod:`.flowback`)."""
 
     def __init__(self, continuous: NonlinearSystem, Ts: Any, order: Any = 4, substeps: Any = 1):
         if not continuous.is_continuous:
@@ -104,8 +105,8 @@ class FlowSystem(NonlinearSystem):
         self.dt = float(Ts)
         self.order = _count("order", order, 1, MAX_ORDER)
         self.substeps = _count("substeps", substeps, 1, 1 << 16)
-        # no symbolic h∘f for a flow: contractors that contract nothing (sound), one per output
-        self._hf = [(_no_contraction, [])] * self.ny
+        # no symbolic h∘Φ: one step back through the flow's mean-value form, per output
+        self._hf = [(FlowBackContractor(self, i), []) for i in range(self.ny)]
         self._taylor = build_taylor(self.f_exprs, self._groups(), self._consts, self.order)
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
         self._f = _FlowForms(self)  # type: ignore[assignment]
@@ -256,10 +257,6 @@ class FlowSystem(NonlinearSystem):
             Ml, Mh = np.minimum(Nl, Tl), np.maximum(Nh, Th)
         return None
 
-    is_flow = True
-    """Marks a validated flow (``nl-interval`` skips its step back, which would contract
-    nothing)."""
-
     # -- identity ------------------------------------------------------------------------------
     @property
     def is_continuous(self) -> bool:
@@ -283,10 +280,6 @@ class FlowSystem(NonlinearSystem):
 
 def _rebuild_flow(spec: dict[str, Any], Ts: float, order: int, substeps: int) -> FlowSystem:
     return FlowSystem(NonlinearSystem(**spec), Ts, order, substeps)
-
-
-def _no_contraction(*args: Any) -> bool:
-    return True
 
 
 def _arr(v: Any, n: int, m: int) -> np.ndarray:
