@@ -223,6 +223,13 @@ def test_api_and_refusals() -> None:
         cont.discretize(-1.0)
     with pytest.raises(IvobsError, match="dt"):
         ivobs.NonlinearSystem(f=["x"], h=["x"], states=["x"], dt=-1)
+    kink = ivobs.NonlinearSystem(f=["-abs(x)"], h=["x"], states=["x"], dt=0)
+    with pytest.raises(IvobsError, match="order: 3 needs a smooth f"):
+        kink.discretize(0.1, order=3)
+    lo, hi = kink.discretize(0.5, order=2).f_box([-0.2], [0.3], [], [], [])
+    assert lo[0] <= -0.2 * math.exp(0.5) and hi[0] >= 0.3 * math.exp(-0.5)  # x0 e^(-|t|)
+    assert hi[0] - lo[0] < 0.75  # 0.70 (the exact range: 0.51)
+    assert "validated flow" in fs._repr_html_()
     back = pickle.loads(pickle.dumps(fs))
     a = fs.f_box([0.5, 0.0], [0.6, 0.1], [0.0], fs.w_box.lo, fs.w_box.hi)
     b = back.f_box([0.5, 0.0], [0.6, 0.1], [0.0], fs.w_box.lo, fs.w_box.hi)

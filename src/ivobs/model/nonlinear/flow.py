@@ -107,6 +107,7 @@ class FlowSystem(NonlinearSystem):
         self.substeps = _count("substeps", substeps, 1, 1 << 16)
         # no symbolic h∘Φ: one step back through the flow's mean-value form, per output
         self._hf = [(FlowBackContractor(self, i), []) for i in range(self.ny)]
+        _check_smooth(self.f_exprs, self.order)
         self._taylor = build_taylor(self.f_exprs, self._groups(), self._consts, self.order)
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
         self._f = _FlowForms(self)  # type: ignore[assignment]
@@ -273,10 +274,36 @@ class FlowSystem(NonlinearSystem):
     def __reduce__(self) -> Any:
         return (_rebuild_flow, (self.continuous.spec(), self.dt, self.order, self.substeps))
 
+    def _repr_html_(self) -> str:
+        from ..._html import summary_html
+
+        rows = [(f"{x}' =", str(e)) for x, e in zip(self.state_names, self.f_text)]
+        rows += [(f"{n} =", str(e)) for n, e in zip(self.output_names, self.h_text)]
+        rows += [
+            ("sampled", f"Ts = {self.dt:g}, Taylor order {self.order}, {self.substeps} substep(s)")
+        ]
+        return summary_html("ivobs NonlinearSystem (validated flow)", rows)
+
     def __repr__(self) -> str:
         return (
             f"FlowSystem(nx={self.nx}, nu={self.nu}, ny={self.ny}, Ts={self.dt:g}, "
             f"order={self.order}, substeps={self.substeps})"
+        )
+
+
+def _check_smooth(f: list[Any], order: int) -> None:
+    """Refuse ``abs``, ``min``, ``max`` in ``f`` above order 2. Up to order 2 the step holds
+    with their generalised derivatives: ``x(h) - x0 - h f(x0) = ∫_0^h (f(x(s)) - f(x0)) ds``
+    with ``f_i(x(s)) - f_i(x0) ∈ ∂f_i(B) s f(B)`` (Lebourg [Clarke1983, Theorem 2.3.7]), i.e.
+    ``h² f^[2](B)``; beyond, Taylor's remainder needs derivatives that do not exist at the
+    kinks."""
+    import sympy as sp
+
+    kinks = (sp.Abs, sp.Min, sp.Max, sp.sign, sp.Heaviside)
+    if order > 2 and any(e.has(*kinks) for e in f):
+        raise IvobsError(
+            f"order: {order} needs a smooth f (the Taylor remainder of order k uses k "
+            "derivatives); f uses abs, min or max: use order=1 or 2 (and more substeps)"
         )
 
 
