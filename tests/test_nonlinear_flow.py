@@ -229,6 +229,12 @@ def test_api_and_refusals() -> None:
     lo, hi = kink.discretize(0.5, order=2).f_box([-0.2], [0.3], [], [], [])
     assert lo[0] <= -0.2 * math.exp(0.5) and hi[0] >= 0.3 * math.exp(-0.5)  # x0 e^(-|t|)
     assert hi[0] - lo[0] < 0.75  # 0.70 (the exact range: 0.51)
+    kinked = kink.discretize(0.5, order=2)
+    box, y = ivobs.Box([-1.0], [1.0]), 0.1 * np.exp(-0.5 * np.arange(3))[:, None]
+    with pytest.raises(IvobsError, match="use nl-interval"):
+        ivobs.make_estimator("nl-zonotope", kinked, x0=box).run(None, y)
+    res = ivobs.make_estimator("nl-interval", kinked, x0=box).run(None, y)  # y = x = 0.1 e^-t
+    assert not np.any(res.inconsistent) and np.all(res.lower <= y) and np.all(y <= res.upper)
     assert "validated flow" in fs._repr_html_()
     back = pickle.loads(pickle.dumps(fs))
     a = fs.f_box([0.5, 0.0], [0.6, 0.1], [0.0], fs.w_box.lo, fs.w_box.hi)

@@ -105,10 +105,14 @@ class FlowSystem(NonlinearSystem):
         self.dt = float(Ts)
         self.order = _count("order", order, 1, MAX_ORDER)
         self.substeps = _count("substeps", substeps, 1, 1 << 16)
-        # no symbolic h∘Φ: one step back through the flow's mean-value form, per output
-        self._hf = [(FlowBackContractor(self, i), []) for i in range(self.ny)]
-        _check_smooth(self.f_exprs, self.order)
+        self.smooth: bool = _check_smooth(self.f_exprs, self.order)
         self._taylor = build_taylor(self.f_exprs, self._groups(), self._consts, self.order)
+        # no symbolic h∘Φ: one step back through the flow's mean-value form, per output (it
+        # needs the flow's Jacobian: a non-smooth f has none here, its contractors do nothing)
+        self._hf = [
+            (FlowBackContractor(self, i) if self.smooth else _no_contraction, [])
+            for i in range(self.ny)
+        ]
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
         self._f = _FlowForms(self)  # type: ignore[assignment]
 
@@ -121,6 +125,12 @@ class FlowSystem(NonlinearSystem):
 
     def _enclose_jacobian(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Any, Any]:
         """``∂Φ_Ts/∂(x, w)`` enclosed over the box, flattened ``(nx, nx + nw)``."""
+        if not self.smooth:
+            raise IvobsError(
+                "sys: the Jacobian of a validated flow needs a smooth f (this one uses abs, min "
+                "or max), so nl-zonotope and nl-constrained-zonotope cannot take it; use "
+                "nl-interval"
+            )
         _, _, A = self._run(xl, xh, u, wl, wh, True)
         assert A is not None
         return A[0][: self.nx].ravel(), A[1][: self.nx].ravel()
@@ -291,20 +301,26 @@ class FlowSystem(NonlinearSystem):
         )
 
 
-def _check_smooth(f: list[Any], order: int) -> None:
+def _no_contraction(*args: Any) -> bool:
+    return True
+
+
+def _check_smooth(f: list[Any], order: int) -> bool:
     """Refuse ``abs``, ``min``, ``max`` in ``f`` above order 2. Up to order 2 the step holds
     with their generalised derivatives: ``x(h) - x0 - h f(x0) = ∫_0^h (f(x(s)) - f(x0)) ds``
     with ``f_i(x(s)) - f_i(x0) ∈ ∂f_i(B) s f(B)`` (Lebourg [Clarke1983, Theorem 2.3.7]), i.e.
     ``h² f^[2](B)``; beyond, Taylor's remainder needs derivatives that do not exist at the
-    kinks."""
+    kinks. Returns whether ``f`` is smooth (the flow's Jacobian is only offered then)."""
     import sympy as sp
 
     kinks = (sp.Abs, sp.Min, sp.Max, sp.sign, sp.Heaviside)
-    if order > 2 and any(e.has(*kinks) for e in f):
+    smooth = not any(e.has(*kinks) for e in f)
+    if order > 2 and not smooth:
         raise IvobsError(
             f"order: {order} needs a smooth f (the Taylor remainder of order k uses k "
             "derivatives); f uses abs, min or max: use order=1 or 2 (and more substeps)"
         )
+    return smooth
 
 
 def _rebuild_flow(spec: dict[str, Any], Ts: float, order: int, substeps: int) -> FlowSystem:
