@@ -114,6 +114,7 @@ class FlowSystem(NonlinearSystem):
             for i in range(self.ny)
         ]
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
+        self._back_cache: Any = None  # the step back's last linearisation (.flowback)
         self._f = _FlowForms(self)  # type: ignore[assignment]
 
     # -- the flow over a box ------------------------------------------------------------------

@@ -62,6 +62,25 @@ class FlowBackContractor:
         vl[:nz], vh[:nz] = zl, zh
         return True
 
+    def _linearise(self, zl: list[float], zh: list[float], up: list[float]) -> tuple[Any, ...]:
+        """``(c, Φ(c) lo, hi, [J] lo, hi)`` over the box, or those of a box that contains it
+        with the same ``u'`` (the other outputs' contractors of the same step: the form holds
+        over any sub-box, ``c`` need not be inside it), shared through the flow."""
+        fs = self.flow
+        nx = fs.nx
+        last = fs._back_cache
+        if last is not None and last[0] == up:
+            bl, bh = last[1], last[2]
+            if all(a >= b for a, b in zip(zl, bl)) and all(a <= b for a, b in zip(zh, bh)):
+                hit: tuple[Any, ...] = last[3]
+                return hit
+        c = [min(max(0.5 * a + 0.5 * b, a), b) for a, b in zip(zl, zh)]
+        pl, ph = fs._enclose(c[:nx], c[:nx], up, c[nx:], c[nx:])
+        Jl, Jh = fs._enclose_jacobian(zl[:nx], zh[:nx], up, zl[nx:], zh[nx:])
+        out = (c, pl, ph, Jl, Jh)
+        fs._back_cache = (list(up), list(zl), list(zh), out)
+        return out
+
     def _backward(
         self,
         zl: list[float],
@@ -79,9 +98,7 @@ class FlowBackContractor:
         rows = [j for j in range(nx) if tl[j] > x1l[j] or th[j] < x1h[j]]
         if not rows:
             return True
-        c = [min(max(0.5 * a + 0.5 * b, a), b) for a, b in zip(zl, zh)]
-        pl, ph = fs._enclose(c[:nx], c[:nx], up, c[nx:], c[nx:])
-        Jl, Jh = fs._enclose_jacobian(zl[:nx], zh[:nx], up, zl[nx:], zh[nx:])
+        c, pl, ph, Jl, Jh = self._linearise(zl, zh, up)
         for j in rows:
             row = [float(v) for v in Jl[j * nz : (j + 1) * nz]]
             row += [float(v) for v in Jh[j * nz : (j + 1) * nz]]
