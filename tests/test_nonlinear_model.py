@@ -3,6 +3,7 @@ the text), callables, validation of every argument, the contract's evaluations, 
 
 from __future__ import annotations
 
+import math
 import pickle
 from fractions import Fraction
 
@@ -110,8 +111,8 @@ def test_malformed_expressions_name_the_expression_position_and_symbol(
         ({"d": {"w1": (0.1, -0.1), "v1": (-1, 1)}}, r"d\['w1'\]: lower bound 0.1 > upper"),
         ({"d": [("w1", 1)]}, r"d: expected a dict"),
         ({"params": {"x1": 1.0, "a": (1, 2), "b": 0.3}}, r"'x1' used twice"),
-        ({"dt": 0}, r"continuous-time nonlinear systems \(dt=0\) are not supported"),
-        ({"dt": -1.0}, r"dt: expected True or a sampling period > 0"),
+        ({"dt": -1.0}, r"dt: expected True, a sampling period > 0 or 0 \(continuous time\)"),
+        ({"dt": math.inf}, r"dt: expected True, a sampling period > 0 or 0"),
         ({"outputs": ["y1", "y2"]}, r"outputs: expected 1 names, got 2"),
     ],
 )

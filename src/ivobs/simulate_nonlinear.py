@@ -38,6 +38,12 @@ _CACHE_ATTR = "_point_fns"
 def point_functions(sys: NonlinearSystem) -> tuple[Any, Any]:
     """``(f, h)``: float functions of ``(x..., u..., p..., d...)`` returning lists (cached on
     the system)."""
+    if sys.is_continuous or getattr(sys, "continuous", None) is not None:
+        raise IvobsError(
+            "sys: a continuous-time model (or its discretize() flow) has no point map to "
+            "simulate step by step; integrate the ODE (e.g. scipy.integrate.solve_ivp with "
+            "u and the unknowns held over each period)"
+        )
     cached: tuple[Any, Any] | None = getattr(sys, _CACHE_ATTR, None)
     if cached is not None:
         return cached

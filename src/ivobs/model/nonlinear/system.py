@@ -77,11 +77,8 @@ def _dt(dt: Any) -> bool | float:
     if dt is True:
         return True
     if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt < 0:
-        raise IvobsError(f"dt: expected True or a sampling period > 0, got {dt!r}")
-    if dt == 0:
         raise IvobsError(
-            "dt: continuous-time nonlinear systems (dt=0) are not supported; give the "
-            "discrete-time map (a guaranteed discretisation of your ODE) with dt=True or dt=Ts"
+            f"dt: expected True, a sampling period > 0 or 0 (continuous time), got {dt!r}"
         )
     return float(dt)
 
@@ -98,7 +95,9 @@ class NonlinearSystem:
     params : ``{name: number}`` (known) or ``{name: (lo, hi)}`` (unknown, any value in the
         bounds at every step).
     d : ``{name: (lo, hi)}``: bounded unknown signals (disturbances, noise).
-    dt : ``True`` or a sampling period ``> 0``.
+    dt : ``True`` or a sampling period ``> 0``; ``0``: ``f`` is the vector field of
+        ``x' = f(x, u, p, d)`` (continuous time), for :meth:`discretize` (the methods take its
+        result, a validated flow; docs/nonlinear.md).
     outputs : names of the outputs (default ``y1..y<ny>``).
     """
 
@@ -238,11 +237,22 @@ class NonlinearSystem:
 
     @property
     def is_continuous(self) -> bool:
-        return False
+        return self.dt is not True and self.dt == 0.0
 
     @property
     def is_discrete(self) -> bool:
-        return True
+        return not self.is_continuous
+
+    def discretize(self, Ts: float, *, order: int = 4, substeps: int = 1) -> NonlinearSystem:
+        """The guaranteed discretisation of this continuous-time system (``dt=0``) with
+        sampling period ``Ts``: a discrete-time model whose ``f`` encloses the exact flow over
+        one period, by the interval Taylor method of order ``order`` with ``substeps`` substeps
+        (halved further where the a priori enclosure fails) [Nedialkov1999], [Lohner1987].
+        ``u`` and the unknowns ``(p, d)`` are held constant over each period (any value of their
+        box per period). :class:`~ivobs.model.nonlinear.flow.FlowSystem`, docs/nonlinear.md."""
+        from .flow import FlowSystem
+
+        return FlowSystem(self, Ts, order=order, substeps=substeps)
 
     @property
     def sampling_period(self) -> float:
