@@ -90,20 +90,22 @@ def section_hull(
 
 
 def propagate_strip(
-    h: np.ndarray, t: float, box: np.ndarray, sigma: float = 0.0
+    h: np.ndarray, t: float, box: np.ndarray, sigma: float = 0.0, nz: np.ndarray | None = None
 ) -> np.ndarray | None:
     """Contract the box ``box = [lo; hi]`` (shape ``(2, n)``) with the strip ``|hᵀw - t| <=
     σ`` (one pass of interval propagation: ``w_j ∈ ([t - σ, t + σ] - Σ_{l≠j} h_l [w_l]) /
     h_j``), into a new ``(2, n)`` array; ``None`` if the strip certainly misses the box. The
     interval sums are widened by the bound ``γ_{n+3} (|t| + σ + Σ_l |h_l| max(|lo_l|,
-    |hi_l|))`` of their rounding, the quotients by ``γ_2`` (relative)."""
+    |hi_l|))`` of their rounding, the quotients by ``γ_2`` (relative). ``nz``: the indices of
+    the nonzero ``h_j`` when the caller has them."""
     prod = h * box  # h_l lo_l and h_l hi_l: their min and max are the interval h_l [w_l]
     t_lo, t_hi = prod.min(axis=0), prod.max(axis=0)
     s_lo, s_hi = float(t_lo.sum()), float(t_hi.sum())
     delta = gamma(h.size + 3) * (abs(t) + sigma + float(np.abs(prod).max(axis=0).sum()))
     if t + sigma < s_lo - delta or t - sigma > s_hi + delta:
         return None
-    nz = np.flatnonzero(h)
+    if nz is None:
+        nz = np.flatnonzero(h)
     # h_j w_j >= (t - σ) - (s_hi - t_hi_j) - δ (row 0), <= (t + σ) - (s_lo - t_lo_j) + δ (row 1)
     rest = np.array([[s_hi], [s_lo]]) - np.stack([t_hi[nz], t_lo[nz]])
     q = (np.array([[t - sigma], [t + sigma]]) - rest + np.array([[-delta], [delta]])) / h[nz]

@@ -58,7 +58,7 @@ derived once for a time-invariant system.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -119,7 +119,7 @@ class _Structure:
     never touch them (their entries of ``s = H_zᵀ h`` and ``λ`` are zero), so they are added at
     the prediction, ``E_pc <c_d, R>``, exactly as in the joint set; ``mc``, the columns of
     ``M = [A E_jc]`` that are nonzero; ``h[i] = (C_i, F_i,jc)``; the absolute values
-    ``|h|, |M|, |E_pc|, |B|, |D|`` of the rounding bounds."""
+    ``|h|, |M|, |E_pc|, |B|, |D|`` of the rounding bounds; ``hnz[i]``: where ``h[i] != 0``."""
 
     A: np.ndarray
     B: np.ndarray
@@ -136,6 +136,7 @@ class _Structure:
     aB: np.ndarray
     aD: np.ndarray
     all_mc: bool
+    hnz: tuple[np.ndarray, ...]
 
 
 def _structure(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, E: np.ndarray,
@@ -163,6 +164,7 @@ def _structure(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, E: np
         np.abs(B),
         np.abs(D),
         mc.size == M.shape[1],
+        tuple(np.flatnonzero(row) for row in h),
     )
 
 
@@ -181,12 +183,12 @@ class _Joint:
 
     def intersect(
         self, h: np.ndarray, ah: np.ndarray, t: float, y_i: float, du: float, g_meas: float,
-        nx: int, v_i: float = 0.0,
+        nx: int, v_i: float = 0.0, hnz: np.ndarray | None = None,
     ) -> bool:  # fmt: skip
         """Intersect with the strip ``|hᵀ(x, d) - t| <= σ`` of one measured component
         (``t = y_i - D_i u``, ``du = |D_i| |u|``, ``ah = |h|``; ``v_i`` widens it by the
         interval matrices' ``|ΔC_i x + ΔD_i u|``); False when it certainly misses the set
-        (inconsistent: the set is left as it was)."""
+        (inconsistent: the set is left as it was). ``hnz``: where ``h != 0``, when known."""
         z, acc, m = self.z, self.acc, self.m
         Hz = self.Hz[:, :m]
         nz = z.shape[0]
@@ -208,7 +210,7 @@ class _Joint:
         s1 = float(np.abs(s).sum())
         if abs(e) > (s1 + sigma_z) * (1.0 + gamma(m + 2)):
             return False  # the strip misses the zonotope: certain
-        box = propagate_strip(h, t, self.box, sigma)
+        box = propagate_strip(h, t, self.box, sigma, hnz)
         if box is None:
             return False
         lo_j, hi_j = section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rows[:nx])
@@ -351,7 +353,7 @@ class StripEstimator(Estimator):
         for i in measured:
             v_i = 0.0 if v is None else float(v[i])
             args = (t_all[i], y_list[i], du_all[i], g_meas, nx, v_i)
-            if not joint.intersect(st.h[i], st.ah[i], *args):
+            if not joint.intersect(st.h[i], st.ah[i], *args, st.hnz[i]):
                 inconsistent = True
         acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
         Hz = joint.Hz[:, : joint.m]
@@ -362,7 +364,9 @@ class StripEstimator(Estimator):
         hi = np.maximum(hi, lo)  # equal up to rounding when a state is pinned down exactly
         w = None if unc is None else uncertain.terms(unc, lo, hi, u_k)[0]  # |w| <= w̄
         p, H, e = self._predict(k, st, joint.z, Hz, rows, acc, u_k, cd, rd, w)
-        return Step(replace(state, p=p, H=H, e=e), lo, hi, inconsistent)
+        # a new state built directly (dataclasses.replace costs as much as a strip's update)
+        new = StripState(p=p, H=H, e=e, k=state.k, scale=state.scale)
+        return Step(new, lo, hi, inconsistent)
 
     def _d_radius(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
         """:func:`safe_radius` of the box of ``d[k]``, kept for the next step while the bounds
