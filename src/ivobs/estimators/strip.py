@@ -180,6 +180,7 @@ class _Joint:
     m: int
     box: np.ndarray
     acc: np.ndarray
+    work: np.ndarray  # scratch of the shape of Hz: |Hz| and λ sᵀ without a new array each
 
     def intersect(
         self, h: np.ndarray, ah: np.ndarray, t: float, y_i: float, du: float, g_meas: float,
@@ -192,7 +193,8 @@ class _Joint:
         z, acc, m = self.z, self.acc, self.m
         Hz = self.Hz[:, :m]
         nz = z.shape[0]
-        rows = np.abs(Hz).sum(axis=1)
+        work = self.work[:, :m]
+        rows = np.abs(Hz, out=work).sum(axis=1)
         s = h @ Hz
         e = float(t - h @ z)
         a_z = np.abs(z)
@@ -226,7 +228,7 @@ class _Joint:
         # rounding of z + λ e and of H - λ sᵀ, σ λ: added to the box aside
         self.acc = acc + gamma(3) * (a_z + al * abs(e) + rows + al * (s1 + sigma_z))
         self.z = z + lam * e
-        Hz -= lam[:, None] * s  # in place: the view of the room in self.Hz
+        Hz -= np.multiply(lam[:, None], s, out=work)  # in place: the room in self.Hz
         self.Hz[:, m] = sigma_z * lam
         self.m = m + 1
         return True
@@ -401,7 +403,7 @@ class StripEstimator(Estimator):
         box[1, nx:] = dbox.hi[jc]
         acc = np.zeros(nz)
         acc[:nx] = state.e
-        return _Joint(z=z, Hz=Hz, m=m, box=box, acc=acc)
+        return _Joint(z=z, Hz=Hz, m=m, box=box, acc=acc, work=np.empty_like(Hz))
 
     def _predict(
         self,
