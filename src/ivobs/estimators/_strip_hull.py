@@ -73,7 +73,8 @@ def section_hull(
     b[:, -1] = 0.0
     w[-1] = sigma
     idx = np.argsort(b, axis=1)
-    cw = np.cumsum(w[idx], axis=1)
+    cw = w[idx]
+    np.cumsum(cw, axis=1, out=cw)
     # the quantiles (W - e)/2 (upper bound) and (W + e)/2 (lower bound), rows 0 and 1
     thr = 0.5 * (cw[:, -1] + np.array([[-e], [e]]))
     pos = np.argmax(cw >= thr[:, :, None], axis=2)

@@ -436,7 +436,9 @@ class StripEstimator(Estimator):
             err = np.nextafter(err + w, np.inf)
         live = rp > 0
         H_next = np.hstack([M @ Hz, Ep[:, live] * rp[live], box_generators(err)])
-        H_next = H_next[:, np.any(H_next != 0, axis=0)]
+        used = np.any(H_next != 0, axis=0)
+        if not used.all():  # a copy only when a column is zero
+            H_next = H_next[:, used]
         self._check_overflow(k + 1, p_next, H_next)
         e_next = np.zeros(nx)
         q = self.design.order
