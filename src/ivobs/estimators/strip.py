@@ -53,7 +53,10 @@ without the check the boxes diverged (CORA's tank30 at ``order = 2 nx``: radius 
 **Work per step.** Only the components of ``d`` that enter a measurement are in the joint set
 (the others are added at the prediction, exactly); the per-coordinate hull sorts the
 breakpoints once (``O(nx m log m)`` per strip, ``m`` the generators); the model's structure is
-derived once for a time-invariant system.
+derived once for a time-invariant system. The two box enclosures are in
+``estimators/_strip_hull.py``, each bound pair computed by stacked ``(2, ·)`` array
+operations, and the large per-strip temporaries (``|H_z|``, ``λ sᵀ``, the hull's spread) are
+computed in place in scratch arrays (issue 17).
 """
 
 from __future__ import annotations
