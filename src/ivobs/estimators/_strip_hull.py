@@ -22,6 +22,8 @@ __all__ = ["propagate_hyperplane", "propagate_strip", "section_hull"]
 
 _SIGN = np.array([[1.0], [-1.0]])  # the upper bound f_j(μ) and the lower one -f_j(-μ)
 _GAMMA2 = gamma(2)
+# the ufuncs' reductions called directly (ndarray.sum and friends add a Python-level wrapper)
+_add, _max, _min = np.add.reduce, np.maximum.reduce, np.minimum.reduce
 
 
 def section_hull(
@@ -48,9 +50,9 @@ def section_hull(
     """
     n, m = H.shape
     if absH is None:
-        absH = np.abs(H).sum(axis=1)
+        absH = _add(np.abs(H), axis=1)
     a_s = np.abs(s)
-    smax = float(a_s.max()) if m else 0.0
+    smax = float(_max(a_s)) if m else 0.0
     if not smax > 0.0:
         r = absH + gamma(m + 2) * (np.abs(z) + absH)
         return z - r, z + r
@@ -68,27 +70,27 @@ def section_hull(
     # a breakpoint beyond the float range (|H_jl| huge against s_l): any finite μ gives a valid
     # bound (weak duality), so it is taken as 0 — only the choice of μ, never the bound,
     # changes. |b_jl| <= ‖H_j‖₁ / min w: the scan is skipped when that is far from overflow
-    if not float(absH.max()) < 1e300 * float(w[:-1].min()):
+    if not float(_max(absH)) < 1e300 * float(_min(w[:-1])):
         b[~np.isfinite(b)] = 0.0
     b[:, -1] = 0.0
     w[-1] = sigma
-    idx = np.argsort(b, axis=1)
+    idx = b.argsort(axis=1)
     cw = w[idx]
-    np.cumsum(cw, axis=1, out=cw)
+    cw.cumsum(axis=1, out=cw)
     # the quantiles (W - e)/2 (upper bound) and (W + e)/2 (lower bound), rows 0 and 1
     thr = 0.5 * (cw[:, -1] + np.array([[-e], [e]]))
-    pos = np.argmax(cw >= thr[:, :, None], axis=2)
+    pos = (cw >= thr[:, :, None]).argmax(axis=2)
     rows = np.arange(n)
     mu = b[rows, idx[rows, pos]]
     am = np.abs(mu)
-    s1 = float(a_s.sum())
+    s1 = float(_add(a_s))
     # f_j(μ) + its rounding bound for the upper bound; for the lower bound -f_j(-μ) with
     # f_j(-μ) = -μ e + |μ| σ + ‖H_j - μ s‖₁ (the same breakpoints, e -> -e)
     # in one (2, n, m) buffer, in place: at n = 60 each temporary is 0.7 MB, allocated and
     # faulted in again at every call
     tmp = np.multiply(mu[:, :, None], s)
     np.subtract(H, tmp, out=tmp)
-    spread = np.abs(tmp, out=tmp).sum(axis=2)
+    spread = _add(np.abs(tmp, out=tmp), axis=2)
     err = gamma(m + 4) * (np.abs(z) + am * (abs(e) + sigma + s1) + absH)
     bounds = _SIGN * mu * e + am * sigma + spread + err
     return z - bounds[1], z + bounds[0]
@@ -103,22 +105,22 @@ def propagate_strip(
     interval sums are widened by the bound ``γ_{n+3} (|t| + σ + Σ_l |h_l| max(|lo_l|,
     |hi_l|))`` of their rounding, the quotients by ``γ_2`` (relative). ``nz``: the indices of
     the nonzero ``h_j`` when the caller has them."""
-    prod = h * box  # h_l lo_l and h_l hi_l: their min and max are the interval h_l [w_l]
-    t_lo, t_hi = prod.min(axis=0), prod.max(axis=0)
-    s_lo, s_hi = float(t_lo.sum()), float(t_hi.sum())
-    delta = gamma(h.size + 3) * (abs(t) + sigma + float(np.abs(prod).max(axis=0).sum()))
+    # [h_l lo_l; h_l hi_l] sorted per column: rows t_lo, t_hi, the interval h_l [w_l]
+    ext = np.sort(h * box, axis=0)
+    s_lo, s_hi = _add(ext, axis=1).tolist()
+    delta = gamma(h.size + 3) * (abs(t) + sigma + float(_add(_max(np.abs(ext), axis=0))))
     if t + sigma < s_lo - delta or t - sigma > s_hi + delta:
         return None
     if nz is None:
         nz = np.flatnonzero(h)
-    # h_j w_j >= (t - σ) - (s_hi - t_hi_j) - δ (row 0), <= (t + σ) - (s_lo - t_lo_j) + δ (row 1)
-    rest = np.array([[s_hi], [s_lo]]) - np.stack([t_hi[nz], t_lo[nz]])
-    q = (np.array([[t - sigma], [t + sigma]]) - rest + np.array([[-delta], [delta]])) / h[nz]
-    pad = _GAMMA2 * np.abs(q).max(axis=0)
+    # h_j w_j <= (t + σ) - (s_lo - t_lo_j) + δ (row 0), >= (t - σ) - (s_hi - t_hi_j) - δ (row 1)
+    c = np.array([[t + sigma, delta], [t - sigma, -delta]])
+    q = (c[:, :1] - (np.array([[s_lo], [s_hi]]) - ext[:, nz]) + c[:, 1:]) / h[nz]
+    pad = _GAMMA2 * _max(np.abs(q), axis=0)
     out = box.copy()
-    out[0, nz] = np.maximum(box[0, nz], q.min(axis=0) - pad)
-    out[1, nz] = np.minimum(box[1, nz], q.max(axis=0) + pad)
-    if np.any(out[0] > out[1]):
+    out[0, nz] = np.maximum(box[0, nz], _min(q, axis=0) - pad)
+    out[1, nz] = np.minimum(box[1, nz], _max(q, axis=0) + pad)
+    if (out[0] > out[1]).any():
         return None  # both intervals hold every (x, d) that explains the data: none does
     return out
 

@@ -74,8 +74,8 @@ from ..sets import Box, Zonotope
 from ..sets.zonotope import box_generators, reduce_girard, reduce_parallelotope, safe_radius
 from . import _uncertain as uncertain
 from . import register
+from ._strip_hull import _add, _max, propagate_strip, section_hull
 from ._strip_hull import propagate_hyperplane as _propagate_hyperplane
-from ._strip_hull import propagate_strip, section_hull
 from ._strip_hull import section_hull as _section_hull
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
@@ -197,13 +197,13 @@ class _Joint:
         Hz = self.Hz[:, :m]
         nz = z.shape[0]
         work = self.work[:, :m]
-        rows = np.abs(Hz, out=work).sum(axis=1)
+        rows = _add(np.abs(Hz, out=work), axis=1)
         s = h @ Hz
         e = float(t - h @ z)
         a_z = np.abs(z)
         # the half-width of the strip that certainly holds (x_k, d_k): eq. (8) of the module
         # docstring with the rounding of y, of t, of e and of s ([Higham2002]'s γ_n bounds)
-        wmax = np.abs(self.box).max(axis=0)
+        wmax = _max(np.abs(self.box), axis=0)
         sigma = (
             g_meas * (abs(y_i) + du + ah @ wmax)
             + gamma(nz + 1) * (abs(t) + ah @ a_z)
@@ -212,7 +212,7 @@ class _Joint:
         ) * (1.0 + 4.0 * UNIT_ROUNDOFF)
         # the point of <z, Hz> that is (x_k, d_k) minus the rounding: in a wider strip
         sigma_z = (sigma + ah @ acc) * (1.0 + gamma(nz + 2))
-        s1 = float(np.abs(s).sum())
+        s1 = float(_add(np.abs(s)))
         if abs(e) > (s1 + sigma_z) * (1.0 + gamma(m + 2)):
             return False  # the strip misses the zonotope: certain
         box = propagate_strip(h, t, self.box, sigma, hnz)
@@ -362,7 +362,7 @@ class StripEstimator(Estimator):
                 inconsistent = True
         acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
         Hz = joint.Hz[:, : joint.m]
-        rows = np.abs(Hz).sum(axis=1)
+        rows = _add(np.abs(Hz), axis=1)
         r = rows[:nx] + acc[:nx]
         lo = np.maximum(joint.z[:nx] - r, joint.box[0, :nx])
         hi = np.minimum(joint.z[:nx] + r, joint.box[1, :nx])
