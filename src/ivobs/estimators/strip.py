@@ -53,12 +53,15 @@ without the check the boxes diverged (CORA's tank30 at ``order = 2 nx``: radius 
 **Work per step.** Only the components of ``d`` that enter a measurement are in the joint set
 (the others are added at the prediction, exactly); the per-coordinate hull sorts the
 breakpoints once (``O(nx m log m)`` per strip, ``m`` the generators); the model's structure is
-derived once for a time-invariant system.
+derived once for a time-invariant system. The two box enclosures are in
+``estimators/_strip_hull.py``, each bound pair computed by stacked ``(2, ·)`` array
+operations, and the large per-strip temporaries (``|H_z|``, ``λ sᵀ``, the hull's spread) are
+computed in place in scratch arrays (issue 17).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -71,10 +74,20 @@ from ..sets import Box, Zonotope
 from ..sets.zonotope import box_generators, reduce_girard, reduce_parallelotope, safe_radius
 from . import _uncertain as uncertain
 from . import register
+from ._strip_hull import _add, _max, propagate_strip, section_hull
+from ._strip_hull import propagate_hyperplane as _propagate_hyperplane
+from ._strip_hull import section_hull as _section_hull
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
 
-__all__ = ["REDUCTIONS", "StripDesign", "StripEstimator", "StripState"]
+__all__ = [
+    "REDUCTIONS",
+    "StripDesign",
+    "StripEstimator",
+    "StripState",
+    "_propagate_hyperplane",
+    "_section_hull",
+]
 
 REDUCTIONS = ("parallelotope", "girard", "box")
 
@@ -108,7 +121,8 @@ class _Structure:
     are part of the joint set; ``pc``, those that enter only the state equation: the strips
     never touch them (their entries of ``s = H_zᵀ h`` and ``λ`` are zero), so they are added at
     the prediction, ``E_pc <c_d, R>``, exactly as in the joint set; ``mc``, the columns of
-    ``M = [A E_jc]`` that are nonzero; ``h[i] = (C_i, F_i,jc)``."""
+    ``M = [A E_jc]`` that are nonzero; ``h[i] = (C_i, F_i,jc)``; the absolute values
+    ``|h|, |M|, |E_pc|, |B|, |D|`` of the rounding bounds; ``hnz[i]``: where ``h[i] != 0``."""
 
     A: np.ndarray
     B: np.ndarray
@@ -120,6 +134,12 @@ class _Structure:
     mc: np.ndarray
     h: np.ndarray
     ah: np.ndarray
+    aM: np.ndarray
+    aEp: np.ndarray
+    aB: np.ndarray
+    aD: np.ndarray
+    all_mc: bool
+    hnz: tuple[np.ndarray, ...]
 
 
 def _structure(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, E: np.ndarray,
@@ -130,70 +150,88 @@ def _structure(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, E: np
     M = np.hstack([A, E[:, jc]])
     mc = np.flatnonzero(np.any(M != 0, axis=0))
     h = np.hstack([C, F[:, jc]])
-    return _Structure(A, B, D, jc, pc, E[:, pc], M[:, mc], mc, h, np.abs(h))
+    Ep, Mc = E[:, pc], M[:, mc]
+    return _Structure(
+        A,
+        B,
+        D,
+        jc,
+        pc,
+        Ep,
+        Mc,
+        mc,
+        h,
+        np.abs(h),
+        np.abs(Mc),
+        np.abs(Ep),
+        np.abs(B),
+        np.abs(D),
+        mc.size == M.shape[1],
+        tuple(np.flatnonzero(row) for row in h),
+    )
 
 
 @dataclass
 class _Joint:
     """The pair ``(x_k, d_jc)`` during the measurement update of one step: in the zonotope
-    ``<z, Hz[:, :m]>`` up to the rounding box ``acc`` kept aside, and in the box ``[lo, hi]``
-    (the exact enclosures of the module docstring). ``Hz`` has room for the column each strip
-    appends. Local to a step, updated strip by strip."""
+    ``<z, Hz[:, :m]>`` up to the rounding box ``acc`` kept aside, and in the box ``box = [lo;
+    hi]`` (shape ``(2, nz)``; the exact enclosures of the module docstring). ``Hz`` has room
+    for the column each strip appends. Local to a step, updated strip by strip."""
 
     z: np.ndarray
     Hz: np.ndarray
     m: int
-    lo: np.ndarray
-    hi: np.ndarray
+    box: np.ndarray
     acc: np.ndarray
+    work: np.ndarray  # scratch of the shape of Hz: |Hz| and λ sᵀ without a new array each
 
     def intersect(
         self, h: np.ndarray, ah: np.ndarray, t: float, y_i: float, du: float, g_meas: float,
-        nx: int, v_i: float = 0.0,
+        nx: int, v_i: float = 0.0, hnz: np.ndarray | None = None,
     ) -> bool:  # fmt: skip
         """Intersect with the strip ``|hᵀ(x, d) - t| <= σ`` of one measured component
         (``t = y_i - D_i u``, ``du = |D_i| |u|``, ``ah = |h|``; ``v_i`` widens it by the
         interval matrices' ``|ΔC_i x + ΔD_i u|``); False when it certainly misses the set
-        (inconsistent: the set is left as it was)."""
+        (inconsistent: the set is left as it was). ``hnz``: where ``h != 0``, when known."""
         z, acc, m = self.z, self.acc, self.m
         Hz = self.Hz[:, :m]
         nz = z.shape[0]
-        aHz = np.abs(Hz)
-        rows = aHz.sum(axis=1)
+        work = self.work[:, :m]
+        rows = _add(np.abs(Hz, out=work), axis=1)
         s = h @ Hz
         e = float(t - h @ z)
+        a_z = np.abs(z)
         # the half-width of the strip that certainly holds (x_k, d_k): eq. (8) of the module
         # docstring with the rounding of y, of t, of e and of s ([Higham2002]'s γ_n bounds)
-        wmax = np.maximum(np.abs(self.lo), np.abs(self.hi))
+        wmax = _max(np.abs(self.box), axis=0)
         sigma = (
             g_meas * (abs(y_i) + du + ah @ wmax)
-            + gamma(nz + 1) * (abs(t) + ah @ np.abs(z))
+            + gamma(nz + 1) * (abs(t) + ah @ a_z)
             + gamma(nz) * float(ah @ rows)
             + v_i
         ) * (1.0 + 4.0 * UNIT_ROUNDOFF)
         # the point of <z, Hz> that is (x_k, d_k) minus the rounding: in a wider strip
         sigma_z = (sigma + ah @ acc) * (1.0 + gamma(nz + 2))
-        s1 = float(np.abs(s).sum())
+        s1 = float(_add(np.abs(s)))
         if abs(e) > (s1 + sigma_z) * (1.0 + gamma(m + 2)):
             return False  # the strip misses the zonotope: certain
-        contracted = _propagate_hyperplane(h, t, self.lo, self.hi, sigma)
-        if contracted is None:
+        box = propagate_strip(h, t, self.box, sigma, hnz)
+        if box is None:
             return False
-        lo, hi = contracted
-        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rows[:nx])
+        lo_j, hi_j = section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rows[:nx])
         pad = acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
-        np.maximum(lo[:nx], lo_j - pad, out=lo[:nx])
-        np.minimum(hi[:nx], hi_j + pad, out=hi[:nx])
-        self.lo, self.hi = lo, hi
+        np.maximum(box[0, :nx], lo_j - pad, out=box[0, :nx])
+        np.minimum(box[1, :nx], hi_j + pad, out=box[1, :nx])
+        self.box = box
         den = float(s @ s) + sigma_z * sigma_z
         if s1 == 0.0 or not den > 0.0:
             return True
         lam = Hz @ s / den  # the F-radius optimal λ* of [Alamo2005] (joint space)
         al = np.abs(lam)
         # rounding of z + λ e and of H - λ sᵀ, σ λ: added to the box aside
-        self.acc = acc + gamma(3) * (np.abs(z) + al * abs(e) + rows + al * (s1 + sigma_z))
+        self.acc = acc + gamma(3) * (a_z + al * abs(e) + rows + al * (s1 + sigma_z))
         self.z = z + lam * e
-        Hz -= np.outer(lam, s)  # in place: the view of the room in self.Hz
+        Hz -= np.multiply(lam[:, None], s, out=work)  # in place: the room in self.Hz
         self.Hz[:, m] = sigma_z * lam
         self.m = m + 1
         return True
@@ -289,6 +327,7 @@ class StripEstimator(Estimator):
             raise IvobsError("weight: only the 'box' reduction takes a weight")
         self.design = StripDesign(order=q, reduction=reduction, weight=W)
         self._lti = None if sys.is_time_varying else _structure(*sys.matrices_at(0))
+        self._d_cache: tuple[tuple[bytes, bytes], tuple[np.ndarray, np.ndarray]] | None = None
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> StripState:
@@ -302,31 +341,45 @@ class StripEstimator(Estimator):
         k = state.k
         st = self._lti if self._lti is not None else _structure(*self.sys.matrices_at(k))
         dbox = self.sys.d_at(k, y_k)
-        cd, rd = safe_radius(dbox.lo, dbox.hi)
-        measured = np.flatnonzero(~np.isnan(y_k))
-        joint = self._joint(state, st, dbox, cd, rd, measured.size)
+        cd, rd = self._d_radius(dbox)
+        y_list = y_k.tolist()
+        measured = [i for i, y_i in enumerate(y_list) if y_i == y_i]  # not NaN
+        joint = self._joint(state, st, dbox, cd, rd, len(measured))
         nx, nu = self.sys.nx, u_k.shape[0]
-        au = np.abs(u_k)
         g_meas = 2.0 * gamma(nx + cd.shape[0] + nu + 2)
-        t_all, du_all = y_k - st.D @ u_k, np.abs(st.D) @ au
+        t_all, du_all = (y_k - st.D @ u_k).tolist(), (st.aD @ np.abs(u_k)).tolist()
         inconsistent = False
         unc = self.sys.uncertainty  # interval matrices: |v| <= v̄ widens each strip (class doc)
-        v = None if unc is None else uncertain.terms(unc, joint.lo[:nx], joint.hi[:nx], u_k)[1]
+        v = (
+            None
+            if unc is None
+            else uncertain.terms(unc, joint.box[0, :nx], joint.box[1, :nx], u_k)[1]
+        )
         for i in measured:
-            y_i, v_i = float(y_k[i]), 0.0 if v is None else float(v[i])
-            args = (float(t_all[i]), y_i, du_all[i], g_meas, nx, v_i)
-            if not joint.intersect(st.h[i], st.ah[i], *args):
+            v_i = 0.0 if v is None else float(v[i])
+            args = (t_all[i], y_list[i], du_all[i], g_meas, nx, v_i)
+            if not joint.intersect(st.h[i], st.ah[i], *args, st.hnz[i]):
                 inconsistent = True
-        joint.acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
+        acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 1))  # the rounding of acc's sums
         Hz = joint.Hz[:, : joint.m]
-        rows = np.abs(Hz).sum(axis=1)
-        r = rows[:nx] + joint.acc[:nx]
-        lo = np.maximum(joint.z[:nx] - r, joint.lo[:nx])
-        hi = np.minimum(joint.z[:nx] + r, joint.hi[:nx])
+        rows = _add(np.abs(Hz), axis=1)
+        r = rows[:nx] + acc[:nx]
+        lo = np.maximum(joint.z[:nx] - r, joint.box[0, :nx])
+        hi = np.minimum(joint.z[:nx] + r, joint.box[1, :nx])
         hi = np.maximum(hi, lo)  # equal up to rounding when a state is pinned down exactly
         w = None if unc is None else uncertain.terms(unc, lo, hi, u_k)[0]  # |w| <= w̄
-        p, H, e = self._predict(k, st, joint.z, Hz, rows, joint.acc, u_k, cd, rd, w)
-        return Step(replace(state, p=p, H=H, e=e), lo, hi, inconsistent)
+        p, H, e = self._predict(k, st, joint.z, Hz, rows, acc, u_k, cd, rd, w)
+        # a new state built directly (dataclasses.replace costs as much as a strip's update)
+        new = StripState(p=p, H=H, e=e, k=state.k, scale=state.scale)
+        return Step(new, lo, hi, inconsistent)
+
+    def _d_radius(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`safe_radius` of the box of ``d[k]``, kept for the next step while the bounds
+        are the same numbers (a time-invariant ``d``: the same box every step)."""
+        key = (dbox.lo.tobytes(), dbox.hi.tobytes())
+        if self._d_cache is None or self._d_cache[0] != key:
+            self._d_cache = (key, safe_radius(dbox.lo, dbox.hi))
+        return self._d_cache[1]
 
     def _joint(
         self, state: StripState, st: _Structure, dbox: Box, cd: np.ndarray, rd: np.ndarray,
@@ -337,19 +390,23 @@ class StripEstimator(Estimator):
         nx = self.sys.nx
         p, H = state.p, state.H
         jc = st.jc
+        nh = H.shape[1]
         cols = np.flatnonzero(rd[jc] > 0)
-        nz, m = nx + jc.size, H.shape[1] + cols.size
+        nz, m = nx + jc.size, nh + cols.size
         z = np.concatenate([p, cd[jc]])
         Hz = np.zeros((nz, m + room))
-        Hz[:nx, : H.shape[1]] = H
-        Hz[nx + cols, H.shape[1] + np.arange(cols.size)] = rd[jc[cols]]
+        Hz[:nx, :nh] = H
+        Hz[nx + cols, nh + np.arange(cols.size)] = rd[jc[cols]]
         r0 = np.abs(H).sum(axis=1)
-        pad = gamma(H.shape[1] + 2) * (np.abs(p) + r0) + state.e * (1.0 + gamma(2))
-        box_lo = np.concatenate([p - r0 - pad, dbox.lo[jc]])
-        box_hi = np.concatenate([p + r0 + pad, dbox.hi[jc]])
+        pad = gamma(nh + 2) * (np.abs(p) + r0) + state.e * (1.0 + gamma(2))
+        box = np.empty((2, nz))
+        box[0, :nx] = p - r0 - pad
+        box[1, :nx] = p + r0 + pad
+        box[0, nx:] = dbox.lo[jc]
+        box[1, nx:] = dbox.hi[jc]
         acc = np.zeros(nz)
         acc[:nx] = state.e
-        return _Joint(z=z, Hz=Hz, m=m, lo=box_lo, hi=box_hi, acc=acc)
+        return _Joint(z=z, Hz=Hz, m=m, box=box, acc=acc, work=np.empty_like(Hz))
 
     def _predict(
         self,
@@ -370,20 +427,21 @@ class StripEstimator(Estimator):
         box aside, and ``w̄`` (interval matrices)."""
         nx = self.sys.nx
         mc, M, Ep = st.mc, st.M, st.Ep
-        aM = np.abs(M)
+        if not st.all_mc:
+            z, Hz, rows, acc = z[mc], Hz[mc], rows[mc], acc[mc]
         cp, rp = cd[st.pc], rd[st.pc]
-        p_next = M @ z[mc] + Ep @ cp + st.B @ u_k
+        p_next = M @ z + Ep @ cp + st.B @ u_k
         n_terms = mc.size + cp.size + u_k.shape[0] + 1
         err = 2.0 * gamma(n_terms) * (
-            aM @ (np.abs(z[mc]) + rows[mc] + acc[mc])
-            + np.abs(Ep) @ (np.abs(cp) + rp)
-            + np.abs(st.B) @ np.abs(u_k)
-        ) + (aM @ acc[mc]) * (1.0 + gamma(mc.size + 1))
+            st.aM @ (np.abs(z) + rows + acc) + st.aEp @ (np.abs(cp) + rp) + st.aB @ np.abs(u_k)
+        ) + (st.aM @ acc) * (1.0 + gamma(mc.size + 1))
         if w is not None:  # the interval matrices' w = ΔA x + ΔB u: generators of the box
             err = np.nextafter(err + w, np.inf)
         live = rp > 0
-        H_next = np.hstack([M @ Hz[mc], Ep[:, live] * rp[live], box_generators(err)])
-        H_next = H_next[:, np.any(H_next != 0, axis=0)]
+        H_next = np.hstack([M @ Hz, Ep[:, live] * rp[live], box_generators(err)])
+        used = np.any(H_next != 0, axis=0)
+        if not used.all():  # a copy only when a column is zero
+            H_next = H_next[:, used]
         self._check_overflow(k + 1, p_next, H_next)
         e_next = np.zeros(nx)
         q = self.design.order
@@ -399,91 +457,3 @@ class StripEstimator(Estimator):
                 H_next[:, -nx:] *= 1.0 + gamma(m + 1)
         # C order, as after a state() / restore() round trip (BLAS results depend on layout)
         return p_next, np.ascontiguousarray(H_next), e_next
-
-
-def _section_hull(
-    z: np.ndarray,
-    H: np.ndarray,
-    s: np.ndarray,
-    e: float,
-    sigma: float = 0.0,
-    absH: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-coordinate hull of ``{z + H ξ : ‖ξ‖∞ <= 1, |sᵀξ - e| <= σ}`` without a solver.
-
-    By LP duality ``max_ξ H_j ξ = min_μ f_j(μ)``, ``f_j(μ) = μ e + |μ| σ + ‖H_j - μ s‖₁`` (and
-    any ``μ`` gives a valid bound). ``f_j = μ e + Σ_l w_l |μ - b_l|`` is convex and piecewise
-    linear, with breakpoints ``b_l = H_jl / s_l`` of weight ``w_l = |s_l|`` and ``b = 0`` of
-    weight ``σ``: its slope ``e - W + 2 Σ_{b_l < μ} w_l`` (``W = Σ w_l``) crosses zero at the
-    weighted quantile ``(W - e) / 2`` of the breakpoints, found by sorting them
-    (``O(m log m)`` per coordinate, all coordinates at once). The lower bound is the same
-    with ``e -> -e``. ``f_j`` is evaluated at the chosen ``μ`` and increased by the bound
-    ``γ_{m+4} (|z_j| + |μ| (|e| + σ + ‖s‖₁) + ‖H_j‖₁)`` of its rounding, so the returned bounds
-    hold for the exact set whatever the rounding of the sort keys. ``absH``: ``‖H_j‖₁`` when
-    the caller has it.
-    """
-    n, m = H.shape
-    if absH is None:
-        absH = np.abs(H).sum(axis=1)
-    a_s = np.abs(s)
-    smax = float(a_s.max()) if m else 0.0
-    if not smax > 0.0:
-        r = absH + gamma(m + 2) * (np.abs(z) + absH)
-        return z - r, z + r
-    keep = a_s > 1e-14 * smax  # tiny s_l: a breakpoint far away of negligible weight
-    n_keep = int(keep.sum())
-    b = np.empty((n, n_keep + 1))
-    with np.errstate(over="ignore"):
-        if n_keep == m:
-            np.divide(H, s, out=b[:, :-1])
-        else:
-            np.divide(H[:, keep], s[keep], out=b[:, :-1])
-    # a breakpoint beyond the float range (|H_jl| huge against s_l): any finite μ gives a valid
-    # bound (weak duality), so it is taken as 0 — only the choice of μ, never the bound, changes
-    b[~np.isfinite(b)] = 0.0
-    b[:, -1] = 0.0
-    w = np.append(a_s[keep], sigma)
-    idx = np.argsort(b, axis=1)
-    cw = np.cumsum(w[idx], axis=1)
-    total = cw[:, -1]
-    rows = np.arange(n)
-    mu_hi = b[rows, idx[rows, np.argmax(cw >= 0.5 * (total - e)[:, None], axis=1)]]
-    mu_lo = b[rows, idx[rows, np.argmax(cw >= 0.5 * (total + e)[:, None], axis=1)]]
-    s1 = float(a_s.sum())
-    g = gamma(m + 4)
-    # f_j(μ) + its rounding bound for the upper bound; for the lower bound -f_j(-μ) with
-    # f_j(-μ) = -μ e + |μ| σ + ‖H_j - μ s‖₁ (the same breakpoints, e -> -e)
-    bounds = []
-    for mu, sign in ((mu_hi, 1.0), (mu_lo, -1.0)):
-        am = np.abs(mu)
-        spread = np.abs(H - mu[:, None] * s).sum(axis=1)
-        err = g * (np.abs(z) + am * (abs(e) + sigma + s1) + absH)
-        bounds.append(sign * mu * e + am * sigma + spread + err)
-    return z - bounds[1], z + bounds[0]
-
-
-def _propagate_hyperplane(
-    h: np.ndarray, t: float, lo: np.ndarray, hi: np.ndarray, sigma: float = 0.0
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Contract the box ``[lo, hi]`` with the strip ``|hᵀw - t| <= σ`` (one pass of interval
-    propagation: ``w_j ∈ ([t - σ, t + σ] - Σ_{l≠j} h_l [w_l]) / h_j``); ``None`` if the strip
-    certainly misses the box. The interval sums are widened by the bound
-    ``γ_{n+3} (|t| + σ + Σ_l |h_l| max(|lo_l|, |hi_l|))`` of their rounding, the quotients by
-    ``γ_2`` (relative)."""
-    t_lo = np.minimum(h * lo, h * hi)
-    t_hi = np.maximum(h * lo, h * hi)
-    s_lo, s_hi = t_lo.sum(), t_hi.sum()
-    delta = gamma(h.size + 3) * (abs(t) + sigma + np.maximum(np.abs(t_lo), np.abs(t_hi)).sum())
-    if t + sigma < s_lo - delta or t - sigma > s_hi + delta:
-        return None
-    nz = h != 0
-    a = (t - sigma) - (s_hi - t_hi[nz]) - delta  # h_j w_j >= a
-    b = (t + sigma) - (s_lo - t_lo[nz]) + delta  # h_j w_j <= b
-    q1, q2 = a / h[nz], b / h[nz]
-    pad = gamma(2) * np.maximum(np.abs(q1), np.abs(q2))
-    lo, hi = lo.copy(), hi.copy()
-    lo[nz] = np.maximum(lo[nz], np.minimum(q1, q2) - pad)
-    hi[nz] = np.minimum(hi[nz], np.maximum(q1, q2) + pad)
-    if np.any(lo > hi):
-        return None  # both intervals hold every (x, d) that explains the data: none does
-    return lo, hi
