@@ -85,24 +85,21 @@ def _model(A: np.ndarray, b: np.ndarray, radius: float) -> Any:
 
 def chain_duals(
     Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float, chains: list[list[int]]
-) -> tuple[np.ndarray, np.ndarray] | str:
+) -> np.ndarray | str:
     """Equality multipliers ``μ`` (K, nc) of the ``K`` programs
     ``min {Gs_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``, in the sign convention of
-    :func:`~.hull._dual_bounds` (``μᵀb - r ‖g - Aᵀμ‖₁`` is the bound), and the mask of the
-    programs HiGHS failed on (their row of ``μ`` is zero: the caller solves them otherwise).
+    :func:`~.hull._dual_bounds` (``μᵀb - r ‖g - Aᵀμ‖₁`` is the bound).
 
     The feasible set is the same for all: it is passed to HiGHS once per chain (``chains``:
     lists of rows of ``Gs`` that cover them all) and only the cost changes along a chain, so
     each solve starts from the optimal basis of the previous objective (for a hull: the minima
     of ``x_1 .. x_n`` in one chain, the maxima of ``x_n .. x_1`` in the other; neighbouring
-    objectives have close optima, opposite ones do not). A program HiGHS does not finish
-    (status "unknown" on an ill-conditioned basis: 1 in 120 on tank30) is solved once more
-    from scratch; should that fail too, only this program is marked, and the chain goes on
-    from a fresh start (before, one failure sent all ``K`` programs to the slow fallback).
-    ``"infeasible"`` when HiGHS calls the set infeasible."""
+    objectives have close optima, opposite ones do not). ``"infeasible"`` when HiGHS calls
+    the set infeasible, ``"failed"`` on any other outcome."""
+    import highspy
+
     m = Gs.shape[1]
-    mu = np.zeros((Gs.shape[0], A.shape[0]))
-    failed = np.zeros(Gs.shape[0], dtype=bool)
+    mu = np.empty((Gs.shape[0], A.shape[0]))
     lp = _model(A, b, radius)
     idx = np.arange(m, dtype=np.int32)
     for n_chain, rows in enumerate(chains):
@@ -110,29 +107,14 @@ def chain_duals(
         h.passModel(lp)
         for i in rows:
             h.changeColsCost(m, idx, np.ascontiguousarray(Gs[i]))
-            out = _solve(h)
-            if out is None:  # retry from scratch (the warm basis may be what failed)
-                h.clearSolver()
-                out = _solve(h)
-            if isinstance(out, str):
-                return out
-            if out is None or not np.all(np.isfinite(out)):
-                failed[i] = True
-                h.clearSolver()
-                continue
-            mu[i] = out
-    return mu, failed
-
-
-def _solve(h: Any) -> np.ndarray | str | None:
-    """Run ``h``: the row duals when optimal, ``"infeasible"``, or None on any other outcome."""
-    import highspy
-
-    h.run()
-    status = h.getModelStatus()
-    if status == highspy.HighsModelStatus.kInfeasible:
-        return "infeasible"
-    sol = h.getSolution()
-    if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
-        return None
-    return np.asarray(sol.row_dual, dtype=float)
+            h.run()
+            status = h.getModelStatus()
+            if status == highspy.HighsModelStatus.kInfeasible:
+                return "infeasible"
+            sol = h.getSolution()
+            if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
+                return "failed"
+            mu[i] = sol.row_dual
+    if not np.all(np.isfinite(mu)):
+        return "failed"
+    return mu

@@ -170,10 +170,12 @@ def _certified_mins(
     """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
 
     The programs share their constraints and are solved by HiGHS as one chain of objectives,
-    each warm-started from the previous optimum (:func:`._highs.chain_duals`); the programs
-    HiGHS fails on (all of them when it calls the set infeasible) are solved one by one with
-    the fallbacks of :data:`_LP_ATTEMPTS` (degenerate, over-determined or ill-conditioned
-    constraints can fool it).
+    each warm-started from the previous optimum (:func:`._highs.chain_duals`); should HiGHS
+    fail on one (or call the set infeasible), they are solved one by one with the fallbacks of
+    :data:`_LP_ATTEMPTS` (degenerate, over-determined or ill-conditioned constraints can fool
+    it). All of them, not only the failed one: on tank30 (where one program in ~120 fails)
+    the multipliers of the chain alone, as optimal but different on these degenerate programs,
+    steer the elimination to boxes 1.4 % wider over the record (median; up to 3.8 %).
     """
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
@@ -181,15 +183,15 @@ def _certified_mins(
     from ._highs import chain_duals
 
     out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
-    if isinstance(out, str):  # HiGHS calls the set infeasible: every program with fallbacks
-        mu, failed = np.zeros((K, nc)), np.ones(K, dtype=bool)
-    else:
-        mu, failed = out
-    for i in np.flatnonzero(failed):
-        _, mu[i], ok = _certified_min(Gs[i], A, b, radius)
+    if isinstance(out, np.ndarray):
+        return _dual_bounds(Gs, A, b, out, radius), out, True
+    mu = np.zeros((K, nc))
+    vals = np.empty(K)
+    for i in range(K):
+        vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
         if not ok:
             return np.full(K, np.nan), np.zeros((K, nc)), False
-    return _dual_bounds(Gs, A, b, mu, radius), mu, True
+    return vals, mu, True
 
 
 def hull_bounds(
