@@ -66,21 +66,33 @@ def _propagate(
     absA = np.abs(A)
     nz = absA > ZERO_TOL * np.maximum(1.0, absA.max(axis=1, keepdims=True))
     safe = np.where(nz, A, 1.0)
+    zero = ~nz
+    bc = b[:, None]
     for _ in range(sweeps):
-        t_lo = np.minimum(A * lo, A * hi)
-        t_hi = np.maximum(A * lo, A * hi)
-        rest_lo = t_lo.sum(axis=1, keepdims=True) - t_lo
-        rest_hi = t_hi.sum(axis=1, keepdims=True) - t_hi
-        q1 = (b[:, None] - rest_hi) / safe
-        q2 = (b[:, None] - rest_lo) / safe
+        # the same operations as before in fewer passes (each product once, in place)
+        a_lo, a_hi = A * lo, A * hi
+        t_lo = np.minimum(a_lo, a_hi)
+        t_hi = np.maximum(a_lo, a_hi, out=a_hi)
+        rest_lo = np.subtract(t_lo.sum(axis=1, keepdims=True), t_lo, out=t_lo)
+        rest_hi = np.subtract(t_hi.sum(axis=1, keepdims=True), t_hi, out=t_hi)
+        q1 = np.divide(np.subtract(bc, rest_hi, out=rest_hi), safe, out=rest_hi)
+        q2 = np.divide(np.subtract(bc, rest_lo, out=rest_lo), safe, out=rest_lo)
         pad = 1e-10 * (1.0 + np.abs(q1) + np.abs(q2))
-        new_lo = np.where(nz, np.minimum(q1, q2) - pad, -np.inf).max(axis=0, initial=-np.inf)
-        new_hi = np.where(nz, np.maximum(q1, q2) + pad, np.inf).min(axis=0, initial=np.inf)
-        lo = np.maximum(lo, new_lo)
-        hi = np.minimum(hi, new_hi)
-        if np.any(lo > hi + 1e-9):
+        q_lo, q_hi = np.minimum(q1, q2, out=a_lo), np.maximum(q1, q2, out=q1)
+        q_lo -= pad
+        q_hi += pad
+        q_lo[zero] = -np.inf
+        q_hi[zero] = np.inf
+        new_lo = q_lo.max(axis=0, initial=-np.inf)
+        new_hi = q_hi.min(axis=0, initial=np.inf)
+        lo_next = np.maximum(lo, new_lo)
+        hi_next = np.minimum(hi, new_hi)
+        if np.any(lo_next > hi_next + 1e-9):
             return None
-        hi = np.maximum(hi, lo)
+        hi_next = np.maximum(hi_next, lo_next)
+        if np.array_equal(lo_next, lo) and np.array_equal(hi_next, hi):
+            break  # a fixed point: the remaining sweeps would repeat this one exactly
+        lo, hi = lo_next, hi_next
     return lo, hi
 
 
@@ -107,13 +119,18 @@ def _elimination_scores(
     its box constraint is redundant and eliminating ``ξ_j`` is exact), and an estimate of the
     Hausdorff error of eliminating it ([Scott2016, Section 4.2 and eq. (A.8)]).
 
-    ``R_j = max(0, max|ρ_j| - 1)`` with ``ρ_j = ∩_i (b_i - Σ_{l≠j} a_il [-1, 1]) / a_ij``.
-    Dropping ``|ξ_j| <= 1`` lets ``ξ_j`` move by about ``R_j`` along the constraints' null
-    space; the error estimate is ``‖G δ_j‖₂`` for the shortest such move
+    ``R_j = max(0, max|ρ_j| - 1)`` with ``ρ_j = ∩_i (b_i - Σ_{l≠j} a_il [-1, 1]) / a_ij``
+    (:func:`_overshoot`). Dropping ``|ξ_j| <= 1`` lets ``ξ_j`` move by about ``R_j`` along the
+    constraints' null space; the error estimate is ``‖G δ_j‖₂`` for the shortest such move
     ``δ_j = R_j P e_j / P_jj`` (``P`` the projector onto the null space of ``A``), computed
-    for all ``j`` from one QR factorisation of ``Aᵀ``.
+    for all ``j`` from one QR factorisation of ``Aᵀ`` (:func:`_hausdorff`).
     """
-    m = A.shape[1]
+    R = _overshoot(A, b)
+    return R, _hausdorff(G, A, R)
+
+
+def _overshoot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``R_j`` of :func:`_elimination_scores` (``inf``: ``ξ_j`` is in no constraint)."""
     absA = np.abs(A)
     tol = ZERO_TOL * max(1.0, float(absA.max()) if absA.size else 1.0)
     nz = absA > tol
@@ -122,13 +139,20 @@ def _elimination_scores(
     mid = b[:, None] / safe
     rho_lo = np.where(nz, mid - spread, -np.inf).max(axis=0, initial=-np.inf)
     rho_hi = np.where(nz, mid + spread, np.inf).min(axis=0, initial=np.inf)
-    R = np.maximum(0.0, np.maximum(-1.0 - rho_lo, rho_hi - 1.0))  # inf: ξ_j is unconstrained
+    R: np.ndarray = np.maximum(0.0, np.maximum(-1.0 - rho_lo, rho_hi - 1.0))
+    return R
+
+
+def _hausdorff(G: np.ndarray, A: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """The Hausdorff-error estimate of :func:`_elimination_scores` from the overshoots ``R``
+    (0 on the exact eliminations, ``R_j <= 1e-3``, when there are any; ``inf`` where none)."""
+    m = A.shape[1]
     err = np.full(m, np.inf)
     cand = np.isfinite(R)
     exact = cand & (R <= 1e-3)
     if np.any(exact):
         err[exact] = 0.0
-        return R, err
+        return err
     Q = np.linalg.qr(A.T)[0]  # orthonormal basis of the row space of A
     Pjj = 1.0 - np.einsum("ij,ij->i", Q, Q)
     GP = G - (G @ Q) @ Q.T  # G P, column j = G P e_j
@@ -136,7 +160,7 @@ def _elimination_scores(
         move = np.linalg.norm(GP, axis=0) * R / Pjj
     ok = cand & (Pjj > 1e-12) & np.isfinite(move)
     err[ok] = move[ok]
-    return R, err
+    return err
 
 
 def _eliminate(
@@ -166,10 +190,14 @@ def independent_constraints(A: np.ndarray) -> np.ndarray:
     keep = np.ones(nc, dtype=bool)
     if nc <= 1:
         return keep
-    from scipy.linalg import qr  # imported here: SciPy is slow to import
+    from scipy.linalg.lapack import dgeqp3  # imported here: SciPy is slow to import
 
-    R, piv = qr(A.T, mode="r", pivoting=True)
-    d = np.abs(np.diag(R))
+    # LAPACK's QR with column pivoting directly (what scipy.linalg.qr calls, without the
+    # argument checks and copies that cost more than the factorisation on small systems; a
+    # blocked workspace, as SciPy's size query gives, so the same factorisation)
+    R, jpvt = dgeqp3(np.array(A.T, dtype=float, order="F"), lwork=2 * nc + (nc + 1) * 64)[:2]
+    piv = jpvt - 1
+    d = np.abs(np.diag(R)[:nc])
     rank = int(np.sum(d > 1e-10 * d[0])) if d.size and d[0] > 0 else 0
     if rank < nc:
         keep[:] = False
@@ -186,26 +214,36 @@ def _choose_factor(
     Hausdorff estimate of :func:`_elimination_scores`; without: that estimate alone (or, when
     ``A`` has no null space, the overshoot ``R_j`` times ``‖G e_j‖``)."""
     m = A.shape[1]
-    R, err = _elimination_scores(G, A, b)
+    R = _overshoot(A, b)
     piv = np.argmax(np.abs(A), axis=0)
     cand = np.isfinite(R) & (np.abs(A[piv, np.arange(m)]) >= PIVOT_TOL)
     if not np.any(cand):
         return None
+    if cert is None:
+        j = int(np.argmin(_shape(G, A, R, cand)))
+        return j, int(piv[j])
+    loss = cert.elimination_loss(A, b, piv, cand)
+    best = loss.min()
+    ties = loss <= best + 1e-9 * (1.0 + abs(best))
+    if np.count_nonzero(ties) == 1:  # a unique least loss: the Hausdorff estimate is not needed
+        j = int(np.flatnonzero(ties)[0])
+        return j, int(piv[j])
+    key = np.where(ties, _shape(G, A, R, cand), np.inf)
+    if not np.any(np.isfinite(key)):
+        key = loss
+    j = int(np.argmin(key))
+    return j, int(piv[j])
+
+
+def _shape(G: np.ndarray, A: np.ndarray, R: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """The shape key of :func:`_choose_factor` on the candidates (``inf`` elsewhere): the
+    Hausdorff estimate, or where it is nowhere finite the overshoot times ``‖G e_j‖``."""
+    err = _hausdorff(G, A, R)
     shape = np.where(cand & np.isfinite(err), err, np.inf)
     if not np.any(np.isfinite(shape)):
         with np.errstate(invalid="ignore"):  # R = inf on the non-candidates
             shape = np.where(cand, R * np.linalg.norm(G, axis=0), np.inf)
-    if cert is not None:
-        loss = cert.elimination_loss(A, b, piv, cand)
-        best = loss.min()
-        ties = loss <= best + 1e-9 * (1.0 + abs(best))
-        key = np.where(ties, shape, np.inf)
-        if not np.any(np.isfinite(key)):
-            key = loss
-    else:
-        key = shape
-    j = int(np.argmin(key))
-    return j, int(piv[j])
+    return shape
 
 
 def eliminate_constraints(

@@ -173,7 +173,9 @@ def _certified_mins(
     each warm-started from the previous optimum (:func:`._highs.chain_duals`); should HiGHS
     fail on one (or call the set infeasible), they are solved one by one with the fallbacks of
     :data:`_LP_ATTEMPTS` (degenerate, over-determined or ill-conditioned constraints can fool
-    it).
+    it). All of them, not only the failed one: on tank30 (where one program in ~120 fails)
+    the multipliers of the chain alone, as optimal but different on these degenerate programs,
+    steer the elimination to boxes 1.4 % wider over the record (median; up to 3.8 %).
     """
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
@@ -262,7 +264,7 @@ class Certificates:
             idx = idx[np.argsort(upper[idx], kind="stable")[:LOSS_CANDIDATES]]
         out = np.full(m, np.inf)
         tj = t[:, idx]  # (K, c)
-        new = np.abs(Rc[:, None, :] - tj[:, :, None] * A[piv[idx]][None, :, :]).sum(axis=2)
+        new = _shifted_l1(Rc, tj, A[piv[idx]])
         loss = new - tj * b[piv[idx]][None, :] - np.abs(Rc).sum(axis=1, keepdims=True)
         out[idx] = self.weight @ loss
         return out
@@ -273,6 +275,27 @@ class Certificates:
         self.mu = self.mu.copy()
         self.mu[:, p] += Rc / A[p, j]
         self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])
+
+
+_CHUNK = 1 << 16
+"""Elements of the ``(K, c, m)`` temporaries of :func:`_shifted_l1` per chunk (cache-sized:
+one ``(K, m)`` block at a time is 3x faster than the whole array on tank30)."""
+
+
+def _shifted_l1(R: np.ndarray, T: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """``N[k, c] = ‖R_k - T_kc P_c‖₁`` (``R`` (K, m), ``T`` (K, c), ``P`` (c, m)), in chunks of
+    candidates whose temporaries fit in cache (the same sums, term for term)."""
+    K, m = R.shape
+    c = T.shape[1]
+    step = max(1, _CHUNK // max(1, K * m))
+    out = np.empty((K, c))
+    for s in range(0, c, step):
+        e = min(c, s + step)
+        buf = T[:, s:e, None] * P[None, s:e, :]
+        np.subtract(R[:, None, :], buf, out=buf)
+        np.abs(buf, out=buf)
+        out[:, s:e] = buf.sum(axis=2)
+    return out
 
 
 def _hull_chains(n: int, k: int) -> list[list[int]]:
