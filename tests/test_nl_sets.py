@@ -238,7 +238,7 @@ def test_mean_value_form_encloses_every_point():
             lo = c - width * rng.uniform(0, 1, 4)
             hi = c + width * rng.uniform(0, 1, 4)
             lo[2:], hi[2:] = np.maximum(lo[2:], [0.9, -0.1]), np.minimum(hi[2:], [1.1, 0.1])
-            lin = linearise(sys.f_box, sys.f_jac_box, lo, hi, rng.uniform(lo, hi), u, 2)
+            lin = linearise(sys.evaluators("f"), lo, hi, rng.uniform(lo, hi), u, 2)
             for _ in range(20):
                 z = rng.uniform(lo, hi)
                 if trial % 3 == 0:  # vertices

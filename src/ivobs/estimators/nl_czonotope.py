@@ -213,9 +213,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
                     inconsistent = True
                 else:
                     prev.lo, prev.hi, wlo, whi = back
-            lin = linearise(
-                self.model.f_box, self.model.f_jac_box, prev.lo, prev.hi, prev.z, state.u, nx
-            )
+            lin = linearise(self.model.evaluators("f"), prev.lo, prev.hi, prev.z, state.u, nx)
             c, G, A, b, e = self._predict(state.k, prev, lin)
             joint = self._joint(c, G, A, b, e, lin.nat_lo, lin.nat_hi, wlo, whi)
         else:
@@ -329,9 +327,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         """``[J_i G_z, σ_i e_i] (ξ, τ) = t_i - J_i z`` for the measured outputs, each row
         divided by a power of two near its largest coefficient (exact)."""
         nx = self.model.nx
-        lin = linearise(
-            self.model.h_box, self.model.h_jac_box, joint.lo, joint.hi, joint.z, u_k, nx, False
-        )
+        lin = linearise(self.model.evaluators("h"), joint.lo, joint.hi, joint.z, u_k, nx, False)
         J = lin.J[obs]
         aJ = np.abs(J)
         n = joint.z.shape[0]

@@ -344,9 +344,7 @@ class NonlinearZonotopeEstimator(Estimator):
         if box is None:
             return False
         joint.lo, joint.hi = np.concatenate(box[0::2]), np.concatenate(box[1::2])
-        lin = linearise(
-            self.model.h_box, self.model.h_jac_box, joint.lo, joint.hi, joint.z, u_k, nx, False
-        )
+        lin = linearise(self.model.evaluators("h"), joint.lo, joint.hi, joint.z, u_k, nx, False)
         n = joint.z.shape[0]
         for i in obs:
             Ji = lin.J[i]
@@ -364,7 +362,7 @@ class NonlinearZonotopeEstimator(Estimator):
         """``(p, H, e, lo, hi)`` of ``x[k+1]`` (steps 4-5 and (v)-(vi) of the proof)."""
         nx = self.model.nx
         z, Hz, acc = joint.z, joint.Hz, joint.acc
-        lin = linearise(self.model.f_box, self.model.f_jac_box, joint.lo, joint.hi, z, u_k, nx)
+        lin = linearise(self.model.evaluators("f"), joint.lo, joint.hi, z, u_k, nx)
         J, aJ = lin.J, np.abs(lin.J)
         d = z - lin.c
         p = lin.g0 + J @ d
