@@ -37,7 +37,7 @@ import numpy as np
 
 from ..linalg import UNIT_ROUNDOFF, gamma
 
-__all__ = ["Linearisation", "contract_back", "linearise"]
+__all__ = ["Linearisation", "TermwiseMargin", "contract_back", "linearise"]
 
 _UP = 1.0 + 2.0 * UNIT_ROUNDOFF
 
@@ -83,16 +83,21 @@ def linearise(
     n, m = len(cl), len(gl)
     delta = [max(q - a, a - p) * _UP for a, p, q in zip(cl, bl, bh)]
     up_rem, up_sum, g3 = 1.0 + gamma(n + 1), 1.0 + gamma(2), gamma(3)
-    g0s, rhos, rows = [0.0] * m, [0.0] * m, []
+    g0s, rhos = [0.0] * m, [0.0] * m
+    rows = [
+        [0.5 * p + 0.5 * q for p, q in zip(jl[i * n : i * n + n], jh[i * n : i * n + n])]
+        for i in range(m)
+    ]  # J̃ = mid [J], halves first: no overflow
+    D = [max(q - t, t - p) * _UP for p, q, t in zip(jl, jh, (t for r in rows for t in r))]
+    with np.errstate(invalid="ignore", over="ignore"):  # D Δ: one product, as BLAS sums it
+        rems = ((np.array(D).reshape(m, n) @ np.array(delta)) * up_rem).tolist()
     curved: dict[tuple[bool, ...], list[int]] = {}  # rows to tighten, by sign pattern
     for i in range(m):
-        Jl, Jh = jl[i * n : i * n + n], jh[i * n : i * n + n]
-        Jt = [0.5 * p + 0.5 * q for p, q in zip(Jl, Jh)]  # halves first: no overflow
+        Jl, Jh, Jt = jl[i * n : i * n + n], jh[i * n : i * n + n], rows[i]
         g0, r = _safe_radius(gl[i], gh[i], g3)
-        rem = sum([max(q - t, t - p) * _UP * d for p, q, t, d in zip(Jl, Jh, Jt, delta)])
-        rho = (r + rem * up_rem) * up_sum
+        rho = (r + rems[i]) * up_sum
         if not math.isfinite(rho + g0 + sum(Jt)):  # a domain edge: the natural inclusion
-            Jt = [0.0] * n
+            rows[i] = [0.0] * n
             g0, rho = _safe_radius(nl[i], nh[i], g3)
         elif natural:
             nl[i], nh[i] = _centred(g0, Jt, rho, bl, bh, cl, nl[i], nh[i])
@@ -103,7 +108,6 @@ def linearise(
                 key = tuple(up + [q <= 0.0 and not s for q, s in zip(Jh, up)])
                 curved.setdefault(key, []).append(i)
         g0s[i], rhos[i] = g0, rho
-        rows.append(Jt)
     for key, members in curved.items():
         _monotone(value, key, bl, bh, ul, nx, members, nl, nh)
     a = np.array
@@ -203,3 +207,24 @@ def contract_back(
     n = lo.shape[0]
     a = np.array
     return a(bl[:n]), a(bh[:n]), a(bl[n:], dtype=float), a(bh[n:], dtype=float)
+
+
+class TermwiseMargin:
+    """Mixin of the set-based nonlinear estimators: no data scale ``s_k`` in the returned
+    bounds' margin (:mod:`ivobs.estimators.rounding`), which stays ``ROUNDING (1 + |bound|)``.
+
+    For a nonlinear model the data scale takes the largest bound of the unknowns ``w`` as the
+    magnitude of the data terms; a parameter such as an Arrhenius constant ``k0 ~ 7e10``, which
+    only enters as ``k0 exp(-E/T) ~ 0.04``, would widen every bound by ``ROUNDING k0 ~ 7``.
+    These methods put the data margin in the recursion instead, relative to the terms it
+    combines: the prediction's box of generators holds ``ROUNDING (1 + |f0| + |J| (|z - c| +
+    |G_z| 1))`` (the magnitudes of the linearised terms of ``f`` over the set) and each measured
+    output's strip ``ROUNDING (1 + |y_i|)``, so a float64 simulation's rounding of each step is
+    covered where it occurs; the returned bounds are widened by ``ROUNDING (1 + |bound|)``, as
+    ``nl-interval`` does (it has no data scale either)."""
+
+    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
+        return 0.0
+
+    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
+        return np.zeros(y.shape[:-1])
