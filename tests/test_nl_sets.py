@@ -238,7 +238,7 @@ def test_mean_value_form_encloses_every_point():
             lo = c - width * rng.uniform(0, 1, 4)
             hi = c + width * rng.uniform(0, 1, 4)
             lo[2:], hi[2:] = np.maximum(lo[2:], [0.9, -0.1]), np.minimum(hi[2:], [1.1, 0.1])
-            lin = linearise(sys.f_box, sys.f_jac_box, lo, hi, rng.uniform(lo, hi), u, 2)
+            lin = linearise(sys.evaluators("f"), lo, hi, rng.uniform(lo, hi), u, 2)
             for _ in range(20):
                 z = rng.uniform(lo, hi)
                 if trial % 3 == 0:  # vertices
@@ -280,3 +280,71 @@ def test_float64_simulator_record_covered(method, T):
         x = np.array([1 - a * x[0] ** 2 + x[1] + w, 0.3 * x[0]])
     lo, hi = _run(method, henon_system(), X0_HENON, np.zeros((T, 0)), Y)
     assert _misses(X, lo, hi).size == 0
+
+
+# -- large-magnitude parameters ---------------------------------------------------------------
+def _cstr_unscaled():
+    """The cstr scenario's reactor with the Arrhenius constant itself as the parameter,
+    ``k0 ∈ [7.056e10, 7.344e10]`` (the scenario uses the factor ``kr ~ 1``)."""
+    rate = "k0*exp(-8750/T)*C"
+    return ivobs.NonlinearSystem(
+        f=[
+            f"C + 0.02*((1 - C) - {rate}) + w1",
+            f"T + 0.02*((350 - T) + 209.2*{rate} + 2.092*(Tc - T)) + w2",
+        ],
+        h=["T + v1"],
+        states=["C", "T"],
+        inputs=["Tc"],
+        params={"k0": (7.056e10, 7.344e10)},
+        d={"w1": (-1e-4, 1e-4), "w2": (-0.01, 0.01), "v1": (-0.1, 0.1)},
+        dt=0.02,
+    )
+
+
+def _simulate_cstr(T, policy, seed=0):
+    """The reactor at 100 bits, parameters and disturbances at vertices of their bounds:
+    ``random`` switching at every step, or ``blocks`` of 25 steps that all heat (k0 high, w1
+    low, w2 high) then all cool, the measurement noise at its bound of the same sign."""
+    from mpmath import exp, mp, mpf
+
+    rng = np.random.default_rng(seed)
+    X, Y = np.empty((T, 2)), np.empty((T, 1))
+    with mp.workprec(100):
+        h, tc = mpf("0.02"), mpf(300)
+        k0s, w1, w2, v = (mpf("7.056e10"), mpf("7.344e10")), mpf("1e-4"), mpf("0.01"), mpf("0.1")
+        c, t = mpf("0.93"), mpf("308.5")
+        for k in range(T):
+            if policy == "random":
+                s = [1 if b else -1 for b in rng.integers(0, 2, 4)]
+            else:
+                s = [1 if (k // 25) % 2 == 0 else -1] * 4
+            X[k] = float(c), float(t)
+            Y[k, 0] = float(t + s[3] * v)
+            r = (k0s[1] if s[0] > 0 else k0s[0]) * exp(-8750 / t) * c
+            c, t = (
+                c + h * ((1 - c) - r) - s[1] * w1,
+                t + h * ((350 - t) + mpf("209.2") * r + mpf("2.092") * (tc - t)) + s[2] * w2,
+            )
+    return X, Y
+
+
+@pytest.mark.parametrize("policy", ["random", "blocks"])
+def test_cstr_unscaled_arrhenius_constant_tight_and_sound(policy):
+    """A parameter of magnitude 7e10 (it enters as k0 exp(-E/T) ~ 0.04): the set methods stay
+    within a small factor of nl-interval's widths (the data margin of the returned bounds used
+    to be ROUNDING * 7.3e10 ~ 7.3 on each side: boxes ~14.7 wide), and contain the state at
+    every step."""
+    T = 300
+    sys = _cstr_unscaled()
+    X, Y = _simulate_cstr(T, policy)
+    U = np.full((T, 1), 300.0)
+    x0 = ivobs.Box([0.8, 305.0], [1.0, 315.0])
+    lo_i, hi_i = _run("nl-interval", sys, x0, U, Y)
+    ref = (hi_i - lo_i)[20:].mean(axis=0)
+    assert _misses(X, lo_i, hi_i).size == 0
+    for method in METHODS:
+        lo, hi = _run(method, sys, x0, U, Y)
+        assert _misses(X, lo, hi).size == 0, method
+        w = (hi - lo)[20:]
+        assert np.all(w.mean(axis=0) <= 1.2 * ref), (method, w.mean(axis=0), ref)
+        assert w.max() < 0.5, method  # was ~14.7 on every step

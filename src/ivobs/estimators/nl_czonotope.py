@@ -43,7 +43,9 @@ of two (exact). The hull bounds are certified by LP duality at the solver's mult
 rounding of that certificate's sum, as the linear ``constrained-zonotope`` method does). The
 prediction's box of generators holds the rounding of ``f0 + J (z - c̄)`` and ``J G_z`` and the
 image of the box aside; the reduction returns supersets and keeps the rounding of its shift in
-``e``.
+``e``. The data margin of a float64 record is in the recursion, relative to the terms of ``f``
+and ``h`` (:class:`~ivobs.estimators._meanvalue.TermwiseMargin`, as ``nl-zonotope``); the base
+class widens the returned bounds by ``ROUNDING (1 + |bound|)``.
 """
 
 from __future__ import annotations
@@ -66,7 +68,7 @@ from ..sets.czonotope import (
     safe_radius,
 )
 from . import register
-from ._meanvalue import Linearisation, contract_back, linearise
+from ._meanvalue import Linearisation, TermwiseMargin, contract_back, linearise
 from .base import ROUNDING, Design, Estimator, check_size
 from .constrained_zonotope import INFLATE, TOLS, default_limits
 from .state import OnlineState, Step
@@ -127,7 +129,7 @@ def _pow2(v: np.ndarray) -> np.ndarray:
 
 
 @register
-class NonlinearConstrainedZonotopeEstimator(Estimator):
+class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
     """Constrained-zonotope filter for nonlinear systems: the mean-value extension of
     [Rego2020] for prediction and measurement update, reduction of [Scott2016].
 
@@ -213,9 +215,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
                     inconsistent = True
                 else:
                     prev.lo, prev.hi, wlo, whi = back
-            lin = linearise(
-                self.model.f_box, self.model.f_jac_box, prev.lo, prev.hi, prev.z, state.u, nx
-            )
+            lin = linearise(self.model.evaluators("f"), prev.lo, prev.hi, prev.z, state.u, nx)
             c, G, A, b, e = self._predict(state.k, prev, lin)
             joint = self._joint(c, G, A, b, e, lin.nat_lo, lin.nat_hi, wlo, whi)
         else:
@@ -288,13 +288,11 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         lo0, hi0 = joint.lo, joint.hi  # restored if y_k is found inconsistent (not used)
         if obs.size:
             # the model's forward-backward contractor of h(x, u, w) = y on the box first
-            box = self.model.h_contract(
-                joint.lo[:nx], joint.hi[:nx], u_k, joint.lo[nx:], joint.hi[nx:], y_k
-            )
-            if box is None:
+            vl, vh, yl = joint.lo.tolist(), joint.hi.tolist(), y_k.tolist()
+            if not self.model.contract_lists(vl, vh, u_k.tolist(), yl, yl):
                 inconsistent = True
             else:
-                joint.lo, joint.hi = np.concatenate(box[0::2]), np.concatenate(box[1::2])
+                joint.lo, joint.hi = np.array(vl), np.array(vh)
                 rows, rhs = self._rows(joint, u_k, y_k, obs)
         if rows is not None and rhs is not None:
             p = rows.shape[1] - joint.Gz.shape[1]
@@ -329,9 +327,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         """``[J_i G_z, σ_i e_i] (ξ, τ) = t_i - J_i z`` for the measured outputs, each row
         divided by a power of two near its largest coefficient (exact)."""
         nx = self.model.nx
-        lin = linearise(
-            self.model.h_box, self.model.h_jac_box, joint.lo, joint.hi, joint.z, u_k, nx, False
-        )
+        lin = linearise(self.model.evaluators("h"), joint.lo, joint.hi, joint.z, u_k, nx, False)
         J = lin.J[obs]
         aJ = np.abs(J)
         n = joint.z.shape[0]
@@ -361,7 +357,8 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         c = lin.g0 + J @ d
         n = z.shape[0]
         err = (
-            # + the library's data margin: a float64 simulation of f is covered too
+            # + the data margin of a float64 simulation of f, relative to its terms over the
+            # set (TermwiseMargin)
             (2.0 * gamma(n + 3) + ROUNDING)
             * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Gz).sum(axis=1)))
             + (aJ @ joint.acc) * (1.0 + gamma(n + 1))

@@ -63,12 +63,15 @@ the same terms (:mod:`ivobs.estimators.rounding`), and ``ROUNDING (1 + |y_i|)`` 
 each ``σ_i``: a record simulated in float64 (every step rounded) is covered as with the linear
 methods. (vi) The reduction returns a superset with its rounding
 in ``e`` (:func:`ivobs.czonotope.reduce_generators`). The base class then widens every
-returned bound by the documented margin (:mod:`ivobs.estimators.rounding`).
+returned bound by ``ROUNDING (1 + |bound|)``: the data margin is in the recursion, relative to
+the terms it combines, not to the largest bound of ``w`` (a parameter ``k0 ~ 7e10`` would
+otherwise widen every bound by ``~7``; :class:`~ivobs.estimators._meanvalue.TermwiseMargin`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -85,12 +88,14 @@ from ..sets.czonotope import (
     safe_radius,
 )
 from . import register
-from ._meanvalue import contract_back, linearise
+from ._meanvalue import TermwiseMargin, contract_back, linearise
 from .base import ROUNDING, Design, Estimator, check_size
 from .state import OnlineState, Step
 from .strip import _propagate_hyperplane, _section_hull
 
 __all__ = ["NonlinearZonotopeDesign", "NonlinearZonotopeEstimator", "NonlinearZonotopeState"]
+
+_g = cache(gamma)  # γ_n of the few sizes of one model, looked up every step
 
 BOX_STRIP_RATIO = 0.9
 """A box strip is applied to ``Z`` where the stored box is narrower than this fraction of the
@@ -141,43 +146,42 @@ class _Joint:
         z, Hz, acc = self.z, self.Hz, self.acc
         n = z.shape[0]
         ah = np.abs(h)
-        s = Hz.T @ h
+        s = h @ Hz
+        rs = np.abs(Hz).sum(axis=1)  # ‖Hz_j‖₁, for σ_z, the section hull and acc
         e = float(t - h @ z)
+        az = np.abs(z)
         sigma_z = (
-            sigma
-            + float(ah @ acc)
-            + gamma(n + 1) * (abs(t) + float(ah @ np.abs(z)))
-            + gamma(n) * float((ah @ np.abs(Hz)).sum())
-        ) * (1.0 + gamma(n + 4))
+            sigma + float(ah @ acc) + _g(n + 1) * (abs(t) + float(ah @ az)) + _g(n) * float(ah @ rs)
+        ) * (1.0 + _g(n + 4))
         s1 = float(np.abs(s).sum())
-        if abs(e) > (s1 + sigma_z) * (1.0 + gamma(s.size + 2)):
+        if abs(e) > (s1 + sigma_z) * (1.0 + _g(s.size + 2)):
             return False
         contracted = _propagate_hyperplane(h, t, self.lo, self.hi, sigma)
         if contracted is None:
             return False
         lo, hi = contracted
-        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z)
+        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rs[:nx])
         pad = acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
-        lo[:nx] = np.maximum(lo[:nx], lo_j - pad)
-        hi[:nx] = np.minimum(hi[:nx], hi_j + pad)
-        if np.any(lo > hi):
+        np.maximum(lo[:nx], lo_j - pad, out=lo[:nx])
+        np.minimum(hi[:nx], hi_j + pad, out=hi[:nx])
+        if (lo > hi).any():
             return False
         self.lo, self.hi = lo, hi
         den = float(s @ s) + sigma_z * sigma_z
         if s1 == 0.0 or not den > 0.0:
             return True
         lam = Hz @ s / den
-        al = np.abs(lam)
-        self.acc = acc + gamma(3) * (
-            np.abs(z) + al * abs(e) + np.abs(Hz).sum(axis=1) + al * (s1 + sigma_z)
-        )
+        self.acc = acc + _g(3) * (az + rs + np.abs(lam) * (abs(e) + s1 + sigma_z))
         self.z = z + lam * e
-        self.Hz = np.hstack([Hz - np.outer(lam, s), (sigma_z * lam)[:, None]])
+        out = np.empty((n, s.shape[0] + 1))
+        np.subtract(Hz, np.outer(lam, s), out=out[:, :-1])
+        out[:, -1] = sigma_z * lam
+        self.Hz = out
         return True
 
 
 @register
-class NonlinearZonotopeEstimator(Estimator):
+class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
     """Zonotopic filter for nonlinear systems: mean-value linearisation with the remainder as
     box generators, strips of the linearised outputs [Alamo2005], order reduction.
 
@@ -232,6 +236,7 @@ class NonlinearZonotopeEstimator(Estimator):
         cw, rw = safe_radius(sys.w_box.lo, sys.w_box.hi)
         self._cw, self._rw = cw, rw
         self._wcols = np.flatnonzero(rw > 0)
+        self._wrange, self._wvals = np.arange(self._wcols.size), rw[self._wcols]
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
 
     # -- online ---------------------------------------------------------------------------------
@@ -269,7 +274,7 @@ class NonlinearZonotopeEstimator(Estimator):
             inconsistent = not self._update(joint, u_k, y_k)
             if inconsistent:  # y_k contradicts the model: not used (the strips before undone)
                 joint = saved
-        joint.acc = joint.acc * (1.0 + gamma(y_k.shape[0] + 4))  # rounding of acc's sums
+        joint.acc = joint.acc * (1.0 + _g(y_k.shape[0] + 4))  # rounding of acc's sums
         lo, hi = joint.lo[:nx].copy(), joint.hi[:nx].copy()
         new = replace(
             state,
@@ -300,11 +305,11 @@ class NonlinearZonotopeEstimator(Estimator):
         cols = self._wcols
         Hz = np.zeros((nx + self._cw.shape[0], H.shape[1] + cols.size))
         Hz[:nx, : H.shape[1]] = H
-        Hz[nx + cols, H.shape[1] + np.arange(cols.size)] = self._rw[cols]
+        Hz[nx + cols, H.shape[1] + self._wrange] = self._wvals
         r0 = np.abs(H).sum(axis=1)
-        rad = r0 + gamma(H.shape[1] + 2) * (np.abs(p) + r0) + e * (1.0 + gamma(2))
+        rad = r0 + _g(H.shape[1] + 2) * (np.abs(p) + r0) + e * (1.0 + _g(2))
         lo, hi = np.maximum(xlo, p - rad), np.minimum(xhi, p + rad)
-        if np.any(lo > hi):  # only by rounding (both hold the state): keep the hull
+        if (lo > hi).any():  # only by rounding (both hold the state): keep the hull
             lo, hi = p - rad, p + rad
         acc = np.zeros(Hz.shape[0])
         acc[:nx] = e
@@ -338,22 +343,19 @@ class NonlinearZonotopeEstimator(Estimator):
         nx = self.model.nx
         # the model's forward-backward contractor of h(x, u, w) = y on the box first: a
         # smaller box, a smaller remainder of the linearised h
-        box = self.model.h_contract(
-            joint.lo[:nx], joint.hi[:nx], u_k, joint.lo[nx:], joint.hi[nx:], y_k
-        )
-        if box is None:
+        vl, vh, yl = joint.lo.tolist(), joint.hi.tolist(), y_k.tolist()
+        if not self.model.contract_lists(vl, vh, u_k.tolist(), yl, yl):
             return False
-        joint.lo, joint.hi = np.concatenate(box[0::2]), np.concatenate(box[1::2])
-        lin = linearise(
-            self.model.h_box, self.model.h_jac_box, joint.lo, joint.hi, joint.z, u_k, nx, False
-        )
+        joint.lo, joint.hi = np.array(vl), np.array(vh)
+        lin = linearise(self.model.evaluators("h"), joint.lo, joint.hi, joint.z, u_k, nx, False)
         n = joint.z.shape[0]
-        for i in obs:
-            Ji = lin.J[i]
-            t = float(y_k[i] - lin.g0[i] + Ji @ lin.c)
-            err = gamma(n + 3) * (abs(y_k[i]) + abs(lin.g0[i]) + float(np.abs(Ji) @ np.abs(lin.c)))
-            err += ROUNDING * (1.0 + abs(y_k[i]))  # the data margin of a float64 record
-            sigma = (float(lin.rho[i]) + err) * (1.0 + gamma(2))
+        mag = np.abs(lin.J) @ np.abs(lin.c)
+        for i in obs.tolist():
+            Ji, yi, h0 = lin.J[i], yl[i], float(lin.g0[i])
+            t = yi - h0 + float(Ji @ lin.c)
+            err = _g(n + 3) * (abs(yi) + abs(h0) + float(mag[i]))
+            err += ROUNDING * (1.0 + abs(yi))  # the data margin of a float64 record
+            sigma = (float(lin.rho[i]) + err) * (1.0 + _g(2))
             if not joint.strip(Ji, t, sigma, nx):
                 return False
         return True
@@ -364,21 +366,22 @@ class NonlinearZonotopeEstimator(Estimator):
         """``(p, H, e, lo, hi)`` of ``x[k+1]`` (steps 4-5 and (v)-(vi) of the proof)."""
         nx = self.model.nx
         z, Hz, acc = joint.z, joint.Hz, joint.acc
-        lin = linearise(self.model.f_box, self.model.f_jac_box, joint.lo, joint.hi, z, u_k, nx)
+        lin = linearise(self.model.evaluators("f"), joint.lo, joint.hi, z, u_k, nx)
         J, aJ = lin.J, np.abs(lin.J)
         d = z - lin.c
         p = lin.g0 + J @ d
-        H = J @ Hz
+        JH = J @ Hz
         n = z.shape[0]
         err = (
-            # + the library's data margin: a float64 simulation of f is covered too
-            (2.0 * gamma(n + 3) + ROUNDING)
+            # + the data margin of a float64 simulation of f, relative to its terms over the
+            # set (TermwiseMargin)
+            (2.0 * _g(n + 3) + ROUNDING)
             * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Hz).sum(axis=1)))
-            + (aJ @ acc) * (1.0 + gamma(n + 1))
+            + (aJ @ acc) * (1.0 + _g(n + 1))
             + lin.rho
-        ) * (1.0 + gamma(4))
-        H = np.hstack([H, box_generators(err)])
-        H = H[:, np.any(H != 0, axis=0)]
+        ) * (1.0 + _g(4))
+        cols = JH.any(axis=0)  # drop zero columns (unknowns that f does not see)
+        H = np.hstack([JH if cols.all() else JH[:, cols], box_generators(err)])
         self._check_overflow(k, p, H)
         nlo, nhi = lin.nat_lo.copy(), lin.nat_hi.copy()
         q = self.design.order

@@ -25,11 +25,16 @@ __all__ = ["Forms", "build_forms"]
 
 
 class Forms:
-    """The compiled functions of one vector ``g`` (``natural``, ``tight``, ``jacobian``) and the
-    labels of their domain-checked calls (``sites``)."""
+    """The compiled functions of one vector ``g`` (``natural``, ``tight``, ``jacobian``, and
+    ``natjac``: the natural extension and the Jacobian over the same box in one call, sharing
+    their subexpressions, ``(nat_lo, nat_hi, jac_lo, jac_hi)`` with the Jacobian row-major) and
+    the labels of their domain-checked calls (``sites``)."""
 
-    def __init__(self, natural: Any, tight: Any, jacobian: Any, sites: list[str], source: str):
+    def __init__(
+        self, natural: Any, tight: Any, jacobian: Any, natjac: Any, sites: list[str], source: str
+    ):
         self.natural, self.tight, self.jacobian = natural, tight, jacobian
+        self.natjac = natjac
         self.sites, self.source = sites, source
 
 
@@ -155,6 +160,16 @@ def build_forms(
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
+    _header(f"{name}_natjac", em, syms, consts)
+    both = _rows(em, exprs, labels)
+    flat = []
+    for i, row in enumerate(jac):
+        flat += _rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
+    em.line(f"return [{', '.join(p[0] for p in both)}], [{', '.join(p[1] for p in both)}], ")
+    em.lines[-1] += f"[{', '.join(p[0] for p in flat)}], [{', '.join(p[1] for p in flat)}]"
+    chunks.append("\n".join(em.lines))
+
+    em = Emitter(sites)
     _header(f"{name}_tight", em, syms, consts)
     nat = _rows(em, exprs, labels)
     repeated = [_repeats(e, z) for e in exprs]
@@ -163,7 +178,6 @@ def build_forms(
     chunks.append("\n".join(em.lines))
 
     source = "\n\n".join(chunks) + "\n"
-    natural = compile_source(source, f"{name}_natural")
-    tight = compile_source(source, f"{name}_tight")
-    jacobian = compile_source(source, f"{name}_jacobian")
-    return Forms(natural, tight, jacobian, sites, source)
+    ns = compile_source(source, f"{name}_natural").__globals__  # compiled once: one namespace
+    nat, tight, jac, both = (ns[f"{name}_{k}"] for k in ("natural", "tight", "jacobian", "natjac"))
+    return Forms(nat, tight, jac, both, sites, source)

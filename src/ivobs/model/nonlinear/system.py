@@ -332,6 +332,16 @@ class NonlinearSystem:
         """Enclosures of ``dh/dx`` ``(ny, nx)`` and ``dh/dw`` ``(ny, nw)`` over the box."""
         return self._jac(self._h, self.ny, xlo, xhi, u, wlo, whi)
 
+    def evaluators(self, which: str) -> tuple[Callable[..., Any], Callable[..., Any]]:
+        """``(natural, natjac)`` of ``f`` (``which="f"``) or ``h``: list-in, list-out forms of
+        :meth:`f_box` and of :meth:`f_box` with :meth:`f_jac_box` over the same box (one call,
+        the Jacobian row-major over ``(x, w)``, :class:`.forms.Forms`) for the per-step code of
+        the set methods: the arguments ``(xl, xh, u, wl, wh)`` are lists of floats of the right
+        lengths and are not checked; a domain error raises IvobsError as elsewhere."""
+        forms = self._f if which == "f" else self._h
+        call, sites, nat, nj = self._call, forms.sites, forms.natural, forms.natjac
+        return (lambda *a: call(nat, sites, *a)), (lambda *a: call(nj, sites, *a))
+
     def h_contract(
         self, xlo: Any, xhi: Any, u: Any, wlo: Any, whi: Any, y: Any, y_hi: Any = None
     ) -> tuple[np.ndarray, ...] | None:
