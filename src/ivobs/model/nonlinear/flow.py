@@ -83,6 +83,7 @@ class _FlowForms:
     def __init__(self, flow: FlowSystem) -> None:
         self.natural = self.tight = flow._enclose
         self.jacobian = flow._enclose_jacobian
+        self.natjac = flow._enclose_natjac
         self.sites: list[str] = []
         self.source = flow._taylor.source
 
@@ -135,6 +136,16 @@ class FlowSystem(NonlinearSystem):
         _, _, A = self._run(xl, xh, u, wl, wh, True)
         assert A is not None
         return A[0][: self.nx].ravel(), A[1][: self.nx].ravel()
+
+    def _enclose_natjac(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Any, ...]:
+        """The flow's box and its Jacobian over the same box in one pass (the ``natjac`` form
+        of :class:`.forms.Forms` that the set methods call): ``(lo, hi, jac_lo, jac_hi)``,
+        lists, the Jacobian row-major over ``(x, w)``."""
+        if not self.smooth:
+            self._enclose_jacobian(xl, xh, u, wl, wh)  # the refusal, with its message
+        lo, hi, A = self._run(xl, xh, u, wl, wh, True)
+        assert A is not None
+        return lo, hi, A[0][: self.nx].ravel().tolist(), A[1][: self.nx].ravel().tolist()
 
     def _run(self, xl: Any, xh: Any, u: Any, wl: Any, wh: Any, jac: bool) -> tuple[Vec, Vec, Pair]:
         """The substeps from ``[xl, xh]``: the box at ``Ts`` and (``jac``) the augmented
