@@ -46,10 +46,10 @@ class ExactState(OnlineState):
     the row ranges (not the equalities) since a rounding made the equalities infeasible.
     ``basis_min``, ``basis_max``: the simplex basis the next step starts from, twice (the
     minima and the maxima had a model each before 2026-11-27; such a state starts from
-    ``basis_min``) (HiGHS status codes of the columns, then of the rows), so that a restored state continues
-    with the same solves as the run that saved it. Filled when the state is saved (while
-    running, the warm-started models hold them); empty: a cold start. A basis is only a
-    starting point: any basis gives the same guaranteed bounds (S).
+    ``basis_min``) (HiGHS status codes of the columns, then of the rows), so that a restored
+    state continues with the same solves as the run that saved it. Filled when the state is
+    saved (while running, the warm-started model holds it); empty: a cold start. A basis is
+    only a starting point: any basis gives the same guaranteed bounds (S).
 
     The warm-started HiGHS models are not part of the state (:class:`~.highs.WarmStarts`)."""
 
