@@ -21,13 +21,12 @@ other methods are measured against (``Estimate.tightness_ratio``).
 Formulation. The LP is kept sparse: the variables are the blocks ``(x[j], d[j])``, the constraints
 the dynamics rows ``x[j+1] - A_j x[j] - E_j d[j] = B_j u[j]`` and the measurement rows
 ``C_j x[j] + F_j d[j] = y[j] - D_j u[j]``. It is built incrementally (a block per step; the oldest
-block dropped in a moving window) and handed to one HiGHS model (``highspy``), which keeps its
+block dropped in a moving window) and handed to two HiGHS models (``highspy``), one for the ``nx``
+minimisations and one for the ``nx`` maximisations, solved in two threads. Each model keeps its
 basis from program to program and from step to step (only the cost, the bounds or appended rows
 change), so every solve is warm-started: a chain of neighbouring objectives
-``min x[k][0], ..., min x[k][n-1], max x[k][n-1], ..., max x[k][0]``. A program whose optimum
-the basis of the previous one already proves (its multipliers give a bound (S) that meets the
-objective value of that basis's vertex) is not solved at all. Each step starts from the
-basis alone (no factorisation or pricing weights kept from the previous step), and HiGHS's own
+``min x[k][0], ..., min x[k][n-1]`` (and the maxima in reverse order). Each step starts from the
+bases alone (no factorisation or pricing weights kept from the previous step), and HiGHS's own
 scaling is off (it was computed once and extended row by row, so a program rebuilt in one go
 was scaled differently): a state saved with its bases (``state()``) therefore continues, once
 restored, with exactly the solves of the run that saved it, bit for bit. Each solve is capped
@@ -102,9 +101,8 @@ filtered hull; ``d[k]`` enters through ``y[k]``).
 
 Layout: :mod:`.safe` (the safe bounds (S) and the Farkas certificate), :mod:`.rows` (the rows
 and their rounding ranges, the interval prediction, the gross-fault test), :mod:`.program` (the
-sparse trajectory program), :mod:`.highs` (the warm-started HiGHS model and its chain of
-programs), :mod:`.warm` (the programs of the states: a cache outside the online state),
-:mod:`.estimator` (the estimator, its design and its state).
+sparse trajectory program), :mod:`.highs` (the warm-started HiGHS models, and their cache
+outside the online state), :mod:`.estimator` (the estimator, its design and its state).
 """
 
 from __future__ import annotations

@@ -17,10 +17,9 @@ from ...sets import Box
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from .highs import INFEASIBLE, OK, basis_array, basis_of
+from .highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts, basis_array, basis_of
 from .program import TrajectoryLP
 from .rows import dynamics, measurement, outside_prediction, prediction, widen
-from .warm import WarmStartedLP, WarmStarts
 
 __all__ = ["Exact", "ExactDesign", "ExactState"]
 
@@ -44,12 +43,11 @@ class ExactState(OnlineState):
     the program (False: dropped as inconsistent); ``p_lo``, ``p_hi`` (·, nx): the interval
     prediction of ``x[j]`` (the row ranges and shifts of the program). ``relaxed``: HiGHS needs
     the row ranges (not the equalities) since a rounding made the equalities infeasible.
-    ``basis_min``, ``basis_max``: the simplex basis the next step starts from, twice (the
-    minima and the maxima had a model each before 2026-11-27; such a state starts from
-    ``basis_min``) (HiGHS status codes of the columns, then of the rows), so that a restored
-    state continues with the same solves as the run that saved it. Filled when the state is
-    saved (while running, the warm-started model holds it); empty: a cold start. A basis is
-    only a starting point: any basis gives the same guaranteed bounds (S).
+    ``basis_min``, ``basis_max``: the simplex bases the next step of the two chains starts from
+    (HiGHS status codes of the columns, then of the rows), so that a restored state continues
+    with the same solves as the run that saved it. Filled when the state is saved (while
+    running, the warm-started models hold them); empty: a cold start. A basis is only a
+    starting point: any basis gives the same guaranteed bounds (S).
 
     The warm-started HiGHS models are not part of the state (:class:`~.highs.WarmStarts`)."""
 

@@ -1,21 +1,21 @@
-"""The HiGHS model that solves the ``2 nx`` programs of a step, warm-started from step to step.
+"""The HiGHS models that solve the trajectory program, warm-started from step to step.
 
-One HiGHS model (``highspy``) holds the trajectory program and solves a chain of neighbouring
-objectives, ``min x[k][0], ..., min x[k][n-1], max x[k][n-1], ..., max x[k][0]``, each
-warm-started from the previous optimum; it keeps its basis from step to step (only the cost, the
-bounds or appended rows change). Many programs of the chain need no solve at all: the optimal
-basis of the previous one is often optimal for them too, which its multipliers prove (a bound
-(S) meeting the objective value of the basis's vertex). The returned bounds are not the solver's
-objective values but the safe bounds (S) of its multipliers
-(:mod:`~ivobs.estimators.exact.safe`, [Neumaier2004]), valid whatever the solver returns; an
-infeasible verdict counts only with a Farkas certificate.
+Two HiGHS models (``highspy``) per program, one for the ``nx`` minimisations and one for the
+``nx`` maximisations, solved in two threads. Each model keeps its basis from program to program
+and from step to step (only the cost, the bounds or appended rows change), so every solve is
+warm-started: a chain of neighbouring objectives ``min x[k][0], ..., min x[k][n-1]`` (and the
+maxima in reverse order). The returned bounds are not the solver's objective values but the safe
+bounds (S) of its multipliers (:mod:`~ivobs.estimators.exact.safe`, [Neumaier2004]), valid
+whatever the solver returns; an infeasible verdict counts only with a Farkas certificate.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import weakref
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Protocol, cast
 
@@ -23,18 +23,22 @@ import highspy
 import numpy as np
 
 from .program import TrajectoryLP
-from .safe import SafeBoundData, certifies_infeasibility, safe_mins
+from .safe import SafeBoundData, certifies_infeasibility, safe_min
 
 __all__ = [
-    "GAP_REL",
     "INFEASIBLE",
     "OK",
+    "PARALLEL",
     "UNSURE",
     "Chain",
+    "WarmStartedLP",
+    "WarmStarts",
     "basis_array",
-    "basis_fits",
     "basis_of",
 ]
+
+PARALLEL = (os.cpu_count() or 1) > 1
+"""Solve the min and the max programs in two threads."""
 
 _PRIMAL_TOL = 1e-9
 """HiGHS primal feasibility tolerance (on the shifted program)."""
@@ -45,18 +49,10 @@ widths of the variables (two solves of one program that end on different optimal
 about that much, e.g. a state saved without bases and restored: 5e-9 for 16 steps of 2
 states)."""
 
-GAP_REL = 1e-9
-"""A bound certified by an optimal basis of another objective (no solve) is taken when it is
-within this times the width of the variable's bound of the objective value of that basis's
-vertex: it is then the optimum to that accuracy (a solve from that basis would stop at once with
-the same multipliers; the optimum HiGHS reports is itself only within ``_DUAL_TOL`` times the
-widths of the variables)."""
-
-
 _ITERATION_LIMIT = 20_000
 """Simplex iterations allowed per program (typically 60-110 here, a few thousand on unstable
 systems over a long horizon). A program stopped by it still gives a safe bound (S) from its last
-multipliers; :attr:`Chain.capped` counts them."""
+multipliers; :attr:`WarmStartedLP.capped` counts them."""
 
 OK, INFEASIBLE, UNSURE = "ok", "infeasible", "unsure"
 """Verdicts of a solve: bounds found; infeasible with a certificate; infeasible says HiGHS, but
@@ -76,10 +72,6 @@ class _Unstubbed(Protocol):
     ) -> highspy.HighsStatus: ...
 
     def getDualRay(self) -> tuple[highspy.HighsStatus, bool, np.ndarray]: ...
-
-    def getBasicVariables(self) -> tuple[highspy.HighsStatus, np.ndarray]: ...
-
-    def getBasisInverseRow(self, row: int) -> tuple[highspy.HighsStatus, np.ndarray]: ...
 
 
 def _unstubbed(h: highspy.Highs) -> _Unstubbed:
@@ -141,11 +133,6 @@ def basis_array(b: highspy.HighsBasis) -> np.ndarray:
     return np.array(codes, dtype=np.int8)
 
 
-def basis_fits(b: highspy.HighsBasis | None, n_col: int, n_row: int) -> bool:
-    """Whether ``b`` is a basis of a program with ``n_col`` columns and ``n_row`` rows."""
-    return b is not None and len(b.col_status) == n_col and len(b.row_status) == n_row
-
-
 def basis_of(codes: np.ndarray, n_col: int) -> highspy.HighsBasis:
     """The HiGHS basis of :func:`basis_array` codes (``n_col`` columns)."""
     b = highspy.HighsBasis()
@@ -155,34 +142,170 @@ def basis_of(codes: np.ndarray, n_col: int) -> highspy.HighsBasis:
     return b
 
 
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    """Two workers for the two chains of programs (HiGHS releases the GIL while it solves)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="ivobs-exact")
+    return _POOL
+
+
+class WarmStartedLP:
+    """A :class:`TrajectoryLP` with its two HiGHS chains (the ``min`` and the ``max``
+    programs), which keep their bases from step to step."""
+
+    def __init__(self, lp: TrajectoryLP, parallel: bool | None = None):
+        self.lp = lp
+        self.chains = (Chain(lp, 1.0), Chain(lp, -1.0))
+        self.parallel = PARALLEL if parallel is None else parallel
+
+    def bases(self) -> tuple[highspy.HighsBasis, ...]:
+        """The bases the next step of each chain starts from."""
+        return tuple(c.h.getBasis() for c in self.chains)
+
+    def start(self, bases: tuple[highspy.HighsBasis, highspy.HighsBasis]) -> None:
+        """Start the chains of a rebuilt program from ``bases`` (saved by :meth:`bases`): now
+        if they fit the program, else at the first solve whose program they fit (a moving
+        window keeps one block more than the state: the basis is that of the next program)."""
+        for c, b in zip(self.chains, bases, strict=True):
+            c.pending = b
+            if _fits(b, self.lp.lo.size, self.lp.row_lo.size):
+                c.sync()
+
+    @property
+    def capped(self) -> int:
+        """Programs stopped by the iteration budget so far."""
+        return sum(c.capped for c in self.chains)
+
+    def last_x_box(self) -> tuple[np.ndarray, np.ndarray, str]:
+        """Bounds of ``x`` of the newest block: ``(lower, upper, verdict)``.
+
+        ``verdict`` is :data:`OK`, :data:`INFEASIBLE` (certified) or :data:`UNSURE`; unless
+        it is OK, the bounds are the variable bounds (the interval prediction).
+        """
+        lp = self.lp
+        sl = lp.last_x
+        lower, upper = lp.lo[sl].copy(), lp.hi[sl].copy()
+        data = lp.bound_data()
+        if self.parallel:
+            jobs = [_pool().submit(c.solve, sl.start, data) for c in self.chains]
+            (lo_b, v_lo), (hi_b, v_hi) = (job.result() for job in jobs)
+        else:
+            (lo_b, v_lo), (hi_b, v_hi) = (c.solve(sl.start, data) for c in self.chains)
+        lp.relaxed = lp.relaxed or any(c.relaxed for c in self.chains)
+        if INFEASIBLE in (v_lo, v_hi):
+            return lower, upper, INFEASIBLE
+        if UNSURE in (v_lo, v_hi):
+            return lower, upper, UNSURE
+        return np.maximum(lower, lo_b), np.minimum(upper, -hi_b), OK
+
+
+def _fits(b: highspy.HighsBasis | None, n_col: int, n_row: int) -> bool:
+    return b is not None and len(b.col_status) == n_col and len(b.row_status) == n_row
+
+
+_Entry = tuple[
+    tuple["weakref.ref[np.ndarray]", ...],
+    tuple[object, ...],
+    "WarmStartedLP | None",
+    tuple[highspy.HighsBasis, ...],
+]
+
+
+class WarmStarts:
+    """The warm-started programs of the states an estimator advanced to, and the bases each
+    such state's next step starts from: a cache, not part of any state (a state holds data
+    only; its bases are written out when it is saved).
+
+    A program belongs to the data it was last advanced to: the arrays of a state (a step makes
+    new arrays, and never modifies them once in a state) and a tag of its scalars. A state
+    with other arrays (restored from a saved state, or built otherwise) has no program here
+    and gets one rebuilt from its history (from the bases saved with it, if any). Taking a
+    program removes it (advancing modifies it) but keeps the state's bases (copies); an entry
+    goes when its first array does.
+    """
+
+    def __init__(self) -> None:
+        self._entries: dict[int, _Entry] = {}
+
+    def _find(self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...]) -> _Entry | None:
+        entry = self._entries.get(id(arrays[0]))
+        if entry is None:
+            return None
+        refs, saved_tag = entry[0], entry[1]
+        if saved_tag != tag or any(r() is not a for r, a in zip(refs, arrays, strict=True)):
+            return None
+        return entry
+
+    def take(self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...]) -> WarmStartedLP | None:
+        """The program of exactly these arrays (the same objects) and tag, removed from the
+        cache; None if there is none."""
+        entry = self._find(arrays, tag)
+        if entry is None:
+            return None
+        self._entries[id(arrays[0])] = (entry[0], entry[1], None, entry[3])
+        return entry[2]
+
+    def bases(
+        self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...]
+    ) -> tuple[highspy.HighsBasis, ...] | None:
+        """The bases the next step from these arrays and tag starts from; None if unknown."""
+        entry = self._find(arrays, tag)
+        return None if entry is None else entry[3]
+
+    def put(
+        self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...], warm: WarmStartedLP
+    ) -> None:
+        """Keep ``warm`` (and a copy of its bases) as the program of ``arrays`` and ``tag``, as
+        long as ``arrays[0]`` lives."""
+        key = id(arrays[0])
+        cache = weakref.ref(self)  # no reference cycle: the models go with the estimator
+
+        def forget(ref: weakref.ref[np.ndarray]) -> None:
+            owner = cache()
+            if owner is not None:
+                owner._forget(key, ref)
+
+        first = weakref.ref(arrays[0], forget)
+        refs = (first, *(weakref.ref(a) for a in arrays[1:]))
+        self._entries[key] = (refs, tag, warm, warm.bases())
+
+    def _forget(self, key: int, ref: weakref.ref[np.ndarray]) -> None:
+        entry = self._entries.get(key)
+        if entry is not None and entry[0][0] is ref:
+            del self._entries[key]
+
+    def __len__(self) -> int:
+        """The programs held (states whose program was taken do not count)."""
+        return sum(e[2] is not None for e in self._entries.values())
+
+
 class Chain:
-    """The HiGHS model solving ``min sense * x_last[i]`` for every ``i`` of the newest block and
-    every ``sense`` of ``senses`` (``(1.0, -1.0)``: the minima, then the maxima).
+    """One HiGHS model solving ``min sense * x_last[i]`` for every ``i`` of the newest block.
 
     Before solving, the model is synchronised with the program as cheaply as the change allows:
     new bounds only (a moving window of a time-invariant system: same matrix, the basis is
-    kept), appended rows and columns (full horizon: the basis is kept), or a rebuild. The
-    programs are taken one after the other, each warm-started from the previous optimum (dual
+    kept), appended rows and columns (full horizon: the basis is kept), or a rebuild. The ``nx``
+    programs are solved one after the other, each warm-started from the previous optimum (dual
     simplex for the first, whose data changed; primal simplex for the next ones, where only the
-    cost changed and the previous optimum is still feasible). After each solve, the next
-    programs are tried against the optimal basis just found (:meth:`_certify`): a program for
-    which it is optimal too needs no solve.
+    cost changed and the previous optimum is still feasible).
     """
 
-    def __init__(self, lp: TrajectoryLP, senses: tuple[float, ...]):
-        self.lp, self.senses = lp, senses
+    def __init__(self, lp: TrajectoryLP, sense: float):
+        self.lp, self.sense = lp, sense
         self.h = _new_highs()
         self._synced: tuple[np.ndarray, np.ndarray, np.ndarray, int, int] | None = None
-        self._cost: tuple[int, float] | None = None  # the one nonzero cost: (column, value)
+        self._cost_col: int | None = None  # the one column with a nonzero cost in the model
         self.relaxed = lp.relaxed  # rows given to HiGHS as ranges (else equalities)
         self.pending: highspy.HighsBasis | None = None  # a saved basis for the rebuilt model
         self.capped = 0  # programs stopped by the iteration budget
-        self.solves = 0  # programs solved by HiGHS
-        self.certified = 0  # programs whose bound an optimal basis of another one certified
 
     def solve(self, first: int, data: SafeBoundData) -> tuple[np.ndarray, str]:
-        """Safe lower bounds of ``sense * x[first + i]`` (a row per sense, a column per ``i``)
-        and the verdict (OK, INFEASIBLE with a certificate, UNSURE)."""
+        """Safe lower bounds of ``sense * x[first + i]`` and the verdict (OK, INFEASIBLE with a
+        certificate, UNSURE)."""
         self.relaxed = self.lp.relaxed
         self.sync()
         lp, h = self.lp, self.h
@@ -192,17 +315,15 @@ class Chain:
         h.clearSolver()
         if basis.valid:
             h.setBasis(basis)
-        out = np.full((len(self.senses), lp.nx), -np.inf)
-        todo = [(s, sense, first + i)
-                for s, sense in enumerate(self.senses)
-                for i in (range(lp.nx) if sense > 0 else reversed(range(lp.nx)))]  # fmt: skip
-        solved: list[tuple[int, float, int]] = []
-        lams: list[np.ndarray] = []  # their multipliers: (S) of all of them at the end
-        while todo:
-            s, sense, col = todo.pop(0)
-            self._set_cost(col, sense)
-            status = self._run(4 if solved else 1)
-            self.solves += 1
+        out = np.full(lp.nx, -np.inf)
+        order = range(lp.nx) if self.sense > 0 else reversed(range(lp.nx))
+        for n, i in enumerate(order):
+            col = first + i
+            if self._cost_col is not None and self._cost_col != col:
+                h.changeColCost(self._cost_col, 0.0)
+            h.changeColCost(col, self.sense)
+            self._cost_col = col
+            status = self._run(1 if n == 0 else 4)
             if status != highspy.HighsModelStatus.kOptimal:
                 # a warm start can stall at a tiny infeasibility: only a cold solve decides
                 h.clearSolver()
@@ -222,67 +343,9 @@ class Chain:
             # (and the variable bound, λ = 0, if there are none)
             sol = h.getSolution()
             if sol.dual_valid and len(sol.row_dual) == data.free.size:
-                solved.append((s, sense, col))
-                lams.append(np.asarray(sol.row_dual))
-                if todo and status == highspy.HighsModelStatus.kOptimal and sol.value_valid:
-                    todo = self._certify(todo, np.asarray(sol.col_value), data, out, first)
-        if solved:
-            rows, senses, cols = (np.array(v) for v in zip(*solved, strict=True))
-            lam = np.array(lams)
-            lam[:, data.free] = 0.0
-            out[rows, cols - first] = safe_mins(lam, data, cols, senses)
+                lam = np.where(data.free, 0.0, np.asarray(sol.row_dual))
+                out[i] = safe_min(lam, data, col, self.sense)
         return out, OK
-
-    def _certify(
-        self,
-        todo: list[tuple[int, float, int]],
-        vertex: np.ndarray,
-        data: SafeBoundData,
-        out: np.ndarray,
-        first: int,
-    ) -> list[tuple[int, float, int]]:
-        """Try the next programs of ``todo``, in order, against the current basis (optimal for
-        the program just solved) until one is not proven; the bounds of those it proves go to
-        ``out`` (row ``s``, column ``col - first``); the rest is returned, to be solved.
-
-        The multipliers of a basis ``B`` for the cost ``c = sense e_col`` are
-        ``λ = B^-T c_B`` [Bertsimas1997, Section 3.1]: ``sense`` times the row of ``B^-1`` of
-        the position of ``col`` among the basic variables (``λ = 0`` if ``col`` is nonbasic).
-        (S) holds for any ``λ``; by weak duality it cannot exceed the objective value ``p`` of
-        the basis's vertex (a feasible point, up to HiGHS's primal tolerance), and when it meets
-        it, ``p - (S) <= GAP_REL (u_col - l_col)``, it is the optimum to that accuracy.
-        """
-        h, lp = _unstubbed(self.h), self.lp
-        status, basic = h.getBasicVariables()
-        if status != highspy.HighsStatus.kOk:
-            return todo
-        basic = np.asarray(basic)
-        while todo:
-            s, sense, col = todo[0]
-            lam = np.zeros((1, data.free.size))
-            pos = np.flatnonzero(basic == col)
-            if pos.size:
-                status, row = h.getBasisInverseRow(int(pos[0]))
-                if status != highspy.HighsStatus.kOk:
-                    return todo
-                lam[0] = sense * np.asarray(row)
-                lam[0, data.free] = 0.0
-            bound = float(safe_mins(lam, data, np.array([col]), np.array([sense]))[0])
-            value = sense * (vertex[col] + lp.shift[col])
-            if not value - bound <= GAP_REL * (lp.hi[col] - lp.lo[col]):
-                return todo
-            out[s, col - first] = bound
-            self.certified += 1
-            todo = todo[1:]
-        return todo
-
-    def _set_cost(self, col: int, sense: float) -> None:
-        """The cost ``sense e_col`` (one nonzero)."""
-        if self._cost is not None and self._cost[0] != col:
-            self.h.changeColCost(self._cost[0], 0.0)
-        if self._cost != (col, sense):
-            self.h.changeColCost(col, sense)
-        self._cost = (col, sense)
 
     def _second_opinions(
         self, status: highspy.HighsModelStatus, data: SafeBoundData
@@ -363,11 +426,11 @@ class Chain:
         lo, hi, rlo, rhi = lp.shifted(self.relaxed)
         empty = np.zeros(0, np.int32)
         basis = h.getBasis() if h.getNumCol() == n_col and h.getNumRow() == m else None
-        if basis_fits(self.pending, n_col, m):
+        if _fits(self.pending, n_col, m):
             basis, self.pending = self.pending, None  # the basis saved with a restored state
         h.clearModel()
         h.addCols(n_col, np.zeros(n_col), lo, hi, 0, empty, empty, np.zeros(0))
         h.addRows(m, rlo, rhi, vals.size, starts, idx, vals)
         if basis is not None and basis.valid:
             h.setBasis(basis)  # same shape (time-varying window): a good start
-        self._cost = None
+        self._cost_col = None

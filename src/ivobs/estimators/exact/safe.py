@@ -28,15 +28,7 @@ import numpy as np
 
 from ...linalg import gamma
 
-__all__ = [
-    "SafeBoundData",
-    "bound_data",
-    "certifies_infeasibility",
-    "gamma_n",
-    "mag",
-    "safe_min",
-    "safe_mins",
-]
+__all__ = ["SafeBoundData", "bound_data", "certifies_infeasibility", "gamma_n", "mag", "safe_min"]
 
 EPS = float(np.finfo(float).eps)
 TINY = float(np.finfo(float).smallest_subnormal)
@@ -103,35 +95,22 @@ def safe_min(lam: np.ndarray, data: SafeBoundData, col: int | None, sense: float
     """A lower bound on ``min c^T z`` (``c = sense e_col``; ``c = 0`` if ``col`` is None) that
     holds in exact arithmetic for every ``λ``: (S) minus the bound on its rounding (module
     docstring). ``-inf`` if it cannot be evaluated (non-finite multipliers)."""
-    cols = None if col is None else np.array([col])
-    return float(safe_mins(lam[None, :], data, cols, np.array([sense]))[0])
-
-
-def safe_mins(
-    lams: np.ndarray, data: SafeBoundData, cols: np.ndarray | None, senses: np.ndarray
-) -> np.ndarray:
-    """:func:`safe_min` of several programs at once: row ``q`` of ``lams`` holds the
-    multipliers of ``min senses[q] z[cols[q]]`` (``c = 0`` if ``cols`` is None). Each bound is
-    evaluated exactly as alone; the batch only saves the interpreter's overhead."""
-    K, n = lams.shape[0], data.w.size
-    # r = c - M^T λ for every row of lams: one weighted count over the stacked COO entries
-    idx = (data.cols[None, :] + n * np.arange(K)[:, None]).ravel()
-    weights = (lams[:, data.rows] * data.vals).ravel()
-    r = -np.bincount(idx, weights=weights, minlength=K * n).reshape(K, n)
-    if cols is not None:
-        r[np.arange(K), cols] += senses
+    r = -np.bincount(data.cols, weights=data.vals * lam[data.rows], minlength=data.w.size)
+    if col is not None:
+        r[col] += sense
     with np.errstate(invalid="ignore", over="ignore"):
-        value = np.minimum(lams * data.row_lo, lams * data.row_hi).sum(axis=1) + np.minimum(
-            r * data.lo, r * data.hi
-        ).sum(axis=1)
-        a = np.abs(lams)
+        value = (
+            np.minimum(lam * data.row_lo, lam * data.row_hi).sum()
+            + np.minimum(r * data.lo, r * data.hi).sum()
+        )
+        a = np.abs(lam)
         err = a @ data.row_mag + np.abs(r) @ data.w + a @ data.Mw
-        if cols is not None:
-            err += np.abs(senses) * data.w[cols]
+        if col is not None:
+            err += abs(sense) * data.w[col]
         bound = value - (data.gamma * err + 4 * data.n_terms * TINY)
-    bound[~np.isfinite(bound)] = -np.inf
-    out: np.ndarray = np.nextafter(bound, -np.inf)
-    return out
+    if not np.isfinite(bound):
+        return -np.inf
+    return float(np.nextafter(bound, -np.inf))
 
 
 def certifies_infeasibility(ray: np.ndarray, data: SafeBoundData) -> bool:
