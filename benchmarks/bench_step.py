@@ -1,6 +1,6 @@
 """Online ``step()`` speed of every method on the servo motor ([Tang2019, Example 1]).
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_step.py [method,method,...] [--cpu]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_step.py [method,method,...] [--cpu] [--steps N]
 
 Best of 3 repeats of 2,000 online steps (``est.step(u[k], y[k])`` after ``est.reset()``),
 vertex disturbances. Prints steps per second per method. ``--cpu``: per second of the
@@ -34,7 +34,12 @@ def main(methods: list[str], clock: Any = time.perf_counter) -> None:
 
 
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if a != "--cpu"]
+    argv = sys.argv[1:]
+    if "--steps" in argv:  # fewer steps (e.g. 400) for the slow methods
+        at = argv.index("--steps")
+        STEPS = int(argv[at + 1])
+        del argv[at : at + 2]
+    args = [a for a in argv if a != "--cpu"]
     default = [m for m in ivobs.methods() if m not in ("exact", "intersect")]
     main(
         args[0].split(",") if args else default,
