@@ -140,10 +140,13 @@ def henon_compare_fig(setting: str = "henon-nl", horizon: int = 100) -> Any:
         truth=pair.traj.x,
         axes=axes[:, 0],
         fill=False,
-        title=f"Hénon map ({setting}: a ∈ [{a[0]}, {a[1]}], |w| ≤ {w}, |v| ≤ {v}), same record",
+        layout=False,
+        title="bounds and the true state",
     )
     plot_estimates(runs, truth=pair.traj.x, axes=axes[:, 1], fill=False, relative=True,
-                   title="bounds minus the true state")  # fmt: skip
+                   layout=False, title="bounds minus the true state")  # fmt: skip
     axes[0, 1].get_legend().remove()
+    fig.suptitle(f"Hénon map, one record ({setting}: a ∈ [{a[0]}, {a[1]}], |w| ≤ {w}, |v| ≤ {v}): "
+                 "Remark 1 vs the nonlinear model")  # fmt: skip
     legend_below(fig, axes[0, 0], ncol=5)
     return fig

@@ -106,6 +106,7 @@ def draw_scenario(sc: Any, traj: Any, runs: dict[str, Estimate]) -> Any:
         fill=False,
         state_names=sc.state_names or getattr(sc.system, "state_names", None),
         title=f"{name}: bounds of each method and the true state ({sc.horizon} steps)",
+        layout=False,  # laid out once, by legend_below
     )
     xlabel = "t" if t is not None else "step k"
     for ax in axes[-1]:
