@@ -48,7 +48,7 @@ def test_capable_methods():
 
 
 @pytest.mark.parametrize("name", list(SCENARIO_FIGURES))
-def test_scenario_figure_draws_every_state_and_method(name):
+def test_scenario_figure_draws_every_state_and_method(name, tmp_path):
     sc, traj, runs = scenario_runs(name, horizon=min(SHORT, SCENARIO_FIGURES[name]))
     fig = draw_scenario(sc, traj, runs)
     nx = sc.system.nx
@@ -66,12 +66,15 @@ def test_scenario_figure_draws_every_state_and_method(name):
     # one legend for the figure: every method and the truth
     (legend,) = fig.legends
     assert [t.get_text() for t in legend.get_texts()] == [*runs, "true state"]
+    fig.savefig(tmp_path / "f.png", dpi=50)
     plt.close(fig)
+    data = (tmp_path / "f.png").read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 8_000
 
 
 def test_generate_writes_the_selected_scenario_figures(tmp_path):
-    paths = figures.generate(tmp_path, scenarios="CSTR,henon")
-    assert [p.name for p in paths] == ["scenario_cstr.png", "henon_remark1_vs_nl.png"]
+    paths = figures.generate(tmp_path, scenarios="CORA-tank6-nl,henon")
+    assert [p.name for p in paths] == ["scenario_cora_tank6_nl.png", "henon_remark1_vs_nl.png"]
     for p in paths:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
