@@ -42,20 +42,22 @@ SCENARIO_FIGURES: dict[str, int] = {
     "servo-uncertain": 100,
 }
 """The scenarios drawn by :func:`scenario_figure`, with the horizon of their figure (steps):
-long enough to show the transient and the steady widths, short enough that all seven take a few
-seconds (docs/figures.md)."""
+long enough to show the transient and the steady widths, short enough that the seven (and the
+Hénon comparison) take about 13 s of CPU time together (measured: docs/figures.md)."""
 
 
 def capable_methods(sys: Any) -> list[str]:
-    """The methods that accept ``sys``: ``supports_nonlinear`` for a nonlinear system,
-    ``supports_uncertain`` for one with interval matrices (without ``intersect``), every method
-    but ``intersect`` otherwise; in :func:`ivobs.estimators.methods` order."""
+    """The methods whose class accepts a system of ``sys``'s kind, in
+    :func:`ivobs.estimators.methods` order, without ``intersect`` (it combines other methods):
+    ``supports_nonlinear`` for a nonlinear system, ``supports_uncertain`` for one with interval
+    matrices, every method otherwise (a method may still refuse a particular system at
+    :func:`~ivobs.make_estimator`, e.g. the ``nl-*`` methods bounds that vary with ``y``)."""
     names = [m for m in all_methods() if m != "intersect"]
     if isinstance(sys, NonlinearSystem):
         return [m for m in names if get_method(m).supports_nonlinear]
     if getattr(sys, "is_uncertain", False):
         return [m for m in names if get_method(m).supports_uncertain]
-    return [m for m in names if not get_method(m).supports_nonlinear]
+    return names
 
 
 def _check_name(name: str) -> str:
