@@ -30,12 +30,14 @@ def plot_estimates(
     title: str | None = None,
     fill: bool | None = None,
     relative: bool = False,
+    layout: bool = True,
 ) -> Any:
     """One panel per state: each method's lower/upper bounds, and the truth as dots.
 
     Returns the matplotlib figure. ``states`` selects state indices (all by default).
     ``relative=True`` plots ``bound - truth`` (the error bands around zero): readable when the
-    state itself moves far more than the bands are wide.
+    state itself moves far more than the bands are wide. ``layout=False`` skips the final
+    ``tight_layout`` (for a caller that adds panels or a legend and lays the figure out once).
     """
     import matplotlib.pyplot as plt
 
@@ -96,7 +98,8 @@ def plot_estimates(
     axes[0].legend(loc="best", fontsize=8, ncol=min(4, len(estimates) + 1))
     if title:
         axes[0].set_title(title)
-    fig.tight_layout()
+    if layout:
+        fig.tight_layout()
     return fig
 
 

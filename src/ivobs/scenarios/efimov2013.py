@@ -72,19 +72,29 @@ def henon_bounds(k: Any, y: Any, *, a_lo: float, a_hi: float, V: float, delta: f
     return Box([1.0 - a_hi * sq_hi - delta, -V], [1.0 - a_lo * sq_lo + delta, V])
 
 
+def henon_remark1_system(
+    a: tuple[float, float] = (1.0, 1.4), V: float = 0.1, delta: float = 0.015
+) -> LinearSystem:
+    """The Hénon map as [Efimov2013, Remark 1] writes it: ``x+ = A x + r b``, ``y = x1 + v``,
+    ``A = [[0, 1], [0.3, 0]]``, ``r = (1, 0)``, with the nonlinear term ``b = 1 - a x1^2 + d``
+    (``a ∈ a``, ``|d| <= delta``) a disturbance bounded at each step from the measurement by
+    :func:`henon_bounds` (``|v| <= V``). Defaults: the ``henon`` scenario's values."""
+    A = np.array([[0.0, 1.0], [0.3, 0.0]])
+    C = np.array([[1.0, 0.0]])
+    # d = (b, v), b = 1 - a(t) x1^2 + d(t) enters through r = (1, 0); v is the output noise
+    E = np.array([[1.0, 0.0], [0.0, 0.0]])
+    F = np.array([[0.0, 1.0]])
+    bounds = partial(henon_bounds, a_lo=a[0], a_hi=a[1], V=V, delta=delta)
+    return LinearSystem(A, None, C, E=E, F=F, d=bounds)
+
+
 @register_scenario(
     "henon", "[Efimov2013] §IV.B: Hénon map, uncertain a(t), bounds from y (Remark 1)"
 )
 def _henon(horizon: int = 200) -> Scenario:
     T = check_horizon(horizon)
-    A = np.array([[0.0, 1.0], [0.3, 0.0]])
-    C = np.array([[1.0, 0.0]])
     a_lo, a_hi, V, delta = 1.0, 1.4, 0.1, 0.015
-    # d = (b, v), b = 1 - a(t) x1^2 + d(t) enters through r = (1, 0); v is the output noise
-    E = np.array([[1.0, 0.0], [0.0, 0.0]])
-    F = np.array([[0.0, 1.0]])
-    bounds = partial(henon_bounds, a_lo=a_lo, a_hi=a_hi, V=V, delta=delta)
-    sys = LinearSystem(A, None, C, E=E, F=F, d=bounds)
+    sys = henon_remark1_system((a_lo, a_hi), V, delta)
 
     def factory(kind: str, seed: Any, T: int) -> Any:
         rng = _rng(seed)

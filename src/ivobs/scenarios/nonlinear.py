@@ -41,15 +41,19 @@ def _paper_uniform(sys: NonlinearSystem) -> Any:
     return factory
 
 
-def henon_nl_system() -> NonlinearSystem:
-    """Hénon, ``a(t) ∈ [1.39, 1.41]``, ``|w| <= 0.005`` on ``x1``, ``y = x1 + v``,
-    ``|v| <= 0.02``."""
+def henon_nl_system(
+    a: tuple[float, float] = (1.39, 1.41), w: float = 0.005, v: float = 0.02
+) -> NonlinearSystem:
+    """Hénon, ``a(t) ∈ a``, ``|w1| <= w`` on ``x1``, ``y = x1 + v1``, ``|v1| <= v``; the
+    defaults are ``henon-nl``'s (``henon_nl_system((1.0, 1.4), 0.015, 0.1)`` is the model of the
+    ``henon`` scenario, whose Remark-1 version is
+    :func:`~ivobs.scenarios.efimov2013.henon_remark1_system`)."""
     return NonlinearSystem(
         f=["1 - a*x1**2 + x2 + w1", "b*x1"],
         h=["x1 + v1"],
         states=["x1", "x2"],
-        params={"a": (1.39, 1.41), "b": 0.3},
-        d={"w1": (-0.005, 0.005), "v1": (-0.02, 0.02)},
+        params={"a": (a[0], a[1]), "b": 0.3},
+        d={"w1": (-w, w), "v1": (-v, v)},
     )
 
 

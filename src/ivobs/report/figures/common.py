@@ -14,7 +14,7 @@ from ... import scenarios
 from ...estimators import make_estimator
 from ...result import Estimate
 
-__all__ = ["DPI", "FigureCheckError", "check_contains", "pyplot", "run_checked"]
+__all__ = ["DPI", "FigureCheckError", "check_contains", "legend_below", "pyplot", "run_checked"]
 
 
 DPI = 100
@@ -53,3 +53,14 @@ def run_checked(
     res = est.run(traj.u, traj.y)
     check_contains(label, res, traj.x)
     return res
+
+
+def legend_below(fig: Any, ax: Any, ncol: int = 4) -> None:
+    """Move ``ax``'s legend below the panels of ``fig`` (a wide legend inside a panel squeezes
+    the others when ``tight_layout`` makes room for it)."""
+    handles, labels = ax.get_legend_handles_labels()
+    if ax.get_legend() is not None:
+        ax.get_legend().remove()
+    rows = -(-len(labels) // ncol)
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.035 * rows + 0.01, 1, 1))
