@@ -128,7 +128,8 @@ def up(x: Any) -> float:
 def inward(enc: Any, lo: Any, hi: Any, to_hi: bool) -> float:
     """A double ``z`` with ``z - g`` in ``[lo, hi]`` for every ``g`` in ``enc`` (``lo``, ``hi``
     decimal enclosures; the test is on their inner ends), next to ``g + hi`` or ``g + lo``."""
-    z = up(enc + hi) if to_hi else down(enc + lo)
+    # rounding towards the inside makes the first candidate the answer unless enc is too wide
+    z = down(enc + hi) if to_hi else up(enc + lo)
     for _ in range(64):
         diff = iv.mpf(z) - enc
         if diff.a >= lo.b and diff.b <= hi.a:
