@@ -18,7 +18,7 @@ from ...model import LinearSystem
 from ...sets import Box, image_bounds, neg, pos
 from .rounding import CONSISTENCY_TOL, Margins, largest, transform_conversion, transform_step_error
 
-__all__ = ["SparseStep", "SplitOperators", "StepMatrices", "hull"]
+__all__ = ["FusedStep", "SparseStep", "SplitOperators", "StepMatrices", "hull"]
 
 
 def hull(
@@ -54,6 +54,22 @@ class SparseStep:
     Gz: np.ndarray
     Gp: np.ndarray
     Gn: np.ndarray
+
+
+@dataclass(frozen=True)
+class FusedStep:
+    """The step with every output observed (``S = I``, dense, constant bounds) as one product:
+    ``W [z̄; z̲; u; y] + w = [z̄+; z̲+; p̄; p̲]`` (before the rounding bound), with
+    ``W = [[Q⁺, −Q⁻, B_z, L], [−Q⁻, Q⁺, B_z, L], [C⁺, −C⁻, D_u, 0], [−C⁻, C⁺, D_u, 0]]``,
+    ``w = [ḡ; g̲; f̄; f̲]``: the next bounds and those of ``C x + D_u u + F d`` (consistency).
+    ``starts``, ``coef``, ``e_d``: the rounding bound :meth:`Margins.local_error` on the
+    blocks ``[z̄; z̲]``, ``u``, ``y`` of the same vector (``γ`` folded in)."""
+
+    W: np.ndarray
+    w: np.ndarray
+    starts: np.ndarray
+    coef: np.ndarray
+    e_d: float
 
 
 class SplitOperators:
@@ -123,6 +139,9 @@ class SplitOperators:
         if self.sparse and self.d_const is not None:
             self.full_inputs = self.input_bounds(self.full, observed, self.d_const)
         self.kappa_z = np.inf if S is None else self._transform_kappa()
+        self.fused = self._fused()
+        """:class:`FusedStep` of a complete ``y`` (dense, ``S = I``, exact matrices, constant
+        bounds), else None."""
         self.window: WindowBound | None = None
         """The finite-memory bound used after missing samples (:mod:`.window`): dense,
         time-invariant systems with constant bounds, ``S = I``."""
@@ -133,6 +152,34 @@ class SplitOperators:
             self.window = window_bound(self.A, self.B, self.C, self.Du, self.E, self.F, dlo, dhi)
 
     # -- design-time helpers -----------------------------------------------------------------
+    def _fused(self) -> FusedStep | None:
+        """The step of a complete ``y`` as one product (:class:`FusedStep`)."""
+        if self.sparse or self.S is not None or self.unc is not None or self.margins is None:
+            return None
+        if self.d_const is None or self.f_hull is None:
+            return None
+        m, n, ny, nu = self.full, self.nx, self.ny, self.sys.nu
+        Cp, Cn = self.C_pm
+        Zy = np.zeros((ny, ny))
+        W = np.block(
+            [
+                [m.Qp, -m.Qn, m.Bz, m.Lz],
+                [-m.Qn, m.Qp, m.Bz, m.Lz],
+                [Cp, -Cn, self.Du, Zy],
+                [-Cn, Cp, self.Du, Zy],
+            ]
+        )
+        glo, ghi = hull(m.Gp, m.Gn, self.d_const.lo, self.d_const.hi)
+        flo, fhi = self.f_hull
+        w = np.concatenate([ghi, glo, fhi, flo])
+        rb = self.margins.bound
+        sizes = np.array([2 * n, nu, ny])
+        keep = sizes > 0
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])[keep]
+        coef = np.array([rb.a_z, rb.a_u, rb.a_y])[keep] * rb.gamma
+        e_d = rb.gamma * rb.a_d * (self.dmax or 0.0) if rb.a_d else 0.0
+        return FusedStep(W, w, starts, coef, e_d)
+
     def _point_sensors(self) -> None:
         """Lemma 1 for ``C`` on the few states it reads (point sensors of sparse systems)."""
         Cc = self.sys.sparse("C").tocoo()
