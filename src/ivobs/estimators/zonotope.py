@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
@@ -202,39 +203,12 @@ class ZonotopeEstimator(ObserverEstimator):
         if self._const is not None:
             self._check_bounded()
         self._fused = self._fused_observer()
-        self._seq: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        self._seq_fixed = False
-        if self._fused is not None:  # constant bounds: (34b) is data-independent
-            self._seq.append(self._generator_entry(self._H0.copy()))
-
-    def _generator_entry(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(H, |H| 1, |C H| 1 + |F| r)``: the generators of a step, the radius of its box and
-        the bound of the innovation (consistency)."""
-        C, r = self._mats[2], self._const[1]  # type: ignore[index]
-        return H, np.abs(H).sum(axis=1), np.abs(C @ H).sum(axis=1) + self._absF @ r
-
-    def _generators(self, k: int, H: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """``(|H| 1, |C H| 1 + |F| r, H[k+1])`` when ``H`` is the ``H[k]`` of (34b) from
-        ``H0`` with complete data (the same object: a data-independent sequence, computed once
-        and kept up to its fixed point or :data:`SEQUENCE_FLOATS`), else None."""
-        seq = self._seq
-        j = min(k, len(seq) - 1)
-        if j < 0 or seq[j][0] is not H:
-            return None
-        _, rad, ybound = seq[j]
-        if j + 1 < len(seq):
-            return rad, ybound, seq[j + 1][0]
-        if self._seq_fixed:
-            return rad, ybound, H
-        if j != k:
-            return None
-        H_next = np.hstack([self._M @ self._reduce(H), self._G * self._const[1]])  # type: ignore[index]
-        if H_next.shape == H.shape and np.array_equal(H_next, H):
-            self._seq_fixed = True
-            return rad, ybound, H
-        if len(seq) * H.size < SEQUENCE_FLOATS:
-            seq.append(self._generator_entry(H_next))
-        return rad, ybound, H_next
+        self._gens: GeneratorSequence | None = None
+        if self._fused is not None and self._const is not None:  # (34b) is data-independent
+            C, GR = self._mats[2], self._G * self._const[1]
+            self._gens = GeneratorSequence(
+                self._H0.copy(), self._M, GR, C, self._absF @ self._const[1], self._reduce
+            )
 
     def _gain_by_width(self) -> None:
         """Default gain: the radius gain minimises the box of Algorithm 1, which the zonotope
@@ -293,7 +267,7 @@ class ZonotopeEstimator(ObserverEstimator):
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ZonotopeState:
-        H0 = self._seq[0][0] if self._seq else self._H0.copy()  # never modified: shared
+        H0 = self._gens.seq[0][0] if self._gens else self._H0.copy()  # never modified: shared
         return ZonotopeState(p=self._p0.copy(), H=H0)
 
     def _step(
@@ -342,9 +316,9 @@ class ZonotopeEstimator(ObserverEstimator):
         self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray
     ) -> Step[ZonotopeState] | None:
         """:meth:`_step` with constant bounds and a complete ``y[k]`` inside its bounds: the
-        generators from the kept sequence (:meth:`_generators`), (34a) as one product
+        generators from the kept sequence (:class:`GeneratorSequence`), (34a) as one product
         (:meth:`_fused_observer`); None (the general step) otherwise."""
-        gen = self._generators(state.k, state.H)
+        gen = None if self._gens is None else self._gens.at(state.k, state.H)
         if gen is None:
             return None
         rad, ybound, H_next = gen
@@ -389,6 +363,45 @@ class ZonotopeEstimator(ObserverEstimator):
                 break
             H = H_next
         return rad, crad
+
+
+class GeneratorSequence:
+    """The generators ``H[k]`` of (34b) from ``H0`` with constant bounds and complete data (they
+    do not depend on the data), each with ``|H| 1`` and ``|C H| 1 + |F| r``, computed once by
+    ``step()`` and kept up to their fixed point (:data:`SEQUENCE_FLOATS` at most)."""
+
+    def __init__(
+        self, H0: np.ndarray, M: np.ndarray, GR: np.ndarray, C: np.ndarray, Fr: np.ndarray,
+        reduce: Callable[[np.ndarray], np.ndarray],
+    ):  # fmt: skip
+        self.M, self.GR, self.C, self.Fr, self.reduce = M, GR, C, Fr, reduce
+        self.seq = [self.entry(H0)]
+        self.fixed = False
+
+    def entry(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return H, np.abs(H).sum(axis=1), np.abs(self.C @ H).sum(axis=1) + self.Fr
+
+    def at(self, k: int, H: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """``(|H| 1, |C H| 1 + |F| r, H[k+1])`` when ``H`` is this sequence's ``H[k]`` (the
+        same object), else None."""
+        seq = self.seq
+        j = min(k, len(seq) - 1)
+        if seq[j][0] is not H:
+            return None
+        _, rad, ybound = seq[j]
+        if j + 1 < len(seq):
+            return rad, ybound, seq[j + 1][0]
+        if self.fixed:
+            return rad, ybound, H
+        if j != k:
+            return None
+        H_next = np.hstack([self.M @ self.reduce(H), self.GR])  # (34b), as _step
+        if H_next.shape == H.shape and np.array_equal(H_next, H):
+            self.fixed = True
+            return rad, ybound, H
+        if len(seq) * H.size < SEQUENCE_FLOATS:
+            seq.append(self.entry(H_next))
+        return rad, ybound, H_next
 
 
 def _reduce(H: np.ndarray, design: ZonotopeDesign) -> np.ndarray:
