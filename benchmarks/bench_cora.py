@@ -93,18 +93,32 @@ def _fingerprint(sc: Any, tr: Any) -> str:
     return h.hexdigest()[:16]
 
 
-def exact_hull(bench: str, out: Path, recompute: bool = False) -> dict[str, Any]:
-    """The exact interval hull (full horizon) of ``bench``'s recorded data, from the cache when
-    its data fingerprint matches, else computed (minutes on tank30) and cached."""
-    sc = ivobs.scenarios.get(bench)
-    tr = sc.simulate("recorded")
+def exact_hull(
+    bench: str,
+    out: Path,
+    recompute: bool = False,
+    *,
+    disturbance: str = "recorded",
+    seed: int | None = None,
+    window: int | None = None,
+    horizon: int | None = None,
+) -> dict[str, Any]:
+    """The exact interval hull of ``bench``'s recorded data (or of ``scenario.simulate(
+    disturbance, seed)``; ``window``: the moving window of ``exact``, None for the full
+    horizon), from the cache when its data fingerprint matches, else computed (minutes on
+    tank30) and cached."""
+    sc = ivobs.scenarios.get(bench, **({} if horizon is None else {"horizon": horizon}))
+    tr = sc.simulate(disturbance, seed)
     fp = _fingerprint(sc, tr)
-    path = out / f"cora_exact_{bench}.npz"
+    stem = f"cora_exact_{bench}"
+    if disturbance != "recorded" or window is not None:
+        stem = f"exact_{bench}_{disturbance}_seed{seed}_T{tr.y.shape[0]}_window{window}"
+    path = out / f"{stem}.npz"
     if path.exists() and not recompute:
         z = np.load(path)
         if str(z["fingerprint"]) == fp:
             return {"lo": z["lo"], "hi": z["hi"], "seconds": float(z["seconds"]), "cached": True}
-    est = ivobs.make_estimator("exact", sc.system, x0=sc.x0, progress=False)
+    est = ivobs.make_estimator("exact", sc.system, x0=sc.x0, window=window, progress=False)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

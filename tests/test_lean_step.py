@@ -13,7 +13,16 @@ from ivobs.estimators._inputs import lean_u_y
 from ivobs.estimators.rounding import lean_outward, outward
 from ivobs.estimators.scale import DataScale
 
-RECURSIVE = ["reachability", "zonotope", "interval", "interval-split", "fixed-time", "kkl", "strip"]
+RECURSIVE = [
+    "reachability",
+    "zonotope",
+    "interval",
+    "interval-split",
+    "interval-transformed",
+    "fixed-time",
+    "kkl",
+    "strip",
+]
 
 
 def _servo(T: int = 300):

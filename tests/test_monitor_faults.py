@@ -8,7 +8,8 @@ Technology 8(3): 456-465: four levels, the two lower ones measured. The numbers 
 (Table I and the minimum-phase operating point P-, Table II): A1 = A3 = 28 cm², A2 = A4 = 32 cm²,
 time constants T = (62, 90, 23, 30) s, k1 = 3.33, k2 = 3.35 cm³/(V s), γ1 = 0.70, γ2 = 0.60,
 kc = 0.50 V/cm; the linearised model (eq. (3)) in deviations from P-, discretised with a 1 s
-hold. Disturbances: ±0.001 cm/s on each level's rate and ±0.01 V of sensor noise.
+hold. Disturbances: ±0.001 cm/s on each level's rate and ±0.01 V of sensor noise. The model is
+the scenario ``quadruple-tank``'s (:func:`ivobs.scenarios.quadtank.quadtank_system`).
 """
 
 import io
@@ -18,7 +19,7 @@ from functools import cache
 import numpy as np
 import pytest
 
-from ivobs import Box, LinearSystem
+from ivobs import Box
 from ivobs.cli import main
 from ivobs.io import save_system, write_log
 from ivobs.monitor import Monitor
@@ -29,31 +30,8 @@ BIAS = 0.15  # V, on sensor 1 (level h1)
 
 
 @cache
-def quadtank(w=0.001, v=0.01, Ts=1.0):
-    A1, A2, A3, A4 = 28.0, 32.0, 28.0, 32.0
-    T1, T2, T3, T4 = 62.0, 90.0, 23.0, 30.0
-    k1, k2, g1, g2, kc = 3.33, 3.35, 0.70, 0.60, 0.50
-    A = np.array(
-        [
-            [-1 / T1, 0, A3 / (A1 * T3), 0],
-            [0, -1 / T2, 0, A4 / (A2 * T4)],
-            [0, 0, -1 / T3, 0],
-            [0, 0, 0, -1 / T4],
-        ]
-    )
-    B = np.array(
-        [
-            [g1 * k1 / A1, 0],
-            [0, g2 * k2 / A2],
-            [0, (1 - g2) * k2 / A3],
-            [(1 - g1) * k1 / A4, 0],
-        ]
-    )
-    C = np.array([[kc, 0, 0, 0], [0, kc, 0, 0]])
-    E = np.hstack([np.eye(4), np.zeros((4, 2))])
-    F = np.hstack([np.zeros((2, 4)), np.eye(2)])
-    d = Box(np.r_[-w * np.ones(4), -v * np.ones(2)], np.r_[w * np.ones(4), v * np.ones(2)])
-    return LinearSystem(A, B, C, E=E, F=F, d=d, dt=0).discretize(Ts)
+def quadtank():
+    return get("quadruple-tank").system  # P-, w = 0.001 cm/s, v = 0.01 V, Ts = 1 s
 
 
 X0 = Box(-np.ones(4), np.ones(4))

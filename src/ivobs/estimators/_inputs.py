@@ -10,7 +10,7 @@ from .._validate import as_float_array, as_vector
 from ..errors import IvobsError
 from .scale import SHORT
 
-__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k", "lean_u_y"]
+__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k", "lean_step_data", "lean_u_y"]
 
 _NO_INPUT = np.zeros(0)
 _NO_INPUT.flags.writeable = False
@@ -36,6 +36,36 @@ def lean_u_y(sys: Any, u_k: Any, y_k: Any) -> tuple[np.ndarray, np.ndarray] | No
     if total - total != 0.0:  # NaN or an infinity somewhere (or an overflow): full checks
         return None
     return u_k, y_k
+
+
+def lean_step_data(
+    sys: Any, g: list[float], c: float, u_k: Any, y_k: Any
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """:func:`lean_u_y` and the data scale of the step (:meth:`DataScale.of_step` with the
+    constant terms ``g``, ``c``: ``max(c, |y_i|, g_i |u_i|)``, the same number) from one
+    conversion of each vector to floats; ``None`` where :func:`lean_u_y` gives ``None``."""
+    if type(y_k) is not np.ndarray or y_k.dtype != np.float64 or y_k.shape != (sys.ny,):
+        return None
+    if u_k is None:
+        if sys.nu:
+            return None
+        u_k = _NO_INPUT
+    elif type(u_k) is not np.ndarray or u_k.dtype != np.float64 or u_k.shape != (sys.nu,):
+        return None
+    ys, us = y_k.tolist(), u_k.tolist()
+    if len(ys) + len(us) > SHORT:
+        return None
+    total = sum(ys) + sum(us)
+    if total - total != 0.0:  # NaN or an infinity somewhere (or an overflow): full checks
+        return None
+    a = c
+    for v in ys:
+        v = abs(v)
+        a = v if v > a else a
+    for v, gi in zip(us, g):
+        v = abs(v) * gi
+        a = v if v > a else a
+    return u_k, y_k, a
 
 
 def check_u_k(sys: Any, u_k: Any) -> np.ndarray:

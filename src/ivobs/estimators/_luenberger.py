@@ -75,6 +75,19 @@ class ObserverEstimator(Estimator):
         kind = "user" if L is not None else ("radius" if gain is None else gain)
         return ObserverDesign(L=Lm, gamma=gamma, P=P, spectral_radius=rho, gain=kind)
 
+    def _fused_observer(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The observer and its innovation of a complete ``y[k]`` as one product (constant
+        bounds): ``[x̂+; ν] = O [x̂; u; y] + o`` with ``O = [[M, B − L D, L], [−C, −D, I]]``,
+        ``o = [(E − L F) c; −F c]``, ``ν = y − C x̂ − D u − F c`` ([Tang2019, eq. (10)] in the
+        form of the vectorised path, :func:`observer_filter`). None without constant bounds."""
+        if self._const is None:
+            return None
+        c = self._const[0]
+        _, B, C, D, E, F = self._mats
+        L, ny = self._L, C.shape[0]
+        O = np.block([[self._M, B - L @ D, L], [-C, -D, np.eye(ny)]])
+        return O, np.concatenate([(E - L @ F) @ c, -(F @ c)])
+
     def _bounds(
         self, k: int, y_k: np.ndarray, lo: np.ndarray, hi: np.ndarray, u_k: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:

@@ -43,12 +43,12 @@ from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
 from ..sets import Box
-from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
+from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_step_data, lean_u_y
 from .persistence import Persistence
 from .record import VECTOR_MIN_STEPS, check_record, run_record
 from .rounding import ROUNDING, lean_outward, outward, overflowed
 from .scale import DataScale
-from .state import OnlineState, Step
+from .state import OnlineState, Step, evolve
 
 __all__ = [
     "MAX_DENSE_STATES",
@@ -230,6 +230,10 @@ class Estimator(Persistence):
         """Whether the measurement of the last ``step()`` was found inconsistent (not used)."""
         self._state: OnlineState | None = None
         self._data_scales = DataScale(sys)
+        self._scale_gain = 1.0  # factor of the data scale (> 1: rounding that grows faster)
+        lean = sys.dt != 0 and not self.rounds_itself
+        lean = lean and type(self)._step_scale is Estimator._step_scale
+        self._lean = self._data_scales.steady_list() if lean else None  # step()'s cheap path
         self._branching = False
         """True while a step runs that will not be continued (:meth:`predict`): a method with
         warm-started solver caches (exact) leaves them with the state they belong to."""
@@ -267,7 +271,13 @@ class Estimator(Persistence):
         ``valid_from``). ``y_k`` may hold NaN for missing components; ``None`` means the whole
         measurement is missing. Continuous-time methods need the sample time ``t``."""
         state = self._state if self._state is not None else self.initial_state()
-        self._state, box = self.advance(state, u_k, y_k, t)
+        lean = lean_step_data(self.sys, *self._lean, u_k, y_k) if self._lean and t is None else None
+        if lean is None:
+            self._state, box = self.advance(state, u_k, y_k, t)
+        else:  # checked float vectors and their data scale in one pass (_inputs.lean_step_data)
+            a = lean[2] * self._scale_gain if self._scale_gain > 1.0 else lean[2]
+            new, lo, hi, _ = self._advance(state, lean[0], lean[1], None, step_scale=a)
+            self._state, box = new, self._box(state.k, lo, hi, new)
         self.last_inconsistent = self._state.inconsistent
         if self.last_inconsistent:
             self._report_inconsistent([state.k])
@@ -311,24 +321,24 @@ class Estimator(Persistence):
         y_k: np.ndarray,
         t_k: float | None,
         online: bool = True,
+        step_scale: float | None = None,
     ) -> tuple[OnlineState, np.ndarray, np.ndarray, bool]:
         """One step: the data scale, the method's recursion, the counter. ``online=False``
         (the loop of :meth:`run`, which rounds with the record's scales) skips the data scale
-        unless the method rounds itself."""
+        unless the method rounds itself. ``step_scale``: :meth:`_step_scale`, if known."""
         scale = state.scale
-        if online or self.rounds_itself:
+        if step_scale is not None:
+            scale = scale if scale >= step_scale else step_scale
+        elif online or self.rounds_itself:
             scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
             if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
                 state = dataclasses.replace(state, scale=scale)
         res: Step[Any] = self._step(state, u_k, y_k, t_k)
-        flag = bool(res.inconsistent)
-        new = res.state
+        new, flag = res.state, bool(res.inconsistent)
         if new is state:  # the method kept its state: a new object for the new counters
-            new = dataclasses.replace(new, k=state.k + 1, scale=scale, inconsistent=flag)
+            new = evolve(new, k=state.k + 1, scale=scale, inconsistent=flag)
         else:  # a fresh state the method just built and nobody else holds: set its counters
-            object.__setattr__(new, "k", state.k + 1)
-            object.__setattr__(new, "scale", scale)
-            object.__setattr__(new, "inconsistent", flag)
+            new.__dict__.update(k=state.k + 1, scale=scale, inconsistent=flag)
         return new, res.lo, res.hi, flag
 
     def _box(
@@ -364,11 +374,15 @@ class Estimator(Persistence):
     # -- data scale of the rounding margin (scale.py) ----------------------------------------
     def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
         """The magnitude of the data terms of one step (its running maximum is ``s_k``)."""
-        return self._data_scales.of_step(k, u_k, y_k, t_k)
+        a = self._data_scales.of_step(k, u_k, y_k, t_k)
+        return a * self._scale_gain if self._scale_gain > 1.0 else a
 
     def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
         """``s_k`` over a record or batch, ``(..., T)`` (the same numbers as the online path)."""
-        return self._data_scales.of_record(u, y, t)
+        s = self._data_scales.of_record(u, y, t)
+        if self._scale_gain > 1.0:
+            s *= self._scale_gain
+        return s
 
     # -- offline --------------------------------------------------------------------------
     def run(

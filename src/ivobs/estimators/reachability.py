@@ -25,7 +25,7 @@ from ._luenberger import (
 )
 from ._recursion import SplitFilter, redo_streams
 from .base import check_size
-from .state import OnlineState, Step
+from .state import OnlineState, Step, evolve
 
 __all__ = ["Reachability", "ReachabilityDesign", "ReachabilityState", "radius_sequence"]
 
@@ -182,6 +182,21 @@ class Reachability(ObserverEstimator):
         self._xc = self.x0.center.copy()
         self._h0 = self.x0.radius.copy()
         self._vec: tuple[int, np.ndarray, np.ndarray, SplitFilter] | None = None
+        self._fast = self._fast_operators()
+
+    def _fast_operators(self) -> tuple[np.ndarray, ...] | None:
+        """Design-time constants of the common step (constant bounds, complete ``y``): the
+        observer and its innovation as one product (:meth:`_fused_observer`), the selector
+        ``Σ`` giving both row sums of ``|X| = |[M^k H0, M^k G diag r]|`` in one product, and
+        ``|F| r``. None when the bounds are not constant (the general step)."""
+        fused = self._fused_observer()
+        if fused is None or self._const is None:
+            return None
+        nx = self._M.shape[0]
+        sel = np.zeros((nx + self._G.shape[1], 2))
+        sel[:nx, 0] = 1.0
+        sel[nx:, 1] = 1.0
+        return *fused, sel, self._absF @ self._const[1]
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ReachabilityState:
@@ -219,6 +234,10 @@ class Reachability(ObserverEstimator):
     def _step(
         self, state: ReachabilityState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ReachabilityState]:
+        if self._fast is not None and state.mode == EXACT:
+            fast = self._fast_step(state, u_k, y_k)
+            if fast is not None:
+                return fast
         xh = state.xh
         rho = self._radius(state)
         lo, hi = xh - rho, xh + rho
@@ -227,7 +246,12 @@ class Reachability(ObserverEstimator):
         c, r = self._bounds(state.k, y_k, lo, hi, u_k)
         obs = ~np.isnan(y_k)
         full = bool(obs.all())
-        innov = (y_k if full else np.where(obs, y_k, 0.0)) - C @ xh - D @ u_k - F @ c
+        if full and self._fast is not None:  # the product of the fast step
+            out = self._fast[0].dot(np.concatenate((xh, u_k, y_k)))
+            out += self._fast[1]
+            innov = out[xh.shape[0] :]
+        else:
+            innov = (y_k if full else np.where(obs, y_k, 0.0)) - C @ xh - D @ u_k - F @ c
         inconsistent = False
         if (full or obs.any()) and not consistent(
             innov, self._absC @ rho + self._absF @ r, y_k, obs
@@ -235,7 +259,9 @@ class Reachability(ObserverEstimator):
             inconsistent = True
             obs, full = np.zeros_like(obs), False
         Lk, Mk, Gk = self._gain_at(obs)
-        if full:  # [Tang2019, eq. (10)]
+        if full and self._fast is not None:
+            xh_next = out[: xh.shape[0]]
+        elif full:  # [Tang2019, eq. (10)]
             xh_next = A @ xh + B @ u_k + E @ c + Lk @ innov
         else:
             xh_next = A @ xh + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
@@ -248,6 +274,29 @@ class Reachability(ObserverEstimator):
         else:
             new = self._window_step(state, xh_next, rho, r, Mk, Gk)
         return Step(new, lo, hi, inconsistent)
+
+    def _fast_step(
+        self, state: ReachabilityState, u_k: np.ndarray, y_k: np.ndarray
+    ) -> Step[ReachabilityState] | None:
+        """Algorithm 1 with constant bounds and a complete, consistent ``y[k]``: the same
+        recursion as :meth:`_step` in a few fused products (:meth:`_fast_operators`); ``None``
+        (the general step) for a missing or inconsistent measurement."""
+        O, o, sel, Fr = self._fast  # type: ignore[misc]
+        xh = state.xh
+        nx = xh.shape[0]
+        sums = np.abs(state.X).dot(sel)  # |M^k H0| 1 and |M^k G diag r| 1
+        rho = sums[:, 0] + state.s
+        out = O.dot(np.concatenate((xh, u_k, y_k)))
+        out += o
+        bound = self._absC.dot(rho)
+        bound += Fr
+        excess = np.abs(out[nx:])  # |y - C x̂ - D u - F c| - (|C| ρ + |F| r)
+        excess -= bound
+        for v in excess.tolist():
+            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
+                return None
+        new = evolve(state, xh=out[:nx], X=self._M.dot(state.X), s=state.s + sums[:, 1])
+        return Step(new, xh - rho, xh + rho, False)
 
     def _window_step(
         self,

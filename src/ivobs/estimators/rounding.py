@@ -92,7 +92,8 @@ def lean_outward(
     total = sum(los) + sum(his)
     if total - total != 0.0:  # not all finite (or the sum overflowed): the full path
         return None
-    return np.array(los), np.array(his)
+    both = np.array((los, his))  # one conversion; its rows are the two bounds
+    return both[0], both[1]
 
 
 LEAN = 32

@@ -56,6 +56,11 @@ class DataScale:
             self._steady_list = (g.tolist(), c)
         return out
 
+    def steady_list(self) -> tuple[list[float], float] | None:
+        """The constant terms ``(g, c)`` with ``g`` as a list, or None when they vary."""
+        self.terms(0)
+        return self._steady_list
+
     def of_step(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
         """The magnitude of the data terms of one step (its running maximum is ``s_k``)."""
         if self._steady_list is not None and y_k.size + u_k.size <= SHORT:

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
@@ -18,7 +19,7 @@ from ..sets import Box, Zonotope
 from . import register
 from ._luenberger import ObserverDesign, ObserverEstimator, consistent, observer_bounds
 from .base import check_size
-from .state import OnlineState, Step
+from .state import OnlineState, Step, evolve
 
 __all__ = ["ZonotopeDesign", "ZonotopeEstimator", "ZonotopeState"]
 
@@ -27,6 +28,9 @@ ORDER_PER_STATE = 10
 
 SETTLE_STEPS = 2000
 """Steps of the generator recursion (34b) iterated at design (more when ``A - LC`` is slow)."""
+
+SEQUENCE_FLOATS = 1 << 21
+"""Most floats kept of the data-independent generator sequence (34b) for ``step()``."""
 
 WIDTH_STEPS = 60
 """Steps of (34b) over which the default gain is chosen when the reduction can grow."""
@@ -198,6 +202,13 @@ class ZonotopeEstimator(ObserverEstimator):
             )
         if self._const is not None:
             self._check_bounded()
+        self._fused = self._fused_observer()
+        self._gens: GeneratorSequence | None = None
+        if self._fused is not None and self._const is not None:  # (34b) is data-independent
+            C, GR = self._mats[2], self._G * self._const[1]
+            self._gens = GeneratorSequence(
+                self._H0.copy(), self._M, GR, C, self._absF @ self._const[1], self._reduce
+            )
 
     def _gain_by_width(self) -> None:
         """Default gain: the radius gain minimises the box of Algorithm 1, which the zonotope
@@ -256,28 +267,72 @@ class ZonotopeEstimator(ObserverEstimator):
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ZonotopeState:
-        return ZonotopeState(p=self._p0.copy(), H=self._H0.copy())
+        H0 = self._gens.seq[0][0] if self._gens else self._H0.copy()  # never modified: shared
+        return ZonotopeState(p=self._p0.copy(), H=H0)
 
     def _step(
         self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ZonotopeState]:
+        if self._fused is not None:
+            fast = self._fast_step(state, u_k, y_k)
+            if fast is not None:
+                return fast
         p, H = state.p, state.H
         rad = np.abs(H).sum(axis=1)
         lo, hi = p - rad, p + rad
-        A, B, C, D, E, F = self._mats
+        A, B, C, _, E, _ = self._mats
         c, r = self._bounds(state.k, y_k, lo, hi, u_k)
         obs = ~np.isnan(y_k)
-        innov = np.where(obs, y_k, 0.0) - C @ p - D @ u_k - F @ c
+        p_full, innov = self._innovation(p, u_k, y_k, obs, c)
         inconsistent = False
         if obs.any():
             bound = np.abs(C @ H).sum(axis=1) + self._absF @ r
             if not consistent(innov, bound, y_k, obs):
                 inconsistent = True
-                obs = np.zeros_like(obs)
+                obs, p_full = np.zeros_like(obs), None
         Lk, Mk, Gk = self._gain_at(obs)
-        p_next = A @ p + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)  # (34a)
+        if p_full is not None:  # (34a), complete y: the product of the fast step
+            p_next = p_full
+        else:  # (34a) without the missing outputs
+            p_next = A @ p + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
         H_next = np.hstack([Mk @ self._reduce(H), Gk * r])  # (34b)
         return Step(replace(state, p=p_next, H=H_next), lo, hi, inconsistent)
+
+    def _innovation(
+        self, p: np.ndarray, u_k: np.ndarray, y_k: np.ndarray, obs: np.ndarray, c: np.ndarray
+    ) -> tuple[np.ndarray | None, np.ndarray]:
+        """``(p+, ν)``: (34a) and the innovation ``ν = y − C p − D u − F c`` of a complete
+        ``y`` by the one product of :meth:`_fused_observer` (constant bounds), as the fast
+        step; else ``(None, ν)`` with missing outputs read as 0."""
+        _, _, C, D, _, F = self._mats
+        if self._fused is not None and obs.all():
+            O, o = self._fused
+            out = O.dot(np.concatenate((p, u_k, y_k)))
+            out += o
+            return out[: p.shape[0]], out[p.shape[0] :]
+        return None, np.where(obs, y_k, 0.0) - C @ p - D @ u_k - F @ c
+
+    def _fast_step(
+        self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray
+    ) -> Step[ZonotopeState] | None:
+        """:meth:`_step` with constant bounds and a complete ``y[k]`` inside its bounds: the
+        generators from the kept sequence (:class:`GeneratorSequence`), (34a) as one product
+        (:meth:`_fused_observer`); None (the general step) otherwise."""
+        gen = None if self._gens is None else self._gens.at(state.k, state.H)
+        if gen is None:
+            return None
+        rad, ybound, H_next = gen
+        O, o = self._fused  # type: ignore[misc]
+        p = state.p
+        nx = p.shape[0]
+        out = O.dot(np.concatenate((p, u_k, y_k)))  # as _innovation
+        out += o
+        excess = np.abs(out[nx:])  # |y - C p - D u - F c| - (|C H| 1 + |F| r)
+        excess -= ybound
+        for v in excess.tolist():
+            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
+                return None
+        return Step(evolve(state, p=out[:nx], H=H_next), p - rad, p + rad, False)
 
     # -- offline, vectorised --------------------------------------------------------------------
     def _run(
@@ -308,6 +363,45 @@ class ZonotopeEstimator(ObserverEstimator):
                 break
             H = H_next
         return rad, crad
+
+
+class GeneratorSequence:
+    """The generators ``H[k]`` of (34b) from ``H0`` with constant bounds and complete data (they
+    do not depend on the data), each with ``|H| 1`` and ``|C H| 1 + |F| r``, computed once by
+    ``step()`` and kept up to their fixed point (:data:`SEQUENCE_FLOATS` at most)."""
+
+    def __init__(
+        self, H0: np.ndarray, M: np.ndarray, GR: np.ndarray, C: np.ndarray, Fr: np.ndarray,
+        reduce: Callable[[np.ndarray], np.ndarray],
+    ):  # fmt: skip
+        self.M, self.GR, self.C, self.Fr, self.reduce = M, GR, C, Fr, reduce
+        self.seq = [self.entry(H0)]
+        self.fixed = False
+
+    def entry(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return H, np.abs(H).sum(axis=1), np.abs(self.C @ H).sum(axis=1) + self.Fr
+
+    def at(self, k: int, H: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """``(|H| 1, |C H| 1 + |F| r, H[k+1])`` when ``H`` is this sequence's ``H[k]`` (the
+        same object), else None."""
+        seq = self.seq
+        j = min(k, len(seq) - 1)
+        if seq[j][0] is not H:
+            return None
+        _, rad, ybound = seq[j]
+        if j + 1 < len(seq):
+            return rad, ybound, seq[j + 1][0]
+        if self.fixed:
+            return rad, ybound, H
+        if j != k:
+            return None
+        H_next = np.hstack([self.M @ self.reduce(H), self.GR])  # (34b), as _step
+        if H_next.shape == H.shape and np.array_equal(H_next, H):
+            self.fixed = True
+            return rad, ybound, H
+        if len(seq) * H.size < SEQUENCE_FLOATS:
+            seq.append(self.entry(H_next))
+        return rad, ybound, H_next
 
 
 def _reduce(H: np.ndarray, design: ZonotopeDesign) -> np.ndarray:

@@ -9,6 +9,7 @@ The registry (:class:`Scenario`, :func:`register_scenario`, :func:`get`, :func:`
 - :mod:`~ivobs.scenarios.dinh2024`: ``kkl-random8``, ``pendulum``, ``kkl-ltv-dt`` ([Dinh2024]);
 - :mod:`~ivobs.scenarios.heat`: ``heat-1d`` (large sparse systems, not from a paper);
 - :mod:`~ivobs.scenarios.cora`: the CORA benchmarks ``cora-*`` ([Althoff2021]);
+- :mod:`~ivobs.scenarios.quadtank`: ``quadruple-tank`` ([Johansson2000]);
 - :mod:`~ivobs.scenarios.uncertain`: ``servo-uncertain`` (interval matrices, docs/uncertain.md);
 - :mod:`~ivobs.scenarios.nonlinear`: ``henon-nl``, ``pendulum-nl``, ``cora-tank6-nl``, ``cstr``,
   ``unicycle-range``, ``chain10-nl`` (NonlinearSystem, docs/nonlinear.md).
@@ -32,7 +33,7 @@ from .registry import (
 
 # The import order is the registration order, hence that of names(): not sorted.
 # isort: off
-from . import wang2020, tang2019, efimov2013, dinh2024, heat, cora, uncertain, nonlinear
+from . import wang2020, tang2019, efimov2013, dinh2024, heat, cora, quadtank, uncertain, nonlinear
 # isort: on
 
 from .dinh2024 import kkl_ltv_A, pendulum_A
@@ -60,6 +61,7 @@ __all__ = [
     "nonlinear",
     "options",
     "pendulum_A",
+    "quadtank",
     "register_scenario",
     "registry",
     "summaries",

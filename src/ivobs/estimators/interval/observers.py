@@ -62,6 +62,7 @@ class CooperativeObserver(Estimator, Generic[S]):
         self.operators = SplitOperators(self.sys, self.x0, L, S_, rounding, self.name)
         self.vector = VectorPath(self.operators)
         self.valid_from = 0
+        self._scale_gain = self.operators.nu  # the data-scale factor nu (.rounding)
 
     def _initial_state(self) -> S:
         ops = self.operators
@@ -76,17 +77,6 @@ class CooperativeObserver(Estimator, Generic[S]):
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
     ) -> tuple[np.ndarray, ...] | None:
         return self.vector.run(self, u, y, t)
-
-    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
-        s = super()._step_scale(k, u_k, y_k, t_k)
-        nu = self.operators.nu
-        return s * nu if nu > 1.0 else s
-
-    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
-        s = super()._data_scale(u, y, t)
-        if self.operators.nu > 1.0:
-            s *= self.operators.nu
-        return s
 
 
 class _GainObserver(CooperativeObserver[S]):

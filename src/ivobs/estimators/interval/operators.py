@@ -18,7 +18,7 @@ from ...model import LinearSystem
 from ...sets import Box, image_bounds, neg, pos
 from .rounding import CONSISTENCY_TOL, Margins, largest, transform_conversion, transform_step_error
 
-__all__ = ["SparseStep", "SplitOperators", "StepMatrices", "hull"]
+__all__ = ["FusedStep", "FusedTransformed", "SparseStep", "SplitOperators", "StepMatrices", "hull"]
 
 
 def hull(
@@ -54,6 +54,39 @@ class SparseStep:
     Gz: np.ndarray
     Gp: np.ndarray
     Gn: np.ndarray
+
+
+@dataclass(frozen=True)
+class FusedStep:
+    """The step with every output observed (``S = I``, dense, constant bounds) as one product:
+    ``W [z̄; z̲; u; y] + w = [z̄+; z̲+; p̄; p̲]`` (before the rounding bound), with
+    ``W = [[Q⁺, −Q⁻, B_z, L], [−Q⁻, Q⁺, B_z, L], [C⁺, −C⁻, D_u, 0], [−C⁻, C⁺, D_u, 0]]``,
+    ``w = [ḡ; g̲; f̄; f̲]``: the next bounds and those of ``C x + D_u u + F d`` (consistency).
+    ``starts``, ``coef``, ``e_d``: the rounding bound :meth:`Margins.local_error` on the
+    blocks ``[z̄; z̲]``, ``u``, ``y`` of the same vector (``γ`` folded in)."""
+
+    W: np.ndarray
+    w: np.ndarray
+    starts: np.ndarray
+    coef: np.ndarray
+    e_d: float
+
+
+@dataclass(frozen=True)
+class FusedTransformed:
+    """:class:`FusedStep` for ``S ≠ I``: ``W [z̄; z̲; u; y] + w = [z̄+; z̲+; x̄; x̲; p̄; p̲]``
+    (before the rounding terms): the next bounds, the hull of ``S⁻¹ [z̲, z̄]`` ([Tang2019,
+    eqs. (42e-f)]) and that of ``C`` on it plus ``D_u u + F d`` (consistency; the widening of
+    the ``x`` box for the computed inverse enters it as ``|C| 1`` times that widening).
+    ``starts``: the blocks ``[z̄; z̲]``, ``u``, ``y`` of the vector; ``err``: the coefficients of
+    :attr:`StepMatrices.err`; ``dmax``: the largest bound of ``d``; ``cabs``: ``|C| 1``."""
+
+    W: np.ndarray
+    w: np.ndarray
+    starts: np.ndarray
+    err: list[float]
+    dmax: float
+    cabs: np.ndarray
 
 
 class SplitOperators:
@@ -123,6 +156,11 @@ class SplitOperators:
         if self.sparse and self.d_const is not None:
             self.full_inputs = self.input_bounds(self.full, observed, self.d_const)
         self.kappa_z = np.inf if S is None else self._transform_kappa()
+        self.fused = self._fused()
+        """:class:`FusedStep` of a complete ``y`` (dense, ``S = I``, exact matrices, constant
+        bounds), else None."""
+        self.fused_z = self._fused_transformed()
+        """:class:`FusedTransformed`: the same for ``S ≠ I``, else None."""
         self.window: WindowBound | None = None
         """The finite-memory bound used after missing samples (:mod:`.window`): dense,
         time-invariant systems with constant bounds, ``S = I``."""
@@ -133,6 +171,64 @@ class SplitOperators:
             self.window = window_bound(self.A, self.B, self.C, self.Du, self.E, self.F, dlo, dhi)
 
     # -- design-time helpers -----------------------------------------------------------------
+    def _fused(self) -> FusedStep | None:
+        """The step of a complete ``y`` as one product (:class:`FusedStep`)."""
+        if self.sparse or self.S is not None or self.unc is not None or self.margins is None:
+            return None
+        if self.d_const is None or self.f_hull is None:
+            return None
+        m, n, ny, nu = self.full, self.nx, self.ny, self.sys.nu
+        Cp, Cn = self.C_pm
+        Zy = np.zeros((ny, ny))
+        W = np.block(
+            [
+                [m.Qp, -m.Qn, m.Bz, m.Lz],
+                [-m.Qn, m.Qp, m.Bz, m.Lz],
+                [Cp, -Cn, self.Du, Zy],
+                [-Cn, Cp, self.Du, Zy],
+            ]
+        )
+        glo, ghi = hull(m.Gp, m.Gn, self.d_const.lo, self.d_const.hi)
+        flo, fhi = self.f_hull
+        w = np.concatenate([ghi, glo, fhi, flo])
+        rb = self.margins.bound
+        sizes = np.array([2 * n, nu, ny])
+        keep = sizes > 0
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])[keep]
+        coef = np.array([rb.a_z, rb.a_u, rb.a_y])[keep] * rb.gamma
+        e_d = rb.gamma * rb.a_d * (self.dmax or 0.0) if rb.a_d else 0.0
+        return FusedStep(W, w, starts, coef, e_d)
+
+    def _fused_transformed(self) -> FusedTransformed | None:
+        """A complete ``y``'s step in ``z = S x`` as one product (:class:`FusedTransformed`)."""
+        if self.S is None or self.Si_pm is None or self.tconv is None or self.unc is not None:
+            return None
+        if self.A is None or self.d_const is None or self.f_hull is None:
+            return None
+        m, n, ny, nu = self.full, self.nx, self.ny, self.sys.nu
+        Sp, Sn = self.Si_pm
+        Cp, Cn = self.C_pm
+        P, N = Cp @ Sp + Cn @ Sn, Cp @ Sn + Cn @ Sp  # C⁺, C⁻ after the hull of S⁻¹
+        Zu, Zy = np.zeros((n, nu)), np.zeros((n, ny))
+        W = np.block(
+            [
+                [m.Qp, -m.Qn, m.Bz, m.Lz],
+                [-m.Qn, m.Qp, m.Bz, m.Lz],
+                [Sp, -Sn, Zu, Zy],
+                [-Sn, Sp, Zu, Zy],
+                [P, -N, self.Du, np.zeros((ny, ny))],
+                [-N, P, self.Du, np.zeros((ny, ny))],
+            ]
+        )
+        glo, ghi = hull(m.Gp, m.Gn, self.d_const.lo, self.d_const.hi)
+        flo, fhi = self.f_hull
+        w = np.concatenate([ghi, glo, np.zeros(2 * n), fhi, flo])
+        sizes = np.array([2 * n, nu, ny])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])[sizes > 0]
+        assert m.err is not None
+        dmax = largest(self.d_const.lo, self.d_const.hi)
+        return FusedTransformed(W, w, starts, m.err.tolist(), dmax, np.abs(self.C).sum(axis=1))
+
     def _point_sensors(self) -> None:
         """Lemma 1 for ``C`` on the few states it reads (point sensors of sparse systems)."""
         Cc = self.sys.sparse("C").tocoo()

@@ -18,8 +18,8 @@ import numpy as np
 from ...sets import Box
 from .. import _uncertain as uncertain
 from .._recursion import csr_accumulate
-from ..state import Step
-from .operators import SplitOperators, hull
+from ..state import Step, evolve
+from .operators import FusedStep, FusedTransformed, SplitOperators, hull
 from .rounding import largest
 from .window import CooperativeState, after_gap
 
@@ -53,6 +53,14 @@ S = TypeVar("S", bound=CooperativeState)
 
 def cooperative_step(ops: SplitOperators, state: S, u_k: np.ndarray, y_k: np.ndarray) -> Step[S]:
     """From the bounds of ``z[k]``: the box of ``x[k]`` and the bounds of ``z[k+1]``."""
+    if ops.fused is not None and state.fresh < 0:
+        fast = _fused_step(ops.fused, state, u_k, y_k)
+        if fast is not None:
+            return fast
+    if ops.fused_z is not None and state.k > 0:
+        fast = _fused_transformed(ops, ops.fused_z, state, u_k, y_k)
+        if fast is not None:
+            return fast
     zlo, zhi = state.lo, state.hi
     xlo, xhi = ops.to_x(state.k, zlo, zhi)
     obs = ~np.isnan(y_k)
@@ -73,6 +81,59 @@ def cooperative_step(ops: SplitOperators, state: S, u_k: np.ndarray, y_k: np.nda
     if ops.window is not None:
         new = after_gap(ops.window, ops.dmax, new, state, u_k, y_k, bool(obs.all()))
     return Step(new, xlo, xhi, inconsistent)
+
+
+def _fused_step(fs: FusedStep, state: S, u_k: np.ndarray, y_k: np.ndarray) -> Step[S] | None:
+    """:func:`cooperative_step` for a complete ``y[k]`` inside its bounds (``S = I``, dense,
+    constant bounds: :attr:`SplitOperators.fused`): the same step in one product; ``None`` (the
+    general step) when ``y[k]`` is missing or maybe inconsistent."""
+    zlo, zhi = state.lo, state.hi
+    n, ny = zlo.shape[0], y_k.shape[0]
+    v = np.concatenate((zhi, zlo, u_k, y_k))
+    out = fs.W.dot(v)
+    out += fs.w
+    p = out[2 * n :].tolist()
+    for hi_, yv, lo_ in zip(p[:ny], y_k.tolist(), p[ny:]):
+        if not lo_ <= yv <= hi_:  # maybe inconsistent, or missing: the general step decides
+            return None
+    e = float(fs.coef.dot(np.maximum.reduceat(np.abs(v, out=v), fs.starts))) + fs.e_d
+    hi = out[:n]
+    hi += e
+    lo = out[n : 2 * n]
+    lo -= e
+    new = evolve(state, lo=lo, hi=hi)
+    return Step(new, zlo, zhi, False)
+
+
+def _fused_transformed(
+    ops: SplitOperators, fs: FusedTransformed, state: S, u_k: np.ndarray, y_k: np.ndarray
+) -> Step[S] | None:
+    """:func:`cooperative_step` in ``z = S x`` (``k >= 1``) for a complete ``y[k]`` inside its
+    bounds (:attr:`SplitOperators.fused_z`): one product, the widening of the ``x`` box for the
+    computed inverse (:meth:`SplitOperators.to_x`) and the step error (``StepMatrices.err`` on
+    the norms of ``x``, ``z``, ``y``, ``u``, ``d``) in floats; ``None``: the general step."""
+    n, ny = state.lo.shape[0], y_k.shape[0]
+    v = np.concatenate((state.hi, state.lo, u_k, y_k))
+    out = fs.W.dot(v)
+    out += fs.w
+    mags = np.maximum.reduceat(np.abs(v), fs.starts).tolist()  # max |z|, |u|, |y| (nonempty)
+    zmax, umax, ymax = mags[0], mags[1] if u_k.shape[0] else 0.0, mags[-1] if ny else 0.0
+    xraw = out[2 * n : 4 * n]
+    xi = float(np.maximum.reduce(np.abs(xraw)))
+    g, c = ops.tconv  # type: ignore[misc]
+    cz = c * zmax
+    ex = cz + g * (xi + cz) / (1.0 - g)  # as to_x
+    p = out[4 * n :].tolist()
+    for hi_, lo_, yv, ca in zip(p[:ny], p[ny:], y_k.tolist(), fs.cabs.tolist()):
+        if not lo_ - ca * ex <= yv <= hi_ + ca * ex:  # maybe inconsistent: the general step
+            return None
+    err = fs.err
+    e = err[0] * (xi + ex) + err[1] * zmax + err[2] * ymax + err[3] * umax + err[4] * fs.dmax
+    hi = out[:n]
+    hi += e
+    lo = out[n : 2 * n]
+    lo -= e
+    return Step(evolve(state, lo=lo, hi=hi), xraw[n:] - ex, xraw[:n] + ex, False)
 
 
 def _split_update(

@@ -46,7 +46,7 @@ import numpy as np
 
 from ...errors import IvobsError
 from ...sets import Box
-from ..state import OnlineState, Step
+from ..state import OnlineState, Step, evolve
 from .design import ObserverMatrices, Transform, TransformSequence, every, finite, image
 from .observer import Observer, Setting, ZState
 
@@ -177,6 +177,71 @@ class DiscreteLTI(DiscreteObserver[S]):
 
 class ObserverZ(DiscreteLTI[ZState]):
     """Observer (3) of [Dinh2024]: the bounds of ``z = T x``."""
+
+    def __init__(self, setting: Setting, m: ObserverMatrices):
+        super().__init__(setting, m)
+        self._fused = self._fuse()
+
+    def _fuse(self) -> tuple[np.ndarray, ...] | None:
+        """The step of a complete ``y`` with constant bounds as one product: ``W [z̲; z̄; y;
+        u] + w = [z̲+; z̄+; D u + F d_c; z_c; z_r]`` ((3.a) and what (3.c-d) and the consistency
+        test need); None otherwise (the general step)."""
+        m, d = self.m, self._dfix
+        if m.g_const is None or d is None:
+            return None
+        _, _, C, D, _, F = m.mats
+        nz, ny, nu = self.design.n_z, C.shape[0], D.shape[1]
+        Az, Bz, I2 = self.design.A_z, self.design.B_z, 0.5 * np.eye(nz)
+        Zz, Zy, Zu = np.zeros((nz, nz)), np.zeros((nz, ny)), np.zeros((nz, nu))
+        W = np.block(
+            [
+                [Az, Zz, Bz, m.Lu],
+                [Zz, Az, Bz, m.Lu],
+                [np.zeros((ny, 2 * nz + ny)), D],
+                [I2, I2, Zy, Zu],
+                [-I2, I2, Zy, Zu],
+            ]
+        )
+        glo, ghi = m.g_const
+        Fdc = F @ (0.5 * (d.lo + d.hi))
+        w = np.concatenate([glo, ghi, Fdc, np.zeros(2 * nz)])
+        Fdr = np.abs(F) @ (0.5 * (d.hi - d.lo))
+        return W, w, Fdr, C, np.abs(C)
+
+    def step(
+        self, state: ZState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[ZState]:
+        if self._fused is not None and state.k > 0:
+            fast = self._fused_step(state, u_k, y_k)
+            if fast is not None:
+                return fast
+        return super().step(state, u_k, y_k, t_k)
+
+    def _fused_step(self, state: ZState, u_k: np.ndarray, y_k: np.ndarray) -> Step[ZState] | None:
+        """:meth:`step` for ``k >= 1``, a complete ``y[k]`` inside its bounds and constant
+        bounds (:meth:`_fuse`): (3.c-d) as :meth:`recover`, the consistency test, (3.a), in a
+        few products; ``None`` (the general step) otherwise."""
+        W, w, Fdr, C, absC = self._fused  # type: ignore[misc]
+        nz, ny = state.zlo.shape[0], y_k.shape[0]
+        out = W.dot(np.concatenate((state.zlo, state.zhi, y_k, u_k)))
+        out += w
+        zc, zr = out[2 * nz + ny : 3 * nz + ny], out[3 * nz + ny :]
+        tr = self.m.tr
+        a = np.abs(zc)  # (3.c-d) with the recovery margin, as recover()
+        a += zr
+        xr = tr.absP.dot(zr)
+        xr += (self.rec * tr.cond) * tr.absP.dot(a)
+        xc = tr.P.dot(zc)
+        dev = y_k - C.dot(xc)  # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r)
+        dev -= out[2 * nz : 2 * nz + ny]
+        np.abs(dev, out=dev)
+        dev -= absC.dot(xr)
+        dev -= Fdr
+        for v in dev.tolist():
+            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
+                return None
+        new = evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz])
+        return Step(new, xc - xr, xc + xr, False)
 
     def initial_state(self) -> ZState:
         zlo, zhi = self.initial_z()  # (3.b)
