@@ -21,7 +21,7 @@ from typing import Any
 
 from .codegen import Emitter, Pair, compile_source
 
-__all__ = ["Forms", "build_forms"]
+__all__ = ["Forms", "build_forms", "emit_centre"]
 
 
 class Forms:
@@ -78,6 +78,31 @@ def _ret(em: Emitter, pairs: list[Pair]) -> None:
     em.line(f"return [{', '.join(p[0] for p in pairs)}], [{', '.join(p[1] for p in pairs)}]")
 
 
+def emit_centre(
+    em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair], nat: list[Pair]
+) -> dict[Any, Pair]:
+    """Code of the centred forms' common start: return ``nat`` when a bound of the box
+    ``z = (x, w)`` is infinite, else the centre ``c`` (midpoint clipped into the box) and the
+    outward-rounded offsets ``[z] - c`` (``d{name}l``, ``d{name}h``); the emitter's scope is
+    set to the centre (and the inputs), which is returned."""
+    z = syms["x"] + syms["w"]
+    zname = [f"x{i}" for i in range(len(syms["x"]))] + [f"w{i}" for i in range(len(syms["w"]))]
+    box = [f"{n}l" for n in zname] + [f"{n}h" for n in zname]
+    em.line(f"s = {' + '.join(box) if box else '0.0'}")
+    lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
+    em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")  # an infinite bound: natural only
+    cenv: dict[Any, Pair] = dict(consts)
+    for s, n in zip(z, zname):
+        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
+        em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
+        em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
+        cenv[s] = (f"c{n}", f"c{n}")
+    for i, s in enumerate(syms["u"]):
+        cenv[s] = (f"u{i}", f"u{i}")
+    em.scope(cenv)
+    return cenv
+
+
 def _mean_value(
     em: Emitter,
     exprs: list[Any],
@@ -98,19 +123,7 @@ def _mean_value(
             if d != 0 and repeated[i]:
                 em.label = f"d {labels[i]} / d {z[j]}"
                 entries[i, j] = em.emit(d)
-    box = [f"{n}l" for n in zname] + [f"{n}h" for n in zname]
-    em.line(f"s = {' + '.join(box) if box else '0.0'}")
-    lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
-    em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")  # an infinite bound: natural only
-    cenv: dict[Any, Pair] = dict(consts)
-    for s, n in zip(z, zname):
-        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
-        em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
-        em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
-        cenv[s] = (f"c{n}", f"c{n}")
-    for i, s in enumerate(syms["u"]):
-        cenv[s] = (f"u{i}", f"u{i}")
-    em.scope(cenv)
+    emit_centre(em, syms, consts, nat)
     out: list[Pair] = []
     for i, nv in enumerate(nat):
         if not repeated[i]:  # single-use: the natural extension is already the exact range

@@ -32,6 +32,7 @@ from __future__ import annotations
 from typing import Any
 
 from .codegen import Emitter, Pair, compile_source
+from .forms import emit_centre
 
 __all__ = ["MAX_ORDER", "TaylorCode", "build_taylor", "lie_coefficients"]
 
@@ -179,18 +180,7 @@ def _mean_value(
     k, x, w = len(coefs), syms["x"], syms["w"]
     z = x + w
     zn = [f"x{i}" for i in range(len(x))] + [f"w{i}" for i in range(len(w))]
-    em.line(f"s = {' + '.join([f'{n}l' for n in zn] + [f'{n}h' for n in zn])}")
-    lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
-    em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")
-    cenv: dict[Any, Pair] = dict(consts)
-    for s, n in zip(z, zn):
-        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
-        em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
-        em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
-        cenv[s] = (f"c{n}", f"c{n}")
-    for i, s in enumerate(syms["u"]):
-        cenv[s] = (f"u{i}", f"u{i}")
-    em.scope(cenv)
+    cenv = emit_centre(em, syms, consts, nat)
     centre = [_emit_all(em, coefs[i], f"f^[{i + 1}] (at the centre)") for i in range(k - 1)]
     out: list[Pair] = []
     for j, nv in enumerate(nat):
