@@ -21,7 +21,7 @@ from typing import Any
 
 from .codegen import Emitter, Pair, compile_source
 
-__all__ = ["Forms", "build_forms", "emit_centre"]
+__all__ = ["Forms", "build_forms", "emit_centre", "emit_meet"]
 
 
 class Forms:
@@ -135,11 +135,17 @@ def _mean_value(
             for j in range(len(z))
             if (i, j) in entries
         ]
-        m = em._sum(terms)
-        r = em.new()
-        em.line(f"{r[0]} = _max({nv[0]}, {m[0]}); {r[1]} = _min({nv[1]}, {m[1]})")
-        out.append(r)
+        out.append(emit_meet(em, nv, terms))
     return out
+
+
+def emit_meet(em: Emitter, nat: Pair, terms: list[Pair]) -> Pair:
+    """Code of ``nat ∩ (terms[0] + terms[1] + ...)``: a centred form met with the natural
+    inclusion ``nat`` of the same row (each encloses the range, so their meet does)."""
+    m = em._sum(terms)
+    r = em.new()
+    em.line(f"{r[0]} = _max({nat[0]}, {m[0]}); {r[1]} = _min({nat[1]}, {m[1]})")
+    return r
 
 
 def build_forms(

@@ -32,7 +32,7 @@ from __future__ import annotations
 from typing import Any
 
 from .codegen import Emitter, Pair, compile_source
-from .forms import emit_centre
+from .forms import emit_centre, emit_meet
 
 __all__ = ["MAX_ORDER", "TaylorCode", "build_taylor", "lie_coefficients"]
 
@@ -188,10 +188,7 @@ def _mean_value(
         terms = [tc] + [
             em.mul(jac[j, m], (f"d{zn[m]}l", f"d{zn[m]}h")) for m in range(len(z)) if (j, m) in jac
         ]
-        mv = em._sum(terms)
-        r = em.new()
-        em.line(f"{r[0]} = _max({nv[0]}, {mv[0]}); {r[1]} = _min({nv[1]}, {mv[1]})")
-        out.append(r)
+        out.append(emit_meet(em, nv, terms))
     return out
 
 
