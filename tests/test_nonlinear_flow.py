@@ -309,3 +309,30 @@ def test_nl_interval_contains_the_sampled_six_tank() -> None:
     res = est.run(U, Y)
     assert np.all(res.lower - MARGIN <= X) and np.all(X <= res.upper + MARGIN)
     assert np.all((res.upper - res.lower)[-1] < 2.5)
+
+
+def test_a_sampled_model_saves_and_loads_with_its_discretisation(tmp_path) -> None:
+    """``[system.discretize]``: a saved FlowSystem loads as the same sampled model (Ts, order,
+    substeps), with the same enclosure of the flow; bad tables are clear errors."""
+    sampled = pendulum().discretize(0.05, order=5, substeps=2)
+    path = tmp_path / "pend.toml"
+    ivobs.save_system(path, sampled, x0=ivobs.Box([-0.1, -0.1], [0.1, 0.1]))
+    text = path.read_text()
+    assert "[system.discretize]" in text and "order = 5" in text and "substeps = 2" in text
+    back = ivobs.load_system(path).system
+    assert (back.dt, back.order, back.substeps) == (0.05, 5, 2)
+    x = ivobs.Box([0.1, -0.2], [0.12, -0.18])
+    args = (x.lo, x.hi, [0.3], sampled.w_box.lo, sampled.w_box.hi)
+    np.testing.assert_array_equal(back.f_box(*args)[0], sampled.f_box(*args)[0])
+    bad = {
+        "Ts = -1.0": "sampling period > 0",
+        "Ts = 0.1\norder = 2.5": "expected an integer",
+        "Ts = 0.1\nsteps = 3": "unknown key",
+        "order = 4": "missing Ts",
+    }
+    for table, msg in bad.items():
+        path.write_text(
+            text.split("[system.discretize]")[0] + "[system.discretize]\n" + table + "\n"
+        )
+        with pytest.raises(IvobsError, match=msg):
+            ivobs.load_system(path)

@@ -81,6 +81,27 @@ def test_henon_bounds_are_sound_for_every_measurement():
         sc.system.d_at(0, np.array([np.nan]))
 
 
+def test_henon_bounds_hold_the_exact_real_bounds():
+    """No tolerance: the box holds the bounds computed in exact rational arithmetic from the
+    same doubles (the measurement and the parameters), so rounding cannot make it miss."""
+    from fractions import Fraction as Q
+
+    sc = scenarios.get("henon")
+    a_lo, a_hi = (Q(a) for a in sc.reference["a"])
+    V, delta = Q(sc.reference["V"]), Q(sc.reference["delta"])
+    rng = np.random.default_rng(1)
+    ys = np.concatenate([rng.uniform(-2, 2, 400), rng.uniform(-0.2, 0.2, 400), [0.0, 0.1, -0.1]])
+    for y in ys:
+        box = sc.system.d_at(0, np.array([y]))
+        sq_lo = max(Q(0), abs(Q(y)) - V) ** 2
+        sq_hi = (abs(Q(y)) + V) ** 2
+        assert Q(box.lo[0]) <= 1 - a_hi * sq_hi - delta
+        assert Q(box.hi[0]) >= 1 - a_lo * sq_lo + delta
+        # and outward by a few ulps only
+        exact = (1 - a_lo * sq_lo + delta) - (1 - a_hi * sq_hi - delta)
+        assert Q(box.hi[0] - box.lo[0]) <= exact + Q(1e-14) * (1 + abs(Q(box.lo[0])))
+
+
 def test_henon_adversarial_runs_stay_bounded_and_use_vertices():
     sc = scenarios.get("henon", horizon=3000)
     tr = sc.simulate("vertex", seed=5)

@@ -18,6 +18,14 @@ nonlinear system file runs no code.
     [system.d]
     w1 = [-0.005, 0.005]
     v1 = [-0.02, 0.02]
+
+A continuous-time model (``dt = 0``) may carry its guaranteed discretisation, the arguments of
+:meth:`~ivobs.NonlinearSystem.discretize`, so that a saved sampled model loads as it was saved::
+
+    [system.discretize]
+    Ts = 0.1
+    order = 4
+    substeps = 1
 """
 
 from __future__ import annotations
@@ -32,7 +40,8 @@ from .reader import TomlReader
 
 __all__ = ["NONLINEAR_KEYS", "dump_nonlinear", "read_nonlinear"]
 
-NONLINEAR_KEYS = ("dt", "states", "inputs", "outputs", "f", "h", "params", "d")
+NONLINEAR_KEYS = ("dt", "states", "inputs", "outputs", "f", "h", "params", "d", "discretize")
+DISCRETIZE_KEYS = ("Ts", "order", "substeps")
 
 
 def _strings(reader: TomlReader, key: tuple[str, ...], value: Any, what: str) -> list[str]:
@@ -83,7 +92,38 @@ def read_nonlinear(reader: Any, sysd: dict[str, Any], dt: bool | float) -> Nonli
     if "names" in reader.doc:  # units (and other labels) beside the model's own names
         given = {k: v for k, v in vars(reader.names(model)).items() if v is not None}
         model.names = dataclasses.replace(model.names, **given)
+    if "discretize" in sysd:
+        return _discretized(reader, model, sysd["discretize"])
     return model
+
+
+def _discretized(reader: Any, model: NonlinearSystem, table: Any) -> NonlinearSystem:
+    """``model`` (continuous-time) sampled as ``[system.discretize]`` says."""
+    key = ("system", "discretize")
+    spec = _table(reader, key, table)
+    other = sorted(set(spec) - set(DISCRETIZE_KEYS))
+    if other:
+        raise reader.fail(
+            (*key, other[0]), f"unknown key; allowed keys: {', '.join(DISCRETIZE_KEYS)}"
+        )
+    if "Ts" not in spec:
+        raise reader.fail(key, "missing Ts = <sampling period > 0>")
+    if model.dt != 0:
+        raise reader.fail(
+            key, f"only a continuous-time model (dt = 0) is discretised; dt = {model.dt}"
+        )
+    for k in ("order", "substeps"):
+        if k in spec and (isinstance(spec[k], bool) or not isinstance(spec[k], int)):
+            raise reader.fail((*key, k), f"expected an integer, got {spec[k]!r}")
+    ts = spec["Ts"]
+    if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not ts > 0 or ts == float("inf"):
+        raise reader.fail((*key, "Ts"), f"expected a finite sampling period > 0, got {ts!r}")
+    try:
+        return model.discretize(
+            float(ts), order=spec.get("order", 4), substeps=spec.get("substeps", 1)
+        )
+    except IvobsError as exc:
+        raise reader.fail(key, str(exc)) from None
 
 
 def _key_of(msg: str) -> tuple[str, ...]:
@@ -111,4 +151,7 @@ def dump_nonlinear(system: NonlinearSystem, scalar: Any, value: Any) -> list[str
     if spec["d"]:
         out += ["", "[system.d]"]
         out += [f"{n} = {value(list(v))}" for n, v in spec["d"].items()]
+    if "discretize" in spec:  # a sampled continuous-time model (FlowSystem)
+        out += ["", "[system.discretize]"]
+        out += [f"{k} = {scalar(v)}" for k, v in spec["discretize"].items()]
     return out

@@ -42,9 +42,10 @@ __all__ = ["FORMAT", "MATRICES", "SystemFile", "load_system", "loads_system"]
 
 FORMAT = 1
 MATRICES = ("A", "B", "C", "D", "E", "F")
+_NONLINEAR = ("states", "inputs", "outputs", "f", "h", "params", "d", "discretize")
 _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
     (): ("format", "name", "description", "system", "disturbance", "x0", "method", "names"),
-    ("system",): ("dt", *MATRICES, "states", "inputs", "outputs", "f", "h", "params", "d"),
+    ("system",): ("dt", *MATRICES, *_NONLINEAR),
     ("disturbance",): ("lower", "upper", "csv", "python", "params"),
     ("x0",): ("lower", "upper"),
     ("method",): ("name", "options"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from functools import partial
 from typing import Any
 
@@ -53,11 +54,20 @@ def _efimov_planar(horizon: int = 50) -> Scenario:
     )
 
 
+def _lo(x: float) -> float:
+    return math.nextafter(x, -math.inf)
+
+
+def _hi(x: float) -> float:
+    return math.nextafter(x, math.inf)
+
+
 def henon_bounds(k: Any, y: Any, *, a_lo: float, a_hi: float, V: float, delta: float) -> Box:
     """Bounds of (b, v), b = 1 - a x1^2 + d, from the measurement y = x1 + v [Efimov2013, Remark 1].
 
     ``x1 ∈ [y - V, y + V]`` so ``x1^2 ∈ [max(0, |y| - V)^2, (|y| + V)^2]``. The paper prints
     ``(|y| - V)^2`` for the lower end, which is unsound when ``|y| < V`` (then ``x1`` may be 0).
+    Each bound is rounded outward, so the box holds the real-number interval.
     A module-level function (bound to its parameters with ``functools.partial``) so that system
     files can name it: ``d = { python = "ivobs.scenarios:henon_bounds", params = {...} }``.
     """
@@ -67,9 +77,13 @@ def henon_bounds(k: Any, y: Any, *, a_lo: float, a_hi: float, V: float, delta: f
             "henon: the nonlinear term is bounded from the measurement y[k], which is missing "
             f"at step {k}; this scenario cannot predict through a missing sample"
         )
-    sq_lo = max(0.0, abs(y0) - V) ** 2
-    sq_hi = (abs(y0) + V) ** 2
-    return Box([1.0 - a_hi * sq_hi - delta, -V], [1.0 - a_lo * sq_lo + delta, V])
+    # Outward rounding: every operation is rounded to the far side (one ulp is enough, since a
+    # correctly rounded result is within half an ulp), so the box holds the real-number bounds.
+    sq_lo = _lo(max(0.0, _lo(abs(y0) - V)) ** 2)
+    sq_hi = _hi(_hi(abs(y0) + V) ** 2)
+    b_lo = _lo(_lo(1.0 - _hi(a_hi * sq_hi)) - delta)
+    b_hi = _hi(_hi(1.0 - _lo(a_lo * sq_lo)) + delta)
+    return Box([b_lo, -V], [b_hi, V])
 
 
 def henon_remark1_system(
