@@ -457,3 +457,35 @@ def test_adversarial_run_puts_the_matrices_on_vertices():
     for method in ("interval-split", "zonotope"):
         res = ivobs.make_estimator(method, sys, x0=X0).run(traj.u, traj.y)
         assert res.contains(traj.x).all()
+
+
+def test_interval_observers_refuse_intervals_too_wide_for_the_design(monkeypatch):
+    """The radius of the interval observers' bounds obeys r+ >= G r,
+    G = |S(A0 − L C0)S⁻¹| + (|S| R_A + |S L| R_C)|S⁻¹|: with ρ(G) > 1 they must diverge, so the
+    design refuses. Random interval-matrix systems 3 and 8 of tests/randsys.py (stable for every
+    matrix in the box: |A0|∞ + |R_A|∞ <= 0.8) have ρ(G) 1.17 and 1.30 for interval-transformed's
+    design; without the refusal its bounds grow like ρ(G)^k (seed 3 overflowed at step 4406)."""
+    from exactsim import simulate_linear
+    from randsys import random_interval_linear
+
+    from ivobs.estimators._uncertain import growth_radius
+    from ivobs.estimators.interval import observers
+
+    for seed, accepted in [(3, False), (8, False), (0, True), (5, True)]:
+        case = random_interval_linear(seed, 300, cooperative=False)
+        if accepted:
+            ivobs.make_estimator("interval-transformed", case.system, x0=case.x0)
+            continue
+        with pytest.raises(ivobs.DesignError, match=r"too wide for this design.*spectral radius"):
+            ivobs.make_estimator("interval-transformed", case.system, x0=case.x0)
+    # the refusal is not conservative here: with the check off, seed 8's bounds explode
+    monkeypatch.setattr(observers.CooperativeObserver, "_check_growth", lambda *a: None)
+    case = random_interval_linear(8, 300, cooperative=False)
+    est = ivobs.make_estimator("interval-transformed", case.system, x0=case.x0)
+    d = est.design
+    R = d.S @ (case.system.A - d.L @ case.system.C) @ np.linalg.inv(d.S)
+    rho = growth_radius(case.system.uncertainty, R, d.L, d.S)
+    assert 1.25 < rho < 1.35
+    rec = simulate_linear(case.system, case.x_true0, 300, case.u, seed=8)
+    w = est.run(case.u, rec.Y).width.max(axis=1)
+    assert w[299] / w[199] > 0.9 * rho**100  # r[k] >= G^k r[0]: geometric at rate ρ(G)

@@ -33,7 +33,7 @@ from ..linalg import gamma
 from ..model.uncertain import MatrixUncertainty
 from .rounding import ROUNDING
 
-__all__ = ["magnitude", "observer_term", "terms", "up", "widen"]
+__all__ = ["growth_radius", "magnitude", "observer_term", "terms", "up", "widen"]
 
 _TINY = 5e-324
 """The smallest subnormal: twice the largest absolute error of one underflowing product."""
@@ -89,3 +89,23 @@ def observer_term(
 def widen(lo: np.ndarray, hi: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``[lo − t, hi + t]``, each end one float outwards (its sum is rounded to nearest)."""
     return np.nextafter(lo - t, -np.inf), np.nextafter(hi + t, np.inf)
+
+
+def growth_radius(
+    unc: MatrixUncertainty, R: np.ndarray, L: np.ndarray, S: np.ndarray | None = None
+) -> float:
+    """``ρ(G)``, ``G = |R| + (|S| R_A + |S L| R_C) |S⁻¹|`` (``S = I`` when None), for an interval
+    observer whose bounds of ``z = S x`` evolve with ``R = S (A0 − L C0) S⁻¹``.
+
+    With every measurement present, the radius ``r`` of those bounds obeys ``r+ >= G r``
+    entrywise: ``|R| r`` from the nominal part, and the term ``|S| w̄ + |S L| v̄`` with
+    ``w̄ = R_A m``, ``v̄ = R_C m`` and ``m >= |S⁻¹| r`` (the magnitude of the box of ``x`` is at
+    least its radius). ``G >= 0``, so from a prior box of positive radius ``ρ(G) > 1`` makes the
+    bounds diverge whatever the data, and ``ρ(G) < 1`` keeps them bounded."""
+    if S is None:
+        H = unc.RA + np.abs(L) @ unc.RC
+        G = np.abs(R) + H
+    else:
+        Si = np.abs(np.linalg.inv(S))
+        G = np.abs(R) + (np.abs(S) @ unc.RA + np.abs(S @ L) @ unc.RC) @ Si
+    return float(np.max(np.abs(np.linalg.eigvals(G)))) if G.size else 0.0

@@ -8,9 +8,11 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
+from ...errors import DesignError
 from ...model import LinearSystem
 from ...sets import Box
 from .. import register
+from .._uncertain import growth_radius
 from ..base import Estimator
 from ..state import Step
 from .design import (
@@ -58,11 +60,29 @@ class CooperativeObserver(Estimator, Generic[S]):
         """The operators of the gain ``L`` (``D = A − LC``; rounding margins when ``S = I``)
         and transformation ``S``."""
         assert self.x0 is not None
+        if self.sys.uncertainty is not None:
+            self._check_growth(L, D, S_)
         rounding = None if S_ is not None else margins(self.sys, L, D, self.name)
         self.operators = SplitOperators(self.sys, self.x0, L, S_, rounding, self.name)
         self.vector = VectorPath(self.operators)
         self.valid_from = 0
         self._scale_gain = self.operators.nu  # the data-scale factor nu (.rounding)
+
+    def _check_growth(self, L: np.ndarray, D: Any, S_: np.ndarray | None) -> None:
+        """Refuse interval matrices too wide for the gain's stability margin: the bounds'
+        radius obeys ``r+ >= G r`` (:func:`~ivobs.estimators._uncertain.growth_radius`), so
+        ``ρ(G) >= 1`` means bounds that cannot converge (with ``ρ(G) > 1``, diverge)."""
+        sys = self.sys
+        R = D if S_ is None else S_ @ (sys.A - L @ sys.C) @ np.linalg.inv(S_)
+        rho = growth_radius(sys.uncertainty, np.asarray(R, dtype=float), L, S_)
+        if rho >= 1.0:
+            raise DesignError(
+                f"{self.name}: the interval matrices are too wide for this design: the radius of "
+                f"the bounds grows as r+ >= G r with G = |S(A0 - L C0)S^-1| + (|S| R_A + "
+                f"|S L| R_C)|S^-1|, whose spectral radius is {rho:.6g} >= 1, so the bounds "
+                "cannot converge; use a method that keeps the correlations (zonotope, "
+                "reachability, strip, constrained-zonotope) or narrower intervals"
+            )
 
     def _initial_state(self) -> S:
         ops = self.operators
