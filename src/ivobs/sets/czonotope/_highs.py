@@ -6,6 +6,13 @@ that was most of the time. Here the feasible set ``{A ξ = b, ‖ξ‖∞ <= r}`
 compressed columns) to a reused ``highspy.Highs`` object and only the objective changes between
 the hull's programs, each warm-started from the optimal basis of the previous one. HiGHS is
 imported where a program is solved (it is slow to import).
+
+Cost of a solve: ``Highs.run`` has a fixed cost of ~65 µs on this machine even for a program
+already solved (a quarter of it reading ``/sys/devices/system/cpu`` for the thread count, the
+rest assessing the model and copying options; no option removes it), against ~100 µs of
+simplex iterations for a warm-started servo program. :func:`block_duals` pays it once for all
+the programs of a hull, but its multipliers differ from the chain's where the programs are
+degenerate (see :data:`BLOCK_MAX`).
 """
 
 from __future__ import annotations
@@ -17,7 +24,20 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["chain_duals"]
+__all__ = ["BLOCK_MAX", "block_duals", "chain_duals"]
+
+BLOCK_MAX = 0
+"""Largest ``K m`` (objectives times factors) whose ``K`` programs :func:`~.hull.hull_certificates`
+solves as one block program (:func:`block_duals`) instead of a warm-started chain
+(:func:`chain_duals`); 0: never (the default).
+
+Measured 2026-11-27 (BENCHMARKS.md, "Constrained-zonotope hull speed"): with ``BLOCK_MAX =
+2000`` the servo's constrained-zonotope runs ~1.25x faster (its hull LPs ~1.8x) and Hénon's
+nl-constrained-zonotope ~1.2x, with the same guarantee, but the boxes are not those of the
+chain: on the degenerate programs of a thin set the block solve returns other optimal
+multipliers, which steer the elimination elsewhere (servo, 2,000 steps: mean width equal to
+5e-6, single boxes up to 4.9 % wider or narrower). On tank30 (120 programs of 81 x 552) the
+block solve is 7x slower than the chain (no warm start): hence a size limit."""
 
 _LOCAL = threading.local()
 
@@ -61,26 +81,42 @@ def _solver(i: int) -> Any:
     return hs[i]
 
 
-def _model(A: np.ndarray, b: np.ndarray, radius: float) -> Any:
-    """``{A ξ = b, ‖ξ‖∞ <= radius}`` as a ``highspy.HighsLp`` (compressed columns)."""
-    import highspy
-
-    nc, m = A.shape
+def _csc(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``A`` in compressed columns: ``(start, index, value)``."""
     At = A.T
     nz = At != 0
-    start = np.zeros(m + 1, dtype=np.int32)
+    start = np.zeros(A.shape[1] + 1, dtype=np.int32)
     np.cumsum(nz.sum(axis=1), out=start[1:])
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = m, nc
-    lp.col_cost_ = np.zeros(m)
-    lp.col_lower_ = np.full(m, -radius)
-    lp.col_upper_ = np.full(m, radius)
-    lp.row_lower_, lp.row_upper_ = b, b
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = start
-    lp.a_matrix_.index_ = np.nonzero(nz)[1].astype(np.int32)
-    lp.a_matrix_.value_ = At[nz]
-    return lp
+    return start, np.nonzero(nz)[1].astype(np.int32), At[nz]
+
+
+def _pass(
+    h: Any,
+    cost: np.ndarray,
+    csc: tuple[np.ndarray, np.ndarray, np.ndarray],
+    shape: tuple[int, int],
+    b: np.ndarray,
+    radius: float,
+    K: int = 1,
+) -> None:
+    """Pass ``K`` copies of ``{A ξ = b, ‖ξ‖∞ <= radius}`` (``A`` (nc, m) of shape ``shape`` in
+    compressed columns ``csc``; block diagonal: copy ``i`` has the columns ``i m .. (i + 1) m - 1``
+    and the rows ``i nc .. (i + 1) nc - 1``) with the cost ``cost`` (K m,) to ``h``, as arrays
+    (``Highs.passModel`` of arrays: no ``HighsLp`` object filled field by field)."""
+    nc, m = shape
+    start, index, value = csc
+    nnz = index.size
+    if K > 1:
+        start = np.concatenate([start[:-1] + i * nnz for i in range(K)] + [[K * nnz]])
+        start = start.astype(np.int32)
+        index = (index + (np.arange(K, dtype=np.int32) * nc)[:, None]).ravel()
+        value = np.tile(value, K)
+        b = np.tile(b, K)
+    n = K * m
+    lower, upper = np.full(n, -radius), np.full(n, radius)
+    integrality = np.zeros(n, dtype=np.int32)  # all continuous (HiGHS wants one per column)
+    h.passModel(n, K * nc, K * nnz, 1, 1, 0.0, cost, lower, upper, b, b, start, index, value,
+                integrality)  # fmt: skip
 
 
 def chain_duals(
@@ -100,11 +136,11 @@ def chain_duals(
 
     m = Gs.shape[1]
     mu = np.empty((Gs.shape[0], A.shape[0]))
-    lp = _model(A, b, radius)
     idx = np.arange(m, dtype=np.int32)
+    csc = _csc(A)
     for n_chain, rows in enumerate(chains):
         h = _solver(n_chain % 2)
-        h.passModel(lp)
+        _pass(h, np.zeros(m), csc, A.shape, b, radius)
         for i in rows:
             h.changeColsCost(m, idx, np.ascontiguousarray(Gs[i]))
             h.run()
@@ -115,6 +151,32 @@ def chain_duals(
             if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
                 return "failed"
             mu[i] = sol.row_dual
+    if not np.all(np.isfinite(mu)):
+        return "failed"
+    return mu
+
+
+def block_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray | str:
+    """The multipliers of :func:`chain_duals` from ONE program: the ``K`` programs side by side
+    (block diagonal, a copy of the factors per objective, the sum of the objectives),
+    ``min Σ_i Gs_iᵀξ_i : A ξ_i = b, ‖ξ_i‖∞ <= radius``, whose equality multipliers are those of
+    the ``K`` programs (the blocks share nothing). On small programs HiGHS' fixed cost of a
+    solve (~65 µs on the servo's 8 x 46, most of a warm-started solve) dominates, so one solve
+    from scratch beats ``K`` warm-started ones; on large ones (tank30) the warm starts win
+    (:data:`BLOCK_MAX`). Any multipliers give sound bounds; the optimal ones the LP's."""
+    import highspy
+
+    K, nc = Gs.shape[0], A.shape[0]
+    h = _solver(0)
+    _pass(h, np.ascontiguousarray(Gs, dtype=float).ravel(), _csc(A), A.shape, b, radius, K)
+    h.run()
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return "infeasible"
+    sol = h.getSolution()
+    if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
+        return "failed"
+    mu = np.asarray(sol.row_dual, dtype=float).reshape(K, nc)
     if not np.all(np.isfinite(mu)):
         return "failed"
     return mu

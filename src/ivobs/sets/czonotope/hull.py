@@ -180,9 +180,12 @@ def _certified_mins(
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
-    from ._highs import chain_duals
+    from . import _highs
 
-    out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
+    if K * A.shape[1] <= _highs.BLOCK_MAX:  # small: one solve of the K programs side by side
+        out = _highs.block_duals(Gs, A, b, radius)
+    else:
+        out = _highs.chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
     if isinstance(out, np.ndarray):
         return _dual_bounds(Gs, A, b, out, radius), out, True
     mu = np.zeros((K, nc))
@@ -230,8 +233,10 @@ class Certificates:
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
         """Constraints ``rows`` and factors ``cols`` are kept (the others were zero)."""
-        self.mu = self.mu[:, rows]
-        self.D = self.D[:, cols]
+        if not rows.all():
+            self.mu = self.mu[:, rows]
+        if not cols.all():
+            self.D = self.D[:, cols]
 
     def scale_rows(self, s: np.ndarray) -> None:
         """Constraint ``r`` was divided by ``s_r``."""
@@ -258,7 +263,10 @@ class Certificates:
         Rc = self.D - self.mu @ A  # (K, m)
         apj = A[piv, np.arange(m)]
         t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
-        upper = self.weight @ np.abs(t) * (np.abs(A[piv]).sum(axis=1) + np.abs(b[piv]))
+        # ‖A_p‖₁ per constraint, then per candidate: the same sums as ``|A[piv]|`` row by row
+        # (each a contiguous row, summed alike) without copying a row per factor (m x m)
+        row_l1 = np.ascontiguousarray(np.abs(A)).sum(axis=1)
+        upper = self.weight @ np.abs(t) * (row_l1[piv] + np.abs(b[piv]))
         idx = np.flatnonzero(cand)
         if idx.size > LOSS_CANDIDATES:
             idx = idx[np.argsort(upper[idx], kind="stable")[:LOSS_CANDIDATES]]
