@@ -72,6 +72,9 @@ class Design:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+Bound = np.ndarray | list[float]
+"""One step's bounds before rounding, as a method's step returns them (:class:`Step`)."""
+
 MAX_DENSE_STATES = 200
 """Largest ``nx`` for the set-based methods whose every step is dense ``O(nx^3)`` work or
 ``2 nx`` linear programs (zonotope, strip, constrained-zonotope, exact); docs/scale.md."""
@@ -322,7 +325,7 @@ class Estimator(Persistence):
         t_k: float | None,
         online: bool = True,
         step_scale: float | None = None,
-    ) -> tuple[OnlineState, np.ndarray, np.ndarray, bool]:
+    ) -> tuple[OnlineState, Bound, Bound, bool]:
         """One step: the data scale, the method's recursion, the counter. ``online=False``
         (the loop of :meth:`run`, which rounds with the record's scales) skips the data scale
         unless the method rounds itself. ``step_scale``: :meth:`_step_scale`, if known."""
@@ -344,8 +347,8 @@ class Estimator(Persistence):
     def _box(
         self,
         k: int,
-        lo: np.ndarray,
-        hi: np.ndarray,
+        lo: Bound,
+        hi: Bound,
         state: OnlineState,
         finite: bool = True,
     ) -> Box:
