@@ -279,8 +279,10 @@ class Estimator(Persistence):
             self._state, box = self.advance(state, u_k, y_k, t)
         else:  # checked float vectors and their data scale in one pass (_inputs.lean_step_data)
             a = lean[2] * self._scale_gain if self._scale_gain > 1.0 else lean[2]
-            new, lo, hi, _ = self._advance(state, lean[0], lean[1], None, step_scale=a)
-            self._state, box = new, self._box(state.k, lo, hi, new)
+            new, lo, hi, _ = self._advance(state, lean[0], lean[1], None, True, a)
+            self._state = new  # (no lean path for the methods that round themselves)
+            rounded = lean_outward(lo, hi, new.scale) if state.k >= self.valid_from else None
+            box = Box._trusted(*rounded) if rounded is not None else self._box(state.k, lo, hi, new)
         self.last_inconsistent = self._state.inconsistent
         if self.last_inconsistent:
             self._report_inconsistent([state.k])

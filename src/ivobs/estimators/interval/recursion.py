@@ -113,18 +113,19 @@ def _fused_transformed(
     computed inverse (:meth:`SplitOperators.to_x`) and the step error (``StepMatrices.err`` on
     the norms of ``x``, ``z``, ``y``, ``u``, ``d``) in floats; ``None``: the general step."""
     n, ny = state.lo.shape[0], y_k.shape[0]
-    v = np.concatenate((state.hi, state.lo, u_k, y_k))
-    out = fs.W.dot(v)
+    out = fs.W.dot(np.concatenate((state.hi, state.lo, u_k, y_k)))
     out += fs.w
-    mags = np.maximum.reduceat(np.abs(v), fs.starts).tolist()  # max |z|, |u|, |y| (nonempty)
-    zmax, umax, ymax = mags[0], mags[1] if u_k.shape[0] else 0.0, mags[-1] if ny else 0.0
-    xraw = out[2 * n : 4 * n]
-    xi = float(np.maximum.reduce(np.abs(xraw)))
+    o = out.tolist()  # the rest in Python floats: the same IEEE operations, so the same bits
+    ys = y_k.tolist()
+    zmax = max(map(abs, state.hi.tolist() + state.lo.tolist()))  # max |z|, |u|, |y|
+    umax = max(map(abs, u_k.tolist())) if u_k.shape[0] else 0.0
+    ymax = max(map(abs, ys)) if ny else 0.0
+    xi = max(map(abs, o[2 * n : 4 * n]))
     g, c = ops.tconv  # type: ignore[misc]
     cz = c * zmax
     ex = cz + g * (xi + cz) / (1.0 - g)  # as to_x
-    p = out[4 * n :].tolist()
-    for hi_, lo_, yv, ca in zip(p[:ny], p[ny:], y_k.tolist(), fs.cabs.tolist()):
+    p = o[4 * n :]
+    for hi_, lo_, yv, ca in zip(p[:ny], p[ny:], ys, fs.cabs.tolist()):
         if not lo_ - ca * ex <= yv <= hi_ + ca * ex:  # maybe inconsistent: the general step
             return None
     err = fs.err
@@ -133,7 +134,8 @@ def _fused_transformed(
     hi += e
     lo = out[n : 2 * n]
     lo -= e
-    return Step(evolve(state, lo=lo, hi=hi), xraw[n:] - ex, xraw[:n] + ex, False)
+    xlo = [x - ex for x in o[3 * n : 4 * n]]
+    return Step(evolve(state, lo=lo, hi=hi), xlo, [x + ex for x in o[2 * n : 3 * n]], False)
 
 
 def _split_update(

@@ -206,7 +206,7 @@ class ObserverZ(DiscreteLTI[ZState]):
         Fdc = F @ (0.5 * (d.lo + d.hi))
         w = np.concatenate([glo, ghi, Fdc, np.zeros(2 * nz)])
         Fdr = np.abs(F) @ (0.5 * (d.hi - d.lo))
-        return W, w, Fdr, C, np.abs(C)
+        return W, w, Fdr.tolist(), C, np.abs(C)  # |F| d_r as floats: tested in floats
 
     def step(
         self, state: ZState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -232,16 +232,14 @@ class ObserverZ(DiscreteLTI[ZState]):
         xr = tr.absP.dot(zr)
         xr += (self.rec * tr.cond) * tr.absP.dot(a)
         xc = tr.P.dot(zc)
-        dev = y_k - C.dot(xc)  # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r)
-        dev -= out[2 * nz : 2 * nz + ny]
-        np.abs(dev, out=dev)
-        dev -= absC.dot(xr)
-        dev -= Fdr
-        for v in dev.tolist():
-            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
-                return None
+        # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r), in floats (the same operations)
+        dev = zip(y_k.tolist(), C.dot(xc).tolist(), out[2 * nz : 2 * nz + ny].tolist())
+        for (yv, cx, du), ax, f in zip(dev, absC.dot(xr).tolist(), Fdr):
+            if not abs(yv - cx - du) - ax - f <= 0.0:  # maybe inconsistent (or NaN): the
+                return None  # general step decides
         new = evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz])
-        return Step(new, xc - xr, xc + xr, False)
+        c_, r_ = xc.tolist(), xr.tolist()
+        return Step(new, [c - r for c, r in zip(c_, r_)], [c + r for c, r in zip(c_, r_)], False)
 
     def initial_state(self) -> ZState:
         zlo, zhi = self.initial_z()  # (3.b)
