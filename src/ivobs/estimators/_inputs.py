@@ -34,22 +34,24 @@ def lean_step_data(
     constant terms ``g``, ``c``: ``max(c, |y_i|, g_i |u_i|)``, the same number) from one
     conversion of each vector to floats; ``None`` where :func:`lean_u_y` gives ``None``."""
     # (``dtype is _F64``: the canonical float64 descriptor; any other goes the full way)
-    if type(y_k) is not np.ndarray or y_k.dtype is not _F64 or y_k.shape != (sys.ny,):
+    if type(y_k) is not np.ndarray or y_k.dtype is not _F64 or y_k.ndim != 1:
         return None
     if u_k is None:
         if sys.nu:
             return None
         u_k = _NO_INPUT
-    elif type(u_k) is not np.ndarray or u_k.dtype is not _F64 or u_k.shape != (sys.nu,):
+    elif type(u_k) is not np.ndarray or u_k.dtype is not _F64 or u_k.ndim != 1:
         return None
     ys, us = y_k.tolist(), u_k.tolist()
-    if len(ys) + len(us) > SHORT:
+    if len(ys) != sys.ny or len(us) != sys.nu or len(ys) + len(us) > SHORT:
         return None
     total = sum(ys) + sum(us)
     if total - total != 0.0:  # NaN or an infinity somewhere (or an overflow): full checks
         return None
-    a = max(map(abs, ys), default=c)  # the same number as comparing one by one
-    a = c if c > a else a
+    a = c
+    for v in ys:
+        v = abs(v)
+        a = v if v > a else a
     for v, gi in zip(us, g):
         v = abs(v) * gi
         a = v if v > a else a

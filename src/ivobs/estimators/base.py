@@ -338,13 +338,13 @@ class Estimator(Persistence):
             scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
             if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
                 state = dataclasses.replace(state, scale=scale)
-        res: Step[Any] = self._step(state, u_k, y_k, t_k)
-        new, flag = res.state, bool(res.inconsistent)
+        new, lo, hi, flag = self._step(state, u_k, y_k, t_k)
+        flag = bool(flag)
         if new is state:  # the method kept its state: a new object for the new counters
             new = evolve(new, k=state.k + 1, scale=scale, inconsistent=flag)
         else:  # a fresh state the method just built and nobody else holds: set its counters
             new.__dict__.update(k=state.k + 1, scale=scale, inconsistent=flag)
-        return new, res.lo, res.hi, flag
+        return new, lo, hi, flag
 
     def _box(
         self,

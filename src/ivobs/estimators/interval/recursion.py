@@ -117,10 +117,12 @@ def _fused_transformed(
     out += fs.w
     o = out.tolist()  # the rest in Python floats: the same IEEE operations, so the same bits
     ys = y_k.tolist()
-    zmax = max(map(abs, state.hi.tolist() + state.lo.tolist()))  # max |z|, |u|, |y|
-    umax = max(map(abs, u_k.tolist())) if u_k.shape[0] else 0.0
-    ymax = max(map(abs, ys)) if ny else 0.0
-    xi = max(map(abs, o[2 * n : 4 * n]))
+    zmax, umax, ymax, xi = (
+        _largest(state.hi.tolist() + state.lo.tolist()),  # max |z|, |u|, |y|, |x̂|
+        _largest(u_k.tolist()),
+        _largest(ys),
+        _largest(o[2 * n : 4 * n]),
+    )
     g, c = ops.tconv  # type: ignore[misc]
     cz = c * zmax
     ex = cz + g * (xi + cz) / (1.0 - g)  # as to_x
@@ -136,6 +138,19 @@ def _fused_transformed(
     lo -= e
     xlo = [x - ex for x in o[3 * n : 4 * n]]
     return Step(evolve(state, lo=lo, hi=hi), xlo, [x + ex for x in o[2 * n : 3 * n]], False)
+
+
+def _largest(values: list[float]) -> float:
+    """``max |v|`` over ``values`` (0 for none; NaN if one is NaN), as NumPy's
+    ``maximum.reduce`` of ``abs``, one float at a time (cheaper on a few numbers)."""
+    a = 0.0
+    for v in values:
+        v = abs(v)
+        if v > a:
+            a = v
+        elif v != v:
+            return v
+    return a
 
 
 def _split_update(
