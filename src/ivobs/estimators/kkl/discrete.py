@@ -181,6 +181,8 @@ class ObserverZ(DiscreteLTI[ZState]):
     def __init__(self, setting: Setting, m: ObserverMatrices):
         super().__init__(setting, m)
         self._fused = self._fuse()
+        tr = m.tr  # recover()'s constants: P, |P| and the margin factor rec cond(T)
+        self._recovery = (tr.P, tr.absP, self.rec * tr.cond)
 
     def _fuse(self) -> tuple[np.ndarray, ...] | None:
         """The step of a complete ``y`` with constant bounds as one product: ``W [z̲; z̄; y;
@@ -226,12 +228,12 @@ class ObserverZ(DiscreteLTI[ZState]):
         out = W.dot(np.concatenate((state.zlo, state.zhi, y_k, u_k)))
         out += w
         zc, zr = out[2 * nz + ny : 3 * nz + ny], out[3 * nz + ny :]
-        tr = self.m.tr
+        P, absP, rc = self._recovery
         a = np.abs(zc)  # (3.c-d) with the recovery margin, as recover()
         a += zr
-        xr = tr.absP.dot(zr)
-        xr += (self.rec * tr.cond) * tr.absP.dot(a)
-        xc = tr.P.dot(zc)
+        xr = absP.dot(zr)
+        xr += rc * absP.dot(a)
+        xc = P.dot(zc)
         # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r), in floats (the same operations)
         dev = zip(y_k.tolist(), C.dot(xc).tolist(), out[2 * nz : 2 * nz + ny].tolist())
         for (yv, cx, du), ax, f in zip(dev, absC.dot(xr).tolist(), Fdr):
