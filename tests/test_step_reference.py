@@ -49,3 +49,25 @@ def test_step_bounds_equal_the_recorded_ones_bit_for_bit(method):
     res = est.run(u, y, vectorize=False)
     assert res.lower[k0:].tobytes() == got[0, k0:].tobytes()
     assert res.upper[k0:].tobytes() == got[1, k0:].tobytes()
+
+
+def test_lean_rounding_of_float_lists_equals_outward_and_leaves_the_edge_to_it():
+    from ivobs.estimators.rounding import lean_outward, outward
+
+    rng = np.random.default_rng(5)
+    for mag in (1e-8, 1.0, 1e8, 1e306):
+        lo = rng.standard_normal(3) * mag
+        hi = lo + np.abs(rng.standard_normal(3)) * mag
+        for scale in (0.0, 2.5, 1e300):
+            got = lean_outward(lo.tolist(), hi.tolist(), scale)  # a fast step's floats
+            assert got is not None
+            ref = outward(lo.copy(), hi.copy(), scale)
+            assert got[0].tobytes() == ref[0].tobytes()
+            assert got[1].tobytes() == ref[1].tobytes()
+    # near the end of the float range, or a non-finite scale: the full path (None here)
+    assert lean_outward([-1.7e308, 0.0], [0.0, 1.0], 0.0) is None
+    assert lean_outward([0.0, 0.0], [1.0, np.nan], 0.0) is None
+    assert lean_outward([0.0, 0.0], [1.0, 1.0], np.inf) is None
+    assert lean_outward([0.0, 0.0], [1.0, 1.0, 2.0], 0.0) is None
+    assert lean_outward([np.nan, 0.0], [1.0, 1.0], 0.0) is None
+    assert lean_outward(np.array([0.0, -np.inf]), np.array([1.0, 1.0]), 0.0) is None

@@ -88,22 +88,25 @@ def lean_outward(
     else:
         return None
     n = len(a_s)
-    if n != len(b_s) or n > LEAN:
+    if n != len(b_s) or n > LEAN or scale - scale != 0.0:  # (a non-finite scale: full path)
         return None
     R = ROUNDING
     los, his = [], []
     for a, b in zip(a_s, b_s):
         ma, mb = abs(a), abs(b)
+        if not (ma < _BELOW and mb < _BELOW):  # NaN, an infinity, or near the end of the
+            return None  # float range: the full path (below, with a finite scale: finite)
         m = ((mb if mb > ma else ma) + scale) * R + R  # max(|lo|, |hi|) + s, times R, plus R
         los.append(a - m)
         his.append(b + m)
-    total = sum(los) + sum(his)
-    if total - total != 0.0:  # not all finite (or the sum overflowed): the full path
-        return None
     return np.array(los), np.array(his)
 
 
 _F64 = np.dtype(np.float64)
+
+_BELOW = 1e307
+"""Bounds below this (and a finite scale, at most the float range) widen to finite bounds:
+the margin is at most ``(1e307 + 1.8e308) ROUNDING + ROUNDING``."""
 
 
 LEAN = 32
