@@ -294,8 +294,11 @@ class Reachability(ObserverEstimator):
             if not abs(i) - (b + f) <= 0.0:  # maybe inconsistent (or NaN): the general step
                 return None
         new = evolve(state, xh=out[:nx], X=self._M.dot(state.X), s=state.s + sums[:, 1])
-        x, r = xh.tolist(), rho.tolist()
-        return Step(new, [a - b for a, b in zip(x, r)], [a + b for a, b in zip(x, r)], False)
+        lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
+        for a, b in zip(xh.tolist(), rho.tolist()):
+            lo.append(a - b)
+            hi.append(a + b)
+        return Step(new, lo, hi, False)
 
     def _window_step(
         self,

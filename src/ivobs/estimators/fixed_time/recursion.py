@@ -209,18 +209,21 @@ class FixedTimeRecursion:
         del w[q : q + nz]  # the slot outside the window
         wmax = max(map(abs, w))  # max |w| over the window
         out = per_slot[p].dot(flat).tolist()
-        rad = [cf * wmax + ct for cf, ct in zip(coef, const)]  # [radius (11); parity bound]
-        for o, b in zip(out[nx:], rad[nx:]):
-            if not abs(o) - b <= 0.0:  # the parity test fails (or NaN): the general step
-                return None
-        rad = rad[:nx]
-        lo = [c - r for c, r in zip(out, rad)]
-        hi = [c + r for c, r in zip(out, rad)]
-        R = ROUNDING  # the kept box's rounding margin, as the base's outward() (|c| + r is
-        m = [(abs(c) + r) * R + R for c, r in zip(out, rad)]  # max(|c - r|, |c + r|))
-        klo = np.array([a - e for a, e in zip(lo, m)])
-        khi = np.array([b + e for b, e in zip(hi, m)])
-        new = evolve(state, z=z, lo=klo, hi=khi, has_box=True)
+        # (loops, not comprehensions: on three numbers, building the comprehension costs more)
+        for o, cf, ct in zip(out[nx:], coef[nx:], const[nx:]):
+            if not abs(o) - (cf * wmax + ct) <= 0.0:  # the parity test fails (or NaN): the
+                return None  # general step
+        R = ROUNDING
+        lo, hi, klo, khi = [], [], [], []
+        for c, cf, ct in zip(out[:nx], coef, const):
+            r = cf * wmax + ct  # the radius (11)
+            m = (abs(c) + r) * R + R  # the kept box's rounding margin, as the base's outward()
+            a, b = c - r, c + r  # (max(|c - r|, |c + r|) <= |c| + r)
+            lo.append(a)
+            hi.append(b)
+            klo.append(a - m)
+            khi.append(b + m)
+        new = evolve(state, z=z, lo=np.array(klo), hi=np.array(khi), has_box=True)
         return Step(new, lo, hi, False)  # lists of floats: rounded by the base as they are
 
     def _remember_clean(self, ymiss: np.ndarray) -> bool:

@@ -240,8 +240,11 @@ class ObserverZ(DiscreteLTI[ZState]):
             if not abs(yv - cx - du) - ax - f <= 0.0:  # maybe inconsistent (or NaN): the
                 return None  # general step decides
         new = evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz])
-        c_, r_ = xc.tolist(), xr.tolist()
-        return Step(new, [c - r for c, r in zip(c_, r_)], [c + r for c, r in zip(c_, r_)], False)
+        lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
+        for c, r in zip(xc.tolist(), xr.tolist()):
+            lo.append(c - r)
+            hi.append(c + r)
+        return Step(new, lo, hi, False)
 
     def initial_state(self) -> ZState:
         zlo, zhi = self.initial_z()  # (3.b)
