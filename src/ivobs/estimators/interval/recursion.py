@@ -132,15 +132,13 @@ def _fused_transformed(
             return None
     err = fs.err
     e = err[0] * (xi + ex) + err[1] * zmax + err[2] * ymax + err[3] * umax + err[4] * fs.dmax
-    hi = out[:n]
-    hi += e
-    lo = out[n : 2 * n]
-    lo -= e
-    xlo, xhi = [], []  # (a loop: cheaper than comprehensions on three numbers)
-    for a, b in zip(o[3 * n : 4 * n], o[2 * n : 3 * n]):
-        xlo.append(a - ex)
-        xhi.append(b + ex)
-    return Step(evolve(state, lo=lo, hi=hi), xlo, xhi, False)
+    hi, lo, xhi, xlo = [], [], [], []  # (a loop: cheaper than comprehensions, or NumPy, on
+    for zh, zl, xh, xl in zip(o, o[n : 2 * n], o[2 * n : 3 * n], o[3 * n : 4 * n]):  # 3 numbers)
+        hi.append(zh + e)
+        lo.append(zl - e)
+        xhi.append(xh + ex)
+        xlo.append(xl - ex)
+    return Step(evolve(state, lo=np.array(lo), hi=np.array(hi)), xlo, xhi, False)
 
 
 def _largest(values: list[float]) -> float:
