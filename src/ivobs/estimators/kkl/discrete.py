@@ -235,7 +235,7 @@ class ObserverZ(DiscreteLTI[ZState]):
         xr += rc * absP.dot(a)
         xc = P.dot(zc)
         # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r), in floats (the same operations)
-        dev = zip(y_k.tolist(), C.dot(xc).tolist(), out[2 * nz : 2 * nz + ny].tolist())
+        dev = zip(y_k.tolist(), C.dot(xc).tolist(), out.tolist()[2 * nz : 2 * nz + ny])
         for (yv, cx, du), ax, f in zip(dev, absC.dot(xr).tolist(), Fdr):
             if not abs(yv - cx - du) - ax - f <= 0.0:  # maybe inconsistent (or NaN): the
                 return None  # general step decides
