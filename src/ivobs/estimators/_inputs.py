@@ -12,6 +12,7 @@ from .scale import SHORT
 
 __all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k", "lean_step_data", "lean_u_y"]
 
+_F64 = np.dtype(np.float64)
 _NO_INPUT = np.zeros(0)
 _NO_INPUT.flags.writeable = False
 
@@ -32,16 +33,17 @@ def lean_step_data(
     """:func:`lean_u_y` and the data scale of the step (:meth:`DataScale.of_step` with the
     constant terms ``g``, ``c``: ``max(c, |y_i|, g_i |u_i|)``, the same number) from one
     conversion of each vector to floats; ``None`` where :func:`lean_u_y` gives ``None``."""
-    if type(y_k) is not np.ndarray or y_k.dtype != np.float64 or y_k.shape != (sys.ny,):
+    # (``dtype is _F64``: the canonical float64 descriptor; any other goes the full way)
+    if type(y_k) is not np.ndarray or y_k.dtype is not _F64 or y_k.ndim != 1:
         return None
     if u_k is None:
         if sys.nu:
             return None
         u_k = _NO_INPUT
-    elif type(u_k) is not np.ndarray or u_k.dtype != np.float64 or u_k.shape != (sys.nu,):
+    elif type(u_k) is not np.ndarray or u_k.dtype is not _F64 or u_k.ndim != 1:
         return None
     ys, us = y_k.tolist(), u_k.tolist()
-    if len(ys) + len(us) > SHORT:
+    if len(ys) != sys.ny or len(us) != sys.nu or len(ys) + len(us) > SHORT:
         return None
     total = sum(ys) + sum(us)
     if total - total != 0.0:  # NaN or an infinity somewhere (or an overflow): full checks

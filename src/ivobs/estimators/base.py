@@ -72,6 +72,9 @@ class Design:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+Bound = np.ndarray | list[float]
+"""One step's bounds before rounding, as a method's step returns them (:class:`Step`)."""
+
 MAX_DENSE_STATES = 200
 """Largest ``nx`` for the set-based methods whose every step is dense ``O(nx^3)`` work or
 ``2 nx`` linear programs (zonotope, strip, constrained-zonotope, exact); docs/scale.md."""
@@ -276,8 +279,10 @@ class Estimator(Persistence):
             self._state, box = self.advance(state, u_k, y_k, t)
         else:  # checked float vectors and their data scale in one pass (_inputs.lean_step_data)
             a = lean[2] * self._scale_gain if self._scale_gain > 1.0 else lean[2]
-            new, lo, hi, _ = self._advance(state, lean[0], lean[1], None, step_scale=a)
-            self._state, box = new, self._box(state.k, lo, hi, new)
+            new, lo, hi, _ = self._advance(state, lean[0], lean[1], None, True, a)
+            self._state = new  # (no lean path for the methods that round themselves)
+            rounded = lean_outward(lo, hi, new.scale) if state.k >= self.valid_from else None
+            box = Box._trusted(*rounded) if rounded is not None else self._box(state.k, lo, hi, new)
         self.last_inconsistent = self._state.inconsistent
         if self.last_inconsistent:
             self._report_inconsistent([state.k])
@@ -322,7 +327,7 @@ class Estimator(Persistence):
         t_k: float | None,
         online: bool = True,
         step_scale: float | None = None,
-    ) -> tuple[OnlineState, np.ndarray, np.ndarray, bool]:
+    ) -> tuple[OnlineState, Bound, Bound, bool]:
         """One step: the data scale, the method's recursion, the counter. ``online=False``
         (the loop of :meth:`run`, which rounds with the record's scales) skips the data scale
         unless the method rounds itself. ``step_scale``: :meth:`_step_scale`, if known."""
@@ -333,19 +338,19 @@ class Estimator(Persistence):
             scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
             if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
                 state = dataclasses.replace(state, scale=scale)
-        res: Step[Any] = self._step(state, u_k, y_k, t_k)
-        new, flag = res.state, bool(res.inconsistent)
+        new, lo, hi, flag = self._step(state, u_k, y_k, t_k)
+        flag = bool(flag)
         if new is state:  # the method kept its state: a new object for the new counters
             new = evolve(new, k=state.k + 1, scale=scale, inconsistent=flag)
         else:  # a fresh state the method just built and nobody else holds: set its counters
             new.__dict__.update(k=state.k + 1, scale=scale, inconsistent=flag)
-        return new, res.lo, res.hi, flag
+        return new, lo, hi, flag
 
     def _box(
         self,
         k: int,
-        lo: np.ndarray,
-        hi: np.ndarray,
+        lo: Bound,
+        hi: Bound,
         state: OnlineState,
         finite: bool = True,
     ) -> Box:

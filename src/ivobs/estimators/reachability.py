@@ -188,7 +188,8 @@ class Reachability(ObserverEstimator):
         """Design-time constants of the common step (constant bounds, complete ``y``): the
         observer and its innovation as one product (:meth:`_fused_observer`), the selector
         ``Σ`` giving both row sums of ``|X| = |[M^k H0, M^k G diag r]|`` in one product, and
-        ``|F| r``. None when the bounds are not constant (the general step)."""
+        ``|F| r`` (a list of floats: the fast step tests in floats). None when the bounds are
+        not constant (the general step)."""
         fused = self._fused_observer()
         if fused is None or self._const is None:
             return None
@@ -196,7 +197,7 @@ class Reachability(ObserverEstimator):
         sel = np.zeros((nx + self._G.shape[1], 2))
         sel[:nx, 0] = 1.0
         sel[nx:, 1] = 1.0
-        return *fused, sel, self._absF @ self._const[1]
+        return *fused, sel, (self._absF @ self._const[1]).tolist()
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ReachabilityState:
@@ -288,15 +289,16 @@ class Reachability(ObserverEstimator):
         rho = sums[:, 0] + state.s
         out = O.dot(np.concatenate((xh, u_k, y_k)))
         out += o
-        bound = self._absC.dot(rho)
-        bound += Fr
-        excess = np.abs(out[nx:])  # |y - C x̂ - D u - F c| - (|C| ρ + |F| r)
-        excess -= bound
-        for v in excess.tolist():
-            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
+        innov = out.tolist()[nx:]  # |y - C x̂ - D u - F c| - (|C| ρ + |F| r), in floats
+        for i, b, f in zip(innov, self._absC.dot(rho).tolist(), Fr):
+            if not abs(i) - (b + f) <= 0.0:  # maybe inconsistent (or NaN): the general step
                 return None
         new = evolve(state, xh=out[:nx], X=self._M.dot(state.X), s=state.s + sums[:, 1])
-        return Step(new, xh - rho, xh + rho, False)
+        lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
+        for a, b in zip(xh.tolist(), rho.tolist()):
+            lo.append(a - b)
+            hi.append(a + b)
+        return Step(new, lo, hi, False)
 
     def _window_step(
         self,

@@ -65,35 +65,48 @@ def outward(
 
 
 def lean_outward(
-    lo: np.ndarray, hi: np.ndarray, scale: float
+    lo: np.ndarray | list[float], hi: np.ndarray | list[float], scale: float
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """:func:`outward` of one step's bounds of a short vector (up to :data:`LEAN` entries) in
     Python floats, into new arrays: the same operations in the same order as :func:`outward`,
-    so the same numbers bit for bit, without a dozen NumPy calls on three numbers. ``None``
-    (use :func:`outward` and its checks) for other arrays and for bounds that are not all
-    finite after widening (NaN, infinities, overflow: their errors are raised by the caller)."""
-    if (
-        type(lo) is not np.ndarray
-        or type(hi) is not np.ndarray
-        or lo.dtype != np.float64
-        or hi.dtype != np.float64
-        or lo.ndim != 1
-        or lo.shape != hi.shape
-        or lo.shape[0] > LEAN
+    so the same numbers bit for bit, without a dozen NumPy calls on three numbers. ``lo``,
+    ``hi``: float64 vectors, or lists of Python floats (a method's fast step that computed its
+    bounds in floats: no conversion to arrays and back). ``None`` (use :func:`outward` and its
+    checks) for other arrays and for bounds that are not all finite after widening (NaN,
+    infinities, overflow: their errors are raised by the caller)."""
+    if type(lo) is list and type(hi) is list:
+        a_s, b_s = lo, hi
+    elif (
+        type(lo) is np.ndarray
+        and type(hi) is np.ndarray
+        and lo.dtype is _F64  # the canonical descriptor (any other: the full path)
+        and hi.dtype is _F64
+        and lo.ndim == 1
+        and hi.ndim == 1
     ):
+        a_s, b_s = lo.tolist(), hi.tolist()
+    else:
+        return None
+    n = len(a_s)
+    if n != len(b_s) or n > LEAN or scale - scale != 0.0:  # (a non-finite scale: full path)
         return None
     R = ROUNDING
     los, his = [], []
-    for a, b in zip(lo.tolist(), hi.tolist()):
+    for a, b in zip(a_s, b_s):
         ma, mb = abs(a), abs(b)
+        if not (ma < _BELOW and mb < _BELOW):  # NaN, an infinity, or near the end of the
+            return None  # float range: the full path (below, with a finite scale: finite)
         m = ((mb if mb > ma else ma) + scale) * R + R  # max(|lo|, |hi|) + s, times R, plus R
         los.append(a - m)
         his.append(b + m)
-    total = sum(los) + sum(his)
-    if total - total != 0.0:  # not all finite (or the sum overflowed): the full path
-        return None
-    both = np.array((los, his))  # one conversion; its rows are the two bounds
-    return both[0], both[1]
+    return np.array(los), np.array(his)
+
+
+_F64 = np.dtype(np.float64)
+
+_BELOW = 1e307
+"""Bounds below this (and a finite scale, at most the float range) widen to finite bounds:
+the margin is at most ``(1e307 + 1.8e308) ROUNDING + ROUNDING``."""
 
 
 LEAN = 32

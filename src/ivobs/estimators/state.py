@@ -68,11 +68,13 @@ S = TypeVar("S", bound=OnlineState)
 
 class Step(NamedTuple, Generic[S]):
     """What a method's recursion returns for one step: the next state, the bounds of ``x[k]``
-    (before outward rounding) and whether ``y[k]`` was found inconsistent (and not used)."""
+    (before outward rounding) and whether ``y[k]`` was found inconsistent (and not used).
+    ``lo``, ``hi``: arrays, or lists of Python floats (a fast step that computed the bounds in
+    floats: the base rounds them without converting them to arrays and back)."""
 
     state: S
-    lo: np.ndarray
-    hi: np.ndarray
+    lo: np.ndarray | list[float]
+    hi: np.ndarray | list[float]
     inconsistent: bool = False
 
 

@@ -110,14 +110,16 @@ class FixedTimeRecursion:
         # missing sample even when s = 0 (u_(k-1) and the bounds of d_(k-1))
         self.slots = self.s + 2
         self.ring = [(p - np.arange(self.s + 1)) % self.slots for p in range(self.slots)]
-        self._fast: tuple[list[np.ndarray], np.ndarray, np.ndarray] | None = None
+        self._fast: tuple[list[np.ndarray], list[float], list[float]] | None = None
         self._fast_ok = not gains.designer.tv and self.sys.has_constant_bounds
+        self._clean: np.ndarray | None = None  # a ring of missing flags known to be all zero
 
-    def _fast_operators(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    def _fast_operators(self) -> tuple[list[np.ndarray], list[float], list[float]]:
         """For a time-invariant system with constant bounds: the complete window's ``GQ`` with
         its columns placed on the ring buffer of each slot ``p`` (``GQ_p z.ravel() = GQ w``, the
         slot outside the window a zero block), the radius ``|T Md| 𝐫`` and the parity bound
-        (constant ``𝐫``), and ``rad_coef``, ``tol_coef`` stacked."""
+        (constant ``𝐫``), and ``rad_coef``, ``tol_coef`` stacked (these two as lists of
+        floats: the fast step's arithmetic on them is in Python floats)."""
         gain = self.gains.complete(self.s)
         assert gain.GQ is not None and gain.HP is not None
         assert gain.rad_coef is not None and gain.tol_coef is not None
@@ -131,7 +133,8 @@ class FixedTimeRecursion:
                 G[:, q * nz : (q + 1) * nz] = gain.GQ[:, j * nz : (j + 1) * nz]
             per_slot.append(G)
         const = np.concatenate([rhp[:nx], rhp[nx:] * (1.0 + 1e-9) + 1e-9])
-        return per_slot, const, np.concatenate([gain.rad_coef, gain.tol_coef])
+        coef = np.concatenate([gain.rad_coef, gain.tol_coef])
+        return per_slot, const.tolist(), coef.tolist()
 
     def initial_state(self) -> FixedTimeState:
         s, nx, ny, nd = self.s, self.sys.nx, self.sys.ny, self.sys.nd
@@ -182,35 +185,56 @@ class FixedTimeRecursion:
     ) -> Step[FixedTimeState] | None:
         """:meth:`step` for ``k >= s + 2`` (every slot written), constant bounds, a complete
         window (no missing sample in the ring) passing the parity test: eqs. (7), (11) as one
-        product on the ring buffer (:meth:`_fast_operators`); ``None``: the general step."""
-        if np.count_nonzero(state.ymiss) or np.isnan(y_k).any():
+        product on the ring buffer (:meth:`_fast_operators`); ``None``: the general step.
+
+        Only that product is NumPy's; the rest is a few operations on ``nx + n_par`` numbers,
+        done in Python floats (each the same IEEE operation as NumPy's, so the same bits)."""
+        if state.ymiss is not self._clean and not self._remember_clean(state.ymiss):
+            return None
+        total = sum(y_k.tolist())
+        if total != total:  # a missing sample (NaN): the general step
             return None
         if self._fast is None:
             self._fast = self._fast_operators()
         per_slot, const, coef = self._fast
-        k, nu, ny, nx = state.k, self.sys.nu, self.sys.ny, self.sys.nx
-        p = k % self.slots
+        nu, ny, nx, nz = self.sys.nu, self.sys.ny, self.sys.nx, self.nz
+        p = state.k % self.slots
         z = state.z.copy()
         z[p, :nu] = u_k
         z[p, nu : nu + ny] = y_k
         # (the centre of d and the bounds in slot p are the constant ones already)
-        rows = np.maximum.reduce(np.abs(z), axis=1).tolist()
-        rows[(p + 1) % self.slots] = 0.0  # the slot outside the window
-        wmax = max(rows)
-        out = per_slot[p].dot(z.ravel())
-        rad = coef * wmax
-        rad += const  # [radius (11); parity bound]
-        if out.shape[0] > nx:
-            for v in (np.abs(out[nx:]) - rad[nx:]).tolist():
-                if not v <= 0.0:  # the parity test fails (or NaN): the general step
-                    return None
-        c, r = out[:nx], rad[:nx]
-        m = np.abs(c)  # the rounding margin of the kept box, as the base's outward():
-        m += r  # max(|c - r|, |c + r|) <= |c| + r
-        m *= ROUNDING
-        m += ROUNDING
-        new = evolve(state, z=z, lo=c - r - m, hi=c + r + m, has_box=True)
-        return Step(new, c - r, c + r, False)
+        flat = z.ravel()
+        w = flat.tolist()
+        q = (p + 1) % self.slots * nz
+        del w[q : q + nz]  # the slot outside the window
+        wmax = max(map(abs, w))  # max |w| over the window
+        out = per_slot[p].dot(flat).tolist()
+        # (loops, not comprehensions: on three numbers, building the comprehension costs more)
+        for o, cf, ct in zip(out[nx:], coef[nx:], const[nx:]):
+            if not abs(o) - (cf * wmax + ct) <= 0.0:  # the parity test fails (or NaN): the
+                return None  # general step
+        R = ROUNDING
+        lo, hi, klo, khi = [], [], [], []
+        for c, cf, ct in zip(out[:nx], coef, const):
+            r = cf * wmax + ct  # the radius (11)
+            m = (abs(c) + r) * R + R  # the kept box's rounding margin, as the base's outward()
+            a, b = c - r, c + r  # (max(|c - r|, |c + r|) <= |c| + r)
+            lo.append(a)
+            hi.append(b)
+            klo.append(a - m)
+            khi.append(b + m)
+        new = evolve(state, z=z, lo=np.array(klo), hi=np.array(khi), has_box=True)
+        return Step(new, lo, hi, False)  # lists of floats: rounded by the base as they are
+
+    def _remember_clean(self, ymiss: np.ndarray) -> bool:
+        """Whether the ring's missing flags ``ymiss`` are all zero; if so, remember the array
+        (made read-only: the fast step passes it on unchanged, so later states holding the same
+        object need no new test) and return True."""
+        if np.count_nonzero(ymiss):
+            return False
+        ymiss.flags.writeable = False
+        self._clean = ymiss
+        return True
 
     def _window_box(self, state: FixedTimeState, k: int, p: int) -> tuple[Bounds | None, bool]:
         """The box of the window ending at ``k`` (eqs. 7, 11), combined with the prediction

@@ -113,27 +113,45 @@ def _fused_transformed(
     computed inverse (:meth:`SplitOperators.to_x`) and the step error (``StepMatrices.err`` on
     the norms of ``x``, ``z``, ``y``, ``u``, ``d``) in floats; ``None``: the general step."""
     n, ny = state.lo.shape[0], y_k.shape[0]
-    v = np.concatenate((state.hi, state.lo, u_k, y_k))
-    out = fs.W.dot(v)
+    out = fs.W.dot(np.concatenate((state.hi, state.lo, u_k, y_k)))
     out += fs.w
-    mags = np.maximum.reduceat(np.abs(v), fs.starts).tolist()  # max |z|, |u|, |y| (nonempty)
-    zmax, umax, ymax = mags[0], mags[1] if u_k.shape[0] else 0.0, mags[-1] if ny else 0.0
-    xraw = out[2 * n : 4 * n]
-    xi = float(np.maximum.reduce(np.abs(xraw)))
+    o = out.tolist()  # the rest in Python floats: the same IEEE operations, so the same bits
+    ys = y_k.tolist()
+    zmax, umax, ymax, xi = (
+        _largest(state.hi.tolist() + state.lo.tolist()),  # max |z|, |u|, |y|, |x̂|
+        _largest(u_k.tolist()),
+        _largest(ys),
+        _largest(o[2 * n : 4 * n]),
+    )
     g, c = ops.tconv  # type: ignore[misc]
     cz = c * zmax
     ex = cz + g * (xi + cz) / (1.0 - g)  # as to_x
-    p = out[4 * n :].tolist()
-    for hi_, lo_, yv, ca in zip(p[:ny], p[ny:], y_k.tolist(), fs.cabs.tolist()):
+    p = o[4 * n :]
+    for hi_, lo_, yv, ca in zip(p[:ny], p[ny:], ys, fs.cabs.tolist()):
         if not lo_ - ca * ex <= yv <= hi_ + ca * ex:  # maybe inconsistent: the general step
             return None
     err = fs.err
     e = err[0] * (xi + ex) + err[1] * zmax + err[2] * ymax + err[3] * umax + err[4] * fs.dmax
-    hi = out[:n]
-    hi += e
-    lo = out[n : 2 * n]
-    lo -= e
-    return Step(evolve(state, lo=lo, hi=hi), xraw[n:] - ex, xraw[:n] + ex, False)
+    hi, lo, xhi, xlo = [], [], [], []  # (a loop: cheaper than comprehensions, or NumPy, on
+    for zh, zl, xh, xl in zip(o, o[n : 2 * n], o[2 * n : 3 * n], o[3 * n : 4 * n]):  # 3 numbers)
+        hi.append(zh + e)
+        lo.append(zl - e)
+        xhi.append(xh + ex)
+        xlo.append(xl - ex)
+    return Step(evolve(state, lo=np.array(lo), hi=np.array(hi)), xlo, xhi, False)
+
+
+def _largest(values: list[float]) -> float:
+    """``max |v|`` over ``values`` (0 for none; NaN if one is NaN), as NumPy's
+    ``maximum.reduce`` of ``abs``, one float at a time (cheaper on a few numbers)."""
+    a = 0.0
+    for v in values:
+        v = abs(v)
+        if v > a:
+            a = v
+        elif v != v:
+            return v
+    return a
 
 
 def _split_update(

@@ -181,6 +181,8 @@ class ObserverZ(DiscreteLTI[ZState]):
     def __init__(self, setting: Setting, m: ObserverMatrices):
         super().__init__(setting, m)
         self._fused = self._fuse()
+        tr = m.tr  # recover()'s constants: P, |P| and the margin factor rec cond(T)
+        self._recovery = (tr.P, tr.absP, self.rec * tr.cond)
 
     def _fuse(self) -> tuple[np.ndarray, ...] | None:
         """The step of a complete ``y`` with constant bounds as one product: ``W [z̲; z̄; y;
@@ -206,7 +208,7 @@ class ObserverZ(DiscreteLTI[ZState]):
         Fdc = F @ (0.5 * (d.lo + d.hi))
         w = np.concatenate([glo, ghi, Fdc, np.zeros(2 * nz)])
         Fdr = np.abs(F) @ (0.5 * (d.hi - d.lo))
-        return W, w, Fdr, C, np.abs(C)
+        return W, w, Fdr.tolist(), C, np.abs(C)  # |F| d_r as floats: tested in floats
 
     def step(
         self, state: ZState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -226,22 +228,23 @@ class ObserverZ(DiscreteLTI[ZState]):
         out = W.dot(np.concatenate((state.zlo, state.zhi, y_k, u_k)))
         out += w
         zc, zr = out[2 * nz + ny : 3 * nz + ny], out[3 * nz + ny :]
-        tr = self.m.tr
+        P, absP, rc = self._recovery
         a = np.abs(zc)  # (3.c-d) with the recovery margin, as recover()
         a += zr
-        xr = tr.absP.dot(zr)
-        xr += (self.rec * tr.cond) * tr.absP.dot(a)
-        xc = tr.P.dot(zc)
-        dev = y_k - C.dot(xc)  # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r)
-        dev -= out[2 * nz : 2 * nz + ny]
-        np.abs(dev, out=dev)
-        dev -= absC.dot(xr)
-        dev -= Fdr
-        for v in dev.tolist():
-            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
-                return None
+        xr = absP.dot(zr)
+        xr += rc * absP.dot(a)
+        xc = P.dot(zc)
+        # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r), in floats (the same operations)
+        dev = zip(y_k.tolist(), C.dot(xc).tolist(), out.tolist()[2 * nz : 2 * nz + ny])
+        for (yv, cx, du), ax, f in zip(dev, absC.dot(xr).tolist(), Fdr):
+            if not abs(yv - cx - du) - ax - f <= 0.0:  # maybe inconsistent (or NaN): the
+                return None  # general step decides
         new = evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz])
-        return Step(new, xc - xr, xc + xr, False)
+        lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
+        for c, r in zip(xc.tolist(), xr.tolist()):
+            lo.append(c - r)
+            hi.append(c + r)
+        return Step(new, lo, hi, False)
 
     def initial_state(self) -> ZState:
         zlo, zhi = self.initial_z()  # (3.b)
