@@ -115,10 +115,10 @@ def _propagate(h: Arr, t: float, box: Arr, sigma: float, ext: Arr, out: Arr) -> 
 @jit
 def _section_hull(
     z: Arr, Hz: Arr, n: int, m: int, s: Arr, e: float, sigma: float, absH: Arr, lo: Arr,
-    hi: Arr, kidx: Arr, b: Arr, w: Arr, cw: Arr, vi: Arr,
+    hi: Arr, kidx: Arr, b: Arr, w: Arr, cw: Arr,
 ) -> None:  # fmt: skip
     """_strip_hull.section_hull for ``<z[:n], Hz[:n, :m]>``, into ``lo``, ``hi``; ``kidx``,
-    ``b``, ``w``, ``cw``, ``vi``: scratch of at least ``m + 1``."""
+    ``b``, ``w``, ``cw``: scratch of at least ``m + 1``."""
     smax = 0.0
     for c in range(m):
         smax = max(smax, abs(s[c]))
@@ -142,29 +142,28 @@ def _section_hull(
         hmax = max(hmax, absH[j])
     scan = not hmax < 1e300 * wmin  # a breakpoint may overflow: taken as 0 (any μ is valid)
     g, ae = _g(m + 4), abs(e)
+    sp, smp = np.empty(2 * m), np.empty((2, 17))
+    tot = 0.0  # the total weight, the same for every coordinate
+    for k in range(nk + 1):
+        tot += w[k]
     for j in range(n):
-        bmin = 0.0  # the breakpoint b = 0 of weight σ is the last one
-        for k in range(nk):
-            v = Hz[j, kidx[k]] / s[kidx[k]]
-            v = 0.0 if scan and not np.isfinite(v) else v
-            b[k] = v
-            bmin = min(bmin, v)
-        b[nk] = 0.0
-        tot = 0.0
-        for k in range(nk + 1):
-            tot += w[k]
-        mu_u = _quantile(b, w, nk + 1, 0.5 * (tot - e), bmin, cw, vi)
-        mu_l = _quantile(b, w, nk + 1, 0.5 * (tot + e), bmin, cw, vi)
-        sp_u = sp_l = sp_u2 = sp_l2 = 0.0
-        for c in range(0, m - 1, 2):  # two partial sums each: γ_m holds in any order
-            sp_u += abs(Hz[j, c] - mu_u * s[c])
-            sp_l += abs(Hz[j, c] - mu_l * s[c])
-            sp_u2 += abs(Hz[j, c + 1] - mu_u * s[c + 1])
-            sp_l2 += abs(Hz[j, c + 1] - mu_l * s[c + 1])
-        if m % 2:
-            sp_u += abs(Hz[j, m - 1] - mu_u * s[m - 1])
-            sp_l += abs(Hz[j, m - 1] - mu_l * s[m - 1])
-        sp_u, sp_l = sp_u + sp_u2, sp_l + sp_l2
+        row = Hz[j]
+        if nk == m:  # every s_l kept: a contiguous (vectorised) division
+            for k in range(m):
+                b[k] = row[k] / s[k]
+        else:
+            for k in range(nk):
+                b[k] = row[kidx[k]] / s[kidx[k]]
+        if scan:
+            for k in range(nk):
+                b[k] = b[k] if np.isfinite(b[k]) else 0.0
+        b[nk] = 0.0  # the breakpoint b = 0 of weight σ is the last one
+        cw[: nk + 1] = w[: nk + 1]
+        mu_u, mu_l = _quantiles(b, cw, nk + 1, 0.5 * (tot - e), 0.5 * (tot + e), tot, smp)
+        for c in range(m):  # elementwise (vectorised), then summed with partial sums
+            sp[c] = abs(row[c] - mu_u * s[c])
+            sp[m + c] = abs(row[c] - mu_l * s[c])
+        sp_u, sp_l = _asum(sp, m), _asum(sp[m:], m)
         au, al = abs(mu_u), abs(mu_l)
         err_u = g * (abs(z[j]) + au * (ae + sigma + s1) + absH[j])
         err_l = g * (abs(z[j]) + al * (ae + sigma + s1) + absH[j])
@@ -173,16 +172,89 @@ def _section_hull(
 
 
 @jit
-def _quantile(b: Arr, w: Arr, n: int, thr: float, bmin: float, vb: Arr, vi: Arr) -> float:
-    """The weighted quantile of the section hull: the least breakpoint ``v`` with
-    ``Σ_{b_l <= v} w_l >= thr`` (NumPy's first sorted breakpoint whose cumulative weight
-    reaches ``thr``; the least breakpoint when none does), by quickselect: expected
-    ``O(n)`` instead of a sort. ``vb`` (values), ``vi`` (their indices): scratch."""
+def _quantiles(
+    vb: Arr, vw: Arr, n: int, t1: float, t2: float, tot: float, smp: Arr
+) -> tuple[float, float]:
+    """The two weighted quantiles of the section hull: for each threshold ``t`` the least
+    breakpoint ``v`` with ``Σ_{b_l <= v} w_l >= t`` (NumPy's first sorted breakpoint whose
+    cumulative weight reaches ``t``; the least one when none does), by selection on
+    the values ``vb`` and weights ``vw`` (permuted in place) instead of a sort. A sample of 17
+    values brackets both thresholds (``tot``: the total weight), one pass splits the values
+    into below, between and above the bracket, and :func:`_select` finishes in the part
+    that holds each threshold (usually the small middle one)."""
+    vb, vw = vb[:n], vw[:n]
+    if n < 64:
+        return _select(vb, vw, 0, n, 0.0, t1), _select(vb, vw, 0, n, 0.0, t2)
+    k = 17
+    sv, sw = smp[0], smp[1]
+    for i in range(k):  # evenly spaced sample, insertion-sorted
+        v, w = vb[(2 * i + 1) * n // (2 * k)], vw[(2 * i + 1) * n // (2 * k)]
+        j = i
+        while j > 0 and sv[j - 1] > v:
+            sv[j], sw[j] = sv[j - 1], sw[j - 1]
+            j -= 1
+        sv[j], sw[j] = v, w
+    ws = 0.0
+    for i in range(k):
+        ws += sw[i]
+    f = tot / ws if ws > 0.0 else 1.0
+    ia, ib, cum = k, k, 0.0
+    for i in range(k):  # first sample reaching each threshold (scaled to the total)
+        cum += sw[i] * f
+        if ia == k and cum >= min(t1, t2):
+            ia = i
+        if ib == k and cum >= max(t1, t2):
+            ib = i
+    p_lo = sv[ia - 1] if 0 < ia <= k else -np.inf
+    p_hi = sv[ib + 1] if ib + 1 < k else np.inf
+    lt, i, gt = 0, 0, n  # [0, lt) < p_lo, [lt, gt) between, [gt, n) > p_hi
+    wl = wm = 0.0
+    while i < gt:
+        v = vb[i]
+        if v < p_lo:
+            wl += vw[i]
+            vb[i], vb[lt] = vb[lt], v
+            vw[i], vw[lt] = vw[lt], vw[i]
+            lt += 1
+            i += 1
+        elif v > p_hi:
+            gt -= 1
+            vb[i], vb[gt] = vb[gt], v
+            vw[i], vw[gt] = vw[gt], vw[i]
+        else:
+            wm += vw[i]
+            i += 1
+    return _part(vb, vw, n, lt, gt, wl, wm, t1), _part(vb, vw, n, lt, gt, wl, wm, t2)
+
+
+@jit
+def _part(vb: Arr, vw: Arr, n: int, lt: int, gt: int, wl: float, wm: float, t: float) -> float:
+    """:func:`_select` in the part of ``vb`` split at ``lt``, ``gt`` (weights ``wl`` below,
+    ``wm`` between) that holds the threshold ``t``."""
+    if wl >= t:
+        return _select(vb, vw, 0, lt, 0.0, t)
+    if wl + wm >= t:
+        return _select(vb, vw, lt, gt, wl, t)
+    return _select(vb, vw, gt, n, wl + wm, t)
+
+
+@jit
+def _least(vb: Arr) -> float:
+    """The least breakpoint (``vb`` holds them all, in any order; the last one is 0)."""
+    out = 0.0
+    for v in vb:
+        out = min(out, v)
+    return out
+
+
+@jit
+def _select(vb: Arr, vw: Arr, lo: int, hi: int, base: float, thr: float) -> float:
+    """Quickselect of the least ``v`` in ``vb[lo:hi]`` with ``base + Σ_{vb_l <= v} vw_l >=
+    thr`` (``base``: the weight of ``vb[:lo]``, all smaller; ``vb[hi:]`` all larger); the least
+    breakpoint when the weight never reaches ``thr`` or ``thr <= 0`` (NumPy's ``argmax`` of an
+    all-False row, or the first breakpoint reaching it)."""
     if not thr > 0.0:
-        return bmin
-    for k in range(n):
-        vb[k], vi[k] = b[k], k
-    lo, hi, base = 0, n, 0.0  # the answer is in vb[lo:hi]; base: the weight below them
+        return _least(vb)
     while hi > lo:
         a, c, d = vb[lo], vb[(lo + hi) // 2], vb[hi - 1]
         piv = max(min(a, c), min(max(a, c), d))  # median of three
@@ -192,17 +264,17 @@ def _quantile(b: Arr, w: Arr, n: int, thr: float, bmin: float, vb: Arr, vi: Arr)
         while i < gt:
             v = vb[i]
             if v < piv:
-                wl += w[vi[i]]
+                wl += vw[i]
                 vb[i], vb[lt] = vb[lt], v
-                vi[i], vi[lt] = vi[lt], vi[i]
+                vw[i], vw[lt] = vw[lt], vw[i]
                 lt += 1
                 i += 1
             elif v > piv:
                 gt -= 1
                 vb[i], vb[gt] = vb[gt], v
-                vi[i], vi[gt] = vi[gt], vi[i]
+                vw[i], vw[gt] = vw[gt], vw[i]
             else:
-                we += w[vi[i]]
+                we += vw[i]
                 i += 1
         if base + wl >= thr:
             hi = lt
@@ -211,31 +283,42 @@ def _quantile(b: Arr, w: Arr, n: int, thr: float, bmin: float, vb: Arr, vi: Arr)
         else:
             base += wl + we
             lo = gt
-    return bmin
+    return _least(vb)
+
+
+@jit
+def _rows_s(Hz: Arr, m: int, h: Arr, rows: Arr, s: Arr) -> None:
+    """``rows = |Hz[:, :m]| 1`` and ``s = hᵀ Hz[:, :m]`` in one pass over ``Hz`` (only
+    ``rows`` when ``h`` is empty)."""
+    s[:m] = 0.0
+    with_s = h.shape[0] > 0
+    for r in range(Hz.shape[0]):
+        rows[r] = _asum(Hz[r], m)
+        if with_s and h[r] != 0.0:
+            hr = h[r]
+            for c in range(m):
+                s[c] += hr * Hz[r, c]
 
 
 @jit
 def _intersect(
-    h: Arr, ah: Arr, t: float, y_i: float, du: float, g_meas: float, nx: int, z: Arr, Hz: Arr,
-    m: int, box: Arr, acc: Arr, sc: tuple[Arr, ...],
-) -> int:  # fmt: skip
-    """strip._Joint.intersect with ``v_i = 0``: the new generator count, or -1 when the strip
-    certainly misses the set (left as it was). ``sc``: the scratch arrays."""
-    rows, s, lo_j, hi_j, lam, ext, out, kidx, b, w, cw, vi = sc
+    h: Arr, ah: Arr, hn: Arr, t: float, y_i: float, du: float, g_meas: float, nx: int, z: Arr,
+    Hz: Arr, m: int, box: Arr, acc: Arr, s: Arr, sn: Arr, sc: tuple[Arr, ...],
+) -> tuple[int, bool]:  # fmt: skip
+    """strip._Joint.intersect with ``v_i = 0``, given ``rows = |Hz| 1`` and ``s = hᵀ Hz``
+    (:func:`_rows_s`): ``(m', ready)``, ``m'`` the new generator count or -1 when the strip
+    certainly misses the set (left as it was). On return ``rows`` is that of the new ``Hz``;
+    when the set was updated and ``hn`` (the next strip's ``h``) is not empty, ``sn = hnᵀ Hz``
+    too, computed in the update's pass (``ready``). ``sc``: the scratch arrays."""
+    rows, lo_j, hi_j, ext, out, kidx, b, w, cw = sc
     nz = z.shape[0]
-    for c in range(m):
-        s[c] = 0.0
     hz = haz = hw = hrows = hacc = 0.0
     for r in range(nz):
-        a = _asum(Hz[r], m)
-        rows[r] = a
         if h[r] != 0.0:
-            for c in range(m):
-                s[c] += h[r] * Hz[r, c]
             hz += h[r] * z[r]
             hw += ah[r] * max(abs(box[0, r]), abs(box[1, r]))
             haz += ah[r] * abs(z[r])
-            hrows += ah[r] * a
+            hrows += ah[r] * rows[r]
             hacc += ah[r] * acc[r]
     e = t - hz
     # eq. (8) of strip.py's docstring: the strip that certainly holds (x_k, d_k)
@@ -247,10 +330,10 @@ def _intersect(
     for c in range(m):
         s1 += abs(s[c])
     if abs(e) > (s1 + sigma_z) * (1.0 + _g(m + 2)):
-        return -1
+        return -1, False
     if not _propagate(h, t, box, sigma, ext, out):
-        return -1
-    _section_hull(z, Hz, nx, m, s, e, sigma_z, rows, lo_j, hi_j, kidx, b, w, cw, vi)
+        return -1, False
+    _section_hull(z, Hz, nx, m, s, e, sigma_z, rows, lo_j, hi_j, kidx, b, w, cw)
     for r in range(nx):
         pad = acc[r] * (1.0 + 2.0 * U)
         box[0, r] = max(box[0, r], lo_j[r] - pad)
@@ -260,17 +343,26 @@ def _intersect(
         den += s[c] * s[c]
     den = den + sigma_z * sigma_z
     if s1 == 0.0 or not den > 0.0:
-        return m
+        return m, False
     g3, ae, se = _g(3), abs(e), s1 + sigma_z
+    nxt = hn.shape[0] > 0
+    if nxt:
+        sn[: m + 1] = 0.0
     for r in range(nz):
-        lam[r] = _dot(Hz[r], s, m) / den  # the F-radius optimal λ* of [Alamo2005]
-        al = abs(lam[r])
+        row = Hz[r]
+        lam = _dot(row, s, m) / den  # the F-radius optimal λ* of [Alamo2005]
+        al = abs(lam)
         acc[r] = acc[r] + g3 * (abs(z[r]) + al * ae + rows[r] + al * se)
-        z[r] = z[r] + lam[r] * e
+        z[r] = z[r] + lam * e
         for c in range(m):
-            Hz[r, c] -= lam[r] * s[c]
-        Hz[r, m] = sigma_z * lam[r]
-    return m + 1
+            row[c] -= lam * s[c]
+        row[m] = sigma_z * lam
+        rows[r] = _asum(row, m + 1)  # for the next strip, while the row is in cache
+        if nxt and hn[r] != 0.0:
+            hr = hn[r]
+            for c in range(m + 1):
+                sn[c] += hr * row[c]
+    return m + 1, nxt
 
 
 # -- prediction --------------------------------------------------------------------------------
@@ -345,39 +437,40 @@ def strip_step(
     the parallelotope. ``finite`` False: the predicted set overflowed (not reduced)."""
     D, aD, h, ah, jc = st[0], st[1], st[2], st[3], st[4]
     nx, ny, nu = p.shape[0], y.shape[0], u.shape[0]
-    room = 0
-    for i in range(ny):
-        room += y[i] == y[i]
-    z, Hz, m, box, acc = _joint(p, H, e, jc, cd, rd, dlo, dhi, room)
+    meas = np.flatnonzero(y == y)  # NaN: a missing component
+    z, Hz, m, box, acc = _joint(p, H, e, jc, cd, rd, dlo, dhi, meas.shape[0])
     nz, cap = z.shape[0], Hz.shape[1]
     sc = (
-        np.empty(nz), np.empty(cap), np.empty(nx), np.empty(nx), np.empty(nz),
-        np.empty((2, nz)), np.empty((2, nz)), np.empty(cap + 1, np.int64), np.empty(cap + 1),
-        np.empty(cap + 1), np.empty(cap + 1), np.empty(cap + 1, np.int64),
+        np.empty(nz), np.empty(nx), np.empty(nx), np.empty((2, nz)), np.empty((2, nz)),
+        np.empty(cap + 1, np.int64), np.empty(cap + 1), np.empty(cap + 1), np.empty(cap + 1),
     )  # fmt: skip
+    rows, s, sn = sc[0], np.empty(cap), np.empty(cap)
     g_meas = 2.0 * _g(nx + cd.shape[0] + nu + 2)
-    inconsistent = False
-    for i in range(ny):
-        if y[i] != y[i]:
-            continue  # a missing component (NaN)
+    inconsistent, ready = False, False
+    none = h[:0, 0]  # no next strip
+    for q in range(meas.shape[0]):
+        i = meas[q]
+        if not ready:
+            _rows_s(Hz, m, h[i], rows, s)
         du_ = du = 0.0
         for k in range(nu):
             du_ += D[i, k] * u[k]
             du += aD[i, k] * abs(u[k])
-        mi = _intersect(h[i], ah[i], y[i] - du_, y[i], du, g_meas, nx, z, Hz, m, box, acc, sc)
+        hn = h[meas[q + 1]] if q + 1 < meas.shape[0] else none
+        args = (y[i] - du_, y[i], du, g_meas, nx, z, Hz, m, box, acc, s, sn, sc)
+        mi, ready = _intersect(h[i], ah[i], hn, *args)
         if mi < 0:
             inconsistent = True
         else:
             m = mi
+        if ready:
+            s, sn = sn, s
+    if meas.shape[0] == 0:
+        _rows_s(Hz, m, none, rows, s)
     ga = 1.0 + _g(ny + 1)  # the rounding of acc's sums
-    rows = sc[0]
     lo, hi = np.empty(nx), np.empty(nx)
     for r in range(nz):
         acc[r] = acc[r] * ga
-        a = 0.0
-        for c in range(m):
-            a += abs(Hz[r, c])
-        rows[r] = a
         if r < nx:
             rr = rows[r] + acc[r]
             lo[r] = max(z[r] - rr, box[0, r])
