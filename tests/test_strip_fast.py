@@ -10,6 +10,7 @@ import pytest
 
 import ivobs
 from ivobs import Box
+from ivobs.estimators import _strip_kernel
 from ivobs.estimators._strip_hull import propagate_strip, section_hull
 from ivobs.linalg import gamma
 
@@ -163,9 +164,17 @@ def simulate(A, B, C, D, E, F, x0, u, dlo, dhi, rng):
     return x, y
 
 
+@pytest.mark.parametrize("kernel", [True, False], ids=["kernel", "numpy"])
 @pytest.mark.parametrize("reduction", ["parallelotope", "girard", "box"])
 @pytest.mark.parametrize("seed", range(3))
-def test_contains_a_simulated_state_with_correlated_vertex_disturbances(seed, reduction):
+def test_contains_a_simulated_state_with_correlated_vertex_disturbances(
+    seed, reduction, kernel, monkeypatch
+):
+    """With the compiled step (estimators/_strip_kernel_nb.py, when numba is installed; the
+    box reduction always takes the NumPy path) and with the NumPy path."""
+    if kernel:
+        pytest.importorskip("numba")
+    monkeypatch.setattr(_strip_kernel, "ENABLED", kernel)
     rng = np.random.default_rng(seed)
     nx, ny, nu, nd, T = 4, 2, 1, 5, 150
     A = rng.normal(size=(nx, nx))
@@ -186,6 +195,7 @@ def test_contains_a_simulated_state_with_correlated_vertex_disturbances(seed, re
     u = rng.normal(size=(T, nu))
     x, y = simulate(A, B, C, D, E, F, rng.choice([-1.0, 1.0], nx), u, dlo, dhi, rng)
     est = ivobs.make_estimator("strip", sys, x0=x0, order=3 * nx, reduction=reduction)
+    assert (est._kernel is not None) == (kernel and reduction != "box")
     res = est.run(u, y)
     assert np.all(res.lower <= x) and np.all(x <= res.upper)
     assert not res.inconsistent.any()

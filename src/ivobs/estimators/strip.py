@@ -56,7 +56,9 @@ breakpoints once (``O(nx m log m)`` per strip, ``m`` the generators); the model'
 derived once for a time-invariant system. The two box enclosures are in
 ``estimators/_strip_hull.py``, each bound pair computed by stacked ``(2, ·)`` array
 operations, and the large per-strip temporaries (``|H_z|``, ``λ sᵀ``, the hull's spread) are
-computed in place in scratch arrays (issue 17).
+computed in place in scratch arrays (issue 17). With numba (``pip install ivobs[fast]``) the
+whole step runs as one compiled call (:mod:`._strip_kernel`), tested bound for bound against
+this module, which is its reference and the fallback.
 """
 
 from __future__ import annotations
@@ -72,8 +74,8 @@ from ..linalg import UNIT_ROUNDOFF, gamma
 from ..model import LinearSystem
 from ..sets import Box, Zonotope
 from ..sets.zonotope import box_generators, reduce_girard, reduce_parallelotope, safe_radius
+from . import _strip_kernel, register
 from . import _uncertain as uncertain
-from . import register
 from ._strip_hull import _add, _max, propagate_strip, section_hull
 from ._strip_hull import propagate_hyperplane as _propagate_hyperplane
 from ._strip_hull import section_hull as _section_hull
@@ -328,6 +330,10 @@ class StripEstimator(Estimator):
         self.design = StripDesign(order=q, reduction=reduction, weight=W)
         self._lti = None if sys.is_time_varying else _structure(*sys.matrices_at(0))
         self._d_cache: tuple[tuple[bytes, bytes], tuple[np.ndarray, np.ndarray]] | None = None
+        # the compiled step when numba is there (_strip_kernel: this file is its reference)
+        plain = reduction == "box" or sys.uncertainty is not None
+        self._kernel = None if plain else _strip_kernel.load()
+        self._kst = None if self._lti is None else _strip_kernel.kernel_structure(self._lti)
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> StripState:
@@ -342,6 +348,8 @@ class StripEstimator(Estimator):
         st = self._lti if self._lti is not None else _structure(*self.sys.matrices_at(k))
         dbox = self.sys.d_at(k, y_k)
         cd, rd = self._d_radius(dbox)
+        if self._kernel is not None:
+            return self._kernel_step(state, st, u_k, y_k, dbox, cd, rd)
         y_list = y_k.tolist()
         measured = [i for i, y_i in enumerate(y_list) if y_i == y_i]  # not NaN
         joint = self._joint(state, st, dbox, cd, rd, len(measured))
@@ -372,6 +380,22 @@ class StripEstimator(Estimator):
         # a new state built directly (dataclasses.replace costs as much as a strip's update)
         new = StripState(p=p, H=H, e=e, k=state.k, scale=state.scale)
         return Step(new, lo, hi, inconsistent)
+
+    def _kernel_step(
+        self, state: StripState, st: _Structure, u_k: np.ndarray, y_k: np.ndarray, dbox: Box,
+        cd: np.ndarray, rd: np.ndarray,
+    ) -> Step[StripState]:  # fmt: skip
+        """:meth:`_step` as one compiled call (:mod:`._strip_kernel`)."""
+        kst = self._kst if self._kst is not None else _strip_kernel.kernel_structure(st)
+        c, kernel = _strip_kernel.as_c, self._kernel
+        assert kernel is not None
+        p, H, e, lo, hi, inconsistent, finite = kernel(
+            c(state.p), c(state.H), c(state.e), c(u_k), c(y_k), cd, rd, c(dbox.lo), c(dbox.hi),
+            kst, self.design.order, self.design.reduction == "girard",
+        )  # fmt: skip
+        if not finite:
+            self._check_overflow(state.k + 1, p, H)
+        return Step(StripState(p=p, H=H, e=e, k=state.k, scale=state.scale), lo, hi, inconsistent)
 
     def _d_radius(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
         """:func:`safe_radius` of the box of ``d[k]``, kept for the next step while the bounds
