@@ -180,12 +180,13 @@ def _certified_mins(
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
-    from . import _highs
+    # the module, not the package (which imports this one): no import cycle
+    from ._highs import BLOCK_MAX, block_duals, chain_duals
 
-    if K * A.shape[1] <= _highs.BLOCK_MAX:  # small: one solve of the K programs side by side
-        out = _highs.block_duals(Gs, A, b, radius)
+    if K * A.shape[1] <= BLOCK_MAX:  # small: one solve of the K programs side by side
+        out = block_duals(Gs, A, b, radius)
     else:
-        out = _highs.chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
+        out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
     if isinstance(out, np.ndarray):
         return _dual_bounds(Gs, A, b, out, radius), out, True
     mu = np.zeros((K, nc))
