@@ -37,7 +37,7 @@ import numpy as np
 
 from ..linalg import UNIT_ROUNDOFF, gamma
 
-__all__ = ["Linearisation", "TermwiseMargin", "contract_back", "linearise"]
+__all__ = ["Linearisation", "TermwiseMargin", "contract_back", "contract_back_lists", "linearise"]
 
 _UP = 1.0 + 2.0 * UNIT_ROUNDOFF
 
@@ -60,8 +60,8 @@ class Linearisation(NamedTuple):
 
 def linearise(
     evals: Evals,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    lo: np.ndarray | list[float],
+    hi: np.ndarray | list[float],
     c: np.ndarray,
     u: np.ndarray,
     nx: int,
@@ -69,13 +69,14 @@ def linearise(
 ) -> Linearisation:
     """The mean-value form (MV) of the module docstring of ``g`` (``evals``: the model's
     :meth:`~ivobs.NonlinearSystem.evaluators` of ``f`` or ``h``) over the joint box
-    ``[lo, hi]`` (``x`` then ``w``; ``nx`` states) at ``c`` (clipped into the box).
-    ``natural=False``: the natural inclusion is not tightened by the centred form and
-    monotonicity (the caller does not use it). Scalar Python arithmetic on lists: for the
+    ``[lo, hi]`` (``x`` then ``w``; ``nx`` states; arrays or lists) at ``c`` (clipped into
+    the box). ``natural=False``: the natural inclusion is not tightened by the centred form
+    and monotonicity (the caller does not use it). Scalar Python arithmetic on lists: for the
     small vectors of one step it is several times faster than NumPy calls, and each operation
     is the same IEEE double operation as the error analysis above assumes."""
     value, natjac = evals
-    bl, bh = lo.tolist(), hi.tolist()
+    bl = lo.tolist() if isinstance(lo, np.ndarray) else lo
+    bh = hi.tolist() if isinstance(hi, np.ndarray) else hi
     cl = [min(max(a, p), q) for a, p, q in zip(c.tolist(), bl, bh)]
     ul = u.tolist()
     gl, gh = value(cl[:nx], cl[:nx], ul, cl[nx:], cl[nx:])
@@ -89,8 +90,13 @@ def linearise(
         for i in range(m)
     ]  # J̃ = mid [J], halves first: no overflow
     D = [max(q - t, t - p) * _UP for p, q, t in zip(jl, jh, (t for r in rows for t in r))]
-    with np.errstate(invalid="ignore", over="ignore"):  # D Δ: one product, as BLAS sums it
+    # D Δ: one product, as BLAS sums it; NumPy's error state (3 µs) only where the terms could
+    # overflow or be NaN (ΣD Σ Δ bounds the nonnegative sums; a NaN fails the test)
+    if sum(D) * sum(delta) < 1e300:
         rems = ((np.array(D).reshape(m, n) @ np.array(delta)) * up_rem).tolist()
+    else:
+        with np.errstate(invalid="ignore", over="ignore"):
+            rems = ((np.array(D).reshape(m, n) @ np.array(delta)) * up_rem).tolist()
     curved: dict[tuple[bool, ...], list[int]] = {}  # rows to tighten, by sign pattern
     for i in range(m):
         Jl, Jh, Jt = jl[i * n : i * n + n], jh[i * n : i * n + n], rows[i]
@@ -196,17 +202,36 @@ def contract_back(
     the boxes explains ``y_k`` (an inconsistent measurement). When ``y_k`` does not pin down
     the states of step ``k`` but does those of step ``k - 1`` (Hénon with ``y = x2 = 0.3
     x1[k-1]``), this bounds the box over which ``f`` is then linearised."""
-    bl = lo.tolist() + wlo.tolist()
-    bh = hi.tolist() + whi.tolist()
+    out = contract_back_lists(
+        sys, lo.tolist(), hi.tolist(), u_prev, u, wlo.tolist(), whi.tolist(), y
+    )
+    if out is None:
+        return None
+    a = np.array
+    return a(out[0]), a(out[1]), a(out[2], dtype=float), a(out[3], dtype=float)
+
+
+def contract_back_lists(
+    sys: Any,
+    lo: list[float],
+    hi: list[float],
+    u_prev: np.ndarray,
+    u: np.ndarray,
+    wlo: list[float],
+    whi: list[float],
+    y: np.ndarray,
+) -> tuple[list[float], list[float], list[float], list[float]] | None:
+    """:func:`contract_back` on the boxes given as lists (new lists returned)."""
+    bl = lo + wlo
+    bh = hi + whi
     uu = u_prev.tolist() + u.tolist()
     pairs = [(c, float(v)) for c, v in zip(sys.hf_contractors(), y, strict=True) if v == v]
     for _ in range(2):
         for (fn, sites), yi in pairs:
             if not sys._call(fn, sites, bl, bh, uu, yi):
                 return None
-    n = lo.shape[0]
-    a = np.array
-    return a(bl[:n]), a(bh[:n]), a(bl[n:], dtype=float), a(bh[n:], dtype=float)
+    n = len(lo)
+    return bl[:n], bh[:n], bl[n:], bh[n:]
 
 
 class TermwiseMargin:
