@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import cache
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -40,6 +41,7 @@ from ..linalg import UNIT_ROUNDOFF, gamma
 __all__ = ["Linearisation", "TermwiseMargin", "contract_back", "contract_back_lists", "linearise"]
 
 _UP = 1.0 + 2.0 * UNIT_ROUNDOFF
+_gamma = cache(gamma)  # the few sizes of one model, looked up at every call
 
 Evals = tuple[Callable[..., Any], Callable[..., Any]]
 """``(natural, natjac)`` of the model's ``f`` or ``h`` on lists
@@ -83,7 +85,7 @@ def linearise(
     nl, nh, jl, jh = natjac(bl[:nx], bh[:nx], ul, bl[nx:], bh[nx:])
     n, m = len(cl), len(gl)
     delta = [max(q - a, a - p) * _UP for a, p, q in zip(cl, bl, bh)]
-    up_rem, up_sum, g3 = 1.0 + gamma(n + 1), 1.0 + gamma(2), gamma(3)
+    up_rem, up_sum, g3 = 1.0 + _gamma(n + 1), 1.0 + _gamma(2), _gamma(3)
     g0s, rhos = [0.0] * m, [0.0] * m
     rows = [
         [0.5 * p + 0.5 * q for p, q in zip(jl[i * n : i * n + n], jh[i * n : i * n + n])]
@@ -180,7 +182,7 @@ def _centred(
         s_lo += a
         s_hi += b
         s_abs += max(-a, b)
-    err = gamma(len(c) + 3) * (abs(g0) + rho + s_abs)
+    err = _gamma(len(c) + 3) * (abs(g0) + rho + s_abs)
     low, high = g0 + s_lo - rho - err, g0 + s_hi + rho + err
     return max(nl, low), min(nh, high)  # a NaN bound (never here: finite rows) is ignored
 

@@ -16,6 +16,10 @@ form as its reference).
 
 from __future__ import annotations
 
+import math
+from bisect import bisect_left
+from itertools import accumulate
+
 import numpy as np
 
 from ..linalg import gamma
@@ -30,6 +34,7 @@ __all__ = [
 
 _SIGN = np.array([[1.0], [-1.0]])  # the upper bound f_j(μ) and the lower one -f_j(-μ)
 _GAMMA2 = gamma(2)
+_FEW = 4  # section_hull: rows finished on Python floats
 # the ufuncs' reductions called directly (ndarray.sum and friends add a Python-level wrapper)
 _add, _max, _min = np.add.reduce, np.maximum.reduce, np.minimum.reduce
 
@@ -87,14 +92,15 @@ def section_hull(
     b[:, -1] = 0.0
     w[-1] = sigma
     idx = b.argsort(axis=1)
-    cw = w[idx]
-    cw.cumsum(axis=1, out=cw)
-    # the quantiles (W - e)/2 (upper bound) and (W + e)/2 (lower bound), rows 0 and 1
-    thr = 0.5 * (cw[:, -1] + np.array([[-e], [e]]))
-    pos = (cw >= thr[:, :, None]).argmax(axis=2)
-    rows = np.arange(n)
-    mu = b[rows, idx[rows, pos]]
-    am = np.abs(mu)
+    mu = _quantiles(b, w, idx, e) if n <= _FEW else None
+    if mu is None:
+        cw = w[idx]
+        cw.cumsum(axis=1, out=cw)
+        # the quantiles (W - e)/2 (upper bound) and (W + e)/2 (lower bound), rows 0 and 1
+        thr = 0.5 * (cw[:, -1] + np.array([[-e], [e]]))
+        pos = (cw >= thr[:, :, None]).argmax(axis=2)
+        rows = np.arange(n)
+        mu = b[rows, idx[rows, pos]]
     s1 = float(_add(a_s))
     # f_j(μ) + its rounding bound for the upper bound; for the lower bound -f_j(-μ) with
     # f_j(-μ) = -μ e + |μ| σ + ‖H_j - μ s‖₁ (the same breakpoints, e -> -e)
@@ -103,9 +109,40 @@ def section_hull(
     tmp = np.multiply(mu[:, :, None], s)
     np.subtract(H, tmp, out=tmp)
     spread = _add(np.abs(tmp, out=tmp), axis=2)
-    err = gamma(m + 4) * (np.abs(z) + am * (abs(e) + sigma + s1) + absH)
+    g = gamma(m + 4)
+    if n <= _FEW:  # the same operations on floats: cheaper than NumPy calls for a few rows
+        c = abs(e) + sigma + s1
+        hi_, lo_ = [], []
+        for zj, hj, m0, m1, f0, f1 in zip(
+            z.tolist(), absH.tolist(), *mu.tolist(), *spread.tolist()
+        ):
+            az = abs(zj)
+            hi_.append(zj + ((m0 * e + abs(m0) * sigma + f0) + g * (az + abs(m0) * c + hj)))
+            lo_.append(zj - ((-m1 * e + abs(m1) * sigma + f1) + g * (az + abs(m1) * c + hj)))
+        return np.array(lo_), np.array(hi_)
+    am = np.abs(mu)
+    err = g * (np.abs(z) + am * (abs(e) + sigma + s1) + absH)
     bounds = _SIGN * mu * e + am * sigma + spread + err
     return z - bounds[1], z + bounds[0]
+
+
+def _quantiles(b: np.ndarray, w: np.ndarray, idx: np.ndarray, e: float) -> np.ndarray | None:
+    """The ``μ`` of :func:`section_hull` (rows: upper, lower bound) on floats for a few rows:
+    the cumulative weights summed in the same order as ``cumsum``, the first position where
+    they reach the quantile found by bisection (they never decrease: ``w >= 0``); ``None``
+    when a weight or ``e`` is not finite (the array form decides)."""
+    wl = w.tolist()
+    up, down = [], []
+    for brow, irow in zip(b.tolist(), idx.tolist()):
+        cw = list(accumulate([wl[i] for i in irow]))
+        total = cw[-1]
+        if not (total < math.inf and abs(e) < math.inf):
+            return None
+        k0, k1 = bisect_left(cw, 0.5 * (total - e)), bisect_left(cw, 0.5 * (total + e))
+        # none reaches the quantile (rounding): argmax of all False is 0
+        up.append(brow[irow[k0 if k0 < len(cw) else 0]])
+        down.append(brow[irow[k1 if k1 < len(cw) else 0]])
+    return np.array([up, down])
 
 
 def propagate_strip(

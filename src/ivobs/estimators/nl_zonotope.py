@@ -70,6 +70,7 @@ otherwise widen every bound by ``~7``; :class:`~ivobs.estimators._meanvalue.Term
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -245,6 +246,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         self._cw, self._rw = cw, rw
         self._wcols = np.flatnonzero(rw > 0)
         self._wrows = sys.nx + self._wcols
+        self._zw = np.zeros(cw.shape[0])
         self._wlo, self._whi = sys.w_box.lo.tolist(), sys.w_box.hi.tolist()
         self._wrange, self._wvals = np.arange(self._wcols.size), rw[self._wcols]
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
@@ -338,12 +340,10 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         hi = [min(a, b) for a, b in zip(xhi, hull_hi)]
         if any(a > b for a, b in zip(lo, hi)):  # only by rounding (both hold the state)
             lo, hi = hull_lo, hull_hi  # keep the hull
-        acc = np.zeros(Hz.shape[0])
-        acc[:nx] = e
         return _Joint(
             z=np.concatenate([p, self._cw]),
             Hz=Hz,
-            acc=acc,
+            acc=np.concatenate([e, self._zw]),
             lo=lo + (self._wlo if wlo is None else wlo),
             hi=hi + (self._whi if whi is None else whi),
         )
@@ -398,25 +398,28 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         p = lin.g0 + J @ d
         JH = J @ Hz
         n = z.shape[0]
-        err = (
-            # + the data margin of a float64 simulation of f, relative to its terms over the
-            # set (TermwiseMargin)
-            (2.0 * _g(n + 3) + ROUNDING)
-            * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + _add(np.abs(Hz), axis=1)))
-            + (aJ @ acc) * (1.0 + _g(n + 1))
-            + lin.rho
-        ) * (1.0 + _g(4))
+        # + the data margin of a float64 simulation of f, relative to its terms over the set
+        # (TermwiseMargin); the products by |J| as arrays (as BLAS sums them), the rest on
+        # floats in the order of the expression
+        terms = (aJ @ (np.abs(d) + _add(np.abs(Hz), axis=1))).tolist()
+        accs = (aJ @ acc).tolist()
+        c1, c2, c3 = 2.0 * _g(n + 3) + ROUNDING, 1.0 + _g(n + 1), 1.0 + _g(4)
+        err = [
+            ((c1 * (1.0 + abs(g) + a) + b * c2) + r) * c3
+            for g, a, b, r in zip(lin.g0.tolist(), terms, accs, lin.rho.tolist())
+        ]
         cols = _any(JH, axis=0)  # drop zero columns (unknowns that f does not see)
         if not cols.all():
             JH = JH[:, cols]
         # H = [JH, diag(err)] (the nonzero entries of err as columns): box_generators, in one
         # array
         m = JH.shape[1]
-        rows = [i for i, v in enumerate(err.tolist()) if v > 0]
+        rows = [i for i, v in enumerate(err) if v > 0]
         H = np.zeros((nx, m + len(rows)))
         H[:, :m] = JH
-        H[rows, range(m, m + len(rows))] = err[rows]
-        if not (np.isfinite(p).all() and np.isfinite(H).all()):
+        H[rows, range(m, m + len(rows))] = [err[i] for i in rows]
+        # one sum is finite only if every term is (else the full check)
+        if not math.isfinite(float(_add(H, axis=None)) + sum(p.tolist())):
             self._check_overflow(k, p, H)
         nlo, nhi = lin.nat_lo.tolist(), lin.nat_hi.tolist()
         q = self.design.order

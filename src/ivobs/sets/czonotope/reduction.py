@@ -240,6 +240,8 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
     if not np.isfinite(X).all():  # singular (NaN) or overflowing
         return None
     aX = np.abs(X)
+    if n <= _FEW:
+        return _box_in_basis_few(aX, X @ P, aX @ np.abs(P), rho)
     eye = _eye(n)
     Rm = eye - X @ P
     aXaP = aX @ np.abs(P)
@@ -256,6 +258,48 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
     v = (aX @ rho) * (1.0 + gamma(n + 1))
     tau: np.ndarray = (v + theta / (1.0 - theta) * float(v.max())) * (1.0 + gamma(4))
     return tau, mu
+
+
+_FEW = 4
+"""Up to this size the ``n``-vectors of :func:`_box_in_basis` are worked on floats (the same
+operations: row sums of fewer than 8 terms are summed in order by NumPy too)."""
+
+
+def _in_order(terms: list[float]) -> float:
+    """The sum from the first term to the last (as NumPy sums fewer than 8 terms; ``sum``
+    may compensate)."""
+    t = 0.0
+    for x in terms:
+        t += x
+    return t
+
+
+def _box_in_basis_few(
+    aX: np.ndarray, XP: np.ndarray, aXaP: np.ndarray, rho: np.ndarray
+) -> tuple[np.ndarray, float] | None:
+    """:func:`_box_in_basis` after its products (``|X|``, ``X P``, ``|X| |P|``), on floats."""
+    n = aX.shape[0]
+    g1 = gamma(n + 1)
+    rows = []
+    for i, (r, a) in enumerate(zip(XP.tolist(), aXaP.tolist())):
+        t = 0.0
+        for j, (rij, aij) in enumerate(zip(r, a)):
+            e = 1.0 if i == j else 0.0
+            t += abs(e - rij) + g1 * (e + aij)
+        rows.append(t)
+    theta = max(rows) * (1.0 + gamma(n + 2))
+    if not theta < 0.5:
+        return None
+    up = 1.0 + gamma(2 * n + 4)
+    skeel = max(_in_order(r) for r in aXaP.tolist()) * up  # >= ‖|X| |P|‖∞ (exact arithmetic)
+    nX = max(_in_order(r) for r in aX.tolist()) * up
+    mu = (UNIT_ROUNDOFF * skeel + nX * n * 2.0**-1074) / (1.0 - theta) * up
+    if not mu < 0.5:
+        return None
+    v = [x * (1.0 + g1) for x in (aX @ rho).tolist()]
+    c = theta / (1.0 - theta) * max(v)
+    up4 = 1.0 + gamma(4)
+    return np.array([(x + c) * up4 for x in v]), mu
 
 
 def reduce_consolidated(
