@@ -105,6 +105,7 @@ def reduce_generators(
 
 
 _TINY = float(np.finfo(float).tiny)
+_add = np.add.reduce  # ndarray.sum without its Python-level wrapper (the same reduction)
 
 
 def _pow2_scaling(L: np.ndarray) -> np.ndarray | None:
@@ -174,15 +175,15 @@ def _absorb_in_basis(
     alpha, info = dtrtrs(R[:N, :N], R[:N, N:])
     if info != 0 or not np.isfinite(alpha).all():
         return None
-    srt = np.argsort(np.abs(alpha).sum(axis=0), kind="stable")
+    srt = _add(np.abs(alpha), axis=0).argsort(kind="stable")
     n_rm = m - order
     rm, kept = srt[:n_rm], others[srt[n_rm:]]
     P, a_rm, L_rm = L[:, basis], alpha[:, rm], L[:, others[rm]]
-    a1 = np.abs(a_rm).sum(axis=1)
+    a1 = _add(np.abs(a_rm), axis=1)
     up = 1.0 + gamma(n_rm + 3)
     rho = (
-        np.abs(L_rm - P @ a_rm).sum(axis=1)
-        + gamma(N + 2) * (np.abs(L_rm).sum(axis=1) + np.abs(P) @ a1)
+        _add(np.abs(L_rm - P @ a_rm), axis=1)
+        + gamma(N + 2) * (_add(np.abs(L_rm), axis=1) + np.abs(P) @ a1)
     ) * up
     s0 = (1.0 + a1) * up
     absorbed = _box_in_basis(P, rho)
@@ -195,7 +196,7 @@ def _absorb_in_basis(
     # (the layout decides the summation order of later reductions: same layout, same bits)
     out = np.empty((N, order), order="F")
     np.multiply(P, t, out=out[:, :N])
-    np.take(L, kept, axis=1, out=out[:, N:])
+    out[:, N:] = L[:, kept]
     return out
 
 
