@@ -185,13 +185,19 @@ def _absorb_in_basis(
         _add(np.abs(L_rm - P @ a_rm), axis=1)
         + gamma(N + 2) * (_add(np.abs(L_rm), axis=1) + np.abs(P) @ a1)
     ) * up
-    s0 = (1.0 + a1) * up
     absorbed = _box_in_basis(P, rho)
     if absorbed is None:
         return None
     tau, mu = absorbed
-    z = (s0 + tau) * (1.0 + gamma(2))
-    t = (z + mu / (1.0 - mu) * float(z.max())) * (1.0 + gamma(6))
+    up2, up6 = 1.0 + gamma(2), 1.0 + gamma(6)
+    t: Any
+    if N <= _FEW:  # the same operations on floats
+        zl = [((1.0 + a) * up + b) * up2 for a, b in zip(a1.tolist(), tau.tolist())]
+        c = mu / (1.0 - mu) * max(zl)
+        t = [(x + c) * up6 for x in zl]
+    else:
+        z = ((1.0 + a1) * up + tau) * up2
+        t = (z + mu / (1.0 - mu) * float(z.max())) * up6
     # [P diag(t), L_kept], column-major as the hstack of the column selections it replaces
     # (the layout decides the summation order of later reductions: same layout, same bits)
     out = np.empty((N, order), order="F")
