@@ -87,11 +87,9 @@ def linearise(
     delta = [max(q - a, a - p) * _UP for a, p, q in zip(cl, bl, bh)]
     up_rem, up_sum, g3 = 1.0 + _gamma(n + 1), 1.0 + _gamma(2), _gamma(3)
     g0s, rhos = [0.0] * m, [0.0] * m
-    rows = [
-        [0.5 * p + 0.5 * q for p, q in zip(jl[i * n : i * n + n], jh[i * n : i * n + n])]
-        for i in range(m)
-    ]  # J̃ = mid [J], halves first: no overflow
-    D = [max(q - t, t - p) * _UP for p, q, t in zip(jl, jh, (t for r in rows for t in r))]
+    mids = [0.5 * p + 0.5 * q for p, q in zip(jl, jh)]  # J̃ = mid [J], halves first: no overflow
+    rows = [mids[i * n : i * n + n] for i in range(m)]
+    D = [max(q - t, t - p) * _UP for p, q, t in zip(jl, jh, mids)]
     # D Δ: one product, as BLAS sums it; NumPy's error state (3 µs) only where the terms could
     # overflow or be NaN (ΣD Σ Δ bounds the nonnegative sums; a NaN fails the test)
     if sum(D) * sum(delta) < 1e300:

@@ -245,10 +245,9 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         cw, rw = safe_radius(sys.w_box.lo, sys.w_box.hi)
         self._cw, self._rw = cw, rw
         self._wcols = np.flatnonzero(rw > 0)
-        self._wrows = sys.nx + self._wcols
+        self._wblock = np.diag(rw)[:, self._wcols]
         self._zw = np.zeros(cw.shape[0])
         self._wlo, self._whi = sys.w_box.lo.tolist(), sys.w_box.hi.tolist()
-        self._wrange, self._wvals = np.arange(self._wcols.size), rw[self._wcols]
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
 
     # -- online ---------------------------------------------------------------------------------
@@ -328,7 +327,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         m = H.shape[1]
         Hz = np.zeros((nx + self._cw.shape[0], m + self._wcols.size))
         Hz[:nx, :m] = H
-        Hz[self._wrows, m + self._wrange] = self._wvals
+        Hz[nx:, m:] = self._wblock  # diag(R_w) of the uncertain w (zero columns dropped)
         g, g2 = _g(m + 2), 1.0 + _g(2)
         r0 = _add(np.abs(H), axis=1).tolist()
         hull_lo, hull_hi = [], []
@@ -417,7 +416,10 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         rows = [i for i, v in enumerate(err) if v > 0]
         H = np.zeros((nx, m + len(rows)))
         H[:, :m] = JH
-        H[rows, range(m, m + len(rows))] = [err[i] for i in rows]
+        if len(rows) == nx:  # the whole diagonal: H[i, m + i], a strided slice of H's buffer
+            H.ravel()[m :: m + nx + 1] = err
+        else:
+            H[rows, range(m, m + len(rows))] = [err[i] for i in rows]
         # one sum is finite only if every term is (else the full check)
         if not math.isfinite(float(_add(H, axis=None)) + sum(p.tolist())):
             self._check_overflow(k, p, H)
