@@ -38,7 +38,15 @@ import numpy as np
 
 from ..linalg import UNIT_ROUNDOFF, gamma
 
-__all__ = ["Linearisation", "TermwiseMargin", "contract_back", "contract_back_lists", "linearise"]
+__all__ = [
+    "Linearisation",
+    "LinearisationLists",
+    "TermwiseMargin",
+    "contract_back",
+    "contract_back_lists",
+    "linearise",
+    "linearise_lists",
+]
 
 _UP = 1.0 + 2.0 * UNIT_ROUNDOFF
 _gamma = cache(gamma)  # the few sizes of one model, looked up at every call
@@ -60,7 +68,19 @@ class Linearisation(NamedTuple):
     nat_hi: np.ndarray
 
 
-def linearise(
+class LinearisationLists(NamedTuple):
+    """:class:`Linearisation` with its vectors as lists (the callers work on them one float
+    at a time); ``J`` and ``c`` stay arrays (they enter matrix products)."""
+
+    g0: list[float]
+    J: np.ndarray
+    rho: list[float]
+    c: np.ndarray
+    nat_lo: list[float]
+    nat_hi: list[float]
+
+
+def linearise_lists(
     evals: Evals,
     lo: np.ndarray | list[float],
     hi: np.ndarray | list[float],
@@ -68,7 +88,7 @@ def linearise(
     u: np.ndarray,
     nx: int,
     natural: bool = True,
-) -> Linearisation:
+) -> LinearisationLists:
     """The mean-value form (MV) of the module docstring of ``g`` (``evals``: the model's
     :meth:`~ivobs.NonlinearSystem.evaluators` of ``f`` or ``h``) over the joint box
     ``[lo, hi]`` (``x`` then ``w``; ``nx`` states; arrays or lists) at ``c`` (clipped into
@@ -116,8 +136,22 @@ def linearise(
         g0s[i], rhos[i] = g0, rho
     for key, members in curved.items():
         _monotone(value, key, bl, bh, ul, nx, members, nl, nh)
+    return LinearisationLists(g0s, np.array(rows).reshape(m, n), rhos, np.array(cl), nl, nh)
+
+
+def linearise(
+    evals: Evals,
+    lo: np.ndarray | list[float],
+    hi: np.ndarray | list[float],
+    c: np.ndarray,
+    u: np.ndarray,
+    nx: int,
+    natural: bool = True,
+) -> Linearisation:
+    """:func:`linearise_lists` with every vector as an array."""
+    out = linearise_lists(evals, lo, hi, c, u, nx, natural)
     a = np.array
-    return Linearisation(a(g0s), a(rows).reshape(m, n), a(rhos), a(cl), a(nl), a(nh))
+    return Linearisation(a(out.g0), out.J, a(out.rho), out.c, a(out.nat_lo), a(out.nat_hi))
 
 
 def _safe_radius(lo: float, hi: float, g3: float) -> tuple[float, float]:

@@ -88,7 +88,7 @@ from ..sets.czonotope import (
     safe_radius,
 )
 from . import register
-from ._meanvalue import TermwiseMargin, contract_back_lists, linearise
+from ._meanvalue import TermwiseMargin, contract_back_lists, linearise_lists
 from ._strip_hull import _add, propagate_lists, section_hull
 from .base import ROUNDING, Design, Estimator, check_size
 from .state import OnlineState, Step
@@ -371,10 +371,10 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         if not self.model.contract_lists(vl, vh, u_k.tolist(), yl, yl):
             return False
         joint.lo, joint.hi = vl, vh
-        lin = linearise(self.model.evaluators("h"), vl, vh, joint.z, u_k, nx, False)
+        lin = linearise_lists(self.model.evaluators("h"), vl, vh, joint.z, u_k, nx, False)
         n = joint.z.shape[0]
         mag = (np.abs(lin.J) @ np.abs(lin.c)).tolist()
-        g0s, rhos = lin.g0.tolist(), lin.rho.tolist()
+        g0s, rhos = lin.g0, lin.rho
         for i in obs:
             Ji, yi, h0 = lin.J[i], yl[i], g0s[i]
             t = yi - h0 + float(Ji @ lin.c)
@@ -391,10 +391,10 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         """``(p, H, e, lo, hi)`` of ``x[k+1]`` (steps 4-5 and (v)-(vi) of the proof)."""
         nx = self.model.nx
         z, Hz, acc = joint.z, joint.Hz, joint.acc
-        lin = linearise(self.model.evaluators("f"), joint.lo, joint.hi, z, u_k, nx)
+        lin = linearise_lists(self.model.evaluators("f"), joint.lo, joint.hi, z, u_k, nx)
         J, aJ = lin.J, np.abs(lin.J)
         d = z - lin.c
-        p = lin.g0 + J @ d
+        p = np.array(lin.g0) + J @ d
         JH = J @ Hz
         n = z.shape[0]
         # + the data margin of a float64 simulation of f, relative to its terms over the set
@@ -405,7 +405,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         c1, c2, c3 = 2.0 * _g(n + 3) + ROUNDING, 1.0 + _g(n + 1), 1.0 + _g(4)
         err = [
             ((c1 * (1.0 + abs(g) + a) + b * c2) + r) * c3
-            for g, a, b, r in zip(lin.g0.tolist(), terms, accs, lin.rho.tolist())
+            for g, a, b, r in zip(lin.g0, terms, accs, lin.rho)
         ]
         cols = _any(JH, axis=0)  # drop zero columns (unknowns that f does not see)
         if not cols.all():
@@ -423,7 +423,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         # one sum is finite only if every term is (else the full check)
         if not math.isfinite(float(_add(H, axis=None)) + sum(p.tolist())):
             self._check_overflow(k, p, H)
-        nlo, nhi = lin.nat_lo.tolist(), lin.nat_hi.tolist()
+        nlo, nhi = lin.nat_lo, lin.nat_hi
         q = self.design.order
         if H.shape[1] <= q + q // 2:  # reduce in batches: a QR every few steps, not every step
             return p, H, np.zeros(nx), nlo, nhi
