@@ -31,15 +31,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import cache
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from ..linalg import UNIT_ROUNDOFF, gamma
 
-__all__ = ["Linearisation", "TermwiseMargin", "contract_back", "linearise"]
+__all__ = [
+    "Linearisation",
+    "LinearisationLists",
+    "TermwiseMargin",
+    "contract_back",
+    "contract_back_lists",
+    "linearise",
+    "linearise_lists",
+]
 
 _UP = 1.0 + 2.0 * UNIT_ROUNDOFF
+_gamma = cache(gamma)  # the few sizes of one model, looked up at every call
 
 Evals = tuple[Callable[..., Any], Callable[..., Any]]
 """``(natural, natjac)`` of the model's ``f`` or ``h`` on lists
@@ -58,39 +68,55 @@ class Linearisation(NamedTuple):
     nat_hi: np.ndarray
 
 
-def linearise(
+class LinearisationLists(NamedTuple):
+    """:class:`Linearisation` with its vectors as lists (the callers work on them one float
+    at a time); ``J`` and ``c`` stay arrays (they enter matrix products)."""
+
+    g0: list[float]
+    J: np.ndarray
+    rho: list[float]
+    c: np.ndarray
+    nat_lo: list[float]
+    nat_hi: list[float]
+
+
+def linearise_lists(
     evals: Evals,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    lo: np.ndarray | list[float],
+    hi: np.ndarray | list[float],
     c: np.ndarray,
     u: np.ndarray,
     nx: int,
     natural: bool = True,
-) -> Linearisation:
+) -> LinearisationLists:
     """The mean-value form (MV) of the module docstring of ``g`` (``evals``: the model's
     :meth:`~ivobs.NonlinearSystem.evaluators` of ``f`` or ``h``) over the joint box
-    ``[lo, hi]`` (``x`` then ``w``; ``nx`` states) at ``c`` (clipped into the box).
-    ``natural=False``: the natural inclusion is not tightened by the centred form and
-    monotonicity (the caller does not use it). Scalar Python arithmetic on lists: for the
+    ``[lo, hi]`` (``x`` then ``w``; ``nx`` states; arrays or lists) at ``c`` (clipped into
+    the box). ``natural=False``: the natural inclusion is not tightened by the centred form
+    and monotonicity (the caller does not use it). Scalar Python arithmetic on lists: for the
     small vectors of one step it is several times faster than NumPy calls, and each operation
     is the same IEEE double operation as the error analysis above assumes."""
     value, natjac = evals
-    bl, bh = lo.tolist(), hi.tolist()
+    bl = lo.tolist() if isinstance(lo, np.ndarray) else lo
+    bh = hi.tolist() if isinstance(hi, np.ndarray) else hi
     cl = [min(max(a, p), q) for a, p, q in zip(c.tolist(), bl, bh)]
     ul = u.tolist()
     gl, gh = value(cl[:nx], cl[:nx], ul, cl[nx:], cl[nx:])
     nl, nh, jl, jh = natjac(bl[:nx], bh[:nx], ul, bl[nx:], bh[nx:])
     n, m = len(cl), len(gl)
     delta = [max(q - a, a - p) * _UP for a, p, q in zip(cl, bl, bh)]
-    up_rem, up_sum, g3 = 1.0 + gamma(n + 1), 1.0 + gamma(2), gamma(3)
+    up_rem, up_sum, g3 = 1.0 + _gamma(n + 1), 1.0 + _gamma(2), _gamma(3)
     g0s, rhos = [0.0] * m, [0.0] * m
-    rows = [
-        [0.5 * p + 0.5 * q for p, q in zip(jl[i * n : i * n + n], jh[i * n : i * n + n])]
-        for i in range(m)
-    ]  # J̃ = mid [J], halves first: no overflow
-    D = [max(q - t, t - p) * _UP for p, q, t in zip(jl, jh, (t for r in rows for t in r))]
-    with np.errstate(invalid="ignore", over="ignore"):  # D Δ: one product, as BLAS sums it
+    mids = [0.5 * p + 0.5 * q for p, q in zip(jl, jh)]  # J̃ = mid [J], halves first: no overflow
+    rows = [mids[i * n : i * n + n] for i in range(m)]
+    D = [max(q - t, t - p) * _UP for p, q, t in zip(jl, jh, mids)]
+    # D Δ: one product, as BLAS sums it; NumPy's error state (3 µs) only where the terms could
+    # overflow or be NaN (ΣD Σ Δ bounds the nonnegative sums; a NaN fails the test)
+    if sum(D) * sum(delta) < 1e300:
         rems = ((np.array(D).reshape(m, n) @ np.array(delta)) * up_rem).tolist()
+    else:
+        with np.errstate(invalid="ignore", over="ignore"):
+            rems = ((np.array(D).reshape(m, n) @ np.array(delta)) * up_rem).tolist()
     curved: dict[tuple[bool, ...], list[int]] = {}  # rows to tighten, by sign pattern
     for i in range(m):
         Jl, Jh, Jt = jl[i * n : i * n + n], jh[i * n : i * n + n], rows[i]
@@ -110,8 +136,22 @@ def linearise(
         g0s[i], rhos[i] = g0, rho
     for key, members in curved.items():
         _monotone(value, key, bl, bh, ul, nx, members, nl, nh)
+    return LinearisationLists(g0s, np.array(rows).reshape(m, n), rhos, np.array(cl), nl, nh)
+
+
+def linearise(
+    evals: Evals,
+    lo: np.ndarray | list[float],
+    hi: np.ndarray | list[float],
+    c: np.ndarray,
+    u: np.ndarray,
+    nx: int,
+    natural: bool = True,
+) -> Linearisation:
+    """:func:`linearise_lists` with every vector as an array."""
+    out = linearise_lists(evals, lo, hi, c, u, nx, natural)
     a = np.array
-    return Linearisation(a(g0s), a(rows).reshape(m, n), a(rhos), a(cl), a(nl), a(nh))
+    return Linearisation(a(out.g0), out.J, a(out.rho), out.c, a(out.nat_lo), a(out.nat_hi))
 
 
 def _safe_radius(lo: float, hi: float, g3: float) -> tuple[float, float]:
@@ -174,7 +214,7 @@ def _centred(
         s_lo += a
         s_hi += b
         s_abs += max(-a, b)
-    err = gamma(len(c) + 3) * (abs(g0) + rho + s_abs)
+    err = _gamma(len(c) + 3) * (abs(g0) + rho + s_abs)
     low, high = g0 + s_lo - rho - err, g0 + s_hi + rho + err
     return max(nl, low), min(nh, high)  # a NaN bound (never here: finite rows) is ignored
 
@@ -196,17 +236,36 @@ def contract_back(
     the boxes explains ``y_k`` (an inconsistent measurement). When ``y_k`` does not pin down
     the states of step ``k`` but does those of step ``k - 1`` (Hénon with ``y = x2 = 0.3
     x1[k-1]``), this bounds the box over which ``f`` is then linearised."""
-    bl = lo.tolist() + wlo.tolist()
-    bh = hi.tolist() + whi.tolist()
+    out = contract_back_lists(
+        sys, lo.tolist(), hi.tolist(), u_prev, u, wlo.tolist(), whi.tolist(), y
+    )
+    if out is None:
+        return None
+    a = np.array
+    return a(out[0]), a(out[1]), a(out[2], dtype=float), a(out[3], dtype=float)
+
+
+def contract_back_lists(
+    sys: Any,
+    lo: list[float],
+    hi: list[float],
+    u_prev: np.ndarray,
+    u: np.ndarray,
+    wlo: list[float],
+    whi: list[float],
+    y: np.ndarray,
+) -> tuple[list[float], list[float], list[float], list[float]] | None:
+    """:func:`contract_back` on the boxes given as lists (new lists returned)."""
+    bl = lo + wlo
+    bh = hi + whi
     uu = u_prev.tolist() + u.tolist()
     pairs = [(c, float(v)) for c, v in zip(sys.hf_contractors(), y, strict=True) if v == v]
     for _ in range(2):
         for (fn, sites), yi in pairs:
             if not sys._call(fn, sites, bl, bh, uu, yi):
                 return None
-    n = lo.shape[0]
-    a = np.array
-    return a(bl[:n]), a(bh[:n]), a(bl[n:], dtype=float), a(bh[n:], dtype=float)
+    n = len(lo)
+    return bl[:n], bh[:n], bl[n:], bh[n:]
 
 
 class TermwiseMargin:

@@ -70,7 +70,8 @@ otherwise widen every bound by ``~7``; :class:`~ivobs.estimators._meanvalue.Term
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
@@ -82,19 +83,19 @@ from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from ..sets.czonotope import (
     UNIT_ROUNDOFF,
-    box_generators,
     gamma,
     reduce_generators,
     safe_radius,
 )
 from . import register
-from ._meanvalue import TermwiseMargin, contract_back, linearise
+from ._meanvalue import TermwiseMargin, contract_back_lists, linearise_lists
+from ._strip_hull import _add, propagate_lists, section_hull
 from .base import ROUNDING, Design, Estimator, check_size
 from .state import OnlineState, Step
-from .strip import _propagate_hyperplane, _section_hull
 
 __all__ = ["NonlinearZonotopeDesign", "NonlinearZonotopeEstimator", "NonlinearZonotopeState"]
 
+_any = np.logical_or.reduce
 _g = cache(gamma)  # γ_n of the few sizes of one model, looked up every step
 
 BOX_STRIP_RATIO = 0.9
@@ -129,15 +130,20 @@ class NonlinearZonotopeState(OnlineState):
     bounds = (("lo", "hi"),)
 
 
+_UP2 = 1.0 + 2.0 * UNIT_ROUNDOFF
+
+
 @dataclass
 class _Joint:
-    """``ζ = (x_k, w_k) ∈ <z, Hz> ⊕ box(acc)`` and ``ζ ∈ [lo, hi]`` during one step."""
+    """``ζ = (x_k, w_k) ∈ <z, Hz> ⊕ box(acc)`` and ``ζ ∈ [lo, hi]`` during one step (the box
+    as lists: it is worked on one scalar at a time, by the contractors and the linearisations).
+    The lists are replaced, never changed in place (a saved ``_Joint`` shares them)."""
 
     z: np.ndarray
     Hz: np.ndarray
     acc: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
+    lo: list[float]
+    hi: list[float]
 
     def strip(self, h: np.ndarray, t: float, sigma: float, nx: int) -> bool:
         """Intersect with ``|hᵀζ - t| <= σ`` (σ already holds the true ``ζ``): the F-radius
@@ -147,25 +153,26 @@ class _Joint:
         n = z.shape[0]
         ah = np.abs(h)
         s = h @ Hz
-        rs = np.abs(Hz).sum(axis=1)  # ‖Hz_j‖₁, for σ_z, the section hull and acc
+        rs = _add(np.abs(Hz), axis=1)  # ‖Hz_j‖₁, for σ_z, the section hull and acc
         e = float(t - h @ z)
         az = np.abs(z)
         sigma_z = (
             sigma + float(ah @ acc) + _g(n + 1) * (abs(t) + float(ah @ az)) + _g(n) * float(ah @ rs)
         ) * (1.0 + _g(n + 4))
-        s1 = float(np.abs(s).sum())
+        s1 = float(_add(np.abs(s)))
         if abs(e) > (s1 + sigma_z) * (1.0 + _g(s.size + 2)):
             return False
-        contracted = _propagate_hyperplane(h, t, self.lo, self.hi, sigma)
+        contracted = propagate_lists(h.tolist(), t, self.lo, self.hi, sigma)
         if contracted is None:
             return False
         lo, hi = contracted
-        lo_j, hi_j = _section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rs[:nx])
-        pad = acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
-        np.maximum(lo[:nx], lo_j - pad, out=lo[:nx])
-        np.minimum(hi[:nx], hi_j + pad, out=hi[:nx])
-        if (lo > hi).any():
-            return False
+        lo_j, hi_j = section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rs[:nx])
+        for j, a, p, q in zip(range(nx), acc.tolist(), lo_j.tolist(), hi_j.tolist()):
+            pad = a * _UP2
+            lo[j] = max(lo[j], p - pad)
+            hi[j] = min(hi[j], q + pad)
+            if lo[j] > hi[j]:
+                return False
         self.lo, self.hi = lo, hi
         den = float(s @ s) + sigma_z * sigma_z
         if s1 == 0.0 or not den > 0.0:
@@ -174,7 +181,9 @@ class _Joint:
         self.acc = acc + _g(3) * (az + rs + np.abs(lam) * (abs(e) + s1 + sigma_z))
         self.z = z + lam * e
         out = np.empty((n, s.shape[0] + 1))
-        np.subtract(Hz, np.outer(lam, s), out=out[:, :-1])
+        body = out[:, :-1]
+        np.multiply(lam[:, None], s, out=body)  # the outer product λ sᵀ
+        np.subtract(Hz, body, out=body)
         out[:, -1] = sigma_z * lam
         self.Hz = out
         return True
@@ -236,17 +245,26 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         cw, rw = safe_radius(sys.w_box.lo, sys.w_box.hi)
         self._cw, self._rw = cw, rw
         self._wcols = np.flatnonzero(rw > 0)
-        self._wrange, self._wvals = np.arange(self._wcols.size), rw[self._wcols]
+        self._wblock = np.diag(rw)[:, self._wcols]
+        self._zw = np.zeros(cw.shape[0])
+        self._wlo, self._whi = sys.w_box.lo.tolist(), sys.w_box.hi.tolist()
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
 
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearZonotopeState:
         assert self.x0 is not None
         p, r = safe_radius(self.x0.lo, self.x0.hi)
-        j = self._joint(p, np.diag(r)[:, r > 0], np.zeros(self.model.nx), self.x0.lo, self.x0.hi)
+        x0lo, x0hi = self.x0.lo.tolist(), self.x0.hi.tolist()
+        j = self._joint(p, np.diag(r)[:, r > 0], np.zeros(self.model.nx), x0lo, x0hi)
         nu = self.model.nu
         return NonlinearZonotopeState(
-            z=j.z, Hz=j.Hz, acc=j.acc, lo=j.lo, hi=j.hi, u=np.zeros(nu), back=False
+            z=j.z,
+            Hz=j.Hz,
+            acc=j.acc,
+            lo=np.array(j.lo),
+            hi=np.array(j.hi),
+            u=np.zeros(nu),
+            back=False,
         )
 
     def _step(
@@ -254,11 +272,13 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
     ) -> Step[NonlinearZonotopeState]:
         nx = self.model.nx
         inconsistent = False
+        yl = y_k.tolist()
+        lo, hi = state.lo.tolist(), state.hi.tolist()
         if state.back:
-            prev = _Joint(z=state.z, Hz=state.Hz, acc=state.acc, lo=state.lo, hi=state.hi)
-            wlo, whi = self.model.w_box.lo, self.model.w_box.hi
-            if self._hf and not np.all(np.isnan(y_k)):
-                back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
+            prev = _Joint(z=state.z, Hz=state.Hz, acc=state.acc, lo=lo, hi=hi)
+            wlo, whi = self._wlo, self._whi
+            if self._hf and not all(v != v for v in yl):
+                back = contract_back_lists(self.model, lo, hi, state.u, u_k, wlo, whi, y_k)
                 if back is None:
                     inconsistent = True
                 else:
@@ -266,61 +286,65 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
             p, H, e, plo, phi = self._predict(state.k, prev, state.u)
             joint = self._joint(p, H, e, plo, phi, wlo, whi)
         else:
-            joint = _Joint(z=state.z, Hz=state.Hz, acc=state.acc, lo=state.lo, hi=state.hi)
+            joint = _Joint(z=state.z, Hz=state.Hz, acc=state.acc, lo=lo, hi=hi)
         if self.design.box_strips and state.back:
-            self._box_strips(joint, plo, phi)
+            self._box_strips(joint, np.array(plo), np.array(phi))
         if not inconsistent:
             saved = _Joint(joint.z, joint.Hz, joint.acc, joint.lo, joint.hi)  # never mutated
-            inconsistent = not self._update(joint, u_k, y_k)
+            inconsistent = not self._update(joint, u_k, yl)
             if inconsistent:  # y_k contradicts the model: not used (the strips before undone)
                 joint = saved
-        joint.acc = joint.acc * (1.0 + _g(y_k.shape[0] + 4))  # rounding of acc's sums
-        lo, hi = joint.lo[:nx].copy(), joint.hi[:nx].copy()
-        new = replace(
-            state,
+        acc = joint.acc * (1.0 + _g(len(yl) + 4))  # rounding of acc's sums
+        Hz = joint.Hz if joint.Hz.flags.c_contiguous else np.ascontiguousarray(joint.Hz)
+        new = NonlinearZonotopeState(
+            k=state.k,
+            scale=state.scale,
+            inconsistent=state.inconsistent,
             z=joint.z,
-            Hz=np.ascontiguousarray(joint.Hz),
-            acc=joint.acc,
-            lo=joint.lo,
-            hi=joint.hi,
+            Hz=Hz,
+            acc=acc,
+            lo=np.array(joint.lo),
+            hi=np.array(joint.hi),
             u=u_k.copy(),
             back=True,
         )
-        return Step(new, lo, hi, inconsistent)
+        return Step(new, np.array(joint.lo[:nx]), np.array(joint.hi[:nx]), inconsistent)
 
     def _joint(
         self,
         p: np.ndarray,
         H: np.ndarray,
         e: np.ndarray,
-        xlo: np.ndarray,
-        xhi: np.ndarray,
-        wlo: np.ndarray | None = None,
-        whi: np.ndarray | None = None,
+        xlo: list[float],
+        xhi: list[float],
+        wlo: list[float] | None = None,
+        whi: list[float] | None = None,
     ) -> _Joint:
         """The joint zonotope of ``(x_k, w_k)`` from ``x_k ∈ <p, H> ⊕ box(e)``, ``x_k ∈ [xlo,
         xhi]`` and ``w_k ∈ [wlo, whi] ⊆ W`` (default ``W``), and its box (step (i) of the
         proof)."""
         nx = self.model.nx
-        cols = self._wcols
-        Hz = np.zeros((nx + self._cw.shape[0], H.shape[1] + cols.size))
-        Hz[:nx, : H.shape[1]] = H
-        Hz[nx + cols, H.shape[1] + self._wrange] = self._wvals
-        r0 = np.abs(H).sum(axis=1)
-        rad = r0 + _g(H.shape[1] + 2) * (np.abs(p) + r0) + e * (1.0 + _g(2))
-        lo, hi = np.maximum(xlo, p - rad), np.minimum(xhi, p + rad)
-        if (lo > hi).any():  # only by rounding (both hold the state): keep the hull
-            lo, hi = p - rad, p + rad
-        acc = np.zeros(Hz.shape[0])
-        acc[:nx] = e
-        wlo = self.model.w_box.lo if wlo is None else wlo
-        whi = self.model.w_box.hi if whi is None else whi
+        m = H.shape[1]
+        Hz = np.zeros((nx + self._cw.shape[0], m + self._wcols.size))
+        Hz[:nx, :m] = H
+        Hz[nx:, m:] = self._wblock  # diag(R_w) of the uncertain w (zero columns dropped)
+        g, g2 = _g(m + 2), 1.0 + _g(2)
+        r0 = _add(np.abs(H), axis=1).tolist()
+        hull_lo, hull_hi = [], []
+        for pi, ri, ei in zip(p.tolist(), r0, e.tolist()):
+            rad = ri + g * (abs(pi) + ri) + ei * g2
+            hull_lo.append(pi - rad)
+            hull_hi.append(pi + rad)
+        lo = [max(a, b) for a, b in zip(xlo, hull_lo)]
+        hi = [min(a, b) for a, b in zip(xhi, hull_hi)]
+        if any(a > b for a, b in zip(lo, hi)):  # only by rounding (both hold the state)
+            lo, hi = hull_lo, hull_hi  # keep the hull
         return _Joint(
             z=np.concatenate([p, self._cw]),
             Hz=Hz,
-            acc=acc,
-            lo=np.concatenate([lo, wlo]),
-            hi=np.concatenate([hi, whi]),
+            acc=np.concatenate([e, self._zw]),
+            lo=lo + (self._wlo if wlo is None else wlo),
+            hi=hi + (self._whi if whi is None else whi),
         )
 
     def _box_strips(self, joint: _Joint, lo: np.ndarray, hi: np.ndarray) -> None:
@@ -334,59 +358,75 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
             h[j] = 1.0
             joint.strip(h, float(m[j]), float(r[j]), nx)
 
-    def _update(self, joint: _Joint, u_k: np.ndarray, y_k: np.ndarray) -> bool:
+    def _update(self, joint: _Joint, u_k: np.ndarray, yl: list[float]) -> bool:
         """Strips of the linearised measured outputs (steps 2 and (iii)); False when ``y_k``
         certainly contradicts the model (the set is then predicted without the rest of it)."""
-        obs = np.flatnonzero(~np.isnan(y_k))
-        if obs.size == 0:
+        obs = [i for i, v in enumerate(yl) if v == v]
+        if not obs:
             return True
         nx = self.model.nx
         # the model's forward-backward contractor of h(x, u, w) = y on the box first: a
         # smaller box, a smaller remainder of the linearised h
-        vl, vh, yl = joint.lo.tolist(), joint.hi.tolist(), y_k.tolist()
+        vl, vh = list(joint.lo), list(joint.hi)
         if not self.model.contract_lists(vl, vh, u_k.tolist(), yl, yl):
             return False
-        joint.lo, joint.hi = np.array(vl), np.array(vh)
-        lin = linearise(self.model.evaluators("h"), joint.lo, joint.hi, joint.z, u_k, nx, False)
+        joint.lo, joint.hi = vl, vh
+        lin = linearise_lists(self.model.evaluators("h"), vl, vh, joint.z, u_k, nx, False)
         n = joint.z.shape[0]
-        mag = np.abs(lin.J) @ np.abs(lin.c)
-        for i in obs.tolist():
-            Ji, yi, h0 = lin.J[i], yl[i], float(lin.g0[i])
+        mag = (np.abs(lin.J) @ np.abs(lin.c)).tolist()
+        g0s, rhos = lin.g0, lin.rho
+        for i in obs:
+            Ji, yi, h0 = lin.J[i], yl[i], g0s[i]
             t = yi - h0 + float(Ji @ lin.c)
-            err = _g(n + 3) * (abs(yi) + abs(h0) + float(mag[i]))
+            err = _g(n + 3) * (abs(yi) + abs(h0) + mag[i])
             err += ROUNDING * (1.0 + abs(yi))  # the data margin of a float64 record
-            sigma = (float(lin.rho[i]) + err) * (1.0 + _g(2))
+            sigma = (rhos[i] + err) * (1.0 + _g(2))
             if not joint.strip(Ji, t, sigma, nx):
                 return False
         return True
 
     def _predict(
         self, k: int, joint: _Joint, u_k: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float], list[float]]:
         """``(p, H, e, lo, hi)`` of ``x[k+1]`` (steps 4-5 and (v)-(vi) of the proof)."""
         nx = self.model.nx
         z, Hz, acc = joint.z, joint.Hz, joint.acc
-        lin = linearise(self.model.evaluators("f"), joint.lo, joint.hi, z, u_k, nx)
+        lin = linearise_lists(self.model.evaluators("f"), joint.lo, joint.hi, z, u_k, nx)
         J, aJ = lin.J, np.abs(lin.J)
         d = z - lin.c
-        p = lin.g0 + J @ d
+        p = np.array(lin.g0) + J @ d
         JH = J @ Hz
         n = z.shape[0]
-        err = (
-            # + the data margin of a float64 simulation of f, relative to its terms over the
-            # set (TermwiseMargin)
-            (2.0 * _g(n + 3) + ROUNDING)
-            * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Hz).sum(axis=1)))
-            + (aJ @ acc) * (1.0 + _g(n + 1))
-            + lin.rho
-        ) * (1.0 + _g(4))
-        cols = JH.any(axis=0)  # drop zero columns (unknowns that f does not see)
-        H = np.hstack([JH if cols.all() else JH[:, cols], box_generators(err)])
-        self._check_overflow(k, p, H)
-        nlo, nhi = lin.nat_lo.copy(), lin.nat_hi.copy()
+        # + the data margin of a float64 simulation of f, relative to its terms over the set
+        # (TermwiseMargin); the products by |J| as arrays (as BLAS sums them), the rest on
+        # floats in the order of the expression
+        terms = (aJ @ (np.abs(d) + _add(np.abs(Hz), axis=1))).tolist()
+        accs = (aJ @ acc).tolist()
+        c1, c2, c3 = 2.0 * _g(n + 3) + ROUNDING, 1.0 + _g(n + 1), 1.0 + _g(4)
+        err = [
+            ((c1 * (1.0 + abs(g) + a) + b * c2) + r) * c3
+            for g, a, b, r in zip(lin.g0, terms, accs, lin.rho)
+        ]
+        cols = _any(JH, axis=0)  # drop zero columns (unknowns that f does not see)
+        if not cols.all():
+            JH = JH[:, cols]
+        # H = [JH, diag(err)] (the nonzero entries of err as columns): box_generators, in one
+        # array
+        m = JH.shape[1]
+        rows = [i for i, v in enumerate(err) if v > 0]
+        H = np.zeros((nx, m + len(rows)))
+        H[:, :m] = JH
+        if len(rows) == nx:  # the whole diagonal: H[i, m + i], a strided slice of H's buffer
+            H.ravel()[m :: m + nx + 1] = err
+        else:
+            H[rows, range(m, m + len(rows))] = [err[i] for i in rows]
+        # one sum is finite only if every term is (else the full check)
+        if not math.isfinite(float(_add(H, axis=None)) + sum(p.tolist())):
+            self._check_overflow(k, p, H)
+        nlo, nhi = lin.nat_lo, lin.nat_hi
         q = self.design.order
         if H.shape[1] <= q + q // 2:  # reduce in batches: a QR every few steps, not every step
-            return p, np.ascontiguousarray(H), np.zeros(nx), nlo, nhi
+            return p, H, np.zeros(nx), nlo, nhi
         none = np.zeros((0, H.shape[1]))
         out = reduce_generators(p, H, none, np.zeros(0), q, True)
         return out[0], np.ascontiguousarray(out[1]), out[4], nlo, nhi

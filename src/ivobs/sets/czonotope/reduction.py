@@ -8,9 +8,12 @@ step, go to a box ([Higham2002, Lemma 3.1] bounds).
 
 from __future__ import annotations
 
+import math
+from functools import cache
 from typing import Any
 
 import numpy as np
+from numpy.linalg import _umath_linalg  # the gufunc behind np.linalg.inv
 
 from ...linalg import UNIT_ROUNDOFF, gamma
 from ..zonotope import MAX_BASIS_CONDITION, reduce_girard
@@ -84,7 +87,8 @@ def reduce_generators(
     order = max(int(max_generators), N)
     if m <= order:
         return (c, G, A, b, np.zeros(N)) if residual else (c, G, A, b)
-    L = np.vstack([G, A])
+    # the same array as the vstack when there are no constraints (the nonlinear zonotope)
+    L = G if not A.shape[0] and G.flags.c_contiguous else np.vstack([G, A])
     d = _pow2_scaling(L)
     Ls = L * d[:, None] if d is not None else L
     L2 = _absorb_in_basis(Ls, order)
@@ -101,25 +105,41 @@ def reduce_generators(
 
 
 _TINY = float(np.finfo(float).tiny)
+_add = np.add.reduce  # ndarray.sum without its Python-level wrapper (the same reduction)
 
 
 def _pow2_scaling(L: np.ndarray) -> np.ndarray | None:
     """Powers of two ``d`` with ``max_j |d_i L_ij|`` in ``[1, 2)`` (zero rows: 1), or ``None``
     when scaling an entry would leave the normal range (then it would not be exact)."""
-    mx = np.abs(L).max(axis=1)
-    e = np.zeros(mx.shape[0])
-    nz = mx > 0
-    e[nz] = -np.frexp(mx[nz])[1] + 1
-    d = np.ldexp(1.0, e.astype(int))
-    Ls = L * d[:, None]
-    return d if _exactly_scaled(Ls, L) else None
+    aL = np.abs(L)
+    d = []
+    for v in aL.max(axis=1).tolist():
+        if not v < math.inf:  # an inf or a NaN
+            return None
+        e = 1 - math.frexp(v)[1] if v > 0 else 0
+        if e > 1023:  # a subnormal row: its scale overflows
+            return None
+        d.append(math.ldexp(1.0, e))
+    scale = np.array(d)
+    # no entry can overflow (the largest lands in [1, 2)); the smallest nonzero one of each
+    # row must stay normal (rounding is monotone: the smallest scaled entry is the scaled
+    # smallest one) — the same test as _exactly_scaled(L * d, L), without forming L * d
+    return scale if bool((_min_nonzero(aL) * scale >= _TINY).all()) else None
+
+
+def _min_nonzero(aM: np.ndarray) -> np.ndarray:
+    """The smallest nonzero entry of each row of ``aM >= 0`` (``inf`` for a zero row)."""
+    out: np.ndarray = np.where(aM > 0, aM, np.inf).min(axis=1)
+    return out
 
 
 def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
     """Whether ``S`` (``M`` scaled by powers of two) was computed exactly: every entry finite
     and normal or zero where ``M`` is zero."""
     aS = np.abs(S)
-    return bool(np.all(np.isfinite(S)) and np.all((aS >= _TINY) | ((aS == 0) & (M == 0))))
+    if not np.isfinite(aS.max(initial=0.0)):  # an inf or a NaN
+        return False
+    return bool(np.where(M != 0, aS, np.inf).min(initial=np.inf) >= _TINY)
 
 
 def _absorb_in_basis(
@@ -140,40 +160,75 @@ def _absorb_in_basis(
     ``P' = fl(P diag(t))`` is ``P (diag(t) + F)`` with ``|F diag(t)⁻¹| <= u |P⁻¹| |P|``,
     so ``t = z + μ / (1 - μ) ‖z‖∞``, ``z = s₀ + τ``, gives ``<0, P diag(s₀)> ⊕ box(ρ) ⊆
     <0, P'>`` (a Neumann-series bound on ``(I + F diag(t)⁻¹)⁻¹``)."""
-    from scipy.linalg.lapack import dgeqp3, dtrtrs  # imported here: SciPy is slow to import
-
     N, m = L.shape
     if m <= order:
         return L
+    dgeqp3, dtrtrs = _lapack()
     R, jpvt, _, _, info = dgeqp3(L)
     if info != 0 or m < N:
         return None
-    dg = np.abs(np.diag(R[:N, :N]))
-    if not dg[N - 1] * max_condition >= dg[0] > 0.0:
+    r_first, r_last = abs(float(R[0, 0])), abs(float(R[N - 1, N - 1]))
+    if not r_last * max_condition >= r_first > 0.0:
         return None
     piv = jpvt - 1
     basis, others = piv[:N], piv[N:]
     alpha, info = dtrtrs(R[:N, :N], R[:N, N:])
-    if info != 0 or not np.all(np.isfinite(alpha)):
+    if info != 0 or not np.isfinite(alpha).all():
         return None
-    srt = np.argsort(np.abs(alpha).sum(axis=0), kind="stable")
+    srt = _add(np.abs(alpha), axis=0).argsort(kind="stable")
     n_rm = m - order
     rm, kept = srt[:n_rm], others[srt[n_rm:]]
     P, a_rm, L_rm = L[:, basis], alpha[:, rm], L[:, others[rm]]
-    a1 = np.abs(a_rm).sum(axis=1)
+    a1 = _add(np.abs(a_rm), axis=1)
     up = 1.0 + gamma(n_rm + 3)
     rho = (
-        np.abs(L_rm - P @ a_rm).sum(axis=1)
-        + gamma(N + 2) * (np.abs(L_rm).sum(axis=1) + np.abs(P) @ a1)
+        _add(np.abs(L_rm - P @ a_rm), axis=1)
+        + gamma(N + 2) * (_add(np.abs(L_rm), axis=1) + np.abs(P) @ a1)
     ) * up
-    s0 = (1.0 + a1) * up
     absorbed = _box_in_basis(P, rho)
     if absorbed is None:
         return None
     tau, mu = absorbed
-    z = (s0 + tau) * (1.0 + gamma(2))
-    t = (z + mu / (1.0 - mu) * float(z.max())) * (1.0 + gamma(6))
-    return np.hstack([P * t, L[:, kept]])
+    up2, up6 = 1.0 + gamma(2), 1.0 + gamma(6)
+    t: Any
+    if N <= _FEW:  # the same operations on floats
+        zl = [((1.0 + a) * up + b) * up2 for a, b in zip(a1.tolist(), tau.tolist())]
+        c = mu / (1.0 - mu) * max(zl)
+        t = [(x + c) * up6 for x in zl]
+    else:
+        z = ((1.0 + a1) * up + tau) * up2
+        t = (z + mu / (1.0 - mu) * float(z.max())) * up6
+    # [P diag(t), L_kept], column-major as the hstack of the column selections it replaces
+    # (the layout decides the summation order of later reductions: same layout, same bits)
+    out = np.empty((N, order), order="F")
+    np.multiply(P, t, out=out[:, :N])
+    out[:, N:] = L[:, kept]
+    return out
+
+
+@cache
+def _lapack() -> tuple[Any, Any]:
+    """SciPy's ``dgeqp3`` and ``dtrtrs``, imported on first use (SciPy is slow to import) and
+    kept (an import statement in the loop costs as much as a small QR)."""
+    from scipy.linalg.lapack import dgeqp3, dtrtrs
+
+    return dgeqp3, dtrtrs
+
+
+@cache
+def _eye(n: int) -> np.ndarray:
+    """``np.eye(n)``, kept (read-only)."""
+    out = np.eye(n)
+    out.flags.writeable = False
+    return out
+
+
+def _inv(P: np.ndarray) -> np.ndarray:
+    """``np.linalg.inv`` without its checks and wrappers (the same LAPACK call, the same
+    numbers): a singular ``P`` gives NaNs instead of an exception."""
+    with np.errstate(all="ignore"):
+        out: np.ndarray = _umath_linalg.inv(P, signature="d->d")
+    return out
 
 
 def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -188,16 +243,16 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
     ``‖|P⁻¹| |P|‖∞ <= ‖|X| |P|‖∞ / (1 - θ)`` (Skeel's condition number, invariant to the scaling
     of the columns; Neumann-series bounds, as in verified linear algebra)."""
     n = P.shape[0]
-    try:
-        X = np.linalg.inv(P)
-    except np.linalg.LinAlgError:
-        return None
-    if not np.all(np.isfinite(X)):
+    X = _inv(P)
+    if not np.isfinite(X).all():  # singular (NaN) or overflowing
         return None
     aX = np.abs(X)
-    Rm = np.eye(n) - X @ P
+    if n <= _FEW:
+        return _box_in_basis_few(aX, X @ P, aX @ np.abs(P), rho)
+    eye = _eye(n)
+    Rm = eye - X @ P
     aXaP = aX @ np.abs(P)
-    row_sums = (np.abs(Rm) + gamma(n + 1) * (np.eye(n) + aXaP)).sum(axis=1)
+    row_sums = (np.abs(Rm) + gamma(n + 1) * (eye + aXaP)).sum(axis=1)
     theta = float(row_sums.max()) * (1.0 + gamma(n + 2))
     if not theta < 0.5:
         return None
@@ -210,6 +265,48 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
     v = (aX @ rho) * (1.0 + gamma(n + 1))
     tau: np.ndarray = (v + theta / (1.0 - theta) * float(v.max())) * (1.0 + gamma(4))
     return tau, mu
+
+
+_FEW = 4
+"""Up to this size the ``n``-vectors of :func:`_box_in_basis` are worked on floats (the same
+operations: row sums of fewer than 8 terms are summed in order by NumPy too)."""
+
+
+def _in_order(terms: list[float]) -> float:
+    """The sum from the first term to the last (as NumPy sums fewer than 8 terms; ``sum``
+    may compensate)."""
+    t = 0.0
+    for x in terms:
+        t += x
+    return t
+
+
+def _box_in_basis_few(
+    aX: np.ndarray, XP: np.ndarray, aXaP: np.ndarray, rho: np.ndarray
+) -> tuple[np.ndarray, float] | None:
+    """:func:`_box_in_basis` after its products (``|X|``, ``X P``, ``|X| |P|``), on floats."""
+    n = aX.shape[0]
+    g1 = gamma(n + 1)
+    rows = []
+    for i, (r, a) in enumerate(zip(XP.tolist(), aXaP.tolist())):
+        t = 0.0
+        for j, (rij, aij) in enumerate(zip(r, a)):
+            e = 1.0 if i == j else 0.0
+            t += abs(e - rij) + g1 * (e + aij)
+        rows.append(t)
+    theta = max(rows) * (1.0 + gamma(n + 2))
+    if not theta < 0.5:
+        return None
+    up = 1.0 + gamma(2 * n + 4)
+    skeel = max(_in_order(r) for r in aXaP.tolist()) * up  # >= ‖|X| |P|‖∞ (exact arithmetic)
+    nX = max(_in_order(r) for r in aX.tolist()) * up
+    mu = (UNIT_ROUNDOFF * skeel + nX * n * 2.0**-1074) / (1.0 - theta) * up
+    if not mu < 0.5:
+        return None
+    v = [x * (1.0 + g1) for x in (aX @ rho).tolist()]
+    c = theta / (1.0 - theta) * max(v)
+    up4 = 1.0 + gamma(4)
+    return np.array([(x + c) * up4 for x in v]), mu
 
 
 def reduce_consolidated(
