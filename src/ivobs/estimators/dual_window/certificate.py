@@ -45,6 +45,7 @@ rounded up once more. Positions before ``s`` are left out by zeroing their data.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -74,20 +75,20 @@ class Layout:
     nd: int
     N: int
 
-    @property
+    @cached_property
     def width(self) -> int:
         return self.ny + self.nu
 
-    @property
+    @cached_property
     def n_main(self) -> int:
         return (self.N + 1) * self.width
 
-    @property
+    @cached_property
     def n_total(self) -> int:
         """The length of the dot product of one bound (:func:`data_vector`)."""
         return self.n_main + 4 + 2 * self.nx + 2
 
-    @property
+    @cached_property
     def kappa(self) -> float:
         """``κ = 4 γ_{n+2}``: covers the rounding of the dot product (length ``n``)."""
         return 4.0 * gamma_n(self.n_total + 2)

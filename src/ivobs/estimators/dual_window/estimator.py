@@ -5,7 +5,7 @@ every step). The formulation is in the package docstring (:mod:`ivobs.estimators
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -16,6 +16,7 @@ from ...model import LinearSystem
 from ...sets import Box
 from .. import register
 from ..base import Design, Estimator, check_size
+from ..exact.highs import basis_array
 from ..state import OnlineState, Step
 from .certificate import (
     Coefficients,
@@ -36,9 +37,9 @@ class DualWindowDesign(Design):
     bound (``2 nx`` bounds); ``refresh``: steps between two solves of the window program once
     the window is full (more often while it fills)."""
 
-    window: int = 100
+    window: int = 50
     cache: int = 16
-    refresh: int = 100
+    refresh: int = 150
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,8 @@ class DualWindowState(OnlineState):
     multipliers of each bound (``+x_i`` then ``−x_i``; zeros: the open-loop bound, valid too);
     ``used`` (2 nx, cache): the step at which each gave the best bound (the least recently
     useful one is replaced); ``since``: steps since the last solve; ``basis``: the HiGHS basis
-    the next solve starts from (status codes; empty: a cold start)."""
+    the next solve starts from (status codes), written when the state is saved (while running
+    the estimator holds it; empty and unknown: a cold start)."""
 
     data: np.ndarray
     x_lo: np.ndarray
@@ -77,9 +79,10 @@ class DualWindow(Estimator):
     ----------
     sys : LinearSystem (discrete time, time-invariant, constant disturbance bounds)
     x0 : Box, the prior box on ``x[0]`` (required)
-    window : int ``N >= 1`` (default 100): the past steps whose data the bounds use
+    window : int ``N >= 1`` (default 50): the past steps whose data the bounds use
     cache : int >= 1 (default 16): multipliers kept per bound
-    refresh : int >= 1 (default 100): steps between two solves of the window program
+    refresh : int >= 1 (default 150): steps between two solves of the window program (more
+        often while the window fills: every ``k/2`` steps)
 
     Notes
     -----
@@ -105,9 +108,9 @@ class DualWindow(Estimator):
         sys: LinearSystem,
         x0: Box | None = None,
         *,
-        window: int = 100,
+        window: int = 50,
         cache: int = 16,
-        refresh: int = 100,
+        refresh: int = 150,
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
@@ -131,7 +134,7 @@ class DualWindow(Estimator):
         self._rows = np.arange(2 * nx)
         self.pred = Predictor(self.mats, self.d_lo, self.d_hi)
         self._lp: WindowLP | None = None
-        self.stats = [0, 0]
+        self._basis: tuple[np.ndarray, Any] | None = None  # (the state's mu, its HiGHS basis)
         self._coef: tuple[np.ndarray, Coefficients] | None = None
 
     # -- state ----------------------------------------------------------------------------
@@ -154,6 +157,14 @@ class DualWindow(Estimator):
             coef = coefficients(self.mats, self.d_lo, self.d_hi, self.c, flat, self.lay)
             self._coef = (mu, coef)
         return self._coef[1]
+
+    def save_state(self, st: Any) -> dict[str, Any]:
+        """The state with the HiGHS basis its next solve starts from (status codes), so that a
+        restored state continues with the same solves."""
+        if isinstance(st, DualWindowState) and not st.basis.size:
+            if self._basis is not None and self._basis[0] is st.mu and self._basis[1].valid:
+                st = replace(st, basis=basis_array(self._basis[1]))
+        return super().save_state(st)
 
     # -- one step -------------------------------------------------------------------------
     def _step(
@@ -182,7 +193,8 @@ class DualWindow(Estimator):
         s = max(lay.N - k, 0)
         prior = (x_lo[s], x_hi[s]) if s < lay.N else (p_lo, p_hi)
         mu, used, since, basis = state.mu, state.used, state.since + 1, state.basis
-        if since >= (self.design.refresh if s == 0 else min(self.design.refresh, (k + 1) // 2)):
+        due = since >= (self.design.refresh if s == 0 else min(self.design.refresh, (k + 1) // 2))
+        if due and not self._branching:  # a look-ahead (predict) uses the cache as it is
             mu, used, basis = self._refresh(state, data, y_rad, s, prior, (p_lo, p_hi), x_lo, x_hi)
             since = 0
         lo, hi, used = self._evaluate(mu, used, data, y_rad, s, prior, k, p_lo, p_hi)
@@ -271,23 +283,25 @@ class DualWindow(Estimator):
         centres = 0.5 * (x_lo + x_hi)
         centres[-1] = 0.5 * (pred[0] + pred[1])
         y, u = data[:, : lay.ny], data[:, lay.ny : lay.width]
-        new, ok, basis = self._lp.solve(y, u, y_rad > 0.0, s, prior, centres, state.basis)
-        if not ok.any():
-            return state.mu, state.used, basis
+        start = None
+        if self._basis is not None and self._basis[0] is state.mu:
+            start = self._basis[1]  # the basis this state's last solve ended on
+        elif state.basis.size:
+            start = self._lp.basis_of(state.basis)  # saved with a restored state
+        new, ok, basis = self._lp.solve(y, u, y_rad > 0.0, s, prior, centres, start)
         mu, used = state.mu.copy(), state.used.copy()
+        self._basis = (mu, basis)
         changed = []
         for r in np.flatnonzero(ok):
             scale = max(1.0, float(np.abs(new[r]).max()))
             same = np.abs(mu[r] - new[r]).reshape(mu.shape[1], -1).max(axis=1) <= 1e-9 * scale
             slot = int(np.argmax(same)) if same.any() else int(np.argmin(used[r]))
             used[r, slot] = state.k
-            self.stats[0] += 1
             if not same.any():
-                self.stats[1] += 1
                 mu[r, slot] = new[r]
                 changed.append(r * mu.shape[1] + slot)
         self._update_coefficients(state.mu, mu, changed)
-        return mu, used, basis
+        return mu, used, _NO_BASIS
 
     def _update_coefficients(self, old: np.ndarray, mu: np.ndarray, rows: list[int]) -> None:
         """The coefficients of ``mu`` from those of ``old`` (if kept) with ``rows`` redone."""
@@ -302,6 +316,9 @@ class DualWindow(Estimator):
             for whole, new in zip(coef, part, strict=True):
                 whole[rows] = new
         self._coef = (mu, coef)
+
+
+_NO_BASIS = np.zeros(0, dtype=np.int8)
 
 
 def _mag(lo: np.ndarray, hi: np.ndarray) -> float:

@@ -22,7 +22,7 @@ import highspy
 import numpy as np
 import scipy.sparse as sp
 
-from ..exact.highs import _new_highs, _unstubbed, basis_array, basis_of
+from ..exact.highs import _new_highs, _unstubbed, basis_of
 from .certificate import Layout
 
 __all__ = ["WindowLP"]
@@ -86,21 +86,22 @@ class WindowLP:
         s: int,
         prior: tuple[np.ndarray, np.ndarray],
         centres: np.ndarray,
-        basis: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        start: highspy.HighsBasis | None,
+    ) -> tuple[np.ndarray, np.ndarray, highspy.HighsBasis]:
         """Measurement multipliers for the ``2 nx`` objectives ``+x_N[i]`` then ``−x_N[i]``
         (rows of ``(2 nx, N+1, ny)``), whether each program was solved to optimality, and the
-        basis to start the next refresh from. ``y`` (N+1, ny) and ``u`` (N+1, nu): the window's
-        data from position ``s`` on (``replaced``: the measurement components that are missing
-        or dropped, free rows); ``prior``: the box of ``x_s``."""
+        basis to start the next refresh from (``start``: this one's; None: a cold start).
+        ``y`` (N+1, ny) and ``u`` (N+1, nu): the window's data from position ``s`` on
+        (``replaced``: the measurement components that are missing or dropped, free rows);
+        ``prior``: the box of ``x_s``."""
         lay, h = self.lay, self.h
         lo, hi, rlo, rhi = self._bounds(y, u, replaced, s, prior, centres)
         h.changeColsBounds(self.n_col, np.arange(self.n_col, dtype=np.int32), lo, hi)
         _unstubbed(h).changeRowsBounds(self.n_row, np.arange(self.n_row, dtype=np.int32),
                                        rlo, rhi)  # fmt: skip
         h.clearSolver()
-        if basis.size == self.n_col + self.n_row:
-            h.setBasis(basis_of(basis, self.n_col))
+        if start is not None:
+            h.setBasis(start)
         first = lay.N * (lay.nx + lay.nd)
         mu = np.zeros((2 * lay.nx, lay.N + 1, lay.ny))
         ok = np.zeros(2 * lay.nx, dtype=bool)
@@ -126,6 +127,11 @@ class WindowLP:
             ok[r] = True
         if last is not None:
             h.changeColCost(last, 0.0)
-        b = h.getBasis()
-        codes = basis_array(b) if b.valid else np.zeros(0, dtype=np.int8)
-        return mu, ok, codes
+        return mu, ok, h.getBasis()
+
+    def basis_of(self, codes: np.ndarray) -> highspy.HighsBasis | None:
+        """The basis saved as status codes (:func:`~ivobs.estimators.exact.highs.basis_array`);
+        None if they do not fit this program."""
+        if codes.size != self.n_col + self.n_row:
+            return None
+        return basis_of(codes, self.n_col)
