@@ -37,9 +37,9 @@ class DualWindowDesign(Design):
     bound (``2 nx`` bounds); ``refresh``: steps between two solves of the window program once
     the window is full (more often while it fills)."""
 
-    window: int = 50
+    window: int = 20
     cache: int = 16
-    refresh: int = 150
+    refresh: int = 60
 
 
 @dataclass(frozen=True)
@@ -79,10 +79,11 @@ class DualWindow(Estimator):
     ----------
     sys : LinearSystem (discrete time, time-invariant, constant disturbance bounds)
     x0 : Box, the prior box on ``x[0]`` (required)
-    window : int ``N >= 1`` (default 50): the past steps whose data the bounds use
+    window : int ``N >= 1`` (default 20): the past steps whose data the bounds use (besides
+        the box proven for ``x[k-N]``)
     cache : int >= 1 (default 16): multipliers kept per bound
-    refresh : int >= 1 (default 150): steps between two solves of the window program (more
-        often while the window fills: every ``k/2`` steps)
+    refresh : int >= 1 (default 60): steps between two solves of the window program (more
+        often while the window fills: every ``k/2`` steps); more often: tighter, slower
 
     Notes
     -----
@@ -108,9 +109,9 @@ class DualWindow(Estimator):
         sys: LinearSystem,
         x0: Box | None = None,
         *,
-        window: int = 50,
+        window: int = 20,
         cache: int = 16,
-        refresh: int = 150,
+        refresh: int = 60,
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
