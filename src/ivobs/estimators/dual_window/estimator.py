@@ -5,6 +5,7 @@ every step). The formulation is in the package docstring (:mod:`ivobs.estimators
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -135,7 +136,9 @@ class DualWindow(Estimator):
         self._rows = np.arange(2 * nx)
         self.pred = Predictor(self.mats, self.d_lo, self.d_hi)
         self._lp: WindowLP | None = None
-        self._basis: tuple[np.ndarray, Any] | None = None  # (the state's mu, its HiGHS basis)
+        # the HiGHS basis each state's next solve starts from, by its ``mu`` array (a solve
+        # makes a new one): a cache outside the states, written out when a state is saved
+        self._bases: dict[int, tuple[weakref.ref[np.ndarray], Any]] = {}
         self._coef: tuple[np.ndarray, Coefficients] | None = None
 
     # -- state ----------------------------------------------------------------------------
@@ -163,9 +166,25 @@ class DualWindow(Estimator):
         """The state with the HiGHS basis its next solve starts from (status codes), so that a
         restored state continues with the same solves."""
         if isinstance(st, DualWindowState) and not st.basis.size:
-            if self._basis is not None and self._basis[0] is st.mu and self._basis[1].valid:
-                st = replace(st, basis=basis_array(self._basis[1]))
+            basis = self._basis_of(st.mu)
+            if basis is not None and basis.valid:
+                st = replace(st, basis=basis_array(basis))
         return super().save_state(st)
+
+    def _basis_of(self, mu: np.ndarray) -> Any:
+        """The basis kept for the states holding ``mu`` (None if there is none)."""
+        entry = self._bases.get(id(mu))
+        return entry[1] if entry is not None and entry[0]() is mu else None
+
+    def _keep_basis(self, mu: np.ndarray, basis: Any) -> None:
+        """Keep ``basis`` for the states holding ``mu``, as long as ``mu`` lives."""
+        key, bases = id(mu), self._bases
+
+        def forget(ref: weakref.ref[np.ndarray]) -> None:
+            if key in bases and bases[key][0] is ref:
+                del bases[key]
+
+        bases[key] = (weakref.ref(mu, forget), basis)
 
     # -- one step -------------------------------------------------------------------------
     def _step(
@@ -284,14 +303,12 @@ class DualWindow(Estimator):
         centres = 0.5 * (x_lo + x_hi)
         centres[-1] = 0.5 * (pred[0] + pred[1])
         y, u = data[:, : lay.ny], data[:, lay.ny : lay.width]
-        start = None
-        if self._basis is not None and self._basis[0] is state.mu:
-            start = self._basis[1]  # the basis this state's last solve ended on
-        elif state.basis.size:
+        start = self._basis_of(state.mu)  # the basis this state's last solve ended on
+        if start is None and state.basis.size:
             start = self._lp.basis_of(state.basis)  # saved with a restored state
         new, ok, basis = self._lp.solve(y, u, y_rad > 0.0, s, prior, centres, start)
         mu, used = state.mu.copy(), state.used.copy()
-        self._basis = (mu, basis)
+        self._keep_basis(mu, basis)
         changed = []
         for r in np.flatnonzero(ok):
             scale = max(1.0, float(np.abs(new[r]).max()))
