@@ -21,25 +21,36 @@ box proven at step ``s``, ``d[j]`` in the model's box, ``|x[j]| <= w_j``) gives 
 window program. For a fixed ``μ`` every coefficient is fixed: the bound is one dot product with
 the window's data, which is what makes a cache of multipliers cheap to evaluate each step.
 
-The data of block ``j`` (a row of the window) and the coefficients of one ``μ`` are laid out as
+One multiplier's bound is a single dot product, ``ub = fl(G · z)`` rounded up once more
+(:func:`row_matrix`, :func:`data_vector`), of its row ``G`` with the step's vector ``z``:
 
 ::
 
-    data:  [ y_j,  u_j,  κ|y_j| + 2τ'_j,  |u_j|,             2τ_j,          2 w_j     ]
-    coef:  [ μ_j,  v̂_j,  |μ_j|,           κ|v̂_j| + 2 ev_j,   |q̂_{j+1}|,     ‖ρ̄_j‖_1  ]
+    z:  [ y_j, u_j (every block),  m_1, m_2, m_3, m_4,     lo_s,          hi_s,          ‖x_s‖, 1 ]
+    G:  [ μ_j, v̂_j,                n_1, n_2, n_3, n_4,     min(q̂_s, 0),   max(q̂_s, 0),   2γ‖q̂_s‖_1,
+          dcum_s + 2γ|dcum_s| ]
 
-(``ev_j``: the rounding bound of ``v̂_j``; ``τ_j`` the range of the dynamics row ``j → j+1``, 0
-for the newest block; ``w_j`` a bound on ``‖x[j]‖_∞``). The ``κ = 4 γ_n`` terms cover the
-rounding of the dot product itself (length ``n``), and the factors 2 the rounding of the error
-terms; the ``h_j`` terms (the model's box is constant) are summed once per ``μ`` into
-``dcum[p]`` (the blocks from position ``p`` on, rounded up). With the window starting at
-position ``s``, the upper bound is
+``min(q̂_s, 0)^T lo + max(q̂_s, 0)^T hi`` is the maximum of ``q̂_s^T x`` over the box of
+``x[s]``; ``dcum_s`` the sum over the blocks from ``s`` of ``max_d h_j^T d`` plus the rounding
+of ``h_j`` (the model's box is constant, so it is computed once per ``μ``, rounded up). The
+rounding terms are bounded by the 1-norms of the coefficients times the largest magnitudes of
+the data over the window (``Σ_j a_j b_j <= ‖a‖_1 max_j b_j`` for ``a, b >= 0``):
 
 ::
 
-    ub = fl(coef · data[s:] + max_{x ∈ box_s} q̂_s^T x + dcum[s]) + γ (|·| of the three terms)
+    n_1 = Σ|μ_j|                     m_1 = max_j (κ ‖y_j‖ + 2 max τ'_j)
+    n_2 = κ Σ|v̂_j| + 2 Σ ev_j        m_2 = max_j ‖u_j‖
+    n_3 = Σ|q̂_{j+1}|                 m_3 = max_j 2 max τ_j
+    n_4 = Σ ‖ρ̄_j‖_1                  m_4 = max_j 2 ‖x_j‖
 
-rounded up once more. Positions before ``s`` are left out by zeroing their data.
+(``ev_j`` the rounding bound of ``v̂_j``, ``τ_j`` the range of the dynamics row ``j → j+1``,
+``‖x_j‖`` that of the block's interval prediction). ``κ = 4 γ_n`` (``n`` the length of the
+dot product) covers the rounding of the signed terms ``μ_j^T y_j + v̂_j^T u_j``, the ``2γ`` terms
+that of the box and ``dcum`` terms, and the factors 2 the rounding of the error terms
+themselves. A window that starts at position ``s > 0`` (while it fills) zeroes the data before
+``s`` and uses ``q̂_s``, ``dcum_s``. A missing or dropped measurement component is replaced by
+the centre of a box ``mid ± rad`` that contains it (from the interval prediction), and
+``|μ|^T rad`` is added: every multiplier stays valid.
 """
 
 from __future__ import annotations
