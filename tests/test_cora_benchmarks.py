@@ -32,6 +32,7 @@ PEDESTRIAN_MISSES = {
     "strip": [217],
     "constrained-zonotope": [217],
     "exact": [217],
+    "dual-window": [217],
     "intersect": [217],
     "nl-interval": [217],  # the nonlinear filters take a linear system too (filter form, tight)
     "nl-zonotope": [217],

@@ -53,6 +53,7 @@ METHODS: dict[str, Entry] = {
     "ellipsoid": Entry("ellipsoid", "EllipsoidEstimator", 85),
     "constrained-zonotope": Entry("constrained_zonotope", "ConstrainedZonotopeEstimator", 90),
     "exact": Entry("exact.estimator", "Exact", 100),
+    "dual-window": Entry("dual_window.estimator", "DualWindow", 105),
     "intersect": Entry("intersect", "Intersect", 110),
     "nl-interval": Entry("nonlinear_interval", "NonlinearIntervalEstimator", 900),
     "nl-zonotope": Entry("nl_zonotope", "NonlinearZonotopeEstimator", 910),

@@ -1,0 +1,137 @@
+"""The window program solved by HiGHS, for the multipliers the cache keeps.
+
+The program over the blocks ``(x_p, d_p)`` of the window (positions ``p = 0..N``, the newest
+last): the measurement rows ``C x_p + F d_p = y_p − D u_p`` (first, so that their duals are the
+first ``ny (N+1)`` entries), then the dynamics rows ``x_{p+1} − A x_p − E d_p = B u_p``. The
+matrix is constant (a time-invariant system); only the right-hand sides and the bound of the
+first state change: ``x_s`` in the box proven at the window's start ``s``, the other ``x_p``
+free, ``d_p`` in the model's box; the rows before ``s`` are free. HiGHS sees the program shifted
+to the centres of the boxes (``z = m + z'``), so that its tolerances act at the scale of the
+widths, as in :mod:`ivobs.estimators.exact.highs`.
+
+The solver's answer is never used as a bound: its measurement duals ``μ`` go into the cache,
+and every bound is the certified evaluation of :mod:`.certificate`, valid for any ``μ``
+[Neumaier2004]. The ``2 nx`` programs of one refresh are solved one after the other, each
+warm-started from the previous optimum; the first starts from the basis saved in the state (so
+that a restored state continues with the same solves).
+"""
+
+from __future__ import annotations
+
+import highspy
+import numpy as np
+import scipy.sparse as sp
+
+from ..exact.highs import _new_highs, _unstubbed, basis_of
+from .certificate import Layout
+
+__all__ = ["WindowLP"]
+
+
+class WindowLP:
+    """The HiGHS model of the window program of a time-invariant system (module docstring)."""
+
+    def __init__(self, mats: tuple[np.ndarray, ...], d_lo: np.ndarray, d_hi: np.ndarray,
+                 lay: Layout):  # fmt: skip
+        self.mats, self.lay = mats, lay
+        self.d_lo, self.d_hi = d_lo, d_hi
+        A, _B, C, _D, E, F = mats
+        N, nx, nd, ny = lay.N, lay.nx, lay.nd, lay.ny
+        nb = nx + nd
+        blocks = N + 1
+        meas = sp.kron(sp.eye(blocks), sp.csr_matrix(np.hstack([C, F])))
+        prev = sp.csr_matrix(np.hstack([-A, -E]))
+        nxt = sp.csr_matrix(np.hstack([np.eye(nx), np.zeros((nx, nd))]))
+        dyn = sp.kron(sp.eye(N, blocks), prev) + sp.kron(sp.eye(N, blocks, k=1), nxt)
+        self.M = sp.vstack([meas, dyn]).tocsr()
+        self.M.eliminate_zeros()
+        self.n_col, self.n_row, self.n_meas = blocks * nb, self.M.shape[0], blocks * ny
+        self.h = _new_highs()
+        empty = np.zeros(0, np.int32)
+        inf = np.full(self.n_col, np.inf)
+        self.h.addCols(self.n_col, np.zeros(self.n_col), -inf, inf, 0, empty, empty, np.zeros(0))
+        rinf = np.full(self.n_row, np.inf)
+        self.h.addRows(self.n_row, -rinf, rinf, self.M.nnz, self.M.indptr.astype(np.int32),
+                       self.M.indices.astype(np.int32), self.M.data)  # fmt: skip
+
+    def _bounds(
+        self, y: np.ndarray, u: np.ndarray, replaced: np.ndarray, s: int,
+        prior: tuple[np.ndarray, np.ndarray], centres: np.ndarray,
+    ) -> tuple[np.ndarray, ...]:  # fmt: skip
+        """Column and row bounds of the shifted program."""
+        _A, B, _C, D, _E, _F = self.mats
+        lay = self.lay
+        N, nx, nd = lay.N, lay.nx, lay.nd
+        d_c = 0.5 * (self.d_lo + self.d_hi)
+        shift = np.hstack([centres, np.broadcast_to(d_c, (N + 1, nd))]).ravel()
+        lo = np.full((N + 1, nx + nd), -np.inf)
+        hi = np.full((N + 1, nx + nd), np.inf)
+        lo[:, nx:], hi[:, nx:] = self.d_lo, self.d_hi
+        lo[s, :nx], hi[s, :nx] = prior
+        lo, hi = lo.ravel() - shift, hi.ravel() - shift
+        rhs = np.concatenate([(y - u @ D.T).ravel(), (u[:-1] @ B.T).ravel()]) - self.M @ shift
+        free = np.zeros(self.n_row, dtype=bool)
+        free[: s * lay.ny] = True  # measurement rows before the start
+        free[: self.n_meas] |= replaced.ravel()  # and those of missing or dropped samples
+        free[self.n_meas : self.n_meas + s * nx] = True  # dynamics rows into the start
+        rlo = np.where(free, -np.inf, rhs)
+        rhi = np.where(free, np.inf, rhs)
+        return lo, hi, rlo, rhi
+
+    def solve(
+        self,
+        y: np.ndarray,
+        u: np.ndarray,
+        replaced: np.ndarray,
+        s: int,
+        prior: tuple[np.ndarray, np.ndarray],
+        centres: np.ndarray,
+        start: highspy.HighsBasis | None,
+    ) -> tuple[np.ndarray, np.ndarray, highspy.HighsBasis]:
+        """Measurement multipliers for the ``2 nx`` objectives ``+x_N[i]`` then ``−x_N[i]``
+        (rows of ``(2 nx, N+1, ny)``), whether each program was solved to optimality, and the
+        basis to start the next refresh from (``start``: this one's; None: a cold start).
+        ``y`` (N+1, ny) and ``u`` (N+1, nu): the window's data from position ``s`` on
+        (``replaced``: the measurement components that are missing or dropped, free rows);
+        ``prior``: the box of ``x_s``."""
+        lay, h = self.lay, self.h
+        lo, hi, rlo, rhi = self._bounds(y, u, replaced, s, prior, centres)
+        h.changeColsBounds(self.n_col, np.arange(self.n_col, dtype=np.int32), lo, hi)
+        _unstubbed(h).changeRowsBounds(self.n_row, np.arange(self.n_row, dtype=np.int32),
+                                       rlo, rhi)  # fmt: skip
+        h.clearSolver()
+        if start is not None:
+            h.setBasis(start)
+        first = lay.N * (lay.nx + lay.nd)
+        mu = np.zeros((2 * lay.nx, lay.N + 1, lay.ny))
+        ok = np.zeros(2 * lay.nx, dtype=bool)
+        last = None
+        for r in range(2 * lay.nx):
+            i, sense = r % lay.nx, (-1.0 if r < lay.nx else 1.0)  # min −x_i: upper bound of x_i
+            col = first + i
+            if last is not None:
+                h.changeColCost(last, 0.0)
+            h.changeColCost(col, sense)
+            last = col
+            h.setOptionValue("simplex_strategy", 1 if r == 0 else 4)
+            h.run()
+            if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
+                continue
+            sol = h.getSolution()
+            if not sol.dual_valid:
+                continue
+            # HiGHS: sense e_i − M^T λ = reduced costs; c = −sense e_i gives μ = −λ
+            lam = np.asarray(sol.row_dual[: self.n_meas])
+            mu[r] = (-lam).reshape(lay.N + 1, lay.ny)
+            mu[r, :s] = 0.0
+            ok[r] = True
+        if last is not None:
+            h.changeColCost(last, 0.0)
+        return mu, ok, h.getBasis()
+
+    def basis_of(self, codes: np.ndarray) -> highspy.HighsBasis | None:
+        """The basis saved as status codes (:func:`~ivobs.estimators.exact.highs.basis_array`);
+        None if they do not fit this program."""
+        if codes.size != self.n_col + self.n_row:
+            return None
+        return basis_of(codes, self.n_col)
