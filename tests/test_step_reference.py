@@ -1,9 +1,10 @@
 """Issue 17's lean ``step()`` of reachability, kkl, interval-transformed and fixed-time: every
-bound at every step equals (bit for bit on the recording machine, to 1e-9 elsewhere) the one recorded from the implementation before the
-fast steps were rewritten in Python floats (tests/data/step_reference_servo.npz, recorded on
-2026-11-27 with the code of main 8486d05, same machine and BLAS). The record has a clean
-stretch (the fast steps), missing samples and an inconsistent measurement (the general steps
-and the way back). The recorded boxes contain the true state."""
+bound at every step equals (bit for bit on the recording machine, to 1e-9 of the scale
+elsewhere) the one recorded from the implementation before the fast steps were rewritten in
+Python floats (tests/data/step_reference_servo.npz, recorded on 2026-11-27 with the code of
+main 8486d05). The record has a clean stretch (the fast steps), missing samples and an
+inconsistent measurement (the general steps and the way back). The recorded boxes contain the
+true state."""
 
 from __future__ import annotations
 

@@ -466,10 +466,9 @@ def test_interval_observers_refuse_intervals_too_wide_for_the_design(monkeypatch
     matrix in the box: |A0|∞ + |R_A|∞ <= 0.8) have ρ(G) 1.17 and 1.30 for interval-transformed's
     design; without the refusal its bounds grow like ρ(G)^k (seed 3 overflowed at step 4406)."""
     from exactsim import simulate_linear
-    from randsys import random_interval_linear
-
     from ivobs.estimators._uncertain import growth_radius
     from ivobs.estimators.interval import observers
+    from randsys import random_interval_linear
 
     for seed, accepted in [(3, False), (8, False), (0, True), (5, True)]:
         case = random_interval_linear(seed, 300, cooperative=False)

@@ -13,7 +13,11 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-from numpy.linalg import _umath_linalg  # the gufunc behind np.linalg.inv
+
+try:  # the gufunc behind np.linalg.inv (private to NumPy: present in 1.26 and 2.x)
+    from numpy.linalg import _umath_linalg as _gufuncs
+except ImportError:  # pragma: no cover - a NumPy without it: the public call
+    _gufuncs = None  # type: ignore[assignment]
 
 from ...linalg import UNIT_ROUNDOFF, gamma
 from ..zonotope import MAX_BASIS_CONDITION, reduce_girard
@@ -226,8 +230,13 @@ def _eye(n: int) -> np.ndarray:
 def _inv(P: np.ndarray) -> np.ndarray:
     """``np.linalg.inv`` without its checks and wrappers (the same LAPACK call, the same
     numbers): a singular ``P`` gives NaNs instead of an exception."""
+    if _gufuncs is None:  # pragma: no cover
+        try:
+            return np.linalg.inv(P)
+        except np.linalg.LinAlgError:
+            return np.full_like(P, np.nan)
     with np.errstate(all="ignore"):
-        out: np.ndarray = _umath_linalg.inv(P, signature="d->d")
+        out: np.ndarray = _gufuncs.inv(P, signature="d->d")
     return out
 
 
