@@ -5,6 +5,7 @@
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py --random N [steps] [methods]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py --linear N [steps] [methods]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py --servo STEPS [-] [methods]
+    (--linear and --servo with --nominal: the same systems with exact matrices)
 
 Default: for each scenario of :mod:`ivobs.scenarios.nonlinear` and each nonlinear method,
 ``steps`` steps (default 10^5) with the disturbances and the uncertain parameters switching
@@ -125,29 +126,44 @@ def random_cases(n: int, steps: int) -> list[tuple[str, Any, Any]]:
     return [case(s) for s in range(n)]
 
 
-def linear_cases(n: int, steps: int, servo_steps: int) -> list[tuple[str, Any, Any]]:
+def _nominal(c: Any) -> Any:
+    """``c`` with the nominal (exact) matrices of its interval-matrix system."""
+    s = c.system
+    sys_ = ivobs.LinearSystem(s.A, s.B, s.C, D=s.D, E=s.E, F=s.F, d=s.d)
+    return type(c)(sys_, c.x_true0, c.x0, c.u, c.text + " (nominal)")
+
+
+def linear_cases(
+    n: int, steps: int, servo_steps: int, nominal: bool = False
+) -> list[tuple[str, Any, Any]]:
+    """``nominal``: the exact-matrix systems (the servo motor's ``servo-motor``) instead."""
     import exactsim
     import randsys
+
+    def build(seed: int, coop: bool) -> Any:
+        c = randsys.random_interval_linear(seed, steps, cooperative=coop)
+        return _nominal(c) if nominal else c
 
     def case(seed: int) -> tuple[str, Any, Any]:
         def sim(c: Any) -> Any:
             return exactsim.simulate_linear(c.system, c.x_true0, steps, c.u, seed=seed)
 
         return (
-            f"random-lin {seed}",
-            lambda coop: randsys.random_interval_linear(seed, steps, cooperative=coop),
+            f"random-lin {seed}" + (" nominal" if nominal else ""),
+            lambda coop: build(seed, coop),
             sim,
         )
 
     def servo(coop: bool) -> Any:
-        sc = ivobs.scenarios.get("servo-uncertain")
+        sc = ivobs.scenarios.get("servo-motor" if nominal else "servo-uncertain")
         u = np.resize(sc.u, (servo_steps, sc.system.nu))
-        return randsys.Case(sc.system, sc.x_true0, sc.x0, u, "servo-uncertain")
+        return randsys.Case(sc.system, sc.x_true0, sc.x0, u, sc.name)
 
     def servo_sim(c: Any) -> Any:
         return exactsim.simulate_linear(c.system, c.x_true0, servo_steps, c.u, seed=3)
 
-    return [case(s) for s in range(n)] + [("servo-uncertain", servo, servo_sim)]
+    label = "servo-motor" if nominal else "servo-uncertain"
+    return [case(s) for s in range(n)] + [(label, servo, servo_sim)]
 
 
 def main() -> None:
@@ -159,17 +175,19 @@ def main() -> None:
     ap.add_argument("--random", type=int, metavar="N")
     ap.add_argument("--linear", type=int, metavar="N")
     ap.add_argument("--servo", type=int, metavar="STEPS")
+    ap.add_argument("--nominal", action="store_true", help="--linear/--servo: exact matrices")
     a = ap.parse_args()
     methods = a.methods.split(",") if a.methods else None
     if a.random or a.linear or a.servo:
         steps = a.steps or 10_000
         if a.random:
             run_cases(random_cases(a.random, steps), methods or METHODS, steps)
-        linear = linear_cases(a.linear or 0, steps, a.servo or 0)
+        linear = linear_cases(a.linear or 0, steps, a.servo or 0, a.nominal)
+        default = ivobs.methods() if a.nominal else _uncertain_methods()
         if a.linear:
-            run_cases(linear[:-1], methods or _uncertain_methods(), steps)
+            run_cases(linear[:-1], methods or default, steps)
         if a.servo:
-            run_cases(linear[-1:], methods or _uncertain_methods(), a.servo)
+            run_cases(linear[-1:], methods or default, a.servo)
         return
     for m in methods or METHODS:
         for s in a.scenarios.split(","):
