@@ -76,3 +76,23 @@ def test_lean_rounding_of_float_lists_equals_outward_and_leaves_the_edge_to_it()
     assert lean_outward([0.0, 0.0], [1.0, 1.0, 2.0], 0.0) is None
     assert lean_outward([np.nan, 0.0], [1.0, 1.0], 0.0) is None
     assert lean_outward(np.array([0.0, -np.inf]), np.array([1.0, 1.0]), 0.0) is None
+
+
+def test_lean_rounding_takes_float64_arrays_of_any_descriptor_object():
+    """numba returns float64 arrays whose dtype object is equal to, not the same as, NumPy's
+    canonical one: they take the lean path too (it once sent the compiled strip step to the
+    slow generic rounding, 16k instead of 28k steps/s), with the same numbers; a
+    byte-swapped array does not."""
+    import copy
+
+    from ivobs.estimators.rounding import lean_outward, outward
+
+    other = copy.deepcopy(np.dtype(np.float64))
+    assert other is not np.dtype(np.float64) and other == np.float64
+    lo, hi = np.array([-1.0, 0.5, 2.0]), np.array([1.0, 0.75, 3.0])
+    got = lean_outward(lo.view(other), hi.view(other), 1.5)
+    assert got is not None
+    ref = outward(lo.copy(), hi.copy(), 1.5)
+    assert got[0].tobytes() == ref[0].tobytes() and got[1].tobytes() == ref[1].tobytes()
+    swapped = lo.astype(">f8")
+    assert lean_outward(swapped, hi.astype(">f8"), 1.5) is None

@@ -79,8 +79,9 @@ def lean_outward(
     elif (
         type(lo) is np.ndarray
         and type(hi) is np.ndarray
-        and lo.dtype is _F64  # the canonical descriptor (any other: the full path)
-        and hi.dtype is _F64
+        # the canonical descriptor first (cheap); an equal one (numba's results) next
+        and (lo.dtype is _F64 or lo.dtype == _F64)
+        and (hi.dtype is _F64 or hi.dtype == _F64)
         and lo.ndim == 1
         and hi.ndim == 1
     ):
