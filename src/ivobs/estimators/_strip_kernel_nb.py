@@ -207,7 +207,18 @@ def _quantiles(
             ib = i
     p_lo = sv[ia - 1] if 0 < ia <= k else -np.inf
     p_hi = sv[ib + 1] if ib + 1 < k else np.inf
-    lt, i, gt = 0, 0, n  # [0, lt) < p_lo, [lt, gt) between, [gt, n) > p_hi
+    lt, gt, wl, wm = _partition(vb, vw, 0, n, p_lo, p_hi)
+    return _part(vb, vw, n, lt, gt, wl, wm, t1), _part(vb, vw, n, lt, gt, wl, wm, t2)
+
+
+@jit
+def _partition(
+    vb: Arr, vw: Arr, lo: int, hi: int, p_lo: float, p_hi: float
+) -> tuple[int, int, float, float]:
+    """Three-way partition of ``vb[lo:hi]`` (``vw`` moved alongside): ``[lo, lt)`` below
+    ``p_lo``, ``[lt, gt)`` in ``[p_lo, p_hi]``, ``[gt, hi)`` above ``p_hi``; returns ``lt``,
+    ``gt`` and the weights ``wl`` below and ``wm`` between."""
+    lt, i, gt = lo, lo, hi
     wl = wm = 0.0
     while i < gt:
         v = vb[i]
@@ -224,7 +235,7 @@ def _quantiles(
         else:
             wm += vw[i]
             i += 1
-    return _part(vb, vw, n, lt, gt, wl, wm, t1), _part(vb, vw, n, lt, gt, wl, wm, t2)
+    return lt, gt, wl, wm
 
 
 @jit
@@ -258,24 +269,7 @@ def _select(vb: Arr, vw: Arr, lo: int, hi: int, base: float, thr: float) -> floa
     while hi > lo:
         a, c, d = vb[lo], vb[(lo + hi) // 2], vb[hi - 1]
         piv = max(min(a, c), min(max(a, c), d))  # median of three
-        # three-way partition of the window: < piv, == piv, > piv
-        lt, i, gt = lo, lo, hi
-        wl = we = 0.0
-        while i < gt:
-            v = vb[i]
-            if v < piv:
-                wl += vw[i]
-                vb[i], vb[lt] = vb[lt], v
-                vw[i], vw[lt] = vw[lt], vw[i]
-                lt += 1
-                i += 1
-            elif v > piv:
-                gt -= 1
-                vb[i], vb[gt] = vb[gt], v
-                vw[i], vw[gt] = vw[gt], vw[i]
-            else:
-                we += vw[i]
-                i += 1
+        lt, gt, wl, we = _partition(vb, vw, lo, hi, piv, piv)  # < piv, == piv, > piv
         if base + wl >= thr:
             hi = lt
         elif base + wl + we >= thr:
