@@ -132,7 +132,6 @@ def chain_duals(
     of ``x_1 .. x_n`` in one chain, the maxima of ``x_n .. x_1`` in the other; neighbouring
     objectives have close optima, opposite ones do not). ``"infeasible"`` when HiGHS calls
     the set infeasible, ``"failed"`` on any other outcome."""
-    import highspy
 
     m = Gs.shape[1]
     mu = np.empty((Gs.shape[0], A.shape[0]))
@@ -143,17 +142,27 @@ def chain_duals(
         _pass(h, np.zeros(m), csc, A.shape, b, radius)
         for i in rows:
             h.changeColsCost(m, idx, np.ascontiguousarray(Gs[i]))
-            h.run()
-            status = h.getModelStatus()
-            if status == highspy.HighsModelStatus.kInfeasible:
-                return "infeasible"
-            sol = h.getSolution()
-            if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
-                return "failed"
-            mu[i] = sol.row_dual
+            duals = _solve(h)
+            if isinstance(duals, str):
+                return duals
+            mu[i] = duals
     if not np.all(np.isfinite(mu)):
         return "failed"
     return mu
+
+
+def _solve(h: Any) -> Any:
+    """Run the loaded program: its equality multipliers, or ``"infeasible"`` / ``"failed"``."""
+    import highspy
+
+    h.run()
+    status = h.getModelStatus()
+    if status == highspy.HighsModelStatus.kInfeasible:
+        return "infeasible"
+    sol = h.getSolution()
+    if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
+        return "failed"
+    return sol.row_dual
 
 
 def block_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray | str:
@@ -164,19 +173,14 @@ def block_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> 
     solve (~65 µs on the servo's 8 x 46, most of a warm-started solve) dominates, so one solve
     from scratch beats ``K`` warm-started ones; on large ones (tank30) the warm starts win
     (:data:`BLOCK_MAX`). Any multipliers give sound bounds; the optimal ones the LP's."""
-    import highspy
 
     K, nc = Gs.shape[0], A.shape[0]
     h = _solver(0)
     _pass(h, np.ascontiguousarray(Gs, dtype=float).ravel(), _csc(A), A.shape, b, radius, K)
-    h.run()
-    status = h.getModelStatus()
-    if status == highspy.HighsModelStatus.kInfeasible:
-        return "infeasible"
-    sol = h.getSolution()
-    if status != highspy.HighsModelStatus.kOptimal or not sol.dual_valid:
-        return "failed"
-    mu = np.asarray(sol.row_dual, dtype=float).reshape(K, nc)
+    duals = _solve(h)
+    if isinstance(duals, str):
+        return duals
+    mu = np.asarray(duals, dtype=float).reshape(K, nc)
     if not np.all(np.isfinite(mu)):
         return "failed"
     return mu
