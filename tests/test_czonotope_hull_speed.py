@@ -24,30 +24,10 @@ from scipy.optimize import linprog
 import ivobs
 from ivobs.sets.czonotope import _highs, elimination, hull
 from ivobs.sets.czonotope._tolerances import ROW_TOL
+from test_czonotope_fast import _random_set
+from test_nl_zonotope_fast import _henon
 
 REFERENCE = Path(__file__).parent / "data" / "czonotope_reference_bounds.npz"
-
-
-def _henon() -> ivobs.NonlinearSystem:
-    return ivobs.NonlinearSystem(
-        f=["1 - a*x1**2 + x2 + w1", "b*x1"],
-        h=["x1 + v1"],
-        states=["x1", "x2"],
-        params={"a": (1.39, 1.41), "b": 0.3},
-        d={"w1": (-0.005, 0.005), "v1": (-0.02, 0.02)},
-    )
-
-
-def _henon_record(T: int) -> np.ndarray:
-    """The measurements of benchmarks/bench_nonlinear_sets.py (seed 0)."""
-    rng = np.random.default_rng(0)
-    x = np.array([0.3, 0.1])
-    y = np.empty((T, 1))
-    for k in range(T):
-        a = rng.choice([1.39, 1.41])
-        y[k, 0] = x[0] + rng.choice([-0.02, 0.02])
-        x = np.array([1 - a * x[0] ** 2 + x[1] + rng.choice([-0.005, 0.005]), 0.3 * x[0]])
-    return y
 
 
 def _run(case: str) -> tuple[np.ndarray, np.ndarray]:
@@ -59,8 +39,9 @@ def _run(case: str) -> tuple[np.ndarray, np.ndarray]:
         assert np.all(res.contains(tr.x))
     elif case == "henon":
         x0 = ivobs.Box([0.2, 0.0], [0.4, 0.2])
-        est = ivobs.make_estimator("nl-constrained-zonotope", _henon(), x0=x0)
-        res = est.run(np.zeros((1000, 0)), _henon_record(1000))
+        henon, y = _henon()  # the first 1,000 of its 2,000 steps
+        est = ivobs.make_estimator("nl-constrained-zonotope", henon, x0=x0)
+        res = est.run(np.zeros((1000, 0)), y[:1000])
     else:
         sc = ivobs.scenarios.get("cora-tank30")
         tr = sc.recorded
@@ -82,18 +63,6 @@ def test_boxes_equal_the_previous_implementation(case: str) -> None:
     w, rw = hi - lo, rhi - rlo
     assert abs(w.mean() / rw.mean() - 1.0) <= 2e-3
     assert np.max(w / rw) <= 1.05
-
-
-def _random_set(
-    rng: np.random.Generator, n: int, m: int, nc: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    G = rng.normal(size=(n, m))
-    A = rng.normal(size=(nc, m))
-    A[rng.random(A.shape) < 0.3] = 0.0
-    xi = rng.uniform(-1.0, 1.0, m)
-    edge = rng.random(m) < 0.5
-    xi[edge] = np.where(xi[edge] >= 0, 1.0, -1.0)  # a point on the boundary
-    return rng.normal(size=n), G, A, A @ xi
 
 
 def _drop_zero_idx_reference(
