@@ -4,7 +4,12 @@ elsewhere) the one recorded from the implementation before the fast steps were r
 Python floats (tests/data/step_reference_servo.npz, recorded on 2026-11-27 with the code of
 main 8486d05). The record has a clean stretch (the fast steps), missing samples and an
 inconsistent measurement (the general steps and the way back). The recorded boxes contain the
-true state."""
+true state.
+
+kkl's entry was re-recorded on 2026-11-27 (evening) from its one-product step, whose recovery
+margin adds the rounding bound of that evaluation (``design.fused_margin``): its bounds differ
+from the earlier record (kept as ``kkl-unfused``) at rounding level only, which
+:func:`test_kkl_one_product_step_differs_from_the_earlier_record_at_rounding_level` checks."""
 
 from __future__ import annotations
 
@@ -96,3 +101,26 @@ def test_lean_rounding_takes_float64_arrays_of_any_descriptor_object():
     assert got[0].tobytes() == ref[0].tobytes() and got[1].tobytes() == ref[1].tobytes()
     swapped = lo.astype(">f8")
     assert lean_outward(swapped, hi.astype(">f8"), 1.5) is None
+
+
+def test_kkl_one_product_step_differs_from_the_earlier_record_at_rounding_level():
+    """The one-product kkl step (recovery and consistency test fused into the observer's
+    product) against the bounds recorded from the earlier six-product step: within 1e-12 of
+    the scale at every step (8.5e-15 measured), widths never narrower beyond the rounding of
+    the bounds (dropping the recovery margin ``ρ |P| a`` would narrow them by 1e-13 of the
+    scale at a typical step), and both contain the true state."""
+    sc, u, y, x = _record()
+    est = ivobs.make_estimator("kkl", sc.system, x0=sc.x0, on_inconsistent="ignore")
+    est.reset()
+    boxes = [est.step(u[k], y[k]) for k in range(T)]
+    got = np.stack([np.stack([b.lo for b in boxes]), np.stack([b.hi for b in boxes])])
+    before = np.load(REFERENCE)["kkl-unfused"]
+    k0 = est.valid_from
+    got, before = got[:, k0:], before[:, k0:]
+    scale = 1.0 + np.abs(before)
+    assert np.max(np.abs(got - before) / scale) < 1e-12
+    # the margin only grew (by γ̃ |P| a): a narrower width is the rounding of x_c ± x_r alone
+    narrower = (before[1] - before[0]) - (got[1] - got[0])
+    assert np.max(narrower / scale[1]) < 1e-14
+    for b in (got, before):
+        assert np.all(b[0] <= x[k0:]) and np.all(x[k0:] <= b[1])

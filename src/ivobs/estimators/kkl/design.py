@@ -30,7 +30,7 @@ from ...design.sylvester import (
     solve_transform,
 )
 from ...errors import DesignError, IvobsError
-from ...linalg import is_observable, observability_rank
+from ...linalg import gamma, is_observable, observability_rank
 from ...model import LinearSystem
 from ...sets import Box, image_bounds, neg, pos
 from ..base import Design
@@ -45,6 +45,7 @@ __all__ = [
     "design_ltv",
     "every",
     "finite",
+    "fused_margin",
     "image",
     "left_inverse",
     "observer_matrices",
@@ -257,7 +258,8 @@ class ObserverMatrices:
     the model ``(A, B, C, D, E, F)``, ``T`` with its left inverse ``P``, the known-input matrix
     ``L_u = T B - B_z D``, the disturbance matrix ``G = T E - B_z F`` of (5), the Lemma-1 bounds
     ``g = G [d̲, d̄]`` when the bounds of ``d`` are constant, the recovery margin
-    ``rec cond(T) |P|`` and, for observer (6), ``L = P B_z`` and ``A - L C``."""
+    ``ρ' |P|`` (:func:`fused_margin` of ``ρ = rec cond(T)``) and, for observer (6), ``L = P
+    B_z`` and ``A - L C``."""
 
     mats: tuple[np.ndarray, ...]
     tr: Transform
@@ -266,6 +268,16 @@ class ObserverMatrices:
     g_const: tuple[np.ndarray, np.ndarray] | None
     margin: np.ndarray
     Mx: np.ndarray | None
+
+
+def fused_margin(rho: float, nz: int) -> float:
+    """``ρ' = (ρ + γ̃_{5 n_z}) (1 + γ̃_{3 n_z + 4})``: the recovery margin ``ρ = rec cond(T)``
+    plus the rounding of the one-product step's evaluation of (3.c-d)
+    (:meth:`.discrete.ObserverZ._fused_step` derives it; ``γ̃``: :func:`~ivobs.linalg.gamma`
+    with unit ``ε = 2u``). The vectorised run uses the same margin, so the two agree to
+    rounding."""
+    eps = float(np.finfo(float).eps)
+    return (rho + gamma(5 * nz, eps)) * (1.0 + gamma(3 * nz + 4, eps))
 
 
 def observer_matrices(
@@ -288,7 +300,7 @@ def observer_matrices(
         Lu=design.T @ B - design.B_z @ D,
         G=G,
         g_const=g_const,
-        margin=rec * tr.cond * np.abs(tr.P),
+        margin=fused_margin(rec * tr.cond, design.n_z) * np.abs(tr.P),
         Mx=Mx,
     )
 

@@ -25,7 +25,9 @@ needed ([Dinh2024, Example 3]: ``valid_from = 2``). ``T0="sylvester"`` (the froz
 of (4)) uses ``x0`` by (15.c).
 
 What is guaranteed: exact (the recursions are linear); rounding is covered by the base margin and
-by the recovery margin ``16 (n_z + n_x) ε cond(T) |T⁺| |z|``.
+by the recovery margin ``ρ |T⁺| |z|``, ``ρ = 16 (n_z + n_x) ε cond(T)``; the one-product step of
+:class:`ObserverZ` (and the vectorised run) add the rounding bound of that evaluation
+(``ρ' = (ρ + γ̃_{5 n_z}) (1 + γ̃_{3 n_z + 4})``, derived in :meth:`ObserverZ._fused_step`).
 
 Data used: the box at ``k`` comes from ``z[k]``, which uses ``y[0..k-1]`` (prediction form, as in
 the paper); ``y[k]`` is used for the step to ``k+1`` and is checked against the box at ``k`` (an
@@ -175,40 +177,53 @@ class DiscreteLTI(DiscreteObserver[S]):
         return v, glo, ghi
 
 
+class Fused(NamedTuple):
+    """:meth:`ObserverZ._fused_step`'s matrix, the constant ``1`` of ``ξ``, ``n_z`` and where
+    ``x_c``, ``x_r``, ``e`` and ``e_r`` are in ``W ξ``."""
+
+    W: np.ndarray
+    one: np.ndarray
+    nz: int
+    xc: slice
+    xr: slice
+    e: slice
+    er: int
+
+
 class ObserverZ(DiscreteLTI[ZState]):
     """Observer (3) of [Dinh2024]: the bounds of ``z = T x``."""
 
     def __init__(self, setting: Setting, m: ObserverMatrices):
         super().__init__(setting, m)
         self._fused = self._fuse()
-        tr = m.tr  # recover()'s constants: P, |P| and the margin factor rec cond(T)
-        self._recovery = (tr.P, tr.absP, self.rec * tr.cond)
 
-    def _fuse(self) -> tuple[np.ndarray, ...] | None:
-        """The step of a complete ``y`` with constant bounds as one product: ``W [z̲; z̄; y;
-        u] + w = [z̲+; z̄+; D u + F d_c; z_c; z_r]`` ((3.a) and what (3.c-d) and the consistency
-        test need); None otherwise (the general step)."""
+    def _fuse(self) -> Fused | None:
+        """The matrix ``W`` of :meth:`_fused_step` (constant bounds of ``d``; None otherwise,
+        the general step): columns ``[z̲; z̄; y; u; a; 1]``, rows ``[z̲+; z̄+; x_c; x_r; e;
+        e_r]``."""
         m, d = self.m, self._dfix
         if m.g_const is None or d is None:
             return None
         _, _, C, D, _, F = m.mats
-        nz, ny, nu = self.design.n_z, C.shape[0], D.shape[1]
-        Az, Bz, I2 = self.design.A_z, self.design.B_z, 0.5 * np.eye(nz)
-        Zz, Zy, Zu = np.zeros((nz, nz)), np.zeros((nz, ny)), np.zeros((nz, nu))
+        nz, ny, nu, nx = self.design.n_z, C.shape[0], D.shape[1], C.shape[1]
+        Az, Bz = self.design.A_z, self.design.B_z
+        h, ah = 0.5 * m.tr.P, 0.5 * m.tr.absP  # (halving is exact)
+        M = m.margin  # ρ' |P|
+        absC, glo, ghi = np.abs(C), *m.g_const
+        Fdc, Fdr = F @ (0.5 * (d.lo + d.hi)), np.abs(F) @ (0.5 * (d.hi - d.lo))
+        zz, zx, zy = np.zeros((nz, nz)), np.zeros((nx, ny + nu)), np.zeros((ny, ny + nu))
         W = np.block(
             [
-                [Az, Zz, Bz, m.Lu],
-                [Zz, Az, Bz, m.Lu],
-                [np.zeros((ny, 2 * nz + ny)), D],
-                [I2, I2, Zy, Zu],
-                [-I2, I2, Zy, Zu],
+                [Az, zz, Bz, m.Lu, zz, glo[:, None]],
+                [zz, Az, Bz, m.Lu, zz, ghi[:, None]],
+                [h, h, zx, np.zeros((nx, nz + 1))],
+                [-ah, ah, zx, M, np.zeros((nx, 1))],
+                [-C @ h, -C @ h, np.eye(ny), -D, np.zeros((ny, nz)), -Fdc[:, None]],
+                [-absC @ ah, absC @ ah, zy, absC @ M, Fdr[:, None]],
             ]
         )
-        glo, ghi = m.g_const
-        Fdc = F @ (0.5 * (d.lo + d.hi))
-        w = np.concatenate([glo, ghi, Fdc, np.zeros(2 * nz)])
-        Fdr = np.abs(F) @ (0.5 * (d.hi - d.lo))
-        return W, w, Fdr.tolist(), C, np.abs(C)  # |F| d_r as floats: tested in floats
+        i, j, e = 2 * nz, 2 * nz + nx, 2 * nz + 2 * nx
+        return Fused(W, np.ones(1), nz, slice(i, j), slice(j, e), slice(e, e + ny), e + ny)
 
     def step(
         self, state: ZState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -221,30 +236,40 @@ class ObserverZ(DiscreteLTI[ZState]):
 
     def _fused_step(self, state: ZState, u_k: np.ndarray, y_k: np.ndarray) -> Step[ZState] | None:
         """:meth:`step` for ``k >= 1``, a complete ``y[k]`` inside its bounds and constant
-        bounds (:meth:`_fuse`): (3.c-d) as :meth:`recover`, the consistency test, (3.a), in a
-        few products; ``None`` (the general step) otherwise."""
-        W, w, Fdr, C, absC = self._fused  # type: ignore[misc]
-        nz, ny = state.zlo.shape[0], y_k.shape[0]
-        out = W.dot(np.concatenate((state.zlo, state.zhi, y_k, u_k)))
-        out += w
-        zc, zr = out[2 * nz + ny : 3 * nz + ny], out[3 * nz + ny :]
-        P, absP, rc = self._recovery
-        a = np.abs(zc)  # (3.c-d) with the recovery margin, as recover()
-        a += zr
-        xr = absP.dot(zr)
-        xr += rc * absP.dot(a)
-        xc = P.dot(zc)
-        # |y - C x_c - D u - F d_c| - (|C| x_r + |F| d_r), in floats (the same operations)
-        dev = zip(y_k.tolist(), C.dot(xc).tolist(), out.tolist()[2 * nz : 2 * nz + ny])
-        for (yv, cx, du), ax, f in zip(dev, absC.dot(xr).tolist(), Fdr):
-            if not abs(yv - cx - du) - ax - f <= 0.0:  # maybe inconsistent (or NaN): the
-                return None  # general step decides
-        new = evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz])
+        bounds of ``d``, in one product; ``None`` (the general step) otherwise.
+
+        With ``a = max(|z̲|, |z̄|)`` (exact; ``= |z_c| + z_r`` for ``z̲ <= z̄``) and ``ξ = [z̲;
+        z̄; y; u; a; 1]``, ``W ξ`` gives (3.a) ``z̲+ = A_z z̲ + B_z y + L_u u + g̲`` and ``z̄+``,
+        the recovery (3.c-d) ``x_c = (P/2) z̲ + (P/2) z̄``, ``x_r = (|P|/2) (z̄ - z̲) + ρ' |P|
+        a``, and the consistency test's ``e = y - C x_c - D u - F d_c`` and ``e_r = |C| x_r +
+        |F| d_r`` (``y`` is used when ``|e| <= e_r``). The box is ``[x_c - x_r, x_c + x_r]``.
+
+        Rounding of the recovery ([Higham2002, Lemma 3.1]; products by zero coefficients and
+        additions of exact zeros are exact, so a row of ``m`` nonzero coefficients errs by at
+        most ``γ_m`` times the sum of its terms' magnitudes, in any order of summation, with
+        or without FMA; ``(|z̲| + |z̄|)/2 <= a``): ``|x̂_c - x_c| <= γ_{2 n_z} |P| a`` and
+        ``x̂_r >= |P| z_r + (1 - γ_{3 n_z}) ρ' |P| a - γ_{3 n_z} |P| a``. So the computed box
+        holds ``P z_c ± (|P| z_r + ρ |P| a)``, the enclosure of :meth:`recover` with its
+        margin ``ρ = rec cond(T)`` (which covers ``P`` being only a computed left inverse)
+        intact, when ``ρ' = (ρ + γ̃_{5 n_z}) (1 + γ̃_{3 n_z + 4})`` (:func:`.fused_margin`;
+        ``γ̃`` with unit ``ε = 2u`` also absorbs the rounding of ``ρ'`` and of ``ρ' |P|``).
+        The rounding of ``x_c ± x_r`` and of the ``z`` recursion is covered by the base
+        margin, as in the general step. The test's rows only decide between this step and the
+        general one (which tests with its own tolerance), not the bounds."""
+        W, one, nz, sc, sr, se, er = self._fused  # type: ignore[misc]
+        zlo, zhi = state.zlo, state.zhi
+        a = np.abs(zlo)
+        np.maximum(a, np.abs(zhi), out=a)
+        out = W.dot(np.concatenate((zlo, zhi, y_k, u_k, a, one)))
+        v = out.tolist()
+        for e, r in zip(v[se], v[er:]):
+            if not abs(e) <= r:  # maybe inconsistent (or NaN): the general step decides
+                return None
         lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
-        for c, r in zip(xc.tolist(), xr.tolist()):
+        for c, r in zip(v[sc], v[sr]):
             lo.append(c - r)
             hi.append(c + r)
-        return Step(new, lo, hi, False)
+        return Step(evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz]), lo, hi, False)
 
     def initial_state(self) -> ZState:
         zlo, zhi = self.initial_z()  # (3.b)

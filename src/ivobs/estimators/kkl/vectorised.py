@@ -83,7 +83,7 @@ class VectorisedLTI:
             yc = y[..., 1:, :] - full
             fail = np.abs(full) > yr0[1:] + 1e-9 * (1.0 + np.abs(yc) + yr0[1:])
         del innov
-        # radius: data-free part + recovery margin |c| (16 (n_z + n_x) ε cond(T)) |T⁺|
+        # radius: data-free part + recovery margin |c| ρ' |T⁺| (design.fused_margin)
         if s_z is not None:
             zc += s_z
         np.abs(zc, out=zc)
