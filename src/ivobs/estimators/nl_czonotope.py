@@ -226,7 +226,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         )
         if state.back:
             wlo, whi = self.model.w_box.lo, self.model.w_box.hi
-            if self._hf and not np.all(np.isnan(y_k)):
+            if self._hf and not np.isnan(y_k).all():
                 back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
                 if back is None:
                     inconsistent = True
@@ -283,7 +283,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         r0 = np.abs(G).sum(axis=1)
         rad = r0 + gamma(m + 2) * (np.abs(c) + r0) + e * (1.0 + gamma(2))
         lo, hi = np.maximum(xlo, c - rad), np.minimum(xhi, c + rad)
-        if np.any(lo > hi):  # only by rounding (both hold the state): keep the hull
+        if (lo > hi).any():  # only by rounding (both hold the state): keep the hull
             lo, hi = c - rad, c + rad
         acc = np.concatenate([e, np.zeros(self._cw.shape[0])])
         wlo = self.model.w_box.lo if wlo is None else wlo
@@ -343,7 +343,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         hi = hi + e + INFLATE * (1.0 + np.abs(hi))
         new_lo = np.maximum(joint.lo[:nx], lo)
         new_hi = np.minimum(joint.hi[:nx], hi)
-        if np.all(new_lo <= new_hi):
+        if (new_lo <= new_hi).all():
             joint.lo[:nx], joint.hi[:nx] = new_lo, new_hi
         return not inconsistent
 

@@ -112,15 +112,15 @@ def _pass(
     nc, m = shape
     start, index, value = csc
     nnz = index.size
-    if K > 1:  # the copies by broadcasting (np.tile and a list of pieces cost more here)
+    if K > 1:  # np.tile and a list of shifted pieces cost more here
         offset = np.arange(K, dtype=np.int32)[:, None]
         block_start = np.empty(K * m + 1, dtype=np.int32)
         np.add(start[:-1], offset * nnz, out=block_start[:-1].reshape(K, m))
         block_start[-1] = K * nnz
         start = block_start
         index = (index + offset * nc).ravel()
-        value = np.broadcast_to(value, (K, nnz)).ravel()
-        b = np.broadcast_to(b, (K, nc)).ravel()
+        value = np.concatenate([value] * K)
+        b = np.concatenate([b] * K)
     n = K * m
     lower, upper = np.full(n, -radius), np.full(n, radius)
     integrality = np.zeros(n, dtype=np.int32)  # all continuous (HiGHS wants one per column)
@@ -155,7 +155,7 @@ def chain_duals(
             if isinstance(duals, str):
                 return duals
             mu[i] = duals
-    if not np.all(np.isfinite(mu)):
+    if not np.isfinite(mu).all():
         return "failed"
     return mu
 
@@ -190,6 +190,6 @@ def block_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> 
     if isinstance(duals, str):
         return duals
     mu = np.asarray(duals, dtype=float).reshape(K, nc)
-    if not np.all(np.isfinite(mu)):
+    if not np.isfinite(mu).all():
         return "failed"
     return mu

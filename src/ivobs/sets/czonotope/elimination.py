@@ -249,7 +249,7 @@ def _choose_factor(
     R = _overshoot(A, b)
     piv = np.argmax(np.abs(A), axis=0)
     cand = np.isfinite(R) & (np.abs(A[piv, np.arange(m)]) >= PIVOT_TOL)
-    if not np.any(cand):
+    if not cand.any():
         return None
     if cert is None:
         j = int(np.argmin(_shape(G, A, R, cand)))
@@ -318,7 +318,7 @@ def eliminate_constraints(
         if cert is not None:
             cert.scale_rows(s)
         rows = independent_constraints(A)
-        if not np.all(rows):  # implied constraints: dropping them keeps the set
+        if not rows.all():  # implied constraints: dropping them keeps the set
             A, b = A[rows], b[rows]
             if cert is not None:
                 cert.keep(rows, np.ones(A.shape[1], dtype=bool))
