@@ -357,9 +357,10 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         J = lin.J[obs]
         aJ = np.abs(J)
         n = joint.z.shape[0]
-        t = y_k[obs] - lin.g0[obs] + J @ lin.c
-        t_err = gamma(n + 3) * (np.abs(y_k[obs]) + np.abs(lin.g0[obs]) + aJ @ np.abs(lin.c))
-        t_err += ROUNDING * (1.0 + np.abs(y_k[obs]))  # the data margin of a float64 record
+        yo, go = y_k[obs], lin.g0[obs]
+        t = yo - go + J @ lin.c
+        t_err = gamma(n + 3) * (np.abs(yo) + np.abs(go) + aJ @ np.abs(lin.c))
+        t_err += ROUNDING * (1.0 + np.abs(yo))  # the data margin of a float64 record
         rhs = t - J @ joint.z
         coeff = J @ joint.Gz
         sigma = (

@@ -100,9 +100,9 @@ def _propagate(
         q_lo, q_hi = np.minimum(q1, q2, out=b0), np.maximum(q1, q2, out=q1)
         q_lo -= pad
         q_hi += pad
-        if any_zero:
-            q_lo[zero] = -np.inf
-            q_hi[zero] = np.inf
+        if any_zero:  # copyto: the masked assignment without its indexing machinery
+            np.copyto(q_lo, -np.inf, where=zero)
+            np.copyto(q_hi, np.inf, where=zero)
         new_lo = q_lo.max(axis=0, initial=-np.inf)
         new_hi = q_hi.min(axis=0, initial=np.inf)
         lo_next = np.maximum(lo, new_lo)

@@ -352,7 +352,7 @@ def hull_certificates(
     n = G.shape[0]
     P = np.zeros((0, G.shape[1])) if extra is None else extra
     k = P.shape[0]
-    Gs = np.vstack([G, -G, P, -P])
+    Gs = np.vstack([G, -G, P, -P] if k else [G, -G])
     chains = _hull_chains(n, k)
     vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains, block_max)
     radius = 1.0
@@ -368,9 +368,12 @@ def hull_certificates(
     lo = c + vals[:n]
     hi = c - vals[n : 2 * n]
     width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
-    p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
-    p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
-    weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
+    if k:
+        p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
+        p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
+        weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
+    else:  # the hull alone (the nonlinear filter): no rows of P
+        weight = np.concatenate([1.0 / width, 1.0 / width])
     cert = Certificates(Gs * radius, mu, weight)
     cert.radius = radius
     return lo, hi, cert
