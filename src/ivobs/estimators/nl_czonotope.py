@@ -280,12 +280,20 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         Gz[nx + cols, m + np.arange(cols.size)] = self._rw[cols]
         Az = np.zeros((A.shape[0], m + cols.size))  # [A 0]
         Az[:, :m] = A
-        r0 = np.abs(G).sum(axis=1)
-        rad = r0 + gamma(m + 2) * (np.abs(c) + r0) + e * (1.0 + gamma(2))
-        lo, hi = np.maximum(xlo, c - rad), np.minimum(xhi, c + rad)
-        if (lo > hi).any():  # only by rounding (both hold the state): keep the hull
-            lo, hi = c - rad, c + rad
-        acc = np.concatenate([e, np.zeros(self._cw.shape[0])])
+        # rad = r0 + γ_{m+2} (|c| + r0) + e (1 + γ_2), r0 = |G| 1: the same IEEE operations on
+        # floats (nx of them: cheaper than NumPy calls; max/min keep the first of equals too)
+        g_m, g_2 = gamma(m + 2), 1.0 + gamma(2)
+        lo, hi, lo_z, hi_z = [], [], [], []
+        for ci, ri, ei, a, q in zip(
+            c.tolist(), np.abs(G).sum(axis=1).tolist(), e.tolist(), xlo.tolist(), xhi.tolist()
+        ):
+            rad = ri + g_m * (abs(ci) + ri) + ei * g_2
+            lo_z.append(ci - rad)
+            hi_z.append(ci + rad)
+            lo.append(max(a, lo_z[-1]))
+            hi.append(min(q, hi_z[-1]))
+        if any(p > q for p, q in zip(lo, hi)):  # only by rounding (both hold the state): the hull
+            lo, hi = lo_z, hi_z
         wlo = self.model.w_box.lo if wlo is None else wlo
         whi = self.model.w_box.hi if whi is None else whi
         return _Joint(
@@ -293,7 +301,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             Gz,
             Az,
             b.copy(),
-            acc,
+            np.concatenate([e, np.zeros(self._cw.shape[0])]),
             np.concatenate([lo, wlo]),
             np.concatenate([hi, whi]),
         )
@@ -338,12 +346,16 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         lo, hi, cert = hull
         if cert.radius != 1.0:  # softened (see hull_certificates): keep the larger set
             joint.Gz, joint.A = joint.Gz * cert.radius, joint.A * cert.radius
-        e = joint.acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
-        lo = lo - e - INFLATE * (1.0 + np.abs(lo))
-        hi = hi + e + INFLATE * (1.0 + np.abs(hi))
-        new_lo = np.maximum(joint.lo[:nx], lo)
-        new_hi = np.minimum(joint.hi[:nx], hi)
-        if (new_lo <= new_hi).all():
+        # lo - e - INFLATE (1 + |lo|) etc. on floats (the same IEEE operations, nx of them)
+        up = 1.0 + 2.0 * UNIT_ROUNDOFF
+        new_lo, new_hi = [], []
+        for a, q, ea, l0, h0 in zip(
+            lo.tolist(), hi.tolist(), joint.acc[:nx].tolist(), joint.lo.tolist(), joint.hi.tolist()
+        ):
+            ei = ea * up
+            new_lo.append(max(l0, a - ei - INFLATE * (1.0 + abs(a))))
+            new_hi.append(min(h0, q + ei + INFLATE * (1.0 + abs(q))))
+        if all(p <= q for p, q in zip(new_lo, new_hi)):
             joint.lo[:nx], joint.hi[:nx] = new_lo, new_hi
         return not inconsistent
 
