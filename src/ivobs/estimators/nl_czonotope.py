@@ -50,23 +50,24 @@ class widens the returned bounds by ``ROUNDING (1 + |bound|)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .._validate import as_int
+from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from ..sets.czonotope import (
     UNIT_ROUNDOFF,
-    box_generators,
     eliminate_constraints,
     gamma,
     hull_certificates,
     reduce_consolidated,
     safe_radius,
 )
+from ..sets.czonotope._highs import BLOCK_SIZE
 from . import register
 from ._meanvalue import Linearisation, TermwiseMargin, contract_back, linearise
 from .base import ROUNDING, Design, Estimator, check_size
@@ -87,6 +88,10 @@ class NonlinearConstrainedZonotopeDesign(Design):
 
     max_constraints: int
     max_generators: int
+    block_max: int = 0
+    """Hull LPs solved as one block program when objectives times factors ``<= block_max``
+    (option ``hull_lp="block"``: :data:`~ivobs.sets.czonotope._highs.BLOCK_SIZE`), else as
+    warm-started chains (``hull_lp="chain"``: 0)."""
 
 
 @dataclass(frozen=True)
@@ -143,6 +148,13 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
     max_constraints, max_generators : int, optional
         Complexity kept between steps (defaults ``2 nx`` and ``16 nx``, as the linear
         ``constrained-zonotope`` method).
+    hull_lp : {"block", "chain"}, optional
+        How the ``2 nx`` hull LPs of a step are solved: ``"block"`` (default) as one program
+        (the ``2 nx`` copies side by side: HiGHS' fixed cost of a solve paid once; up to
+        ``K m <=`` :data:`~ivobs.sets.czonotope._highs.BLOCK_SIZE`, chains beyond), or
+        ``"chain"``: warm-started one after the other (the linear method's way). Both are
+        certified by their multipliers; on degenerate programs the optimal multipliers differ,
+        so the boxes differ slightly (Hénon, 1,000 steps: mean width within 0.01 %).
     """
 
     name = "nl-constrained-zonotope"
@@ -161,6 +173,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         *,
         max_constraints: int | None = None,
         max_generators: int | None = None,
+        hull_lp: str = "block",
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
@@ -172,7 +185,11 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         nc_def, ng_def = default_limits(sys.nx)
         nc = nc_def if max_constraints is None else as_int("max_constraints", max_constraints, 0)
         ng = ng_def if max_generators is None else as_int("max_generators", max_generators, 1)
-        self.design = NonlinearConstrainedZonotopeDesign(max_constraints=nc, max_generators=ng)
+        if hull_lp not in ("block", "chain"):
+            raise IvobsError(f"hull_lp: expected 'block' or 'chain', got {hull_lp!r}")
+        self.design = NonlinearConstrainedZonotopeDesign(
+            max_constraints=nc, max_generators=ng, block_max=BLOCK_SIZE if hull_lp == "block" else 0
+        )
         self._cw, self._rw = safe_radius(sys.w_box.lo, sys.w_box.hi)
         self._wcols = np.flatnonzero(self._rw > 0)
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
@@ -209,7 +226,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         )
         if state.back:
             wlo, whi = self.model.w_box.lo, self.model.w_box.hi
-            if self._hf and not np.all(np.isnan(y_k)):
+            if self._hf and not np.isnan(y_k).all():
                 back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
                 if back is None:
                     inconsistent = True
@@ -225,8 +242,10 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         else:
             self._update(joint, u_k, np.full_like(y_k, np.nan))
         lo, hi = joint.lo[:nx].copy(), joint.hi[:nx].copy()
-        new = replace(
-            state,
+        new = NonlinearConstrainedZonotopeState(  # not dataclasses.replace: 10x cheaper
+            k=state.k,
+            scale=state.scale,
+            inconsistent=state.inconsistent,
             z=joint.z,
             Gz=np.ascontiguousarray(joint.Gz),
             A=np.ascontiguousarray(joint.A),
@@ -259,13 +278,22 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         Gz = np.zeros((nx + self._cw.shape[0], m + cols.size))
         Gz[:nx, :m] = G
         Gz[nx + cols, m + np.arange(cols.size)] = self._rw[cols]
-        Az = np.hstack([A, np.zeros((A.shape[0], cols.size))])
-        r0 = np.abs(G).sum(axis=1)
-        rad = r0 + gamma(m + 2) * (np.abs(c) + r0) + e * (1.0 + gamma(2))
-        lo, hi = np.maximum(xlo, c - rad), np.minimum(xhi, c + rad)
-        if np.any(lo > hi):  # only by rounding (both hold the state): keep the hull
-            lo, hi = c - rad, c + rad
-        acc = np.concatenate([e, np.zeros(self._cw.shape[0])])
+        Az = np.zeros((A.shape[0], m + cols.size))  # [A 0]
+        Az[:, :m] = A
+        # rad = r0 + γ_{m+2} (|c| + r0) + e (1 + γ_2), r0 = |G| 1: the same IEEE operations on
+        # floats (nx of them: cheaper than NumPy calls; max/min keep the first of equals too)
+        g_m, g_2 = gamma(m + 2), 1.0 + gamma(2)
+        lo, hi, lo_z, hi_z = [], [], [], []
+        for ci, ri, ei, a, q in zip(
+            c.tolist(), np.abs(G).sum(axis=1).tolist(), e.tolist(), xlo.tolist(), xhi.tolist()
+        ):
+            rad = ri + g_m * (abs(ci) + ri) + ei * g_2
+            lo_z.append(ci - rad)
+            hi_z.append(ci + rad)
+            lo.append(max(a, lo_z[-1]))
+            hi.append(min(q, hi_z[-1]))
+        if any(p > q for p, q in zip(lo, hi)):  # only by rounding (both hold the state): the hull
+            lo, hi = lo_z, hi_z
         wlo = self.model.w_box.lo if wlo is None else wlo
         whi = self.model.w_box.hi if whi is None else whi
         return _Joint(
@@ -273,7 +301,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             Gz,
             Az,
             b.copy(),
-            acc,
+            np.concatenate([e, np.zeros(self._cw.shape[0])]),
             np.concatenate([lo, wlo]),
             np.concatenate([hi, whi]),
         )
@@ -295,29 +323,39 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
                 joint.lo, joint.hi = np.array(vl), np.array(vh)
                 rows, rhs = self._rows(joint, u_k, y_k, obs)
         if rows is not None and rhs is not None:
-            p = rows.shape[1] - joint.Gz.shape[1]
-            Gz = np.hstack([joint.Gz, np.zeros((joint.Gz.shape[0], p))])
-            A = np.vstack([np.hstack([joint.A, np.zeros((joint.A.shape[0], p))]), rows])
+            # [Gz 0] and [[A 0]; rows] filled in place (the same C-ordered arrays as the stacks)
+            nc, mg = joint.A.shape[0], joint.Gz.shape[1]
+            Gz = np.zeros((joint.Gz.shape[0], rows.shape[1]))
+            Gz[:, :mg] = joint.Gz
+            A = np.zeros((nc + rows.shape[0], rows.shape[1]))
+            A[:nc, :mg] = joint.A
+            A[nc:] = rows
             b = np.concatenate([joint.b, rhs])
-            hull = hull_certificates(joint.z[:nx], Gz[:nx], A, b)
+            hull = hull_certificates(joint.z[:nx], Gz[:nx], A, b, block_max=self.design.block_max)
             if hull is not None:
                 joint.Gz, joint.A, joint.b = Gz, A, b
             inconsistent = hull is None
         if inconsistent:
             joint.lo, joint.hi = lo0, hi0
         if rows is None or inconsistent:
-            hull = hull_certificates(joint.z[:nx], joint.Gz[:nx], joint.A, joint.b)
+            hull = hull_certificates(
+                joint.z[:nx], joint.Gz[:nx], joint.A, joint.b, block_max=self.design.block_max
+            )
         if hull is None:  # pragma: no cover - the predicted set is never certainly empty
             return not inconsistent
         lo, hi, cert = hull
         if cert.radius != 1.0:  # softened (see hull_certificates): keep the larger set
             joint.Gz, joint.A = joint.Gz * cert.radius, joint.A * cert.radius
-        e = joint.acc[:nx] * (1.0 + 2.0 * UNIT_ROUNDOFF)
-        lo = lo - e - INFLATE * (1.0 + np.abs(lo))
-        hi = hi + e + INFLATE * (1.0 + np.abs(hi))
-        new_lo = np.maximum(joint.lo[:nx], lo)
-        new_hi = np.minimum(joint.hi[:nx], hi)
-        if np.all(new_lo <= new_hi):
+        # lo - e - INFLATE (1 + |lo|) etc. on floats (the same IEEE operations, nx of them)
+        up = 1.0 + 2.0 * UNIT_ROUNDOFF
+        new_lo, new_hi = [], []
+        for a, q, ea, l0, h0 in zip(
+            lo.tolist(), hi.tolist(), joint.acc[:nx].tolist(), joint.lo.tolist(), joint.hi.tolist()
+        ):
+            ei = ea * up
+            new_lo.append(max(l0, a - ei - INFLATE * (1.0 + abs(a))))
+            new_hi.append(min(h0, q + ei + INFLATE * (1.0 + abs(q))))
+        if all(p <= q for p, q in zip(new_lo, new_hi)):
             joint.lo[:nx], joint.hi[:nx] = new_lo, new_hi
         return not inconsistent
 
@@ -331,9 +369,10 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         J = lin.J[obs]
         aJ = np.abs(J)
         n = joint.z.shape[0]
-        t = y_k[obs] - lin.g0[obs] + J @ lin.c
-        t_err = gamma(n + 3) * (np.abs(y_k[obs]) + np.abs(lin.g0[obs]) + aJ @ np.abs(lin.c))
-        t_err += ROUNDING * (1.0 + np.abs(y_k[obs]))  # the data margin of a float64 record
+        yo, go = y_k[obs], lin.g0[obs]
+        t = yo - go + J @ lin.c
+        t_err = gamma(n + 3) * (np.abs(yo) + np.abs(go) + aJ @ np.abs(lin.c))
+        t_err += ROUNDING * (1.0 + np.abs(yo))  # the data margin of a float64 record
         rhs = t - J @ joint.z
         coeff = J @ joint.Gz
         sigma = (
@@ -343,7 +382,10 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             + gamma(n + 1) * (np.abs(t) + aJ @ np.abs(joint.z))
             + gamma(n) * (aJ @ np.abs(joint.Gz)).sum(axis=1)
         ) * (1.0 + gamma(n + 6))
-        rows = np.hstack([coeff, np.diag(sigma)])
+        p, mg = coeff.shape
+        rows = np.zeros((p, mg + p))  # [coeff, diag(sigma)]
+        rows[:, :mg] = coeff
+        rows[np.arange(p), mg + np.arange(p)] = sigma
         scale = _pow2(np.maximum(np.abs(rows).max(axis=1), np.finfo(float).tiny))
         return rows / scale[:, None], rhs / scale
 
@@ -364,9 +406,15 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             + (aJ @ joint.acc) * (1.0 + gamma(n + 1))
             + lin.rho
         ) * (1.0 + gamma(4))
-        box = box_generators(err)
-        G = np.hstack([J @ Gz, box])
-        A = np.hstack([joint.A, np.zeros((joint.A.shape[0], box.shape[1]))])
+        # [J G_z, diag(err)] (nonzero radii only) and [A 0], filled in place (box_generators
+        # and two stacks cost more than the arithmetic here)
+        nz = np.flatnonzero(err > 0)
+        mg = Gz.shape[1]
+        G = np.zeros((err.shape[0], mg + nz.size))
+        G[:, :mg] = J @ Gz
+        G[nz, mg + np.arange(nz.size)] = err[nz]
+        A = np.zeros((joint.A.shape[0], mg + nz.size))
+        A[:, :mg] = joint.A
         self._check_overflow(k, c, G)
         return self._reduce(c, G, A, joint.b, lin)
 

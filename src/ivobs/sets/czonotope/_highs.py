@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BLOCK_MAX", "block_duals", "chain_duals"]
+__all__ = ["BLOCK_MAX", "BLOCK_SIZE", "block_duals", "chain_duals"]
 
 BLOCK_MAX = 0
 """Largest ``K m`` (objectives times factors) whose ``K`` programs :func:`~.hull.hull_certificates`
@@ -38,6 +38,12 @@ chain: on the degenerate programs of a thin set the block solve returns other op
 multipliers, which steer the elimination elsewhere (servo, 2,000 steps: mean width equal to
 5e-6, single boxes up to 4.9 % wider or narrower). On tank30 (120 programs of 81 x 552) the
 block solve is 7x slower than the chain (no warm start): hence a size limit."""
+
+BLOCK_SIZE = 2000
+"""The size limit ``K m`` of a caller that chooses the block program (``nl-constrained-zonotope``
+by default, whose boxes need not be those of the chain): up to it one solve from scratch beats
+``K`` warm-started ones (Hénon, K m ~ 150: 1.2x per step, BENCHMARKS.md "nl-constrained-zonotope
+speed (2026-11-27 evening)"); tank30's 66,240 is far beyond."""
 
 _LOCAL = threading.local()
 
@@ -106,12 +112,15 @@ def _pass(
     nc, m = shape
     start, index, value = csc
     nnz = index.size
-    if K > 1:
-        start = np.concatenate([start[:-1] + i * nnz for i in range(K)] + [[K * nnz]])
-        start = start.astype(np.int32)
-        index = (index + (np.arange(K, dtype=np.int32) * nc)[:, None]).ravel()
-        value = np.tile(value, K)
-        b = np.tile(b, K)
+    if K > 1:  # np.tile and a list of shifted pieces cost more here
+        offset = np.arange(K, dtype=np.int32)[:, None]
+        block_start = np.empty(K * m + 1, dtype=np.int32)
+        np.add(start[:-1], offset * nnz, out=block_start[:-1].reshape(K, m))
+        block_start[-1] = K * nnz
+        start = block_start
+        index = (index + offset * nc).ravel()
+        value = np.concatenate([value] * K)
+        b = np.concatenate([b] * K)
     n = K * m
     lower, upper = np.full(n, -radius), np.full(n, radius)
     integrality = np.zeros(n, dtype=np.int32)  # all continuous (HiGHS wants one per column)
@@ -146,7 +155,7 @@ def chain_duals(
             if isinstance(duals, str):
                 return duals
             mu[i] = duals
-    if not np.all(np.isfinite(mu)):
+    if not np.isfinite(mu).all():
         return "failed"
     return mu
 
@@ -181,6 +190,6 @@ def block_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> 
     if isinstance(duals, str):
         return duals
     mu = np.asarray(duals, dtype=float).reshape(K, nc)
-    if not np.all(np.isfinite(mu)):
+    if not np.isfinite(mu).all():
         return "failed"
     return mu

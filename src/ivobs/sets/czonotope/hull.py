@@ -166,11 +166,14 @@ def _certified_mins(
     b: np.ndarray,
     radius: float = 1.0,
     chains: list[list[int]] | None = None,
+    block_max: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
 
     The programs share their constraints and are solved by HiGHS as one chain of objectives,
-    each warm-started from the previous optimum (:func:`._highs.chain_duals`); should HiGHS
+    each warm-started from the previous optimum (:func:`._highs.chain_duals`), or, when
+    ``K m <= block_max`` (default :data:`._highs.BLOCK_MAX`), as one block program
+    (:func:`._highs.block_duals`: other optimal multipliers on degenerate programs); should HiGHS
     fail on one (or call the set infeasible), they are solved one by one with the fallbacks of
     :data:`_LP_ATTEMPTS` (degenerate, over-determined or ill-conditioned constraints can fool
     it). All of them, not only the failed one: on tank30 (where one program in ~120 fails)
@@ -183,7 +186,8 @@ def _certified_mins(
     # the module, not the package (which imports this one): no import cycle
     from ._highs import BLOCK_MAX, block_duals, chain_duals
 
-    if K * A.shape[1] <= BLOCK_MAX:  # small: one solve of the K programs side by side
+    limit = BLOCK_MAX if block_max is None else block_max
+    if K * A.shape[1] <= limit:  # small: one solve of the K programs side by side
         out = block_duals(Gs, A, b, radius)
     else:
         out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
@@ -321,6 +325,7 @@ def hull_certificates(
     A: np.ndarray,
     b: np.ndarray,
     extra: np.ndarray | None = None,
+    block_max: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
     """Certified interval hull of ``<c, G, A, b>`` and the certificates of its ``2 n`` bounds
     (weighted by the inverse width of each coordinate, so that losses are relative), or
@@ -338,29 +343,37 @@ def hull_certificates(
     found): a superset, so still sound. ``cert.radius`` is then ``ρ``: the certificates are
     those of ``<c, ρ G, ρ A, b>`` (the same set, with the factors rescaled to the unit box),
     which the caller should keep instead of the original.
+
+    ``block_max``: the programs are solved as one block program when ``K m`` (objectives times
+    factors) is at most this (:func:`._highs.block_duals`), else as warm-started chains;
+    default :data:`._highs.BLOCK_MAX` (0: always chains). Either way every bound is certified
+    by its multipliers; only which optimal multipliers a degenerate program gets differs.
     """
     n = G.shape[0]
     P = np.zeros((0, G.shape[1])) if extra is None else extra
     k = P.shape[0]
-    Gs = np.vstack([G, -G, P, -P])
+    Gs = np.vstack([G, -G, P, -P] if k else [G, -G])
     chains = _hull_chains(n, k)
-    vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains)
+    vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains, block_max)
     radius = 1.0
     if not ok:
         r, r_low = radius_certificate(A, b)
         if r_low > 1.0 + EMPTY_TOL:
             return None
         radius = (max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)
-        vals, mu, ok = _certified_mins(Gs, A, b, radius, chains)
+        vals, mu, ok = _certified_mins(Gs, A, b, radius, chains, block_max)
         if not ok:  # HiGHS contradicting itself: the bound of the zonotope (any μ is valid)
             mu = np.zeros_like(mu)
             vals = _dual_bounds(Gs, A, b, mu, radius)
     lo = c + vals[:n]
     hi = c - vals[n : 2 * n]
     width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
-    p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
-    p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
-    weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
+    if k:
+        p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
+        p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
+        weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
+    else:  # the hull alone (the nonlinear filter): no rows of P
+        weight = np.concatenate([1.0 / width, 1.0 / width])
     cert = Certificates(Gs * radius, mu, weight)
     cert.radius = radius
     return lo, hi, cert

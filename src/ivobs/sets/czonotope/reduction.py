@@ -38,9 +38,9 @@ def consolidate_small(
     n, m = G.shape
     if m == 0:
         return c, G, A, b
-    small = np.all(np.abs(G) <= tol_x, axis=0)
+    small = (np.abs(G) <= tol_x).all(axis=0)
     if A.shape[0]:
-        small &= np.all(np.abs(A) <= tol_c, axis=0)
+        small &= (np.abs(A) <= tol_c).all(axis=0)
     k = int(small.sum())
     if k <= 1:
         return c, G, A, b
