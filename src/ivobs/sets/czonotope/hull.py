@@ -181,7 +181,7 @@ def _certified_mins(
     if nc == 0 or K == 0:
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
     # the module, not the package (which imports this one): no import cycle
-    from ._highs import BLOCK_MAX, block_duals, chain_duals
+    from ._highs import BLOCK_MAX, block_duals, chain_duals, linprog_duals
 
     if K * A.shape[1] <= BLOCK_MAX:  # small: one solve of the K programs side by side
         out = block_duals(Gs, A, b, radius)
@@ -189,9 +189,15 @@ def _certified_mins(
         out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
     if isinstance(out, np.ndarray):
         return _dual_bounds(Gs, A, b, out, radius), out, True
+    # linprog's first attempt, its HiGHS called directly (the same multipliers, less work)
+    first = linprog_duals(Gs, A, b, radius)
     mu = np.zeros((K, nc))
     vals = np.empty(K)
     for i in range(K):
+        if first is not None and np.all(np.isfinite(first[i])):
+            mu[i] = first[i]
+            vals[i] = _dual_bounds(Gs[i][None, :], A, b, mu[i][None, :], radius)[0]
+            continue
         vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
         if not ok:
             return np.full(K, np.nan), np.zeros((K, nc)), False
