@@ -48,3 +48,26 @@ def test_fallback_bounds_equal_the_linprog_fallback(monkeypatch: pytest.MonkeyPa
         res = linprog(g, A_eq=A, b_eq=b, bounds=(-1, 1), method="highs")
         assert vals[i] <= res.fun
         assert vals[i] >= res.fun - 1e-7 * (1.0 + abs(res.fun))
+
+
+@pytest.mark.parametrize(
+    ("K", "c", "m"),
+    [(3, 2, 1), (7, 5, 3), (12, 24, 50), (9, 4, 129), (5, 3, 257), (120, 24, 552), (4, 2, 1000)],
+)
+def test_compiled_loss_equals_numpy_bit_for_bit(
+    K: int, c: int, m: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The compiled ``‖R_k - T_kc P_c‖₁`` (numba) equals NumPy's, bit for bit, on every row
+    length class of NumPy's pairwise sum (below 8, up to 128, split once, twice)."""
+    pytest.importorskip("numba")
+    rng = np.random.default_rng(m)
+    R, T, P = rng.normal(size=(K, m)), rng.normal(size=(K, c)), rng.normal(size=(c, m))
+    R[0, : m // 2] *= 1e8  # terms of very different sizes: the order of the sum shows
+    monkeypatch.setattr(hull, "_KERNEL", False)  # looked up afresh
+    assert hull._kernel() is not None
+    compiled = hull._shifted_l1(R, T, P)
+    monkeypatch.setattr(hull, "_KERNEL", None)  # the NumPy path
+    ref = hull._shifted_l1(R, T, P)
+    assert hull._kernel() is None
+    assert np.array_equal(compiled, ref)
+    assert np.allclose(ref, np.abs(R[:, None, :] - T[:, :, None] * P[None, :, :]).sum(axis=2))
