@@ -5,6 +5,9 @@ the multipliers steer (through the elimination) stay the same."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy.optimize import linprog
@@ -64,6 +67,7 @@ def test_compiled_loss_equals_numpy_bit_for_bit(
     R, T, P = rng.normal(size=(K, m)), rng.normal(size=(K, c)), rng.normal(size=(c, m))
     R[0, : m // 2] *= 1e8  # terms of very different sizes: the order of the sum shows
     monkeypatch.setattr(hull, "_KERNEL", False)  # looked up afresh
+    monkeypatch.setattr(hull, "_KERNEL_MIN", 0)  # the small cases too
     assert hull._kernel() is not None
     compiled = hull._shifted_l1(R, T, P)
     monkeypatch.setattr(hull, "_KERNEL", None)  # the NumPy path
@@ -71,3 +75,19 @@ def test_compiled_loss_equals_numpy_bit_for_bit(
     assert hull._kernel() is None
     assert np.array_equal(compiled, ref)
     assert np.allclose(ref, np.abs(R[:, None, :] - T[:, :, None] * P[None, :, :]).sum(axis=2))
+
+
+def test_small_sets_do_not_load_numba() -> None:
+    """The servo's eliminations (12 objectives x 50 factors) stay in NumPy: a short run does
+    not pay numba's import and the kernel's load (~0.5 s of CPU once per process)."""
+    code = (
+        "import sys, ivobs\n"
+        "sc = ivobs.scenarios.get('servo-motor', horizon=30)\n"
+        "tr = sc.simulate('vertex', seed=0)\n"
+        "est = ivobs.make_estimator('constrained-zonotope', sc.system, x0=sc.x0)\n"
+        "res = est.run(tr.u, tr.y)\n"
+        "assert res.contains(tr.x).all()\n"
+        "print('numba' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

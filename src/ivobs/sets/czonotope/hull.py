@@ -315,6 +315,10 @@ def _kernel() -> Any:
 
 
 _KERNEL: Any = False  # not looked up yet
+_KERNEL_MIN = 1 << 16
+"""``K c m`` from which :func:`_shifted_l1` uses the compiled kernel: below it (the servo's 12 x
+24 x 50) NumPy takes tens of µs and importing numba and loading the kernel (~0.5 s of CPU
+once per process) would not pay."""
 
 
 def _shifted_l1(R: np.ndarray, T: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -322,7 +326,8 @@ def _shifted_l1(R: np.ndarray, T: np.ndarray, P: np.ndarray) -> np.ndarray:
     candidates whose temporaries fit in cache (the same sums, term for term); with numba,
     the same numbers in one compiled pass (:mod:`._loss_nb`; 2x faster on tank30)."""
     K, m = R.shape
-    if m <= 8192:  # (NumPy may sum longer rows in chunks: another order)
+    # (NumPy may sum rows longer than 8192 in chunks: another order)
+    if K * T.shape[1] * m >= _KERNEL_MIN and m <= 8192:
         kernel = _kernel()
         if kernel is not None:
             f = np.float64
