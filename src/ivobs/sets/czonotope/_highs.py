@@ -192,38 +192,40 @@ def linprog_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -
     bounds=(-radius, radius), method="highs")`` solves it, bit for bit (the same HiGHS, the
     same options, the same model, a fresh solver object per program), without linprog's
     per-call work (input checks, a sparse matrix and option validation per call, the bound
-    marginals built in a Python loop): 30 % less time on tank30's fallbacks (81 x 552, 120
-    programs: 5.8-9.1 ms -> 3.9-6.7 ms per program). A row of NaN where HiGHS does not
+    marginals built in a Python loop): ~40 % less time on tank30's fallbacks (81 x 552, 120
+    programs: 6.3-9.2 ms -> 3.4-5.8 ms per program). A row of NaN where HiGHS does not
     report an optimum (the caller then runs linprog's further attempts). ``None`` when SciPy's
-    bundled HiGHS is not where SciPy 1.15+ keeps it."""
+    bundled HiGHS is not where (or not what) SciPy 1.15+ keeps: the caller then uses linprog."""
     try:
         import scipy.optimize._highspy._core as core  # SciPy's own HiGHS build (private)
         from scipy.sparse import csc_array
-    except ImportError:  # pragma: no cover - another SciPy layout: linprog itself
+
+        options = core.HighsOptions()  # linprog's: presolve on, dual simplex, silent
+        options.presolve = "on"
+        options.highs_debug_level = core.HighsDebugLevel.kHighsDebugLevelNone
+        options.log_to_console = False
+        options.output_flag = False
+        options.simplex_strategy = 1  # kSimplexStrategyDual
+        new_solver, optimal = core._Highs, core.HighsModelStatus.kOptimal
+    except (ImportError, AttributeError):  # pragma: no cover - another SciPy: linprog itself
         return None
     K, m = Gs.shape
     nc = A.shape[0]
     S = csc_array(A)  # as linprog builds it (explicit zeros dropped, int32 indices)
     lower, upper = np.full(m, -float(radius)), np.full(m, float(radius))
-    options = core.HighsOptions()  # linprog's: presolve on, dual simplex, silent
-    options.presolve = "on"
-    options.highs_debug_level = core.HighsDebugLevel.kHighsDebugLevelNone
-    options.log_to_console = False
-    options.output_flag = False
-    options.simplex_strategy = 1  # kSimplexStrategyDual
     mu = np.full((K, nc), np.nan)
     start, index, value = S.indptr, S.indices, S.data
     cost = np.ascontiguousarray(Gs, dtype=float)
     integrality = np.zeros(m, dtype=np.int32)  # all continuous
     for i in range(K):
-        h = core._Highs()
+        h = new_solver()
         h.passOptions(options)
         # the arrays straight to HiGHS (a HighsLp filled field by field converts them element
         # by element, ~0.8 ms per tank30 program): the same model
         h.passModel(m, nc, value.size, 1, 1, 0.0, cost[i], lower, upper, b, b, start, index,
                     value, integrality)  # fmt: skip
         h.run()
-        if h.getModelStatus() != core.HighsModelStatus.kOptimal:
+        if h.getModelStatus() != optimal:
             continue
         sol = h.getSolution()
         x, con = np.array(sol.col_value), b - np.array(sol.row_value)
