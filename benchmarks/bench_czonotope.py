@@ -122,8 +122,13 @@ def growth() -> None:
         times.append((time.process_time() - c0) / 10)
         ms, ms_wall = 1e3 * times[-1], 1e3 * wall
         print(f"n = {n:3d}: {ms:9.2f} ms CPU per step ({ms_wall:9.2f} wall)", flush=True)
+    if len(ns) < 2:
+        return
     slope = np.polyfit(np.log(ns), np.log(times), 1)[0]
     print(f"fitted exponent of the CPU time (n = {ns[0]}..{ns[-1]}): {slope:.2f}")
+    local = np.diff(np.log(times)) / np.diff(np.log(ns))
+    pairs = zip(ns, ns[1:], local, strict=False)
+    print("local exponents: " + ", ".join(f"{a}-{b}: {e:.2f}" for a, b, e in pairs))
 
 
 if __name__ == "__main__":

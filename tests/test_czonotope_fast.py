@@ -86,8 +86,16 @@ def test_a_failing_program_sends_all_to_the_fallback(monkeypatch: pytest.MonkeyP
         calls["fallback"] += 1
         return real_min(*args, **kw)  # type: ignore[arg-type]
 
+    real_first = _highs.linprog_duals
+
+    def counted_first(Gs: np.ndarray, *args: object) -> object:  # linprog's first attempt
+        out = real_first(Gs, *args)  # type: ignore[arg-type]
+        calls["fallback"] += int(np.all(np.isfinite(out), axis=1).sum())
+        return out
+
     monkeypatch.setattr(_highs, "chain_duals", failed)
     monkeypatch.setattr(hull, "_certified_min", counted)
+    monkeypatch.setattr(_highs, "linprog_duals", counted_first)
     out = hull.hull_certificates(c, G, A, b)
     assert out is not None
     assert calls["fallback"] == 2 * G.shape[0]
