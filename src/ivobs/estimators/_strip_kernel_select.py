@@ -17,7 +17,7 @@ Three ways, each tried when the one before cannot decide:
   of those ``q`` breakpoints with ``C_q(v) + R_q >= t``) and ``v_b`` (the least with ``C_q(v)
   >= t``): when ``v_a = v_b`` it *is* that breakpoint, whatever the other ones are, and they
   are neither divided nor visited. The breakpoints are inserted in decreasing weight into a
-  sorted list, the bracket tested at ``q = 1, 2, 4, …, MAX_HEAVY`` (tank30: three quarters
+  sorted list, the bracket tested at ``q = 2, 4, 8, …, MAX_HEAVY`` (tank30: three quarters
   of the coordinates decided by ``q = 16``).
 * :func:`bracketed_quantiles`: else the quantiles are in ``[v_a, v_b]``; one pass over all
   the breakpoints sums the weight below ``v_a`` and sorts the few inside (tank30: most of
@@ -94,7 +94,7 @@ def heavy_quantiles(
     ``(found, μ_1, μ_2, lo, hi)``; when not ``found`` (the ``k`` heaviest do not decide), both
     quantiles are in ``[lo, hi]`` (for :func:`bracketed_quantiles`). ``sb``, ``sw``: scratch
     of ``k``, the sorted list."""
-    check, lo, hi = 1, -np.inf, np.inf
+    check, lo, hi = 2, -np.inf, np.inf  # the bracket only narrows with q: q = 1 is skipped
     for q in range(k):
         v = _breakpoint(row, s, kidx[hk[q]], scan)
         i = q
