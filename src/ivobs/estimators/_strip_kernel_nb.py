@@ -184,7 +184,8 @@ def _section_hull(
             flat = fails > 4 and 2 * fails > j + 1
         if not found:
             _breakpoints(row, s, m, nk, kidx, scan, b)
-            cw[: nk + 1] = w[: nk + 1]
+            for k in range(nk + 1):  # a loop: cw and w share a buffer, a slice copy would
+                cw[k] = w[k]  # test the overlap and copy through a new array
             mu_u, mu_l = quantiles(b, cw, nk + 1, t1, t2, tot, smp)
         for c in range(m):  # elementwise (vectorised), then summed with partial sums
             sp[c] = abs(row[c] - mu_u * s[c])
