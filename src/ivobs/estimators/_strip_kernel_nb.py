@@ -4,8 +4,9 @@ The same recursion as :meth:`StripEstimator._step` with the NumPy helpers
 (``_strip_hull.section_hull``, ``_strip_hull.propagate_strip``,
 ``sets.zonotope.reduce_parallelotope`` / ``reduce_girard``), written as loops: the joint set,
 the strips [Alamo2005] (eq. (8) half-widths, the propagation, the per-coordinate section hull,
-its weighted quantile by quickselect instead of a sort: any ``μ`` gives a valid bound, the
-choice only its tightness; the F-radius update) and the
+its weighted quantile from the heaviest breakpoints or by quickselect instead of a sort
+(:mod:`._strip_kernel_select`: the same breakpoint; any ``μ`` gives a valid bound, the
+choice only its tightness); the F-radius update) and the
 prediction here; the parallelotope reduction [Chisci1998] (its pivoted QR after LAPACK's
 ``dlaqp2``) and Girard's [Girard2005] in :mod:`._strip_kernel_linalg`.
 
@@ -34,6 +35,17 @@ from ._strip_kernel_linalg import (
     _reduce_girard,
     _reduce_parallelotope,
     jit,
+)
+from ._strip_kernel_select import (
+    FEW,
+    FLAT,
+    MAX_BRACKET,
+    MAX_HEAVY,
+    bracketed_quantiles,
+    heavy_quantiles,
+    heavy_set,
+    quantile_slack,
+    quantiles,
 )
 
 __all__ = ["MAX_COND", "strip_step"]
@@ -115,10 +127,13 @@ def _propagate(h: Arr, t: float, box: Arr, sigma: float, ext: Arr, out: Arr) -> 
 @jit
 def _section_hull(
     z: Arr, Hz: Arr, n: int, m: int, s: Arr, e: float, sigma: float, absH: Arr, lo: Arr,
-    hi: Arr, kidx: Arr, b: Arr, w: Arr, cw: Arr,
+    hi: Arr, sel: tuple[Arr, ...],
 ) -> None:  # fmt: skip
-    """_strip_hull.section_hull for ``<z[:n], Hz[:n, :m]>``, into ``lo``, ``hi``; ``kidx``,
-    ``b``, ``w``, ``cw``: scratch of at least ``m + 1``."""
+    """_strip_hull.section_hull for ``<z[:n], Hz[:n, :m]>``, into ``lo``, ``hi``; ``sel``:
+    the scratch of :func:`_selection_scratch`. Each ``μ`` from the heaviest breakpoints or
+    their bracket when they decide it, else by the exact selection
+    (:mod:`._strip_kernel_select`: the same ``μ``, bit for bit); ``μ_u = μ_l``: one sum."""
+    kidx, b, w, cw, sp, smp, hk, hb, hw, cum, rest, bv, bw = sel
     smax = 0.0
     for c in range(m):
         smax = max(smax, abs(s[c]))
@@ -137,33 +152,48 @@ def _section_hull(
             wmin = min(wmin, a)
             nk += 1
     w[nk] = sigma
+    kidx[nk] = -1  # the breakpoint b = 0 of weight σ is the last one
     hmax = 0.0
     for j in range(n):
         hmax = max(hmax, absH[j])
     scan = not hmax < 1e300 * wmin  # a breakpoint may overflow: taken as 0 (any μ is valid)
     g, ae = _g(m + 4), abs(e)
-    sp, smp = np.empty(2 * m), np.empty((2, 17))
     tot = 0.0  # the total weight, the same for every coordinate
     for k in range(nk + 1):
         tot += w[k]
+    t1, t2 = 0.5 * (tot - e), 0.5 * (tot + e)
+    # few breakpoints: quickselect at once; flat weights: the heaviest rarely decide (and
+    # they are given up when they fail on most coordinates)
+    fails, flat, nh, delta = 0, nk + 1 < FEW, 0, 0.0
+    if not flat:
+        nh = heavy_set(w, nk + 1, hk, hw, rest)  # the same for every coordinate
+        delta = quantile_slack(nk + 1, tot)
+        flat = not rest[nh] < FLAT * tot
     for j in range(n):
         row = Hz[j]
-        if nk == m:  # every s_l kept: a contiguous (vectorised) division
-            for k in range(m):
-                b[k] = row[k] / s[k]
-        else:
-            for k in range(nk):
-                b[k] = row[kidx[k]] / s[kidx[k]]
-        if scan:
-            for k in range(nk):
-                b[k] = b[k] if np.isfinite(b[k]) else 0.0
-        b[nk] = 0.0  # the breakpoint b = 0 of weight σ is the last one
-        cw[: nk + 1] = w[: nk + 1]
-        mu_u, mu_l = _quantiles(b, cw, nk + 1, 0.5 * (tot - e), 0.5 * (tot + e), tot, smp)
+        found, mu_u, mu_l = False, 0.0, 0.0
+        if not flat:
+            found, mu_u, mu_l, va, vb = heavy_quantiles(
+                row, s, kidx, scan, hk, hw, rest, nh, t1, t2, delta, hb, cum
+            )
+            if not found:
+                found, mu_u, mu_l = bracketed_quantiles(
+                    row, s, kidx, scan, w, nk + 1, va, vb, t1, t2, delta, bv, bw
+                )
+            fails += not found
+            flat = fails > 4 and 2 * fails > j + 1
+        if not found:
+            _breakpoints(row, s, m, nk, kidx, scan, b)
+            for k in range(nk + 1):  # a loop: cw and w share a buffer, a slice copy would
+                cw[k] = w[k]  # test the overlap and copy through a new array
+            mu_u, mu_l = quantiles(b, cw, nk + 1, t1, t2, tot, smp)
         for c in range(m):  # elementwise (vectorised), then summed with partial sums
             sp[c] = abs(row[c] - mu_u * s[c])
-            sp[m + c] = abs(row[c] - mu_l * s[c])
-        sp_u, sp_l = _asum(sp, m), _asum(sp[m:], m)
+        sp_u = sp_l = _asum(sp, m)
+        if mu_l != mu_u:
+            for c in range(m):
+                sp[c] = abs(row[c] - mu_l * s[c])
+            sp_l = _asum(sp, m)
         au, al = abs(mu_u), abs(mu_l)
         err_u = g * (abs(z[j]) + au * (ae + sigma + s1) + absH[j])
         err_l = g * (abs(z[j]) + al * (ae + sigma + s1) + absH[j])
@@ -172,112 +202,36 @@ def _section_hull(
 
 
 @jit
-def _quantiles(
-    vb: Arr, vw: Arr, n: int, t1: float, t2: float, tot: float, smp: Arr
-) -> tuple[float, float]:
-    """The two weighted quantiles of the section hull: for each threshold ``t`` the least
-    breakpoint ``v`` with ``Σ_{b_l <= v} w_l >= t`` (NumPy's first sorted breakpoint whose
-    cumulative weight reaches ``t``; the least one when none does), by selection on
-    the values ``vb`` and weights ``vw`` (permuted in place) instead of a sort. A sample of 17
-    values brackets both thresholds (``tot``: the total weight), one pass splits the values
-    into below, between and above the bracket, and :func:`_select` finishes in the part
-    that holds each threshold (usually the small middle one)."""
-    vb, vw = vb[:n], vw[:n]
-    if n < 64:
-        return _select(vb, vw, 0, n, 0.0, t1), _select(vb, vw, 0, n, 0.0, t2)
-    k = 17
-    sv, sw = smp[0], smp[1]
-    for i in range(k):  # evenly spaced sample, insertion-sorted
-        v, w = vb[(2 * i + 1) * n // (2 * k)], vw[(2 * i + 1) * n // (2 * k)]
-        j = i
-        while j > 0 and sv[j - 1] > v:
-            sv[j], sw[j] = sv[j - 1], sw[j - 1]
-            j -= 1
-        sv[j], sw[j] = v, w
-    ws = 0.0
-    for i in range(k):
-        ws += sw[i]
-    f = tot / ws if ws > 0.0 else 1.0
-    ia, ib, cum = k, k, 0.0
-    for i in range(k):  # first sample reaching each threshold (scaled to the total)
-        cum += sw[i] * f
-        if ia == k and cum >= min(t1, t2):
-            ia = i
-        if ib == k and cum >= max(t1, t2):
-            ib = i
-    p_lo = sv[ia - 1] if 0 < ia <= k else -np.inf
-    p_hi = sv[ib + 1] if ib + 1 < k else np.inf
-    lt, gt, wl, wm = _partition(vb, vw, 0, n, p_lo, p_hi)
-    return _part(vb, vw, n, lt, gt, wl, wm, t1), _part(vb, vw, n, lt, gt, wl, wm, t2)
+def _breakpoints(row: Arr, s: Arr, m: int, nk: int, kidx: Arr, scan: bool, b: Arr) -> None:
+    """``b[:nk] = row / s`` at the kept positions ``kidx`` (non-finite ones as 0 when
+    ``scan``), ``b[nk] = 0``."""
+    if nk == m:  # every s_l kept: a contiguous (vectorised) division
+        for k in range(m):
+            b[k] = row[k] / s[k]
+    else:
+        for k in range(nk):
+            b[k] = row[kidx[k]] / s[kidx[k]]
+    if scan:
+        for k in range(nk):
+            b[k] = b[k] if np.isfinite(b[k]) else 0.0
+    b[nk] = 0.0
 
 
 @jit
-def _partition(
-    vb: Arr, vw: Arr, lo: int, hi: int, p_lo: float, p_hi: float
-) -> tuple[int, int, float, float]:
-    """Three-way partition of ``vb[lo:hi]`` (``vw`` moved alongside): ``[lo, lt)`` below
-    ``p_lo``, ``[lt, gt)`` in ``[p_lo, p_hi]``, ``[gt, hi)`` above ``p_hi``; returns ``lt``,
-    ``gt`` and the weights ``wl`` below and ``wm`` between."""
-    lt, i, gt = lo, lo, hi
-    wl = wm = 0.0
-    while i < gt:
-        v = vb[i]
-        if v < p_lo:
-            wl += vw[i]
-            vb[i], vb[lt] = vb[lt], v
-            vw[i], vw[lt] = vw[lt], vw[i]
-            lt += 1
-            i += 1
-        elif v > p_hi:
-            gt -= 1
-            vb[i], vb[gt] = vb[gt], v
-            vw[i], vw[gt] = vw[gt], vw[i]
-        else:
-            wm += vw[i]
-            i += 1
-    return lt, gt, wl, wm
-
-
-@jit
-def _part(vb: Arr, vw: Arr, n: int, lt: int, gt: int, wl: float, wm: float, t: float) -> float:
-    """:func:`_select` in the part of ``vb`` split at ``lt``, ``gt`` (weights ``wl`` below,
-    ``wm`` between) that holds the threshold ``t``."""
-    if wl >= t:
-        return _select(vb, vw, 0, lt, 0.0, t)
-    if wl + wm >= t:
-        return _select(vb, vw, lt, gt, wl, t)
-    return _select(vb, vw, gt, n, wl + wm, t)
-
-
-@jit
-def _least(vb: Arr) -> float:
-    """The least breakpoint (``vb`` holds them all, in any order; the last one is 0)."""
-    out = 0.0
-    for v in vb:
-        out = min(out, v)
-    return out
-
-
-@jit
-def _select(vb: Arr, vw: Arr, lo: int, hi: int, base: float, thr: float) -> float:
-    """Quickselect of the least ``v`` in ``vb[lo:hi]`` with ``base + Σ_{vb_l <= v} vw_l >=
-    thr`` (``base``: the weight of ``vb[:lo]``, all smaller; ``vb[hi:]`` all larger); the least
-    breakpoint when the weight never reaches ``thr`` or ``thr <= 0`` (NumPy's ``argmax`` of an
-    all-False row, or the first breakpoint reaching it)."""
-    if not thr > 0.0:
-        return _least(vb)
-    while hi > lo:
-        a, c, d = vb[lo], vb[(lo + hi) // 2], vb[hi - 1]
-        piv = max(min(a, c), min(max(a, c), d))  # median of three
-        lt, gt, wl, we = _partition(vb, vw, lo, hi, piv, piv)  # < piv, == piv, > piv
-        if base + wl >= thr:
-            hi = lt
-        elif base + wl + we >= thr:
-            return float(piv)
-        else:
-            base += wl + we
-            lo = gt
-    return _least(vb)
+def _selection_scratch(cap: int) -> tuple[Arr, ...]:
+    """The scratch of :func:`_section_hull` for up to ``cap`` generators, as views of two
+    arrays (each allocation costs as much as a small strip's selection): ``kidx``, ``b``,
+    ``w``, ``cw``, ``sp`` (``cap + 1``), the sample (2, 17), the heaviest ``hk``, ``hb``,
+    ``hw``, ``cum`` (:data:`MAX_HEAVY`), ``rest`` (one more), the bracket ``bv``, ``bw``
+    (:data:`MAX_BRACKET`)."""
+    n, nh, nb = cap + 1, MAX_HEAVY, MAX_BRACKET
+    ints, f = np.empty(n + nh, np.int64), np.empty(4 * n + 34 + 4 * nh + 1 + 2 * nb)
+    a, c = 4 * n + 34, 4 * n + 34 + 4 * nh + 1  # where the heaviest's, the bracket's start
+    return (
+        ints[:n], f[:n], f[n : 2 * n], f[2 * n : 3 * n], f[3 * n : 4 * n],
+        f[4 * n : a].reshape((2, 17)), ints[n:], f[a : a + nh], f[a + nh : a + 2 * nh],
+        f[a + 2 * nh : a + 3 * nh], f[a + 3 * nh : c], f[c : c + nb], f[c + nb : c + 2 * nb],
+    )  # fmt: skip
 
 
 @jit
@@ -304,7 +258,7 @@ def _intersect(
     certainly misses the set (left as it was). On return ``rows`` is that of the new ``Hz``;
     when the set was updated and ``hn`` (the next strip's ``h``) is not empty, ``sn = hnᵀ Hz``
     too, computed in the update's pass (``ready``). ``sc``: the scratch arrays."""
-    rows, lo_j, hi_j, ext, out, kidx, b, w, cw = sc
+    rows, lo_j, hi_j, ext, out, sel = sc
     nz = z.shape[0]
     hz = haz = hw = hrows = hacc = 0.0
     for r in range(nz):
@@ -327,7 +281,7 @@ def _intersect(
         return -1, False
     if not _propagate(h, t, box, sigma, ext, out):
         return -1, False
-    _section_hull(z, Hz, nx, m, s, e, sigma_z, rows, lo_j, hi_j, kidx, b, w, cw)
+    _section_hull(z, Hz, nx, m, s, e, sigma_z, rows, lo_j, hi_j, sel)
     for r in range(nx):
         pad = acc[r] * (1.0 + 2.0 * U)
         box[0, r] = max(box[0, r], lo_j[r] - pad)
@@ -436,7 +390,7 @@ def strip_step(
     nz, cap = z.shape[0], Hz.shape[1]
     sc = (
         np.empty(nz), np.empty(nx), np.empty(nx), np.empty((2, nz)), np.empty((2, nz)),
-        np.empty(cap + 1, np.int64), np.empty(cap + 1), np.empty(cap + 1), np.empty(cap + 1),
+        _selection_scratch(cap),
     )  # fmt: skip
     rows, s, sn = sc[0], np.empty(cap), np.empty(cap)
     g_meas = 2.0 * _g(nx + cd.shape[0] + nu + 2)
