@@ -133,6 +133,31 @@ def _pow2(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def _joint_box(
+    c: np.ndarray, G: np.ndarray, e: np.ndarray, xlo: np.ndarray, xhi: np.ndarray
+) -> tuple[list[float], list[float]]:
+    """The box of ``x_k`` for the joint set: the zonotope's bounds ``c ± rad``, rounded outward,
+    intersected with ``[xlo, xhi]`` (both hold the state; if they part, only by rounding, the
+    zonotope's bounds are kept).
+
+    ``rad = r0 + γ_{m+2} (|c| + r0) + e (1 + γ_2)``, ``r0 = |G| 1``: the same IEEE operations on
+    floats (``nx`` of them: cheaper than NumPy calls; max/min keep the first of equals too)."""
+    m = G.shape[1]
+    g_m, g_2 = gamma(m + 2), 1.0 + gamma(2)
+    lo, hi, lo_z, hi_z = [], [], [], []
+    for ci, ri, ei, a, q in zip(
+        c.tolist(), np.abs(G).sum(axis=1).tolist(), e.tolist(), xlo.tolist(), xhi.tolist()
+    ):
+        rad = ri + g_m * (abs(ci) + ri) + ei * g_2
+        lo_z.append(ci - rad)
+        hi_z.append(ci + rad)
+        lo.append(max(a, lo_z[-1]))
+        hi.append(min(q, hi_z[-1]))
+    if any(p > q for p, q in zip(lo, hi)):
+        return lo_z, hi_z
+    return lo, hi
+
+
 @register
 class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
     """Constrained-zonotope filter for nonlinear systems: the mean-value extension of
@@ -280,20 +305,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         Gz[nx + cols, m + np.arange(cols.size)] = self._rw[cols]
         Az = np.zeros((A.shape[0], m + cols.size))  # [A 0]
         Az[:, :m] = A
-        # rad = r0 + γ_{m+2} (|c| + r0) + e (1 + γ_2), r0 = |G| 1: the same IEEE operations on
-        # floats (nx of them: cheaper than NumPy calls; max/min keep the first of equals too)
-        g_m, g_2 = gamma(m + 2), 1.0 + gamma(2)
-        lo, hi, lo_z, hi_z = [], [], [], []
-        for ci, ri, ei, a, q in zip(
-            c.tolist(), np.abs(G).sum(axis=1).tolist(), e.tolist(), xlo.tolist(), xhi.tolist()
-        ):
-            rad = ri + g_m * (abs(ci) + ri) + ei * g_2
-            lo_z.append(ci - rad)
-            hi_z.append(ci + rad)
-            lo.append(max(a, lo_z[-1]))
-            hi.append(min(q, hi_z[-1]))
-        if any(p > q for p, q in zip(lo, hi)):  # only by rounding (both hold the state): the hull
-            lo, hi = lo_z, hi_z
+        lo, hi = _joint_box(c, G, e, xlo, xhi)
         wlo = self.model.w_box.lo if wlo is None else wlo
         whi = self.model.w_box.hi if whi is None else whi
         return _Joint(
