@@ -63,13 +63,17 @@ class FusedStep:
     ``W = [[Q⁺, −Q⁻, B_z, L], [−Q⁻, Q⁺, B_z, L], [C⁺, −C⁻, D_u, 0], [−C⁻, C⁺, D_u, 0]]``,
     ``w = [ḡ; g̲; f̄; f̲]``: the next bounds and those of ``C x + D_u u + F d`` (consistency).
     ``starts``, ``coef``, ``e_d``: the rounding bound :meth:`Margins.local_error` on the
-    blocks ``[z̄; z̲]``, ``u``, ``y`` of the same vector (``γ`` folded in)."""
+    blocks ``[z̄; z̲]``, ``u``, ``y`` of the same vector (``γ`` folded in); ``bounds``,
+    ``coef_list``: the same blocks as ``(start, end)`` and ``coef`` as Python floats (the
+    fast step's float loop)."""
 
     W: np.ndarray
     w: np.ndarray
     starts: np.ndarray
     coef: np.ndarray
     e_d: float
+    bounds: list[tuple[int, int]]
+    coef_list: list[float]
 
 
 @dataclass(frozen=True)
@@ -197,7 +201,9 @@ class SplitOperators:
         starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])[keep]
         coef = np.array([rb.a_z, rb.a_u, rb.a_y])[keep] * rb.gamma
         e_d = rb.gamma * rb.a_d * (self.dmax or 0.0) if rb.a_d else 0.0
-        return FusedStep(W, w, starts, coef, e_d)
+        ends = [*starts.tolist()[1:], W.shape[1]]
+        bounds = list(zip(starts.tolist(), ends, strict=True))
+        return FusedStep(W, w, starts, coef, e_d, bounds, coef.tolist())
 
     def _fused_transformed(self) -> FusedTransformed | None:
         """A complete ``y``'s step in ``z = S x`` as one product (:class:`FusedTransformed`)."""
