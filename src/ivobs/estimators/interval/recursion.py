@@ -96,6 +96,8 @@ def _fused_step(fs: FusedStep, state: S, u_k: np.ndarray, y_k: np.ndarray) -> St
     v = np.concatenate((zhi, zlo, u_k, y_k))
     out = fs.W.dot(v)
     out += fs.w
+    if v.shape[0] > _FEW:  # long vectors: NumPy (the same numbers)
+        return _fused_long(fs, state, v, out, y_k)
     o = out.tolist()
     vs = v.tolist()
     n2 = 2 * n
@@ -103,10 +105,7 @@ def _fused_step(fs: FusedStep, state: S, u_k: np.ndarray, y_k: np.ndarray) -> St
     for hi_, yv, lo_ in zip(p[:ny], vs[-ny:], p[ny:]):
         if not lo_ <= yv <= hi_:  # maybe inconsistent, or missing: the general step decides
             return None
-    if len(vs) > _FEW:  # long vectors: NumPy (the same numbers)
-        e = float(fs.coef.dot(np.maximum.reduceat(np.abs(v, out=v), fs.starts))) + fs.e_d
-    else:
-        e = _block_dot(vs, fs.bounds, fs.coef_list) + fs.e_d
+    e = _block_dot(vs, fs.bounds, fs.coef_list) + fs.e_d
     hi, lo = [], []  # (a loop: cheaper than comprehensions, or NumPy, on 3 numbers)
     for zh, zl in zip(o[:n], o[n:n2]):
         hi.append(zh + e)
@@ -115,15 +114,34 @@ def _fused_step(fs: FusedStep, state: S, u_k: np.ndarray, y_k: np.ndarray) -> St
     return Step(new, vs[n:n2], vs[:n], False)
 
 
+def _fused_long(
+    fs: FusedStep, state: S, v: np.ndarray, out: np.ndarray, y_k: np.ndarray
+) -> Step[S] | None:
+    """The rest of :func:`_fused_step` in NumPy, for long vectors (``out = W v + w``)."""
+    zlo, zhi = state.lo, state.hi
+    n, ny = zlo.shape[0], y_k.shape[0]
+    p = out[2 * n :].tolist()
+    for hi_, yv, lo_ in zip(p[:ny], y_k.tolist(), p[ny:]):
+        if not lo_ <= yv <= hi_:  # maybe inconsistent, or missing: the general step decides
+            return None
+    e = float(fs.coef.dot(np.maximum.reduceat(np.abs(v, out=v), fs.starts))) + fs.e_d
+    hi = out[:n]
+    hi += e
+    lo = out[n : 2 * n]
+    lo -= e
+    return Step(evolve(state, lo=lo, hi=hi), zlo, zhi, False)
+
+
 _FEW = 32
-"""Longest ``[z̄; z̲; u; y]`` whose rounding bound :func:`_fused_step` takes in Python floats."""
+"""Longest ``[z̄; z̲; u; y]`` that :func:`_fused_step` finishes in Python floats (beyond,
+NumPy's calls cost less than a float loop)."""
 
 
 def _block_dot(vs: list[float], bounds: list[tuple[int, int]], coef: list[float]) -> float:
     """``coef · maximum.reduceat(|v|, starts)`` (nonempty blocks ``bounds``) one float at a
     time: the largest ``|v_i|`` of each block as NumPy's ``maximum`` (NaN propagates), then
     the sum of the products from ``0.0`` in order, as the BLAS ``ddot`` of a few numbers
-    (checked equal on the recorded runs, tests/test_step_reference.py)."""
+    (tests/test_lean_step.py checks them equal, NaN and infinities included)."""
     e = 0.0
     for (a, b), c in zip(bounds, coef):
         m = 0.0  # _largest(vs[a:b]), inline (a call per block costs as much as its work)
