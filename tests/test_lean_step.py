@@ -147,10 +147,13 @@ def test_bad_step_inputs_still_get_the_full_errors(method):
 
 
 @pytest.mark.parametrize("sizes", [(6, 1, 2), (2, 0, 1), (8, 3, 4), (20, 5, 6)])
-def test_fused_rounding_bound_in_floats_is_numpys_bit_for_bit(sizes):
+def test_fused_rounding_bound_in_floats_is_numpys(sizes):
     """The interval fast step's rounding bound in Python floats (``_block_dot``) is NumPy's
-    ``coef . maximum.reduceat(|v|, starts)`` bit for bit: magnitudes over many decades, ties,
-    signed zeros, and NaN / infinities (which propagate as NumPy's)."""
+    ``coef . maximum.reduceat(|v|, starts)``: magnitudes over many decades, ties, signed zeros,
+    and NaN / infinities (which propagate as NumPy's). Bit for bit where the BLAS sums a few
+    terms in order without FMA (this machine: every trial); to the rounding of a dot product of
+    at most ``len(starts)`` terms elsewhere (a BLAS kernel with FMA), which the bound's own
+    ``γ`` slack covers."""
     from ivobs.estimators.interval.recursion import _block_dot
 
     rng = np.random.default_rng(7)
@@ -168,6 +171,10 @@ def test_fused_rounding_bound_in_floats_is_numpys_bit_for_bit(sizes):
             v[:] = np.abs(v[0])  # ties
         want = float(coef.dot(np.maximum.reduceat(np.abs(v), starts)))
         got = _block_dot(v.tolist(), bounds, coef.tolist())
-        assert got == want or (np.isnan(got) and np.isnan(want)), (trial, v, coef)
-        same += got == want
+        if np.isnan(want) or np.isinf(want):
+            assert got == want or (np.isnan(got) and np.isnan(want)), (trial, v, coef)
+            continue
+        tol = 2.0 * len(starts) * np.finfo(float).eps * want
+        assert abs(got - want) <= tol, (trial, v, coef)
+        same += 1
     assert same > 2500  # most trials are finite: compared as numbers, not only as NaN
