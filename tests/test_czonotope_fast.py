@@ -221,12 +221,14 @@ def _simulate(
     return np.array(xs), np.array(ys)
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_filter_contains_the_state_under_vertex_disturbances(seed: int) -> None:
-    rng = np.random.default_rng(100 + seed)
-    n, ny, T = 3, 1 + seed % 2, 60
+def _vertex_case(
+    rng: np.random.Generator, ny: int, rho: float, n: int = 3, T: int = 60
+) -> tuple[ivobs.LinearSystem, np.ndarray, np.ndarray]:
+    """A random system of spectral radius ``rho`` with ``d`` in the unit box, its states and
+    outputs over ``T`` steps with ``d`` on the box's vertices and ``x[0]`` partly on the prior
+    box's boundary (``[-1, 1]^n``)."""
     A = rng.normal(size=(n, n))
-    A *= (0.9 + 0.1 * seed) / max(abs(np.linalg.eigvals(A)))  # up to marginally stable
+    A *= rho / max(abs(np.linalg.eigvals(A)))
     C = rng.normal(size=(ny, n))
     E = np.hstack([0.1 * np.eye(n), np.zeros((n, ny))])
     F = np.hstack([np.zeros((ny, n)), 0.05 * np.eye(ny)])
@@ -237,6 +239,15 @@ def test_filter_contains_the_state_under_vertex_disturbances(seed: int) -> None:
     sys_ = ivobs.LinearSystem(
         A, np.zeros((n, 1)), C, E=E, F=F, d=ivobs.Box(-np.ones(n + ny), np.ones(n + ny))
     )
+    return sys_, xs, ys
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_filter_contains_the_state_under_vertex_disturbances(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    n, T = 3, 60
+    # up to marginally stable
+    sys_, xs, ys = _vertex_case(rng, 1 + seed % 2, 0.9 + 0.1 * seed, n, T)
     est = ivobs.make_estimator("constrained-zonotope", sys_, x0=ivobs.Box(-np.ones(n), np.ones(n)))
     widths = []
     for k in range(T):

@@ -24,7 +24,7 @@ from scipy.optimize import linprog
 import ivobs
 from ivobs.sets.czonotope import _highs, elimination, hull
 from ivobs.sets.czonotope._tolerances import ROW_TOL
-from test_czonotope_fast import _random_set
+from test_czonotope_fast import _random_set, _vertex_case
 from test_nl_zonotope_fast import _henon
 
 REFERENCE = Path(__file__).parent / "data" / "czonotope_reference_bounds.npz"
@@ -181,25 +181,13 @@ def test_filter_with_the_block_program_contains_the_state(
 
     monkeypatch.setattr(_highs, "block_duals", counted)
     rng = np.random.default_rng(300 + seed)
-    n, ny, T = 3, 1 + seed, 60
-    A = rng.normal(size=(n, n))
-    A *= 0.95 / max(abs(np.linalg.eigvals(A)))
-    C = rng.normal(size=(ny, n))
-    E = np.hstack([0.1 * np.eye(n), np.zeros((n, ny))])
-    F = np.hstack([np.zeros((ny, n)), 0.05 * np.eye(ny)])
-    d = np.where(rng.integers(0, 2, (T, n + ny)) > 0, 1.0, -1.0)  # vertices of the box
-    x = rng.uniform(-1.0, 1.0, n)
-    x[rng.random(n) < 0.5] = 1.0  # on the prior box's boundary
-    sys_ = ivobs.LinearSystem(
-        A, np.zeros((n, 1)), C, E=E, F=F, d=ivobs.Box(-np.ones(n + ny), np.ones(n + ny))
-    )
+    n, T = 3, 60
+    sys_, xs, ys = _vertex_case(rng, 1 + seed, 0.95, n, T)
     est = ivobs.make_estimator("constrained-zonotope", sys_, x0=ivobs.Box(-np.ones(n), np.ones(n)))
     widths = []
     for k in range(T):
-        y = C @ x + F @ d[k]
-        box = est.step(np.zeros(1), y)
-        assert np.all(box.lo <= x) and np.all(x <= box.hi), k
+        box = est.step(np.zeros(1), ys[k])
+        assert np.all(box.lo <= xs[k]) and np.all(xs[k] <= box.hi), k
         widths.append(box.hi - box.lo)
-        x = A @ x + E @ d[k]
     assert used["block"] >= T  # the block program was used at every step
     assert np.max(widths[-1]) < 2.0  # informative
