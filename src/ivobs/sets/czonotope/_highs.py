@@ -221,18 +221,15 @@ def linprog_duals(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -
     K, m = Gs.shape
     nc = A.shape[0]
     S = csc_array(A)  # as linprog builds it (explicit zeros dropped, int32 indices)
-    lower, upper = np.full(m, -float(radius)), np.full(m, float(radius))
     mu = np.full((K, nc), np.nan)
-    start, index, value = S.indptr, S.indices, S.data
+    csc = (S.indptr, S.indices, S.data)
     cost = np.ascontiguousarray(Gs, dtype=float)
-    integrality = np.zeros(m, dtype=np.int32)  # all continuous
     for i in range(K):
         h = new_solver()
         h.passOptions(options)
         # the arrays straight to HiGHS (a HighsLp filled field by field converts them element
         # by element, ~0.8 ms per tank30 program): the same model
-        h.passModel(m, nc, value.size, 1, 1, 0.0, cost[i], lower, upper, b, b, start, index,
-                    value, integrality)  # fmt: skip
+        _pass(h, cost[i], csc, (nc, m), b, float(radius))
         h.run()
         if h.getModelStatus() != optimal:
             continue
