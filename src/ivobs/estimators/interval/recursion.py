@@ -141,7 +141,8 @@ def _block_dot(vs: list[float], bounds: list[tuple[int, int]], coef: list[float]
     """``coef · maximum.reduceat(|v|, starts)`` (nonempty blocks ``bounds``) one float at a
     time: the largest ``|v_i|`` of each block as NumPy's ``maximum`` (NaN propagates), then
     the sum of the products from ``0.0`` in order, as the BLAS ``ddot`` of a few numbers
-    (tests/test_lean_step.py checks them equal, NaN and infinities included)."""
+    (tests/test_lean_step.py compares them, NaN and infinities included: equal bit for bit on
+    this machine; a BLAS kernel with FMA would differ by the rounding of a short dot)."""
     e = 0.0
     for (a, b), c in zip(bounds, coef):
         m = 0.0  # _largest(vs[a:b]), inline (a call per block costs as much as its work)
