@@ -1,6 +1,7 @@
-"""The compiled propagation and overshoots of the elimination (``_elim_nb``, numba) give the
-NumPy code's numbers bit for bit: on random arrays of both memory layouts (whose row sums NumPy
-orders differently) and on the tank30 boxes they steer. Skipped without numba."""
+"""The compiled propagation and overshoots of the elimination (``_elim_nb``, numba) and the
+loss kernel (``_loss_nb``) give the NumPy code's numbers bit for bit: on random arrays of both
+memory layouts (whose row sums NumPy orders differently) and on the tank30 boxes they steer.
+Skipped without numba."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 import ivobs
-from ivobs.sets.czonotope import _elim_kernels, elimination
+from ivobs.sets.czonotope import _elim_kernels, elimination, hull
 from ivobs.sets.czonotope._tolerances import ZERO_TOL
 
 pytest.importorskip("numba")
@@ -153,12 +154,40 @@ def test_kernels_equal_numpy_with_infinities(
     assert np.isnan(R).any() or np.isinf(R).any()
 
 
+@pytest.mark.parametrize(
+    ("K", "c", "m"),
+    [(1, 1, 0), (1, 1, 1), (2, 3, 8), (5, 2, 136), (130, 3, 64), (17, 5, 777), (3, 2, 8192)],
+)
+def test_loss_kernel_equals_numpy_bit_for_bit(
+    K: int, c: int, m: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``‖R_k - T_kc P_c‖₁`` with the rows of a candidate summed side by side (numba) equals
+    NumPy's pairwise row sums bit for bit: no split, one split, leaves of 64 and of 128 terms,
+    terms of very different sizes, an infinite entry."""
+    rng = np.random.default_rng(K + c + m)
+    R = rng.normal(size=(K, m)) * 10.0 ** rng.integers(-8, 8, (K, m))
+    T, P = rng.normal(size=(K, c)), rng.normal(size=(c, m))
+    if m > 2:
+        R[-1, 1] = np.inf
+    monkeypatch.setattr(hull, "_KERNEL", False)
+    monkeypatch.setattr(hull, "_KERNEL_MIN", 0)
+    assert hull._kernel() is not None
+    compiled = hull._shifted_l1(R, np.asfortranarray(T), P)
+    monkeypatch.setattr(hull, "_KERNEL", None)
+    ref = hull._shifted_l1(R, T, P)
+    assert _same(compiled, ref)
+    assert compiled.shape == (K, c) and (m <= 2 or np.isinf(compiled[-1]).all())
+
+
 def test_tank30_boxes_equal_with_and_without_the_kernels(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """The first 12 tank30 steps (81 x 552 eliminations, Fortran-ordered) give the same boxes
-    bit for bit through the kernels (which are used) as through NumPy's code."""
+    bit for bit through the kernels (which are used; the loss kernel too) as through NumPy's
+    code."""
     monkeypatch.setattr(_elim_kernels, "_KERNELS", False)
+    monkeypatch.setattr(hull, "_KERNEL", False)
+    assert hull._kernel() is not None
     nb = _elim_kernels.kernels()
     assert nb is not None
     calls = {"propagate": 0, "overshoot": 0}
@@ -184,6 +213,7 @@ def test_tank30_boxes_equal_with_and_without_the_kernels(
     compiled = run()
     assert calls["propagate"] >= 100 and calls["overshoot"] >= 100
     monkeypatch.setattr(_elim_kernels, "_KERNELS", None)  # NumPy's code (IVOBS_NUMBA=0)
+    monkeypatch.setattr(hull, "_KERNEL", None)
     ref = run()
     assert _same(compiled, ref)
     assert np.all(np.isfinite(ref[1] - ref[0])) and np.all(ref[1] >= ref[0])
