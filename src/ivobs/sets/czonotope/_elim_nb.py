@@ -3,8 +3,9 @@
 
 :func:`~.elimination._propagate` and :func:`~.elimination._overshoot` build a handful of
 ``A``-sized temporaries per sweep; on tank30 (81 constraints x 552 factors, ~21 eliminations
-per step) they cost ~1.5 ms and ~0.9 ms per elimination, mostly memory traffic. These kernels
-compute the same numbers in two passes over ``A``, **bit for bit**:
+per step) they cost ~1.3 ms and ~0.65 ms per elimination, mostly memory traffic; these
+kernels 0.2 and 0.08 ms (BENCHMARKS.md, "Constrained-zonotope elimination kernels"). They
+compute the same numbers, **bit for bit**:
 
 * each element is the same IEEE operations in the same order (``@njit`` without ``fastmath``:
   no FMA contraction, no reassociation); ``np.maximum``/``np.minimum`` are reproduced with
