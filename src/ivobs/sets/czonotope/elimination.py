@@ -16,6 +16,7 @@ try:  # the gufuncs behind np.linalg.qr (private to NumPy: present in 1.26 and 2
 except ImportError:  # pragma: no cover - a NumPy without it: the public call
     _gufuncs = None  # type: ignore[assignment]
 
+from ._elim_kernels import select as _kernels_for
 from ._tolerances import PIVOT_TOL, ROW_TOL, ZERO_TOL
 from .hull import Certificates
 
@@ -69,8 +70,13 @@ def _propagate(
 
     Each row ``a ξ = b`` gives ``ξ_j ∈ (b - Σ_{l≠j} a_l [ξ_l]) / a_j``; all rows are applied at
     once and the results intersected (``sweeps`` times). The computed intervals are widened by
-    ``1e-10`` (relative) so that rounding never excludes a feasible ``ξ``.
+    ``1e-10`` (relative) so that rounding never excludes a feasible ``ξ``. On large sets
+    (tank30) the compiled :func:`._elim_nb.propagate` gives the same numbers, bit for bit.
     """
+    fast = _kernels_for(A, b)
+    if fast is not None:
+        feasible, lo_k, hi_k = fast[0].propagate(A, b, sweeps, fast[1])
+        return (lo_k, hi_k) if feasible else None
     m = A.shape[1]
     lo = -np.ones(m)
     hi = np.ones(m)
@@ -150,7 +156,11 @@ def _elimination_scores(
 
 
 def _overshoot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``R_j`` of :func:`_elimination_scores` (``inf``: ``ξ_j`` is in no constraint)."""
+    """``R_j`` of :func:`_elimination_scores` (``inf``: ``ξ_j`` is in no constraint); on large
+    sets by the compiled :func:`._elim_nb.overshoot` (the same numbers, bit for bit)."""
+    fast = _kernels_for(A, b)
+    if fast is not None:
+        return fast[0].overshoot(A, b, fast[1])
     absA = np.abs(A)
     tol = ZERO_TOL * max(1.0, float(absA.max()) if absA.size else 1.0)
     nz = absA > tol
