@@ -157,7 +157,7 @@ def chain_duals(
             if isinstance(duals, str):
                 return duals
             mu[i] = duals
-    if not np.isfinite(mu).all():
+    if not np.logical_and.reduce(np.isfinite(mu), axis=None):
         return "failed"
     return mu
 

@@ -43,17 +43,26 @@ def _drop_zero_idx(
     absA = np.abs(A)
     scale = 1.0 + (_max(absA, axis=None) if A.size else 0.0)
     rows = _any(absA > ROW_TOL * scale, axis=1)
-    consistent = True
-    if not _all(rows):
+    all_rows, consistent = bool(_all(rows)), True
+    if not all_rows:
         # a dropped row a ξ = b can only hold if |b| <= ‖a‖₁ (up to rounding)
         zb, za = b[~rows], absA[~rows].sum(axis=1)
         consistent = bool((np.abs(zb) <= za + 1e-8 * (1.0 + np.abs(zb))).all())
-    # the copies are kept even when nothing is dropped: their memory layout (``G[:, cols]`` is
-    # Fortran-ordered) decides how BLAS rounds the products that follow
-    A, b = A[rows], b[rows]
+        A = A[rows]
+    b = b[rows]
     # only exactly zero generators: fixing a small nonzero ξ_j at 0 would shrink the set
     cols = _any(G != 0, axis=0) | _any(A != 0, axis=0)
+    # the copies are made even when nothing is dropped: their memory layout (``G[:, cols]`` is
+    # column-major) decides how BLAS rounds the products that follow; arrays already laid out
+    # as these copies would be (in the loop of eliminate_constraints) are kept as they are
+    if all_rows and _all(cols) and _column_major(G) and _column_major(A):
+        return c, G, A, b, rows, cols, consistent
     return c, G[:, cols], A[:, cols], b, rows, cols, consistent
+
+
+def _column_major(M: np.ndarray) -> bool:
+    """Whether ``M`` (2-D float64) has the strides of a fresh column-major copy of itself."""
+    return M.dtype == np.float64 and M.strides == (8, 8 * M.shape[0])
 
 
 def _normalise_rows_s(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

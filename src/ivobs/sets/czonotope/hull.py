@@ -421,6 +421,6 @@ def hull_certificates(
         weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
     else:  # the hull alone (the nonlinear filter): no rows of P
         weight = np.concatenate([1.0 / width, 1.0 / width])
-    cert = Certificates(Gs * radius, mu, weight)
+    cert = Certificates(Gs * radius if radius != 1.0 else Gs, mu, weight)  # (x * 1.0 is x)
     cert.radius = radius
     return lo, hi, cert
