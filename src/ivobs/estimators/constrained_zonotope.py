@@ -375,14 +375,16 @@ class ConstrainedZonotopeEstimator(Estimator):
         dbox = self.sys.d_at(k, y_k)
         cd, rd = safe_radius(dbox.lo, dbox.hi)
         rd = _inflate(cd, rd)
-        cols = (rd > 0) & (np.any(E != 0, axis=0) | np.any(F != 0, axis=0))
+        # (the ufuncs' reductions directly: what np.any and ndarray.sum call)
+        cols = (rd > 0) & (np.logical_or.reduce(E != 0) | np.logical_or.reduce(F != 0))
+        rdc = rd[cols]
         data = _StepData(
             mats=mats,
             u=u_k,
             cd=cd,
-            ER=E[:, cols] * rd[cols],
-            FR=F[:, cols] * rd[cols],
-            xmag=np.abs(state.c) + np.abs(state.G).sum(axis=1) + state.e,
+            ER=E[:, cols] * rdc,
+            FR=F[:, cols] * rdc,
+            xmag=np.abs(state.c) + np.add.reduce(np.abs(state.G), axis=1) + state.e,
             dmag=np.abs(cd) + rd,
             n=state.G.shape[0] + state.G.shape[1] + u_k.shape[0] + dbox.dim,
         )

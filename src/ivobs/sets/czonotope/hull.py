@@ -15,6 +15,7 @@ can tell what it loosens. SciPy is imported where an LP is solved (it is slow to
 from __future__ import annotations
 
 import os
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -358,9 +359,11 @@ def _shifted_l1(R: np.ndarray, T: np.ndarray, P: np.ndarray) -> np.ndarray:
     return out
 
 
+@cache
 def _hull_chains(n: int, k: int) -> list[list[int]]:
     """Two warm-start chains over the rows ``[G; -G; P; -P]`` (``G`` n rows, ``P`` k rows):
-    the minima in order, the maxima in reverse order."""
+    the minima in order, the maxima in reverse order (kept: the same few sizes every step;
+    read only)."""
     lo = list(range(n)) + list(range(2 * n, 2 * n + k))
     hi = list(range(2 * n - 1, n - 1, -1)) + list(range(2 * n + 2 * k - 1, 2 * n + k - 1, -1))
     return [lo, hi]
