@@ -115,7 +115,7 @@ def test_elimination_step_equals_reference_layout_included(order: str) -> None:
         j = 1
         p = int(np.argmax(np.abs(A[:, j])))
         ref = elimination._drop_zero_idx(*_eliminate_reference(c, G, A, b, j, p))
-        got = elimination._drop_zero_idx(*elimination._eliminate(c, G, A, b, j, p))
+        got = elimination._drop_zero_idx(*elimination._eliminate(c, G, A, b, j, p), own=True)
         _assert_same(ref, got)
         out = hull.hull_certificates(c, G, A, b)
         assert out is not None
@@ -130,16 +130,21 @@ def test_elimination_step_equals_reference_layout_included(order: str) -> None:
 
 
 def test_drop_zero_idx_keeps_an_array_laid_out_as_its_copy() -> None:
-    """Nothing to drop and column-major (as in the elimination loop): the arrays themselves,
-    which have the strides of the copies the former code made."""
+    """Nothing to drop and column-major (as in the elimination loop, on its own temporaries):
+    the arrays themselves, which have the strides of the copies the former code made; a
+    caller's arrays (the first call) are copied as before."""
     rng = np.random.default_rng(3)
     c, G, A, b = _random_set(rng, 3, 20, 5)
     G, A = np.asfortranarray(G), np.asfortranarray(A)
-    out = elimination._drop_zero_idx(c, G, A, b)
+    out = elimination._drop_zero_idx(c, G, A, b, own=True)
     assert out[1] is G and out[2] is A
     assert out[1].strides == G[:, np.ones(20, dtype=bool)].strides
-    C_order = elimination._drop_zero_idx(c, np.ascontiguousarray(G), np.ascontiguousarray(A), b)
-    assert C_order[1] is not G and C_order[1].flags.f_contiguous  # copied, column-major
+    copied = elimination._drop_zero_idx(c, G, A, b)
+    assert copied[1] is not G and copied[2] is not A
+    _assert_same(copied, out)
+    Gc, Ac = np.ascontiguousarray(G), np.ascontiguousarray(A)
+    C_order = elimination._drop_zero_idx(c, Gc, Ac, b, own=True)
+    assert C_order[1] is not Gc and C_order[1].flags.f_contiguous  # copied, column-major
 
 
 def test_csc_equals_scipy() -> None:

@@ -28,7 +28,7 @@ __all__ = ["eliminate_constraints", "independent_constraints"]
 
 
 def _drop_zero_idx(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray, own: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """Remove (numerically) trivial constraints ``0 ξ = 0`` (all coefficients below
     :data:`ROW_TOL`: dropping a constraint gives a superset) and generators that are zero in
@@ -36,7 +36,8 @@ def _drop_zero_idx(
 
     Returns ``(c, G, A, b, rows, cols, consistent)``: the masks of the kept constraints and
     generators, and False for a dropped constraint ``a ξ = b`` with ``|b| > ‖a‖₁`` (an empty
-    set).
+    set). ``own``: ``G`` and ``A`` are temporaries of the caller's (never a caller's
+    arrays), which may be returned themselves.
     """
     # the ufuncs' reductions called directly (what ndarray.max / any / all call, without their
     # Python wrappers: a few µs a call, five calls per step on the servo)
@@ -54,8 +55,8 @@ def _drop_zero_idx(
     cols = _any(G != 0, axis=0) | _any(A != 0, axis=0)
     # the copies are made even when nothing is dropped: their memory layout (``G[:, cols]`` is
     # column-major) decides how BLAS rounds the products that follow; arrays already laid out
-    # as these copies would be (in the loop of eliminate_constraints) are kept as they are
-    if all_rows and _all(cols) and _column_major(G) and _column_major(A):
+    # as these copies would be (own temporaries, in the loop of eliminate_constraints) are kept
+    if own and all_rows and _all(cols) and _column_major(G) and _column_major(A):
         return c, G, A, b, rows, cols, consistent
     return c, G[:, cols], A[:, cols], b, rows, cols, consistent
 
@@ -331,7 +332,7 @@ def eliminate_constraints(
         c, G, A, b, rad = out
         if cert is not None:
             cert.scale_factors(rad)
-        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b)
+        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b, own=True)
         if not ok:
             return None
         if cert is not None:
@@ -360,7 +361,7 @@ def eliminate_constraints(
         c, G, A, b = _eliminate(c, G, A, b, j, p)
         if cert is not None:
             cert.keep(np.arange(A.shape[0] + 1) != p, np.arange(G.shape[1] + 1) != j)
-        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b)
+        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b, own=True)
         if not ok:
             return None
         if cert is not None:
