@@ -83,7 +83,7 @@ from .state import OnlineState, Step
 
 __all__ = ["ConstrainedZonotopeDesign", "ConstrainedZonotopeEstimator", "ConstrainedZonotopeState"]
 
-_cat = np.concatenate  # np.hstack / np.vstack / np.append of these arrays call it (the same result)
+_cat = np.concatenate  # what np.hstack / vstack / append call here, without their wrappers
 
 
 INFLATE = 1e-9
@@ -138,12 +138,10 @@ def _measurement_update(
     constraints were dropped that the kept ones do not quite satisfy: the caller decides with
     :func:`ivobs.czonotope.certified_empty` on ``full``, the system before dropping)."""
     obs = ~np.isnan(rhs)
-    # np.concatenate: what np.hstack / np.vstack call on 2-D arrays, without their wrappers
     FRo = FR[obs]
     rows, rhs, rho = _cat([CG[obs], FRo], axis=1), rhs[obs], rho[obs]
     quiet = ~np.logical_or.reduce(FRo != 0, axis=1)
-    l1 = np.add.reduce(np.abs(rows), axis=1)
-    size = rho + np.where(quiet, INFLATE * (1.0 + np.abs(rhs) + l1), 0.0)
+    size = rho + np.where(quiet, INFLATE * (1.0 + np.abs(rhs) + np.abs(rows).sum(axis=1)), 0.0)
     live = (size > 0).nonzero()[0]
     slack = np.zeros((rows.shape[0], live.size))
     slack[live, np.arange(live.size)] = size[live]
@@ -375,15 +373,13 @@ class ConstrainedZonotopeEstimator(Estimator):
         dbox = self.sys.d_at(k, y_k)
         cd, rd = safe_radius(dbox.lo, dbox.hi)
         rd = _inflate(cd, rd)
-        # (the ufuncs' reductions directly: what np.any and ndarray.sum call)
         cols = (rd > 0) & (np.logical_or.reduce(E != 0) | np.logical_or.reduce(F != 0))
-        rdc = rd[cols]
         data = _StepData(
             mats=mats,
             u=u_k,
             cd=cd,
-            ER=E[:, cols] * rdc,
-            FR=F[:, cols] * rdc,
+            ER=E[:, cols] * rd[cols],
+            FR=F[:, cols] * rd[cols],
             xmag=np.abs(state.c) + np.add.reduce(np.abs(state.G), axis=1) + state.e,
             dmag=np.abs(cd) + rd,
             n=state.G.shape[0] + state.G.shape[1] + u_k.shape[0] + dbox.dim,
@@ -423,9 +419,7 @@ class ConstrainedZonotopeEstimator(Estimator):
         G_aug = _cat([G, np.zeros((nx, p))], axis=1)
         # the certificates also keep the hull of the prediction x[k+1] = A x[k] + E d[k] (same
         # factors): the box of x[k] alone lets an elimination blow up a predicted coordinate
-        pred = None
-        if self.design.elimination != "hausdorff":
-            pred = _cat([data.mats[0] @ G, ER], axis=1)
+        pred = None if self.design.elimination == "hausdorff" else np.hstack([data.mats[0] @ G, ER])
         hull: tuple[np.ndarray, np.ndarray, Certificates | None] | None = None
         if status != "empty":
             hull = hull_certificates(c, G_aug, A_new, b_new, pred)
