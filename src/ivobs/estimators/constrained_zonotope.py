@@ -83,6 +83,8 @@ from .state import OnlineState, Step
 
 __all__ = ["ConstrainedZonotopeDesign", "ConstrainedZonotopeEstimator", "ConstrainedZonotopeState"]
 
+_cat = np.concatenate  # what np.hstack / vstack / append call here, without their wrappers
+
 
 INFLATE = 1e-9
 """Relative inflation of the bounds of ``x0`` and ``d``, slack of noise-free outputs, and
@@ -136,16 +138,17 @@ def _measurement_update(
     constraints were dropped that the kept ones do not quite satisfy: the caller decides with
     :func:`ivobs.czonotope.certified_empty` on ``full``, the system before dropping)."""
     obs = ~np.isnan(rhs)
-    rows, rhs, rho = np.hstack([CG[obs], FR[obs]]), rhs[obs], rho[obs]
-    quiet = ~np.any(FR[obs] != 0, axis=1)
+    FRo = FR[obs]
+    rows, rhs, rho = _cat([CG[obs], FRo], axis=1), rhs[obs], rho[obs]
+    quiet = ~np.logical_or.reduce(FRo != 0, axis=1)
     size = rho + np.where(quiet, INFLATE * (1.0 + np.abs(rhs) + np.abs(rows).sum(axis=1)), 0.0)
-    live = np.flatnonzero(size > 0)
+    live = (size > 0).nonzero()[0]
     slack = np.zeros((rows.shape[0], live.size))
     slack[live, np.arange(live.size)] = size[live]
-    rows, rhs, consistent = _clean_rows(np.hstack([rows, slack]), rhs)
+    rows, rhs, consistent = _clean_rows(_cat([rows, slack], axis=1), rhs)
     p = FR.shape[1] + live.size
-    A_old = np.hstack([Ac, np.zeros((Ac.shape[0], p))])
-    A_all, b_all = np.vstack([A_old, rows]), np.append(b, rhs)
+    A_old = _cat([Ac, np.zeros((Ac.shape[0], p))], axis=1)
+    A_all, b_all = _cat([A_old, rows]), _cat([b, rhs])
     if not consistent:
         return A_all, b_all, p, "empty", (A_all, b_all)
     A_new, b_new, implied_ok = _drop_implied(A_all, b_all)
@@ -370,14 +373,14 @@ class ConstrainedZonotopeEstimator(Estimator):
         dbox = self.sys.d_at(k, y_k)
         cd, rd = safe_radius(dbox.lo, dbox.hi)
         rd = _inflate(cd, rd)
-        cols = (rd > 0) & (np.any(E != 0, axis=0) | np.any(F != 0, axis=0))
+        cols = (rd > 0) & (np.logical_or.reduce(E != 0) | np.logical_or.reduce(F != 0))
         data = _StepData(
             mats=mats,
             u=u_k,
             cd=cd,
             ER=E[:, cols] * rd[cols],
             FR=F[:, cols] * rd[cols],
-            xmag=np.abs(state.c) + np.abs(state.G).sum(axis=1) + state.e,
+            xmag=np.abs(state.c) + np.add.reduce(np.abs(state.G), axis=1) + state.e,
             dmag=np.abs(cd) + rd,
             n=state.G.shape[0] + state.G.shape[1] + u_k.shape[0] + dbox.dim,
         )
@@ -412,8 +415,8 @@ class ConstrainedZonotopeEstimator(Estimator):
         A_new, b_new, p, status, full = _measurement_update(Ac, b, C @ G, data.FR, rhs, rho)
         if status == "check" and certified_empty(*full):
             status = "empty"
-        ER = np.hstack([data.ER, np.zeros((nx, p - data.ER.shape[1]))])  # slacks: not in x
-        G_aug = np.hstack([G, np.zeros((nx, p))])
+        ER = _cat([data.ER, np.zeros((nx, p - data.ER.shape[1]))], axis=1)  # slacks: not in x
+        G_aug = _cat([G, np.zeros((nx, p))], axis=1)
         # the certificates also keep the hull of the prediction x[k+1] = A x[k] + E d[k] (same
         # factors): the box of x[k] alone lets an elimination blow up a predicted coordinate
         pred = None if self.design.elimination == "hausdorff" else np.hstack([data.mats[0] @ G, ER])
@@ -454,9 +457,9 @@ class ConstrainedZonotopeEstimator(Estimator):
             w = uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0]
             err = np.nextafter(err + w, np.inf)
         box = box_generators(err)
-        G_next = np.hstack([A @ upd.G[:, :m], upd.ER, box])
+        G_next = _cat([A @ upd.G[:, :m], upd.ER, box], axis=1)
         self._check_overflow(k + 1, c_next, G_next)
-        A_next = np.hstack([upd.A, np.zeros((upd.A.shape[0], box.shape[1]))])
+        A_next = _cat([upd.A, np.zeros((upd.A.shape[0], box.shape[1]))], axis=1)
         if self.design.max_generators <= 0:
             return c_next, G_next, A_next, upd.b, np.zeros(nx)
         return self._reduce(c_next, G_next, A_next, upd, box.shape[1], data)
@@ -478,7 +481,7 @@ class ConstrainedZonotopeEstimator(Estimator):
         if self.design.elimination == "hausdorff" or cert is None:
             cert = None
         else:
-            cert.D = np.hstack([cert.D, np.zeros((cert.D.shape[0], n_box))])
+            cert.D = _cat([cert.D, np.zeros((cert.D.shape[0], n_box))], axis=1)
         # in coordinates centred at c, so that the rounding in the reduction is relative to the
         # set, not to |x|; the shift is added once, its rounding aside
         out = eliminate_constraints(np.zeros(nx), G, A, b, self.design.max_constraints, cert)

@@ -9,6 +9,9 @@ the one with the smallest estimate of the Hausdorff error ([Scott2016, eq. (A.8)
 
 from __future__ import annotations
 
+from functools import cache
+from typing import Any
+
 import numpy as np
 
 try:  # the gufuncs behind np.linalg.qr (private to NumPy: present in 1.26 and 2.x)
@@ -20,11 +23,13 @@ from ._elim_kernels import select as _kernels_for
 from ._tolerances import PIVOT_TOL, ROW_TOL, ZERO_TOL
 from .hull import Certificates
 
+_max, _any, _all = np.maximum.reduce, np.logical_or.reduce, np.logical_and.reduce
+
 __all__ = ["eliminate_constraints", "independent_constraints"]
 
 
 def _drop_zero_idx(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
+    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray, own: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """Remove (numerically) trivial constraints ``0 ξ = 0`` (all coefficients below
     :data:`ROW_TOL`: dropping a constraint gives a superset) and generators that are zero in
@@ -32,22 +37,34 @@ def _drop_zero_idx(
 
     Returns ``(c, G, A, b, rows, cols, consistent)``: the masks of the kept constraints and
     generators, and False for a dropped constraint ``a ξ = b`` with ``|b| > ‖a‖₁`` (an empty
-    set).
+    set). ``own``: ``G`` and ``A`` are temporaries of the caller's (never a caller's
+    arrays), which may be returned themselves.
     """
+    # the ufuncs' reductions called directly (what ndarray.max / any / all call, without their
+    # Python wrappers: a few µs a call, five calls per step on the servo)
     absA = np.abs(A)
-    scale = 1.0 + (absA.max() if A.size else 0.0)
-    rows = (absA > ROW_TOL * scale).any(axis=1)
-    consistent = True
-    if not rows.all():
+    scale = 1.0 + (_max(absA, axis=None) if A.size else 0.0)
+    rows = _any(absA > ROW_TOL * scale, axis=1)
+    all_rows, consistent = bool(_all(rows)), True
+    if not all_rows:
         # a dropped row a ξ = b can only hold if |b| <= ‖a‖₁ (up to rounding)
         zb, za = b[~rows], absA[~rows].sum(axis=1)
         consistent = bool((np.abs(zb) <= za + 1e-8 * (1.0 + np.abs(zb))).all())
-    # the copies are kept even when nothing is dropped: their memory layout (``G[:, cols]`` is
-    # Fortran-ordered) decides how BLAS rounds the products that follow
-    A, b = A[rows], b[rows]
+        A = A[rows]
+    b = b[rows]
     # only exactly zero generators: fixing a small nonzero ξ_j at 0 would shrink the set
-    cols = (G != 0).any(axis=0) | (A != 0).any(axis=0)
+    cols = _any(G != 0, axis=0) | _any(A != 0, axis=0)
+    # the copies are made even when nothing is dropped: their memory layout (``G[:, cols]`` is
+    # column-major) decides how BLAS rounds the products that follow; arrays already laid out
+    # as these copies would be (own temporaries, in the loop of eliminate_constraints) are kept
+    if own and all_rows and _all(cols) and _column_major(G) and _column_major(A):
+        return c, G, A, b, rows, cols, consistent
     return c, G[:, cols], A[:, cols], b, rows, cols, consistent
+
+
+def _column_major(M: np.ndarray) -> bool:
+    """Whether ``M`` (2-D float64) has the strides of a fresh column-major copy of itself."""
+    return M.dtype == np.float64 and M.strides == (8, 8 * M.shape[0])
 
 
 def _normalise_rows_s(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -55,8 +72,8 @@ def _normalise_rows_s(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndar
     conditioned); also returns the scales."""
     if A.shape[0] == 0:
         return A, b, np.ones(0)
-    s = np.abs(A).max(axis=1)
-    if not s.all():
+    s = _max(np.abs(A), axis=1)
+    if not _all(s):
         s[s == 0] = 1.0
     return A / s[:, None], b / s, s
 
@@ -178,7 +195,7 @@ def _hausdorff(G: np.ndarray, A: np.ndarray, R: np.ndarray) -> np.ndarray:
     (0 on the exact eliminations, ``R_j <= 1e-3``, when there are any; ``inf`` where none)."""
     cand = np.isfinite(R)
     exact = cand & (R <= 1e-3)
-    if exact.any():
+    if _any(exact):
         return np.where(exact, 0.0, np.inf)
     Q = _qr_q(A.T)  # orthonormal basis of the row space of A
     Pjj = 1.0 - np.einsum("ij,ij->i", Q, Q)
@@ -213,14 +230,16 @@ def _eliminate(
     ([Scott2016, Proposition 5, eqs. (27) and (29)])."""
     piv_row = A[i] / A[i, j]
     piv_b = b[i] / A[i, j]
-    # ξ_j = piv_b - Σ_{l≠j} piv_row_l ξ_l
+    # ξ_j = piv_b - Σ_{l≠j} piv_row_l ξ_l (the products of np.outer, without its wrapper)
     c = c + G[:, j] * piv_b
-    G = G - np.outer(G[:, j], piv_row)
+    G = G - G[:, j, None] * piv_row[None, :]
     b = b - A[:, j] * piv_b
-    A = A - np.outer(A[:, j], piv_row)
+    A = A - A[:, j, None] * piv_row[None, :]
     keep_r = np.arange(A.shape[0]) != i
     keep_c = np.arange(A.shape[1]) != j
-    return c, G[:, keep_c], A[np.ix_(keep_r, keep_c)], b[keep_r]
+    # two masks in turn rather than np.ix_ (the same entries; the caller's _drop_zero_idx
+    # copies them again, into a layout that does not depend on this one)
+    return c, G[:, keep_c], A[keep_r][:, keep_c], b[keep_r]
 
 
 def independent_constraints(A: np.ndarray) -> np.ndarray:
@@ -232,19 +251,25 @@ def independent_constraints(A: np.ndarray) -> np.ndarray:
     keep = np.ones(nc, dtype=bool)
     if nc <= 1:
         return keep
-    from scipy.linalg.lapack import dgeqp3  # imported here: SciPy is slow to import
-
     # LAPACK's QR with column pivoting directly (what scipy.linalg.qr calls, without the
     # argument checks and copies that cost more than the factorisation on small systems; a
     # blocked workspace, as SciPy's size query gives, so the same factorisation)
-    R, jpvt = dgeqp3(np.array(A.T, dtype=float, order="F"), lwork=2 * nc + (nc + 1) * 64)[:2]
-    piv = jpvt - 1
-    d = np.abs(np.diag(R)[:nc])
-    rank = int(np.sum(d > 1e-10 * d[0])) if d.size and d[0] > 0 else 0
+    R, jpvt = _dgeqp3()(np.array(A.T, dtype=float, order="F"), lwork=2 * nc + (nc + 1) * 64)[:2]
+    d = np.abs(R.diagonal()[:nc])
+    rank = int(np.count_nonzero(d > 1e-10 * d[0])) if d.size and d[0] > 0 else 0
     if rank < nc:
         keep[:] = False
-        keep[piv[:rank]] = True
+        keep[jpvt[:rank] - 1] = True
     return keep
+
+
+@cache
+def _dgeqp3() -> Any:
+    """SciPy's ``dgeqp3``, imported on first use (SciPy is slow to import) and kept (the import
+    statement costs a sixth of a servo-sized factorisation)."""
+    from scipy.linalg.lapack import dgeqp3
+
+    return dgeqp3
 
 
 def _choose_factor(
@@ -259,21 +284,21 @@ def _choose_factor(
     R = _overshoot(A, b)
     piv = np.argmax(np.abs(A), axis=0)
     cand = np.isfinite(R) & (np.abs(A[piv, np.arange(m)]) >= PIVOT_TOL)
-    if not cand.any():
+    if not _any(cand):
         return None
     if cert is None:
         j = int(np.argmin(_shape(G, A, R, cand)))
         return j, int(piv[j])
     loss = cert.elimination_loss(A, b, piv, cand)
-    best = loss.min()
+    best = np.minimum.reduce(loss)
     ties = loss <= best + 1e-9 * (1.0 + abs(best))
     if np.count_nonzero(ties) == 1:  # a unique least loss: the Hausdorff estimate is not needed
-        j = int(np.flatnonzero(ties)[0])
+        j = int(ties.argmax())
         return j, int(piv[j])
     key = np.where(ties, _shape(G, A, R, cand), np.inf)
-    if not np.any(np.isfinite(key)):
+    if not _any(np.isfinite(key)):
         key = loss
-    j = int(np.argmin(key))
+    j = int(key.argmin())
     return j, int(piv[j])
 
 
@@ -282,7 +307,7 @@ def _shape(G: np.ndarray, A: np.ndarray, R: np.ndarray, cand: np.ndarray) -> np.
     Hausdorff estimate, or where it is nowhere finite the overshoot times ``‖G e_j‖``."""
     err = _hausdorff(G, A, R)
     shape = np.where(cand & np.isfinite(err), err, np.inf)
-    if not np.any(np.isfinite(shape)):
+    if not _any(np.isfinite(shape)):
         with np.errstate(invalid="ignore"):  # R = inf on the non-candidates
             shape = np.where(cand, R * np.linalg.norm(G, axis=0), np.inf)
     return shape
@@ -317,7 +342,7 @@ def eliminate_constraints(
         c, G, A, b, rad = out
         if cert is not None:
             cert.scale_factors(rad)
-        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b)
+        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b, own=True)
         if not ok:
             return None
         if cert is not None:
@@ -328,7 +353,7 @@ def eliminate_constraints(
         if cert is not None:
             cert.scale_rows(s)
         rows = independent_constraints(A)
-        if not rows.all():  # implied constraints: dropping them keeps the set
+        if not _all(rows):  # implied constraints: dropping them keeps the set
             A, b = A[rows], b[rows]
             if cert is not None:
                 cert.keep(rows, np.ones(A.shape[1], dtype=bool))
@@ -346,7 +371,7 @@ def eliminate_constraints(
         c, G, A, b = _eliminate(c, G, A, b, j, p)
         if cert is not None:
             cert.keep(np.arange(A.shape[0] + 1) != p, np.arange(G.shape[1] + 1) != j)
-        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b)
+        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b, own=True)
         if not ok:
             return None
         if cert is not None:

@@ -15,12 +15,17 @@ can tell what it loosens. SciPy is imported where an LP is solved (it is slow to
 from __future__ import annotations
 
 import os
+from functools import cache
 from typing import Any
 
 import numpy as np
 
 from ...linalg import gamma
 from ._tolerances import EMPTY_TOL, ZERO_TOL
+
+# ndarray.sum / all without their Python wrappers (the same reductions): called several times
+# per elimination, on small arrays where the wrapper costs as much as the sum
+_add, _all = np.add.reduce, np.logical_and.reduce
 
 __all__ = [
     "Certificates",
@@ -83,9 +88,10 @@ def _dual_bounds(
     nc, m = A.shape
     am = np.abs(mu)
     err = gamma(nc + m + 3) * (
-        am @ np.abs(b) + radius * (np.abs(Gs).sum(axis=1) + am @ np.abs(A).sum(axis=1))
+        am @ np.abs(b) + radius * (_add(np.abs(Gs), axis=1) + am @ _add(np.abs(A), axis=1))
     )
-    bounds: np.ndarray = mu @ b - radius * np.abs(Gs - mu @ A).sum(axis=1) - err * (1.0 + gamma(4))
+    l1 = _add(np.abs(Gs - mu @ A), axis=1)
+    bounds: np.ndarray = mu @ b - radius * l1 - err * (1.0 + gamma(4))
     return bounds
 
 
@@ -245,9 +251,9 @@ class Certificates:
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
         """Constraints ``rows`` and factors ``cols`` are kept (the others were zero)."""
-        if not rows.all():
+        if not _all(rows):
             self.mu = self.mu[:, rows]
-        if not cols.all():
+        if not _all(cols):
             self.D = self.D[:, cols]
 
     def scale_rows(self, s: np.ndarray) -> None:
@@ -277,15 +283,15 @@ class Certificates:
         t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
         # ‖A_p‖₁ per constraint, then per candidate: the same sums as ``|A[piv]|`` row by row
         # (each a contiguous row, summed alike) without copying a row per factor (m x m)
-        row_l1 = np.ascontiguousarray(np.abs(A)).sum(axis=1)
+        row_l1 = _add(np.abs(A, order="C"), axis=1)
         upper = self.weight @ np.abs(t) * (row_l1[piv] + np.abs(b[piv]))
-        idx = np.flatnonzero(cand)
+        idx = cand.nonzero()[0]
         if idx.size > LOSS_CANDIDATES:
             idx = idx[np.argsort(upper[idx], kind="stable")[:LOSS_CANDIDATES]]
         out = np.full(m, np.inf)
         tj = t[:, idx]  # (K, c)
         new = _shifted_l1(Rc, tj, A[piv[idx]])
-        loss = new - tj * b[piv[idx]][None, :] - np.abs(Rc).sum(axis=1, keepdims=True)
+        loss = new - tj * b[piv[idx]][None, :] - _add(np.abs(Rc), axis=1, keepdims=True)
         out[idx] = self.weight @ loss
         return out
 
@@ -294,7 +300,7 @@ class Certificates:
         Rc = self.D[:, j] - self.mu @ A[:, j]
         self.mu = self.mu.copy()
         self.mu[:, p] += Rc / A[p, j]
-        self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])
+        self.D = self.D - (self.D[:, j] / A[p, j])[:, None] * A[p][None, :]  # np.outer's product
 
 
 _CHUNK = 1 << 16
@@ -349,13 +355,15 @@ def _shifted_l1(R: np.ndarray, T: np.ndarray, P: np.ndarray) -> np.ndarray:
         buf = T[:, s:e, None] * P[None, s:e, :]
         np.subtract(R[:, None, :], buf, out=buf)
         np.abs(buf, out=buf)
-        out[:, s:e] = buf.sum(axis=2)
+        out[:, s:e] = _add(buf, axis=2)
     return out
 
 
+@cache
 def _hull_chains(n: int, k: int) -> list[list[int]]:
     """Two warm-start chains over the rows ``[G; -G; P; -P]`` (``G`` n rows, ``P`` k rows):
-    the minima in order, the maxima in reverse order."""
+    the minima in order, the maxima in reverse order (kept: the same few sizes every step;
+    read only)."""
     lo = list(range(n)) + list(range(2 * n, 2 * n + k))
     hi = list(range(2 * n - 1, n - 1, -1)) + list(range(2 * n + 2 * k - 1, 2 * n + k - 1, -1))
     return [lo, hi]
@@ -394,7 +402,7 @@ def hull_certificates(
     n = G.shape[0]
     P = np.zeros((0, G.shape[1])) if extra is None else extra
     k = P.shape[0]
-    Gs = np.vstack([G, -G, P, -P] if k else [G, -G])
+    Gs = np.concatenate([G, -G, P, -P] if k else [G, -G])  # np.vstack's call
     chains = _hull_chains(n, k)
     vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains, block_max)
     radius = 1.0
@@ -416,6 +424,6 @@ def hull_certificates(
         weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
     else:  # the hull alone (the nonlinear filter): no rows of P
         weight = np.concatenate([1.0 / width, 1.0 / width])
-    cert = Certificates(Gs * radius, mu, weight)
+    cert = Certificates(Gs * radius if radius != 1.0 else Gs, mu, weight)  # (x * 1.0 is x)
     cert.radius = radius
     return lo, hi, cert

@@ -47,7 +47,7 @@ def consolidate_small(
     up = 1.0 + gamma(k + 1)
     gx = np.abs(G[:, small]).sum(axis=1) * up
     ga = np.abs(A[:, small]).sum(axis=1) * up
-    ix, ia = np.flatnonzero(gx > 0), np.flatnonzero(ga > 0)
+    ix, ia = (gx > 0).nonzero()[0], (ga > 0).nonzero()[0]
     if ix.size + ia.size >= k:
         return c, G, A, b
     nc = A.shape[0]
@@ -55,7 +55,8 @@ def consolidate_small(
     Ab = np.zeros((nc, ix.size + ia.size))
     Gb[ix, np.arange(ix.size)] = gx[ix]
     Ab[ia, ix.size + np.arange(ia.size)] = ga[ia]
-    return c, np.hstack([G[:, ~small], Gb]), np.hstack([A[:, ~small], Ab]), b
+    # np.concatenate: np.hstack's call on 2-D arrays, without its wrapper
+    return c, np.concatenate([G[:, ~small], Gb], 1), np.concatenate([A[:, ~small], Ab], 1), b
 
 
 def reduce_generators(
