@@ -8,13 +8,14 @@ they reproduce (:func:`select`); they are used from :data:`KERNEL_MIN` entries o
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["KERNEL_MIN", "Kernels", "kernels", "select"]
+__all__ = ["KERNEL_MIN", "Kernels", "kernels", "load_compiled", "select"]
 
 
 class Kernels(NamedTuple):
@@ -31,19 +32,26 @@ KERNEL_MIN = 1 << 14
 (~0.5 s of CPU once per process) would not pay."""
 
 
+def load_compiled(module: str, *names: str) -> tuple[Any, ...] | None:
+    """``names`` from the compiled module ``module`` of this package (``"_elim_nb"``,
+    ``"_loss_nb"``), or None: numba missing (or broken), or disabled by the environment
+    variable ``IVOBS_NUMBA=0`` (as the strip kernel). Imported by name, when first asked: only
+    then is numba imported."""
+    if os.environ.get("IVOBS_NUMBA", "") == "0":
+        return None
+    try:
+        mod = importlib.import_module(f".{module}", __package__)
+    except ImportError:  # numba not installed (or broken): NumPy
+        return None
+    return tuple(getattr(mod, name) for name in names)
+
+
 def kernels() -> Kernels | None:
-    """The kernels, or None: numba missing, or disabled by the environment variable
-    ``IVOBS_NUMBA=0`` (as the other kernels) when first asked."""
+    """The kernels, or None (:func:`load_compiled`) when first asked."""
     global _KERNELS
     if _KERNELS is False:
-        _KERNELS = None
-        if os.environ.get("IVOBS_NUMBA", "") != "0":
-            try:
-                from ._elim_nb import overshoot, propagate
-            except ImportError:  # numba not installed (or broken): NumPy
-                pass
-            else:
-                _KERNELS = Kernels(propagate, overshoot)
+        found = load_compiled("_elim_nb", "propagate", "overshoot")
+        _KERNELS = None if found is None else Kernels(*found)
     out: Kernels | None = _KERNELS
     return out
 

@@ -14,13 +14,13 @@ can tell what it loosens. SciPy is imported where an LP is solved (it is slow to
 
 from __future__ import annotations
 
-import os
 from functools import cache
 from typing import Any
 
 import numpy as np
 
 from ...linalg import gamma
+from ._elim_kernels import load_compiled
 from ._tolerances import EMPTY_TOL, ZERO_TOL
 
 # ndarray.sum / all without their Python wrappers (the same reductions): called several times
@@ -309,18 +309,12 @@ one ``(K, m)`` block at a time is 3x faster than the whole array on tank30)."""
 
 
 def _kernel() -> Any:
-    """The compiled :func:`._loss_nb.shifted_l1`, or None: numba missing, or disabled by the
-    environment variable ``IVOBS_NUMBA=0`` (as the strip kernel) when first asked."""
+    """The compiled :func:`._loss_nb.shifted_l1`, or None (numba missing, or ``IVOBS_NUMBA=0``:
+    :func:`._elim_kernels.load_compiled`) when first asked."""
     global _KERNEL
     if _KERNEL is False:
-        _KERNEL = None
-        if os.environ.get("IVOBS_NUMBA", "") != "0":
-            try:
-                from ._loss_nb import shifted_l1
-            except ImportError:  # numba not installed (or broken): NumPy
-                pass
-            else:
-                _KERNEL = shifted_l1
+        found = load_compiled("_loss_nb", "shifted_l1")
+        _KERNEL = None if found is None else found[0]
     return _KERNEL
 
 
