@@ -35,7 +35,8 @@ from __future__ import annotations
 import numpy as np
 
 # numba's on-disk cache does not notice a change in another module: after editing
-# _loss_nb._pairwise_sum, touch this file (or clear __pycache__) so that these recompile
+# _loss_nb._pairwise_sum (or its _plan), touch this file (or clear __pycache__) so that these
+# recompile
 from ._loss_nb import _pairwise_sum, jit
 from ._tolerances import ZERO_TOL
 

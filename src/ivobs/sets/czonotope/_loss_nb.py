@@ -63,48 +63,12 @@ def _block_sum(buf: np.ndarray, lo: int, n: int) -> float:  # pragma: no cover -
 
 
 @jit
-def _pairwise_sum(buf: np.ndarray, n: int) -> float:  # pragma: no cover - compiled
-    """NumPy's pairwise sum of ``buf[:n]``: the tree of halves (``n/2`` rounded down to a
-    multiple of 8) down to blocks of at most 128, walked in post-order with explicit stacks
-    (numba's on-disk cache mishandles recursive functions: they crash when loaded)."""
-    if n <= 128:
-        return _block_sum(buf, 0, n)
-    los = np.empty(64, dtype=np.int64)
-    ns = np.empty(64, dtype=np.int64)
-    state = np.empty(64, dtype=np.int64)
-    vals = np.empty(64)
-    top, nv = 0, 0
-    los[0], ns[0], state[0] = 0, n, 0
-    while top >= 0:
-        lo, cnt = los[top], ns[top]
-        if cnt <= 128:
-            vals[nv] = _block_sum(buf, lo, cnt)
-            nv += 1
-            top -= 1
-            continue
-        half = cnt // 2
-        half -= half % 8
-        if state[top] == 0:  # the left half first
-            state[top] = 1
-            top += 1
-            los[top], ns[top], state[top] = lo, half, 0
-        elif state[top] == 1:  # then the right half
-            state[top] = 2
-            top += 1
-            los[top], ns[top], state[top] = lo + half, cnt - half, 0
-        else:  # both done: left + right
-            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
-            nv -= 1
-            top -= 1
-    return float(vals[0])
-
-
-@jit
 def _plan(n: int) -> np.ndarray:  # pragma: no cover - compiled
-    """NumPy's pairwise tree of ``n`` terms as a post-order program (the walk of
-    :func:`_pairwise_sum`): rows ``(0, lo, cnt)`` push the block sum of ``[lo, lo + cnt)``
-    (``cnt <= 128``), rows ``(1, 0, 0)`` replace the last two values by their sum. Every block
-    of a split tree has at least 64 terms, so ``2 n / 64 + 2`` rows suffice."""
+    """NumPy's pairwise tree of ``n`` terms as a post-order program, the left half first
+    (:func:`_pairwise_sum` and :func:`shifted_l1` evaluate it): rows ``(0, lo, cnt)`` push the
+    block sum of ``[lo, lo + cnt)`` (``cnt <= 128``), rows ``(1, 0, 0)`` replace the last two
+    values by their sum. Every block of a split tree has at least 64 terms, so ``2 n / 64 + 2``
+    rows suffice."""
     prog = np.zeros((2 * (n // 64) + 2, 3), dtype=np.int64)
     los = np.empty(64, dtype=np.int64)
     ns = np.empty(64, dtype=np.int64)
@@ -133,6 +97,26 @@ def _plan(n: int) -> np.ndarray:  # pragma: no cover - compiled
             rows += 1
             top -= 1
     return prog[:rows]
+
+
+@jit
+def _pairwise_sum(buf: np.ndarray, n: int) -> float:  # pragma: no cover - compiled
+    """NumPy's pairwise sum of ``buf[:n]``: the tree of halves (``n/2`` rounded down to a
+    multiple of 8) down to blocks of at most 128, evaluated along :func:`_plan` with an explicit
+    stack (numba's on-disk cache mishandles recursive functions: they crash when loaded)."""
+    if n <= 128:
+        return _block_sum(buf, 0, n)
+    prog = _plan(n)
+    vals = np.empty(64)
+    nv = 0
+    for s in range(prog.shape[0]):
+        if prog[s, 0] == 0:
+            vals[nv] = _block_sum(buf, prog[s, 1], prog[s, 2])
+            nv += 1
+        else:  # both halves done: left + right
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+    return float(vals[0])
 
 
 @jit
