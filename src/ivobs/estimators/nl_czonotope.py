@@ -133,6 +133,14 @@ def _pow2(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def _pad(M: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """``[[M, 0], [0, 0]]`` of shape ``(rows, cols)``, C-ordered (what ``np.hstack`` /
+    ``np.vstack`` with zero blocks give, filled in place: cheaper than the stacks here)."""
+    out = np.zeros((rows, cols))
+    out[: M.shape[0], : M.shape[1]] = M
+    return out
+
+
 def _joint_box(
     c: np.ndarray, G: np.ndarray, e: np.ndarray, xlo: np.ndarray, xhi: np.ndarray
 ) -> tuple[list[float], list[float]]:
@@ -303,8 +311,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         Gz = np.zeros((nx + self._cw.shape[0], m + cols.size))
         Gz[:nx, :m] = G
         Gz[nx + cols, m + np.arange(cols.size)] = self._rw[cols]
-        Az = np.zeros((A.shape[0], m + cols.size))  # [A 0]
-        Az[:, :m] = A
+        Az = _pad(A, A.shape[0], m + cols.size)  # [A 0]
         lo, hi = _joint_box(c, G, e, xlo, xhi)
         wlo = self.model.w_box.lo if wlo is None else wlo
         whi = self.model.w_box.hi if whi is None else whi
@@ -335,12 +342,10 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
                 joint.lo, joint.hi = np.array(vl), np.array(vh)
                 rows, rhs = self._rows(joint, u_k, y_k, obs)
         if rows is not None and rhs is not None:
-            # [Gz 0] and [[A 0]; rows] filled in place (the same C-ordered arrays as the stacks)
-            nc, mg = joint.A.shape[0], joint.Gz.shape[1]
-            Gz = np.zeros((joint.Gz.shape[0], rows.shape[1]))
-            Gz[:, :mg] = joint.Gz
-            A = np.zeros((nc + rows.shape[0], rows.shape[1]))
-            A[:nc, :mg] = joint.A
+            # [Gz 0] and [[A 0]; rows] (the same C-ordered arrays as the stacks)
+            nc = joint.A.shape[0]
+            Gz = _pad(joint.Gz, joint.Gz.shape[0], rows.shape[1])
+            A = _pad(joint.A, nc + rows.shape[0], rows.shape[1])
             A[nc:] = rows
             b = np.concatenate([joint.b, rhs])
             hull = hull_certificates(joint.z[:nx], Gz[:nx], A, b, block_max=self.design.block_max)
@@ -395,8 +400,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             + gamma(n) * (aJ @ np.abs(joint.Gz)).sum(axis=1)
         ) * (1.0 + gamma(n + 6))
         p, mg = coeff.shape
-        rows = np.zeros((p, mg + p))  # [coeff, diag(sigma)]
-        rows[:, :mg] = coeff
+        rows = _pad(coeff, p, mg + p)  # [coeff, diag(sigma)]
         rows[np.arange(p), mg + np.arange(p)] = sigma
         scale = _pow2(np.maximum(np.abs(rows).max(axis=1), np.finfo(float).tiny))
         return rows / scale[:, None], rhs / scale
@@ -422,11 +426,9 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         # and two stacks cost more than the arithmetic here)
         nz = np.flatnonzero(err > 0)
         mg = Gz.shape[1]
-        G = np.zeros((err.shape[0], mg + nz.size))
-        G[:, :mg] = J @ Gz
+        G = _pad(J @ Gz, err.shape[0], mg + nz.size)
         G[nz, mg + np.arange(nz.size)] = err[nz]
-        A = np.zeros((joint.A.shape[0], mg + nz.size))
-        A[:, :mg] = joint.A
+        A = _pad(joint.A, joint.A.shape[0], mg + nz.size)
         self._check_overflow(k, c, G)
         return self._reduce(c, G, A, joint.b, lin)
 
