@@ -79,31 +79,37 @@ def test_image_bounds_is_the_exact_hull(seed):
     P = Box(lo, hi).sample(50, rng) @ M.T
     assert np.all(P >= b_lo - 1e-12) and np.all(P <= b_hi + 1e-12)
     assert M @ Box(lo, hi) == Box(b_lo, b_hi)
+    assert np.all(b_lo <= V.min(axis=0)) and np.all(b_hi >= V.max(axis=0))  # outward
 
 
 def test_image_bounds_with_infinite_bounds_and_batches():
     M = np.array([[1.0, 0.0], [0.0, -2.0]])
     lo, hi = image_bounds(M, [-np.inf, 1.0], [0.0, 2.0])
-    np.testing.assert_array_equal(lo, [-np.inf, -4.0])
-    np.testing.assert_array_equal(hi, [0.0, -2.0])
+    assert lo[0] == -np.inf and -4.0 - 1e-14 < lo[1] <= -4.0  # outward by its rounding bound
+    assert 0.0 <= hi[0] < 1e-14 and -2.0 <= hi[1] < -2.0 + 1e-14
     L = np.zeros((5, 7, 2))
     H = np.ones((5, 7, 2))
     lo, hi = image_bounds(M, L, H)
     assert lo.shape == (5, 7, 2)
-    np.testing.assert_array_equal(hi[..., 1], 0.0)
+    assert np.all((hi[..., 1] >= 0.0) & (hi[..., 1] < 1e-14))
 
 
 def test_zonotope_operations():
     z = Zonotope([1.0, 0.0], [[1.0, 0.5], [0.0, 1.0]])
-    assert z.interval_hull() == Box([-0.5, -1.0], [2.5, 1.0])
+    hull = z.interval_hull()  # the exact hull [-0.5, 2.5] x [-1, 1], rounded outward
+    assert np.all(hull.lo <= [-0.5, -1.0]) and np.all(hull.hi >= [2.5, 1.0])
+    np.testing.assert_allclose(hull.lo, [-0.5, -1.0], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(hull.hi, [2.5, 1.0], rtol=0, atol=1e-14)
     w = np.array([[2.0, 0.0], [1.0, 1.0]]) @ z
     np.testing.assert_array_equal(w.c, [2.0, 1.0])
+    np.testing.assert_array_equal(w.G[:, :2], [[2.0, 1.0], [1.0, 1.5]])
+    assert w.num_generators == 4 and np.all(w.G[:, 2:] < 1e-14)  # + the box of its rounding
     s = z + Box([0, 0], [1, 1])
-    assert s.num_generators == 4
+    assert s.num_generators == 6  # 2 + the box's 2 + the centre's rounding box
     np.testing.assert_array_equal(s.c, [1.5, 0.5])
     assert z.contains([2.5, 1.0]) and not z.contains([2.5, -1.0])
     t = Box([0, 0], [1, 1]) + z  # the box's generators first
-    np.testing.assert_array_equal(t.G, np.hstack([np.diag([0.5, 0.5]), z.G]))
+    np.testing.assert_allclose(t.G[:, :4], np.hstack([np.diag([0.5, 0.5]), z.G]), atol=1e-15)
     np.testing.assert_array_equal(t.c, s.c)
     with pytest.raises(IvobsError, match="expected shape"):
         Zonotope([0.0, 0.0], np.ones((3, 2)))

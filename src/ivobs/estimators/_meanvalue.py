@@ -18,7 +18,7 @@ remainder of [Althoff2008] is the same statement with ``J̃ = J(c)``). ``J̃ = m
 ``|g(ζ) - g0 - J̃ (ζ - c)| <= ρ`` componentwise. **Rounding**: ``g(c)`` is enclosed by the
 model's point evaluation ``[gl, gh]`` (outward rounded); ``g0 = fl((gl + gh) / 2)`` and its
 distance to any point of ``[gl, gh]`` is at most ``r = (gh - gl)/2`` rounded up by
-``γ_3 (|g0| + r)`` (:func:`~ivobs.sets.zonotope.safe_radius`). ``J̃`` is any float matrix (it
+``γ_3 (|g0| + r)`` (:func:`~ivobs.sets.rounding.mid_rad`). ``J̃`` is any float matrix (it
 need not be the exact midpoint). ``D = max(Jh - J̃, J̃ - Jl)`` and ``Δ = max(hi - c, c - lo)``
 are single rounded subtractions, so ``(1 + 2u) D`` and ``(1 + 2u) Δ`` bound the exact ones; the
 product ``D Δ`` (non-negative terms, ``n`` of them) is rounded up by ``(1 + γ_{n+1})`` and the
@@ -155,7 +155,7 @@ def linearise(
 
 
 def _safe_radius(lo: float, hi: float, g3: float) -> tuple[float, float]:
-    """:func:`~ivobs.sets.zonotope.safe_radius` of one interval (``g3 = γ_3``)."""
+    """:func:`~ivobs.sets.rounding.mid_rad` of one interval (``g3 = γ_3``)."""
     c = 0.5 * (lo + hi)
     r = 0.5 * (hi - lo)
     return c, (r + g3 * (abs(c) + r) if hi > lo else 0.0)

@@ -213,6 +213,11 @@ class Estimator(Persistence):
     """True for methods that accept interval matrices (``LinearSystem(ivobs.Box(A_lo, A_hi),
     ...)``), each saying why in its docstring; the others refuse such a system."""
     needs_x0: ClassVar[bool] = True
+    proven_rounding: ClassVar[bool] = False
+    """True for methods whose ``_step`` (and ``_run``) return bounds that already enclose the
+    exact sets, every floating-point error of the recursion bounded by a proven model
+    ([Higham2002] or directed rounding; :mod:`ivobs.sets.rounding`): the base class then adds no
+    margin and computes no data scale."""
     rounds_itself: ClassVar[bool] = False
     """True for methods that apply the rounding margin themselves (``intersect``: its members'
     boxes are rounded before they are intersected, which needs no arithmetic); the data scale
@@ -234,7 +239,7 @@ class Estimator(Persistence):
         self._state: OnlineState | None = None
         self._data_scales = DataScale(sys)
         self._scale_gain = 1.0  # factor of the data scale (> 1: rounding that grows faster)
-        lean = sys.dt != 0 and not self.rounds_itself
+        lean = sys.dt != 0 and not self.rounds_itself and not self.proven_rounding
         lean = lean and type(self)._step_scale is Estimator._step_scale
         self._lean = self._data_scales.steady_list() if lean else None  # step()'s cheap path
         self._branching = False
@@ -334,7 +339,7 @@ class Estimator(Persistence):
         scale = state.scale
         if step_scale is not None:
             scale = scale if scale >= step_scale else step_scale
-        elif online or self.rounds_itself:
+        elif (online or self.rounds_itself) and not self.proven_rounding:
             scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
             if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
                 state = dataclasses.replace(state, scale=scale)
@@ -358,12 +363,13 @@ class Estimator(Persistence):
         NaN before ``valid_from``."""
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
-        if not self.rounds_itself:
+        margin = not (self.rounds_itself or self.proven_rounding)
+        if margin:
             box = lean_outward(lo, hi, state.scale)
             if box is not None:  # short finite bounds, rounded in floats (rounding.py)
                 return Box._trusted(*box)
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
-        if not self.rounds_itself:
+        if margin:
             outward(lo, hi, state.scale)
         if finite and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
             what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"

@@ -73,8 +73,8 @@ from ..sets.czonotope import (
     gamma,
     hull_certificates,
     independent_constraints,
+    mid_rad,
     reduce_consolidated,
-    safe_radius,
 )
 from . import _uncertain as uncertain
 from . import register
@@ -190,7 +190,7 @@ def _restart(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Predicted set from the box ``[lo, hi]`` of ``x[k]`` (sound fallback; a box covers the
     rounding of ``A m + shift`` and ``A diag(r)``)."""
-    m, r = safe_radius(lo, hi)
+    m, r = mid_rad(lo, hi)
     c = A @ m + shift
     err = gamma(A.shape[1] + 2) * (np.abs(A) @ (np.abs(m) + r) + np.abs(shift))
     G = np.hstack([A * r, ER, box_generators(err)])
@@ -357,7 +357,7 @@ class ConstrainedZonotopeEstimator(Estimator):
     # -- online -------------------------------------------------------------------------------
     def _initial_state(self) -> ConstrainedZonotopeState:
         assert self.x0 is not None
-        c, r = safe_radius(self.x0.lo, self.x0.hi)
+        c, r = mid_rad(self.x0.lo, self.x0.hi)
         r = _inflate(c, r)
         G = np.diag(r)[:, r > 0]
         return ConstrainedZonotopeState(
@@ -371,7 +371,7 @@ class ConstrainedZonotopeEstimator(Estimator):
         mats = self.sys.matrices_at(k)
         E, F = mats[4], mats[5]
         dbox = self.sys.d_at(k, y_k)
-        cd, rd = safe_radius(dbox.lo, dbox.hi)
+        cd, rd = mid_rad(dbox.lo, dbox.hi)
         rd = _inflate(cd, rd)
         cols = (rd > 0) & (np.logical_or.reduce(E != 0) | np.logical_or.reduce(F != 0))
         data = _StepData(

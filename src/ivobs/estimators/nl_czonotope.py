@@ -64,8 +64,8 @@ from ..sets.czonotope import (
     eliminate_constraints,
     gamma,
     hull_certificates,
+    mid_rad,
     reduce_consolidated,
-    safe_radius,
 )
 from ..sets.czonotope._highs import BLOCK_SIZE
 from . import register
@@ -223,14 +223,14 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         self.design = NonlinearConstrainedZonotopeDesign(
             max_constraints=nc, max_generators=ng, block_max=BLOCK_SIZE if hull_lp == "block" else 0
         )
-        self._cw, self._rw = safe_radius(sys.w_box.lo, sys.w_box.hi)
+        self._cw, self._rw = mid_rad(sys.w_box.lo, sys.w_box.hi)
         self._wcols = np.flatnonzero(self._rw > 0)
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
 
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearConstrainedZonotopeState:
         assert self.x0 is not None
-        c, r = safe_radius(self.x0.lo, self.x0.hi)
+        c, r = mid_rad(self.x0.lo, self.x0.hi)
         G = np.diag(r)[:, r > 0]
         j = self._joint(
             c,
@@ -442,7 +442,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         e = np.zeros(nx)
         out = eliminate_constraints(np.zeros(nx), G, A, b, self.design.max_constraints)
         if out is None:  # numerically empty: restart from the natural box (sound)
-            c, r = safe_radius(lin.nat_lo, lin.nat_hi)
+            c, r = mid_rad(lin.nat_lo, lin.nat_hi)
             G = np.diag(r)[:, r > 0]
             A, b = np.zeros((0, G.shape[1])), np.zeros(0)
         else:

@@ -42,7 +42,7 @@ Option ``box_strips``: also cut ``Z`` with ``|x_j - mid_j| <= rad_j`` where the 
 ``x_k`` is in ``<p, H> ⊕ box(e)`` and ``[lo, hi]`` (steps (v)-(vi)); the contractors of step 0
 and 3 only remove points that cannot explain ``y_k``. (i) ``Z``, ``B``: the hull is
 ``p ± (|H| 1 + e)`` enlarged by ``γ_{m+2} (|p| + |H| 1)`` (the rounding of the sums);
-``W`` is re-centred by :func:`~ivobs.sets.zonotope.safe_radius` (``[wl, wh] ⊆ c_w ± R_w``
+``W`` is re-centred by :func:`~ivobs.sets.rounding.mid_rad` (``[wl, wh] ⊆ c_w ± R_w``
 exactly). (ii) Linearisation: :func:`~ivobs.estimators._meanvalue.linearise` returns
 ``(g0, J, ρ)`` with ``|g(ζ) - g0 - J(ζ - c)| <= ρ`` exactly for every ``ζ ∈ B``, from the
 model's outward-rounded enclosures (its docstring bounds its own rounding). (iii) A strip
@@ -84,8 +84,8 @@ from ..sets import Box
 from ..sets.czonotope import (
     UNIT_ROUNDOFF,
     gamma,
+    mid_rad,
     reduce_generators,
-    safe_radius,
 )
 from . import register
 from ._meanvalue import TermwiseMargin, contract_back_lists, linearise_lists
@@ -242,7 +242,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         if not isinstance(box_strips, bool):
             raise IvobsError(f"box_strips: expected True or False, got {box_strips!r}")
         self.design = NonlinearZonotopeDesign(order=q, box_strips=box_strips)
-        cw, rw = safe_radius(sys.w_box.lo, sys.w_box.hi)
+        cw, rw = mid_rad(sys.w_box.lo, sys.w_box.hi)
         self._cw, self._rw = cw, rw
         self._wcols = np.flatnonzero(rw > 0)
         self._wblock = np.diag(rw)[:, self._wcols]
@@ -253,7 +253,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearZonotopeState:
         assert self.x0 is not None
-        p, r = safe_radius(self.x0.lo, self.x0.hi)
+        p, r = mid_rad(self.x0.lo, self.x0.hi)
         x0lo, x0hi = self.x0.lo.tolist(), self.x0.hi.tolist()
         j = self._joint(p, np.diag(r)[:, r > 0], np.zeros(self.model.nx), x0lo, x0hi)
         nu = self.model.nu
@@ -352,7 +352,7 @@ class NonlinearZonotopeEstimator(TermwiseMargin, Estimator):
         (step 1)."""
         nx = self.model.nx
         hull = np.abs(joint.Hz[:nx]).sum(axis=1) + joint.acc[:nx]
-        m, r = safe_radius(lo, hi)
+        m, r = mid_rad(lo, hi)
         for j in np.flatnonzero(r < BOX_STRIP_RATIO * hull):
             h = np.zeros(joint.z.shape[0])
             h[j] = 1.0

@@ -54,7 +54,7 @@ def run_record(
     if y.ndim == 2:
         lo, hi, inc = _block(est, u, y, t, vectorize, bar)
         lo, hi = _owned(lo), _owned(hi)
-        finalize(est, lo, hi, est._data_scale(u, y, t))
+        finalize(est, lo, hi, None if est.proven_rounding else est._data_scale(u, y, t))
         return lo, hi, inc
     # streams in cache-sized chunks written into one output: large fresh temporaries cost more
     # in page faults than the arithmetic itself
@@ -65,7 +65,8 @@ def run_record(
     for b0 in range(0, B, chunk):
         sl = slice(b0, min(B, b0 + chunk))
         lo[sl], hi[sl], inc[sl] = _block(est, u[sl], y[sl], t, vectorize, bar)
-        finalize(est, lo[sl], hi[sl], est._data_scale(u[sl], y[sl], t))
+        scale = None if est.proven_rounding else est._data_scale(u[sl], y[sl], t)
+        finalize(est, lo[sl], hi[sl], scale)
     return lo, hi, inc
 
 
@@ -94,7 +95,7 @@ def _block(
 def finalize(est: Estimator, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None) -> None:
     """In place: outward rounding (``scale``: the data scale ``s_k``, ``(..., T)``), NaN before
     ``valid_from``, no non-finite bound after."""
-    if not est.rounds_itself:
+    if not (est.rounds_itself or est.proven_rounding):
         outward(lo, hi, scale)
     vf = est.valid_from
     lo[..., :vf, :] = np.nan

@@ -73,7 +73,8 @@ from ..errors import IvobsError
 from ..linalg import UNIT_ROUNDOFF, gamma
 from ..model import LinearSystem
 from ..sets import Box, Zonotope
-from ..sets.zonotope import box_generators, reduce_girard, reduce_parallelotope, safe_radius
+from ..sets.rounding import mid_rad
+from ..sets.zonotope import box_generators, reduce_girard, reduce_parallelotope
 from . import _strip_kernel, register
 from . import _uncertain as uncertain
 from ._strip_hull import _add, _max, propagate_strip, section_hull
@@ -338,7 +339,7 @@ class StripEstimator(Estimator):
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> StripState:
         assert self.x0 is not None
-        p, r = safe_radius(self.x0.lo, self.x0.hi)
+        p, r = mid_rad(self.x0.lo, self.x0.hi)
         return StripState(p=p, H=np.diag(r)[:, r > 0], e=np.zeros(self.sys.nx))
 
     def _step(
@@ -398,11 +399,11 @@ class StripEstimator(Estimator):
         return Step(StripState(p=p, H=H, e=e, k=state.k, scale=state.scale), lo, hi, inconsistent)
 
     def _d_radius(self, dbox: Box) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`safe_radius` of the box of ``d[k]``, kept for the next step while the bounds
+        """:func:`mid_rad` of the box of ``d[k]``, kept for the next step while the bounds
         are the same numbers (a time-invariant ``d``: the same box every step)."""
         key = (dbox.lo.tobytes(), dbox.hi.tobytes())
         if self._d_cache is None or self._d_cache[0] != key:
-            self._d_cache = (key, safe_radius(dbox.lo, dbox.hi))
+            self._d_cache = (key, mid_rad(dbox.lo, dbox.hi))
         return self._d_cache[1]
 
     def _joint(

@@ -32,7 +32,8 @@ from .czonotope import (
     radius_certificate,
     reduce_generators,
 )
-from .zonotope import Zonotope, box_generators, safe_radius
+from .rounding import mid_rad
+from .zonotope import Zonotope, box_generators
 
 __all__ = [
     "EMPTY_TOL",
@@ -48,9 +49,9 @@ __all__ = [
     "hull_certificates",
     "image_bounds",
     "independent_constraints",
+    "mid_rad",
     "neg",
     "pos",
     "radius_certificate",
     "reduce_generators",
-    "safe_radius",
 ]

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._validate import as_float_array, as_matrix, check_finite
 from ..errors import InconsistentDataError, IvobsError
+from .rounding import down, mid_rad, product_error, up
 
 if TYPE_CHECKING:
     from .zonotope import Zonotope
@@ -38,9 +39,11 @@ def image_bounds(M: Any, lo: Any, hi: Any) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of ``M x`` for ``lo <= x <= hi`` ([Efimov2013, Lemma 1], [Dinh2024, Lemma 1],
     [Tang2019, Lemma 2]).
 
-    ``M⁺ lo - M⁻ hi <= M x <= M⁺ hi - M⁻ lo``. ``lo`` and ``hi`` may carry leading axes
-    (time, batch): shapes ``(..., n)`` give ``(..., m)``. These bounds are the interval hull of the
-    image ``M [lo, hi]``, so they are exact componentwise.
+    ``M⁺ lo - M⁻ hi <= M x <= M⁺ hi - M⁻ lo``: the interval hull of the image ``M [lo, hi]``,
+    exact componentwise in real arithmetic; evaluated in floating point and widened by the
+    proven bound of that evaluation (``2 γ_{n+3} (M⁺ |hi| + M⁻ |lo|)`` for the upper bound)
+    (:mod:`ivobs.sets.rounding`), then rounded outward, so the result contains the exact image.
+    ``lo`` and ``hi`` may carry leading axes (time, batch): shapes ``(..., n)`` give ``(..., m)``.
     """
     M = np.asarray(M, dtype=float)
     lo = np.asarray(lo, dtype=float)
@@ -50,7 +53,10 @@ def image_bounds(M: Any, lo: Any, hi: Any) -> tuple[np.ndarray, np.ndarray]:
     with np.errstate(invalid="ignore"):
         new_lo = _safe_matvec(Mp, lo) - _safe_matvec(Mn, hi)
         new_hi = _safe_matvec(Mp, hi) - _safe_matvec(Mn, lo)
-    return new_lo, new_hi
+        alo, ahi, n = np.abs(lo), np.abs(hi), M.shape[-1] + 1
+        err_lo = product_error(_safe_matvec(Mp, alo) + _safe_matvec(Mn, ahi), n)
+        err_hi = product_error(_safe_matvec(Mp, ahi) + _safe_matvec(Mn, alo), n)
+        return down(new_lo - err_lo), up(new_hi + err_hi)
 
 
 def _safe_matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -223,7 +229,8 @@ class Box:
         return Box._trusted(lo, hi)
 
     def linear_map(self, M: Any) -> Box:
-        """Interval hull of ``M [lo, hi]`` ([Efimov2013, Lemma 1]; exact per component)."""
+        """Interval hull of ``M [lo, hi]`` ([Efimov2013, Lemma 1]; exact per component, then
+        widened by its proven rounding: :func:`image_bounds`)."""
         M = as_matrix("M", M, cols=self.dim, vector="row")
         return Box._trusted(*image_bounds(M, self.lo, self.hi))
 
@@ -239,11 +246,11 @@ class Box:
         if isinstance(other, Box):
             if other.dim != self.dim:
                 raise IvobsError(f"Box + Box: dimensions differ ({self.dim} and {other.dim})")
-            return Box._trusted(self.lo + other.lo, self.hi + other.hi)
+            return Box._trusted(down(self.lo + other.lo), up(self.hi + other.hi))
         if hasattr(other, "interval_hull"):
             return NotImplemented
         v = as_float_array("translation", other)
-        return Box._trusted(self.lo + v, self.hi + v)
+        return Box._trusted(down(self.lo + v), up(self.hi + v))
 
     __radd__ = __add__
 
@@ -255,7 +262,8 @@ class Box:
         """``<center, diag(radius)>`` (only for constant, bounded boxes)."""
         if self.is_time_varying or not self.is_bounded:
             raise IvobsError("to_zonotope: needs a constant box with finite bounds")
-        return Box._zonotope(self.center, np.diag(self.radius))
+        c, r = mid_rad(self.lo, self.hi)  # contains the box exactly (c, r rounded)
+        return Box._zonotope(c, np.diag(r))
 
     def vertices(self) -> np.ndarray:
         """All ``2^n`` vertices, shape ``(2^n, n)`` (``n <= 20``)."""

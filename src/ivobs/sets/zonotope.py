@@ -15,8 +15,9 @@ import numpy as np
 
 from .._validate import as_float_array, as_matrix, as_vector, check_finite
 from ..errors import IvobsError
-from ..linalg import gamma
+from ..linalg import UNIT_ROUNDOFF, gamma
 from .box import Box
+from .rounding import enclose, product_error, up, upper
 
 __all__ = [
     "MAX_BASIS_CONDITION",
@@ -24,17 +25,13 @@ __all__ = [
     "box_generators",
     "reduce_girard",
     "reduce_parallelotope",
-    "safe_radius",
 ]
 
 
-def safe_radius(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(c, r)`` with ``[lo, hi] ⊆ [c - r, c + r]`` in exact arithmetic: ``c = (lo + hi)/2``
-    and ``r = (hi - lo)/2`` are rounded, so ``r`` is enlarged by ``γ_3 (|c| + r)``
-    ([Higham2002, Lemma 3.1]); ``r = 0`` (and ``c = lo`` exactly) where ``lo = hi``."""
-    c = 0.5 * (lo + hi)
-    r = 0.5 * (hi - lo)
-    return c, np.where(hi > lo, r + gamma(3) * (np.abs(c) + r), 0.0)
+def _sum_error(c: np.ndarray) -> np.ndarray:
+    """Generators of the box of the rounding of a centre ``c = fl(a + b)``: ``|c − (a + b)|
+    <= u |c|`` (plus nothing where ``c`` is exact, i.e. zero)."""
+    return box_generators(up(UNIT_ROUNDOFF * np.abs(c)))
 
 
 def box_generators(r: np.ndarray) -> np.ndarray:
@@ -172,19 +169,26 @@ class Zonotope:
         return int(self.G.shape[1])
 
     def radius(self) -> np.ndarray:
-        """Radius of the interval hull: ``sum_j |G_ij|`` ([Tang2019, Property 4, eq. (5)])."""
-        out: np.ndarray = np.abs(self.G).sum(axis=1)
+        """Radius of the interval hull: ``sum_j |G_ij|`` ([Tang2019, Property 4, eq. (5)]),
+        rounded up (an upper bound of the exact sum)."""
+        out: np.ndarray = upper(np.abs(self.G).sum(axis=1), self.G.shape[1])
         return out
 
     def interval_hull(self) -> Box:
-        """Smallest box containing the zonotope ([Tang2019, Property 4, eq. (5)]; exact)."""
-        r = self.radius()
-        return Box._trusted(self.c - r, self.c + r)
+        """Smallest box containing the zonotope ([Tang2019, Property 4, eq. (5)]), its bounds
+        rounded outward: it contains the exact hull."""
+        return Box._trusted(*enclose(self.c, self.radius()))
 
     def linear_map(self, M: Any) -> Zonotope:
-        """``M <c, G> = <M c, M G>`` ([Tang2019, Property 3, eq. (4b)])."""
+        """``M <c, G> = <M c, M G>`` ([Tang2019, Property 3, eq. (4b)]) evaluated in floating
+        point, plus the box ``diag(e)`` of its proven rounding error, ``e >= |fl(M c) − M c| +
+        Σ_j |fl(M G)_j − M G_j|`` (:func:`~ivobs.sets.rounding.product_error` of
+        ``|M| (|c| + |G| 1)``), so the result contains the exact image."""
         M = as_matrix("M", M, cols=self.dim, vector="row")
-        return Zonotope._trusted(M @ self.c, M @ self.G)
+        absM = np.abs(M)
+        n, m = self.G.shape
+        e = product_error(absM @ (np.abs(self.c) + np.abs(self.G).sum(axis=1)), n + m + 1)
+        return Zonotope._trusted(M @ self.c, np.hstack([M @ self.G, box_generators(e)]))
 
     def __rmatmul__(self, M: Any) -> Zonotope:
         return self.linear_map(M)
@@ -200,11 +204,13 @@ class Zonotope:
                 raise IvobsError(
                     f"Zonotope + Zonotope: dimensions differ ({self.dim}, {other.dim})"
                 )
-            return Zonotope._trusted(self.c + other.c, np.hstack([self.G, other.G]))
+            c = self.c + other.c
+            return Zonotope._trusted(c, np.hstack([self.G, other.G, _sum_error(c)]))
         if hasattr(other, "interval_hull"):
             return NotImplemented
         v = as_vector("translation", other, self.dim)
-        return Zonotope._trusted(self.c + v, self.G)
+        c = self.c + v
+        return Zonotope._trusted(c, np.hstack([self.G, _sum_error(c)]))
 
     __radd__ = __add__
 
@@ -232,7 +238,8 @@ class Zonotope:
             norms = np.einsum("ij,ik,kj->j", G, W, G)
         order_idx = np.argsort(-norms, kind="stable")
         keep = G[:, order_idx[: q - n]]
-        box = np.abs(G[:, order_idx[q - n :]]).sum(axis=1)
+        rest = G[:, order_idx[q - n :]]
+        box = upper(np.abs(rest).sum(axis=1), rest.shape[1])  # rounded up: contains the exact
         return Zonotope._trusted(self.c, np.hstack([keep, np.diag(box)]))
 
     def contains(self, x: Any, tol: float = 1e-9) -> bool:

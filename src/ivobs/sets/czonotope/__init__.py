@@ -35,14 +35,15 @@ constraints are dropped (a superset); propagated factor bounds are widened by ``
 
 Modules: :mod:`.constrained` (the set and its exact operations), :mod:`.hull` (the LPs and their
 certificates), :mod:`.elimination` and :mod:`.reduction` (the two reductions, on raw arrays).
-``UNIT_ROUNDOFF``, ``gamma`` (:mod:`ivobs.linalg`) and ``safe_radius``, ``box_generators``
+``UNIT_ROUNDOFF``, ``gamma`` (:mod:`ivobs.linalg`) and ``mid_rad``, ``box_generators``
 (:mod:`ivobs.sets.zonotope`) are re-exported here for the estimators' rounding terms.
 """
 
 from __future__ import annotations
 
 from ...linalg import UNIT_ROUNDOFF, gamma
-from ..zonotope import box_generators, safe_radius
+from ..rounding import mid_rad
+from ..zonotope import box_generators
 from ._tolerances import EMPTY_TOL, PIVOT_TOL, ROW_TOL, ZERO_TOL
 from .constrained import ConstrainedZonotope
 from .elimination import eliminate_constraints, independent_constraints
@@ -71,8 +72,8 @@ __all__ = [
     "hull_bounds",
     "hull_certificates",
     "independent_constraints",
+    "mid_rad",
     "radius_certificate",
     "reduce_consolidated",
     "reduce_generators",
-    "safe_radius",
 ]

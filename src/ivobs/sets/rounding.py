@@ -1,0 +1,174 @@
+"""Proven bounds on floating-point error: what a set operation adds so that its result contains
+the exact one, at every magnitude.
+
+**Model** ([Higham2002, §2.2, Lemma 3.1, §3.1]). In IEEE double precision with rounding to
+nearest, ``fl(a op b) = (a op b)(1 + δ)``, ``|δ| <= u = 2⁻⁵³``, when the result is in the
+normal range; a product that underflows is off by at most ``η = 2⁻¹⁰⁷⁵`` in absolute value (a
+sum or difference is exact when its result is subnormal). Hence a dot product of ``n`` terms,
+evaluated in any order (BLAS blocking, FMA and pairwise sums included), satisfies
+
+    |fl(xᵀy) − xᵀy| <= γ_n |x|ᵀ|y| + n η,        γ_n = n u / (1 − n u),
+
+and a sum of ``n`` nonnegative terms computed in floating point is within a factor
+``(1 ± γ_{n-1})`` of the exact sum. Every bound below is itself evaluated in floating point, so
+each carries a factor 2 on ``γ`` (and a few ``η``) that absorbs the rounding of its own
+evaluation: the returned numbers are upper bounds of the exact quantities, never estimates.
+
+A bound after one rounded operation is made safe with one step of directed rounding,
+``np.nextafter`` (:func:`up`, :func:`down`): the exact result of one operation lies within half
+an ulp of the rounded one.
+
+Nothing here needs the processor's rounding mode, so NumPy and BLAS run as they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import DesignError
+from ..linalg import UNIT_ROUNDOFF, gamma
+
+__all__ = [
+    "ETA",
+    "UNIT_ROUNDOFF",
+    "DecayBound",
+    "down",
+    "enclose",
+    "gamma",
+    "matvec",
+    "mid_rad",
+    "product_error",
+    "up",
+    "upper",
+]
+
+ETA = 2.0**-1074
+"""The smallest positive subnormal double (``2η``): a product's underflow error is below it."""
+
+_INF = np.inf
+
+
+def up(x: Any) -> Any:
+    """The next double above ``x`` (elementwise): an upper bound of the exact result of the one
+    rounded operation that gave ``x``."""
+    return np.nextafter(x, _INF)
+
+
+def down(x: Any) -> Any:
+    """The next double below ``x`` (elementwise): a lower bound of the exact result of the one
+    rounded operation that gave ``x``."""
+    return np.nextafter(x, -_INF)
+
+
+def upper(s: Any, n: int) -> Any:
+    """An upper bound of the exact value of a nonnegative expression ``s`` computed in floating
+    point from nonnegative numbers by at most ``n`` roundings on every path (a sum of ``n``
+    products, a row sum of ``n`` entries): ``s (1 + 2 γ_{n+2}) + (n + 2) ETA``."""
+    return s * (1.0 + 2.0 * gamma(n + 2)) + (n + 2) * ETA
+
+
+def product_error(s: Any, n: int) -> Any:
+    """An upper bound of ``|fl(A B) − A B|`` (elementwise) from ``s = fl(|A| |B|)`` and the inner
+    dimension ``n``: ``γ_n`` times the exact ``|A| |B|``, plus underflow; also for the
+    matrix-vector and vector forms. ``2 γ_{n+2} s + (n + 2) ETA``."""
+    return (2.0 * gamma(n + 2)) * s + (n + 2) * ETA
+
+
+def matvec(M: np.ndarray, absM: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(y, e)``: ``y = fl(M x)`` and ``e >= |y − M x|`` (exact), ``absM = |M|``; ``x`` may be a
+    matrix (columns), ``e`` is then elementwise."""
+    y = M @ x
+    return y, product_error(absM @ np.abs(x), M.shape[1])
+
+
+def mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(c, r)`` with ``[lo, hi] ⊆ [c − r, c + r]`` exactly: ``c = fl((lo + hi) / 2)`` and
+    ``r = fl((hi − lo) / 2)`` enlarged by ``γ_3 (|c| + r)`` and by the underflow of the halving
+    ([Higham2002, Lemma 3.1]); ``r = 0``, ``c = lo`` where ``lo = hi``."""
+    c = 0.5 * lo + 0.5 * hi  # (no overflow of lo + hi near the end of the float range)
+    r = 0.5 * hi - 0.5 * lo
+    r = np.where(hi > lo, up(r + 2.0 * gamma(4) * (np.abs(c) + r) + 4 * ETA), 0.0)
+    c = np.where(hi > lo, c, lo)
+    return c, r
+
+
+def enclose(c: Any, r: Any) -> tuple[Any, Any]:
+    """The box ``[c − r, c + r]`` with its two bounds rounded outward (one operation each)."""
+    return down(c - r), up(c + r)
+
+
+@dataclass(frozen=True)
+class DecayBound:
+    """Proven constants of the decay of a Schur matrix's powers: ``‖Mⁱ‖∞ <= c λⁱ`` for every
+    ``i >= 0``, for the *exact* powers of the float matrix ``M``.
+
+    Errors that a recursion ``x+ = M x + ...`` makes at every step (its rounding ``r_j``) add
+    up to ``Σ_j M^{k-1-j} r_j``, whose ∞-norm is at most ``q_k`` with ``q_{j+1} = λ q_j + c ‖r_j‖∞``
+    (:meth:`next`): a scalar that stays bounded, also when ``|M|`` is not Schur.
+
+    Built by :meth:`of`: enclosures ``Pᵢ ± Rᵢ`` of the exact powers (``P_{i+1} = fl(M Pᵢ)``,
+    ``R_{i+1} >= |M| Rᵢ + |fl(M Pᵢ) − M Pᵢ|``) until ``‖|P_K| + R_K‖∞ <= θ < 1``; then for
+    ``i = q K + j``, ``‖Mⁱ‖ <= θ^q N_j`` (``N_j = ‖|P_j| + R_j‖∞``), so ``λ = θ^{1/K}`` (rounded up)
+    and ``c = max_j N_j / λ^j``.
+    """
+
+    c: float
+    lam: float
+
+    @classmethod
+    def of(cls, M: np.ndarray, *, theta: float = 0.5, max_power: int = 100_000) -> DecayBound:
+        """The constants for ``M`` (:class:`~ivobs.DesignError` when its powers do not certify
+        a decay below ``θ`` within ``max_power`` steps: ``M`` not Schur, or too close to it)."""
+        M = np.asarray(M, dtype=float)
+        n = M.shape[0]
+        if n == 0:
+            return cls(1.0, 0.0)
+        absM = np.abs(M)
+        P, R = np.eye(n), np.zeros((n, n))
+        norms = [1.0]
+        for _ in range(max_power):
+            P, err = matvec(M, absM, P)
+            R = upper(absM @ R + err, n + 1)
+            N = float(upper(np.max(np.sum(np.abs(P) + R, axis=1)), n + 1))
+            if not N < 1e150:
+                break
+            if N <= theta:
+                K = len(norms)
+                lam = float(theta ** (1.0 / K)) * (1.0 + 1e-12)
+                if not lam < 1.0:
+                    break
+                powers = lam ** np.arange(K)
+                c = float(np.max(np.asarray(norms) / powers)) * (1.0 + 1e-12)
+                return cls(max(c, 1.0), lam)
+            norms.append(N)
+        raise DesignError(
+            "the rounding of the recursion cannot be bounded: the powers of its matrix do not "
+            f"certifiably decay (‖M^i‖∞ after {len(norms)} powers: {norms[-1]:.3g}); the matrix "
+            "is not Schur stable or too close to the unit circle"
+        )
+
+    @property
+    def gain(self) -> float:
+        """``c / (1 − λ)``: the bound of ``q_k`` per unit of ``sup_j ‖r_j‖∞``."""
+        return float(up(self.c / (1.0 - self.lam) * (1.0 + 8.0 * UNIT_ROUNDOFF)))
+
+    def next(self, q: float, r: float) -> float:
+        """``q_{k+1} >= λ q_k + c r_k`` (exactly; the two products and the sum rounded up)."""
+        return (self.lam * q + self.c * r) * (1.0 + 4.0 * UNIT_ROUNDOFF) + ETA
+
+    def accumulate(self, r: np.ndarray, q0: float = 0.0) -> np.ndarray:
+        """``q_1, ..., q_T`` of :meth:`next` over a record of step errors ``r`` (``(T,)``),
+        as one linear filter (constants enlarged so that its rounding is covered: each output
+        is within ``(1 ± 3u)`` of ``λ' q + c' r``, and ``(1 − 3u)(1 + 8u) >= 1``)."""
+        from scipy.signal import lfilter
+
+        lam = self.lam * (1.0 + 8.0 * UNIT_ROUNDOFF)
+        c = self.c * (1.0 + 8.0 * UNIT_ROUNDOFF)
+        r = np.asarray(r, dtype=float) + ETA
+        out: np.ndarray = lfilter([c], [1.0, -lam], r, zi=[lam * q0 * (1.0 + 8.0 * UNIT_ROUNDOFF)])[
+            0
+        ]
+        return out
