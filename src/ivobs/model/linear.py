@@ -272,6 +272,30 @@ class LinearSystem(IntervalMatrices):
         return self._d is None or (isinstance(self._d, Box) and not self._d.is_time_varying)
 
     @property
+    def bounds_depend_on_y(self) -> bool:
+        """True when ``d`` is a callable ``(k, y_k) -> Box`` (bounds known only with the
+        measurement, [Efimov2013, Remark 1]); then :meth:`d_at` needs ``y_k``."""
+        return callable(self._d)
+
+    def d_over(self, T: int) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``d[0..T-1]`` as ``(lo, hi)`` arrays ``(T, nd)`` (constant or time-varying
+        bounds; a time-varying Box shorter than ``T`` is an error naming the step). For a
+        callable ``d`` (:attr:`bounds_depend_on_y`) use :meth:`d_at` step by step."""
+        if self.bounds_depend_on_y:
+            raise IvobsError("d: the bounds depend on y[k] (a callable): evaluate d_at(k, y_k)")
+        if self._d is None:
+            return np.zeros((T, 0)), np.zeros((T, 0))
+        d = self._d
+        assert isinstance(d, Box)
+        if not d.is_time_varying:
+            return np.broadcast_to(d.lo, (T, self.nd)), np.broadcast_to(d.hi, (T, self.nd))
+        if d.lo.shape[0] < T:
+            raise IvobsError(
+                f"d: the time-varying bounds cover {d.lo.shape[0]} steps, the record has {T}"
+            )
+        return d.lo[:T], d.hi[:T]
+
+    @property
     def is_sparse(self) -> bool:
         """True when ``A`` was given as a ``scipy.sparse`` matrix (large systems)."""
         return self._A.sp is not None

@@ -95,6 +95,15 @@ class SystemModel(Protocol):
 class LinearModel(SystemModel, Protocol):
     """A model with matrices ``(A, B, C, D, E, F)`` at each step."""
 
+    @property
+    def bounds_depend_on_y(self) -> bool:
+        """Whether ``d`` is a callable of ``(k, y_k)``."""
+        ...
+
+    def d_over(self, T: int) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``d[0..T-1]`` as ``(T, nd)`` arrays (not for a callable ``d``)."""
+        ...
+
     def matrices_at(self, k: Any) -> tuple[np.ndarray, ...]:
         """``(A, B, C, D, E, F)`` at step ``k`` (time ``t`` in continuous time)."""
         ...
