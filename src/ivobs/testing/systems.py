@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from .errors import IvobsError
-from .linalg import is_observable
-from .model import LinearSystem
-from .result import Estimate
-from .sets import Box
-from .simulate import Trajectory, simulate, vertex_disturbance
+from ..errors import IvobsError
+from ..linalg import is_observable
+from ..model import LinearSystem
+from ..result import Estimate
+from ..sets import Box
+from ..simulate import Trajectory, simulate, vertex_disturbance
 
 __all__ = ["adversarial_run", "assert_contains", "random_system"]
 
