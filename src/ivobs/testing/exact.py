@@ -111,8 +111,8 @@ class ExactLinear:
         of this step (an interval-matrix plant's realisation)."""
         A, B, C, D, E, F = self._mats(matrices)
         sys = self.sys
-        uu = _dyadic(np.zeros(sys.nu) if u is None else np.asarray(u, dtype=float).ravel())
-        dd = _dyadic(np.zeros(sys.nd) if d is None else np.asarray(d, dtype=float).ravel())
+        uu = _dyadic(np.zeros(sys.nu).tolist() if u is None else np.ravel(u).tolist())
+        dd = _dyadic(np.zeros(sys.nd).tolist() if d is None else np.ravel(d).tolist())
         y = _add(_apply(C, self.x), _apply(D, uu), _apply(F, dd))
         self.x = _add(_apply(A, self.x), _apply(B, uu), _apply(E, dd))
         self.k += 1
