@@ -1,0 +1,137 @@
+"""Adversarial scale campaign: every method on random plants whose states range from 1e-6 to
+1e10, stable and unstable, badly scaled, with large gains, on *exact* trajectories
+(ivobs.testing.exact: integers over a power of two; measurements rounded once to doubles, as a
+logger records them), disturbances on the vertices of their bounds, some samples missing.
+
+Every path is checked: ``run()`` on long records (the vectorised path where a method has one),
+batches, ``step()`` with ``state()``/``restore()`` round trips through JSON. The only pass is
+0 boxes missing the exact state and 0 admissible samples flagged inconsistent.
+
+The budget per method is ``IVOBS_CAMPAIGN_STEPS`` steps (default below); the plants are shared
+by all methods (one exact simulation each).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import warnings
+
+import numpy as np
+import pytest
+
+import ivobs
+from ivobs import Box, DesignError, IvobsError, LinearSystem
+from ivobs.testing import exact_misses, exact_run
+
+pytestmark = pytest.mark.slow
+
+STEPS = int(os.environ.get("IVOBS_CAMPAIGN_STEPS", "100000"))
+"""Steps per method (over all plants and paths)."""
+
+RECORD = 2000
+"""Steps per plant (the vectorised path of ``run()`` starts at 2,000 steps)."""
+
+STEP_PATH = 200
+"""Steps of the ``step()`` path with state round trips, per plant."""
+
+
+def _plant(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, np.ndarray, int]:
+    """A random plant, its prior box, the true x[0], inputs and vertex disturbances."""
+    rng = np.random.default_rng(seed)
+    nx, ny, nu = int(rng.integers(2, 5)), int(rng.integers(1, 3)), int(rng.integers(0, 2))
+    ny = min(ny, nx)
+    unstable = rng.uniform() < 0.3
+    for _ in range(500):
+        A = rng.normal(size=(nx, nx))
+        rho = rng.uniform(1.01, 1.04) if unstable else rng.uniform(0.3, 0.95)
+        A *= rho / max(np.max(np.abs(np.linalg.eigvals(A))), 1e-9)
+        C = rng.normal(size=(ny, nx))
+        O = np.vstack([C @ np.linalg.matrix_power(A, i) for i in range(nx)])
+        if np.linalg.matrix_rank(O) == nx and np.linalg.cond(O) < 1e4:
+            break
+    scale = 10.0 ** rng.uniform(-6, 10, nx)  # x = S z: coordinates of very different sizes
+    S, Si = np.diag(scale), np.diag(1.0 / scale)
+    gain = 10.0 ** rng.uniform(-3, 0, ny)  # small output scales: observer gains up to ~1e3
+    nw, nv = nx, ny
+    E = np.hstack([S @ rng.normal(size=(nx, nw)) * 0.1, np.zeros((nx, nv))])
+    F = np.hstack([np.zeros((ny, nw)), np.diag(gain * 10.0 ** rng.uniform(-3, -1, ny))])
+    lo = -rng.uniform(0.2, 1.0, nw + nv)
+    hi = rng.uniform(0.2, 1.0, nw + nv) if rng.uniform() < 0.5 else -lo
+    sys = LinearSystem(
+        S @ A @ Si,
+        S @ rng.normal(size=(nx, nu)) if nu else None,
+        np.diag(gain) @ C @ Si,
+        E=E,
+        F=F,
+        d=Box(lo, hi),
+    )
+    offset = scale * rng.uniform(-5, 5, nx)  # far from the origin
+    x0 = Box(offset - scale, offset + scale)
+    T = RECORD if not unstable else min(RECORD, int(np.log(1e3) / np.log(rho)))
+    x_true0 = np.where(rng.integers(0, 2, nx).astype(bool), x0.hi, x0.lo)
+    U = rng.uniform(-1, 1, size=(T, nu)) * 10.0 ** rng.uniform(-3, 3)
+    Dv = np.where(rng.integers(0, 2, size=(T, nw + nv)).astype(bool), hi, lo)
+    return sys, x0, x_true0, U, Dv, T
+
+
+@functools.cache
+def _record(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, list, np.ndarray]:
+    sys, x0, x_true0, U, Dv, _ = _plant(seed)
+    Y, X = exact_run(sys, x_true0, U, Dv)
+    miss = np.random.default_rng(seed + 1).uniform(size=Y.shape) < 0.1
+    return sys, x0, U, Y, X, miss
+
+
+def _methods() -> list[str]:
+    return [m for m in ivobs.methods()]
+
+
+def _quiet(fn, *a, **k):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*a, **k)
+
+
+@pytest.mark.parametrize("method", _methods())
+def test_no_box_misses_the_exact_state_at_any_scale(method):
+    done, seed, refused, runs = 0, 0, {}, 0
+    failures: list[str] = []
+    while done < STEPS and seed < 400:
+        sys, x0, U, Y, X, miss = _record(seed)
+        seed += 1
+        try:
+            est = ivobs.make_estimator(method, sys, x0=x0)
+        except (DesignError, IvobsError) as exc:
+            refused[seed - 1] = str(exc)[:80]
+            continue
+        runs += 1
+        Ym = np.where(miss, np.nan, Y) if seed % 2 else Y
+        try:
+            res = _quiet(est.run, U, Ym)
+        except IvobsError as exc:  # e.g. an overflow of an unstable plant's bounds
+            failures.append(f"seed {seed - 1}: run() raised {exc}"[:200])
+            continue
+        bad = exact_misses(res.lower, res.upper, X)
+        if bad.size:
+            failures.append(f"seed {seed - 1}: run(): {bad.size} misses, first at step {bad[0]}")
+        if np.any(res.inconsistent) and not np.all(np.isnan(Ym[res.inconsistent])):
+            k = int(np.flatnonzero(res.inconsistent)[0])
+            failures.append(f"seed {seed - 1}: run(): admissible sample {k} flagged inconsistent")
+        done += Y.shape[0]
+        # step() with a state round trip through JSON every 37 steps
+        est.reset()
+        n = min(STEP_PATH, Y.shape[0])
+        lo, hi = np.empty((n, sys.nx)), np.empty((n, sys.nx))
+        for k in range(n):
+            if k % 37 == 5:
+                est.restore(json.loads(json.dumps(est.state())))
+            box = _quiet(est.step, U[k] if sys.nu else None, Ym[k])
+            lo[k], hi[k] = box.lo, box.hi
+        bad = exact_misses(lo, hi, X[:n])
+        if bad.size:
+            failures.append(f"seed {seed - 1}: step(): {bad.size} misses, first at step {bad[0]}")
+        done += n
+    assert not failures, f"{method}: {len(failures)} failing runs of {runs}: {failures[:5]}"
+    assert done >= min(STEPS, 1000), f"{method}: only {done} steps checked; refused: {refused}"
