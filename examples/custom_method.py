@@ -22,6 +22,8 @@ import ivobs
 from ivobs.estimators import Design, Estimator, register
 from ivobs.estimators.state import OnlineState, Step
 from ivobs.sets import image_bounds
+from ivobs.sets.rounding import UNIT_ROUNDOFF, down, up
+from ivobs.testing import check_estimator
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,7 @@ class MeasuredStatePredictor(Estimator):
     reference = "[Efimov2013, Lemma 1]"
     data_used = "filter"
     needs_x0 = True
+    proven_rounding = True  # every operation below contains its exact result (sets.rounding)
 
     def __init__(self, sys: ivobs.LinearSystem, x0: ivobs.Box | None = None, **options: Any):
         super().__init__(sys, x0, **options)
@@ -77,20 +80,24 @@ class MeasuredStatePredictor(Estimator):
         for i, j, c in self.design.rows:  # correction by the measurement strip
             if np.isnan(y_k[j]):
                 continue  # a missing sample: predict without it
-            f_lo, f_hi = image_bounds(F[j : j + 1], d.lo, d.hi)
-            r = y_k[j] - D[j] @ u_k
-            a, b = sorted(((r - f_hi[0]) / c, (r - f_lo[0]) / c))
+            # c x_i = y_j − D_j u − F_j d, with y_j known to half an ulp (a logger's rounding);
+            # image_bounds contains the exact interval, and each further operation rounds out
+            v_lo, v_hi = image_bounds(np.hstack([D[j], F[j]])[None], [*u_k, *d.lo], [*u_k, *d.hi])
+            slack = up(abs(y_k[j]) * UNIT_ROUNDOFF)
+            r_lo, r_hi = down(down(y_k[j] - v_hi[0]) - slack), up(up(y_k[j] - v_lo[0]) + slack)
+            a, b = (down(r_lo / c), up(r_hi / c)) if c > 0 else (down(r_hi / c), up(r_lo / c))
             if b < lo[i] or a > hi[i]:
                 inconsistent = True  # y contradicts the model: not used
                 continue
             lo[i], hi[i] = max(lo[i], a), min(hi[i], b)
-        a_lo, a_hi = image_bounds(A, lo, hi)  # prediction of x[k+1]
-        e_lo, e_hi = image_bounds(E, d.lo, d.hi)
-        nxt = replace(state, lo=a_lo + B @ u_k + e_lo, hi=a_hi + B @ u_k + e_hi)
-        return Step(nxt, lo, hi, inconsistent)
+        # prediction of x[k+1] = A x + B u + E d over the box: one rigorous interval image
+        n_lo, n_hi = image_bounds(np.hstack([A, B, E]), [*lo, *u_k, *d.lo], [*hi, *u_k, *d.hi])
+        return Step(replace(state, lo=n_lo, hi=n_hi), lo, hi, inconsistent)
 
 
 def main() -> None:
+    report = check_estimator(MeasuredStatePredictor)  # the checks every ivobs method passes
+    print(f"conformance: {report.steps} steps on {report.checked}, skipped {list(report.skipped)}")
     sc = ivobs.scenarios.get("servo-motor", horizon=200)
     tr = sc.simulate("vertex", seed=0)
     for method in ("measured-state-predictor", "interval-split"):

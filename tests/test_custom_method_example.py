@@ -17,8 +17,11 @@ import numpy as np
 sys.path.insert(0, sys.argv[1])
 import custom_method  # registers "measured-state-predictor"
 import ivobs
+import ivobs.testing
 
 assert "measured-state-predictor" in ivobs.methods()
+report = ivobs.testing.check_estimator(custom_method.MeasuredStatePredictor, steps=60)
+assert report.checked, report.skipped
 rng = np.random.default_rng(7)
 A = np.array([[0.9, 0.2, 0.0], [-0.1, 0.8, 0.3], [0.0, 0.1, 0.7]])
 B = np.array([[0.0], [1.0], [0.5]])

@@ -1,5 +1,6 @@
 """Adversarial scale campaign: every method on random plants whose states range from 1e-6 to
-1e10, stable and unstable, badly scaled, with large gains, on *exact* trajectories
+1e10, stable and unstable, badly scaled, with large gains and uncertainties from 1e-12 to 1 of
+the states' magnitudes, on *exact* trajectories
 (ivobs.testing.exact: integers over a power of two; measurements rounded once to doubles, as a
 logger records them), disturbances on the vertices of their bounds, some samples missing.
 
@@ -54,9 +55,10 @@ def _plant(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, np.nda
     scale = 10.0 ** rng.uniform(-6, 10, nx)  # x = S z: coordinates of very different sizes
     S, Si = np.diag(scale), np.diag(1.0 / scale)
     gain = 10.0 ** rng.uniform(-3, 0, ny)  # small output scales: observer gains up to ~1e3
+    thin = 10.0 ** rng.uniform(-12, 0)  # uncertainty relative to the state's magnitude
     nw, nv = nx, ny
-    E = np.hstack([S @ rng.normal(size=(nx, nw)) * 0.1, np.zeros((nx, nv))])
-    F = np.hstack([np.zeros((ny, nw)), np.diag(gain * 10.0 ** rng.uniform(-3, -1, ny))])
+    E = np.hstack([S @ rng.normal(size=(nx, nw)) * 0.1 * thin, np.zeros((nx, nv))])
+    F = np.hstack([np.zeros((ny, nw)), np.diag(gain * 10.0 ** rng.uniform(-3, -1, ny) * thin)])
     lo = -rng.uniform(0.2, 1.0, nw + nv)
     hi = rng.uniform(0.2, 1.0, nw + nv) if rng.uniform() < 0.5 else -lo
     sys = LinearSystem(
@@ -68,7 +70,7 @@ def _plant(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, np.nda
         d=Box(lo, hi),
     )
     offset = scale * rng.uniform(-5, 5, nx)  # far from the origin
-    x0 = Box(offset - scale, offset + scale)
+    x0 = Box(offset - scale * thin, offset + scale * thin)
     T = RECORD if not unstable else min(RECORD, int(np.log(1e3) / np.log(rho)))
     x_true0 = np.where(rng.integers(0, 2, nx).astype(bool), x0.hi, x0.lo)
     U = rng.uniform(-1, 1, size=(T, nu)) * 10.0 ** rng.uniform(-3, 3)
@@ -98,6 +100,7 @@ def _quiet(fn, *a, **k):
 def test_no_box_misses_the_exact_state_at_any_scale(method):
     done, seed, refused, runs = 0, 0, {}, 0
     failures: list[str] = []
+    errors: list[str] = []  # refusals at run time (an overflow): not a miss, but reported
     while done < STEPS and seed < 400:
         sys, x0, U, Y, X, miss = _record(seed)
         seed += 1
@@ -111,7 +114,7 @@ def test_no_box_misses_the_exact_state_at_any_scale(method):
         try:
             res = _quiet(est.run, U, Ym)
         except IvobsError as exc:  # e.g. an overflow of an unstable plant's bounds
-            failures.append(f"seed {seed - 1}: run() raised {exc}"[:200])
+            errors.append(f"seed {seed - 1}: run() raised {exc}"[:200])
             continue
         bad = exact_misses(res.lower, res.upper, X)
         if bad.size:
@@ -124,14 +127,19 @@ def test_no_box_misses_the_exact_state_at_any_scale(method):
         est.reset()
         n = min(STEP_PATH, Y.shape[0])
         lo, hi = np.empty((n, sys.nx)), np.empty((n, sys.nx))
-        for k in range(n):
-            if k % 37 == 5:
-                est.restore(json.loads(json.dumps(est.state())))
-            box = _quiet(est.step, U[k] if sys.nu else None, Ym[k])
-            lo[k], hi[k] = box.lo, box.hi
+        try:
+            for k in range(n):
+                if k % 37 == 5:
+                    est.restore(json.loads(json.dumps(est.state())))
+                box = _quiet(est.step, U[k] if sys.nu else None, Ym[k])
+                lo[k], hi[k] = box.lo, box.hi
+        except IvobsError as exc:
+            errors.append(f"seed {seed - 1}: step() raised {exc}"[:200])
+            continue
         bad = exact_misses(lo, hi, X[:n])
         if bad.size:
             failures.append(f"seed {seed - 1}: step(): {bad.size} misses, first at step {bad[0]}")
         done += n
     assert not failures, f"{method}: {len(failures)} failing runs of {runs}: {failures[:5]}"
+    assert len(errors) <= runs // 10, f"{method}: {len(errors)} of {runs} runs raised: {errors[:5]}"
     assert done >= min(STEPS, 1000), f"{method}: only {done} steps checked; refused: {refused}"
