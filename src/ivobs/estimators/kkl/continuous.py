@@ -230,7 +230,9 @@ class ContinuousObserver(Observer[S]):
             xabs = np.maximum(np.abs(lo), np.abs(hi))
             if finite(xabs):
                 y_o = y_k[obs]
-                if self.check(CDF, obs).contradicts(y_o, u_k, lo, hi, xabs, np.abs(u_k), d.lo, d.hi):
+                if self.check(CDF, obs).contradicts(
+                    y_o, u_k, lo, hi, xabs, np.abs(u_k), d.lo, d.hi
+                ):
                     obs, bad = np.zeros_like(obs), True
         full = every(obs)
         Co, Do, Fo = (M[obs] for M in CDF)

@@ -87,7 +87,7 @@ class Discrete(Observer[DiscreteState]):
         super().__init__(sys, x0, design, max_cond)
         self.seq = seq
         self._tr = left_inverse(design.T, max_cond) if seq is None else None
-        self._patterns: dict[bytes, Terms] = {}
+        self._patterns: dict[bytes, tuple[Terms, Terms | None]] = {}
         nx = sys.nx
         self._none = (np.full(nx, -np.inf), np.full(nx, np.inf))
 
@@ -99,9 +99,10 @@ class Discrete(Observer[DiscreteState]):
         assert self.seq is not None
         return self.seq.at(k)
 
-    def terms(self, k: int, obs: np.ndarray) -> Terms:
-        """:class:`~.terms.Terms` of step ``k`` for the observed outputs ``obs`` (kept per
-        pattern for a time-invariant system)."""
+    def terms(self, k: int, obs: np.ndarray) -> tuple[Terms, Terms | None]:
+        """:class:`~.terms.Terms` of step ``k`` for the observed outputs ``obs`` and, with
+        missing outputs and a left-invertible ``T[k]``, those that bound them through ``z``
+        (kept per pattern for a time-invariant system)."""
         if self.seq is None:
             key = obs.tobytes()
             hit = self._patterns.get(key)
@@ -112,7 +113,7 @@ class Discrete(Observer[DiscreteState]):
             return hit
         return self._terms(k, obs)
 
-    def _terms(self, k: int, obs: np.ndarray) -> Terms:
+    def _terms(self, k: int, obs: np.ndarray) -> tuple[Terms, Terms | None]:
         A, B, C, D, E, F = self.sys.matrices_at(k)
         Az, Bz = self.design.A_z, self.design.B_z
         Bo, Bm = Bz[:, obs], Bz[:, ~obs]
@@ -128,7 +129,12 @@ class Discrete(Observer[DiscreteState]):
             L = _plus_tau(combination((Tn, B), (-Bo, Do)), tau, B)
             G = _plus_tau(combination((Tn, E), (-Bo, Fo)), tau, E)
             X = combination((Bm, Cm))
-        return make_terms(obs, Az, Bz, L, G, X, (C, D, F), d)
+        terms = make_terms(obs, Az, Bz, L, G, X, (C, D, F), d)
+        tr = self.transform(k)
+        if terms.full or not tr.ok:
+            return terms, None
+        through = (tr.P, tr.resid, tr.T)
+        return terms, make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, through)
 
     # -- the step -------------------------------------------------------------------------
     def initial_state(self) -> DiscreteState:
@@ -173,22 +179,24 @@ class Discrete(Observer[DiscreteState]):
         uabs = np.abs(u_k)
         bounded = bool(xabs.max() < np.inf) if xabs.size else True
         obs = y_k == y_k  # the components measured (not NaN)
-        terms = self.terms(k, obs)
+        terms, via_z = self.terms(k, obs)
         y_o = y_k if terms.full else y_k[obs]
         bad = False
         if bounded and y_o.size:  # a measurement the box contradicts is not used
             bad = terms.check.contradicts(y_o, u_k, lo, hi, xabs, uabs, d.lo, d.hi)
             if bad:
                 obs = np.zeros_like(obs)
-                terms, y_o = self.terms(k, obs), y_k[obs]
+                (terms, via_z), y_o = self.terms(k, obs), y_k[obs]
         if not terms.full and not bounded:
             raise IvobsError(
                 f"y: measurement missing at step {k}, before T[k] is left-invertible, and "
                 "no prior box on x[0]: pass x0 to predict through missing samples there"
             )
-        zlo, zhi = terms.advance(  # (3.a)/(15.a)
-            state.zlo, state.zhi, zabs, y_o, u_k, uabs, lo, hi, xabs, d.lo, d.hi
-        )
+        args = (state.zlo, state.zhi, zabs, y_o, u_k, uabs, lo, hi, xabs, d.lo, d.hi)
+        zlo, zhi = terms.advance(*args)  # (3.a)/(15.a)
+        if via_z is not None:  # missing outputs: also bounded through z; both are sound
+            zlo2, zhi2 = via_z.advance(*args)
+            zlo, zhi = _meet(zlo, zhi, zlo2, zhi2)
         plo, phi = self._none
         if bounded and (self.seq is not None or not terms.full or cut):
             plo, phi = self.predict(k, lo, hi, u_k, d)
@@ -221,10 +229,18 @@ class Discrete(Observer[DiscreteState]):
         if tau is not None and np.any(tau):
             e = upper(tau @ np.maximum(np.abs(plo), np.abs(phi)), T.shape[1])
             tlo, thi = down(tlo - e), up(thi + e)
-        nlo, nhi = np.maximum(zlo, tlo), np.minimum(zhi, thi)
-        if np.count_nonzero(nlo > nhi):  # data contradicting the model: keep (3.a)
-            return zlo, zhi
-        return nlo, nhi
+        return _meet(zlo, zhi, tlo, thi)
+
+
+def _meet(
+    lo: np.ndarray, hi: np.ndarray, lo2: np.ndarray, hi2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The intersection of two enclosures of the same vector (the first where they do not
+    meet: data contradicting the model)."""
+    nlo, nhi = np.maximum(lo, lo2), np.minimum(hi, hi2)
+    if np.count_nonzero(nlo > nhi):
+        return lo, hi
+    return nlo, nhi
 
 
 def _plus_tau(

@@ -118,7 +118,7 @@ class KKL(Estimator):
                 T,
                 tune=tune,
                 max_cond=self.max_cond,
-                )
+            )
         self.valid_from = self.design.k_star
         self._vector: VectorisedLTI | None = None
         self._observer = self._choose(seq, input_hold, float(rtol), float(atol))

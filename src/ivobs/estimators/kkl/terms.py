@@ -95,6 +95,8 @@ class Consistency:
     contradicts the model. Time-varying bounds of ``d``: ``f`` is computed per step."""
 
     M: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
     F: np.ndarray
     const: bool
     c: float
@@ -147,7 +149,7 @@ def consistency(
         flo, fhi = image_bounds(F, *d)
         fcol = np.concatenate((flo, fhi, up(c * np.maximum(np.abs(flo), np.abs(fhi)) + eta)))
         M = np.hstack((M, fcol[:, None]))
-    return Consistency(M=M, F=F, const=d is not None, c=c, eta=eta, outward=_outward(no))
+    return Consistency(M=M, C=C, D=D, F=F, const=d is not None, c=c, eta=eta, outward=_outward(no))
 
 
 @dataclass(frozen=True)
@@ -158,7 +160,8 @@ class Terms:
     error bound ``ε`` (the ``|x|`` column only when ``X`` is not zero; the constant column only
     for constant bounds of ``d``, which carries ``g`` and its part of ``ε``). Missing outputs
     (``x_sym`` False): ``X̂ [x̲, x̄]`` is added at the step, its magnitude times ``c`` to ``ε``.
-    ``G``, ``Gerr``: for bounds of ``d`` that vary. ``check``: the consistency test of ``y_o``.
+    ``G``, ``Gerr``: for bounds of ``d`` that vary; ``L``, ``Lerr``, ``xmag`` (``>= |X|`` or
+    ``|X - X̂|``): for the vectorised run. ``check``: the consistency test of ``y_o``.
     """
 
     obs: np.ndarray
@@ -169,6 +172,9 @@ class Terms:
     x_sym: bool
     x_used: bool
     X: np.ndarray
+    xmag: np.ndarray
+    L: np.ndarray
+    Lerr: np.ndarray
     G: np.ndarray
     Gerr: np.ndarray
     c: float
@@ -225,10 +231,16 @@ def make_terms(
     X: tuple[np.ndarray, np.ndarray],
     CDF: tuple[np.ndarray, np.ndarray, np.ndarray],
     d: tuple[np.ndarray, np.ndarray] | None,
+    through: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Terms:
     """:class:`Terms` of the pattern ``obs`` from ``(L̂, |L - L̂|)``, ``(Ĝ, |G - Ĝ|)``,
     ``(X̂, |X - X̂|)`` (:func:`combination`, plus ``τ`` terms for a time-varying ``T``) and
-    the rows of ``(C, D, F)``; ``d``: constant bounds of ``d`` (or None)."""
+    the rows of ``(C, D, F)``; ``d``: constant bounds of ``d`` (or None).
+
+    ``through = (P, |I - P T| row sums, ...)``: the missing outputs bounded through ``z``
+    instead of the box: ``X x = X P z + X (I - P T) x``, so ``z+`` has the matrix ``Q = A_z +
+    X P`` (mixed signs: its Lemma-1 image, [Dinh2024, Lemma 1]) and ``|X| |I - P T| |x|`` is
+    added to ``ε`` with the error of ``Q̂``."""
     nz = A_z.shape[0]
     full = bool(np.all(obs))
     Bo = B_z[:, obs]
@@ -243,9 +255,19 @@ def make_terms(
     c = _factor(n, m)
     eta = (n + m + 8) * ETA
     Z = np.zeros((nz, nz))
-    W = np.block([[A_z, Z, Bo, Lh], [Z, A_z, Bo, Lh]])
-    x_mag = up(np.abs(Xh) + Xe) if x_sym else Xe
-    K = [up(c * A_z), up(c * np.abs(Bo)), up(c * np.abs(Lh) + Le)]
+    if through is None:
+        Zp, Zn, z_mag = A_z, Z, up(c * A_z)
+        x_mag = up(np.abs(Xh) + Xe) if x_sym else Xe
+    else:
+        P, resid, _ = through
+        Q, eQ = combination((A_z, np.eye(nz)), (Xh, P))
+        eQ = up(eQ + upper(Xe @ np.abs(P), nz))
+        Zp, Zn, z_mag = np.maximum(Q, 0.0), np.maximum(-Q, 0.0), up(c * np.abs(Q) + eQ)
+        x_sym = True  # X (I - P T) x: a residual, bounded by |X| r ‖x‖∞ <= (|X| r) 1ᵀ |x|
+        x_mag = np.repeat(upper((np.abs(Xh) + Xe) @ resid, nx + 1)[:, None], nx, axis=1)
+        x_used = bool(np.any(x_mag))
+    W = np.block([[Zp, -Zn, Bo, Lh], [-Zn, Zp, Bo, Lh]])
+    K = [z_mag, up(c * np.abs(Bo)), up(c * np.abs(Lh) + Le)]
     if x_used:
         K.append(up(x_mag * (1.0 + 2.0 * gamma(m + 3))))
     K_ = np.hstack(K)
@@ -264,6 +286,9 @@ def make_terms(
         x_sym=x_sym,
         x_used=x_used,
         X=Xh,
+        xmag=x_mag,
+        L=Lh,
+        Lerr=Le,
         G=Gh,
         Gerr=Ge,
         c=c,
