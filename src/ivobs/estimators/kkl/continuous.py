@@ -21,7 +21,8 @@ numerically (time-varying: SciPy DOP853, ``rtol=1e-10``, ``atol=1e-12``,
 :class:`ContinuousLTV`) or evaluated by matrix exponentials (time-invariant, closed forms,
 :class:`~ivobs.estimators.kkl.sampled.ContinuousLTI`), and that error is covered by a stated
 margin: ``z`` bounds widened by ``10 (atol + rtol |z|)`` per interval (time-varying) and the
-recovery by ``100 rtol cond(T) |P| |z|`` (:meth:`ContinuousObserver.recover_box`). Assumptions between samples: ``u``
+recovery by ``100 rtol cond(T) |P| |z|`` (:meth:`ContinuousObserver.recover_box`).
+Assumptions between samples: ``u``
 follows ``input_hold`` (``"zero"``-order hold by default, as a digital controller and
 :func:`ivobs.simulate` with array inputs do; ``"linear"`` interpolation of the samples; or a
 callable ``t -> u(t)``, integrated by 8-point Gauss-Legendre per interval (time-invariant) or by
@@ -123,14 +124,15 @@ class ContinuousObserver(Observer[S]):
     def check(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Consistency:
         """The consistency test of the observed outputs ``obs`` (kept per pattern)."""
         d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
+        C, D, F = (M[obs] for M in CDF)
         if self._checks is None:
-            return consistency(*(M[obs] for M in CDF), d)
+            return consistency(C, D, F, d)
         key = obs.tobytes()
         c = self._checks.get(key)
         if c is None:
             if len(self._checks) >= 256:
                 self._checks.clear()
-            c = self._checks[key] = consistency(*(M[obs] for M in CDF), d)
+            c = self._checks[key] = consistency(C, D, F, d)
         return c
 
     def recover_box(

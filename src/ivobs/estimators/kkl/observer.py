@@ -65,6 +65,7 @@ def recover(
     err += tr.eta
     b[:nx] -= err
     b[nx:] += err
+    assert tr.outward is not None
     np.nextafter(b, tr.outward, out=b)
     return b[:nx], b[nx:]
 

@@ -53,10 +53,12 @@ def combination(*pairs: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.n
     """``M̂ = fl(Σ_i P_i Q_i)`` and ``e >= |M - M̂|`` (``M`` the exact sum, every ``P_i``,
     ``Q_i`` a float matrix): the product bound of [Higham2002, Lemma 3.1] over the ``n = Σ``
     inner dimensions of the terms (:func:`~ivobs.sets.rounding.product_error`)."""
-    M = sum(P @ Q for P, Q in pairs)
-    s = sum(np.abs(P) @ np.abs(Q) for P, Q in pairs)
+    M = np.asarray(sum(P @ Q for P, Q in pairs), dtype=float)
     n = sum(P.shape[1] for P, _ in pairs)
-    return np.asarray(M, dtype=float), product_error(np.asarray(s, dtype=float), n)
+    if n == 0:  # an empty sum: exactly zero
+        return M, np.zeros_like(M)
+    s = sum(np.abs(P) @ np.abs(Q) for P, Q in pairs)
+    return M, product_error(np.asarray(s, dtype=float), n)
 
 
 def _factor(n: int, m: int) -> float:

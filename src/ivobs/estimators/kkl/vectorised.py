@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from ...sets.rounding import ETA, UNIT_ROUNDOFF, DecayBound, gamma, mid_rad, up, upper
 from ...sets import image_bounds
+from ...sets.rounding import ETA, UNIT_ROUNDOFF, DecayBound, gamma, mid_rad, up, upper
 from .._recursion import LinearFilter, redo_streams
 from .discrete import Discrete
 from .observer import prior_box
@@ -101,7 +101,7 @@ class VectorisedLTI:
             return lo, hi
         if y.ndim != 3:
             return None  # the loop reports the step and predicts without it
-        return redo_streams(est, u, y, t, lo, hi, bad.any(axis=-1))
+        return redo_streams(est, u, y, t, lo, hi, np.asarray(bad.any(axis=-1)))
 
     def radius(
         self, Tn: int, r0: np.ndarray, gr: np.ndarray, const: bool
