@@ -81,7 +81,7 @@ def g_image(
     glo, ghi = image_bounds(G, dlo, dhi)
     if G.shape[1] == 0:
         return glo, ghi
-    e = upper(Gerr @ np.maximum(np.abs(dlo), np.abs(dhi)), G.shape[1])
+    e = upper(np.maximum(np.abs(dlo), np.abs(dhi)) @ Gerr.T, G.shape[1])
     return down(glo - e), up(ghi + e)
 
 
