@@ -8,19 +8,15 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from fractions import Fraction
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import ivobs
+from exactsim import Record, simulate_linear
 from ivobs import Box, LinearSystem
 from ivobs.testing import random_system
-
-sys.path.insert(0, str(Path(__file__).parent))
-from exactsim import Record, simulate_linear  # noqa: E402
 
 
 def _plant(seed: int, nx: int, ny: int, rho: float, scale: float = 1.0) -> LinearSystem:

@@ -15,7 +15,6 @@ import pytest
 import ivobs
 from ivobs.testing import adversarial_run, random_system
 
-
 SLOW = pytest.mark.slow
 
 
