@@ -177,7 +177,8 @@ class Discrete(Observer[DiscreteState]):
         d = self.bounds_d(k, y_k)
         xabs = np.maximum(np.abs(lo), np.abs(hi))
         uabs = np.abs(u_k)
-        bounded = bool(xabs.max() < np.inf) if xabs.size else True
+        # (time-invariant: always bounded, the prior box is required)
+        bounded = self.seq is None or bool(xabs.max() < np.inf) if xabs.size else True
         obs = y_k == y_k  # the components measured (not NaN)
         terms, via_z = self.terms(k, obs)
         y_o = y_k if terms.full else y_k[obs]

@@ -50,8 +50,8 @@ def recover(
     ``P`` is a float left inverse of ``T``, not an exact one: ``x = P (T x) + (I - P T) x``.
     The first term lies in the Lemma-1 image ``P⁺ z̲ - P⁻ z̄ <= P z <= P⁺ z̄ - P⁻ z̲``, evaluated
     in floats with error at most ``γ_{2 n_z} |P| |z|`` (each bound a sum of ``2 n_z`` products,
-    [Higham2002, Lemma 3.1]); the second is at most ``r ‖x‖∞`` per component, ``r`` the row
-    sums of ``|I - P T|`` (``tr.resid``), with ``‖x‖∞ <= ‖|P| |z|‖∞ / (1 - max r)``. Both are
+    [Higham2002, Lemma 3.1]); the second is at most ``max r ‖x‖∞`` per component, ``r`` the
+    row sums of ``|I - P T|`` (``tr.resid``), with ``‖x‖∞ <= ‖|P| |z|‖∞ / (1 - max r)``. Both are
     added (constants of :class:`~.design.Transform` with the slack that covers the rounding
     of this sum), then each bound is rounded outward by one ulp (the exact result of its last
     operation lies within half an ulp). ``|z| <= zabs = max(|z̲|, |z̄|)`` componentwise."""
@@ -61,8 +61,7 @@ def recover(
     r = tr.W @ np.concatenate((zlo, zhi, zabs))
     b, s = r[: 2 * nx], r[2 * nx :]
     err = tr.c_err * s
-    err += tr.resid * (s.max() * tr.c_norm)
-    err += tr.eta
+    err += s.max() * tr.c_resid + tr.eta  # r_i ‖x‖∞ <= max r ‖x‖∞
     b[:nx] -= err
     b[nx:] += err
     assert tr.outward is not None

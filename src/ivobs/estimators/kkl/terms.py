@@ -48,6 +48,8 @@ from ...sets.rounding import ETA, down, gamma, product_error, up, upper
 
 __all__ = ["Consistency", "Terms", "combination", "consistency", "make_terms"]
 
+_ONE = np.ones(1)
+
 
 def combination(*pairs: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """``M̂ = fl(Σ_i P_i Q_i)`` and ``e >= |M - M̂|`` (``M`` the exact sum, every ``P_i``,
@@ -120,7 +122,7 @@ class Consistency:
         admissible sample, also one within rounding of the set's boundary, never is)."""
         no = y_o.shape[0]
         if self.const:
-            r = self.M @ np.concatenate((lo, hi, u, xabs, uabs, (1.0,)))
+            r = self.M @ np.concatenate((lo, hi, u, xabs, uabs, _ONE))
         else:
             r = self.M @ np.concatenate((lo, hi, u, xabs, uabs))
             flo, fhi = image_bounds(self.F, dlo, dhi)
@@ -205,7 +207,7 @@ class Terms:
         if self.x_used:
             parts.append(xabs)
         if self.const:
-            parts.append(np.ones(1))
+            parts.append(_ONE)
         r = self.M @ np.concatenate(parts)
         out, eps = r[: 2 * nz], r[2 * nz :]
         if not self.const:  # bounds of d that vary: G [d̲, d̄] at this step

@@ -202,7 +202,7 @@ class VectorisedLTI:
         s = cP + Rp
         rad = tr.c_err * s
         rad += Rp
-        rad += tr.resid * (_rowmax(s)[..., None] * tr.c_norm + tr.eta)
+        rad += _rowmax(s)[..., None] * tr.c_resid + tr.eta
         return xc, rad
 
     def first_contradicted(
