@@ -124,14 +124,15 @@ class ContinuousObserver(Observer[S]):
     def check(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Consistency:
         """The consistency test of the observed outputs ``obs`` (kept per pattern)."""
         d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
-        C, D, F = (M[obs] for M in CDF)
         if self._checks is None:
+            C, D, F = (M[obs] for M in CDF)
             return consistency(C, D, F, d)
         key = obs.tobytes()
         c = self._checks.get(key)
         if c is None:
             if len(self._checks) >= 256:
                 self._checks.clear()
+            C, D, F = (M[obs] for M in CDF)
             c = self._checks[key] = consistency(C, D, F, d)
         return c
 

@@ -109,9 +109,10 @@ class Transform:
 
     def __post_init__(self) -> None:
         """The constants of :func:`.observer.recover` for ``n_z`` rows of ``T``: ``c_err >=
-        γ_{2 n_z}`` (the error of the Lemma-1 image ``P [z̲, z̄]``) and ``c_norm >= 1 / (1 -
-        max r)`` (``‖x‖∞`` from ``‖|P| |z|‖∞``) and ``c_resid >= max r c_norm``, each with a factor ``1 + 2 γ_{n_z + 6}`` that
-        covers the rounding of ``|P| |z|`` and of the few operations that combine them;
+        γ_{2 n_z}`` (the error of the Lemma-1 image ``P [z̲, z̄]``), ``c_norm >= 1 / (1 - max
+        r)`` (``‖x‖∞`` from ``‖|P| |z|‖∞``) and ``c_resid >= max r c_norm``, each with a factor
+        ``1 + 2 γ_{n_z + 6}`` that covers the rounding of ``|P| |z|`` and of the few operations
+        that combine them;
         ``eta``: underflow; ``outward``: ``[-inf; +inf]`` for rounding the bounds outward."""
         nz, nx = self.T.shape
         slack = 1.0 + 2.0 * gamma(nz + 6)

@@ -54,7 +54,7 @@ from ...sets.rounding import down, product_error, up, upper
 from ..state import Step, evolve
 from .design import KKLDesign, Transform, TransformSequence, finite, left_inverse
 from .observer import Observer, ZState, recover
-from .terms import Terms, combination, make_terms
+from .terms import Consistency, Terms, combination, consistency, make_terms
 
 __all__ = ["Discrete", "DiscreteState"]
 
@@ -88,6 +88,8 @@ class Discrete(Observer[DiscreteState]):
         self.seq = seq
         self._tr = left_inverse(design.T, max_cond) if seq is None else None
         self._patterns: dict[bytes, tuple[Terms, Terms | None]] = {}
+        # time-varying: the consistency test of a pattern, kept while (C, D, F) do not change
+        self._checks: dict[bytes, tuple[tuple[np.ndarray, ...], Consistency]] = {}
         nx = sys.nx
         self._none = (np.full(nx, -np.inf), np.full(nx, np.inf))
 
@@ -129,12 +131,31 @@ class Discrete(Observer[DiscreteState]):
             L = _plus_tau(combination((Tn, B), (-Bo, Do)), tau, B)
             G = _plus_tau(combination((Tn, E), (-Bo, Fo)), tau, E)
             X = combination((Bm, Cm))
-        terms = make_terms(obs, Az, Bz, L, G, X, (C, D, F), d)
+        check = self._check((C, D, F), obs, d)
+        terms = make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, check=check)
         tr = self.transform(k)
         if terms.full or not tr.ok:
             return terms, None
         through = (tr.P, tr.resid, tr.T)
-        return terms, make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, through)
+        return terms, make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, through, check)
+
+    def _check(
+        self,
+        CDF: tuple[np.ndarray, ...],
+        obs: np.ndarray,
+        d: tuple[np.ndarray, np.ndarray] | None,
+    ) -> Consistency:
+        """The consistency test of the pattern ``obs`` (kept while ``C, D, F`` are the same)."""
+        key = obs.tobytes()
+        hit = self._checks.get(key)
+        if hit is not None and all(np.array_equal(a, b) for a, b in zip(hit[0], CDF)):
+            return hit[1]
+        if len(self._checks) >= PATTERNS:
+            self._checks.clear()
+        C, D, F = (M[obs] for M in CDF)
+        check = consistency(C, D, F, d)
+        self._checks[key] = (CDF, check)
+        return check
 
     # -- the step -------------------------------------------------------------------------
     def initial_state(self) -> DiscreteState:
@@ -207,15 +228,17 @@ class Discrete(Observer[DiscreteState]):
     def predict(
         self, k: int, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, d: Box
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``x[k+1] ∈ A [x̲, x̄] + B u + E [d̲, d̄]`` (Lemma 1; each term and each sum rounded
-        outward: :class:`~ivobs.sets.Box` verbs)."""
+        """``x[k+1] ∈ A [x̲, x̄] + B u + E [d̲, d̄]`` (Lemma 1, proven images; ``B u`` with its
+        product bound; each sum rounded outward)."""
         A, B, _, _, E, _ = self.sys.matrices_at(k)
         Bu = B @ u
         e = product_error(np.abs(B) @ np.abs(u), B.shape[1])
-        pred = A @ Box._trusted(lo, hi) + Box._trusted(down(Bu - e), up(Bu + e))
+        plo, phi = image_bounds(A, lo, hi)
+        plo, phi = down(plo + down(Bu - e)), up(phi + up(Bu + e))
         if E.shape[1]:
-            pred = pred + E @ d
-        return pred.lo, pred.hi
+            elo, ehi = image_bounds(E, d.lo, d.hi)
+            plo, phi = down(plo + elo), up(phi + ehi)
+        return plo, phi
 
     def intersect_z(
         self, k: int, zlo: np.ndarray, zhi: np.ndarray, plo: np.ndarray, phi: np.ndarray

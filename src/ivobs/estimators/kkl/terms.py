@@ -146,13 +146,19 @@ def consistency(
     Cp, Cn = np.maximum(C, 0.0), np.maximum(-C, 0.0)
     c = _factor(2 * nx + nu + 1, nx + nu + 1)
     eta = (2 * (nx + nu) + 8) * ETA
-    Ky = up(c * np.hstack((np.abs(C), np.abs(D))))
-    Z = np.zeros((no, nx + nu))
-    M = np.block([[Cp, -Cn, D, Z], [-Cn, Cp, D, Z], [np.zeros((no, 2 * nx + nu)), Ky]])
+    M = np.zeros((3 * no, 3 * nx + 2 * nu + (d is not None)))
+    M[:no, :nx], M[:no, nx : 2 * nx], M[:no, 2 * nx : 2 * nx + nu] = Cp, -Cn, D
+    M[no : 2 * no, :nx], M[no : 2 * no, nx : 2 * nx], M[no : 2 * no, 2 * nx : 2 * nx + nu] = (
+        -Cn,
+        Cp,
+        D,
+    )
+    M[2 * no :, 2 * nx + nu : 3 * nx + nu] = up(c * np.abs(C))
+    M[2 * no :, 3 * nx + nu : 3 * nx + 2 * nu] = up(c * np.abs(D))
     if d is not None:
         flo, fhi = image_bounds(F, *d)
         fcol = np.concatenate((flo, fhi, up(c * np.maximum(np.abs(flo), np.abs(fhi)) + eta)))
-        M = np.hstack((M, fcol[:, None]))
+        M[:, -1] = fcol
     return Consistency(M=M, C=C, D=D, F=F, const=d is not None, c=c, eta=eta, outward=_outward(no))
 
 
@@ -236,10 +242,12 @@ def make_terms(
     CDF: tuple[np.ndarray, np.ndarray, np.ndarray],
     d: tuple[np.ndarray, np.ndarray] | None,
     through: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    check: Consistency | None = None,
 ) -> Terms:
     """:class:`Terms` of the pattern ``obs`` from ``(L̂, |L - L̂|)``, ``(Ĝ, |G - Ĝ|)``,
     ``(X̂, |X - X̂|)`` (:func:`combination`, plus ``τ`` terms for a time-varying ``T``) and
-    the rows of ``(C, D, F)``; ``d``: constant bounds of ``d`` (or None).
+    the rows of ``(C, D, F)``; ``d``: constant bounds of ``d`` (or None); ``check``: the
+    consistency test of these rows, if already built.
 
     ``through = (P, |I - P T| row sums, ...)``: the missing outputs bounded through ``z``
     instead of the box: ``X x = X P z + X (I - P T) x``, so ``z+`` has the matrix ``Q = A_z +
@@ -258,9 +266,8 @@ def make_terms(
     m = nz + no + nu + nx + 2  # terms of each entry of ε
     c = _factor(n, m)
     eta = (n + m + 8) * ETA
-    Z = np.zeros((nz, nz))
     if through is None:
-        Zp, Zn, z_mag = A_z, Z, up(c * A_z)
+        Zp, Zn, z_mag = A_z, np.zeros((nz, nz)), up(c * A_z)
         x_mag = up(np.abs(Xh) + Xe) if x_sym else Xe
     else:
         P, resid, _ = through
@@ -270,17 +277,24 @@ def make_terms(
         x_sym = True  # X (I - P T) x: a residual, bounded by |X| r ‖x‖∞ <= (|X| r) 1ᵀ |x|
         x_mag = np.repeat(upper((np.abs(Xh) + Xe) @ resid, nx + 1)[:, None], nx, axis=1)
         x_used = bool(np.any(x_mag))
-    W = np.block([[Zp, -Zn, Bo, Lh], [-Zn, Zp, Bo, Lh]])
-    K = [z_mag, up(c * np.abs(Bo)), up(c * np.abs(Lh) + Le)]
+    # columns [z̲, z̄, y_o, u | |z|, |y_o|, |u|, |x| | 1]
+    w = 2 * nz + no + nu
+    M = np.zeros((3 * nz, w + nz + no + nu + (nx if x_used else 0) + (d is not None)))
+    for rows, first, second in ((slice(0, nz), Zp, -Zn), (slice(nz, 2 * nz), -Zn, Zp)):
+        M[rows, :nz], M[rows, nz : 2 * nz] = first, second
+        M[rows, 2 * nz : 2 * nz + no], M[rows, 2 * nz + no : w] = Bo, Lh
+    K = M[2 * nz :]
+    K[:, w : w + nz] = z_mag
+    K[:, w + nz : w + nz + no] = up(c * np.abs(Bo))
+    K[:, w + nz + no : w + nz + no + nu] = up(c * np.abs(Lh) + Le)
     if x_used:
-        K.append(up(x_mag * (1.0 + 2.0 * gamma(m + 3))))
-    K_ = np.hstack(K)
-    M = np.block([[W, np.zeros((2 * nz, K_.shape[1]))], [np.zeros((nz, W.shape[1])), K_]])
+        K[:, w + nz + no + nu : w + nz + no + nu + nx] = up(x_mag * (1.0 + 2.0 * gamma(m + 3)))
     if d is not None:  # constant bounds of d: g = G d and its part of ε in one column
         glo, ghi = g_image(Gh, Ge, *d)
-        col = np.concatenate((glo, ghi, up(c * np.maximum(np.abs(glo), np.abs(ghi)) + eta)))
-        M = np.hstack((M, col[:, None]))
-    C, D, F = (A[obs] for A in CDF)
+        M[:, -1] = np.concatenate((glo, ghi, up(c * np.maximum(np.abs(glo), np.abs(ghi)) + eta)))
+    if check is None:
+        C, D, F = (A[obs] for A in CDF)
+        check = consistency(C, D, F, d)
     return Terms(
         obs=obs,
         full=full,
@@ -297,6 +311,6 @@ def make_terms(
         Gerr=Ge,
         c=c,
         eta=eta,
-        check=consistency(C, D, F, d),
+        check=check,
         outward=_outward(nz),
     )

@@ -84,8 +84,10 @@ class VectorisedLTI:
             cf = LinearFilter(Az, [Bz, Lu, np.eye(Az.shape[0])], [np.eye(Az.shape[0])])
             chat = cf.run([y, u, np.broadcast_to(gc, (*y.shape[:-1], gc.shape[-1]))], x0=c0)[0]
         rhat, rdef = self.radius(Tn, r0, gr, const)
-        cP = np.abs(chat) @ tr.absP.T
-        q = self.slack(chat, rhat, rdef, y, u, gc, c0, cP, tr, terms)
+        cabs = np.abs(chat)
+        cP = _rowmax(cabs @ tr.absP.T)  # ‖|P| |ĉ[k]|‖∞
+        q = self.slack(chat, cabs, rhat, rdef, y, u, gc, c0, cP, tr, terms)
+        del cabs
         if q is None:
             return None
         xc, rad = self.boxes(chat, cP, rhat, q, tr)
@@ -131,6 +133,7 @@ class VectorisedLTI:
     def slack(
         self,
         chat: np.ndarray,
+        cabs: np.ndarray,
         rhat: np.ndarray,
         rdef: np.ndarray,
         y: np.ndarray,
@@ -142,7 +145,7 @@ class VectorisedLTI:
         terms: Any,
     ) -> np.ndarray | None:
         """``q[0..T-1]`` (module docstring), or None when ``A_z``'s decay cannot be
-        certified (then the loop). ``cP = |ĉ| |P|ᵀ``."""
+        certified (then the loop). ``cabs = |ĉ|``, ``cP = ‖|P| |ĉ|‖∞`` per step."""
         ob = self.ob
         Az, Bz, Lu = ob.design.A_z, ob.design.B_z, terms.L
         nz, ny, nu = Az.shape[0], Bz.shape[1], Lu.shape[1]
@@ -157,11 +160,11 @@ class VectorisedLTI:
         step += y @ Bz.T
         if nu:
             step += u @ Lu.T
-        dfct = chat[..., 1:, :] - step[..., :-1, :]
+        dfct = np.subtract(chat[..., 1:, :], step[..., :-1, :], out=step[..., :-1, :])
         dfct -= g
         eta = _rowmax(np.abs(dfct, out=dfct))  # (..., T-1)
         del step, dfct
-        c_abs = _rowmax(np.abs(chat))
+        c_abs = _rowmax(cabs)
         mag = c_abs[..., 1:] + _norm(Az) * c_abs[..., :-1]
         mag += _norm(np.abs(Bz)) * _rowmax(np.abs(y[..., :-1, :]))
         gmax = float(np.max(np.abs(gc)))
@@ -174,7 +177,7 @@ class VectorisedLTI:
         # |X| |x|: ‖x[k]‖∞ <= c_norm ‖|P| (|ĉ| + r̂ + q)‖∞ (recover); η = a + b q
         xr = float(upper(np.max(terms.xmag.sum(axis=1)), ob.sys.nx)) if terms.x_used else 0.0
         if xr:
-            s = _rowmax(cP[..., :-1, :]) + _rowmax(rhat[:-1] @ tr.absP.T)
+            s = cP[..., :-1] + _rowmax(rhat[:-1] @ tr.absP.T)
             eta += (xr * tr.c_norm) * s
         if lead:
             eta = eta.reshape(-1, eta.shape[-1]).max(axis=0)
@@ -194,37 +197,23 @@ class VectorisedLTI:
         self, chat: np.ndarray, cP: np.ndarray, rhat: np.ndarray, q: np.ndarray, tr: Any
     ) -> tuple[np.ndarray, np.ndarray]:
         """The recovery (:func:`.observer.recover`) of ``z[k] ∈ [ĉ[k] ± (r̂[k] + q[k])]``
-        over the record: ``x_c = P ĉ`` and the radius ``|P| (r̂ + q)`` plus the bound ``c_err
-        |P| (|ĉ| + r̂ + q)`` of their evaluation and ``r ‖x‖∞`` (the box is ``[x_c ± rad]``
-        rounded outward)."""
+        over the record: ``x_c = P ĉ`` and the radius ``|P| (r̂ + q)`` plus the bound of their
+        evaluation and of ``(I - P T) x``, ``(c_err + c_resid) ‖|P| (|ĉ| + r̂ + q)‖∞`` (the box
+        is ``[x_c ± rad]`` rounded outward). ``cP = ‖|P| |ĉ|‖∞`` per step."""
         Rp = (rhat + q[:, None]) @ tr.absP.T  # (T, nx), shared by the streams of a batch
         xc = chat @ tr.P.T
-        s = cP + Rp
-        rad = tr.c_err * s
-        rad += Rp
-        rad += _rowmax(s)[..., None] * tr.c_resid + tr.eta
+        extra = up(tr.c_err + tr.c_resid) * (1.0 + 4.0 * gamma(4))
+        rad = (extra * (cP + _rowmax(Rp)) + tr.eta)[..., None] + Rp
         return xc, rad
 
     def first_contradicted(
-        self,
-        lo: np.ndarray,
-        hi: np.ndarray,
-        u: np.ndarray,
-        y: np.ndarray,
-        check: Any,
-        d: tuple[np.ndarray, np.ndarray],
+        self, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, y: np.ndarray, check: Any, d: Any
     ) -> np.ndarray:
         """Whether ``y[0]`` contradicts the first box (intersected with the prior, as in the
-        loop): :meth:`.terms.Consistency.contradicts` per stream."""
-        dlo, dhi = (d[0], d[1]) if d[0].ndim == 1 else (d[0][0], d[1][0])
-        lo0, hi0, u0, y0 = (a[..., 0, :] for a in (lo, hi, u, y))
-        shape = lo0.shape[:-1]
-        out = np.zeros(shape, dtype=bool)
-        for i in np.ndindex(shape):
-            xabs = np.maximum(np.abs(lo0[i]), np.abs(hi0[i]))
-            uu = u0[i]
-            out[i] = check.contradicts(y0[i], uu, lo0[i], hi0[i], xabs, np.abs(uu), dlo, dhi)
-        return out
+        loop): :meth:`contradicted` on its proven centre and radius."""
+        xc, rad = mid_rad(lo[..., :1, :], hi[..., :1, :])
+        d0 = (d[0], d[1]) if d[0].ndim == 1 else (d[0][:1], d[1][:1])
+        return self.contradicted(xc, rad, u[..., :1, :], y[..., :1, :], check, d0)[..., 0]
 
     def contradicted(
         self,
@@ -244,12 +233,15 @@ class VectorisedLTI:
         nx, nu = C.shape[1], D.shape[1]
         flo, fhi = image_bounds(check.F, *d)
         fc, fr = mid_rad(flo, fhi)
-        r = rad + (2.0 * UNIT_ROUNDOFF) * (np.abs(xc) + rad) + 4 * ETA
-        e = y - (xc @ C.T)
+        e = y - xc @ C.T
         if nu:
             e -= u @ D.T
         e -= fc
         np.abs(e, out=e)
+        # below the band of the exact box's data-free part: certainly consistent
+        if np.all(e <= (rad @ np.abs(C).T + fr) * (1.0 - 2.0 * gamma(nx + 3))):
+            return np.zeros(e.shape[:-1], dtype=bool)
+        r = rad + (2.0 * UNIT_ROUNDOFF) * (np.abs(xc) + rad) + 4 * ETA
         band = r @ np.abs(C).T
         band += fr
         mag = np.abs(xc) @ np.abs(C).T
