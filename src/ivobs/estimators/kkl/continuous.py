@@ -141,9 +141,7 @@ class ContinuousObserver(Observer[S]):
     ) -> tuple[np.ndarray, np.ndarray]:
         """(3.c-d)/(10.d) (:func:`.observer.recover`, proven rounding), widened by the margin
         of the flows' integration, ``100 rtol cond(T) |P| |z|``."""
-        lo, hi = recover(tr, zlo, zhi)
-        m = (100.0 * self.rtol * tr.cond) * (tr.absP @ np.maximum(np.abs(zlo), np.abs(zhi)))
-        return down(lo - m), up(hi + m)
+        return recover(tr, zlo, zhi, margin=100.0 * self.rtol * tr.cond)
 
     def initial_fields(self) -> dict[str, Any]:
         """The fields of :class:`ContinuousState` at step 0."""

@@ -149,8 +149,10 @@ def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
     resid = upper(E.sum(axis=1), nx + 1)
     ok = bool(np.max(resid) <= 0.25)  # a left inverse to working accuracy
     Pp, Pn = np.maximum(P, 0.0), np.maximum(-P, 0.0)
-    Z = np.zeros((nx, nz))
-    W = np.block([[Pp, -Pn, Z], [-Pn, Pp, Z], [Z, Z, absP]])
+    W = np.zeros((3 * nx, 3 * nz))
+    W[:nx, :nz], W[:nx, nz : 2 * nz] = Pp, -Pn
+    W[nx : 2 * nx, :nz], W[nx : 2 * nx, nz : 2 * nz] = -Pn, Pp
+    W[2 * nx :, 2 * nz :] = absP
     return Transform(T=T, P=P, cond=cond, ok=ok, absP=absP, resid=resid, W=W)
 
 

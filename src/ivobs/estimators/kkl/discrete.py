@@ -121,16 +121,18 @@ class Discrete(Observer[DiscreteState]):
         Bo, Bm = Bz[:, obs], Bz[:, ~obs]
         Co, Cm, Do, Fo = C[obs], C[~obs], D[obs], F[obs]
         d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
+        nu = B.shape[1]
+        BE, DF = np.hstack((B, E)), np.hstack((Do, Fo))
         if self.seq is None:  # (4) for the float T: its residual X is bounded on the box
             T = self.design.T
-            L = combination((T, B), (-Bo, Do))
-            G = combination((T, E), (-Bo, Fo))
+            LG = combination((T, BE), (-Bo, DF))
             X = combination((T, A), (-Az, T), (-Bo, Co))
         else:  # (15.b), exact: T̂[k+1] within τ[k+1]; X = B_m C_m
             Tn, tau = self.seq.at(k + 1).T, self.seq.tau(k + 1)
-            L = _plus_tau(combination((Tn, B), (-Bo, Do)), tau, B)
-            G = _plus_tau(combination((Tn, E), (-Bo, Fo)), tau, E)
+            LG = _plus_tau(combination((Tn, BE), (-Bo, DF)), tau, BE)
             X = combination((Bm, Cm))
+        L = (LG[0][:, :nu], LG[1][:, :nu])
+        G = (LG[0][:, nu:], LG[1][:, nu:])
         check = self._check((C, D, F), obs, d)
         terms = make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, check=check)
         tr = self.transform(k)
