@@ -9,7 +9,11 @@ Prints steps per second (best of a few repeats, ``time.process_time``) for
 * CT LTI (Example 1, 8 states) and CT LTV (pendulum) ``run()`` on a dt = 0.01 grid;
 * the offline design time (default target with gradient refinement).
 
-Usage: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_kkl.py [--quick]``.
+``--widths``: the mean width over whole records of every scenario of ``suite.py`` that ``kkl``
+runs (vertex disturbances); ``--missing``: the width ratio with 10 % of the output components
+missing on random 4-state plants (``rho = 0.8``, 3,000 steps).
+
+Usage: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_kkl.py [--quick | --widths | --missing]``.
 """
 
 from __future__ import annotations
@@ -86,5 +90,56 @@ def main(quick: bool = False) -> None:
     print(f"CT LTV run (pendulum, {trp.T} samples)     {trp.T / dt:12.3e} steps/s")
 
 
+SCENARIOS = [
+    "dinh2019",
+    "servo-motor",
+    "tang-example2",
+    "efimov-planar",
+    "henon",
+    "kkl-random8",
+    "kkl-ltv-dt",
+    "cora-2dim",
+    "cora-vehicle6",
+    "cora-pedestrian4",
+    "cora-slip4",
+]
+
+
+def widths() -> None:
+    """Mean width (sum over the states) over each whole record, from ``valid_from``."""
+    import warnings
+
+    warnings.simplefilter("ignore")
+    for name in SCENARIOS:
+        sc = ivobs.scenarios.get(name)
+        tr = sc.simulate("vertex", seed=0)
+        res = ivobs.make_estimator("kkl", sc.system, x0=sc.x0).run(tr.u, tr.y)
+        w = res.width[res.valid_from :].sum(axis=1).mean()
+        ok = bool(res.contains(tr.x)[res.valid_from :].all())
+        print(f"{name:18s} T={tr.T:5d} mean_width={w:.10g} contains={ok}")
+
+
+def missing() -> None:
+    """Mean width with 10 % of the output components missing / with complete data."""
+    from ivobs.testing import adversarial_run, random_system
+
+    for ny in (1, 2):
+        for seed in range(6):
+            sys_ = random_system(seed, nx=4, ny=ny, nu=1, rho=0.8)
+            x0 = ivobs.Box(-np.ones(4), np.ones(4))
+            tr = adversarial_run(sys_, x0, 3000, seed=seed)
+            y = tr.y.copy()
+            y[np.random.default_rng(100 + seed).random(y.shape) < 0.1] = np.nan
+            est = ivobs.make_estimator("kkl", sys_, x0=x0)
+            full, miss = est.run(tr.u, tr.y), est.run(tr.u, y)
+            ratio = miss.width[100:].sum(1).mean() / full.width[100:].sum(1).mean()
+            print(f"ny={ny} seed={seed} ratio={ratio:.3g} contains={miss.contains(tr.x).all()}")
+
+
 if __name__ == "__main__":
-    main(quick="--quick" in sys.argv)
+    if "--widths" in sys.argv:
+        widths()
+    elif "--missing" in sys.argv:
+        missing()
+    else:
+        main(quick="--quick" in sys.argv)
