@@ -64,11 +64,13 @@ PATTERNS = 256
 
 @dataclass(frozen=True)
 class DiscreteState(ZState):
-    """Observers (3)/(15): ``z̲ <= T[k] x[k] <= z̄`` and the model's prediction ``[xlo, xhi]``
-    of the box of ``x[k]`` (infinite when not carried)."""
+    """Observers (3)/(15): ``z̲ <= T[k] x[k] <= z̄`` and, when ``carried``, the model's
+    prediction ``[xlo, xhi]`` of the box of ``x[k]`` (zeros otherwise: every entry of a saved
+    state is finite)."""
 
     xlo: np.ndarray
     xhi: np.ndarray
+    carried: bool
 
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (("zlo", "zhi"), ("xlo", "xhi"))
 
@@ -92,6 +94,7 @@ class Discrete(Observer[DiscreteState]):
         self._checks: dict[bytes, tuple[tuple[np.ndarray, ...], Consistency]] = {}
         nx = sys.nx
         self._none = (np.full(nx, -np.inf), np.full(nx, np.inf))
+        self._zero = np.zeros(nx)
 
     # -- the design at step k -------------------------------------------------------------
     def transform(self, k: int) -> Transform:
@@ -162,8 +165,11 @@ class Discrete(Observer[DiscreteState]):
     # -- the step -------------------------------------------------------------------------
     def initial_state(self) -> DiscreteState:
         zlo, zhi = self.initial_z()  # (3.b)/(15.c); z[0] = 0 exactly for T0 = 0
-        xlo, xhi = self.initial_x() if self.seq is not None else self._none
-        return DiscreteState(zlo=zlo, zhi=zhi, xlo=xlo, xhi=xhi)
+        xlo, xhi = self.initial_x()  # the prior (time-varying: the box until T is invertible)
+        carried = self.seq is not None and self.x0 is not None
+        if not carried:
+            xlo = xhi = self._zero
+        return DiscreteState(zlo=zlo, zhi=zhi, xlo=xlo, xhi=xhi, carried=carried)
 
     def box(
         self, state: DiscreteState, k: int, tr: Transform, zabs: np.ndarray
@@ -177,8 +183,7 @@ class Discrete(Observer[DiscreteState]):
         if k == 0:
             lo, hi = self.first_box(lo, hi)
         plo, phi = state.xlo, state.xhi
-        carried = plo[0] != -np.inf if plo.size else False
-        cut = carried and bool(np.count_nonzero(plo > lo) or np.count_nonzero(phi < hi))
+        cut = state.carried and bool(np.count_nonzero(plo > lo) or np.count_nonzero(phi < hi))
         if cut:
             nlo, nhi = np.maximum(lo, plo), np.minimum(hi, phi)
             if np.count_nonzero(nlo > nhi):  # data contradicting the model: keep (3.c-d)
@@ -221,11 +226,14 @@ class Discrete(Observer[DiscreteState]):
         if via_z is not None:  # missing outputs: also bounded through z; both are sound
             zlo2, zhi2 = via_z.advance(*args)
             zlo, zhi = _meet(zlo, zhi, zlo2, zhi2)
-        plo, phi = self._none
+        plo = phi = self._zero
+        carried = False
         if bounded and (self.seq is not None or not terms.full or cut):
             plo, phi = self.predict(k, lo, hi, u_k, d)
+            carried = True
             zlo, zhi = self.intersect_z(k, zlo, zhi, plo, phi)
-        return Step(evolve(state, zlo=zlo, zhi=zhi, xlo=plo, xhi=phi), lo, hi, bad)
+        new = evolve(state, zlo=zlo, zhi=zhi, xlo=plo, xhi=phi, carried=carried)
+        return Step(new, lo, hi, bad)
 
     def predict(
         self, k: int, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, d: Box
