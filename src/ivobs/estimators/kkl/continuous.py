@@ -14,11 +14,15 @@ samples; as the sampling period tends to 0 this is observer (3)/(10). ``T(0)`` i
 (4) (time-invariant) or of (4) frozen at ``t = 0`` (time-varying), so the bounds hold from the
 first sample given ``x0`` (``valid_from = 0``).
 
-What is guaranteed. The flows are integrated numerically (time-varying: SciPy DOP853,
-``rtol=1e-10``, ``atol=1e-12``, :class:`ContinuousLTV`); the bounds are sound up to that
-integration error, which is covered heuristically (``z`` bounds widened by ``10 (atol + rtol
-|z|)`` per interval, recovery margin ``+100 rtol cond(T)``). Time-invariant systems use closed
-forms (:class:`~ivobs.estimators.kkl.sampled.ContinuousLTI`). Assumptions between samples: ``u``
+What is guaranteed. The measurement jump, the recovery and the consistency test bound their
+floating-point error by a proven model, as in discrete time (:func:`.observer.recover`,
+:class:`.terms.Consistency`). The flows between samples are not proven: they are integrated
+numerically (time-varying: SciPy DOP853, ``rtol=1e-10``, ``atol=1e-12``,
+:class:`ContinuousLTV`) or evaluated by matrix exponentials (time-invariant, closed forms,
+:class:`~ivobs.estimators.kkl.sampled.ContinuousLTI`), and that error is covered by a stated
+margin: ``z`` bounds widened by ``10 (atol + rtol |z|)`` per interval (time-varying) and the
+recovery by ``100 rtol cond(T) |P| |z|`` (:meth:`ContinuousObserver.recover_box`).
+Assumptions between samples: ``u``
 follows ``input_hold`` (``"zero"``-order hold by default, as a digital controller and
 :func:`ivobs.simulate` with array inputs do; ``"linear"`` interpolation of the samples; or a
 callable ``t -> u(t)``, integrated by 8-point Gauss-Legendre per interval (time-invariant) or by
@@ -38,10 +42,13 @@ from typing import Any, ClassVar, NamedTuple, TypeVar
 import numpy as np
 
 from ...errors import DesignError, IvobsError
+from ...model import LinearSystem
 from ...sets import Box
+from ...sets.rounding import down, product_error, up
 from ..state import Step
-from .design import Transform, every, left_inverse
-from .observer import Observer, Setting, ZState
+from .design import KKLDesign, Transform, every, finite, left_inverse
+from .observer import Observer, ZState, recover
+from .terms import Consistency, consistency
 
 __all__ = ["ContinuousLTV", "ContinuousObserver", "ContinuousState", "Flowed", "InputHold", "Span"]
 
@@ -98,10 +105,43 @@ class ContinuousObserver(Observer[S]):
     """The sampled-data step, written once: the flow from the previous sample (subclasses), the
     measurement jump, and the recovery of the box."""
 
-    def __init__(self, setting: Setting, hold: InputHold, rtol: float, atol: float):
-        super().__init__(setting)
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None,
+        design: KKLDesign,
+        max_cond: float,
+        hold: InputHold,
+        rtol: float,
+        atol: float,
+    ):
+        super().__init__(sys, x0, design, max_cond)
         self.hold = hold
         self.rtol, self.atol = rtol, atol
+        # constant (C, D, F): the consistency test of each pattern of observed outputs, kept
+        self._checks: dict[bytes, Consistency] | None = None if sys.is_time_varying else {}
+
+    def check(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Consistency:
+        """The consistency test of the observed outputs ``obs`` (kept per pattern)."""
+        d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
+        if self._checks is None:
+            C, D, F = (M[obs] for M in CDF)
+            return consistency(C, D, F, d)
+        key = obs.tobytes()
+        c = self._checks.get(key)
+        if c is None:
+            if len(self._checks) >= 256:
+                self._checks.clear()
+            C, D, F = (M[obs] for M in CDF)
+            c = self._checks[key] = consistency(C, D, F, d)
+        return c
+
+    def recover_box(
+        self, tr: Transform, zlo: np.ndarray, zhi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(3.c-d)/(10.d) (:func:`.observer.recover`, proven rounding), widened by the margin
+        of the flows' integration, ``100 rtol cond(T) |P| |z|``."""
+        return recover(tr, zlo, zhi, margin=100.0 * self.rtol * tr.cond)
 
     def initial_fields(self) -> dict[str, Any]:
         """The fields of :class:`ContinuousState` at step 0."""
@@ -186,25 +226,34 @@ class ContinuousObserver(Observer[S]):
         tr = an.trm if an is not None else left_inverse(T, self.max_cond)
         box, bad = self.x_box(tr, zlo, zhi, model)
         obs = ~np.isnan(y_k)
-        if box is not None:
-            obs, inconsistent = self.usable(y_k, box[0], box[1], CDF, u_k, d)
-            bad = bad or inconsistent
-        if self._patterns is None:  # time-varying matrices: the rows of this step
-            full = every(obs)
-            Co, Do, Fo = (M[obs] for M in CDF)
-        else:
-            r = self.measured(CDF, obs)
-            full, (Co, Do, Fo) = r.full, r.rows[:3]
+        if box is not None and np.count_nonzero(obs):
+            lo, hi = box
+            xabs = np.maximum(np.abs(lo), np.abs(hi))
+            if finite(xabs):
+                y_o = y_k[obs]
+                if self.check(CDF, obs).contradicts(
+                    y_o, u_k, lo, hi, xabs, np.abs(u_k), d.lo, d.hi
+                ):
+                    obs, bad = np.zeros_like(obs), True
+        full = every(obs)
+        Co, Do, Fo = (M[obs] for M in CDF)
         Bo = h * self.design.B_z[:, obs]
         if an is not None and full:
             T = an.T  # = T(t_k-) + h B_z C exactly (see ContinuousLTI.anchor)
         else:
             T = T + Bo @ Co
-        v = Bo @ ((y_k if full else y_k[obs]) - Do @ u_k)
+        # z jumps by h B_o (y_o - D_o u - F_o d): the Lemma-1 bounds of the d term, and the
+        # proven bound of the evaluation (a sum of n_o (n_u + 1) + 1 products per entry)
+        yo = y_k if full else y_k[obs]
+        v = Bo @ (yo - Do @ u_k)
         BF = Bo @ Fo
-        v = v - BF @ (0.5 * (d.lo + d.hi))
-        gr = np.abs(BF) @ (0.5 * (d.hi - d.lo))
-        return T, zlo + v - gr, zhi + v + gr, bad
+        dc, dr = 0.5 * (d.lo + d.hi), 0.5 * (d.hi - d.lo)
+        v = v - BF @ dc
+        gr = np.abs(BF) @ dr
+        mag = np.abs(Bo) @ (np.abs(yo) + np.abs(Do) @ np.abs(u_k) + np.abs(Fo) @ np.abs(dc))
+        n = Bo.shape[1] * (2 + Do.shape[1] + Fo.shape[1]) + 4
+        e = up(product_error(mag + gr, n) + gr * (1.0 + 1e-15))
+        return T, down(zlo + v - e), up(zhi + v + e), bad
 
     def x_box(
         self,
@@ -223,7 +272,7 @@ class ContinuousObserver(Observer[S]):
         """
         if not tr.ok:
             return model, False
-        lo, hi = self.recover(tr, zlo, zhi)
+        lo, hi = self.recover_box(tr, zlo, zhi)
         if model is None:
             return (lo, hi), False
         lo, hi = np.maximum(lo, model[0]), np.minimum(hi, model[1])

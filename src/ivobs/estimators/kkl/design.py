@@ -12,8 +12,8 @@ from ``T[0]`` (:class:`TransformSequence`), whose first left-invertible ``T[k]``
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, NamedTuple
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -32,24 +32,19 @@ from ...design.sylvester import (
 from ...errors import DesignError, IvobsError
 from ...linalg import gamma, is_observable, observability_rank
 from ...model import LinearSystem
-from ...sets import Box, image_bounds, neg, pos
+from ...sets import Box
+from ...sets.rounding import ETA, product_error, up, upper
 from ..base import Design
 
 __all__ = [
     "KKLDesign",
-    "ObserverMatrices",
-    "OutputRows",
     "Transform",
     "TransformSequence",
     "design_lti",
     "design_ltv",
     "every",
     "finite",
-    "fused_margin",
-    "image",
     "left_inverse",
-    "observer_matrices",
-    "output_rows",
     "x0_required",
 ]
 
@@ -72,7 +67,6 @@ class KKLDesign(Design):
     cond_T: float
     continuous: bool
     time_varying: bool
-    coordinates: str = "z"
     predicted_width: np.ndarray | None = None
     A_tilde: np.ndarray | None = None
     indices: tuple[int, ...] | None = None
@@ -92,25 +86,43 @@ def finite(v: np.ndarray) -> bool:
     return bool(np.count_nonzero(np.isfinite(v)) == v.size)
 
 
-def image(M: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`ivobs.sets.image_bounds` of one step (float arrays, vector bounds): the same
-    operations, without its conversions and error-state guard when the bounds are finite."""
-    if not (finite(lo) and finite(hi)):
-        return image_bounds(M, lo, hi)
-    Mp, Mn = pos(M), neg(M)
-    return lo @ Mp.T - hi @ Mn.T, hi @ Mp.T - lo @ Mn.T
-
-
 @dataclass(frozen=True)
 class Transform:
-    """``T[k]``, its pseudo-inverse ``P`` (with ``|P|``, used by every recovery), condition
-    number and whether it counts as left-invertible."""
+    """``T[k]``, its left inverse ``P`` (a float matrix, with ``|P|``), the condition number,
+    whether it counts as left-invertible, and ``resid``: per row, an upper bound of the row
+    sums of ``|I - P T|`` (exact, for the float matrices ``P`` and ``T``), which bounds the
+    error of the recovery ``x = P z + (I - P T) x`` (:func:`.observer.recover`); ``W`` maps
+    ``[z̲; z̄; |z|]`` to the Lemma-1 bounds of ``P z`` and ``|P| |z|``."""
 
     T: np.ndarray
     P: np.ndarray
     cond: float
     ok: bool
     absP: np.ndarray
+    resid: np.ndarray
+    W: np.ndarray
+    c_err: float = 0.0
+    c_norm: float = 0.0
+    c_resid: float = 0.0
+    eta: float = 0.0
+    outward: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        """The constants of :func:`.observer.recover` for ``n_z`` rows of ``T``: ``c_err >=
+        γ_{2 n_z}`` (the error of the Lemma-1 image ``P [z̲, z̄]``), ``c_norm >= 1 / (1 - max
+        r)`` (``‖x‖∞`` from ``‖|P| |z|‖∞``) and ``c_resid >= max r c_norm``, each with a factor
+        ``1 + 2 γ_{n_z + 6}`` that covers the rounding of ``|P| |z|`` and of the few operations
+        that combine them;
+        ``eta``: underflow; ``outward``: ``[-inf; +inf]`` for rounding the bounds outward."""
+        nz, nx = self.T.shape
+        slack = 1.0 + 2.0 * gamma(nz + 6)
+        rho = float(np.max(self.resid)) if self.resid.size else 0.0
+        object.__setattr__(self, "c_err", 2.0 * gamma(2 * nz + 2) * slack)
+        object.__setattr__(self, "c_norm", slack * slack / (1.0 - min(rho, 0.5)))
+        object.__setattr__(self, "c_resid", float(up(rho * self.c_norm * slack)))
+        object.__setattr__(self, "eta", (2 * nz + 8) * ETA)
+        inf = np.full(nx, np.inf)
+        object.__setattr__(self, "outward", np.concatenate((-inf, inf)))
 
 
 def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
@@ -118,18 +130,38 @@ def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
 
     ``z̲ <= T x <= z̄`` is equivalent to ``N z̲ <= N T x <= N z̄`` for a positive diagonal ``N``,
     so ``x = (N T)⁺ N z`` recovers the same box; rows that decayed (fast target modes, long
-    gaps) then do not count as ill-conditioning. ``cond`` is that of ``N T``.
+    gaps) then do not count as ill-conditioning. ``cond`` is that of ``N T``. ``resid`` bounds
+    ``|I - P T|`` with the product bound of [Higham2002, Lemma 3.1] (:func:`product_error`).
     """
     norms = np.linalg.norm(T, axis=1)
     nz, nx = T.shape
     if np.count_nonzero(norms == 0) or not finite(norms):
-        P0 = np.zeros((nx, nz))
-        return Transform(T=T, P=P0, cond=float("inf"), ok=False, absP=P0)
+        return _singular(T, float("inf"))
     U, s, Vt = np.linalg.svd(T / norms[:, None], full_matrices=False)
     cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
     ok = cond <= max_cond  # False for inf
-    P = ((Vt.T / s) @ U.T) / norms[None, :] if ok else np.zeros((nx, nz))
-    return Transform(T=T, P=P, cond=cond, ok=ok, absP=np.abs(P))
+    if not ok:
+        return _singular(T, cond)
+    P = ((Vt.T / s) @ U.T) / norms[None, :]
+    absP = np.abs(P)
+    # |I - P T| <= |fl(I - P T)| + error of that evaluation (nz + 1 terms per entry)
+    E = np.abs(np.eye(nx) - P @ T) + product_error(absP @ np.abs(T) + np.eye(nx), nz + 1)
+    resid = upper(E.sum(axis=1), nx + 1)
+    ok = bool(np.max(resid) <= 0.25)  # a left inverse to working accuracy
+    Pp, Pn = np.maximum(P, 0.0), np.maximum(-P, 0.0)
+    W = np.zeros((3 * nx, 3 * nz))
+    W[:nx, :nz], W[:nx, nz : 2 * nz] = Pp, -Pn
+    W[nx : 2 * nx, :nz], W[nx : 2 * nx, nz : 2 * nz] = -Pn, Pp
+    W[2 * nx :, 2 * nz :] = absP
+    return Transform(T=T, P=P, cond=cond, ok=ok, absP=absP, resid=resid, W=W)
+
+
+def _singular(T: np.ndarray, cond: float) -> Transform:
+    """A :class:`Transform` that is not left-invertible (no recovery from it)."""
+    nz, nx = T.shape
+    P0 = np.zeros((nx, nz))
+    W = np.zeros((3 * nx, 3 * nz))
+    return Transform(T=T, P=P0, cond=cond, ok=False, absP=P0, resid=np.ones(nx), W=W)
 
 
 def x0_required(x0: Box | None, why: str) -> Box:
@@ -152,7 +184,6 @@ def design_lti(
     *,
     tune: bool,
     max_cond: float,
-    coordinates: str,
 ) -> KKLDesign:
     """The target pair and ``T`` of (4) for a time-invariant system ([Dinh2024, Algorithm 1])."""
     ct = sys.is_continuous
@@ -206,7 +237,6 @@ def design_lti(
         cond_T=cond,
         continuous=ct,
         time_varying=False,
-        coordinates=coordinates,
         predicted_width=pw,
         tuned=tuned,
     )
@@ -234,75 +264,6 @@ def _d_delta(sys: LinearSystem) -> np.ndarray:
         w: np.ndarray = d.hi - d.lo
         return np.asarray(np.max(w, axis=0)) if w.ndim == 2 else w
     return np.ones(sys.nd)
-
-
-class OutputRows(NamedTuple):
-    """The rows of ``C``, ``D``, ``F`` of the observed outputs, and ``|C|``, ``|F|`` of them."""
-
-    C: np.ndarray
-    D: np.ndarray
-    F: np.ndarray
-    absC: np.ndarray
-    absF: np.ndarray
-
-
-def output_rows(CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> OutputRows:
-    """:class:`OutputRows` of ``(C, D, F)`` for the observed outputs ``obs``."""
-    C, D, F = (M[obs] for M in CDF)
-    return OutputRows(C, D, F, np.abs(C), np.abs(F))
-
-
-@dataclass(frozen=True)
-class ObserverMatrices:
-    """The constant matrices of observers (3) and (6) of a discrete-time time-invariant design:
-    the model ``(A, B, C, D, E, F)``, ``T`` with its left inverse ``P``, the known-input matrix
-    ``L_u = T B - B_z D``, the disturbance matrix ``G = T E - B_z F`` of (5), the Lemma-1 bounds
-    ``g = G [d̲, d̄]`` when the bounds of ``d`` are constant, the recovery margin
-    ``ρ' |P|`` (:func:`fused_margin` of ``ρ = rec cond(T)``) and, for observer (6), ``L = P
-    B_z`` and ``A - L C``."""
-
-    mats: tuple[np.ndarray, ...]
-    tr: Transform
-    Lu: np.ndarray
-    G: np.ndarray
-    g_const: tuple[np.ndarray, np.ndarray] | None
-    margin: np.ndarray
-    Mx: np.ndarray | None
-
-
-def fused_margin(rho: float, nz: int) -> float:
-    """``ρ' = (ρ + γ̃_{5 n_z}) (1 + γ̃_{3 n_z + 4})``: the recovery margin ``ρ = rec cond(T)``
-    plus the rounding of the one-product step's evaluation of (3.c-d)
-    (:meth:`.discrete.ObserverZ._fused_step` derives it; ``γ̃``: :func:`~ivobs.linalg.gamma`
-    with unit ``ε = 2u``). The vectorised run uses the same margin, so the two agree to
-    rounding."""
-    eps = float(np.finfo(float).eps)
-    return (rho + gamma(5 * nz, eps)) * (1.0 + gamma(3 * nz + 4, eps))
-
-
-def observer_matrices(
-    sys: LinearSystem, design: KKLDesign, max_cond: float, rec: float
-) -> ObserverMatrices:
-    """:class:`ObserverMatrices` of a discrete-time time-invariant design."""
-    A, B, C, D, E, F = sys.matrices_at(0)
-    tr = left_inverse(design.T, max_cond)
-    G = design.T @ E - design.B_z @ F
-    g_const = None
-    if sys.d is None or (isinstance(sys.d, Box) and not sys.d.is_time_varying):
-        dd = sys.d_at(0)
-        g_const = image_bounds(G, dd.lo, dd.hi)
-    Mx = None
-    if design.coordinates == "x":
-        Mx = A - (tr.P @ design.B_z) @ C
-    return ObserverMatrices(
-        mats=(A, B, C, D, E, F),
-        tr=tr,
-        Lu=design.T @ B - design.B_z @ D,
-        G=G,
-        g_const=g_const,
-        margin=fused_margin(rec * tr.cond, design.n_z) * np.abs(tr.P),
-        Mx=Mx,
-    )
 
 
 # -- time-varying ------------------------------------------------------------------------------
@@ -410,7 +371,14 @@ def _default_ell(A_tilde: np.ndarray, A_0: np.ndarray) -> float:
 
 class TransformSequence:
     """``T[k]`` of [Dinh2024, eq. (15.b)] with its left inverses, computed forward once and
-    kept (it does not depend on the data)."""
+    kept (it does not depend on the data).
+
+    The observer's transformation is the *exact* real sequence ``T[k+1] = (A_z T[k] + B_z
+    C[k]) A[k]⁻¹`` from the float ``T[0]``; the float ``T̂[k]`` computed here is within ``τ[k]``
+    of it (elementwise, :meth:`tau`): ``T[k+1] - T̂[k+1] = (A_z (T[k] - T̂[k]) + (A_z T̂[k] +
+    B_z C - M̂) + (M̂ - T̂[k+1] A)) A⁻¹`` with ``M̂ = fl(A_z T̂[k] + B_z C)``, each term bounded
+    by [Higham2002, Lemma 3.1] and ``|A⁻¹|`` by a float inverse and its residual. The recovery
+    of :class:`Transform` adds ``|P| τ`` to its residual ``|I - P T|``."""
 
     def __init__(
         self, sys: LinearSystem, A_z: np.ndarray, B_z: np.ndarray, T0: np.ndarray, max_cond: float
@@ -419,21 +387,41 @@ class TransformSequence:
         self.A_z, self.B_z = A_z, B_z
         self.max_cond = max_cond
         self._seq = [left_inverse(T0, max_cond)]
+        self._tau = [np.zeros_like(T0)]
 
     def at(self, k: int) -> Transform:
-        """``T[k]`` and its left inverse."""
-        seq = self._seq
-        while len(seq) <= k:
-            j = len(seq) - 1
-            Aj, Cj = self.sys.A_at(j), self.sys.C_at(j)
-            if not finite(Aj) or np.linalg.cond(Aj) > 1e13:
-                raise DesignError(
-                    f"A[{j}] is singular (cond {np.linalg.cond(Aj):.2e}); the time-varying "
-                    "KKL observer (15.b) needs invertible A[k] ([Dinh2024, Assumption 3 (VIII)])"
-                )
-            rhs = self.A_z @ seq[j].T + self.B_z @ Cj
-            seq.append(left_inverse(np.linalg.solve(Aj.T, rhs.T).T, self.max_cond))
-        return seq[k]
+        """``T̂[k]`` and its left inverse (the residual of the recovery includes ``τ[k]``)."""
+        while len(self._seq) <= k:
+            self._extend()
+        return self._seq[k]
+
+    def tau(self, k: int) -> np.ndarray:
+        """``τ[k] >= |T[k] - T̂[k]|`` elementwise."""
+        self.at(k)
+        return self._tau[k]
+
+    def _extend(self) -> None:
+        j = len(self._seq) - 1
+        Aj, Cj = self.sys.A_at(j), self.sys.C_at(j)
+        if not finite(Aj) or np.linalg.cond(Aj) > 1e13:
+            raise DesignError(
+                f"A[{j}] is singular (cond {np.linalg.cond(Aj):.2e}); the time-varying "
+                "KKL observer (15.b) needs invertible A[k] ([Dinh2024, Assumption 3 (VIII)])"
+            )
+        Az, Bz, Tj = self.A_z, self.B_z, self._seq[j].T
+        nz, nx = Tj.shape
+        M = Az @ Tj + Bz @ Cj
+        eM = product_error(Az @ np.abs(Tj) + np.abs(Bz) @ np.abs(Cj), nz + Bz.shape[1])
+        Tn = np.linalg.solve(Aj.T, M.T).T
+        res = np.abs(M - Tn @ Aj) + product_error(np.abs(M) + np.abs(Tn) @ np.abs(Aj), nx + 1)
+        rhs = up(Az @ self._tau[j] + eM + res)
+        tau = upper(rhs @ _inverse_bound(Aj), nx + nz + 4)
+        tr = left_inverse(Tn, self.max_cond)
+        if tr.ok and np.any(tau):
+            resid = up(tr.resid + upper((tr.absP @ tau).sum(axis=1), nz + nx))
+            tr = replace(tr, resid=resid, ok=bool(np.max(resid) <= 0.25))
+        self._seq.append(tr)
+        self._tau.append(tau)
 
     def first_left_invertible(self) -> tuple[int, float]:
         """Offline: the first ``k`` with ``cond(T[k]) <= max_cond``, and that condition number.
@@ -468,6 +456,24 @@ class TransformSequence:
             f"(smallest cond(T[k]) = {best:.3e} > max_cond = {self.max_cond:.0e}): the pair "
             f"(A[k], C[k]) may not be uniformly observable; {advice}"
         )
+
+
+def _inverse_bound(A: np.ndarray) -> np.ndarray:
+    """An elementwise upper bound of ``|A⁻¹|`` (exact inverse of the float ``A``): with a float
+    inverse ``X`` and ``F >= |I - A X|`` of row sums ``<= β < 1``, ``‖A⁻¹‖∞ <= ‖X‖∞ / (1 - β)``
+    and ``|A⁻¹ - X| = |A⁻¹ (I - A X)| <= ‖A⁻¹‖∞ max_l F_lj``."""
+    n = A.shape[0]
+    X = np.linalg.inv(A)
+    F = np.abs(np.eye(n) - A @ X) + product_error(np.abs(A) @ np.abs(X) + np.eye(n), n + 1)
+    beta = float(upper(np.max(F.sum(axis=1)), n + 1))
+    if not beta < 0.5:
+        raise DesignError(
+            f"A: the inverse of A[k] cannot be bounded (residual {beta:.2e}); the time-varying "
+            "KKL observer (15.b) needs well-conditioned A[k]"
+        )
+    norm = float(upper(np.max(np.abs(X).sum(axis=1)), n)) / (1.0 - beta) * (1.0 + 1e-15)
+    out: np.ndarray = up(np.abs(X) + up(norm * F.max(axis=0))[None, :])
+    return out
 
 
 def _is_stack(M: Any) -> bool:

@@ -1,4 +1,5 @@
-"""Discrete-time KKL observers of [Dinh2024]: the recursion (3.a)/(15.a), written once.
+"""The discrete-time KKL observers of [Dinh2024]: observers (3) (time-invariant) and (15)
+(time-varying), one step, written once.
 
 Time-invariant systems ([Dinh2024, Section 2]). ``T`` solves ``T A = A_z T + B_z C`` (eq. 4), so
 ``z = T x`` obeys, with the feedthrough and the shared disturbance of the ivobs model,
@@ -7,366 +8,280 @@ Time-invariant systems ([Dinh2024, Section 2]). ``T`` solves ``T A = A_z T + B_z
 
 and, ``A_z`` being nonnegative, observer (3.a) ``z̄+ = A_z z̄ + B_z y + (TB - B_zD) u + ḡ``
 (``ḡ``, ``g̲`` the Lemma-1 bounds of ``(T E - B_z F) d``; one matrix for the correlated ``d``)
-keeps ``z̲ <= T x <= z̄``; (3.c-d) give ``x = T⁻¹ z`` (:class:`ObserverZ`). Option
-``coordinates="x"`` runs the same observer written in ``x`` (eq. 6, with ``L = T⁻¹ B_z``;
-:class:`ObserverX`).
+keeps ``z̲ <= T x <= z̄``; (3.c-d) give ``x = T⁻¹ z``. Observer (6) of the paper is the same
+bounds written in ``x̂ = T⁻¹ z``: ivobs runs (3).
 
-Time-varying systems ([Dinh2024, Section 3.2]; :class:`DiscreteLTV`). ``T[k+1] = (A_z T[k] +
-B_z C[k]) A[k]⁻¹`` (eq. 15.b, needs invertible ``A[k]``), ``A_z = gamma Ã``, ``B_z = B̃``
-block-diagonal with one block per output of size the observability index ``m_i`` (eq. 16.a),
-``n_z = Σ m_i``; the bounds (15.a) with ``T[k+1]`` in place of ``T``, and ``x`` recovered by the
-pseudo-inverse (15.d) once ``T[k]`` is left-invertible. ``T[k]`` does not depend on the data, so
-``valid_from`` is decided offline: the first ``k`` with ``cond(N T[k]) = σ_max/σ_min <=
-max_cond`` (default 1e7), ``N`` the positive diagonal scaling that gives ``T[k]`` unit rows (the
-recovery uses ``x = (N T)⁺ N z``, the same box; rows that merely decayed do not count as
-ill-conditioning). A later ``T[k]`` failing the threshold gets the previous box propagated
-through the model. The default ``T0 = 0`` makes ``z[0] = 0`` exactly: no prior on ``x[0]`` is
-needed ([Dinh2024, Example 3]: ``valid_from = 2``). ``T0="sylvester"`` (the frozen-time solution
-of (4)) uses ``x0`` by (15.c).
+Time-varying systems ([Dinh2024, Section 3.2]). ``T[k+1] = (A_z T[k] + B_z C[k]) A[k]⁻¹``
+(eq. 15.b, needs invertible ``A[k]``), ``A_z = gamma Ã``, ``B_z = B̃`` block-diagonal with one
+block per output of size the observability index ``m_i`` (eq. 16.a), ``n_z = Σ m_i``; the
+bounds (15.a) with ``T[k+1]`` in place of ``T``, and ``x`` recovered by the pseudo-inverse
+(15.d) once ``T[k]`` is left-invertible. ``T[k]`` does not depend on the data, so
+``valid_from`` is decided offline: the first ``k`` with ``cond(N T[k]) <= max_cond``, ``N`` the
+positive diagonal scaling that gives ``T[k]`` unit rows. The default ``T0 = 0`` makes ``z[0] =
+0`` exactly: no prior on ``x[0]`` is needed ([Dinh2024, Example 3]: ``valid_from = 2``).
 
-What is guaranteed: exact (the recursions are linear); rounding is covered by the base margin and
-by the recovery margin ``ρ |T⁺| |z|``, ``ρ = 16 (n_z + n_x) ε cond(T)``; the one-product step of
-:class:`ObserverZ` (and the vectorised run) add the rounding bound of that evaluation
-(``ρ' = (ρ + γ̃_{5 n_z}) (1 + γ̃_{3 n_z + 4})``, derived in :meth:`ObserverZ._fused_step`).
+What is guaranteed: the exact sets, every floating-point error bounded: the step's terms and
+their rounding (:mod:`.terms`), the recovery (:func:`.observer.recover`), the transformation
+(time-invariant: the float ``T`` is the observer's exact transformation, its residual in (4)
+bounded on the box of ``x``; time-varying: the exact sequence (15.b), within ``τ[k]`` of the
+float one, :class:`~.design.TransformSequence`).
 
 Data used: the box at ``k`` comes from ``z[k]``, which uses ``y[0..k-1]`` (prediction form, as in
-the paper); ``y[k]`` is used for the step to ``k+1`` and is checked against the box at ``k`` (an
-inconsistent measurement is reported and not used).
+the paper); ``y[k]`` is used for the step to ``k+1`` and is checked against the box at ``k`` (a
+measurement certainly outside the set the model allows is reported and not used).
 
-Missing samples. The unknown ``B_m y_m = B_m (C_m x + D_m u + F_m d)`` is bounded with ``x[k] =
-T[k]⁺ z[k]``: ``z+ ∈ (A_z + B_m C_m T⁺)[z̲, z̄] + ...`` by Lemma 1 (exact identity, ``T`` stays on
-its data-independent sequence); before ``T[k]`` is left-invertible (time-varying) ``C_m x`` is
-bounded on the open-loop box propagated from ``x0`` (needs ``x0``).
+Missing samples. ``B_m y_m = B_m (C_m x + D_m u + F_m d)`` is bounded on the box of ``x``
+(:mod:`.terms`). That alone can let the widths grow while outputs are missing (the interval
+image of ``B_m C_m`` on the box of ``x = T⁺ z`` is not a contraction), so from a missing sample
+on the observer also carries the model's one-step prediction of the box, ``x[k+1] ∈ A [x̲, x̄] +
+B u + E [d̲, d̄]``, and intersects: the box of ``x`` with it, and ``z`` with ``T[k+1]`` times it
+(Lemma 1). Both are sound, so the result is; the prediction is carried until the box from
+``z`` alone lies inside it (then it no longer helps). Time-varying systems always carry it
+(before ``T[k]`` is left-invertible it is the only box).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, NamedTuple, TypeVar
+from typing import ClassVar
 
 import numpy as np
 
 from ...errors import IvobsError
-from ...sets import Box
-from ..state import OnlineState, Step, evolve
-from .design import ObserverMatrices, Transform, TransformSequence, every, finite, image
-from .observer import Observer, Setting, ZState
+from ...model import LinearSystem
+from ...sets import Box, image_bounds
+from ...sets.rounding import down, product_error, up, upper
+from ..state import Step, evolve
+from .design import KKLDesign, Transform, TransformSequence, finite, left_inverse
+from .observer import Observer, ZState, recover
+from .terms import Consistency, Terms, combination, consistency, make_terms
 
-__all__ = ["DiscreteLTV", "DiscreteLTVState", "ObserverX", "ObserverZ", "XHatState"]
+__all__ = ["Discrete", "DiscreteState"]
 
-
-@dataclass(frozen=True)
-class XHatState(OnlineState):
-    """Observer (6): ``T⁻¹ z̲`` and ``T⁻¹ z̄`` (``xh_lo``, ``xh_hi``). ``T⁻¹`` has entries of both
-    signs, so the two are not ordered (``xh_lo > xh_hi`` in a component is normal): no
-    ``lower <= upper`` check on restore."""
-
-    xh_lo: np.ndarray
-    xh_hi: np.ndarray
-
-    bounds: ClassVar[tuple[tuple[str, str], ...]] = ()
+PATTERNS = 256
+"""Patterns of observed outputs whose matrices a time-invariant observer keeps."""
 
 
 @dataclass(frozen=True)
-class DiscreteLTVState(ZState):
-    """Observer (15): ``z̲ <= T[k] x[k] <= z̄`` and the open-loop box ``[xlo, xhi]`` of ``x[k]``
-    propagated through the model (used while ``T[k]`` is not left-invertible)."""
+class DiscreteState(ZState):
+    """Observers (3)/(15): ``z̲ <= T[k] x[k] <= z̄`` and, when ``carried``, the model's
+    prediction ``[xlo, xhi]`` of the box of ``x[k]`` (zeros otherwise: every entry of a saved
+    state is finite)."""
 
     xlo: np.ndarray
     xhi: np.ndarray
+    carried: bool
 
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (("zlo", "zhi"), ("xlo", "xhi"))
 
 
-S = TypeVar("S", bound=OnlineState)
+class Discrete(Observer[DiscreteState]):
+    """Observer (3) (``seq`` None: one ``T``) or (15) (the sequence ``T[k]`` of (15.b))."""
 
-
-class StepData(NamedTuple):
-    """What one step of (3.a)/(15.a) has computed before the update of ``z``."""
-
-    k: int
-    u: np.ndarray
-    y: np.ndarray
-    d: Box
-    obs: np.ndarray  # the components of y[k] used
-    lo: np.ndarray  # the box of x[k]
-    hi: np.ndarray
-    zlo: np.ndarray
-    zhi: np.ndarray
-    tk: Transform  # T[k]
-    tn: Transform  # T[k+1]
-    mats: tuple[np.ndarray, ...]  # (A, B, C, D, E, F) at k
-
-
-class DiscreteObserver(Observer[S]):
-    """The step of (3)/(15): the box of ``x[k]`` from ``z[k]``, the consistency of ``y[k]``,
-    then ``z[k+1]``. Subclasses say where ``T[k]`` and the matrices come from and how ``z`` is
-    stored and updated."""
-
-    def matrices(self, k: int) -> tuple[np.ndarray, ...]:
-        raise NotImplementedError
-
-    def transform(self, k: int) -> Transform:
-        raise NotImplementedError
-
-    def z_bounds(self, state: S) -> tuple[np.ndarray, np.ndarray]:
-        raise NotImplementedError
-
-    def advance(self, state: S, s: StepData) -> S:
-        raise NotImplementedError
-
-    def box(
-        self, state: S, k: int, tk: Transform, zlo: np.ndarray, zhi: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The box of ``x[k]`` (3.c-d)/(15.d)."""
-        return self.recover(tk, zlo, zhi)
-
-    def step(self, state: S, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> Step[S]:
-        k = state.k
-        mats = self.matrices(k)
-        tk, tn = self.transform(k), self.transform(k + 1)
-        zlo, zhi = self.z_bounds(state)
-        lo, hi = self.box(state, k, tk, zlo, zhi)
-        if k == 0:
-            lo, hi = self.first_box(lo, hi)
-        d = self.bounds_d(k, y_k)
-        obs, bad = self.usable(y_k, lo, hi, (mats[2], mats[3], mats[5]), u_k, d)
-        s = StepData(k, u_k, y_k, d, obs, lo, hi, zlo, zhi, tk, tn, mats)
-        return Step(self.advance(state, s), lo, hi, bad)
-
-    def update_z(self, s: StepData) -> tuple[np.ndarray, np.ndarray]:
-        """(3.a)/(15.a) with the observed outputs; missing ones bounded through ``x[k]``."""
-        _, B, C, D, E, F = s.mats
-        Az, Bz, obs = self.design.A_z, self.design.B_z, s.obs
-        Bo, Bm = Bz[:, obs], Bz[:, ~obs]
-        v = Bo @ s.y[obs] + (s.tn.T @ B - Bo @ D[obs]) @ s.u
-        glo, ghi = image(s.tn.T @ E - Bo @ F[obs], s.d.lo, s.d.hi)
-        if every(obs):
-            mlo, mhi = Az @ s.zlo, Az @ s.zhi
-        elif s.tk.ok:  # x[k] = T[k]⁺ z[k] exactly: B_m C_m x = B_m C_m T⁺ z
-            mlo, mhi = image(Az + Bm @ C[~obs] @ s.tk.P, s.zlo, s.zhi)
-        else:
-            if not (finite(s.lo) and finite(s.hi)):
-                raise IvobsError(
-                    f"y: measurement missing at step {s.k}, before T[k] is left-invertible, and "
-                    "no prior box on x[0]: pass x0 to predict through missing samples there"
-                )
-            clo, chi = image(Bm @ C[~obs], s.lo, s.hi)
-            mlo, mhi = Az @ s.zlo + clo, Az @ s.zhi + chi
-        return mlo + v + glo, mhi + v + ghi
-
-
-class DiscreteLTI(DiscreteObserver[S]):
-    """Time-invariant: one ``T`` and the constant matrices of :class:`ObserverMatrices`."""
-
-    def __init__(self, setting: Setting, m: ObserverMatrices):
-        super().__init__(setting)
-        self.m = m
-
-    def matrices(self, k: int) -> tuple[np.ndarray, ...]:
-        return self.m.mats
-
-    def transform(self, k: int) -> Transform:
-        return self.m.tr
-
-    def known(self, s: StepData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """With every output observed: ``B_z y + L_u u`` and the bounds ``g̲, ḡ`` of ``G d``."""
-        m = self.m
-        v = self.design.B_z @ s.y + m.Lu @ s.u
-        glo, ghi = m.g_const if m.g_const is not None else image(m.G, s.d.lo, s.d.hi)
-        return v, glo, ghi
-
-
-class Fused(NamedTuple):
-    """:meth:`ObserverZ._fused_step`'s matrix, the constant ``1`` of ``ξ``, ``n_z`` and where
-    ``x_c``, ``x_r``, ``e`` and ``e_r`` are in ``W ξ``."""
-
-    W: np.ndarray
-    one: np.ndarray
-    nz: int
-    xc: slice
-    xr: slice
-    e: slice
-    er: int
-
-
-class ObserverZ(DiscreteLTI[ZState]):
-    """Observer (3) of [Dinh2024]: the bounds of ``z = T x``."""
-
-    def __init__(self, setting: Setting, m: ObserverMatrices):
-        super().__init__(setting, m)
-        self._fused = self._fuse()
-
-    def _fuse(self) -> Fused | None:
-        """The matrix ``W`` of :meth:`_fused_step` (constant bounds of ``d``; None otherwise,
-        the general step): columns ``[z̲; z̄; y; u; a; 1]``, rows ``[z̲+; z̄+; x_c; x_r; e;
-        e_r]``."""
-        m, d = self.m, self._dfix
-        if m.g_const is None or d is None:
-            return None
-        _, _, C, D, _, F = m.mats
-        nz, ny, nu, nx = self.design.n_z, C.shape[0], D.shape[1], C.shape[1]
-        Az, Bz = self.design.A_z, self.design.B_z
-        h, ah = 0.5 * m.tr.P, 0.5 * m.tr.absP  # (halving is exact)
-        M = m.margin  # ρ' |P|
-        absC, glo, ghi = np.abs(C), *m.g_const
-        Fdc, Fdr = F @ (0.5 * (d.lo + d.hi)), np.abs(F) @ (0.5 * (d.hi - d.lo))
-        zz, zx, zy = np.zeros((nz, nz)), np.zeros((nx, ny + nu)), np.zeros((ny, ny + nu))
-        W = np.block(
-            [
-                [Az, zz, Bz, m.Lu, zz, glo[:, None]],
-                [zz, Az, Bz, m.Lu, zz, ghi[:, None]],
-                [h, h, zx, np.zeros((nx, nz + 1))],
-                [-ah, ah, zx, M, np.zeros((nx, 1))],
-                [-C @ h, -C @ h, np.eye(ny), -D, np.zeros((ny, nz)), -Fdc[:, None]],
-                [-absC @ ah, absC @ ah, zy, absC @ M, Fdr[:, None]],
-            ]
-        )
-        i, j, e = 2 * nz, 2 * nz + nx, 2 * nz + 2 * nx
-        return Fused(W, np.ones(1), nz, slice(i, j), slice(j, e), slice(e, e + ny), e + ny)
-
-    def step(
-        self, state: ZState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> Step[ZState]:
-        if self._fused is not None and state.k > 0:
-            fast = self._fused_step(state, u_k, y_k)
-            if fast is not None:
-                return fast
-        return super().step(state, u_k, y_k, t_k)
-
-    def _fused_step(self, state: ZState, u_k: np.ndarray, y_k: np.ndarray) -> Step[ZState] | None:
-        """:meth:`step` for ``k >= 1``, a complete ``y[k]`` inside its bounds and constant
-        bounds of ``d``, in one product; ``None`` (the general step) otherwise.
-
-        With ``a = max(|z̲|, |z̄|)`` (exact; ``= |z_c| + z_r`` for ``z̲ <= z̄``) and ``ξ = [z̲;
-        z̄; y; u; a; 1]``, ``W ξ`` gives (3.a) ``z̲+ = A_z z̲ + B_z y + L_u u + g̲`` and ``z̄+``,
-        the recovery (3.c-d) ``x_c = (P/2) z̲ + (P/2) z̄``, ``x_r = (|P|/2) (z̄ - z̲) + ρ' |P|
-        a``, and the consistency test's ``e = y - C x_c - D u - F d_c`` and ``e_r = |C| x_r +
-        |F| d_r`` (``y`` is used when ``|e| <= e_r``). The box is ``[x_c - x_r, x_c + x_r]``.
-
-        Rounding of the recovery ([Higham2002, Lemma 3.1]; products by zero coefficients and
-        additions of exact zeros are exact, so a row of ``m`` nonzero coefficients errs by at
-        most ``γ_m`` times the sum of its terms' magnitudes, in any order of summation, with
-        or without FMA; ``(|z̲| + |z̄|)/2 <= a``): ``|x̂_c - x_c| <= γ_{2 n_z} |P| a`` and
-        ``x̂_r >= |P| z_r + (1 - γ_{3 n_z}) ρ' |P| a - γ_{3 n_z} |P| a``. So the computed box
-        holds ``P z_c ± (|P| z_r + ρ |P| a)``, the enclosure of :meth:`recover` with its
-        margin ``ρ = rec cond(T)`` (which covers ``P`` being only a computed left inverse)
-        intact, when ``ρ' = (ρ + γ̃_{5 n_z}) (1 + γ̃_{3 n_z + 4})`` (:func:`.fused_margin`;
-        ``γ̃`` with unit ``ε = 2u`` also absorbs the rounding of ``ρ'`` and of ``ρ' |P|``).
-        The rounding of ``x_c ± x_r`` and of the ``z`` recursion is covered by the base
-        margin, as in the general step. The test's rows only decide between this step and the
-        general one (which tests with its own tolerance), not the bounds."""
-        W, one, nz, sc, sr, se, er = self._fused  # type: ignore[misc]
-        zlo, zhi = state.zlo, state.zhi
-        a = np.abs(zlo)
-        np.maximum(a, np.abs(zhi), out=a)
-        out = W.dot(np.concatenate((zlo, zhi, y_k, u_k, a, one)))
-        v = out.tolist()
-        for e, r in zip(v[se], v[er:]):
-            if not abs(e) <= r:  # maybe inconsistent (or NaN): the general step decides
-                return None
-        lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
-        for c, r in zip(v[sc], v[sr]):
-            lo.append(c - r)
-            hi.append(c + r)
-        return Step(evolve(state, zlo=out[:nz], zhi=out[nz : 2 * nz]), lo, hi, False)
-
-    def initial_state(self) -> ZState:
-        zlo, zhi = self.initial_z()  # (3.b)
-        return ZState(zlo=zlo, zhi=zhi)
-
-    def z_bounds(self, state: ZState) -> tuple[np.ndarray, np.ndarray]:
-        return state.zlo, state.zhi
-
-    def advance(self, state: ZState, s: StepData) -> ZState:
-        if every(s.obs):
-            v, glo, ghi = self.known(s)
-            Az = self.design.A_z
-            nlo, nhi = Az @ s.zlo + v + glo, Az @ s.zhi + v + ghi  # (3.a)
-        else:
-            nlo, nhi = self.update_z(s)
-        return ZState(
-            zlo=nlo, zhi=nhi, k=state.k, scale=state.scale, inconsistent=state.inconsistent
-        )
-
-
-class ObserverX(DiscreteLTI[XHatState]):
-    """Observer (6) of [Dinh2024]: the same bounds written in ``x̂ = T⁻¹ z``, with
-    ``x̂+ = (A - L C) x̂ + T⁻¹ (B_z y + L_u u + g)``, ``L = T⁻¹ B_z``."""
-
-    def initial_state(self) -> XHatState:
-        zlo, zhi = self.initial_z()
-        P = self.m.tr.P
-        return XHatState(xh_lo=P @ zlo, xh_hi=P @ zhi)  # (6.b-c)
-
-    def z_bounds(self, state: XHatState) -> tuple[np.ndarray, np.ndarray]:
-        T = self.design.T
-        return T @ state.xh_lo, T @ state.xh_hi  # (6.d-e)
-
-    def advance(self, state: XHatState, s: StepData) -> XHatState:
-        P = self.m.tr.P
-        if every(s.obs):
-            v, glo, ghi = self.known(s)
-            Mx = self.m.Mx
-            assert Mx is not None
-            xh_lo = Mx @ state.xh_lo + P @ (v + glo)  # (6.a)
-            xh_hi = Mx @ state.xh_hi + P @ (v + ghi)
-        else:
-            nlo, nhi = self.update_z(s)
-            xh_lo, xh_hi = P @ nlo, P @ nhi
-        return XHatState(
-            xh_lo=xh_lo, xh_hi=xh_hi, k=state.k, scale=state.scale, inconsistent=state.inconsistent
-        )
-
-
-class DiscreteLTV(DiscreteObserver[DiscreteLTVState]):
-    """Observer (15) of [Dinh2024] on the data-free sequence ``T[k]`` of (15.b)."""
-
-    def __init__(self, setting: Setting, seq: TransformSequence):
-        super().__init__(setting)
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None,
+        design: KKLDesign,
+        max_cond: float,
+        seq: TransformSequence | None = None,
+    ):
+        super().__init__(sys, x0, design, max_cond)
         self.seq = seq
+        self._tr = left_inverse(design.T, max_cond) if seq is None else None
+        self._patterns: dict[bytes, tuple[Terms, Terms | None]] = {}
+        # time-varying: the consistency test of a pattern, kept while (C, D, F) do not change
+        self._checks: dict[bytes, tuple[tuple[np.ndarray, ...], Consistency]] = {}
+        nx = sys.nx
+        self._none = (np.full(nx, -np.inf), np.full(nx, np.inf))
+        self._zero = np.zeros(nx)
 
-    def initial_state(self) -> DiscreteLTVState:
-        zlo, zhi = self.initial_z()  # (15.c); z[0] = 0 exactly for T0 = 0
-        xlo, xhi = self.initial_x()
-        return DiscreteLTVState(zlo=zlo, zhi=zhi, xlo=xlo, xhi=xhi)
-
-    def matrices(self, k: int) -> tuple[np.ndarray, ...]:
-        return self.sys.matrices_at(k)
-
+    # -- the design at step k -------------------------------------------------------------
     def transform(self, k: int) -> Transform:
+        """``T[k]`` with its left inverse."""
+        if self._tr is not None:
+            return self._tr
+        assert self.seq is not None
         return self.seq.at(k)
 
-    def z_bounds(self, state: DiscreteLTVState) -> tuple[np.ndarray, np.ndarray]:
-        return state.zlo, state.zhi
+    def terms(self, k: int, obs: np.ndarray) -> tuple[Terms, Terms | None]:
+        """:class:`~.terms.Terms` of step ``k`` for the observed outputs ``obs`` and, with
+        missing outputs and a left-invertible ``T[k]``, those that bound them through ``z``
+        (kept per pattern for a time-invariant system)."""
+        if self.seq is None:
+            key = obs.tobytes()
+            hit = self._patterns.get(key)
+            if hit is None:
+                if len(self._patterns) >= PATTERNS:
+                    self._patterns.clear()
+                hit = self._patterns[key] = self._terms(k, obs)
+            return hit
+        return self._terms(k, obs)
+
+    def _terms(self, k: int, obs: np.ndarray) -> tuple[Terms, Terms | None]:
+        A, B, C, D, E, F = self.sys.matrices_at(k)
+        Az, Bz = self.design.A_z, self.design.B_z
+        Bo, Bm = Bz[:, obs], Bz[:, ~obs]
+        Co, Cm, Do, Fo = C[obs], C[~obs], D[obs], F[obs]
+        d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
+        nu = B.shape[1]
+        BE, DF = np.hstack((B, E)), np.hstack((Do, Fo))
+        if self.seq is None:  # (4) for the float T: its residual X is bounded on the box
+            T = self.design.T
+            LG = combination((T, BE), (-Bo, DF))
+            X = combination((T, A), (-Az, T), (-Bo, Co))
+        else:  # (15.b), exact: T̂[k+1] within τ[k+1]; X = B_m C_m
+            Tn, tau = self.seq.at(k + 1).T, self.seq.tau(k + 1)
+            LG = _plus_tau(combination((Tn, BE), (-Bo, DF)), tau, BE)
+            X = combination((Bm, Cm))
+        L = (LG[0][:, :nu], LG[1][:, :nu])
+        G = (LG[0][:, nu:], LG[1][:, nu:])
+        check = self._check((C, D, F), obs, d)
+        terms = make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, check=check)
+        tr = self.transform(k)
+        if terms.full or not tr.ok:
+            return terms, None
+        through = (tr.P, tr.resid, tr.T)
+        return terms, make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, through, check)
+
+    def _check(
+        self,
+        CDF: tuple[np.ndarray, ...],
+        obs: np.ndarray,
+        d: tuple[np.ndarray, np.ndarray] | None,
+    ) -> Consistency:
+        """The consistency test of the pattern ``obs`` (kept while ``C, D, F`` are the same)."""
+        key = obs.tobytes()
+        hit = self._checks.get(key)
+        if hit is not None and all(np.array_equal(a, b) for a, b in zip(hit[0], CDF)):
+            return hit[1]
+        if len(self._checks) >= PATTERNS:
+            self._checks.clear()
+        C, D, F = (M[obs] for M in CDF)
+        check = consistency(C, D, F, d)
+        self._checks[key] = (CDF, check)
+        return check
+
+    # -- the step -------------------------------------------------------------------------
+    def initial_state(self) -> DiscreteState:
+        zlo, zhi = self.initial_z()  # (3.b)/(15.c); z[0] = 0 exactly for T0 = 0
+        xlo, xhi = self.initial_x()  # the prior (time-varying: the box until T is invertible)
+        carried = self.seq is not None and self.x0 is not None
+        if not carried:
+            xlo = xhi = self._zero
+        return DiscreteState(zlo=zlo, zhi=zhi, xlo=xlo, xhi=xhi, carried=carried)
 
     def box(
-        self, state: DiscreteLTVState, k: int, tk: Transform, zlo: np.ndarray, zhi: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(15.d), or the open-loop box while ``T[k]`` is not left-invertible."""
-        if tk.ok:
-            return self.recover(tk, zlo, zhi)
-        lo, hi = state.xlo.copy(), state.xhi.copy()
-        if k >= self.design.k_star and not (finite(lo) and finite(hi)):
+        self, state: DiscreteState, k: int, tr: Transform, zabs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """The box of ``x[k]``: (3.c-d)/(15.d), intersected with the prediction when one is
+        carried (and with the prior at ``k = 0``); whether the prediction cut it."""
+        if tr.ok:
+            lo, hi = recover(tr, state.zlo, state.zhi, zabs)
+        else:  # T[k] not left-invertible (time-varying): the prediction alone
+            lo, hi = self._none
+        if k == 0:
+            lo, hi = self.first_box(lo, hi)
+        plo, phi = state.xlo, state.xhi
+        cut = state.carried and bool(np.count_nonzero(plo > lo) or np.count_nonzero(phi < hi))
+        if cut:
+            nlo, nhi = np.maximum(lo, plo), np.minimum(hi, phi)
+            if np.count_nonzero(nlo > nhi):  # data contradicting the model: keep (3.c-d)
+                return lo, hi, False
+            lo, hi = nlo, nhi
+        if not tr.ok and k >= self.design.k_star and not (finite(lo) and finite(hi)):
             raise IvobsError(
-                f"kkl: T[{k}] is not left-invertible (cond {tk.cond:.2e}) and no finite "
+                f"kkl: T[{k}] is not left-invertible (cond {tr.cond:.2e}) and no finite "
                 "prior is available; pass x0 so the observer can bridge such steps"
             )
-        return lo, hi
+        return lo, hi, cut
 
-    def advance(self, state: DiscreteLTVState, s: StepData) -> DiscreteLTVState:
-        nlo, nhi = self.update_z(s)
-        # the open-loop box, for steps where T[k+1] is not left-invertible
-        A, B, _, _, E, _ = s.mats
-        alo, ahi = image(A, s.lo, s.hi)
-        elo, ehi = image(E, s.d.lo, s.d.hi)
-        Bu = B @ s.u
-        return DiscreteLTVState(
-            zlo=nlo,
-            zhi=nhi,
-            xlo=alo + Bu + elo,
-            xhi=ahi + Bu + ehi,
-            k=state.k,
-            scale=state.scale,
-            inconsistent=state.inconsistent,
-        )
+    def step(
+        self, state: DiscreteState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
+    ) -> Step[DiscreteState]:
+        k = state.k
+        zabs = np.maximum(np.abs(state.zlo), np.abs(state.zhi))
+        lo, hi, cut = self.box(state, k, self.transform(k), zabs)  # (3.c-d)/(15.d)
+        d = self.bounds_d(k, y_k)
+        xabs = np.maximum(np.abs(lo), np.abs(hi))
+        uabs = np.abs(u_k)
+        # (time-invariant: always bounded, the prior box is required)
+        bounded = self.seq is None or bool(xabs.max() < np.inf) if xabs.size else True
+        obs = y_k == y_k  # the components measured (not NaN)
+        terms, via_z = self.terms(k, obs)
+        y_o = y_k if terms.full else y_k[obs]
+        bad = False
+        if bounded and y_o.size:  # a measurement the box contradicts is not used
+            bad = terms.check.contradicts(y_o, u_k, lo, hi, xabs, uabs, d.lo, d.hi)
+            if bad:
+                obs = np.zeros_like(obs)
+                (terms, via_z), y_o = self.terms(k, obs), y_k[obs]
+        if not terms.full and not bounded:
+            raise IvobsError(
+                f"y: measurement missing at step {k}, before T[k] is left-invertible, and "
+                "no prior box on x[0]: pass x0 to predict through missing samples there"
+            )
+        args = (state.zlo, state.zhi, zabs, y_o, u_k, uabs, lo, hi, xabs, d.lo, d.hi)
+        zlo, zhi = terms.advance(*args)  # (3.a)/(15.a)
+        if via_z is not None:  # missing outputs: also bounded through z; both are sound
+            zlo2, zhi2 = via_z.advance(*args)
+            zlo, zhi = _meet(zlo, zhi, zlo2, zhi2)
+        plo = phi = self._zero
+        carried = False
+        if bounded and (self.seq is not None or not terms.full or cut):
+            plo, phi = self.predict(k, lo, hi, u_k, d)
+            carried = True
+            zlo, zhi = self.intersect_z(k, zlo, zhi, plo, phi)
+        new = evolve(state, zlo=zlo, zhi=zhi, xlo=plo, xhi=phi, carried=carried)
+        return Step(new, lo, hi, bad)
+
+    def predict(
+        self, k: int, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, d: Box
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``x[k+1] ∈ A [x̲, x̄] + B u + E [d̲, d̄]`` (Lemma 1, proven images; ``B u`` with its
+        product bound; each sum rounded outward)."""
+        A, B, _, _, E, _ = self.sys.matrices_at(k)
+        Bu = B @ u
+        e = product_error(np.abs(B) @ np.abs(u), B.shape[1])
+        plo, phi = image_bounds(A, lo, hi)
+        plo, phi = down(plo + down(Bu - e)), up(phi + up(Bu + e))
+        if E.shape[1]:
+            elo, ehi = image_bounds(E, d.lo, d.hi)
+            plo, phi = down(plo + elo), up(phi + ehi)
+        return plo, phi
+
+    def intersect_z(
+        self, k: int, zlo: np.ndarray, zhi: np.ndarray, plo: np.ndarray, phi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``z[k+1] = T[k+1] x[k+1]`` also lies in ``T[k+1]`` times the prediction (Lemma 1;
+        time-varying: the exact ``T[k+1]`` within ``τ[k+1]`` of the float one)."""
+        if self.seq is None:
+            T, tau = self.design.T, None
+        else:
+            T, tau = self.seq.at(k + 1).T, self.seq.tau(k + 1)
+        tlo, thi = image_bounds(T, plo, phi)
+        if tau is not None and np.any(tau):
+            e = upper(tau @ np.maximum(np.abs(plo), np.abs(phi)), T.shape[1])
+            tlo, thi = down(tlo - e), up(thi + e)
+        return _meet(zlo, zhi, tlo, thi)
+
+
+def _meet(
+    lo: np.ndarray, hi: np.ndarray, lo2: np.ndarray, hi2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The intersection of two enclosures of the same vector (the first where they do not
+    meet: data contradicting the model)."""
+    nlo, nhi = np.maximum(lo, lo2), np.minimum(hi, hi2)
+    if np.count_nonzero(nlo > nhi):
+        return lo, hi
+    return nlo, nhi
+
+
+def _plus_tau(
+    coef: tuple[np.ndarray, np.ndarray], tau: np.ndarray, M: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A coefficient ``T[k+1] M - ...`` computed with ``T̂[k+1]``: its error bound plus
+    ``τ |M|``."""
+    if not np.any(tau) or M.shape[1] == 0:
+        return coef
+    return coef[0], up(coef[1] + upper(tau @ np.abs(M), tau.shape[1]))

@@ -14,15 +14,9 @@ from .. import register
 from ..base import Estimator
 from ..state import OnlineState, Step
 from .continuous import ContinuousLTV
-from .design import (
-    KKLDesign,
-    TransformSequence,
-    design_lti,
-    design_ltv,
-    observer_matrices,
-)
-from .discrete import DiscreteLTV, ObserverX, ObserverZ
-from .observer import EPS, Observer, Setting
+from .design import KKLDesign, TransformSequence, design_lti, design_ltv
+from .discrete import Discrete
+from .observer import Observer
 from .options import check_options
 from .sampled import ContinuousLTI
 from .vectorised import VectorisedLTI
@@ -47,7 +41,6 @@ class KKL(Estimator):
         ``"sylvester"`` (CT default; (4) frozen at the first step, uses ``x0``), or a matrix.
     gamma : DT time-varying factor of (16.a), default 1 ([Dinh2024, Example 3]). ell : CT factor
         of (11.a), default 2 ([Dinh2024, Example 2]).
-    coordinates : ``"z"`` (observer (3), default) or ``"x"`` (observer (6); discrete-time LTI).
     max_cond : largest ``cond(T)`` accepted (LTI: else :class:`DesignError`; LTV: the threshold of
         left-invertibility that decides ``valid_from``). Default 1e7.
     tune : refine the default time-invariant target by gradient descent on the predicted width.
@@ -57,12 +50,14 @@ class KKL(Estimator):
 
     Notes
     -----
-    The observer is chosen once, from the system: :class:`~.discrete.ObserverZ` /
-    :class:`~.discrete.ObserverX` (discrete-time LTI, observers (3)/(6), with the vectorised run
-    of :mod:`.vectorised`), :class:`~.discrete.DiscreteLTV` (observer (15)),
+    The observer is chosen once, from the system: :class:`~.discrete.Discrete` (observers (3)
+    and (15); discrete-time LTI with the vectorised run of :mod:`.vectorised`),
     :class:`~.sampled.ContinuousLTI` and :class:`~.continuous.ContinuousLTV` (observers (3)/(10)
     in sampled-data form). Their modules give the equations, what is guaranteed, the data used
-    at each step and the treatment of missing samples.
+    at each step and the treatment of missing samples. Discrete time: every floating-point
+    error is bounded by a proven model (``proven_rounding``); continuous time: the rounding of
+    the arithmetic likewise, the integration of the flows up to the stated margin of
+    :mod:`.continuous`.
     """
 
     name = "kkl"
@@ -72,6 +67,7 @@ class KKL(Estimator):
     supports_continuous: ClassVar[bool] = True
     supports_time_varying: ClassVar[bool] = True
     needs_x0: ClassVar[bool] = False
+    proven_rounding: ClassVar[bool] = True
     design: KKLDesign
 
     def __init__(
@@ -85,7 +81,6 @@ class KKL(Estimator):
         T0: Any = None,
         gamma: float | None = None,
         ell: float | None = None,
-        coordinates: str = "z",
         max_cond: float = 1e7,
         tune: bool = True,
         input_hold: str | Callable[[float], Any] = "zero",
@@ -102,7 +97,6 @@ class KKL(Estimator):
             T0=T0,
             gamma=gamma,
             ell=ell,
-            coordinates=coordinates,
             max_cond=max_cond,
             tune=tune,
             input_hold=input_hold,
@@ -110,7 +104,6 @@ class KKL(Estimator):
             atol=atol,
         )
         self.max_cond = float(max_cond)
-        self.coordinates = coordinates
         seq: TransformSequence | None = None
         if sys.is_time_varying:
             self.design, seq = design_ltv(
@@ -125,35 +118,28 @@ class KKL(Estimator):
                 T,
                 tune=tune,
                 max_cond=self.max_cond,
-                coordinates=coordinates,
             )
         self.valid_from = self.design.k_star
-        ct = sys.is_continuous
-        # the relative rounding margin of the recovery x = T⁺ z (Observer)
-        rec = 16 * (self.design.n_z + sys.nx) * EPS + (100 * float(rtol) if ct else 0.0)
         self._vector: VectorisedLTI | None = None
-        self._observer = self._choose(seq, rec, input_hold, float(rtol), float(atol))
+        self._observer = self._choose(seq, input_hold, float(rtol), float(atol))
 
     def _choose(
         self,
         seq: TransformSequence | None,
-        rec: float,
         hold: str | Callable[[float], Any],
         rtol: float,
         atol: float,
     ) -> Observer[Any]:
         """The observer of the system's kind (and, discrete-time LTI, the vectorised run)."""
         sys, x0, design = self.sys, self.x0, self.design
-        setting = Setting(sys, x0, design, self.max_cond, rec)
         if sys.is_continuous:
             cls = ContinuousLTV if sys.is_time_varying else ContinuousLTI
-            return cls(setting, hold, rtol, atol)
-        if seq is not None:
-            return DiscreteLTV(setting, seq)
-        assert x0 is not None  # design_lti requires it
-        m = observer_matrices(sys, design, self.max_cond, rec)
-        self._vector = VectorisedLTI(sys, x0, design, m)
-        return ObserverX(setting, m) if design.coordinates == "x" else ObserverZ(setting, m)
+            return cls(sys, x0, design, self.max_cond, hold, rtol, atol)
+        observer = Discrete(sys, x0, design, self.max_cond, seq)
+        if seq is None:
+            assert x0 is not None  # design_lti requires it
+            self._vector = VectorisedLTI(observer)
+        return observer
 
     def _initial_state(self) -> OnlineState:
         state: OnlineState = self._observer.initial_state()

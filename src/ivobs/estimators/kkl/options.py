@@ -56,7 +56,6 @@ def check_options(
     T0: Any,
     gamma: Any,
     ell: Any,
-    coordinates: Any,
     max_cond: Any,
     tune: Any,
     input_hold: Any,
@@ -93,13 +92,6 @@ def check_options(
     number("atol", atol, above=0.0)
     if not isinstance(tune, (bool, np.bool_)):
         raise IvobsError(f"tune: expected True or False, got {tune!r}")
-    if not isinstance(coordinates, str) or coordinates not in ("z", "x"):
-        raise IvobsError(f"coordinates: expected 'z' or 'x', got {coordinates!r}")
-    if coordinates == "x" and (ct or tv):
-        raise IvobsError(
-            "coordinates: 'x' (observer (6)) needs a constant T, i.e. a "
-            "discrete-time time-invariant system; use 'z'"
-        )
     hold_ok = isinstance(input_hold, str) and input_hold in ("linear", "zero")
     if not (callable(input_hold) or hold_ok):
         raise IvobsError(

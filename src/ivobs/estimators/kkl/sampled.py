@@ -19,10 +19,10 @@ from ..._validate import as_vector
 from ...design.sylvester import flow_gap
 from ...errors import DesignError
 from ...linalg import gamma
-from ...sets import image_bounds
+from ...model import LinearSystem
+from ...sets import Box, image_bounds
 from .continuous import ContinuousObserver, ContinuousState, Flowed, InputHold, Span
-from .design import left_inverse
-from .observer import Setting
+from .design import KKLDesign, left_inverse
 from .periods import Anchor, PeriodData, make_anchor, period_data
 
 __all__ = ["ContinuousLTI", "ContinuousLTIState"]
@@ -53,8 +53,17 @@ class ContinuousLTI(ContinuousObserver[ContinuousLTIState]):
     """Time-invariant: closed-form flows, a constant ``T`` on regular grids, and the model's
     prediction of the previous box."""
 
-    def __init__(self, setting: Setting, hold: InputHold, rtol: float, atol: float):
-        super().__init__(setting, hold, rtol, atol)
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box | None,
+        design: KKLDesign,
+        max_cond: float,
+        hold: InputHold,
+        rtol: float,
+        atol: float,
+    ):
+        super().__init__(sys, x0, design, max_cond, hold, rtol, atol)
         self._periods: dict[float, PeriodData] = {}
         # a target slower than a plant mode ([Dinh2024, Proposition 1] allows it): the flow of T
         # between samples is unstable, so T is brought back onto T_h from the last box
