@@ -42,10 +42,11 @@ class StepOperator:
     """One step for a pattern of observed outputs (:mod:`.rounding`): ``W`` maps
     ``v = [z̄; z̲; u; y; d̄; d̲]`` to the upper rows ``[z̄+; x̄; p̄ − y; y − p̲]`` (the first
     ``h``; ``p`` the bounds of ``C x + D_u u + F d`` on the observed outputs: the consistency
-    test of ``y[k]``) and the lower rows ``[z̲+; x̲]``; ``R``, ``e0``: the rounding bound ``R b + e0`` with ``b`` the
-    largest ``|v_i|`` of each nonempty block (``starts``), negated on the lower rows. ``L``: the gain of the pattern (in
-    ``x``); ``Lmag >= |S L|``; ``Q``, ``Bz``, ``Lz``, ``G``, ``Cz``: the float matrices
-    (:mod:`.rounding`); ``err``: their error bounds; ``rho``: ``ρ(|Q|)`` (NaN: not computed)."""
+    test of ``y[k]``) and the lower rows ``[z̲+; x̲]``; ``R``, ``e0``: the rounding bound
+    ``R b + e0`` with ``b`` the largest ``|v_i|`` of each nonempty block (``starts``), negated
+    on the lower rows. ``L``: the gain of the pattern (in ``x``); ``Lmag >= |S L|``; ``Q``,
+    ``Bz``, ``Lz``, ``G``, ``Cz``: the float matrices (:mod:`.rounding`); ``err``: their error
+    bounds; ``rho``: ``ρ(|Q|)`` (NaN: not computed)."""
 
     W: Any
     R: np.ndarray

@@ -59,9 +59,9 @@ for the last addition: ``fl(o + e) >= o + e − u |o + e|`` and ``|o + e| <= |o|
 sum that rounds to a subnormal is exact). The step adds ``e`` to the upper rows and subtracts
 it from the lower rows (``R``, ``e0`` negated there): every computed bound is on the safe side
 of the exact Lemma-1 bound from the computed box, which contains the true state by induction
-from ``z̲_0 <= S x_0 <= z̄_0``, with no directed rounding. Nothing assumes a magnitude: the bound scales with the
-state, the input, the measurement and the gain, at every step and for every missing-output
-pattern (no margin, no data scale: ``proven_rounding``).
+from ``z̲_0 <= S x_0 <= z̄_0``, with no directed rounding. Nothing assumes a magnitude: the
+bound scales with the state, the input, the measurement and the gain, at every step and for
+every missing-output pattern (no margin, no data scale: ``proven_rounding``).
 
 The vectorised path (:mod:`.vectorised`) is another algorithm with its own proof, built on the
 same :class:`RowErrors`.
@@ -147,7 +147,7 @@ def pattern_errors(
 ) -> RowErrors:
     """:class:`RowErrors` of the float matrices ``mats`` (``Mh``, ``Bh``, ``Gh`` in ``x``; with
     ``tr``: ``SM``, ``Q``, ``Bz``, ``Lz``, ``G``, ``Cz``) of the gain ``L_k``."""
-    A, B, C, Du, E, F = sys_mats
+    C, Du, F = sys_mats[2], sys_mats[3], sys_mats[5]
     ny, n = C.shape
     aL = np.abs(Lk)
     Cr, Dr, Fr = _rows(C), _rows(Du), _rows(F)
@@ -188,10 +188,10 @@ def row_bounds(
     obs: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(R, e0)`` of the module docstring for a step matrix whose row groups are
-    ``[z+; x (has_x); p − y; y − p]`` (the upper rows; ``p``: the observed outputs ``obs``) and whose column blocks ``[z̄, z̲, u, y, d̄, d̲]`` have the
-    ``sizes``; ``blocks[g][b]``: the part of ``W`` of row group ``g`` and column block ``b``
-    (None: zero; its row sums of absolute values are taken); ``m``: the longest row. ``R`` has
-    one column per nonempty block."""
+    ``[z+; x (has_x); p − y; y − p]`` (the upper rows; ``p``: the observed outputs ``obs``) and
+    whose column blocks ``[z̄, z̲, u, y, d̄, d̲]`` have the ``sizes``; ``blocks[g][b]``: the part
+    of ``W`` of row group ``g`` and column block ``b`` (None: zero; its row sums of absolute
+    values are taken); ``m``: the longest row. ``R`` has one column per nonempty block."""
     ge = 2.0 * gamma(m + 2)
     Vec = np.ndarray | None
     groups: list[tuple[str, np.ndarray, Vec, Vec, Vec]] = [("z", err.ex, err.eu, err.ey, err.ed)]

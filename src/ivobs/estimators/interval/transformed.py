@@ -31,7 +31,6 @@ from ...design.width_lp import MAX_LP_STATES, width_gain
 from ...errors import DesignError, IvobsError
 from ...linalg import observability_matrix, spectral_radius
 from ...model import LinearSystem
-from ...sets import Box
 from ..base import Design
 from .design import check_design_size, check_gain, design_delta
 

@@ -122,9 +122,10 @@ class VectorPath:
         return self._decay if isinstance(self._decay, DecayBound) else None
 
     def run(self, est: Any, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> Bounds | None:
-        """The bounds of the record or batch; ``None`` (the loop) for interval matrices, callable bounds, missing samples, time-varying bounds shorter than the record,
-        or an inconsistent measurement of a single record (the loop reports it); streams of a
-        batch with one go through ``est``'s loop."""
+        """The bounds of the record or batch; ``None`` (the loop) for interval matrices,
+        callable bounds, missing samples, time-varying bounds shorter than the record, or an
+        inconsistent measurement of a single record (the loop reports it); streams of a batch
+        with one go through ``est``'s loop."""
         ops = self.ops
         sys = ops.sys
         T = y.shape[-2]
