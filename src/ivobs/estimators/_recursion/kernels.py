@@ -83,10 +83,14 @@ def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.
     rows = int(np.prod(lead)) if lead else 1
     if out is None:
         out = np.empty((*lead, p))
-    narrow = m <= 8 and p <= 8 and rows % 8 == 0 and rows >= 4096
-    if narrow and X.flags.c_contiguous and out.flags.c_contiguous:
+    if m <= 8 and p <= 8 and rows >= 4096 and out.flags.c_contiguous:
+        X2 = np.ascontiguousarray(X).reshape(rows, m)
+        O2 = out.reshape(rows, p)
+        main = rows - rows % 8
         big = np.kron(np.eye(8), Mt)
-        np.matmul(X.reshape(rows // 8, 8 * m), big, out=out.reshape(rows // 8, 8 * p))
+        np.matmul(X2[:main].reshape(main // 8, 8 * m), big, out=O2[:main].reshape(main // 8, 8 * p))
+        if main < rows:
+            O2[main:] = X2[main:] @ Mt
     else:
         out.reshape(rows, p)[...] = X.reshape(rows, m) @ Mt
     return out

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import DesignError, IvobsError
+from ...linalg import UNIT_ROUNDOFF
 from ...sets.rounding import ETA, DecayBound, gamma, mid_rad, up, upper
 from .._recursion import LinearFilter, SplitFilter, matrix_product, redo_streams
 from .operators import Operators
@@ -74,24 +75,31 @@ def _weighted_decay(aQ: Any) -> DecayBound | None:
     return DecayBound(c, lam) if lam < 1.0 else None
 
 
-def _enclose(c: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(lo, hi)`` with ``[c − r, c + r] ⊆ [lo, hi]`` exactly (``r >= 0``), in round-to-nearest:
-    ``r' = (r + 2u |c|)(1 + 8u) + η`` evaluated in three rounded operations is at least
-    ``(r + u |c|) / (1 − u)``, and ``fl(c + r') >= c + r' − u (|c| + r') >= c + r`` (the same
-    below; a result in the subnormal range is exact)."""
+def _enclose(c: np.ndarray, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` with ``[c − ρ, c + ρ] ⊆ [lo, hi]`` exactly for ``ρ = r + s`` (``r``
+    ``(T, n)`` shared by the streams, ``s`` ``(..., T)`` one number per step), in
+    round-to-nearest: ``ρ' = 2u (1 + 8u) |c| + (r + s)(1 + 8u) + η`` evaluated in three rounded
+    operations (after the factors) is at least ``(ρ + u |c|) / (1 − u)``, and
+    ``fl(c + ρ') >= c + ρ' − u (|c| + ρ') >= c + ρ`` (the same below; a result in the
+    subnormal range is exact)."""
+    k = 1.0 + 8.0 * UNIT_ROUNDOFF
     r2 = np.abs(c)
-    r2 *= _U2
-    r2 += r
-    r2 *= 1.0 + 8.0 * _U2 / 2.0
-    r2 += ETA
+    r2 *= 2.0 * UNIT_ROUNDOFF * k
+    r2 += r * k + ETA
+    r2 += (s * k)[..., None]
     return c - r2, c + r2
 
 
 def _rowmax(a: np.ndarray) -> np.ndarray:
-    """``max_i |a_i|`` over the last axis (0 when it is empty): exact."""
-    if not a.shape[-1]:
-        return np.zeros(a.shape[:-1])
-    out: np.ndarray = np.maximum(a.max(axis=-1), -a.min(axis=-1))
+    """``max_i |a_i|`` over the last axis (0 when it is empty): exact. Short rows (the states
+    of a small system) column by column: NumPy's reduction along a short last axis is slow."""
+    n = a.shape[-1]
+    if n > 16:
+        big: np.ndarray = np.abs(a).max(axis=-1)
+        return big
+    out = np.zeros(a.shape[:-1])
+    for j in range(n):
+        np.maximum(out, np.abs(a[..., j]), out=out)
     return out
 
 
@@ -177,50 +185,56 @@ class VectorPath:
         c[..., 0, :] = c0
         # -- the radius (data-free) and its deficit --------------------------------------------
         rad, tau = self._radius_of(T, r0, gr if tv else gr[0])
-        # -- the defect of the centres ---------------------------------------------------------
-        cmax, ymax, umax = _rowmax(c), _rowmax(y), _rowmax(u)
-        pred = matrix_product(c[..., :-1, :], m.Q.T)
-        pred += matrix_product(y[..., :-1, :], m.Lz.T)
-        if nu:
-            pred += matrix_product(u[..., :-1, :], m.Bz.T)
-        pred += gc[:-1] if tv else gc[0]
-        pred -= c[..., 1:, :]
+        rmax = _rowmax(rad)  # (T,)
+        # -- the defect of the centres: whole (contiguous) arrays, then the rows k < T − 1 -------
+        cmax, ymax = _rowmax(c), _rowmax(y)
+        umax: Any = _rowmax(u) if nu else 0.0
+        pred = matrix_product(c, m.Q.T)
+        pred += matrix_product(y, m.Lz.T)
+        if nu and m.Bz.any():
+            pred += matrix_product(u, m.Bz.T)
+        pred += gc if tv else gc[0]
+        defect = pred[..., :-1, :]
+        defect -= c[..., 1:, :]
         nQ, nL, nB, nG = _norm(m.Q), _norm(m.Lz), _norm(m.Bz), float(np.max(_rowmax(gc)))
         ge = 2.0 * gamma(n + ny + nu + 4)
         e = ops.tr.kx if ops.tr is not None else 1.0
         ex, eu = e * float(np.max(m.err.ex, initial=0.0)), float(np.max(m.err.eu, initial=0.0))
         ey, ed = float(np.max(m.err.ey, initial=0.0)), float(np.max(m.err.ed, initial=0.0))
-        cm0, cm1 = cmax[..., :-1], cmax[..., 1:]
-        ym, um = ymax[..., :-1], umax[..., :-1] if nu else 0.0
-        beta = (1.0 + _U2) * _rowmax(pred)
-        beta += ge * (nQ * cm0 + nL * ym + nB * um + nG + cm1) + (n + ny + nu + 4) * ETA
-        beta += ex * (cm0 + _rowmax(rad[:-1])) + eu * um + ey * ym
+        cm0, ym = cmax[..., :-1], ymax[..., :-1]
+        um = umax[..., :-1] if nu else 0.0
+        beta = (1.0 + _U2) * _rowmax(defect)
+        del pred, defect
+        beta += (ge * nQ + ex) * cm0 + ge * cmax[..., 1:] + (ge * nL + ey) * ym
+        beta += (ge * nB + eu) * um
+        beta += ge * nG + (n + ny + nu + 4) * ETA + ex * rmax[:-1] + tau
         beta += ed * (d_mag[:-1] if tv else d_mag[0]) + (g_err[:-1] if tv else g_err[0])
-        beta += tau
         s = np.zeros(cmax.shape)
         if T > 1:  # per stream (identical streams, identical bounds)
             beta = upper(beta, 12)
             for out, b in zip(s.reshape(-1, T), beta.reshape(-1, T - 1)):
                 out[1:] = decay.accumulate(b)
-        zr = upper(rad + s[..., None], 2)  # z_k ∈ ĉ_k ± zr_k
-        zmax = upper(cmax + _rowmax(zr), 2)
+        # z_k ∈ ĉ_k ± (r̂_k + s_k); ‖z_k‖ <= zmax
+        zmax = upper(cmax + rmax + s, 3)
         # -- consistency of y[k] with C x + D_u u + F d (the loop's test rows) ----------------
+        Du = ops.mats[3]
         yc = matrix_product(c, m.Cz.T)
-        if nu:
-            yc += matrix_product(u, ops.mats[3].T)
+        if nu and Du.any():
+            yc += matrix_product(u, Du.T)
         yc += fc
-        yr = upper(matrix_product(zr, np.abs(m.Cz).T), n)
-        yr += fr
-        nC, nD = _norm(m.Cz), _norm(ops.mats[3])
+        yc -= y
+        np.abs(yc, out=yc)
+        aC = np.abs(m.Cz)
+        yr = upper(matrix_product(rad, aC.T), n) + fr  # (T, ny): data-free
+        nC, nD = _norm(m.Cz), _norm(Du)
         pz = float(np.max(m.err.pz, initial=0.0)) + e * float(np.max(m.err.px, initial=0.0))
         nf = float(np.max(_rowmax(fc)))
-        slack = 2.0 * gamma(n + nu + 3) * (nC * cmax + nD * (umax if nu else 0.0) + nf)
+        slack = 2.0 * gamma(n + nu + 3) * (nC * cmax + nD * umax + nf) + f_err
         slack += pz * zmax + _U2 * ymax + (n + nu + 3) * ETA
-        slack += f_err
-        yr += slack[..., None]
-        yc -= y
-        bad = np.abs(yc) > upper(yr, 4)
-        del yc, yr
+        slack = upper(slack, 8)[..., None] + upper(s[..., None] * aC.sum(axis=1), n)
+        slack += yr
+        bad = yc > upper(slack, 4)
+        del yc, slack
         fail = None
         if bad.any():
             if y.ndim == 2:
@@ -228,14 +242,15 @@ class VectorPath:
             fail = bad.reshape(bad.shape[0], -1).any(axis=1)
         # -- the boxes ---------------------------------------------------------------------------
         if ops.tr is None:
-            lo, hi = _enclose(c, zr)
+            lo, hi = _enclose(c, rad, s)
         else:
             Si = ops.tr.Si
+            aSi = np.abs(Si)
             xc = matrix_product(c, Si.T)
-            xr = upper(matrix_product(zr, np.abs(Si).T), n)
+            xr = upper(matrix_product(rad, aSi.T), n)  # (T, n): data-free
             extra = 2.0 * gamma(n + 2) * _norm(Si) * cmax + float(np.max(ops.tr.rs)) * e * zmax
-            xr += upper(extra, 3)[..., None]
-            lo, hi = _enclose(xc, xr)
+            extra = upper(extra, 3) + upper(s * float(np.max(aSi.sum(axis=1))), 2)
+            lo, hi = _enclose(xc, xr, extra)
             lo[..., 0, :] = ops.x0.lo  # [Tang2019, eq. (42)]: the prior box at k = 0
             hi[..., 0, :] = ops.x0.hi
         if fail is not None:
