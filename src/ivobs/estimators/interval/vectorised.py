@@ -49,30 +49,9 @@ Bounds = tuple[np.ndarray, ...]
 _U2 = 2.0 * np.finfo(float).eps / 2
 
 
-def _norm(M: Any) -> float:
-    """``‖M‖∞`` rounded up (0 for an empty matrix; dense or sparse)."""
-    rows = np.asarray(abs(M).sum(axis=1)).ravel()
-    return float(upper(np.max(rows, initial=0.0), max(M.shape[-1], 1)))
-
-
-def _weighted_decay(aQ: Any) -> DecayBound | None:
-    """Proven ``‖|Q|^i‖∞ <= c λ^i`` from a positive ``v`` with ``|Q| v <= λ v`` (``v`` the
-    computed ``(I − |Q|)⁻¹ 1``, checked with the rounding of ``|Q| v``): ``|Q|^i v <= λ^i v``, so
-    the row sums of ``|Q|^i`` are at most ``λ^i max v / min v``. For sparse ``|Q|``, whose
-    powers :meth:`DecayBound.of` would fill in."""
-    from scipy.sparse import identity
-    from scipy.sparse.linalg import spsolve
-
-    n = aQ.shape[0]
-    with np.errstate(all="ignore"):
-        v = np.atleast_1d(spsolve((identity(n, format="csc") - aQ).tocsc(), np.ones(n)))
-    if not (np.all(np.isfinite(v)) and v.min() > 0.0):
-        return None
-    row = int(np.max(np.diff(aQ.tocsr().indptr), initial=1))
-    w = upper(aQ @ v, row)
-    lam = float(upper(np.max(w / v), 2))
-    c = float(upper(v.max() / v.min(), 2))
-    return DecayBound(c, lam) if lam < 1.0 else None
+def _norm(M: np.ndarray) -> float:
+    """``‖M‖∞`` rounded up (0 for an empty matrix)."""
+    return float(upper(np.max(np.abs(M).sum(axis=1), initial=0.0), max(M.shape[-1], 1)))
 
 
 def _enclose(c: np.ndarray, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,10 +97,8 @@ class VectorPath:
         if self._decay is False:
             ops, m = self.ops, self.ops.full
             try:
-                db = _weighted_decay(abs(m.Q)) if ops.sparse else DecayBound.of(np.abs(m.Q))
+                db = DecayBound.of(np.abs(m.Q))
             except DesignError:
-                db = None
-            if db is None:
                 self._decay = None
                 return None
             kx = 1.0 if ops.tr is None else ops.tr.kx
@@ -130,14 +107,15 @@ class VectorPath:
         return self._decay if isinstance(self._decay, DecayBound) else None
 
     def run(self, est: Any, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> Bounds | None:
-        """The bounds of the record or batch; ``None`` (the loop) for interval matrices,
-        callable bounds, missing samples, time-varying bounds shorter than the record, or an
-        inconsistent measurement of a single record (the loop reports it); streams of a batch
-        with one go through ``est``'s loop."""
+        """The bounds of the record or batch; ``None`` (the loop) for sparse systems (one
+        sparse product per step: the loop is as fast), interval matrices, callable bounds,
+        missing samples, time-varying bounds shorter than the record, or an inconsistent
+        measurement of a single record (the loop reports it); streams of a batch with one go
+        through ``est``'s loop."""
         ops = self.ops
         sys = ops.sys
         T = y.shape[-2]
-        if not T or ops.unc is not None or sys.bounds_depend_on_y:
+        if not T or ops.sparse or ops.unc is not None or sys.bounds_depend_on_y:
             return None
         if np.isnan(y).any():
             return None
@@ -168,8 +146,6 @@ class VectorPath:
         tv = dlo.shape[0] > 1  # time-varying bounds: (T, nd); constant: (1, nd)
         dc, dr = mid_rad(dlo, dhi)
         aG, aF = np.abs(m.G), np.abs(ops.mats[5])
-        if tv and ops.sparse:  # (tabulated bounds on a large system: the loop)
-            return None
         gc = dc @ m.G.T  # (1 or T, n)
         g_err = _rowmax(upper(aG @ np.abs(dc).T, nd).T) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
         gr = upper(dr @ aG.T, nd)
@@ -262,14 +238,6 @@ class VectorPath:
     ) -> np.ndarray:
         """The centres ``ĉ`` ``(..., T, n)`` of the record or batch (one filter pass)."""
         m, n = self.ops.full, self.ops.nx
-        if self.ops.sparse:  # one sparse product per step (LinearFilter's loop form)
-            W, sig = [m.Lz, m.Bz], [y, u]
-            if tv:
-                W, sig = [*W, np.eye(n)], [*sig, gc]
-            lead = y.shape[:-2]
-            sig = [np.broadcast_to(a, (*lead, *a.shape[-2:])) for a in sig]
-            states: np.ndarray = LinearFilter(m.Q, W, [], g=None if tv else gc).states(sig, x0=c0)
-            return states
         if tv:
             filt = SplitFilter(m.Q, [m.Lz, m.Bz, np.eye(n)], [np.eye(n)])
             sig = [y, u, gc]
@@ -290,11 +258,8 @@ class VectorPath:
         if not tv and self._radius is not None and self._radius[0] == T:
             return self._radius[1], self._radius[2]
         m, n = self.ops.full, self.ops.nx
-        aQ = abs(m.Q)
-        if self.ops.sparse:
-            filt = LinearFilter(aQ, [np.eye(n)] if tv else [], [], g=None if tv else gr)
-            rad = filt.states([gr] if tv else [], T=T, x0=r0)
-        elif tv:
+        aQ = np.abs(m.Q)
+        if tv:
             rad = LinearFilter(aQ, [np.eye(n)], [np.eye(n)]).run([gr], x0=r0)[0]
         else:
             rad = LinearFilter(aQ, [], [np.eye(n)], g=gr).run([], T=T, x0=r0)[0]
