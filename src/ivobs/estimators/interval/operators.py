@@ -53,6 +53,7 @@ class StepOperator:
     e0: np.ndarray
     starts: np.ndarray
     h: int
+    rows: np.ndarray
     L: np.ndarray
     Lmag: np.ndarray
     Q: Any
@@ -70,7 +71,7 @@ class StepOperator:
         out: np.ndarray = self.W @ v
         e = self.R @ np.maximum.reduceat(np.abs(v), self.starts)  # (R, e0: signed per side)
         e += self.e0
-        out += e
+        out += np.repeat(e, self.rows)
         return out
 
 
@@ -178,11 +179,22 @@ class Operators:
         R1, e01 = row_bounds(sums, err, kx, self.sizes, tr is not None, m, obs)
         rho = np.nan if self.sparse else spectral_radius(np.abs(Q))
         h = R1.shape[0]
-        lows = h - 2 * int(obs.sum())  # the lower rows: [z̲+; x̲]
+        # one bound per group of rows (the largest): [z+; x; p − y; y − p] (upper rows), then
+        # [z+; x] (lower rows)
+        no = int(obs.sum())
+        sizes = np.array([self.nx, self.xrows, no, no])
+        ends = np.cumsum(sizes)
+        nb = R1.shape[1]
+        Rg = np.array(
+            [R1[a - k : a].max(axis=0) if k else np.zeros(nb) for a, k in zip(ends, sizes)]
+        )
+        e0g = np.array([e01[a - k : a].max() if k else 0.0 for a, k in zip(ends, sizes)])
+        low_groups = 2
         return StepOperator(
             W=W,
-            R=np.ascontiguousarray(np.vstack([R1, -R1[:lows]])),
-            e0=np.concatenate([e01, -e01[:lows]]),
+            R=np.vstack([Rg, -Rg[:low_groups]]),
+            e0=np.concatenate([e0g, -e0g[:low_groups]]),
+            rows=np.concatenate([sizes, sizes[:low_groups]]),
             starts=self.starts,
             h=h,
             L=Lk,
