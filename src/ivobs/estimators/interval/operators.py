@@ -36,6 +36,10 @@ from .rounding import RowErrors, Transform, pattern_errors, row_bounds, transfor
 
 __all__ = ["Operators", "StepOperator"]
 
+_GROUPED = 64
+"""Above this many upper rows a step's rounding bound takes one coefficient per group of rows
+(their largest): for a large sparse system a dense ``R b`` would cost as much as the step."""
+
 
 @dataclass(frozen=True)
 class StepOperator:
@@ -53,7 +57,7 @@ class StepOperator:
     e0: np.ndarray
     starts: np.ndarray
     h: int
-    rows: np.ndarray
+    rows: np.ndarray | None
     L: np.ndarray
     Lmag: np.ndarray
     Q: Any
@@ -71,7 +75,7 @@ class StepOperator:
         out: np.ndarray = self.W @ v
         e = self.R @ np.maximum.reduceat(np.abs(v), self.starts)  # (R, e0: signed per side)
         e += self.e0
-        out += np.repeat(e, self.rows)
+        out += e if self.rows is None else np.repeat(e, self.rows)
         return out
 
 
@@ -179,22 +183,24 @@ class Operators:
         R1, e01 = row_bounds(sums, err, kx, self.sizes, tr is not None, m, obs)
         rho = np.nan if self.sparse else spectral_radius(np.abs(Q))
         h = R1.shape[0]
-        # one bound per group of rows (the largest): [z+; x; p − y; y − p] (upper rows), then
-        # [z+; x] (lower rows)
-        no = int(obs.sum())
-        sizes = np.array([self.nx, self.xrows, no, no])
-        ends = np.cumsum(sizes)
-        nb = R1.shape[1]
-        Rg = np.array(
-            [R1[a - k : a].max(axis=0) if k else np.zeros(nb) for a, k in zip(ends, sizes)]
-        )
-        e0g = np.array([e01[a - k : a].max() if k else 0.0 for a, k in zip(ends, sizes)])
-        low_groups = 2
+        lows = h - 2 * int(obs.sum())  # the lower rows: [z̲+; x̲]
+        R, e0, rows = np.vstack([R1, -R1[:lows]]), np.concatenate([e01, -e01[:lows]]), None
+        if h > _GROUPED:  # one bound per group of rows (the largest): a few operations a step
+            no = int(obs.sum())
+            sizes = np.array([self.nx, self.xrows, no, no])
+            ends = np.cumsum(sizes)
+            nb = R1.shape[1]
+            Rg = np.array(
+                [R1[a - k : a].max(axis=0) if k else np.zeros(nb) for a, k in zip(ends, sizes)]
+            )
+            e0g = np.array([e01[a - k : a].max() if k else 0.0 for a, k in zip(ends, sizes)])
+            R, e0 = np.vstack([Rg, -Rg[:2]]), np.concatenate([e0g, -e0g[:2]])
+            rows = np.concatenate([sizes, sizes[:2]])
         return StepOperator(
             W=W,
-            R=np.vstack([Rg, -Rg[:low_groups]]),
-            e0=np.concatenate([e0g, -e0g[:low_groups]]),
-            rows=np.concatenate([sizes, sizes[:low_groups]]),
+            R=np.ascontiguousarray(R),
+            e0=e0,
+            rows=rows,
             starts=self.starts,
             h=h,
             L=Lk,
