@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linprog
 
-from ..linalg import gamma
+from ..linalg import UNIT_ROUNDOFF, gamma
+from ..sets.rounding import down, up, upper
 
 __all__ = ["MAX_LP_STATES", "MAX_WINDOW_STATES", "WindowBound", "window_bound"]
 
@@ -52,7 +53,7 @@ class WindowBound:
     ``eu``, ``ed``: per row, the coefficients of ``‖U‖∞``, ``‖d‖∞`` from the round-off of
     ``K_u``, ``K_d``; ``g``: ``γ`` of one evaluation (doubled); ``p_y``, ``p_u``, ``p_d``
     and ``delta`` (``‖Θ‖∞``): the bound of ``‖x_s‖∞`` (module docstring) is
-    ``(p_y ‖Y‖∞ + p_u ‖U‖∞ + p_d ‖d‖∞) / (1 − delta)``."""
+    ``(p_y ‖Y‖∞ + p_u ‖U‖∞ + p_d ‖d‖∞) / (1 − delta)``; ``d_mag``: ``‖d‖∞`` over the bounds."""
 
     N: int
     M: np.ndarray
@@ -69,10 +70,13 @@ class WindowBound:
     p_u: float
     p_d: float
     delta: float
+    d_mag: float
 
-    def box(self, Y: np.ndarray, U: np.ndarray, d_mag: float) -> tuple[np.ndarray, np.ndarray]:
+    def box(self, Y: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``x[s+N]`` from the window's outputs ``Y`` and inputs ``U`` (flattened,
-        step-major) and ``‖d‖∞ <= d_mag``."""
+        step-major), rounded outwards. ``Y`` is taken as recorded: the float nearest to the
+        true outputs, ``|Y_true − Y| <= 2u |Y|`` (``u = 2⁻⁵³``), which ``|M| 2u |Y|`` covers."""
+        d_mag = self.d_mag
         c = self.M @ Y + self.Ku @ U + self.kc
         u_mag = float(np.max(np.abs(U))) if U.size else 0.0
         y_mag = float(np.max(np.abs(Y))) if Y.size else 0.0
@@ -80,8 +84,9 @@ class WindowBound:
         xs_mag *= 1.0 + self.g
         r = self.kr + self.ex * xs_mag + self.eu * u_mag + self.ed * d_mag
         ev = self.absM @ np.abs(Y) + self.absKu @ np.abs(U) + np.abs(self.kc) + np.abs(c) + r
-        r = r + self.g * ev
-        return c - r, c + r
+        r = r + self.g * ev + UNIT_ROUNDOFF * 2.0 * (self.absM @ np.abs(Y))
+        r = upper(r, 3)
+        return down(c - r), up(c + r)
 
 
 def window_bound(
@@ -153,7 +158,10 @@ def window_bound(
     p_y = float(np.max(absP.sum(axis=1))) * (1.0 + gK)
     p_u = float(np.max((absP @ aTu).sum(axis=1), initial=0.0)) * (1.0 + gK)
     p_d = float(np.max((absP @ aTd).sum(axis=1), initial=0.0)) * (1.0 + gK)
-    return WindowBound(N, M, Ku, kc, kr, ex, eu, ed, absM, np.abs(Ku), g, p_y, p_u, p_d, delta)
+    d_mag = float(max(np.max(np.abs(d_lo), initial=0.0), np.max(np.abs(d_hi), initial=0.0)))
+    return WindowBound(
+        N, M, Ku, kc, kr, ex, eu, ed, absM, np.abs(Ku), g, p_y, p_u, p_d, delta, d_mag
+    )
 
 
 def _index(A: np.ndarray, C: np.ndarray) -> int | None:

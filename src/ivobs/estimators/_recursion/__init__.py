@@ -20,10 +20,11 @@ not depend on the data. Both are outputs of one discrete LTI system driven by th
 * **Large or sparse state**: a loop over time, one (sparse) product per step, with all input
   terms precomputed in one matrix product and written into the state buffer beforehand.
 
-Results agree with the step-by-step recursion up to rounding (sums in another order); the
-observers' outward rounding margin covers that (:data:`ivobs.estimators.rounding.ROUNDING`).
+Results agree with the step-by-step recursion up to rounding (sums in another order): a method
+that uses a filter bounds that difference itself (e.g. by the defect of the computed sequence,
+:mod:`ivobs.estimators.interval.vectorised`).
 
-The package: :mod:`.kernels` (sparse products, reusable temporaries, batch helpers),
+The package: :mod:`.kernels` (reusable temporaries, batch helpers),
 :mod:`.linear_filter` (:class:`LinearFilter`, :func:`affine_recursion`), :mod:`.split_filter`
 (:class:`SplitFilter`: the per-stream and shared parts of a batch).
 """
@@ -32,7 +33,6 @@ from __future__ import annotations
 
 from .kernels import (
     centre_band,
-    csr_accumulate,
     is_shared,
     matrix_product,
     redo_streams,
@@ -48,7 +48,6 @@ __all__ = [
     "SplitFilter",
     "affine_recursion",
     "centre_band",
-    "csr_accumulate",
     "is_shared",
     "matrix_product",
     "redo_streams",

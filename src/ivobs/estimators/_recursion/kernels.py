@@ -1,5 +1,5 @@
-"""Kernels shared by the fast paths: compiled sparse products, reusable temporaries, products
-over the last axis of batches, and the checks that send a stream of a batch back to its loop."""
+"""Kernels shared by the fast paths: reusable temporaries, products over the last axis of batches,
+and the checks that send a stream of a batch back to its loop."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "csr_accumulate",
     "is_shared",
     "matrix_product",
     "redo_streams",
@@ -22,23 +21,6 @@ SCRATCH_MAX = 1 << 22
 """Temporaries up to this many elements are reused between calls (:func:`scratch`)."""
 
 _LOCAL = threading.local()
-
-try:  # SciPy's compiled kernels y += A x (a private module, stable for years)
-    from scipy.sparse._sparsetools import csc_matvec as _csc_matvec
-    from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
-except ImportError:  # pragma: no cover
-    _csr_matvec = _csc_matvec = None
-
-
-def csr_accumulate(M: Any, x: np.ndarray, out: np.ndarray) -> None:
-    """``out += M @ x`` for a CSR (or CSC) matrix ``M`` and vectors: SciPy's compiled kernel,
-    without a temporary or the Python-level dispatch of ``@`` (for large sparse systems this is
-    the whole per-step cost of an observer); the public ``@`` when the kernel is unavailable."""
-    kernel = {"csr": _csr_matvec, "csc": _csc_matvec}.get(M.format)
-    if kernel is not None and M.data.dtype == np.float64 and x.dtype == np.float64:
-        kernel(M.shape[0], M.shape[1], M.indptr, M.indices, M.data, x, out)
-    else:  # pragma: no cover
-        out += M @ x
 
 
 def scratch(owner: Any, name: str, shape: tuple[int, ...], dtype: Any = float) -> np.ndarray:
@@ -101,10 +83,14 @@ def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.
     rows = int(np.prod(lead)) if lead else 1
     if out is None:
         out = np.empty((*lead, p))
-    narrow = m <= 8 and p <= 8 and rows % 8 == 0 and rows >= 4096
-    if narrow and X.flags.c_contiguous and out.flags.c_contiguous:
+    if m <= 8 and p <= 8 and rows >= 4096 and out.flags.c_contiguous:
+        X2 = np.ascontiguousarray(X).reshape(rows, m)
+        O2 = out.reshape(rows, p)
+        main = rows - rows % 8
         big = np.kron(np.eye(8), Mt)
-        np.matmul(X.reshape(rows // 8, 8 * m), big, out=out.reshape(rows // 8, 8 * p))
+        np.matmul(X2[:main].reshape(main // 8, 8 * m), big, out=O2[:main].reshape(main // 8, 8 * p))
+        if main < rows:
+            O2[main:] = X2[main:] @ Mt
     else:
         out.reshape(rows, p)[...] = X.reshape(rows, m) @ Mt
     return out

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import _issparse, _matrix, csr_accumulate, matrix_product, scratch
+from .kernels import _issparse, _matrix, matrix_product, scratch
 
 __all__ = ["BLOCK_MAX_STATES", "LinearFilter", "affine_recursion"]
 
@@ -287,8 +287,6 @@ class LinearFilter:
         n = self.n
         X = np.empty((b, T, n))
         X[:, 0] = x0
-        if self.sparse and b == 1:
-            return X, _sparse_states(self, vs, T, X[0])
         if T > 1:
             Xn = X[:, 1:]
             Xn[...] = 0.0 if self.g is None else self.g
@@ -329,27 +327,6 @@ class LinearFilter:
             if self.h[j] is not None:
                 o += self.h[j]
         return xT
-
-
-def _sparse_states(f: LinearFilter, vs: list[np.ndarray], T: int, x: np.ndarray) -> np.ndarray:
-    """:meth:`LinearFilter.states` of one record, sparse ``M``: ``x[k] = g + M x[k-1] +
-    W v[k-1]`` written row by row (``x[0]`` given), two compiled sparse products per step
-    (``W = [W_s]`` as CSC); returns ``x[T]``. The row is still in cache when it is accumulated
-    into."""
-    from scipy.sparse import csc_matrix
-
-    n = f.n
-    W = csc_matrix(np.hstack(f.W)) if f.W else csc_matrix((n, 0))
-    v = np.concatenate([a[0] for a in vs], axis=-1) if vs else np.zeros((T, 0))
-    g = np.zeros(n) if f.g is None else f.g
-    M = f.M
-    xT = np.empty(n)
-    for k in range(1, T + 1):
-        row = x[k] if k < T else xT
-        row[...] = g
-        csr_accumulate(M, x[k - 1], row)
-        csr_accumulate(W, v[k - 1], row)
-    return xT[None]
 
 
 def _block_operators(f: LinearFilter, K: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:

@@ -33,31 +33,34 @@ on ``x0``). When ``Q >= 0`` (``Q⁻ = 0``) this *is* [Tang2019]'s (36)/(42) and 
 (3)/(4); for ``interval-split`` it is [Efimov2013]'s (5). The midpoint obeys ``c+ = Q c + …`` and
 the radius ``r+ = |Q| r + radius(SG d)`` (``|Q| = Q⁺ + Q⁻``): bounded iff ``|Q|`` is Schur.
 (The stacked bounds follow ``[[Q⁺, −Q⁻], [−Q⁻, Q⁺]]``, not [Efimov2013]'s error matrix Σ; both
-are Schur iff ``|Q|`` is.) The vectorised path (:mod:`.vectorised`) runs exactly these two
-linear recursions through the shared kernels of :mod:`ivobs._recursion`.
+are Schur iff ``|Q|`` is.) The vectorised path (:mod:`.vectorised`) runs the centre and the
+radius as two linear filters of :mod:`ivobs.estimators._recursion`.
 
-**Missing samples** (NaN in ``y[k]``): the gain's columns of the missing components are set to
-zero for that step, ``L_k = L diag(observed)``; (*) holds for *any* gain, so the same Lemma-1
-step with ``Q_k = S(A − L_k C)S⁻¹`` (which may have negative entries even when ``Q`` has none:
-the split form covers it) stays sound; with every component missing it is the model's prediction
-``x+ ∈ A[x̲, x̄] + B u + E[d]``. **Inconsistent data**: when ``y[k]`` lies outside
-``C[x̲_k, x̄_k] + D_u u_k + F[d]`` no state in the box explains it (a fault); it is reported and
-treated as missing. The width of the bounds grows during a gap of output ``j`` alone at the rate
-``ρ(|A − L_(j) C|)`` (``design.missing_radius``); the default gains are the smallest among the
-width-optimal ones (:mod:`ivobs.design.cooperative`), so that no gap multiplies the bounds by the
-size of a needlessly large gain. **After a gap** (``S = I``: ``interval``, ``interval-split``;
-dense, time-invariant, constant bounds, ``(A, C)`` observable) the bounds are intersected once,
-``N`` complete steps after it, with the finite-memory bound of those steps
-(:mod:`.window`, :mod:`ivobs.design.finite_memory`): the width is back within that bound ``N``
-steps after a gap of any length (docs/operating.md, "After a gap").
+**Missing samples** (NaN in ``y[k]``): the gain's columns of the missing components are zero
+for that step; (*) holds for *any* gain, so the same Lemma-1 step with ``Q_k = S(A − L_k C)S⁻¹``
+(which may have negative entries even when ``Q`` has none: the split form covers it) stays
+sound; with every component missing it is the model's prediction. ``L_k = L diag(observed)``
+unless that leaves ``|Q_k|`` non-Schur: then the gain of that pattern is the one with the
+smallest ``ρ(|Q_k|)`` among it, zero and the width-optimal gain of the observed outputs
+(designed once, cached; :mod:`.operators`). **Inconsistent data**: when ``y[k]`` lies outside
+``C[x̲_k, x̄_k] + D_u u_k + F[d]`` (rounding included) no state in the box explains it (a
+fault); it is reported and treated as missing. **After a gap** (dense, time-invariant, constant
+bounds, exact matrices, ``(A, C)`` observable) the bounds are intersected once, ``N`` complete
+steps after it, with the finite-memory bound of those steps (:mod:`.window`,
+:mod:`ivobs.design.finite_memory`; its image by ``S`` for ``interval-transformed``): the width
+is back within that bound ``N`` steps after a gap of any length (docs/operating.md, "After a
+gap"). In coordinates ``z = S x`` some patterns have no gain with ``|Q_k|`` Schur although the
+plant is stable (``|S A S⁻¹|`` is not ``|A|``): widths then grow during such gaps until the
+window bound resets them (docs/interval.md).
 
-**Rounding**: the floating-point error of the recursion is bounded and covered by the loop
-(inside every step) and by the vectorised path (an enlarged margin): :mod:`.rounding`.
+**Rounding** (``proven_rounding``): every bound the step returns or keeps is on the safe side
+of the exact one, by a proven model of the floating-point error of the step (:mod:`.rounding`);
+the vectorised path has its own proof (:mod:`.vectorised`). No margin is added.
 
-The package: :mod:`.design` (offline: gains, ``S``; no time loop), :mod:`.operators` (the
-matrices derived from the design, once), :mod:`.recursion` (the typed state and the step),
-:mod:`.vectorised` (whole records and batches), :mod:`.rounding`, :mod:`.observers` (the three
-registered estimators), :mod:`.window` (recovery after missing samples).
+The package: :mod:`.design` (offline: gains, ``S``; no time loop), :mod:`.operators` (the step
+matrix of each missing-output pattern, built once), :mod:`.recursion` (the typed state and the
+step), :mod:`.rounding` (the proof), :mod:`.vectorised` (whole records and batches),
+:mod:`.observers` (the three registered estimators), :mod:`.window` (recovery after gaps).
 """
 
 from __future__ import annotations

@@ -84,13 +84,17 @@ def design_delta(sys: LinearSystem) -> np.ndarray:
     """Widths ``Δ`` of the ``d`` box used by the width objectives: constant bounds as they
     are, time-varying bounds their largest width per component, callable bounds
     ([Efimov2013, Remark 1]) ones (no better information before the data arrive)."""
-    box = sys.d
-    if box is None:
+    if not sys.nd:
         return np.zeros(0)
-    if isinstance(box, Box):
-        w: np.ndarray = box.hi - box.lo
-        return np.max(w, axis=0) if box.is_time_varying else w
-    return np.ones(sys.nd)
+    if sys.bounds_depend_on_y:
+        return np.ones(sys.nd)
+    if sys.has_constant_bounds:
+        box = sys.d_at(0)
+        return np.asarray(box.hi - box.lo)
+    tabulated = sys.d  # a time-varying Box: its widest step per component
+    assert isinstance(tabulated, Box)
+    w: np.ndarray = np.max(tabulated.hi - tabulated.lo, axis=0)
+    return w
 
 
 MAX_DENSE_DESIGN = MAX_LMI_STATES
@@ -136,9 +140,12 @@ def sparse_radius(P: Any) -> float:
     return min(float(np.abs(val[0])), bound)
 
 
-def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: bool) -> Any:
-    """``D = A − LC`` as a sparse matrix, checked as :func:`check_nonnegative_schur` /
-    :func:`check_abs_schur` do, without dense algebra (``scipy.sparse`` systems)."""
+def sparse_gain_check(
+    sys: LinearSystem, L: np.ndarray, who: str, nonnegative: bool
+) -> tuple[Any, float]:
+    """``(D, ρ)``: ``D = A − LC`` as a sparse matrix, checked as
+    :func:`check_nonnegative_schur` / :func:`check_abs_schur` do, without dense algebra
+    (``scipy.sparse`` systems), and ``ρ(|D|)``."""
     from scipy.sparse import csr_matrix
 
     A = sys.sparse("A")
@@ -159,7 +166,7 @@ def sparse_gain_check(sys: LinearSystem, L: np.ndarray, who: str, nonnegative: b
         what = "A − LC is not Schur" if nonnegative else "|A − LC| = D⁺ + D⁻ is not Schur"
         ref = "[Efimov2013, Assumption 2.A]" if nonnegative else "[Efimov2013, Theorem 3]"
         raise DesignError(f"{who}: {what}: spectral radius {rho:.6g} >= 1 ({ref})")
-    return D
+    return D, rho
 
 
 def check_gain(sys: LinearSystem, L: Any) -> np.ndarray:
@@ -174,8 +181,7 @@ def given_gain(
     and ``ρ`` the spectral radius of ``D`` (``nonnegative``) or of ``|D|``."""
     L = check_gain(sys, L)
     if sys.is_sparse:
-        D = sparse_gain_check(sys, L, who, nonnegative)
-        return L, D, sparse_radius(abs(D))
+        return (L, *sparse_gain_check(sys, L, who, nonnegative))
     A, C = sys.A_at(0), sys.C_at(0)
     if nonnegative:
         D = check_nonnegative_schur(A, C, L, who)
@@ -187,7 +193,7 @@ def given_gain(
 def _steady(sys: LinearSystem, D: Any, L: np.ndarray) -> np.ndarray | None:
     """``(I − |D|)⁻¹ |E − LF| Δ`` (a sparse solve for sparse systems); None for callable
     bounds."""
-    if sys.nd and not isinstance(sys.d, Box):
+    if sys.bounds_depend_on_y:
         return None
     G = sys.E_at(0) - L @ sys.F_at(0)
     if sys.is_sparse:

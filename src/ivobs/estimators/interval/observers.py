@@ -1,5 +1,5 @@
 """The three registered interval observers: design in ``__init__`` (:mod:`.design`), the matrices
-derived from it once (:class:`~.operators.SplitOperators`), the step of :mod:`.recursion` and the
+derived from it once (:class:`~.operators.Operators`), the step of :mod:`.recursion` and the
 vectorised path of :mod:`.vectorised`."""
 
 from __future__ import annotations
@@ -21,15 +21,14 @@ from .design import (
     interval_design,
     split_design,
 )
-from .operators import SplitOperators
+from .operators import Operators
 from .recursion import (
     CooperativeState,
     IntervalState,
     SplitState,
     TransformedState,
-    cooperative_step,
+    interval_step,
 )
-from .rounding import margins
 from .transformed import TransformedDesign, transformed_design
 from .vectorised import VectorPath
 from .window import empty_window
@@ -41,10 +40,11 @@ S = TypeVar("S", bound=CooperativeState)
 
 class CooperativeObserver(Estimator, Generic[S]):
     """What the three observers share (package docstring): the split-form recursion in
-    ``z = S x`` with the operators of the design, its typed state, the vectorised path, and the
-    data-scale factor ``nu`` of the rounding margin (:mod:`.rounding`)."""
+    ``z = S x`` with the operators of the design, its typed state and the vectorised path, each
+    with its proven rounding bound (:mod:`.rounding`, :mod:`.vectorised`)."""
 
     needs_x0: ClassVar[bool] = True
+    proven_rounding: ClassVar[bool] = True
     data_used: ClassVar[str] = "prediction"
     supports_uncertain: ClassVar[bool] = True
     """Interval matrices ([Efimov2013]'s uncertain ``A = A0 + ΔA``, docs/uncertain.md): the gain
@@ -57,16 +57,13 @@ class CooperativeObserver(Estimator, Generic[S]):
     state_type: ClassVar[type[CooperativeState]] = CooperativeState
 
     def _build(self, L: np.ndarray, D: Any, S_: np.ndarray | None = None) -> None:
-        """The operators of the gain ``L`` (``D = A − LC``; rounding margins when ``S = I``)
-        and transformation ``S``."""
+        """The step operators of the gain ``L`` (``D = A − LC``) and transformation ``S``."""
         assert self.x0 is not None
         if self.sys.uncertainty is not None:
             self._check_growth(L, D, S_)
-        rounding = None if S_ is not None else margins(self.sys, L, D, self.name)
-        self.operators = SplitOperators(self.sys, self.x0, L, S_, rounding, self.name)
+        self.operators = Operators(self.sys, self.x0, L, S_, self.name)
         self.vector = VectorPath(self.operators)
         self.valid_from = 0
-        self._scale_gain = self.operators.nu  # the data-scale factor nu (.rounding)
 
     def _check_growth(self, L: np.ndarray, D: Any, S_: np.ndarray | None) -> None:
         """Refuse interval matrices too wide for the gain's stability margin: the bounds'
@@ -91,7 +88,7 @@ class CooperativeObserver(Estimator, Generic[S]):
         return self.state_type(lo=lo, hi=hi, window=window)  # type: ignore[return-value]
 
     def _step(self, state: S, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> Step[S]:
-        return cooperative_step(self.operators, state, u_k, y_k)
+        return interval_step(self.operators, state, u_k, y_k)
 
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None

@@ -1,48 +1,70 @@
-"""Floating-point error of the interval recursion, bounded so that the bounds stay guaranteed.
+"""The floating-point error of the interval recursion, bounded: the one proof of the family.
 
-The recursion of :mod:`ivobs.estimators.interval` (module docstring) is exact in real
-arithmetic; here is what its evaluation in floating point can lose, and how the loop and the
-vectorised path cover it.
+**What is computed.** One step of :mod:`.recursion` evaluates, for the bounds ``[z̲, z̄]`` of
+``z[k] = S x[k]`` (``S = I`` except for ``interval-transformed``), one product
 
-**Rounding** (``interval``, ``interval-split``). The terms one step adds are not all of
-the size of the data: ``L_k y`` is ``|L|`` times larger, and ``A − L_k C`` is formed in floating
-point. By the standard bound on sums ([Higham2002, Chapter 3]:
-``|fl(Σ t_i) − Σ t_i| <= γ_m Σ |t_i|``, ``γ_m = m u / (1 − m u)``, ``u = 2⁻⁵³``;
-``m = 2 n_r + n_u + 2 n_y + 2 n_d + 6`` with ``n_r`` the nonzeros per row of
-``|A| + |L||C|``), one step of the loop is off by at most
+    W v,    v = [z̄; z̲; u; y; d̄; d̲]
 
-    δ_k = γ_m (a_z ‖z_k‖_∞ + a_y ‖y_k‖_∞ + a_u ‖u_k‖_∞ + a_d ‖d‖_∞)
+whose rows are the upper bounds ``[z̄+; x̄; p̄]`` and the lower bounds ``[z̲+; x̲; p̲]`` of
+``z[k+1]``, of ``x[k]`` (``S ≠ I`` only) and of ``C x[k] + D_u u[k] + F d[k]`` (the
+consistency test of ``y[k]``): Lemma 1 of [Efimov2013] with the float matrices of the step,
 
-with ``a_z = 3 ‖|A| + |L||C|‖_∞`` (the products ``Q_k z``, the rounding of ``Q_k`` itself acting
-on the true state, which lies in the box), ``a_y = ‖L‖_∞``, ``a_u = 2 ‖|B| + |L||D_u|‖_∞``,
-``a_d = 3 ‖|E| + |L||F|‖_∞`` (Lemma 1 on the computed ``E − L_k F``) and ``‖d‖`` the largest
-bound magnitude (:class:`RoundingBound`). *Loop* (``step()``, short records, missing samples):
-every step widens its new bounds by ``δ_k``, so they enclose the exact recursion from the
-computed box for every missing pattern (also when ``|A − L_k C|`` is not Schur), by induction.
-*Vectorised path* (complete data): the errors add up to at most ``κ max_j δ_j`` with
-``κ = ‖(I − |A − LC|)⁻¹‖_∞``; the outward margin ``ROUNDING (1 + |bound| + s_k)`` of
-:mod:`ivobs.estimators.rounding` is enlarged to ``ROUNDING (1 + μ |bound| + ν s_k)`` with
-``μ = κ γ_m a_z / ROUNDING``, ``ν = κ γ_m (a_y + a_u' + a_d') / ROUNDING`` (``a_u'``, ``a_d'``: the
-same terms relative to the data scale ``s_k``) whenever they exceed 1 (taking, like the base
-margin, the bound's own magnitude for the running maximum of ``‖z_j‖``; the block evaluation of
-:class:`~ivobs._recursion.LinearFilter` reorders the same sums). The consistency test's slack
-grows by ``max(1, μ, ν)``. On the paper examples ``μ, ν < 0.6`` (nothing changes there); with a
-gain ``L = (−999999.1, 10⁶)`` they are about 100.
+    z̄+ = Q⁺ z̄ − Q⁻ z̲ + B_z u + L_z y + G⁺ d̄ − G⁻ d̲,    x̄ = Si⁺ z̄ − Si⁻ z̲,
+    p̄  = C_z⁺ z̄ − C_z⁻ z̲ + D_u u + F⁺ d̄ − F⁻ d̲        (lower rows: the mirror images)
 
-**Rounding in** ``z = S x`` (``interval-transformed``). The recursion runs with computed
-matrices ``Q = fl(S M̂ Si)``, ``S L_k``, ``S (B − L_k D_u)``, ``S (E − L_k F)`` (``M̂ = fl(A − L_k
-C)``, ``Si`` the computed ``S⁻¹``), while the true ``z = S x`` obeys the exact ones. On the true
-state the matrix error is ``(Q − S M S⁻¹) z = (Q S − S M̂) x + S (M̂ − M) x``: an evaluated
-residual acting on ``x`` (no ``cond(S)`` factor). With the errors of the other products and of
-the evaluation, one step is off by at most ``c_x ‖x‖ + c_z ‖z‖ + c_y ‖y‖ + c_u ‖u‖ + c_d ‖d‖``
-(:func:`transform_step_error`); the loop adds it to the new ``z`` bounds at every step, the
-vectorised path adds ``‖Si‖ κ_z`` times its running maximum to the ``x`` bounds
-(``κ_z = ‖(I − |Q|)⁻¹‖_∞``). The box of ``x = S⁻¹ z`` is widened for the computed inverse
-(``|Si S − I|``, :func:`transform_conversion`) and ``z_0`` for the products with ``S``. On the
-paper examples these terms are below ``1e-12`` relative; with a large gain and an
-ill-conditioned ``S`` (nearly unobservable systems far from the origin: ``|L| ~ 10⁶``,
-``cond(S) ~ 10⁷``, ``|x| ~ 10⁶``) they are the real floating-point error of the design and
-dominate the width: prefer ``interval-split``, or give ``poles=`` with a smaller gain.
+with ``M̂ = fl(A − fl(L_k C))``, ``Q = fl(fl(S M̂) Si)``, ``B_z = fl(S fl(B − fl(L_k D_u)))``,
+``L_z = fl(S L_k)``, ``G = fl(S fl(E − fl(L_k F)))``, ``Si = fl(S⁻¹)``, ``C_z = fl(C Si)``
+(``S = I``: the products by ``S`` and ``Si`` are absent, ``Q = M̂``, ``C_z = C``).
+
+**What is true.** For any gain ``L_k`` the plant obeys exactly
+
+    S x+ = S (A − L_k C) x + S (B − L_k D_u) u + S L_k y + S (E − L_k F) d,
+
+so with the float matrices, ``z+ = Q z + B_z u + L_z y + G d + δ`` where
+
+    δ = (S (A − L_k C) − Q S) x + (S (B − L_k D_u) − B_z) u + (S L_k − L_z) y
+        + (S (E − L_k F) − G) d,
+
+and ``x = Si z + (I − Si S) x``, ``C x = C_z z + (C Si − C_z) z + C (I − Si S) x``. Each matrix
+difference is bounded entrywise at design time ([Higham2002, §2.2, §3.1]; ``u = 2⁻⁵³``, products
+of inner dimension ``n`` off by at most :func:`~ivobs.sets.rounding.product_error`, a difference
+of floats by ``u`` times its rounded value, doubled): ``|A − L_k C − M̂| <=
+pe(|L_k| |C|) + 2u |M̂|`` and alike; ``|S M̂ − Q S| <= (1 + 2u) |fl(fl(S M̂) − fl(Q S))| +
+pe(|S| |M̂|) + pe(|Q| |S|)``; ``|I − Si S| <= R_S`` (evaluated the same way). Only the row sums
+of these bounds are kept (:class:`RowErrors`): each acts on the ∞-norm of ``x``, ``z``, ``u``,
+``y`` or ``d``, and ``‖x‖∞ <= k_x ‖z‖∞`` with ``k_x = ‖|Si|‖∞ / (1 − ‖R_S‖∞)`` (from
+``x = Si z + (I − Si S) x``; ``k_x = 1`` when ``S = I``).
+
+**The data.** A measurement is taken as recorded: the float nearest to an admissible ``y`` (a
+logger rounds once), so ``|y_true − y| <= 2u |y|``. It enters the state rows through ``L_z``
+(``2u |L_z| 1 ‖y‖∞``) and the test of ``y`` (its slack grows by ``2u ‖y‖∞``): a sample within
+rounding of its bound is never flagged, and using it keeps the bounds sound.
+
+**The evaluation.** Row ``i`` of ``fl(W v)`` is a sum of ``m`` products (``m``: the row length,
+or the largest number of stored entries of a row of a sparse ``W``), in any order, with FMA or
+not: off by at most ``2γ_{m+2} Σ_j |W_ij| |v_j| + (m + 2) η`` (:func:`product_error`), and
+``Σ_j |W_ij| |v_j| <= Σ_b (Σ_{j in b} |W_ij|) ‖v_b‖∞`` over the blocks ``b`` of ``v``.
+
+**One step's bound.** So every row ``i`` satisfies
+
+    exact bound_i <= fl(W v)_i + Σ_b R_ib ‖v_b‖∞ + e0_i
+
+with ``R`` the sum of the evaluation and the matrix-error coefficients of each block
+(``‖z‖∞ <= ‖z̄‖∞ + ‖z̲‖∞``, so the terms on ``‖z‖``, ``‖x‖`` go on both of those blocks;
+:func:`row_bounds`). ``R`` and ``e0`` are enlarged by :func:`~ivobs.sets.rounding.upper` so that
+their own evaluation ``e = fl(R b + e0)`` (``b``: the block maxima) is at least the exact sum,
+and by ``4u Σ_b (Σ_{j in b} |W_ij|) b_b >= 2u |fl(W v)_i|`` and a factor ``1 + 4u``, which pays
+for the last addition: ``fl(o + e) >= o + e − u |o + e|`` and ``|o + e| <= |o| + e``, so with
+``e' >= (1 + 2u) e + 2u |o|`` the rounded ``fl(o + e')`` is at least ``o + e`` (underflow: a
+sum that rounds to a subnormal is exact). The step adds ``e`` to the upper rows and subtracts
+it from the lower rows (``R``, ``e0`` negated there): every computed bound is on the safe side
+of the exact Lemma-1 bound from the computed box, which contains the true state by induction
+from ``z̲_0 <= S x_0 <= z̄_0``, with no directed rounding. Nothing assumes a magnitude: the
+bound scales with the state, the input, the measurement and the gain, at every step and for
+every missing-output pattern (no margin, no data scale: ``proven_rounding``).
+
+The vectorised path (:mod:`.vectorised`) is another algorithm with its own proof, built on the
+same :class:`RowErrors`.
 """
 
 from __future__ import annotations
@@ -53,214 +75,151 @@ from typing import Any
 import numpy as np
 
 from ...errors import DesignError
-from ...linalg import gamma as gamma_n
-from ...model import LinearSystem
-from ...sets import Box
-from ..rounding import ROUNDING
+from ...linalg import UNIT_ROUNDOFF
+from ...sets.rounding import ETA, gamma, product_error, upper
 
-__all__ = [
-    "CONSISTENCY_TOL",
-    "Margins",
-    "RoundingBound",
-    "largest",
-    "margins",
-    "norm_inf",
-    "rounding_bound",
-    "transform_conversion",
-    "transform_step_error",
-]
+__all__ = ["RowErrors", "Transform", "pattern_errors", "row_bounds", "transform"]
 
-CONSISTENCY_TOL = 1e-9
-"""Relative slack of the consistency test ``y[k] ∈ C[x̲, x̄] + D_u u + F[d]`` (round-off)."""
+_U2 = 2.0 * UNIT_ROUNDOFF
 
 
-def norm_inf(M: np.ndarray) -> float:
-    """``‖M‖_∞`` (largest absolute row sum; 0 for an empty matrix)."""
-    return float(np.linalg.norm(M, np.inf))
+def _rows(M: Any) -> np.ndarray:
+    """Row sums of ``|M|`` (dense or sparse), as an upper bound (their own rounding covered)."""
+    s = np.asarray(abs(M).sum(axis=1)).ravel()
+    return np.asarray(upper(s, max(M.shape[-1], 1)))
 
 
-def largest(*arrays: np.ndarray) -> float:
-    """``max |a_i|`` over all the entries of ``arrays`` (0 when they are empty)."""
-    return max((float(np.max(np.abs(a), initial=0.0)) for a in arrays), default=0.0)
+def _diff(M: Any, n: int) -> np.ndarray:
+    """Row sums of the bound ``2u |M|`` of a difference rounded to ``M``, with the underflow of
+    the ``n``-term products before it."""
+    return np.asarray(upper(_U2 * _rows(M) + (n + 2) * M.shape[-1] * ETA, 2))
 
 
-def transform_conversion(S: np.ndarray, Si: np.ndarray, who: str) -> tuple[float, float]:
-    """Rounding of ``x = S⁻¹ z`` evaluated with the computed inverse ``Si`` (module docstring,
-    "Rounding", ``S ≠ I``): ``(g, c)`` with ``g >= ‖Si S − I‖_∞`` (the residual plus the
-    rounding of its evaluation, ``γ_{n+1} |Si| |S|``) and ``c = γ_{n+1} ‖Si‖_∞``. For the true
-    ``z = S x`` in a box of magnitude ``ζ`` whose image by Lemma 1 of ``Si`` has magnitude
-    ``ξ``: ``|x − Si z| <= |Si S − I| |x|``, so ``‖x‖ <= (ξ + c ζ) / (1 − g)`` and the box of
-    ``x`` is the image widened by ``c ζ + g (ξ + c ζ) / (1 − g)``. ``DesignError`` when
-    ``g >= 1/2`` (``S`` numerically singular)."""
+@dataclass(frozen=True)
+class Transform:
+    """The float ``S``, ``Si = fl(S⁻¹)``, row sums ``rs = R_S 1`` of the bound ``R_S`` of
+    ``|I − Si S|`` and ``kx = ‖|Si|‖∞ / (1 − ‖R_S‖∞)`` (module docstring)."""
+
+    S: np.ndarray
+    Si: np.ndarray
+    rs: np.ndarray
+    kx: float
+
+
+def transform(S: np.ndarray, who: str) -> Transform:
+    """:class:`Transform` of ``S``; :class:`~ivobs.DesignError` when ``‖R_S‖∞ >= 1/2``
+    (``S`` numerically singular: no bound of ``x`` from ``z``)."""
     n = S.shape[0]
-    gam = gamma_n(n + 1)
-    g = norm_inf(np.abs(Si @ S - np.eye(n)) + gam * (np.abs(Si) @ np.abs(S)))
+    Si = np.linalg.inv(S)
+    SiS = Si @ S
+    res = np.abs(SiS - np.eye(n))
+    aS, aSi = np.abs(S), np.abs(Si)
+    rs = upper((1.0 + _U2) * res.sum(axis=1) + _rows(product_error(aSi @ aS, n)), n + 2)
+    g = float(np.max(rs, initial=0.0))
     if not g < 0.5:
         raise DesignError(
-            f"{who}: the transformation S is numerically singular (‖S⁻¹S − I‖ = {g:.3g} in "
+            f"{who}: the transformation S is numerically singular (‖S⁻¹S − I‖ <= {g:.3g} in "
             f"floating point, cond(S) = {np.linalg.cond(S):.3g}): no guaranteed bounds through "
             "x = S⁻¹ z; give another L, R, e1, e2 or S"
         )
-    return g, gam * norm_inf(Si)
-
-
-def transform_step_error(
-    S: np.ndarray,
-    Si: np.ndarray,
-    A: np.ndarray,
-    Lk: np.ndarray,
-    C: np.ndarray,
-    B: np.ndarray,
-    Du: np.ndarray,
-    E: np.ndarray,
-    F: np.ndarray,
-    Q: np.ndarray,
-    mats: tuple[np.ndarray, np.ndarray, np.ndarray],
-) -> np.ndarray:
-    """Coefficients ``(c_x, c_z, c_y, c_u, c_d)`` of the error of one step of the recursion in
-    ``z = S x`` (``S ≠ I``; module docstring): the computed step differs from the
-    exact ``z+ = S M S⁻¹ z + S L_k y + S(B − L_k D_u) u + S(E − L_k F) d`` (``M = A − L_k C``,
-    true ``z = S x``) by at most ``c_x ‖x‖ + c_z ‖z‖ + c_y ‖y‖ + c_u ‖u‖ + c_d ‖d‖``
-    (∞-norms; ``x``, ``z``: the true state, bounded by its boxes):
-
-    * ``(Q − S M S⁻¹) z = (Q S − S M̂) x + S (M̂ − M) x`` with ``M̂ = fl(A − L_k C)``: the
-      residual ``Q S − S M̂`` is evaluated (plus ``γ (|Q| |S| + |S| |M̂|)`` for its rounding)
-      and ``|M̂ − M| <= γ (|A| + |L_k| |C|)`` — no ``cond(S)`` factor: the error acts on
-      ``x``, not on ``S⁻¹`` applied to ``z``;
-    * the computed ``S L_k``, ``S (B − L_k D_u)``, ``S (E − L_k F)``: ``γ |S|`` times the
-      absolute values of their factors;
-    * the evaluation of the step (split form, sums of ``m`` terms): ``γ_m`` times
-      ``‖Q‖ ‖z‖ + ‖S L_k‖ ‖y‖ + ‖S (B − L_k D_u)‖ ‖u‖ + ‖S (E − L_k F)‖ ‖d‖``.
-    """
-    n, ny, nu, nd = A.shape[0], C.shape[0], B.shape[1], E.shape[1]
-    Bz, Lz, Gz = mats
-    gam = gamma_n(2 * n + 2 * ny + nu + 2 * nd + 8)
-    aS, aL = np.abs(S), np.abs(Lk)
-    Mh = A - Lk @ C
-    res = np.abs(Q @ S - S @ Mh) + gam * (np.abs(Q) @ aS + aS @ np.abs(Mh))
-    c_x = norm_inf(res + gam * (aS @ (np.abs(A) + aL @ np.abs(C))))
-    c_z = gam * norm_inf(Q)
-    c_y = gam * (norm_inf(Lz) + 2.0 * norm_inf(aS @ aL))
-    c_u = gam * (norm_inf(Bz) + 2.0 * norm_inf(aS @ (np.abs(B) + aL @ np.abs(Du))))
-    c_d = gam * (norm_inf(Gz) + 2.0 * norm_inf(aS @ (np.abs(E) + aL @ np.abs(F))))
-    return np.array([c_x, c_z, c_y, c_u, c_d])
+    kx = float(upper(float(np.max(_rows(Si))) / (1.0 - g), 2))
+    return Transform(S, Si, rs, kx)
 
 
 @dataclass(frozen=True)
-class RoundingBound:
-    """The floating-point model of the recursion with a gain ``L`` (``S = I``; module
-    docstring). One step's error is at most
-    ``gamma (a_z ‖z‖_∞ + a_y ‖y‖_∞ + a_u ‖u‖_∞ + a_d ‖d‖_∞)`` (``‖d‖``: the largest bound
-    magnitude); ``kappa = ‖(I − |A − LC|)⁻¹‖_∞`` amplifies it over the steps with complete
-    measurements; ``mu``, ``nu``: the factors on the bounds' magnitude and on the data scale
-    that the outward margin of the vectorised path needs beyond
-    :data:`~ivobs.estimators.base.ROUNDING`."""
+class RowErrors:
+    """Row sums of the bounds of the matrix errors of one step (module docstring), per row of
+    ``z+`` (``ex`` on ``‖x‖∞``, ``eu``, ``ey`` (with the data's rounding), ``ed``), of ``x``
+    (``xx`` on ``‖x‖∞``; ``S ≠ I``) and of the test rows ``C x`` (``px`` on ``‖x‖∞``, ``pz``
+    on ``‖z‖∞``)."""
 
-    kappa: float
-    gamma: float
-    a_z: float
-    a_y: float
-    a_u: float
-    a_d: float
-    mu: float
-    nu: float
+    ex: np.ndarray
+    eu: np.ndarray
+    ey: np.ndarray
+    ed: np.ndarray
+    xx: np.ndarray
+    px: np.ndarray
+    pz: np.ndarray
 
 
-def rounding_bound(sys: LinearSystem, L: np.ndarray, D: Any) -> RoundingBound:
-    """:class:`RoundingBound` of the recursion with gain ``L`` and ``D = A − LC`` (dense or
-    ``scipy.sparse``; ``|D|`` Schur): ``mu = κ γ a_z / ROUNDING`` and
-    ``nu = κ γ (a_y + a_u' + a_d') / ROUNDING``, where ``a_u'``, ``a_d'`` bound the input and
-    disturbance terms relative to the base data scale ``s`` (which bounds ``g_j |u_j|``,
-    ``|E| |d|``, ``|F| |d|``)."""
-    n, ny, nu, nd = sys.nx, sys.ny, sys.nu, sys.nd
-    absL = np.abs(L)
-    if sys.is_sparse:
-        from scipy.sparse import identity
-        from scipy.sparse.linalg import spsolve
-
-        Aa = abs(sys.sparse("A"))
-        Ca = abs(sys.sparse("C"))
-        Da = abs(D).tocsc()
-        with np.errstate(all="ignore"):
-            kap = np.atleast_1d(spsolve((identity(n, format="csc") - Da).tocsc(), np.ones(n)))
-    else:
-        Aa, Ca = np.abs(sys.A_at(0)), np.abs(sys.C_at(0))
-        with np.errstate(all="ignore"):
-            kap = np.linalg.solve(np.eye(n) - np.abs(D), np.ones(n))
-    # (I − |D|)⁻¹ >= 0 when |D| is Schur: its row sums are the amplification of each component
-    kappa = float(kap.max()) if np.all(np.isfinite(kap)) and kap.min() >= 1.0 - 1e-9 else np.inf
-    # terms per row of Q_k = A − L_k C (any pattern): products with structural zeros are exact
-    if sys.is_sparse:
-        from scipy.sparse import csr_matrix
-
-        P = ((Aa != 0).astype(float) + csr_matrix(absL) @ (Ca != 0).astype(float)).tocsr()
-        P.eliminate_zeros()
-        row_nnz = int(np.max(np.diff(P.indptr), initial=1))
-    else:
-        P = (Aa != 0) | (absL @ (Ca != 0) != 0)
-        row_nnz = int(np.max(P.sum(axis=1), initial=1))
-    m = 2 * max(row_nnz, 1) + nu + 2 * ny + 2 * nd + 6
-    gamma = gamma_n(m)
-    # Q_k z (with the rounding of Q_k = A − L_k C itself and the true state inside the box)
-    a_z = 3.0 * float(np.max(np.asarray(Aa @ np.ones(n)).ravel() + absL @ (Ca @ np.ones(n))))
-    a_y = float(np.max(absL.sum(axis=1), initial=0.0))  # L_k y
-    a_u = a_u_s = 0.0  # (B − L_k D_u) u, and the same relative to the data scale
-    if nu:
-        B, Du = np.abs(sys.B_at(0)), np.abs(sys.D_at(0))
-        Mu = 2.0 * (B + absL @ Du)
-        a_u = float(np.max(Mu.sum(axis=1)))
-        g = np.max(np.vstack([B, Du]), axis=0)  # the base scale bounds g_j |u_j|
-        a_u_s = float(np.max((Mu[:, g > 0] / g[g > 0]).sum(axis=1), initial=0.0))
-    a_d = a_d_s = 0.0  # (E − L_k F) d and its Lemma-1 bounds
-    if nd:
-        E, F = np.abs(sys.E_at(0)), np.abs(sys.F_at(0))
-        a_d = 3.0 * float(np.max((E + absL @ F).sum(axis=1)))
-        # |E| |d| <= s, |F| |d| <= s (base scale) for Box bounds; nothing is known for callables
-        a_d_s = 3.0 * (1.0 + a_y) if isinstance(sys.d, Box) else 0.0
-    mu = kappa * gamma * a_z / ROUNDING
-    nu_ = kappa * gamma * (a_y + a_u_s + a_d_s) / ROUNDING
-    return RoundingBound(kappa, gamma, a_z, a_y, a_u, a_d, mu, nu_)
+def pattern_errors(
+    mats: dict[str, Any], Lk: np.ndarray, tr: Transform | None, sys_mats: tuple[Any, ...]
+) -> RowErrors:
+    """:class:`RowErrors` of the float matrices ``mats`` (``Mh``, ``Bh``, ``Gh`` in ``x``; with
+    ``tr``: ``SM``, ``Q``, ``Bz``, ``Lz``, ``G``, ``Cz``) of the gain ``L_k``."""
+    C, Du, F = sys_mats[2], sys_mats[3], sys_mats[5]
+    ny, n = C.shape
+    aL = np.abs(Lk)
+    Cr, Dr, Fr = _rows(C), _rows(Du), _rows(F)
+    # x coordinates: |A − L_k C − M̂| 1, |B − L_k D_u − B̂| 1, |E − L_k F − Ĝ| 1
+    g_ny = 2.0 * gamma(ny + 2)
+    em = upper(g_ny * (aL @ Cr) + _diff(mats["Mh"], ny), 3)
+    eb = upper(g_ny * (aL @ Dr) + _diff(mats["Bh"], ny), 3)
+    eg = upper(g_ny * (aL @ Fr) + _diff(mats["Gh"], ny), 3)
+    data = _U2 * _rows(Lk)  # the measurement's own rounding through L_k
+    zero_n, zero_y = np.zeros(n), np.zeros(ny)
+    if tr is None:
+        return RowErrors(em, eb, upper(data, 1), eg, zero_n, zero_y, zero_y)
+    S, Si = tr.S, tr.Si
+    aS = np.abs(S)
+    g_n = 2.0 * gamma(n + 2)
+    Q, SM = mats["Q"], mats["SM"]
+    QS = Q @ S
+    resid = (1.0 + _U2) * np.abs(SM - QS).sum(axis=1)
+    ex = upper(
+        aS @ em + resid + g_n * (aS @ _rows(mats["Mh"]) + np.abs(Q) @ _rows(S)) + 4 * n * n * ETA,
+        n + 4,
+    )
+    eu = upper(aS @ eb + g_n * (aS @ _rows(mats["Bh"])) + n * n * ETA, n + 3)
+    ey = upper(g_n * (aS @ _rows(Lk)) + aS @ data + n * n * ETA, n + 3)
+    ed = upper(aS @ eg + g_n * (aS @ _rows(mats["Gh"])) + n * n * ETA, n + 3)
+    pz = upper(g_n * (np.abs(C) @ _rows(Si)) + n * n * ETA, n + 2)
+    px = upper(np.abs(C) @ tr.rs, n + 1)
+    return RowErrors(ex, eu, ey, ed, tr.rs, px, pz)
 
 
-@dataclass(frozen=True)
-class Margins:
-    """What the estimator adds to the base rounding margin for a gain ``L`` (``S = I``):
-    ``mu``, ``nu`` (at least 1: the factors on the bound's magnitude and on the data scale),
-    ``ctol`` (the consistency test's slack, :data:`CONSISTENCY_TOL` times ``max(mu, nu)``),
-    ``bound`` (:class:`RoundingBound`) and ``blocks``: where the blocks of ``v = [z̲; z̄;
-    y_obs; u]`` start and their coefficients ``(a_z, a_y, a_u)`` (:meth:`local_error`)."""
-
-    mu: float
-    nu: float
-    ctol: float
-    bound: RoundingBound
-    blocks: tuple[np.ndarray, np.ndarray]
-
-    def local_error(self, v: np.ndarray, dmax: float) -> float:
-        """The rounding bound of one step of the loop (module docstring),
-        ``γ (a_z ‖z‖_∞ + a_y ‖y_obs‖_∞ + a_u ‖u‖_∞ + a_d ‖d‖_∞)``, for ``v = [z̲; z̄; y_obs; u]``
-        (fresh; overwritten): the largest entry of each block (one ``reduceat``); ``dmax``: the
-        largest magnitude of the bounds of ``d``."""
-        rb = self.bound
-        idx, coef = self.blocks
-        e = float(coef.dot(np.maximum.reduceat(np.abs(v, out=v), idx)))
-        if rb.a_d:
-            e += rb.a_d * dmax
-        return rb.gamma * e
-
-
-def margins(sys: LinearSystem, L: np.ndarray, D: Any, who: str) -> Margins:
-    """The :class:`Margins` of :func:`rounding_bound` (``S = I``); :class:`DesignError` when
-    ``(I − |A − LC|)⁻¹`` cannot be evaluated."""
-    rb = rounding_bound(sys, L, D)
-    if not np.isfinite(rb.mu + rb.nu):
-        raise DesignError(
-            f"{who}: (I − |A − LC|)⁻¹ could not be evaluated (|A − LC| has spectral "
-            "radius too close to 1): the rounding of the recursion cannot be bounded"
-        )
-    mu, nu = max(1.0, rb.mu), max(1.0, rb.nu)
-    sizes = np.array([2 * sys.nx, sys.ny, sys.nu])
-    keep = sizes > 0  # the blocks of v = [z̲; z̄; y_obs; u] (reduceat needs nonempty ones)
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    blocks = (starts[keep], np.array([rb.a_z, rb.a_y, rb.a_u])[keep])
-    return Margins(mu, nu, CONSISTENCY_TOL * max(mu, nu), rb, blocks)
+def row_bounds(
+    blocks: list[Any],
+    err: RowErrors,
+    kx: float,
+    sizes: tuple[int, ...],
+    has_x: bool,
+    m: int,
+    obs: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, e0)`` of the module docstring for a step matrix whose row groups are
+    ``[z+; x (has_x); p − y; y − p]`` (the upper rows; ``p``: the observed outputs ``obs``) and
+    whose column blocks ``[z̄, z̲, u, y, d̄, d̲]`` have the ``sizes``; ``blocks[g][b]``: the part
+    of ``W`` of row group ``g`` and column block ``b`` (None: zero; its row sums of absolute
+    values are taken); ``m``: the longest row. ``R`` has one column per nonempty block."""
+    ge = 2.0 * gamma(m + 2)
+    Vec = np.ndarray | None
+    groups: list[tuple[str, np.ndarray, Vec, Vec, Vec]] = [("z", err.ex, err.eu, err.ey, err.ed)]
+    if has_x:
+        groups.append(("x", err.xx, None, None, None))
+    groups += [("p", err.px[obs], None, None, None)] * 2
+    R_rows, e0_rows = [], []
+    for (name, on_x, on_u, on_y, on_d), sums in zip(groups, blocks, strict=True):
+        rows = len(on_x)
+        cols = []
+        for b, s in enumerate(sums):
+            a = np.zeros(rows) if s is None else _rows(s)
+            c = (ge + 4.0 * UNIT_ROUNDOFF) * a  # (+ the last addition: 2u |fl(W v)|, doubled)
+            if b in (0, 1):  # ‖x‖ <= kx ‖z‖ <= kx (‖z̄‖ + ‖z̲‖)
+                c = c + kx * on_x
+                if name == "p":
+                    c = c + err.pz[obs]
+            elif b == 2 and on_u is not None:
+                c = c + on_u
+            elif b == 3:
+                c = c + (on_y if on_y is not None else (_U2 if name == "p" else 0.0))
+            elif b in (4, 5) and on_d is not None:
+                c = c + on_d
+            cols.append(c)
+        R_rows.append(np.column_stack(cols))
+        e0_rows.append(np.full(rows, (m + 4) * ETA))
+    R = np.vstack(R_rows) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+    keep = [b for b, size in enumerate(sizes) if size]
+    nb = len(keep)
+    e0 = upper(np.concatenate(e0_rows) * (1.0 + 4.0 * UNIT_ROUNDOFF), nb + 2) + (nb + 4) * ETA
+    return np.ascontiguousarray(upper(R[:, keep], nb + 2)), e0

@@ -31,7 +31,6 @@ from ...design.width_lp import MAX_LP_STATES, width_gain
 from ...errors import DesignError, IvobsError
 from ...linalg import observability_matrix, spectral_radius
 from ...model import LinearSystem
-from ...sets import Box
 from ..base import Design
 from .design import check_design_size, check_gain, design_delta
 
@@ -123,7 +122,7 @@ def transformed_design(
         R_given = None  # S was built from R: check_transform checks nonnegativity only
     Rs = check_transform(M, S, who, R_given)
     steady = None
-    if not (sys.nd and not isinstance(sys.d, Box)):
+    if not sys.bounds_depend_on_y:
         steady = transformed_width(M, G, delta, S)
     return TransformedDesign(
         L=L,
@@ -171,7 +170,7 @@ def _schur(sys: LinearSystem, who: str, L: Any, poles: Any) -> TransformedDesign
     M = A - L @ C
     Rs = check_transform(M, S, who, None, nonnegative=False)
     steady = None
-    if not (sys.nd and not isinstance(sys.d, Box)):
+    if not sys.bounds_depend_on_y:
         steady = transformed_width(M, E - L @ F, delta, S)
     return TransformedDesign(
         L=L,
@@ -193,7 +192,7 @@ def _identity(
     A, _, C, _, E, F = sys.matrices_at(0)
     M = A - L @ C
     steady = None
-    if not (sys.nd and not isinstance(sys.d, Box)):
+    if not sys.bounds_depend_on_y:
         steady = steady_width(M, E - L @ F, delta)
     return TransformedDesign(
         L=L,

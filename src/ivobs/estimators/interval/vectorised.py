@@ -1,279 +1,274 @@
 """The whole record at once (complete measurements, constant or tabulated bounds): the interval
-recursion as linear filters of the shared kernels (:mod:`ivobs._recursion`).
+recursion as a centre and a radius, each a linear filter over the record, with its own proof.
 
-The midpoint ``c+ = Q c + S L y + S(B − L D_u) u + gc`` and the innovation
-``y − C S⁻¹ c − D_u u − fc`` are outputs of one :class:`~ivobs._recursion.SplitFilter` pass; the
-radius ``r+ = |Q| r + gr`` does not depend on the data (computed once per record length, shared
-by the streams of a batch). Sparse systems run the bounds themselves through one
-:class:`~ivobs._recursion.LinearFilter` (loop form). The margins of the rounding are in
-:mod:`.rounding`; tests check these paths equal to the loop over the step.
+**Algorithm.** With every output observed, the bounds of ``z = S x`` are ``ĉ_k ± ρ_k``: the
+centre follows ``ĉ+ = Q ĉ + L_z y + B_z u + G d_c`` (one :class:`~ivobs._recursion.SplitFilter`
+pass over the record or batch, evaluated in blocks: sums in another order than the loop's) and
+the radius ``r+ = |Q| r + |G| d_r`` does not depend on the data (one pass per record length,
+shared by the streams of a batch). In exact arithmetic this is the loop's recursion
+(:mod:`.recursion`: ``Q⁺ z̄ − Q⁻ z̲`` has centre ``Q c`` and radius ``|Q| r``).
+
+**Proof** (the float matrices and their error bounds are those of :mod:`.rounding`). Whatever
+the computed centres ``ĉ_k`` are, ``e_k = z_k − ĉ_k`` obeys
+
+    e+ = Q e + G (d − d_c) + β,    β_k = (G d_c − fl(G d_c)) + δ_k − ρ_k,
+
+with ``δ_k`` the matrix errors of :mod:`.rounding` (on ``‖x_k‖``, ``‖u_k‖``, ``‖y_k‖``,
+``‖d_k‖``) and ``ρ_k = ĉ_{k+1} − (Q ĉ_k + L_z y_k + B_z u_k + fl(G d_c))`` the *defect* of the
+computed sequence, evaluated afterwards by one product over the record and bounded with its
+rounding ([Higham2002, §3.1], norm-wise). Split ``e = a + b``: ``a+ = Q a + G (d − d_c)``,
+``|a_0| <= r_0`` gives ``|a_k| <= r_k`` (the exact radius recursion), and ``b+ = Q b + β``,
+``b_0 = 0``. The computed radii ``r̂`` fall short of the exact ones by at most ``p_k``,
+``p+ = |Q| p + τ`` with ``τ_k`` the (evaluated) deficit ``|Q| r̂_k + |G| d_r − r̂_{k+1}``.
+``‖Q^i‖∞ <= ‖|Q|^i‖∞ <= c λ^i`` (:class:`~ivobs.sets.rounding.DecayBound` of ``|Q|``), so
+``‖b_k‖∞ + ‖p_k‖∞ <= s_k``, ``s+ = λ s + c (‖β‖ + ‖τ‖)``: one more linear filter
+(:meth:`~ivobs.sets.rounding.DecayBound.accumulate`; ``δ_k`` depends on ``‖z_k‖ <= ‖ĉ_k‖ +
+‖r̂_k‖ + s_k``, whose last term goes into ``λ``). Hence ``z_k ∈ ĉ_k ± (r̂_k + s_k)``, rounded
+outwards; ``s_k`` is of the order of the rounding of the data times ``c / (1 − λ)``. The box of
+``x`` (``S ≠ I``) and the consistency test of ``y[k]`` are evaluated from it with their rounding
+bounds, as in the loop; a measurement found inconsistent sends the record (or that stream of a
+batch) to the loop, which reports it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ...sets import Box, image_bounds
-from .._recursion import (
-    LinearFilter,
-    SplitFilter,
-    centre_band,
-    matrix_product,
-    redo_streams,
-    within_band,
-)
-from ..rounding import ROUNDING
-from .operators import SplitOperators
-from .rounding import largest, norm_inf
+from ...errors import DesignError, IvobsError
+from ...linalg import UNIT_ROUNDOFF
+from ...sets.rounding import ETA, DecayBound, gamma, mid_rad, up, upper
+from .._recursion import LinearFilter, SplitFilter, matrix_product, redo_streams
+from .operators import Operators
 
 __all__ = ["VectorPath"]
 
 Bounds = tuple[np.ndarray, ...]
 
-
-def bad_streams(res: np.ndarray, rad: np.ndarray, y: np.ndarray, ctol: float) -> Any:
-    """The loop's test ``|res| <= rad + tol`` (:meth:`SplitOperators.consistent`) over a record
-    or a batch: None when it passes; for a batch the ``(B,)`` mask of streams that fail; True
-    when the single record fails (the caller falls back to its loop)."""
-    fail = np.abs(res) > rad + ctol * (1.0 + np.abs(y) + 2.0 * rad)
-    if not fail.any():
-        return None
-    return fail.reshape(fail.shape[0], -1).any(axis=1) if y.ndim == 3 else True
+_U2 = 2.0 * np.finfo(float).eps / 2
 
 
-@dataclass(frozen=True)
-class _Terms:
-    """What the vectorised path needs for a record of ``T`` steps: the filter, the radius
-    ``(T, nx)`` in ``x`` coordinates, the output band radius ``|C| r + fr``, for time-varying
-    bounds the known-input signals ``(gc, fc)`` (else None), and ``fc`` at step 0."""
+def _norm(M: np.ndarray) -> float:
+    """``‖M‖∞`` rounded up (0 for an empty matrix)."""
+    return float(upper(np.max(np.abs(M).sum(axis=1), initial=0.0), max(M.shape[-1], 1)))
 
-    T: int
-    filt: SplitFilter
-    rad: np.ndarray
-    yrad: np.ndarray
-    known: tuple[np.ndarray, np.ndarray] | None
-    fc0: np.ndarray
+
+def _enclose(c: np.ndarray, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` with ``[c − ρ, c + ρ] ⊆ [lo, hi]`` exactly for ``ρ = r + s`` (``r``
+    ``(T, n)`` shared by the streams, ``s`` ``(..., T)`` one number per step), in
+    round-to-nearest: ``ρ' = 2u (1 + 8u) |c| + (r + s)(1 + 8u) + η`` evaluated in three rounded
+    operations (after the factors) is at least ``(ρ + u |c|) / (1 − u)``, and
+    ``fl(c + ρ') >= c + ρ' − u (|c| + ρ') >= c + ρ`` (the same below; a result in the
+    subnormal range is exact)."""
+    k = 1.0 + 8.0 * UNIT_ROUNDOFF
+    r2 = np.abs(c)
+    r2 *= 2.0 * UNIT_ROUNDOFF * k
+    r2 += r * k + ETA
+    r2 += (s * k)[..., None]
+    return c - r2, c + r2
+
+
+def _rowmax(a: np.ndarray) -> np.ndarray:
+    """``max_i |a_i|`` over the last axis (0 when it is empty): exact. Short rows (the states
+    of a small system) column by column: NumPy's reduction along a short last axis is slow."""
+    n = a.shape[-1]
+    if n > 16:
+        big: np.ndarray = np.abs(a).max(axis=-1)
+        return big
+    out = np.zeros(a.shape[:-1])
+    for j in range(n):
+        np.maximum(out, np.abs(a[..., j]), out=out)
+    return out
 
 
 class VectorPath:
     """``_run`` of the interval observers (module docstring)."""
 
-    def __init__(self, ops: SplitOperators):
+    def __init__(self, ops: Operators):
         self.ops = ops
-        self._terms: _Terms | None = None  # the last record length's (batches share it)
+        self._decay: DecayBound | bool | None = False  # False: not yet computed
+        self._radius: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._filter: SplitFilter | None = None
+
+    def _decay_bound(self) -> DecayBound | None:
+        """``c``, ``λ`` of ``|Q|`` with the matrix errors' feedback (module docstring); None
+        when they cannot be certified (then the loop runs)."""
+        if self._decay is False:
+            ops, m = self.ops, self.ops.full
+            try:
+                db = DecayBound.of(np.abs(m.Q))
+            except DesignError:
+                self._decay = None
+                return None
+            kx = 1.0 if ops.tr is None else ops.tr.kx
+            lam = float(up(db.lam + db.c * float(upper(kx * np.max(m.err.ex, initial=0.0), 2))))
+            self._decay = DecayBound(db.c, lam) if lam < 1.0 else None
+        return self._decay if isinstance(self._decay, DecayBound) else None
 
     def run(self, est: Any, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> Bounds | None:
-        """The bounds of the record or batch; ``None`` (the loop) for callable bounds, missing
-        samples, time-varying bounds shorter than the record, or an inconsistent measurement
-        of a single record (the loop reports it and predicts without it); streams of a batch
-        with one go through ``est``'s loop."""
+        """The bounds of the record or batch; ``None`` (the loop) for sparse systems (one
+        sparse product per step: the loop is as fast), interval matrices, callable bounds,
+        missing samples, time-varying bounds shorter than the record, or an inconsistent
+        measurement of a single record (the loop reports it); streams of a batch with one go
+        through ``est``'s loop."""
         ops = self.ops
-        box = ops.sys.d
+        sys = ops.sys
         T = y.shape[-2]
-        if not T or (box is not None and not isinstance(box, Box)):
-            return None  # (an empty record: the loop)
-        if box is not None and box.is_time_varying and box.lo.shape[0] < T:
+        if not T or ops.sparse or ops.unc is not None or sys.bounds_depend_on_y:
             return None
-        if np.isnan(y).any() or ops.unc is not None:  # interval matrices: terms from the box
+        if np.isnan(y).any():
             return None
-        if ops.sparse:
-            return self._run_sparse(est, u, y, T)
-        if ops.S is not None and not np.isfinite(ops.kappa_z):
-            return None  # |Q| not Schur in floating point: the loop bounds each step's error
-        return self._run_dense(est, u, y, t)
+        try:
+            dlo, dhi = sys.d_over(T)
+        except IvobsError:
+            return None
+        decay = self._decay_bound()
+        if decay is None:
+            return None
+        if sys.has_constant_bounds:
+            dlo, dhi = dlo[:1], dhi[:1]
+        return self._run(est, decay, u, y, t, dlo, dhi)
 
-    def _run_dense(
-        self, est: Any, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
+    def _run(
+        self,
+        est: Any,
+        decay: DecayBound,
+        u: np.ndarray,
+        y: np.ndarray,
+        t: np.ndarray | None,
+        dlo: np.ndarray,
+        dhi: np.ndarray,
     ) -> Bounds | None:
-        ops = self.ops
-        vec = self._vector_terms(y.shape[-2])
-        hi = np.empty((*y.shape[:-1], ops.nx))
-        sig = [y, u] if vec.known is None else [y, u, *vec.known]
-        lo0, hi0 = ops.initial_bounds()
-        (xc, innov), shared = vec.filt.run(sig, x0=0.5 * (lo0 + hi0), out=[hi, None], temp=[1])
-        s_x, s_i = (None, None) if shared is None else shared
-        if ops.Si is not None:  # [Tang2019, eq. (42)]: the prior box itself at k = 0
-            row0 = ops.x0.center - (0.0 if s_x is None else s_x[0])
-            xc[..., 0, :] = row0
-            inn0 = y[..., 0, :] - ops.x0.center @ ops.C.T - u[..., 0, :] @ ops.Du.T
-            inn0 -= vec.fc0 + (0.0 if s_i is None else s_i[0])
-            innov[..., 0, :] = inn0
-        # the loop's test is |res| <= pr + tol(|y|, pr); without |y| the band is narrower, so
-        # passing it decides without touching y again
-        bad = None
-        if not within_band(innov, s_i, vec.yrad + ops.ctol * (1.0 + 2.0 * vec.yrad)):
-            bad = bad_streams(innov if s_i is None else innov + s_i, vec.yrad, y, ops.ctol)
-            if bad is True:
-                return None
-        del innov
-        lo, xc = centre_band(xc, vec.rad, s_x)
-        self._widen(lo, xc)
-        if ops.S is not None:
-            extra = self._transform_margin(lo, xc, u, y)
-            lo -= extra
-            xc += extra
-        if bad is not None:  # only the streams with an inconsistent measurement by the loop
-            return redo_streams(est, u, y, t, lo, xc, bad)
-        return lo, xc
-
-    def _widen(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """In place: ``(mu − 1) ROUNDING |bound|`` on top of the base margin (when ``mu > 1``;
-        :mod:`.rounding`)."""
-        mu = self.ops.mu
-        if mu > 1.0:
-            m = np.maximum(np.abs(lo), np.abs(hi))
-            m *= (mu - 1.0) * ROUNDING
-            lo -= m
-            hi += m
-
-    def _transform_margin(
-        self, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, y: np.ndarray
-    ) -> np.ndarray:
-        """The rounding of the vectorised path in ``z = S x`` (``S ≠ I``; :mod:`.rounding`): per
-        step, ``‖Si‖ κ_z max_{j<=k} δ_j`` plus the conversion to ``x``
-        (:func:`~.rounding.transform_conversion`), with ``δ_j`` from
-        :func:`~.rounding.transform_step_error` on the running maxima of ``‖x‖`` (the bounds),
-        ``‖z‖ <= 2 ‖S‖ ‖x‖``, ``‖y‖``, ``‖u‖`` and ``‖d‖``. When the margin from each stream's
-        whole-record maxima is below ``1e-3 ROUNDING`` that one is used (whole-array
-        reductions): shape ``(..., 1, 1)``; else the running maxima are taken per block of
-        ``T / 64`` steps (the maximum up to the end of a step's block): shape ``(..., T, 1)``."""
-        ops = self.ops
-        assert ops.S is not None and ops.Si is not None and ops.tconv is not None
-        err = ops.full.err
-        assert err is not None
-        c_x, c_z, c_y, c_u, c_d = err
-        nS, nSi, kap = norm_inf(ops.S), norm_inf(ops.Si), ops.kappa_z
-        g, c = ops.tconv
-        box = ops.sys.d
-        Dm = 0.0
-        if isinstance(box, Box):
-            Dm = largest(box.lo, box.hi)
-
-        def margin(X: Any, Y: Any, U: Any) -> Any:
-            delta = (c_x + 2.0 * nS * c_z) * X + c_y * Y + c_u * U + c_d * Dm
-            zeta = 2.0 * nS * X
-            return nSi * kap * delta + c * zeta + g * (X + c * zeta) / (1.0 - g)
-
-        lead = y.shape[:-2]
-        B = int(np.prod(lead))
-
-        def stream_max(a: np.ndarray) -> np.ndarray:  # max |a| per stream (u may be shared)
-            flat = a.reshape(B, -1) if a.ndim == y.ndim else a.reshape(1, -1)
-            if not flat.shape[1]:
-                return np.zeros(flat.shape[0])
-            big: np.ndarray = np.maximum(flat.max(axis=1), -flat.min(axis=1))
-            return big
-
-        extra = margin(np.maximum(stream_max(hi), stream_max(lo)), stream_max(y), stream_max(u))
-        if float(np.max(extra)) <= 1e-3 * ROUNDING:
-            return np.asarray(extra).reshape(*lead, 1, 1)
-
-        # per block of K steps (64 blocks: contiguous reductions), then the running maximum
-        # over blocks: at step k, the maximum up to the end of k's block (>= the one up to k)
+        ops, m = self.ops, self.ops.full
+        n, ny, nu, nd = ops.nx, ops.ny, ops.nu, ops.nd
         T = y.shape[-2]
-        K = max(1, -(-T // 64))
-        starts = np.arange(0, T, K)
-
-        def running(a: np.ndarray) -> np.ndarray:
-            if not a.shape[-1]:
-                return np.zeros((*a.shape[:-2], starts.size))
-            r = np.maximum(
-                np.maximum.reduceat(a, starts, axis=-2).max(axis=-1),
-                -np.minimum.reduceat(a, starts, axis=-2).min(axis=-1),
-            )
-            out: np.ndarray = np.maximum.accumulate(r, axis=-1, out=r)
-            return out
-
-        X = np.maximum(running(hi), running(lo))
-        extra = margin(X, running(y), running(u))
-        return np.repeat(extra, K, axis=-1)[..., :T, None]
-
-    def _disturbance_images(self, T: int) -> tuple[np.ndarray, ...]:
-        """Lemma 1's bounds of the disturbance terms over ``T`` steps with every output observed:
-        ``(glo, ghi, flo, fhi)``, ``[glo, ghi] ∋ (S(E − LF)) d`` and ``[flo, fhi] ∋ F d``
-        (``(T, ·)`` for time-varying bounds; zeros without ``d``)."""
-        ops = self.ops
-        box = ops.sys.d
-        n, ny = ops.nx, ops.ny
-        if box is None:
-            return np.zeros(n), np.zeros(n), np.zeros(ny), np.zeros(ny)
-        assert isinstance(box, Box)
-        dlo, dhi = (box.lo[:T], box.hi[:T]) if box.is_time_varying else (box.lo, box.hi)
-        glo, ghi = image_bounds(ops.full.Gz, dlo, dhi)
-        flo, fhi = image_bounds(ops.F, dlo, dhi)
-        return glo, ghi, flo, fhi
-
-    def _run_sparse(self, est: Any, u: np.ndarray, y: np.ndarray, T: int) -> Bounds | None:
-        """Sparse ``A``: the bounds themselves, ``[z̄; z̲]+ = S2 [z̄; z̲] + v[k]``, one sparse
-        product per step with every input term ``v`` precomputed by one matrix product
-        (:class:`~ivobs._recursion.LinearFilter`, loop form); then the consistency of ``y``."""
-        ops = self.ops
-        n, m = ops.nx, ops.full
-        glo, ghi, flo, fhi = self._disturbance_images(T)
-        two = np.vstack
-        W = [two([m.Lz, m.Lz]), two([m.Bz, m.Bz])]
-        sig = [y, u]
-        g = None
-        if glo.ndim == 2:  # time-varying bounds: one more (shared) input
-            W.append(np.eye(2 * n))
-            sig.append(np.broadcast_to(np.hstack([ghi, glo]), (*y.shape[:-2], T, 2 * n)))
-        else:
-            g = np.concatenate([ghi, glo])
-        filt = LinearFilter(m.S2, W, [], g=g)
-        lead = y.shape[:-2]
-        sig = [np.broadcast_to(a, (*lead, *a.shape[-2:])) for a in sig]
+        tv = dlo.shape[0] > 1  # time-varying bounds: (T, nd); constant: (1, nd)
+        dc, dr = mid_rad(dlo, dhi)
+        aG, aF = np.abs(m.G), np.abs(ops.mats[5])
+        gc = dc @ m.G.T  # (1 or T, n)
+        g_err = _rowmax(upper(aG @ np.abs(dc).T, nd).T) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
+        gr = upper(dr @ aG.T, nd)
+        fc = dc @ ops.mats[5].T
+        f_err = _rowmax(upper(np.abs(dc) @ aF.T, nd)) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
+        fr = upper(dr @ aF.T, nd)
+        d_mag = _rowmax(np.maximum(np.abs(dlo), np.abs(dhi)))  # (1 or T,)
         lo0, hi0 = ops.initial_bounds()
-        X = filt.states(sig, x0=np.concatenate([hi0, lo0]))
-        hi, lo = X[..., :n], X[..., n:]
-        # consistency of y[k] with C[x̲_k, x̄_k] + D_u u + F[d] (the loop's test), on the few
-        # states C reads
-        assert ops.C_gather is not None
-        cols, Rs, Ra = ops.C_gather
-        clo, chi = lo[..., cols], hi[..., cols]
-        yc = (clo + chi) @ Rs
-        yc += matrix_product(u, ops.Du.T) + 0.5 * (flo + fhi)
-        yr = (chi - clo) @ Ra + 0.5 * (fhi - flo)
-        bad = bad_streams(y - yc, yr, y, ops.ctol)
-        if bad is True:
-            return None
-        self._widen(lo, hi)
-        if bad is not None and bad.any():
-            return redo_streams(est, u, y, None, lo, hi, bad)
+        c0, r0 = mid_rad(lo0, hi0)
+
+        # -- the centre: one filter pass -------------------------------------------------------
+        c = self._centre(u, y, c0, gc if tv else gc[0], tv)
+        c[..., 0, :] = c0
+        # -- the radius (data-free) and its deficit --------------------------------------------
+        rad, tau = self._radius_of(T, r0, gr if tv else gr[0])
+        rmax = _rowmax(rad)  # (T,)
+        # -- the defect of the centres: whole (contiguous) arrays, then the rows k < T − 1 -------
+        cmax, ymax = _rowmax(c), _rowmax(y)
+        umax: Any = _rowmax(u) if nu else 0.0
+        pred = matrix_product(c, m.Q.T)
+        pred += matrix_product(y, m.Lz.T)
+        if nu and m.Bz.any():
+            pred += matrix_product(u, m.Bz.T)
+        pred += gc if tv else gc[0]
+        defect = pred[..., :-1, :]
+        defect -= c[..., 1:, :]
+        nQ, nL, nB, nG = _norm(m.Q), _norm(m.Lz), _norm(m.Bz), float(np.max(_rowmax(gc)))
+        ge = 2.0 * gamma(n + ny + nu + 4)
+        e = ops.tr.kx if ops.tr is not None else 1.0
+        ex, eu = e * float(np.max(m.err.ex, initial=0.0)), float(np.max(m.err.eu, initial=0.0))
+        ey, ed = float(np.max(m.err.ey, initial=0.0)), float(np.max(m.err.ed, initial=0.0))
+        cm0, ym = cmax[..., :-1], ymax[..., :-1]
+        um = umax[..., :-1] if nu else 0.0
+        beta = (1.0 + _U2) * _rowmax(defect)
+        del pred, defect
+        beta += (ge * nQ + ex) * cm0 + ge * cmax[..., 1:] + (ge * nL + ey) * ym
+        beta += (ge * nB + eu) * um
+        beta += ge * nG + (n + ny + nu + 4) * ETA + ex * rmax[:-1] + tau
+        beta += ed * (d_mag[:-1] if tv else d_mag[0]) + (g_err[:-1] if tv else g_err[0])
+        s = np.zeros(cmax.shape)
+        if T > 1:  # per stream (identical streams, identical bounds)
+            beta = upper(beta, 12)
+            for out, b in zip(s.reshape(-1, T), beta.reshape(-1, T - 1)):
+                out[1:] = decay.accumulate(b)
+        # z_k ∈ ĉ_k ± (r̂_k + s_k); ‖z_k‖ <= zmax
+        zmax = upper(cmax + rmax + s, 3)
+        # -- consistency of y[k] with C x + D_u u + F d (the loop's test rows) ----------------
+        Du = ops.mats[3]
+        yc = matrix_product(c, m.Cz.T)
+        if nu and Du.any():
+            yc += matrix_product(u, Du.T)
+        yc += fc
+        yc -= y
+        np.abs(yc, out=yc)
+        aC = np.abs(m.Cz)
+        yr = upper(matrix_product(rad, aC.T), n) + fr  # (T, ny): data-free
+        nC, nD = _norm(m.Cz), _norm(Du)
+        pz = float(np.max(m.err.pz, initial=0.0)) + e * float(np.max(m.err.px, initial=0.0))
+        nf = float(np.max(_rowmax(fc)))
+        slack = 2.0 * gamma(n + nu + 3) * (nC * cmax + nD * umax + nf) + f_err
+        slack += pz * zmax + _U2 * ymax + (n + nu + 3) * ETA
+        slack = upper(slack, 8)[..., None] + upper(s[..., None] * aC.sum(axis=1), n)
+        slack += yr
+        bad = yc > upper(slack, 4)
+        del yc, slack
+        fail = None
+        if bad.any():
+            if y.ndim == 2:
+                return None
+            fail = bad.reshape(bad.shape[0], -1).any(axis=1)
+        # -- the boxes ---------------------------------------------------------------------------
+        if ops.tr is None:
+            lo, hi = _enclose(c, rad, s)
+        else:
+            Si = ops.tr.Si
+            aSi = np.abs(Si)
+            xc = matrix_product(c, Si.T)
+            xr = upper(matrix_product(rad, aSi.T), n)  # (T, n): data-free
+            extra = 2.0 * gamma(n + 2) * _norm(Si) * cmax + float(np.max(ops.tr.rs)) * e * zmax
+            extra = upper(extra, 3) + upper(s * float(np.max(aSi.sum(axis=1))), 2)
+            lo, hi = _enclose(xc, xr, extra)
+            lo[..., 0, :] = ops.x0.lo  # [Tang2019, eq. (42)]: the prior box at k = 0
+            hi[..., 0, :] = ops.x0.hi
+        if fail is not None:
+            return redo_streams(est, u, y, t, lo, hi, fail)
         return lo, hi
 
-    def _vector_terms(self, T: int) -> _Terms:
-        """The :class:`_Terms` of a record of ``T`` steps (kept for the next call)."""
-        if self._terms is not None and self._terms.T == T:
-            return self._terms
-        ops = self.ops
-        n, ny = ops.nx, ops.ny
-        m = ops.full
-        glo, ghi, flo, fhi = self._disturbance_images(T)
-        gc, gr = 0.5 * (glo + ghi), 0.5 * (ghi - glo)
-        fc, fr = 0.5 * (flo + fhi), 0.5 * (fhi - flo)
-        Q = m.Qp - m.Qn
-        H = np.eye(n) if ops.Si is None else ops.Si
-        tv = gc.ndim == 2
-        W = [m.Lz, m.Bz] + ([np.eye(n), np.zeros((n, ny))] if tv else [])
-        J_inn: list[np.ndarray | None] = [np.eye(ny), -ops.Du]
+    def _centre(
+        self, u: np.ndarray, y: np.ndarray, c0: np.ndarray, gc: np.ndarray, tv: bool
+    ) -> np.ndarray:
+        """The centres ``ĉ`` ``(..., T, n)`` of the record or batch (one filter pass)."""
+        m, n = self.ops.full, self.ops.nx
         if tv:
-            J_inn += [None, -np.eye(ny)]
-        J: list[list[np.ndarray | None]] = [[None] * len(W), J_inn]
-        filt = SplitFilter(
-            Q, W, [H, -ops.C @ H], J, g=None if tv else gc, h=[None, None if tv else -fc]
-        )
-        z0lo, z0hi = ops.initial_bounds()
-        r0 = 0.5 * (z0hi - z0lo)
-        if tv:
-            rad = LinearFilter(m.Qp + m.Qn, [np.eye(n)], [np.abs(H)]).run([gr], x0=r0)[0]
+            filt = SplitFilter(m.Q, [m.Lz, m.Bz, np.eye(n)], [np.eye(n)])
+            sig = [y, u, gc]
         else:
-            rad = LinearFilter(m.Qp + m.Qn, [], [np.abs(H)], g=gr).run([], T=T, x0=r0)[0]
-        if ops.Si is not None:
-            rad[0] = ops.x0.radius
-        yrad = rad @ np.abs(ops.C).T + fr
-        terms = _Terms(T, filt, rad, yrad, (gc, fc) if tv else None, fc[0] if tv else fc)
-        self._terms = terms
-        return terms
+            if self._filter is None:
+                self._filter = SplitFilter(m.Q, [m.Lz, m.Bz], [np.eye(n)], g=gc)
+            filt, sig = self._filter, [y, u]
+        (c,), shared = filt.run(sig, x0=c0)
+        if shared is not None:
+            c += shared[0]
+        return c
+
+    def _radius_of(self, T: int, r0: np.ndarray, gr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(r̂, ‖τ‖)``: the computed radii ``(T, n)`` from ``r̂_0 = r0`` and the norms of
+        their deficits ``(T − 1,)`` (module docstring); kept for the next record of the same
+        length (constant bounds)."""
+        tv = gr.ndim == 2
+        if not tv and self._radius is not None and self._radius[0] == T:
+            return self._radius[1], self._radius[2]
+        m, n = self.ops.full, self.ops.nx
+        aQ = np.abs(m.Q)
+        if tv:
+            rad = LinearFilter(aQ, [np.eye(n)], [np.eye(n)]).run([gr], x0=r0)[0]
+        else:
+            rad = LinearFilter(aQ, [], [np.eye(n)], g=gr).run([], T=T, x0=r0)[0]
+        rad[0] = r0
+        nxt = matrix_product(rad[:-1], aQ.T)
+        nxt += gr[:-1] if tv else gr
+        ev = 2.0 * gamma(n + 3) * _rowmax(nxt) + (n + 3) * ETA
+        nxt -= rad[1:]
+        tau = upper((1.0 + _U2) * _rowmax(np.maximum(nxt, 0.0)) + ev, 3)
+        if not tv:
+            self._radius = (T, rad, tau)
+        return rad, tau

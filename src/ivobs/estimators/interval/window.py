@@ -23,6 +23,7 @@ from typing import ClassVar, TypeVar
 import numpy as np
 
 from ...design.finite_memory import WindowBound
+from ...sets import image_bounds
 from ..state import OnlineState
 
 __all__ = ["CooperativeState", "after_gap", "empty_window"]
@@ -56,7 +57,7 @@ def empty_window(bound: WindowBound | None, ny: int, nu: int) -> np.ndarray:
 
 def after_gap(
     bound: WindowBound,
-    dmax: float | None,
+    T: np.ndarray | None,
     new: S,
     old: S,
     u_k: np.ndarray,
@@ -65,7 +66,8 @@ def after_gap(
 ) -> S:
     """The next state ``new`` after step ``old.k``: with ``complete`` False a window starts;
     while one is pending the step's ``[y, u]`` is kept, and at its ``N``-th complete step the
-    bounds are intersected with the window's."""
+    bounds are intersected with the window's (its image by Lemma 1 of ``T`` when the bounds are
+    those of ``z = T x``)."""
     if not complete:
         return replace(new, fresh=0) if new.fresh != 0 else new
     j = old.fresh
@@ -77,7 +79,9 @@ def after_gap(
     buf[j, ny:] = u_k
     if j + 1 < bound.N:
         return replace(new, window=buf, fresh=j + 1)
-    wlo, whi = bound.box(buf[:, :ny].reshape(-1), buf[:, ny:].reshape(-1), dmax or 0.0)
+    wlo, whi = bound.box(buf[:, :ny].reshape(-1), buf[:, ny:].reshape(-1))
+    if T is not None:
+        wlo, whi = image_bounds(T, wlo, whi)
     lo = np.fmax(new.lo, wlo)
     hi = np.fmin(new.hi, whi)
     if not bool(np.all(lo <= hi)):
