@@ -102,6 +102,7 @@ class DualWindow(Estimator):
     summary = "moving-window exact hull from cached, certified LP multipliers (time-invariant)"
     reference = "weak duality of the window program [Neumaier2004]; [Higham2002, §3.1]"
     needs_x0 = True
+    proven_rounding = True  # every bound is a certified evaluation: certificate.py
 
     design: DualWindowDesign
 

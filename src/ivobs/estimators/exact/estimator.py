@@ -100,12 +100,10 @@ class Exact(Estimator):
     Online, the program is kept warm-started from step to step (:meth:`step`, :meth:`run`, and
     :meth:`advance` from the state the previous call returned). Every step starts from the
     simplex bases the previous one ended on, and nothing else, and :meth:`state` saves those
-    bases: a restored state rebuilds the same program and continues bit for bit like the run
-    that saved it. A state saved without bases (by an older ivobs) continues from a cold start:
-    its boxes agree with the run's to the solver's tolerances (both are safe bounds; typically
-    1e-8 relative to ``1 + |x|``). Each solve is capped at 20,000 simplex iterations; a program
-    stopped there still gives a guaranteed (possibly wider) box, and a ``RuntimeWarning`` says
-    at which step.
+    bases: a restored state rebuilds the same program and continues identically to the run
+    that saved it. Each solve is capped at 20,000 simplex iterations; a program stopped there
+    still gives a guaranteed (possibly wider) box, and a ``RuntimeWarning`` says at which
+    step.
     """
 
     name = "exact"
@@ -114,6 +112,7 @@ class Exact(Estimator):
     reference = "set-membership hull [Tang2019, Section I] by LP with HiGHS; [Neumaier2004]"
     supports_time_varying = True
     needs_x0 = True
+    proven_rounding = True  # safe bounds (S) and proven variable bounds: package docstring
 
     design: ExactDesign
 

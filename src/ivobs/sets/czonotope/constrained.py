@@ -239,7 +239,7 @@ class ConstrainedZonotope:
         _normalise_rows(z, None)
         if not _rescale(z, None):
             raise InconsistentDataError("rescale: the constrained zonotope is empty")
-        return ConstrainedZonotope._of(z.finish())
+        return ConstrainedZonotope._of(z.finish(None))
 
     @classmethod
     def _of(cls, r: Reduced) -> ConstrainedZonotope:

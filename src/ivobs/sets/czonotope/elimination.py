@@ -52,9 +52,11 @@ class _Set:
         self.s = np.zeros(A.shape[0])
         self.e = np.zeros(c.shape[0])
 
-    def finish(self) -> Reduced:
+    def finish(self, cert: Certificates | None) -> Reduced:
         """The slacks as factors: ``[G 0], [A diag(s)]`` (rows with ``s > 0`` only)."""
         rows = np.flatnonzero(self.s > 0)
+        if cert is not None:
+            cert.pad(rows.size)
         G = np.concatenate([self.G, np.zeros((self.G.shape[0], rows.size))], axis=1)
         S = np.zeros((self.A.shape[0], rows.size))
         S[rows, np.arange(rows.size)] = self.s[rows]
@@ -62,16 +64,34 @@ class _Set:
 
 
 def _drop_zero(z: _Set, cert: Certificates | None) -> bool:
-    """Drop constraints whose coefficients are all below :data:`ROW_TOL` (relative; a
-    superset: after cancellation they carry rounding, which normalising would amplify) and
-    factors that are zero in ``G`` and ``A`` (exactly: dropping a small one would give a
-    subset). False when a dropped constraint cannot hold, ``|b_i| > ‖a_i‖₁ + s_i`` (rounded
-    so that this is certain): the set is empty."""
+    """Drop what is negligible, keeping a superset:
+
+    * coefficients of a constraint below :data:`ZERO_TOL` times its largest go to its slack
+      (``|a_ij ξ_j| <= |a_ij|``), entries of ``G`` below ``ZERO_TOL`` times the largest of
+      their row to ``e``: cancellation leaves such noise, down to subnormal numbers, which
+      would fill the sparse constraints and slow every later operation;
+    * constraints whose coefficients are all below :data:`ROW_TOL` (relative; after
+      cancellation or rescaling they carry rounding, which normalising would amplify);
+    * factors that are zero in ``G`` and ``A``.
+
+    False when a dropped constraint cannot hold, ``|b_i| > ‖a_i‖₁ + s_i`` (rounded so that this
+    is certain): the set is empty."""
+    m = z.A.shape[1]
     absA = np.abs(z.A)
+    noise = (absA <= ZERO_TOL * absA.max(axis=1, initial=0.0)[:, None]) & (absA > 0)
+    if noise.any():
+        z.s = up(z.s + upper(np.where(noise, absA, 0.0).sum(axis=1), m))
+        z.A = np.where(noise, 0.0, z.A)
+        absA = np.abs(z.A)
+    absG = np.abs(z.G)
+    noise = (absG <= ZERO_TOL * absG.max(axis=1, initial=0.0)[:, None]) & (absG > 0)
+    if noise.any():
+        z.e = up(z.e + upper(np.where(noise, absG, 0.0).sum(axis=1), m))
+        z.G = np.where(noise, 0.0, z.G)
     scale = 1.0 + (absA.max() if absA.size else 0.0)
     rows = (absA > ROW_TOL * scale).any(axis=1)
     if not rows.all():
-        reach = upper(absA[~rows].sum(axis=1) + z.s[~rows], z.A.shape[1] + 1)
+        reach = upper(absA[~rows].sum(axis=1) + z.s[~rows], m + 1)
         if (np.abs(z.b[~rows]) > reach).any():
             return False
         z.A, z.b, z.s = z.A[rows], z.b[rows], z.s[rows]
@@ -96,38 +116,64 @@ def _normalise_rows(z: _Set, cert: Certificates | None) -> None:
         cert.scale_rows(1.0 / d)
 
 
+class _Entries(NamedTuple):
+    """The nonzero entries of a constraint matrix ``A`` (a few percent of it once the
+    constraints of many steps are in it), sorted by column: rows ``r``, columns ``c``, values
+    ``a``; ``cols`` the columns that have entries and ``starts`` where each begins."""
+
+    r: np.ndarray
+    c: np.ndarray
+    a: np.ndarray
+    cols: np.ndarray
+    starts: np.ndarray
+
+    @classmethod
+    def of(cls, A: np.ndarray) -> _Entries:
+        c, r = np.nonzero(A.T)
+        cols, starts = np.unique(c, return_index=True)
+        return cls(r, c, A[r, c], cols, starts)
+
+    def col_max(self, v: np.ndarray, m: int) -> np.ndarray:
+        """``max`` of the entry values ``v`` over each column (``-inf`` where none)."""
+        out = np.full(m, -np.inf)
+        if v.size:
+            out[self.cols] = np.maximum.reduceat(v, self.starts)
+        return out
+
+    def row_sum(self, v: np.ndarray, nc: int) -> np.ndarray:
+        """``Σ`` of the entry values ``v`` over each row."""
+        return np.bincount(self.r, weights=v, minlength=nc)
+
+
 def _propagate(z: _Set, sweeps: int = 3) -> tuple[np.ndarray, np.ndarray] | None:
     """Bounds ``[lo, hi] ⊆ [-1, 1]^m`` on every ``ξ`` of (R) (constraint propagation,
     [Scott2016, Section 4.2, Algorithm 1]), or ``None`` when they prove the set empty.
 
     Row ``i`` gives ``a_ij ξ_j ∈ b_i ± s_i − Σ_{l≠j} a_il [ξ_l]`` for every ``j`` with ``a_ij``
-    above :data:`ZERO_TOL` (the rows are normalised); all rows at once, the results
-    intersected, ``sweeps`` times. Proof of the rounding: the right-hand side is a sum of at
-    most ``m + 3`` rounded terms, so it is within ``E_i = γ_{m+3} (|b_i| + s_i + |A_i| w)``
-    (``w = max(|lo|, |hi|)``) of its exact value; dividing by ``a_ij`` adds at most
-    ``u |q_ij|``. So ``q ∓ (E_i / |a_ij| + 4 u |q|)`` bounds the exact quotient (the factor 2 in
-    :func:`product_error` and the 4 absorb the rounding of the pad itself), and the bounds
-    are rounded outward once after the max / min over the rows."""
+    above :data:`ZERO_TOL` (the rows are normalised); all rows at once (on the nonzero entries
+    of ``A``), the results intersected, ``sweeps`` times. Proof of the rounding: each end
+    ``n_ij`` of that interval is a sum of at most ``m + 3`` rounded terms bounded by
+    ``M_i = |b_i| + s_i + |A_i| w`` (``w = max(|lo|, |hi|)``), so it is within ``γ_{m+3} M_i``
+    of its exact value, and ``|n_ij| <= M_i``; dividing by ``a_ij`` adds at most
+    ``u |n_ij| / |a_ij|``. So each computed quotient is within ``(E_i + 4 u M_i) / |a_ij|`` of
+    the exact one (``E_i``: :func:`product_error`, whose factor 2 absorbs the rounding of this
+    pad), and the bounds are rounded outward once after the max / min over the rows."""
     A, b, s = z.A, z.b, z.s
-    m = A.shape[1]
+    nc, m = A.shape
+    ent = _Entries.of(A)
+    r, c, a = ent.r, ent.c, ent.a
+    pos, absa = a > 0, np.abs(a)
+    far = np.where(absa > ZERO_TOL, 0.0, np.inf)  # a negligible coefficient: no bound
     lo, hi = -np.ones(m), np.ones(m)
-    absA = np.abs(A)
-    nz = absA > ZERO_TOL
-    inv = np.where(nz, 1.0 / np.where(nz, absA, 1.0), 0.0)
-    safe = np.where(nz, A, 1.0)
-    Ap, An = np.maximum(A, 0.0), np.minimum(A, 0.0)
-    bc, sc = b[:, None], s[:, None]
     for _ in range(sweeps):
-        t_lo = Ap * lo + An * hi  # min of a_il ξ_l over [lo_l, hi_l]
-        t_hi = Ap * hi + An * lo
-        E = product_error(np.abs(b) + s + absA @ np.maximum(np.abs(lo), np.abs(hi)), m + 3)
-        num_lo = bc - sc - (t_hi.sum(axis=1, keepdims=True) - t_hi)
-        num_hi = bc + sc - (t_lo.sum(axis=1, keepdims=True) - t_lo)
-        q1, q2 = num_lo / safe, num_hi / safe
-        q_lo, q_hi = np.minimum(q1, q2), np.maximum(q1, q2)
-        pad = E[:, None] * inv + (4.0 * UNIT_ROUNDOFF) * np.maximum(np.abs(q_lo), np.abs(q_hi))
-        new_lo = down(np.where(nz, q_lo - pad, -np.inf).max(axis=0, initial=-np.inf))
-        new_hi = up(np.where(nz, q_hi + pad, np.inf).min(axis=0, initial=np.inf))
+        a_lo, a_hi = a * lo[c], a * hi[c]
+        t_lo, t_hi = np.where(pos, a_lo, a_hi), np.where(pos, a_hi, a_lo)  # a_ij [ξ_j]
+        M = np.abs(b) + s + ent.row_sum(absa * np.maximum(np.abs(lo), np.abs(hi))[c], nc)
+        pad = (product_error(M, m + 3) + (4.0 * UNIT_ROUNDOFF) * M)[r] / absa + far
+        q1 = ((b - s - ent.row_sum(t_hi, nc))[r] + t_hi) / a
+        q2 = ((b + s - ent.row_sum(t_lo, nc))[r] + t_lo) / a
+        new_lo = down(ent.col_max(np.minimum(q1, q2) - pad, m))
+        new_hi = up(-ent.col_max(-(np.maximum(q1, q2) + pad), m))
         lo_next, hi_next = np.maximum(lo, new_lo), np.minimum(hi, new_hi)
         if (lo_next > hi_next).any():
             return None
@@ -211,13 +257,15 @@ def _overshoot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     ``R_j = max(0, max|ρ_j| - 1)`` with ``ρ_j = ∩_i (b_i - Σ_{l≠j} a_il [-1, 1]) / a_ij``
     (``inf``: ``ξ_j`` is in no constraint; 0: its box is redundant and eliminating it is
     exact). A score, not a bound: no rounding to bound."""
+    m = A.shape[1]
     absA = np.abs(A)
-    nz = absA > ZERO_TOL
-    safe = np.where(nz, A, 1.0)
-    spread = (absA.sum(axis=1, keepdims=True) - absA) / np.abs(safe)
-    mid = b[:, None] / safe
-    rho_lo = np.where(nz, mid - spread, -np.inf).max(axis=0, initial=-np.inf)
-    rho_hi = np.where(nz, mid + spread, np.inf).min(axis=0, initial=np.inf)
+    ent = _Entries.of(np.where(absA > ZERO_TOL, A, 0.0))
+    absa = np.abs(ent.a)
+    row_l1 = absA.sum(axis=1)
+    spread = (row_l1[ent.r] - absa) / absa
+    mid = b[ent.r] / ent.a
+    rho_lo = ent.col_max(mid - spread, m)
+    rho_hi = -ent.col_max(-(mid + spread), m)
     R: np.ndarray = np.maximum(0.0, np.maximum(-1.0 - rho_lo, rho_hi - 1.0))
     return R
 
@@ -316,4 +364,4 @@ def eliminate_constraints(
         _eliminate(z, *choice, cert)
         if not _drop_zero(z, cert):
             return None
-    return z.finish()
+    return z.finish(cert)

@@ -146,67 +146,75 @@ def _load(
 
 def _multipliers(
     Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float, chains: list[list[int]]
-) -> np.ndarray | str:
-    """Row duals ``μ`` (K, nc) of the ``K`` programs ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``,
-    or ``"infeasible"`` / ``"failed"``.
+) -> np.ndarray | None:
+    """Row duals ``μ`` (K, nc) of the ``K`` programs ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``
+    (zero where no solver finds them: the bound of the set without constraints, valid too),
+    or None when HiGHS calls the set infeasible.
 
     Small programs (``K m <=`` :data:`BLOCK_SIZE`) are solved as one block program,
     ``min Σ_i g_iᵀξ_i`` over ``K`` independent copies, whose row duals are those of the ``K``
     programs. Larger ones share one model per chain of objectives (``chains``), only the cost
-    changing along a chain, each solve warm-started from the previous optimum."""
+    changing along a chain, each solve warm-started from the previous optimum. A program the
+    shared model fails on is retried from a cold start, then by :func:`_second_opinion`."""
     K, m = Gs.shape
     nc = A.shape[0]
+    mu = np.zeros((K, nc))
     if K * m <= BLOCK_SIZE:
         lp = _solver(0)
         _load(lp, A, b, radius, Gs.ravel(), K)
         status = lp.solve()
         lam = lp.row_duals() if status == "optimal" else None
-        if lam is None:
-            return "infeasible" if status == "infeasible" else "failed"
-        return lam.reshape(K, nc)
-    mu = np.empty((K, nc))
+        if lam is not None and np.isfinite(lam).all():
+            return lam.reshape(K, nc)
+        chains = [list(range(K))]
+        shared = False
+    else:
+        shared = True
     cols = np.arange(m)
     for n_chain, rows in enumerate(chains):
         lp = _solver(n_chain % 2)
-        _load(lp, A, b, radius, np.zeros(m))
-        for n, i in enumerate(rows):
-            lp.set_cost(cols, Gs[i])
-            status = lp.solve(primal=n > 0)
-            lam = lp.row_duals() if status == "optimal" else None
-            if lam is None:
-                return "infeasible" if status == "infeasible" else "failed"
-            mu[i] = lam
+        if shared:
+            _load(lp, A, b, radius, np.zeros(m))
+        for i in rows:
+            lam = None
+            if shared:
+                lp.set_cost(cols, Gs[i])
+                status = lp.solve()
+                if status != "optimal":
+                    lp.cold()
+                    status = lp.solve()
+                lam = lp.row_duals() if status == "optimal" else None
+            if lam is None or not np.isfinite(lam).all():
+                lam, infeasible = _second_opinion(Gs[i], A, b, radius)
+                if infeasible:
+                    return None
+            if lam is not None:
+                mu[i] = lam
     return mu
 
 
 _SECOND_OPINIONS: tuple[dict[str, bool], ...] = ({"presolve": True}, {}, {"ipm": True})
-"""Fresh HiGHS models tried in turn for a program the shared ones failed on: on the
+"""Fresh HiGHS models tried in turn for a program the shared one failed on: on the
 ill-conditioned programs of a set pinned down by its constraints, a warm start can stall or
 call a feasible program infeasible; presolve, a cold start or the interior point method usually
 succeed. Any multipliers give a valid bound, so a failure only loosens that bound."""
 
 
-def _one_by_one(Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray | None:
-    """The multipliers of each program from fresh models (:data:`_SECOND_OPINIONS`); ``0`` (the
-    bound of the zonotope without constraints) where all fail; None when every model calls one
-    of the programs infeasible."""
-    K = Gs.shape[0]
-    mu = np.zeros((K, A.shape[0]))
-    for i in range(K):
-        infeasible = True
-        for options in _SECOND_OPINIONS:
-            lp = LinearProgram(**options)
-            _load(lp, A, b, radius, Gs[i])
-            status = lp.solve()
-            lam = lp.row_duals() if status == "optimal" else None
-            if lam is not None and np.isfinite(lam).all():
-                mu[i] = lam
-                infeasible = False
-                break
-            infeasible &= status == "infeasible"
-        if infeasible:
-            return None
-    return mu
+def _second_opinion(
+    g: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float
+) -> tuple[np.ndarray | None, bool]:
+    """The multipliers of one program from fresh models (:data:`_SECOND_OPINIONS`), or None;
+    and whether every model calls it infeasible."""
+    infeasible = True
+    for options in _SECOND_OPINIONS:
+        lp = LinearProgram(**options)
+        _load(lp, A, b, radius, g)
+        status = lp.solve()
+        lam = lp.row_duals() if status == "optimal" else None
+        if lam is not None and np.isfinite(lam).all():
+            return lam, False
+        infeasible &= status == "infeasible"
+    return None, infeasible
 
 
 def _certified_mins(
@@ -217,15 +225,10 @@ def _certified_mins(
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
-    out = _multipliers(Gs, A, b, radius, chains)
-    if isinstance(out, str):
-        mu = _one_by_one(Gs, A, b, radius)
-        if mu is None:
-            return np.full(K, np.nan), np.zeros((K, nc)), False
-        out = mu
-    if not np.isfinite(out).all():
-        out = np.where(np.isfinite(out), out, 0.0)
-    return dual_bounds(Gs, A, b, out, radius), out, True
+    mu = _multipliers(Gs, A, b, radius, chains)
+    if mu is None:
+        return np.full(K, np.nan), np.zeros((K, nc)), False
+    return dual_bounds(Gs, A, b, mu, radius), mu, True
 
 
 @cache
@@ -343,8 +346,10 @@ class Certificates:
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
         """Constraints ``rows`` and factors ``cols`` are kept (masks; the others were zero)."""
-        self.mu = self.mu[:, rows]
-        self.D = self.D[:, cols]
+        if not rows.all():
+            self.mu = self.mu[:, rows]
+        if not cols.all():
+            self.D = self.D[:, cols]
 
     def pad(self, n_cols: int) -> None:
         """``n_cols`` new factors, in no objective."""
@@ -378,10 +383,14 @@ class Certificates:
         if idx.size > LOSS_CANDIDATES:
             idx = idx[np.argsort(bound[idx], kind="stable")[:LOSS_CANDIDATES]]
         out = np.full(m, np.inf)
-        tj = t[:, idx]  # (K, c)
-        new = np.abs(Rc[:, None, :] - tj[:, :, None] * A[piv[idx]][None, :, :]).sum(axis=2)
-        loss = new - tj * b[piv[idx]][None, :] - np.abs(Rc).sum(axis=1, keepdims=True)
-        out[idx] = self.weight @ loss
+        # only the columns where the pivot row is nonzero change: Σ over them of
+        # |R_k - t_k a_p| - |R_k|, the candidates' supports side by side
+        tj, rows = t[:, idx], A[piv[idx]]
+        which, col = np.nonzero(rows)
+        starts = np.searchsorted(which, np.arange(idx.size))
+        diff = np.abs(Rc[:, col] - tj[:, which] * rows[which, col]) - np.abs(Rc[:, col])
+        change = np.add.reduceat(diff, starts, axis=1) if col.size else np.zeros_like(tj)
+        out[idx] = self.weight @ (change - tj * b[piv[idx]])
         return out
 
     def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
