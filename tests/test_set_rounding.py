@@ -19,9 +19,7 @@ def _scaled(rng, shape, lo=-12, hi=12):
 
 
 def _exact_matvec(M, x):
-    return [
-        sum((Fr(M[i, k]) * Fr(x[k]) for k in range(M.shape[1])), Fr(0)) for i in range(M.shape[0])
-    ]
+    return [sum((Fr(M[i, k]) * Fr(x[k]) for k in range(M.shape[1])), Fr(0)) for i in range(M.shape[0])]
 
 
 @settings(max_examples=60, deadline=None)
