@@ -223,7 +223,6 @@ class _StepData:
     mats: tuple[np.ndarray, ...]
     u: np.ndarray
     cd: np.ndarray
-    rd: np.ndarray
     ER: np.ndarray
     FR: np.ndarray
     xmag: np.ndarray
@@ -362,7 +361,6 @@ class ConstrainedZonotopeEstimator(Estimator):
             mats=mats,
             u=u_k,
             cd=cd,
-            rd=rd,
             ER=E[:, cols] * rd[cols],
             FR=F[:, cols] * rd[cols],
             xmag=xmag,

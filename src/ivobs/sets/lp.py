@@ -87,7 +87,8 @@ class LinearProgram:
         h = self.h = _quiet_highs()()
         h.setOptionValue("threads", 1)
         h.setOptionValue("presolve", "on" if presolve else "off")
-        h.setOptionValue("solver", "ipm" if ipm else "simplex")
+        if ipm:
+            h.setOptionValue("solver", "ipm")
         h.setOptionValue("primal_feasibility_tolerance", primal_tol)
         h.setOptionValue("dual_feasibility_tolerance", dual_tol)
         if iteration_limit is not None:

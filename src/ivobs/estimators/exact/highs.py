@@ -233,6 +233,10 @@ class Chain:
                 verdict, status = self._second_opinions(data)
                 if verdict is not None:
                     return out, verdict
+            if status == "failed" and not self.relaxed:
+                # numerical trouble on the equalities (large magnitudes): the ranges from now on
+                self._relax()
+                status = prog.solve()
             if status == "limit":
                 self.capped += 1  # the budget is spent: the bound of the last multipliers
             elif status != "optimal":
@@ -255,12 +259,8 @@ class Chain:
         if self._certified(data):
             return INFEASIBLE, status
         if not self.relaxed:
-            # equalities of floating-point data can be infeasible by a rounding: HiGHS sees the
-            # ranges from now on (this step and, via the program, the next ones)
-            self.relaxed = True
-            _lo, _hi, rlo, rhi = self.lp.shifted(True)
-            prog.set_row_bounds(rlo, rhi)
-            prog.cold()
+            # equalities of floating-point data can be infeasible by a rounding
+            self._relax()
             status = prog.solve()
         if status == "infeasible" and not self._certified(data):
             prog.cold()  # no certificate: a second opinion from the primal simplex
@@ -268,6 +268,14 @@ class Chain:
         if status == "infeasible":
             return (INFEASIBLE if self._certified(data) else UNSURE), status
         return None, status
+
+    def _relax(self) -> None:
+        """HiGHS sees the rows as their ranges ``rhs ± tau`` from now on (this step and, via
+        the program, the next ones), from a cold start."""
+        self.relaxed = True
+        _lo, _hi, rlo, rhi = self.lp.shifted(True)
+        self.prog.set_row_bounds(rlo, rhi)
+        self.prog.cold()
 
     def _certified(self, data: SafeBoundData) -> bool:
         ray = self.prog.dual_ray()

@@ -20,7 +20,7 @@ from ..box import Box
 from ..lp import LinearProgram, csc
 from ..rounding import UNIT_ROUNDOFF, product_error, up
 from ..zonotope import Zonotope, box_generators, center_and_generators
-from .elimination import Reduced, _normalise_rows, _rescale, _Set, eliminate_constraints
+from .elimination import Reduced, eliminate_constraints, rescale_factors
 from .hull import certified_empty, hull_bounds, radius_certificate
 from .reduction import reduce_generators
 
@@ -235,11 +235,10 @@ class ConstrainedZonotope:
         """The set (a superset, by its rounding) with its factors rescaled to their propagated
         bounds ([Scott2016, Section 4.2]). Raises :class:`~ivobs.InconsistentDataError` when
         propagation proves it empty."""
-        z = _Set(self.c, self.G, self.A, self.b)
-        _normalise_rows(z, None)
-        if not _rescale(z, None):
+        out = rescale_factors(self.c, self.G, self.A, self.b)
+        if out is None:
             raise InconsistentDataError("rescale: the constrained zonotope is empty")
-        return ConstrainedZonotope._of(z.finish(None))
+        return ConstrainedZonotope._of(out)
 
     @classmethod
     def _of(cls, r: Reduced) -> ConstrainedZonotope:

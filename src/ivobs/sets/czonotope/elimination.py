@@ -31,7 +31,7 @@ from ..rounding import ETA, UNIT_ROUNDOFF, down, mid_rad, product_error, up, upp
 from .hull import Certificates
 from .tolerances import PIVOT_TOL, ROW_TOL, ZERO_TOL
 
-__all__ = ["Reduced", "eliminate_constraints", "independent_constraints"]
+__all__ = ["Reduced", "eliminate_constraints", "independent_constraints", "rescale_factors"]
 
 
 class Reduced(NamedTuple):
@@ -232,6 +232,15 @@ def _eliminate(z: _Set, j: int, p: int, cert: Certificates | None) -> None:
     z.c, z.G, z.A, z.b, z.s = c, G[:, cols], A[np.ix_(rows, cols)], b[rows], s[rows]
     if cert is not None:
         cert.keep(rows, cols)
+
+
+def rescale_factors(c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray) -> Reduced | None:
+    """``<c, G, A, b>`` with its constraints normalised and its factors rescaled to their
+    propagated bounds ([Scott2016, Section 4.2]): a superset, its rounding included (the form of
+    :func:`eliminate_constraints`' result), or ``None`` when propagation proves it empty."""
+    z = _Set(c, G, A, b)
+    _normalise_rows(z, None)
+    return z.finish(None) if _rescale(z, None) else None
 
 
 def independent_constraints(A: np.ndarray) -> np.ndarray:
