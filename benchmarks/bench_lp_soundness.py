@@ -23,8 +23,8 @@ import numpy as np
 import ivobs
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from exactsim import simulate_linear  # noqa: E402
-from test_set_membership_soundness import random_plant  # noqa: E402
+from exactsim import simulate_linear
+from test_set_membership_soundness import random_plant
 
 OPTIONS: dict[str, dict[str, object]] = {"exact": {"window": 20, "progress": False}}
 
