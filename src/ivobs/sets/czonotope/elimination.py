@@ -129,9 +129,9 @@ class _Entries(NamedTuple):
 
     @classmethod
     def of(cls, A: np.ndarray) -> _Entries:
-        c, r = np.nonzero(A.T)
-        cols, starts = np.unique(c, return_index=True)
-        return cls(r, c, A[r, c], cols, starts)
+        c, r = np.nonzero(A.T)  # by column, then row
+        starts = np.flatnonzero(np.diff(c, prepend=-1))
+        return cls(r, c, A[r, c], c[starts], starts)
 
     def col_max(self, v: np.ndarray, m: int) -> np.ndarray:
         """``max`` of the entry values ``v`` over each column (``-inf`` where none)."""
@@ -252,7 +252,7 @@ def independent_constraints(A: np.ndarray) -> np.ndarray:
     keep = np.ones(nc, dtype=bool)
     if nc <= 1:
         return keep
-    R, piv = scipy.linalg.qr(A.T, mode="r", pivoting=True)
+    R, piv = scipy.linalg.qr(A.T, mode="r", pivoting=True, check_finite=False)
     d = np.abs(np.diagonal(R)[:nc])
     rank = int(np.count_nonzero(d > 1e-10 * d[0])) if d.size and d[0] > 0 else 0
     if rank < nc:
