@@ -2,6 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_lp_soundness.py [--steps 10000]
         [--methods constrained-zonotope,exact,dual-window,nl-constrained-zonotope]
+        [--plants servo,random]
 
 For the servo motor and the random 4-state plant of tests/test_set_membership_soundness.py,
 one record of ``--steps`` samples from tests/exactsim.py (every state and measurement an exact
@@ -35,9 +36,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--methods", default="constrained-zonotope,exact,dual-window,nl-constrained-zonotope"
     )
+    p.add_argument("--plants", default="servo,random")
     args = p.parse_args(argv)
     T = args.steps
-    for plant in ("servo", "random"):
+    for plant in args.plants.split(","):
         if plant == "servo":
             sc = ivobs.scenarios.get("servo-motor", horizon=T)
             sys_, x0, u = sc.system, sc.x0, sc.simulate("vertex", seed=0).u
