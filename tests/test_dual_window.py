@@ -90,7 +90,7 @@ def test_within_a_few_percent_of_the_exact_hull_of_the_same_window():
 
 def test_step_equals_run_and_a_restored_state_continues_identically():
     """``step()`` through 160 steps (solves at warm-up and every 25 steps) gives ``run()``'s boxes
-    bit for bit; a state saved at step 90 (through JSON) and restored into a new estimator
+    exactly; a state saved at step 90 (through JSON) and restored into a new estimator
     continues with the same boxes."""
     sys, x0, u = quadtank(160)
     _, y = simulate_vertex(sys, x0, u, 5)

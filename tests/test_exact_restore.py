@@ -1,9 +1,9 @@
 """``exact`` after ``state()``/``restore()`` continues with the same solves as the run that saved
-it (bit for bit, full horizon and moving window, badly scaled time-varying systems), and an
-unstable system whose programs HiGHS's own scaling made fail finishes quickly with tight boxes."""
+it (identically, full horizon and moving window, badly scaled time-varying systems), and an
+unstable system whose programs HiGHS's own scaling made fail gets tight boxes, no program
+stopped."""
 
 import json
-import time
 import warnings
 
 import numpy as np
@@ -33,7 +33,7 @@ def _steps(est, u, y, ks):
 
 @pytest.mark.parametrize("window", [None, 5])
 @pytest.mark.parametrize("cut", [5, 12, 20])
-def test_restored_state_continues_bit_for_bit_on_a_badly_scaled_time_varying_system(window, cut):
+def test_restored_state_continues_identically_on_a_badly_scaled_time_varying_system(window, cut):
     """Magnitudes over 1e±3, A time-varying: before, the restored continuation differed from the
     run by up to 7e-7 absolute (47 times the box width here), as the program rebuilt from the
     saved state was scaled by HiGHS differently and solved from a cold start."""
@@ -53,9 +53,9 @@ def test_restored_state_continues_bit_for_bit_on_a_badly_scaled_time_varying_sys
     assert_contains(ivobs.Estimate(rest[:, :2], rest[:, 2:]), tr.x[cut:])
 
 
-def test_a_state_saved_without_bases_still_restores():
-    """States saved before the bases were kept restore (cold start: equal to the solver's
-    tolerance), and a basis that is not HiGHS status codes is refused by name."""
+def test_a_state_with_empty_bases_restores_from_a_cold_start():
+    """Empty bases (a state built without a solver) restore from a cold start (equal to the
+    solver's tolerance), and a basis that is not HiGHS status codes is refused by name."""
     sys, x0 = _scaled_time_varying(4, nx=2, ny=1, nu=1, nd=None, spread=0.0)
     tr = adversarial_run(sys, x0, 12, seed=5)
     est = ivobs.make_estimator("exact", sys, x0=x0, progress=False)
@@ -65,7 +65,8 @@ def test_a_state_saved_without_bases_still_restores():
     saved = first.state()
     assert len(saved["state"]["basis_min"]["array"]) > 0
     old = json.loads(json.dumps(saved))
-    del old["state"]["basis_min"], old["state"]["basis_max"]
+    for key in ("basis_min", "basis_max"):
+        old["state"][key].update(shape=[0], array=[])
     second = ivobs.make_estimator("exact", sys, x0=x0, progress=False)
     second.restore(old)
     np.testing.assert_allclose(_steps(second, tr.u, tr.y, range(6, 12)), ref[6:], atol=1e-8)
@@ -75,7 +76,7 @@ def test_a_state_saved_without_bases_still_restores():
         ivobs.make_estimator("exact", sys, x0=x0, progress=False).restore(bad)
 
 
-def test_an_unstable_system_finishes_quickly_with_tight_boxes():
+def test_an_unstable_system_gets_tight_boxes_with_no_program_stopped():
     """An unstable 6-state system (|x| up to 8e7 in 30 steps): HiGHS's equilibration, computed
     once and extended row by row, made 40 of its programs end 'unknown' (loose safe bounds,
     summed width 525, 13 s on a quiet machine); now every program is solved (width 93). The
@@ -90,11 +91,8 @@ def test_an_unstable_system_finishes_quickly_with_tight_boxes():
     x0 = ivobs.Box(c - 1, c + 1)
     tr = adversarial_run(sys, x0, T, seed=12)
     est = ivobs.make_estimator("exact", sys, x0=x0, progress=False, on_inconsistent="raise")
-    start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # no program stopped by the budget
         res = est.run(tr.u, tr.y)
-    elapsed = time.perf_counter() - start
     assert_contains(res, tr.x)
     assert float(res.width.sum()) < 150.0  # was 525 (programs ended 'unknown')
-    assert elapsed < 60.0  # about 2 s of CPU; generous for a loaded CI machine

@@ -42,14 +42,37 @@ only with a certificate (:func:`ivobs.czonotope.certified_empty`: a dual ray, ch
 point, proving that even the factor box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the constraints). When
 HiGHS calls a thin set infeasible without one, the box is that of the softened set (a superset).
 
-**Rounding.** Each measured row gets a slack factor of the size ``ρ_i`` of the rounding of its
-data and of its computed coefficients, ``ρ = 3 γ_n (|y| + |D| |u| + |C| x̄ + |F| d̄) + |C| e``
-(``γ_n = n u / (1 - n u)`` [Higham2002, Chapter 3], ``x̄``, ``d̄`` bounds on ``|x|``, ``|d|``),
-so that a float64 record of the model's output is never found inconsistent whatever its scale
-(``|D u| = 1e8``, ``|x| ~ 1e5``). The prediction appends a box of generators for the rounding of
-``A c + B u + E c_d`` and ``A G``; the rounding of the reduction is kept in a box aside
-(``x[k] ∈ <c, G, A, b> ⊕ box(e)``); tiny generators are consolidated into one box per step
-(:data:`CONSOLIDATE_X`, :data:`CONSOLIDATE_C`).
+**Rounding (proof).** The state is ``x[k] ∈ <c, G, A, b> ⊕ box(e)`` with the arrays read as
+exact numbers; every floating-point step keeps that true by adding the proven bound of its
+error ([Higham2002, Lemma 3.1]: a computed sum of ``n`` products is within
+``γ_n Σ |a_i| |b_i|`` of the exact one; :func:`~ivobs.sets.rounding.product_error` evaluates
+such a bound so that it is one, rounding included), so the base class adds no margin
+(``proven_rounding``):
+
+* ``d[k] ∈ c_d ± r_d`` exactly (:func:`~ivobs.sets.rounding.mid_rad`); ``E R``, ``F R`` are
+  one product per entry;
+* measurement rows: the right-hand side ``y − D u − C c − F c_d`` and the row ``[C G, F R]``
+  at ``|ξ| <= 1`` are dot products of at most ``n = nx + m + nu + nd`` terms. Their errors,
+  and that of the data itself (a float64 record ``y = fl(C x + D u + F d)`` of an admissible
+  ``x``, ``d``, also within ``γ_n`` of the terms), are bounded by
+  ``ρ = product_error(|y| + |D| |u| + |C| x̄ + |F| d̄, 2n + 3)`` (``x̄ = |c| + |G| 1 + e`` bounds
+  ``|x|``, ``d̄ = |c_d| + r_d``), and the box aside enters as ``|C| e``: each row gets a slack
+  factor of that size. New rows are scaled by powers of two (exact);
+* the box: each hull bound is proven by weak duality (:func:`ivobs.czonotope.dual_bounds`),
+  then ``∓ e``, rounded outward;
+* prediction: ``A c + B u + E c_d``, ``A G`` and the image ``|A| e`` of the box aside, with the
+  float64 plant's own rounding, likewise: one box of generators
+  ``product_error(|A| x̄ + |B| |u| + |E| d̄, 2n + 3) + |A| e``;
+* the elimination and the generator reduction return supersets of what they are given, their
+  rounding included (:mod:`ivobs.sets.czonotope.elimination`,
+  :mod:`ivobs.sets.czonotope.reduction`); the elimination runs in coordinates centred at
+  ``c`` and its rounding box joins ``e``, with the rounding ``u |c + shift|`` of the re-centring;
+* a softened set (:func:`ivobs.czonotope.hull_certificates`) is rescaled with the rounding of
+  that product in ``e`` and a slack per constraint.
+
+A measurement is therefore never found inconsistent when the data are a float64 record of an
+admissible trajectory, whatever the magnitudes. Tiny generators are consolidated into one box
+per step (:data:`CONSOLIDATE_X`, :data:`CONSOLIDATE_C`).
 """
 
 from __future__ import annotations
@@ -65,37 +88,23 @@ from ..model import LinearSystem
 from ..sets import Box
 from ..sets.czonotope import (
     EMPTY_TOL,
-    UNIT_ROUNDOFF,
     Certificates,
     box_generators,
     certified_empty,
     eliminate_constraints,
-    gamma,
     hull_certificates,
     independent_constraints,
     mid_rad,
     reduce_consolidated,
+    soften,
 )
+from ..sets.rounding import UNIT_ROUNDOFF, down, product_error, up, upper
 from . import _uncertain as uncertain
 from . import register
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step
 
 __all__ = ["ConstrainedZonotopeDesign", "ConstrainedZonotopeEstimator", "ConstrainedZonotopeState"]
-
-_cat = np.concatenate  # what np.hstack / vstack / append call here, without their wrappers
-
-
-INFLATE = 1e-9
-"""Relative inflation of the bounds of ``x0`` and ``d``, slack of noise-free outputs, and
-outward margin of the boxes (on top of the base class' ``ROUNDING``).
-
-Adversarial (vertex) disturbances put the true state on the boundary of the exact set, which is
-then often thin, and more independent outputs than disturbances make it a point; rescaling a
-thin set amplifies rounding, and a true state a few ulps outside would make its next
-measurement look inconsistent or leave the box. A margin of ``1e-9`` of the bounds (plus
-``1e-12 (1 + |center|)``) keeps it strictly inside; the boxes grow by as little (the ``exact``
-reference widens its variable bounds by the same amount)."""
 
 
 CONSOLIDATE_X = 1e-13
@@ -104,70 +113,55 @@ CONSOLIDATE_C = 1e-9
 state) and whose constraint part is below ``CONSOLIDATE_C`` times the largest (normalised)
 coefficient are replaced, after each reduction, by one box in ``x`` and one slack per
 constraint (:func:`ivobs.czonotope.consolidate_small`, a superset): the rounding slacks of
-the measurement rows and the rounding boxes of the prediction would otherwise pile up in the
-set (a few per step) until the generator limit. Larger thresholds cost tightness where the
-state is pinned down by more outputs than disturbances (``kkl-random8``: ``1e-11`` and
-``1e-9`` widen its boxes from ``1e-8`` to ``2e-3``); on other sets these generators are
-negligible either way."""
+the measurement rows and of the elimination, and the rounding boxes of the prediction, would
+otherwise pile up in the set (a few per step) until the generator limit. Larger thresholds
+cost tightness where the state is pinned down by more outputs than disturbances
+(``kkl-random8``); on other sets these generators are negligible either way."""
 TOLS = (CONSOLIDATE_X, CONSOLIDATE_C)
 """Both, for :func:`~ivobs.sets.czonotope.reduce_consolidated`."""
 
 
-def _inflate(center: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """``radius (1 + INFLATE) + 1e-3 INFLATE (1 + |center|)`` where ``radius > 0``."""
-    return np.where(radius > 0, radius * (1 + INFLATE) + 1e-3 * INFLATE * (1 + np.abs(center)), 0.0)
+def _pow2_rows(rows: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row (and its right-hand side) scaled by a power of two so that its largest
+    coefficient is in ``[1, 2)``: the same constraints, exactly (the rows are far from the
+    underflow range: their largest entry is at least ``1e-9 (1 + |rhs|)``)."""
+    top = np.abs(rows).max(axis=1)
+    d = np.ldexp(1.0, 1 - np.frexp(top)[1])
+    return rows * d[:, None], rhs * d
 
 
 def _measurement_update(
-    Ac: np.ndarray,
-    b: np.ndarray,
-    CG: np.ndarray,
-    FR: np.ndarray,
-    rhs: np.ndarray,
+    Ac: np.ndarray, b: np.ndarray, CG: np.ndarray, FR: np.ndarray, rhs: np.ndarray,
     rho: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, int, str, tuple[np.ndarray, np.ndarray]]:
+) -> tuple[np.ndarray, np.ndarray, int, str, tuple[np.ndarray, np.ndarray]]:  # fmt: skip
     """Constraints after the measurement: the old ones (padded with the new factors) and
     ``[C G, F R, diag(ρ)] (ξ, δ, τ) = y - D u - C c - F c_d`` for the measured components
-    (NaN: missing).
+    (NaN: missing); ``τ_i`` is the slack factor of the rounding bound ``ρ_i`` of row ``i``.
 
-    Every measured output gets a slack factor ``τ_i`` of size ``ρ_i``, the bound of the rounding
-    of its row (in ``y`` and in the computed row, see :meth:`ConstrainedZonotopeEstimator._update`);
-    an output with no noise (``F_i R = 0``) also gets the relative margin :data:`INFLATE`. Returns
-    ``(A, b, p, status, full)``, ``p`` the number of new factors (``δ`` and slacks);
+    Returns ``(A, b, p, status, full)``, ``p`` the number of new factors (``δ`` and slacks);
     ``status`` is ``"ok"``, ``"empty"`` (certainly inconsistent) or ``"check"`` (implied
     constraints were dropped that the kept ones do not quite satisfy: the caller decides with
     :func:`ivobs.czonotope.certified_empty` on ``full``, the system before dropping)."""
     obs = ~np.isnan(rhs)
-    FRo = FR[obs]
-    rows, rhs, rho = _cat([CG[obs], FRo], axis=1), rhs[obs], rho[obs]
-    quiet = ~np.logical_or.reduce(FRo != 0, axis=1)
-    size = rho + np.where(quiet, INFLATE * (1.0 + np.abs(rhs) + np.abs(rows).sum(axis=1)), 0.0)
-    live = (size > 0).nonzero()[0]
+    rows, rhs, rho = np.concatenate([CG[obs], FR[obs]], axis=1), rhs[obs], rho[obs]
+    live = np.flatnonzero(rho > 0)
     slack = np.zeros((rows.shape[0], live.size))
-    slack[live, np.arange(live.size)] = size[live]
-    rows, rhs, consistent = _clean_rows(_cat([rows, slack], axis=1), rhs)
+    slack[live, np.arange(live.size)] = rho[live]
+    rows = np.concatenate([rows, slack], axis=1)
+    # a row of negligible coefficients is dropped (normalising it would amplify rounding; a
+    # superset); it certainly cannot hold when |rhs| exceeds what the factor box reaches
+    absr = np.abs(rows)
+    zero = absr.max(axis=1, initial=0.0) <= 1e-9 * (1.0 + np.abs(rhs))
+    reach = upper(absr[zero].sum(axis=1) * (1.0 + EMPTY_TOL), rows.shape[1] + 1)
+    consistent = bool(np.all(np.abs(rhs[zero]) <= reach))
+    rows, rhs = _pow2_rows(rows[~zero], rhs[~zero])
     p = FR.shape[1] + live.size
-    A_old = _cat([Ac, np.zeros((Ac.shape[0], p))], axis=1)
-    A_all, b_all = _cat([A_old, rows]), _cat([b, rhs])
+    A_all = np.concatenate([np.concatenate([Ac, np.zeros((Ac.shape[0], p))], axis=1), rows])
+    b_all = np.concatenate([b, rhs])
     if not consistent:
         return A_all, b_all, p, "empty", (A_all, b_all)
     A_new, b_new, implied_ok = _drop_implied(A_all, b_all)
     return A_new, b_new, p, "ok" if implied_ok else "check", (A_all, b_all)
-
-
-def _clean_rows(rows: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Normalise the new constraints (largest coefficient 1) and drop those whose coefficients
-    are all negligible (below ``1e-9 (1 + |rhs|)``: normalising them would amplify rounding; a
-    superset). Such a constraint ``a ξ = rhs`` is certainly violated when
-    ``|rhs| > ‖a‖₁ (1 + EMPTY_TOL)`` beyond the rounding of the sum: then False."""
-    absr = np.abs(rows)
-    scale = absr.max(axis=1) if rows.shape[1] else np.zeros(rows.shape[0])
-    ref = 1.0 + np.abs(rhs)
-    zero = scale <= 1e-9 * ref
-    reach = absr[zero].sum(axis=1) * (1.0 + EMPTY_TOL) * (1.0 + gamma(rows.shape[1] + 2))
-    consistent = bool(np.all(np.abs(rhs[zero]) <= reach))
-    keep = ~zero
-    return rows[keep] / scale[keep, None], rhs[keep] / scale[keep], consistent
 
 
 def _drop_implied(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -185,18 +179,6 @@ def _drop_implied(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return A[keep], b[keep], ok
 
 
-def _restart(
-    A: np.ndarray, shift: np.ndarray, ER: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Predicted set from the box ``[lo, hi]`` of ``x[k]`` (sound fallback; a box covers the
-    rounding of ``A m + shift`` and ``A diag(r)``)."""
-    m, r = mid_rad(lo, hi)
-    c = A @ m + shift
-    err = gamma(A.shape[1] + 2) * (np.abs(A) @ (np.abs(m) + r) + np.abs(shift))
-    G = np.hstack([A * r, ER, box_generators(err)])
-    return c, G, np.zeros((0, G.shape[1])), np.zeros(0)
-
-
 @dataclass(frozen=True)
 class ConstrainedZonotopeDesign(Design):
     """Complexity limits of the constrained zonotope [Scott2016, Section 4].
@@ -211,14 +193,10 @@ class ConstrainedZonotopeDesign(Design):
 
 
 def default_limits(nx: int) -> tuple[int, int]:
-    """Default ``(max_constraints, max_generators) = (2 nx, 16 nx)``.
-
-    Measured on 8 random stable systems (2-6 states, 1-3 outputs, 100 steps, vertex
-    disturbances; ratio of mean widths to the exact hull): 1.015 on average, 1.09 at worst.
-    Fewer generators cost less and lose more (``10 nx``: up to 1.23), more approach the exact
-    hull (``20 nx``: up to 1.04); with certificate-guided elimination, constraints beyond
-    ``2 nx`` buy little.
-    """
+    """Default ``(max_constraints, max_generators) = (2 nx, 16 nx)``: on random stable systems
+    (2-6 states, 1-3 outputs, vertex disturbances) the mean widths stay within a few percent of
+    the exact hull; fewer generators cost less and lose more, more approach the exact hull; with
+    certificate-guided elimination, constraints beyond ``2 nx`` buy little."""
     return 2 * nx, 16 * nx
 
 
@@ -238,9 +216,9 @@ class ConstrainedZonotopeState(OnlineState):
 @dataclass(frozen=True)
 class _StepData:
     """What a step knows before its measurement update: the model at ``k``, the bounds of
-    ``d[k]`` (re-centred and inflated: ``d = cd + rd δ``), the columns ``E R``, ``F R`` of the
-    disturbance factors, bounds ``xmag >= |x_k|`` and ``dmag >= |d_k|``, and ``n``, the length of
-    the sums whose rounding ``γ_n`` bounds."""
+    ``d[k] = c_d + r_d δ``, the columns ``E R``, ``F R`` of the disturbance factors, bounds
+    ``xmag >= |x_k|`` and ``dmag >= |d_k|``, ``n`` (the length of the sums of a step) and, for
+    interval matrices, ``v >= |ΔC x + ΔD u|``."""
 
     mats: tuple[np.ndarray, ...]
     u: np.ndarray
@@ -250,16 +228,16 @@ class _StepData:
     xmag: np.ndarray
     dmag: np.ndarray
     n: int
-    v: np.ndarray | None = None  # interval matrices: |ΔC x + ΔD u| <= v (a wider slack)
+    v: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class _Filtered:
     """The set after the measurement update of a step: the box ``[lo, hi]`` of ``x[k]``, the
     generators ``G`` (the state's, padded for the new factors), constraints ``A ξ = b``, ``ER``
-    padded likewise, the certificates of the box (None for the paper's rule or when absent),
-    their radius ``scale`` (1 unless the set was softened) and whether ``y[k]`` was
-    inconsistent (then not used)."""
+    padded likewise, ``e`` (the box aside, grown if the set was softened), ``er_err`` (the
+    rounding of ``E R`` if it was softened), the certificates of the box (None for the paper's
+    rule) and whether ``y[k]`` was inconsistent (not used)."""
 
     lo: np.ndarray
     hi: np.ndarray
@@ -267,8 +245,9 @@ class _Filtered:
     A: np.ndarray
     b: np.ndarray
     ER: np.ndarray
+    e: np.ndarray
+    er_err: np.ndarray
     cert: Certificates | None
-    scale: float
     inconsistent: bool
 
 
@@ -285,16 +264,20 @@ class ConstrainedZonotopeEstimator(Estimator):
     x0 : Box, the prior box on ``x[0]``
     max_constraints : int, optional
         Constraints kept between steps (default ``2 nx``; :func:`default_limits`; at least 1:
-        with none, the widths diverge on marginally stable plants).
+        with none, the widths diverge on marginally stable plants). Raise it when the boxes
+        are far from the ``exact`` hull on your system; each constraint costs a factor in
+        every LP.
     max_generators : int, optional
         Generators kept between steps (default ``16 nx``; never fewer than the rank of the
-        lifted generators, at most ``nx + max_constraints``).
+        lifted generators, ``nx`` plus the constraints). Raise it for tighter boxes (towards
+        the exact hull), lower it for cheaper steps.
     reduce : bool
         ``False`` keeps every constraint and generator: the exact filter, whose cost grows
         with the horizon (for short records and as a reference).
     elimination : ``"certificates"`` (default) or ``"hausdorff"``
         How the factor to eliminate is chosen: the least loss of the LP-certified box bounds
-        (see the module docstring), or the paper's smallest Hausdorff-error estimate.
+        (see the module docstring), or [Scott2016]'s smallest Hausdorff-error estimate (to
+        reproduce the paper's filter as published; looser).
 
     Notes
     -----
@@ -312,6 +295,7 @@ class ConstrainedZonotopeEstimator(Estimator):
     data_used = "filter"
     supports_time_varying = True
     supports_uncertain = True  # see "Interval matrices" in the docstring
+    proven_rounding = True  # see "Rounding (proof)" in the module docstring
     design: ConstrainedZonotopeDesign
 
     def __init__(
@@ -358,7 +342,6 @@ class ConstrainedZonotopeEstimator(Estimator):
     def _initial_state(self) -> ConstrainedZonotopeState:
         assert self.x0 is not None
         c, r = mid_rad(self.x0.lo, self.x0.hi)
-        r = _inflate(c, r)
         G = np.diag(r)[:, r > 0]
         return ConstrainedZonotopeState(
             c=c, G=G, A=np.zeros((0, G.shape[1])), b=np.zeros(0), e=np.zeros(self.sys.nx)
@@ -372,128 +355,119 @@ class ConstrainedZonotopeEstimator(Estimator):
         E, F = mats[4], mats[5]
         dbox = self.sys.d_at(k, y_k)
         cd, rd = mid_rad(dbox.lo, dbox.hi)
-        rd = _inflate(cd, rd)
-        cols = (rd > 0) & (np.logical_or.reduce(E != 0) | np.logical_or.reduce(F != 0))
+        cols = (rd > 0) & ((E != 0).any(axis=0) | (F != 0).any(axis=0))
+        xmag = upper(np.abs(state.c) + np.abs(state.G).sum(axis=1) + state.e, state.G.shape[1] + 2)
         data = _StepData(
             mats=mats,
             u=u_k,
             cd=cd,
             ER=E[:, cols] * rd[cols],
             FR=F[:, cols] * rd[cols],
-            xmag=np.abs(state.c) + np.add.reduce(np.abs(state.G), axis=1) + state.e,
-            dmag=np.abs(cd) + rd,
+            xmag=xmag,
+            dmag=up(np.abs(cd) + rd),
             n=state.G.shape[0] + state.G.shape[1] + u_k.shape[0] + dbox.dim,
         )
         if self.sys.uncertainty is not None:  # from the predicted box |x| <= xmag
-            xm = np.nextafter(data.xmag * (1.0 + gamma(data.n)), np.inf)
-            data = replace(data, v=uncertain.terms(self.sys.uncertainty, -xm, xm, u_k)[1])
+            data = replace(data, v=uncertain.terms(self.sys.uncertainty, -xmag, xmag, u_k)[1])
         upd = self._update(state, data, y_k)
         c, G, A, b, e = self._predict(k, state, data, upd)
-        # C order, as after a state() / restore() round trip (BLAS results depend on layout)
-        new = replace(state, c=c, G=np.ascontiguousarray(G), A=np.ascontiguousarray(A), b=b, e=e)
+        new = replace(state, c=c, G=G, A=A, b=b, e=e)
         return Step(new, upd.lo, upd.hi, upd.inconsistent)
 
     def _update(
         self, state: ConstrainedZonotopeState, data: _StepData, y_k: np.ndarray
     ) -> _Filtered:
-        """Measurement update on ``(x_k, d_k)``: ``C x + F d = y - D u`` for the point
-        ``x - ε`` of the set (``|ε| <= e``), up to the rounding bound ``ρ`` of each row: of
-        ``y`` itself (a float64 record of the model's output) and of the computed right-hand
-        side and row ``C G`` (``γ_n`` times the sums of absolute values of their terms). Then
-        the certified box of ``x[k]`` (the box aside and a margin for the rounding in the
-        set's construction added)."""
+        """Measurement update on ``(x_k, d_k)`` (``C x + F d = y - D u`` up to the rounding
+        bound ``ρ`` of each row, module docstring), then the certified box of ``x[k]``."""
         _, _, C, D, _, F = data.mats
         c, G, Ac, b, e = state.c, state.G, state.A, state.b, state.e
         nx, m = G.shape
         rhs = y_k - D @ data.u - C @ c - F @ data.cd
         aC = np.abs(C)
-        rho = 3.0 * gamma(data.n + 3) * (
-            np.abs(y_k) + np.abs(D) @ np.abs(data.u) + aC @ data.xmag + np.abs(F) @ data.dmag
-        ) + (aC @ e) * (1.0 + gamma(nx + 1))
+        terms = np.abs(y_k) + np.abs(D) @ np.abs(data.u) + aC @ data.xmag + np.abs(F) @ data.dmag
+        rho = upper(product_error(terms, 2 * data.n + 3) + aC @ e, nx + 1)
         if data.v is not None:
-            rho = np.nextafter(rho + data.v, np.inf)
+            rho = up(rho + data.v)
         A_new, b_new, p, status, full = _measurement_update(Ac, b, C @ G, data.FR, rhs, rho)
         if status == "check" and certified_empty(*full):
             status = "empty"
-        ER = _cat([data.ER, np.zeros((nx, p - data.ER.shape[1]))], axis=1)  # slacks: not in x
-        G_aug = _cat([G, np.zeros((nx, p))], axis=1)
+        ER = np.concatenate([data.ER, np.zeros((nx, p - data.ER.shape[1]))], axis=1)  # slacks
+        G_aug = np.concatenate([G, np.zeros((nx, p))], axis=1)
         # the certificates also keep the hull of the prediction x[k+1] = A x[k] + E d[k] (same
         # factors): the box of x[k] alone lets an elimination blow up a predicted coordinate
-        pred = None if self.design.elimination == "hausdorff" else np.hstack([data.mats[0] @ G, ER])
-        hull: tuple[np.ndarray, np.ndarray, Certificates | None] | None = None
-        if status != "empty":
-            hull = hull_certificates(c, G_aug, A_new, b_new, pred)
+        pred = None
+        if self.design.elimination != "hausdorff":
+            pred = np.concatenate([data.mats[0] @ G, ER], axis=1)
+        hull = None if status == "empty" else hull_certificates(c, G_aug, A_new, b_new, pred)
         inconsistent = hull is None
         if hull is None:  # certainly inconsistent: report, predict without y_k
-            A_new, b_new = np.hstack([Ac, np.zeros((Ac.shape[0], p))]), b
+            A_new, b_new = np.concatenate([Ac, np.zeros((Ac.shape[0], p))], axis=1), b
             hull = hull_certificates(c, G_aug, A_new, b_new, pred)
-            if hull is None:  # pragma: no cover - the prior set is never certainly empty
-                r = np.abs(G).sum(axis=1) * (1.0 + gamma(m + 2))
-                hull = (c - r, c + r, None)
-        lo, hi, cert = hull
-        scale = 1.0 if cert is None else cert.radius
-        if scale != 1.0:  # softened (see hull_certificates): keep the larger set
-            G_aug, A_new, ER = G_aug * scale, A_new * scale, ER * scale
-        lo = lo - e * (1.0 + 2.0 * UNIT_ROUNDOFF) - INFLATE * (1.0 + np.abs(lo))
-        hi = hi + e * (1.0 + 2.0 * UNIT_ROUNDOFF) + INFLATE * (1.0 + np.abs(hi))
-        return _Filtered(lo, hi, G_aug, A_new, b_new, ER, cert, scale, inconsistent)
+        cert: Certificates | None = None
+        er_err = np.zeros(nx)
+        if hull is None:  # pragma: no cover - the prior set is never certainly empty
+            r = upper(np.abs(G).sum(axis=1), m)
+            lo, hi = down(c - r), up(c + r)
+        else:
+            lo, hi, cert = hull
+            if cert.radius != 1.0:  # softened (see hull_certificates): keep the larger set
+                pad = np.concatenate([np.zeros((nx, m)), ER], axis=1)  # E R on the new factors
+                GE, A_new, err = soften(np.concatenate([G_aug, pad]), A_new, cert.radius)
+                G_aug, ER, e, er_err = GE[:nx], GE[nx:, m:], up(e + err[:nx]), err[nx:]
+                cert = None  # certificates of the softened set: not worth rescaling
+        lo, hi = down(lo - e), up(hi + e)
+        if self.design.elimination == "hausdorff":
+            cert = None
+        return _Filtered(lo, hi, G_aug, A_new, b_new, ER, e, er_err, cert, inconsistent)
 
     def _predict(
         self, k: int, state: ConstrainedZonotopeState, data: _StepData, upd: _Filtered
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(c, G, A, b, e)`` of ``x[k+1]``: the prediction (exact: same factors, so the
-        certificates still apply), plus a box for the rounding of ``A c + B u + E c_d`` and
-        ``A G`` (and of the plant's own float64 arithmetic) and the image of the box aside;
-        then the reduction [Scott2016, Section 4]."""
+        """``(c, G, A, b, e)`` of ``x[k+1]``: the prediction (same factors, so the
+        certificates still apply) plus the box of its rounding (module docstring), then the
+        reduction [Scott2016, Section 4]."""
         A, B, _, _, E, _ = data.mats
-        c, e, m = state.c, state.e, state.G.shape[1]
-        nx = c.shape[0]
-        aA = np.abs(A)
+        c, m, n = state.c, state.G.shape[1], data.n
         c_next = A @ c + B @ data.u + E @ data.cd
-        err = 2.0 * gamma(data.n + 2) * upd.scale * (
-            aA @ data.xmag + np.abs(B) @ np.abs(data.u) + np.abs(E) @ data.dmag
-        ) + (aA @ e) * (1.0 + gamma(nx + 1))
+        aA = np.abs(A)
+        terms = aA @ data.xmag + np.abs(B) @ np.abs(data.u) + np.abs(E) @ data.dmag
+        err = upper(product_error(terms, 2 * n + 3) + aA @ upd.e + upd.er_err, c.shape[0] + 2)
         if self.sys.uncertainty is not None:  # w = ΔA x + ΔB u from the certified box of x[k]
-            w = uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0]
-            err = np.nextafter(err + w, np.inf)
+            err = up(err + uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0])
         box = box_generators(err)
-        G_next = _cat([A @ upd.G[:, :m], upd.ER, box], axis=1)
+        G_next = np.concatenate([A @ upd.G[:, :m], upd.ER, box], axis=1)
         self._check_overflow(k + 1, c_next, G_next)
-        A_next = _cat([upd.A, np.zeros((upd.A.shape[0], box.shape[1]))], axis=1)
+        A_next = np.concatenate([upd.A, np.zeros((upd.A.shape[0], box.shape[1]))], axis=1)
         if self.design.max_generators <= 0:
-            return c_next, G_next, A_next, upd.b, np.zeros(nx)
-        return self._reduce(c_next, G_next, A_next, upd, box.shape[1], data)
-
-    def _reduce(
-        self,
-        c: np.ndarray,
-        G: np.ndarray,
-        A: np.ndarray,
-        upd: _Filtered,
-        n_box: int,
-        data: _StepData,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """At most ``max_constraints`` constraints, eliminated where the certified box loses
-        least (or by the paper's rule), then at most ``max_generators`` generators."""
-        nx = c.shape[0]
-        b, e = upd.b, np.zeros(nx)
+            return c_next, G_next, A_next, upd.b, np.zeros(c.shape[0])
         cert = upd.cert
-        if self.design.elimination == "hausdorff" or cert is None:
-            cert = None
+        if cert is not None:
+            cert.pad(box.shape[1])
+        # in coordinates centred at c_next, so that the rounding of the reduction is relative to
+        # the set, not to |x|; the shift is added once, its rounding u |c + shift| aside
+        out = eliminate_constraints(
+            np.zeros_like(c_next), G_next, A_next, upd.b, self.design.max_constraints, cert
+        )
+        if out is None:  # numerically empty: restart from the box of x[k] (sound, not a fault)
+            c_next, G, A_c, b = self._restart(data, upd)
+            e = np.zeros_like(c_next)
         else:
-            cert.D = _cat([cert.D, np.zeros((cert.D.shape[0], n_box))], axis=1)
-        # in coordinates centred at c, so that the rounding in the reduction is relative to the
-        # set, not to |x|; the shift is added once, its rounding aside
-        out = eliminate_constraints(np.zeros(nx), G, A, b, self.design.max_constraints, cert)
-        if out is None:  # numerically empty: restart from the box (sound, not a fault)
-            A_k, B, _, _, E, _ = data.mats
-            ER = upd.ER
-            if self.sys.uncertainty is not None:  # the interval matrices' w̄, as in _predict
-                w = uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0]
-                ER = np.hstack([ER, box_generators(w)])
-            c, G, A, b = _restart(A_k, B @ data.u + E @ data.cd, ER, upd.lo, upd.hi)
-        else:
-            shift, G, A, b = out
-            e = gamma(2) * (np.abs(c) + np.abs(shift))
-            c = c + shift
-        return (*reduce_consolidated(c, G, A, b, self.design.max_generators, TOLS), e)
+            c_next = c_next + out.c
+            G, A_c, b, e = out.G, out.A, out.b, up(out.e + UNIT_ROUNDOFF * np.abs(c_next))
+        c_next, G, A_c, b = reduce_consolidated(c_next, G, A_c, b, self.design.max_generators, TOLS)
+        return c_next, G, A_c, b, e
+
+    def _restart(
+        self, data: _StepData, upd: _Filtered
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The prediction of the box ``[lo, hi]`` of ``x[k]``: ``A m + B u + E c_d``,
+        ``[A diag(r), E R]`` and the box of its rounding (as in :meth:`_predict`)."""
+        A, B, _, _, E, _ = data.mats
+        mid, r = mid_rad(upd.lo, upd.hi)
+        aA = np.abs(A)
+        terms = aA @ (np.abs(mid) + r) + np.abs(B) @ np.abs(data.u) + np.abs(E) @ data.dmag
+        err = product_error(terms, 2 * data.n + 3)
+        if self.sys.uncertainty is not None:
+            err = up(err + uncertain.terms(self.sys.uncertainty, upd.lo, upd.hi, data.u)[0])
+        G = np.concatenate([A * r, data.ER, box_generators(err)], axis=1)
+        return A @ mid + B @ data.u + E @ data.cd, G, np.zeros((0, G.shape[1])), np.zeros(0)

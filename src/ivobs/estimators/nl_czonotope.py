@@ -32,20 +32,21 @@ model's forward-backward contractor of ``h = y_k``.
 * **Reduction** [Scott2016, Section 4]: constraint elimination and generator reduction
   (:func:`ivobs.czonotope.eliminate_constraints`, :func:`ivobs.czonotope.reduce_generators`).
 
-**Soundness under rounding (proof).** As for ``nl-zonotope`` (:mod:`ivobs.estimators.nl_zonotope`,
-steps (i)-(iii), (v), (vi)): the linearisation bounds its own rounding; a measured row is
-computed in floating point, and for the true factors ``ξ`` the computed row satisfies
+**Soundness under rounding (proof).** Every floating-point error of the recursion is bounded
+where it occurs (``proven_rounding``: the base class adds no margin). The linearisation bounds
+its own rounding (:mod:`ivobs.estimators._meanvalue`); a measured row is computed in floating
+point, and for the true factors ``ξ`` the computed row satisfies
 ``|fl(J_i G_z) ξ - fl(t_i - J_i z)| <= σ_i``, ``σ_i`` including ``γ_n |J_i| |G_z| 1`` and
 ``γ_{n+1} (|t_i| + |J_i| |z|)`` (the errors of the row and of the right-hand side, [Higham2002,
-Section 3.1]) besides ``ρ_i + |t̃_i - t_i|`` and ``|J_i| e``; the row is then scaled by a power
-of two (exact). The hull bounds are certified by LP duality at the solver's multipliers
-(:func:`ivobs.czonotope.hull_certificates`) and widened by :data:`INFLATE` relative (the
-rounding of that certificate's sum, as the linear ``constrained-zonotope`` method does). The
-prediction's box of generators holds the rounding of ``f0 + J (z - c̄)`` and ``J G_z`` and the
-image of the box aside; the reduction returns supersets and keeps the rounding of its shift in
-``e``. The data margin of a float64 record is in the recursion, relative to the terms of ``f``
-and ``h`` (:class:`~ivobs.estimators._meanvalue.TermwiseMargin`, as ``nl-zonotope``); the base
-class widens the returned bounds by ``ROUNDING (1 + |bound|)``.
+Section 3.1]) besides ``ρ_i + |t̃_i - t_i|`` and ``|J_i| e``, the sum enlarged by
+``(1 + γ_{n+6})`` for its own rounding; the row is then scaled by a power of two (exact). The
+hull bounds are proven by weak duality at the solver's multipliers
+(:func:`ivobs.czonotope.hull_certificates`), then ``∓ e``, rounded outward. The prediction's box
+of generators holds the rounding of ``f0 + J (z - c̄)`` and ``J G_z`` and the image of the box
+aside; the reduction returns supersets, its own rounding included, and the rounding of the
+re-centring goes to ``e``. A float64 record of the model is covered by data margins in the
+recursion, relative to the terms of ``f`` and ``h`` (``ROUNDING (1 + |f0| + |J| (|z - c| +
+|G_z| 1))`` in the prediction's box, ``ROUNDING (1 + |y_i|)`` in each measured row).
 """
 
 from __future__ import annotations
@@ -56,22 +57,21 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int
-from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from ..sets.czonotope import (
-    UNIT_ROUNDOFF,
     eliminate_constraints,
     gamma,
     hull_certificates,
     mid_rad,
     reduce_consolidated,
+    soften,
 )
-from ..sets.czonotope._highs import BLOCK_SIZE
+from ..sets.rounding import UNIT_ROUNDOFF, down, up, upper
 from . import register
-from ._meanvalue import Linearisation, TermwiseMargin, contract_back, linearise
+from ._meanvalue import Linearisation, contract_back, linearise
 from .base import ROUNDING, Design, Estimator, check_size
-from .constrained_zonotope import INFLATE, TOLS, default_limits
+from .constrained_zonotope import TOLS, default_limits
 from .state import OnlineState, Step
 
 __all__ = [
@@ -88,10 +88,6 @@ class NonlinearConstrainedZonotopeDesign(Design):
 
     max_constraints: int
     max_generators: int
-    block_max: int = 0
-    """Hull LPs solved as one block program when objectives times factors ``<= block_max``
-    (option ``hull_lp="block"``: :data:`~ivobs.sets.czonotope._highs.BLOCK_SIZE`), else as
-    warm-started chains (``hull_lp="chain"``: 0)."""
 
 
 @dataclass(frozen=True)
@@ -143,31 +139,20 @@ def _pad(M: np.ndarray, rows: int, cols: int) -> np.ndarray:
 
 def _joint_box(
     c: np.ndarray, G: np.ndarray, e: np.ndarray, xlo: np.ndarray, xhi: np.ndarray
-) -> tuple[list[float], list[float]]:
-    """The box of ``x_k`` for the joint set: the zonotope's bounds ``c ± rad``, rounded outward,
-    intersected with ``[xlo, xhi]`` (both hold the state; if they part, only by rounding, the
-    zonotope's bounds are kept).
-
-    ``rad = r0 + γ_{m+2} (|c| + r0) + e (1 + γ_2)``, ``r0 = |G| 1``: the same IEEE operations on
-    floats (``nx`` of them: cheaper than NumPy calls; max/min keep the first of equals too)."""
-    m = G.shape[1]
-    g_m, g_2 = gamma(m + 2), 1.0 + gamma(2)
-    lo, hi, lo_z, hi_z = [], [], [], []
-    for ci, ri, ei, a, q in zip(
-        c.tolist(), np.abs(G).sum(axis=1).tolist(), e.tolist(), xlo.tolist(), xhi.tolist()
-    ):
-        rad = ri + g_m * (abs(ci) + ri) + ei * g_2
-        lo_z.append(ci - rad)
-        hi_z.append(ci + rad)
-        lo.append(max(a, lo_z[-1]))
-        hi.append(min(q, hi_z[-1]))
-    if any(p > q for p, q in zip(lo, hi)):
+) -> tuple[np.ndarray, np.ndarray]:
+    """The box of ``x_k`` for the joint set: the zonotope's bounds ``c ± (|G| 1 + e)``, rounded
+    outward, intersected with ``[xlo, xhi]`` (both hold the state; if they part, only by
+    rounding, the zonotope's bounds are kept)."""
+    rad = upper(np.abs(G).sum(axis=1) + e, G.shape[1] + 1)
+    lo_z, hi_z = down(c - rad), up(c + rad)
+    lo, hi = np.maximum(xlo, lo_z), np.minimum(xhi, hi_z)
+    if (lo > hi).any():
         return lo_z, hi_z
     return lo, hi
 
 
 @register
-class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
+class NonlinearConstrainedZonotopeEstimator(Estimator):
     """Constrained-zonotope filter for nonlinear systems: the mean-value extension of
     [Rego2020] for prediction and measurement update, reduction of [Scott2016].
 
@@ -181,13 +166,6 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
     max_constraints, max_generators : int, optional
         Complexity kept between steps (defaults ``2 nx`` and ``16 nx``, as the linear
         ``constrained-zonotope`` method).
-    hull_lp : {"block", "chain"}, optional
-        How the ``2 nx`` hull LPs of a step are solved: ``"block"`` (default) as one program
-        (the ``2 nx`` copies side by side: HiGHS' fixed cost of a solve paid once; up to
-        ``K m <=`` :data:`~ivobs.sets.czonotope._highs.BLOCK_SIZE`, chains beyond), or
-        ``"chain"``: warm-started one after the other (the linear method's way). Both are
-        certified by their multipliers; on degenerate programs the optimal multipliers differ,
-        so the boxes differ slightly (Hénon, 1,000 steps: mean width within 0.01 %).
     """
 
     name = "nl-constrained-zonotope"
@@ -197,6 +175,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
     data_used = "filter"
     supports_nonlinear = True
     needs_x0 = True
+    proven_rounding = True  # see "Soundness under rounding" in the module docstring
     design: NonlinearConstrainedZonotopeDesign
 
     def __init__(
@@ -206,7 +185,6 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         *,
         max_constraints: int | None = None,
         max_generators: int | None = None,
-        hull_lp: str = "block",
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
@@ -218,11 +196,7 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
         nc_def, ng_def = default_limits(sys.nx)
         nc = nc_def if max_constraints is None else as_int("max_constraints", max_constraints, 0)
         ng = ng_def if max_generators is None else as_int("max_generators", max_generators, 1)
-        if hull_lp not in ("block", "chain"):
-            raise IvobsError(f"hull_lp: expected 'block' or 'chain', got {hull_lp!r}")
-        self.design = NonlinearConstrainedZonotopeDesign(
-            max_constraints=nc, max_generators=ng, block_max=BLOCK_SIZE if hull_lp == "block" else 0
-        )
+        self.design = NonlinearConstrainedZonotopeDesign(max_constraints=nc, max_generators=ng)
         self._cw, self._rw = mid_rad(sys.w_box.lo, sys.w_box.hi)
         self._wcols = np.flatnonzero(self._rw > 0)
         self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
@@ -348,31 +322,24 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             A = _pad(joint.A, nc + rows.shape[0], rows.shape[1])
             A[nc:] = rows
             b = np.concatenate([joint.b, rhs])
-            hull = hull_certificates(joint.z[:nx], Gz[:nx], A, b, block_max=self.design.block_max)
+            hull = hull_certificates(joint.z[:nx], Gz[:nx], A, b)
             if hull is not None:
                 joint.Gz, joint.A, joint.b = Gz, A, b
             inconsistent = hull is None
         if inconsistent:
             joint.lo, joint.hi = lo0, hi0
         if rows is None or inconsistent:
-            hull = hull_certificates(
-                joint.z[:nx], joint.Gz[:nx], joint.A, joint.b, block_max=self.design.block_max
-            )
+            hull = hull_certificates(joint.z[:nx], joint.Gz[:nx], joint.A, joint.b)
         if hull is None:  # pragma: no cover - the predicted set is never certainly empty
             return not inconsistent
         lo, hi, cert = hull
         if cert.radius != 1.0:  # softened (see hull_certificates): keep the larger set
-            joint.Gz, joint.A = joint.Gz * cert.radius, joint.A * cert.radius
-        # lo - e - INFLATE (1 + |lo|) etc. on floats (the same IEEE operations, nx of them)
-        up = 1.0 + 2.0 * UNIT_ROUNDOFF
-        new_lo, new_hi = [], []
-        for a, q, ea, l0, h0 in zip(
-            lo.tolist(), hi.tolist(), joint.acc[:nx].tolist(), joint.lo.tolist(), joint.hi.tolist()
-        ):
-            ei = ea * up
-            new_lo.append(max(l0, a - ei - INFLATE * (1.0 + abs(a))))
-            new_hi.append(min(h0, q + ei + INFLATE * (1.0 + abs(q))))
-        if all(p <= q for p, q in zip(new_lo, new_hi)):
+            joint.Gz, joint.A, err = soften(joint.Gz, joint.A, cert.radius)
+            joint.acc = up(joint.acc + err)
+        acc = joint.acc[:nx]
+        new_lo = np.maximum(joint.lo[:nx], down(lo - acc))
+        new_hi = np.minimum(joint.hi[:nx], up(hi + acc))
+        if (new_lo <= new_hi).all():
             joint.lo[:nx], joint.hi[:nx] = new_lo, new_hi
         return not inconsistent
 
@@ -446,7 +413,6 @@ class NonlinearConstrainedZonotopeEstimator(TermwiseMargin, Estimator):
             G = np.diag(r)[:, r > 0]
             A, b = np.zeros((0, G.shape[1])), np.zeros(0)
         else:
-            shift, G, A, b = out
-            e = gamma(2) * (np.abs(c) + np.abs(shift))
-            c = c + shift
+            c = c + out.c
+            G, A, b, e = out.G, out.A, out.b, up(out.e + UNIT_ROUNDOFF * np.abs(c))
         return (*reduce_consolidated(c, G, A, b, self.design.max_generators, TOLS), e)

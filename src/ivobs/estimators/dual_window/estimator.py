@@ -15,9 +15,9 @@ from ..._validate import as_int
 from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box
+from ...sets.lp import basis_codes
 from .. import register
 from ..base import Design, Estimator, check_size
-from ..exact.highs import basis_array
 from ..state import OnlineState, Step
 from .certificate import (
     Coefficients,
@@ -102,6 +102,7 @@ class DualWindow(Estimator):
     summary = "moving-window exact hull from cached, certified LP multipliers (time-invariant)"
     reference = "weak duality of the window program [Neumaier2004]; [Higham2002, §3.1]"
     needs_x0 = True
+    proven_rounding = True  # every bound is a certified evaluation: certificate.py
 
     design: DualWindowDesign
 
@@ -168,7 +169,7 @@ class DualWindow(Estimator):
         if isinstance(st, DualWindowState) and not st.basis.size:
             basis = self._basis_of(st.mu)
             if basis is not None and basis.valid:
-                st = replace(st, basis=basis_array(basis))
+                st = replace(st, basis=basis_codes(basis))
         return super().save_state(st)
 
     def _basis_of(self, mu: np.ndarray) -> Any:

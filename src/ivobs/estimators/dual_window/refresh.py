@@ -18,11 +18,13 @@ that a restored state continues with the same solves).
 
 from __future__ import annotations
 
-import highspy
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 
-from ..exact.highs import _new_highs, _unstubbed, basis_of
+from ...sets.lp import LinearProgram, basis_of
+from ..exact.highs import ITERATION_LIMIT
 from .certificate import Layout
 
 __all__ = ["WindowLP"]
@@ -46,13 +48,12 @@ class WindowLP:
         self.M = sp.vstack([meas, dyn]).tocsr()
         self.M.eliminate_zeros()
         self.n_col, self.n_row, self.n_meas = blocks * nb, self.M.shape[0], blocks * ny
-        self.h = _new_highs()
-        empty = np.zeros(0, np.int32)
-        inf = np.full(self.n_col, np.inf)
-        self.h.addCols(self.n_col, np.zeros(self.n_col), -inf, inf, 0, empty, empty, np.zeros(0))
-        rinf = np.full(self.n_row, np.inf)
-        self.h.addRows(self.n_row, -rinf, rinf, self.M.nnz, self.M.indptr.astype(np.int32),
-                       self.M.indices.astype(np.int32), self.M.data)  # fmt: skip
+        # as the exact method's models: no scaling, bounded iterations (the duals only go to
+        # the cache; any of them certifies)
+        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
+        inf, rinf = np.full(self.n_col, np.inf), np.full(self.n_row, np.inf)
+        self.prog.add_cols(-inf, inf)
+        self.prog.add_rows((self.M.indptr, self.M.indices, self.M.data), -rinf, rinf)
 
     def _bounds(
         self, y: np.ndarray, u: np.ndarray, replaced: np.ndarray, s: int,
@@ -86,22 +87,20 @@ class WindowLP:
         s: int,
         prior: tuple[np.ndarray, np.ndarray],
         centres: np.ndarray,
-        start: highspy.HighsBasis | None,
-    ) -> tuple[np.ndarray, np.ndarray, highspy.HighsBasis]:
+        start: Any,
+    ) -> tuple[np.ndarray, np.ndarray, Any]:
         """Measurement multipliers for the ``2 nx`` objectives ``+x_N[i]`` then ``−x_N[i]``
         (rows of ``(2 nx, N+1, ny)``), whether each program was solved to optimality, and the
         basis to start the next refresh from (``start``: this one's; None: a cold start).
         ``y`` (N+1, ny) and ``u`` (N+1, nu): the window's data from position ``s`` on
         (``replaced``: the measurement components that are missing or dropped, free rows);
         ``prior``: the box of ``x_s``."""
-        lay, h = self.lay, self.h
+        lay, prog = self.lay, self.prog
         lo, hi, rlo, rhi = self._bounds(y, u, replaced, s, prior, centres)
-        h.changeColsBounds(self.n_col, np.arange(self.n_col, dtype=np.int32), lo, hi)
-        _unstubbed(h).changeRowsBounds(self.n_row, np.arange(self.n_row, dtype=np.int32),
-                                       rlo, rhi)  # fmt: skip
-        h.clearSolver()
-        if start is not None:
-            h.setBasis(start)
+        prog.set_bounds(lo, hi)
+        prog.set_row_bounds(rlo, rhi)
+        prog.cold()
+        prog.set_basis(start)
         first = lay.N * (lay.nx + lay.nd)
         mu = np.zeros((2 * lay.nx, lay.N + 1, lay.ny))
         ok = np.zeros(2 * lay.nx, dtype=bool)
@@ -110,28 +109,23 @@ class WindowLP:
             i, sense = r % lay.nx, (-1.0 if r < lay.nx else 1.0)  # min −x_i: upper bound of x_i
             col = first + i
             if last is not None:
-                h.changeColCost(last, 0.0)
-            h.changeColCost(col, sense)
+                prog.set_cost(np.array([last]), np.zeros(1))
+            prog.set_cost(np.array([col]), np.array([sense]))
             last = col
-            h.setOptionValue("simplex_strategy", 1 if r == 0 else 4)
-            h.run()
-            if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
-                continue
-            sol = h.getSolution()
-            if not sol.dual_valid:
+            lam = prog.row_duals() if prog.solve(primal=r > 0) == "optimal" else None
+            if lam is None:
                 continue
             # HiGHS: sense e_i − M^T λ = reduced costs; c = −sense e_i gives μ = −λ
-            lam = np.asarray(sol.row_dual[: self.n_meas])
-            mu[r] = (-lam).reshape(lay.N + 1, lay.ny)
+            mu[r] = (-lam[: self.n_meas]).reshape(lay.N + 1, lay.ny)
             mu[r, :s] = 0.0
             ok[r] = True
         if last is not None:
-            h.changeColCost(last, 0.0)
-        return mu, ok, h.getBasis()
+            prog.set_cost(np.array([last]), np.zeros(1))
+        return mu, ok, prog.basis()
 
-    def basis_of(self, codes: np.ndarray) -> highspy.HighsBasis | None:
-        """The basis saved as status codes (:func:`~ivobs.estimators.exact.highs.basis_array`);
-        None if they do not fit this program."""
+    def basis_of(self, codes: np.ndarray) -> Any:
+        """The basis saved as status codes (:func:`ivobs.sets.lp.basis_codes`); None if they
+        do not fit this program."""
         if codes.size != self.n_col + self.n_row:
             return None
         return basis_of(codes, self.n_col)

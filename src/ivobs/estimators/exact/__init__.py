@@ -29,7 +29,7 @@ change), so every solve is warm-started: a chain of neighbouring objectives
 bases alone (no factorisation or pricing weights kept from the previous step), and HiGHS's own
 scaling is off (it was computed once and extended row by row, so a program rebuilt in one go
 was scaled differently): a state saved with its bases (``state()``) therefore continues, once
-restored, with exactly the solves of the run that saved it, bit for bit. Each solve is capped
+restored, with exactly the solves of the run that saved it. Each solve is capped
 at 20,000 simplex iterations (a stalled or very long solve); a capped program still gives the
 safe bound (S) of its last multipliers, and the step warns (``RuntimeWarning``).
 HiGHS sees the program shifted to the centres of the variable bounds (``z = m + z'``; ``m``:
@@ -99,10 +99,14 @@ prediction), only less tight. NaN components of ``y[k]`` are missing: their rows
 Data used: ``x0``, the bounds ``d`` and ``u[0..k]``, ``y[0..k]`` for the box of ``x[k]`` (the
 filtered hull; ``d[k]`` enters through ``y[k]``).
 
+Every bound the estimator returns is therefore proven in floating point (``proven_rounding``:
+the base class adds no margin).
+
 Layout: :mod:`.safe` (the safe bounds (S) and the Farkas certificate), :mod:`.rows` (the rows
 and their rounding ranges, the interval prediction, the gross-fault test), :mod:`.program` (the
-sparse trajectory program), :mod:`.highs` (the warm-started HiGHS models, and their cache
-outside the online state), :mod:`.estimator` (the estimator, its design and its state).
+sparse trajectory program), :mod:`.highs` (the warm-started models,
+:class:`ivobs.sets.lp.LinearProgram`, and their cache outside the online state),
+:mod:`.estimator` (the estimator, its design and its state).
 """
 
 from __future__ import annotations

@@ -14,10 +14,11 @@ from ..._progress import Progress
 from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box
+from ...sets.lp import basis_codes, basis_of
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from .highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts, basis_array, basis_of
+from .highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts
 from .program import TrajectoryLP
 from .rows import dynamics, measurement, outside_prediction, prediction, widen
 
@@ -99,12 +100,10 @@ class Exact(Estimator):
     Online, the program is kept warm-started from step to step (:meth:`step`, :meth:`run`, and
     :meth:`advance` from the state the previous call returned). Every step starts from the
     simplex bases the previous one ended on, and nothing else, and :meth:`state` saves those
-    bases: a restored state rebuilds the same program and continues bit for bit like the run
-    that saved it. A state saved without bases (by an older ivobs) continues from a cold start:
-    its boxes agree with the run's to the solver's tolerances (both are safe bounds; typically
-    1e-8 relative to ``1 + |x|``). Each solve is capped at 20,000 simplex iterations; a program
-    stopped there still gives a guaranteed (possibly wider) box, and a ``RuntimeWarning`` says
-    at which step.
+    bases: a restored state rebuilds the same program and continues identically to the run
+    that saved it. Each solve is capped at 20,000 simplex iterations; a program stopped there
+    still gives a guaranteed (possibly wider) box, and a ``RuntimeWarning`` says at which
+    step.
     """
 
     name = "exact"
@@ -113,6 +112,7 @@ class Exact(Estimator):
     reference = "set-membership hull [Tang2019, Section I] by LP with HiGHS; [Neumaier2004]"
     supports_time_varying = True
     needs_x0 = True
+    proven_rounding = True  # safe bounds (S) and proven variable bounds: package docstring
 
     design: ExactDesign
 
@@ -263,18 +263,11 @@ class Exact(Estimator):
         if isinstance(st, ExactState) and not st.basis_min.size:
             bases = self._bases(st)
             if bases is not None and all(b.valid for b in bases):
-                st = replace(st, basis_min=basis_array(bases[0]), basis_max=basis_array(bases[1]))
+                st = replace(st, basis_min=basis_codes(bases[0]), basis_max=basis_codes(bases[1]))
         return super().save_state(st)
 
     def check_state(self, state: Any) -> ExactState:
-        """As :meth:`Estimator.check_state`; a state saved without bases (before they were
-        saved) is accepted and continues from a cold start. The bases are checked (status
-        codes 0-4)."""
-        if isinstance(state, dict) and isinstance(state.get("state"), dict):
-            inner = dict(state["state"])
-            for key in ("basis_min", "basis_max"):
-                inner.setdefault(key, {"shape": [0], "array": [], "dtype": "|i1"})
-            state = {**state, "state": inner}
+        """As :meth:`Estimator.check_state`, and the bases are checked (status codes 0-4)."""
         st = super().check_state(state)
         assert isinstance(st, ExactState)
         for key in ("basis_min", "basis_max"):

@@ -15,46 +15,41 @@ Proposition 1]):
 * ``Z ∩_R Y = <c_z, [G_z 0], [[A_z, 0], [0, A_y], [R G_z, -G_y]], [b_z; b_y; c_y - R c_z]>``
 
 What is not cheap is asking a question of the set: its interval hull, emptiness and membership
-are linear programs (solved with HiGHS). Each bound is certified by
-LP duality: for any multiplier ``μ``, ``min {gᵀξ : Aξ = b, |ξ| <= 1} >= μᵀb - ‖g - Aᵀμ‖₁``; the
-returned bound is this expression at HiGHS' multipliers, so it is a valid bound whatever the
-solver's tolerances (it equals the optimum when ``μ`` is optimal).
+are linear programs (:mod:`.hull`, HiGHS through :class:`ivobs.sets.lp.LinearProgram`), each
+bound certified by weak duality at the solver's multipliers, so it holds whatever the solver's
+tolerances.
 
 The complexity (``m`` generators, ``nc`` constraints) grows with every Minkowski sum and
 intersection; :meth:`ConstrainedZonotope.reduce` bounds it ([Scott2016, Section 4]): constraint
-elimination after rescaling (Section 4.2), then generator reduction of the lifted zonotope
-(Section 4.3). Both return a superset. The array-level functions (:func:`eliminate_constraints`,
-:func:`reduce_generators`, :func:`hull_certificates`) are what the ``constrained-zonotope``
-estimator uses; :class:`Certificates` lets the elimination keep the LP bounds the estimator
-reports as tight as possible (see its docstring).
+elimination after rescaling (:mod:`.elimination`, Section 4.2), then generator reduction of the
+lifted zonotope (:mod:`.reduction`, Section 4.3). Both return a superset, their rounding
+included. The array-level functions (:func:`eliminate_constraints`, :func:`reduce_generators`,
+:func:`hull_certificates`) are what the estimators use; :class:`Certificates` lets the
+elimination keep the LP bounds the estimator reports as tight as possible.
 
-Rounding. Constraints are normalised (largest coefficient 1); constraints made of rounding noise
-(all coefficients below :data:`ROW_TOL` after cancellation or rescaling) and linearly dependent
-constraints are dropped (a superset); propagated factor bounds are widened by ``1e-10``
-(relative); a set counts as empty only beyond :data:`EMPTY_TOL`.
-
-Modules: :mod:`.constrained` (the set and its exact operations), :mod:`.hull` (the LPs and their
-certificates), :mod:`.elimination` and :mod:`.reduction` (the two reductions, on raw arrays).
-``UNIT_ROUNDOFF``, ``gamma`` (:mod:`ivobs.linalg`) and ``mid_rad``, ``box_generators``
-(:mod:`ivobs.sets.zonotope`) are re-exported here for the estimators' rounding terms.
+Modules: :mod:`.constrained` (the set and its operations), :mod:`.hull` (the LPs and their
+certificates), :mod:`.elimination` and :mod:`.reduction` (the two reductions, on raw arrays),
+:mod:`.tolerances`. ``UNIT_ROUNDOFF``, ``gamma`` and ``mid_rad`` (:mod:`ivobs.sets.rounding`),
+``box_generators`` (:mod:`ivobs.sets.zonotope`) are re-exported for the estimators.
 """
 
 from __future__ import annotations
 
-from ...linalg import UNIT_ROUNDOFF, gamma
-from ..rounding import mid_rad
+from ..rounding import UNIT_ROUNDOFF, gamma, mid_rad
 from ..zonotope import box_generators
-from ._tolerances import EMPTY_TOL, PIVOT_TOL, ROW_TOL, ZERO_TOL
 from .constrained import ConstrainedZonotope
-from .elimination import eliminate_constraints, independent_constraints
+from .elimination import Reduced, eliminate_constraints, independent_constraints
 from .hull import (
     Certificates,
     certified_empty,
+    dual_bounds,
     hull_bounds,
     hull_certificates,
     radius_certificate,
+    soften,
 )
 from .reduction import consolidate_small, reduce_consolidated, reduce_generators
+from .tolerances import EMPTY_TOL, PIVOT_TOL, ROW_TOL, ZERO_TOL
 
 __all__ = [
     "EMPTY_TOL",
@@ -64,9 +59,11 @@ __all__ = [
     "ZERO_TOL",
     "Certificates",
     "ConstrainedZonotope",
+    "Reduced",
     "box_generators",
     "certified_empty",
     "consolidate_small",
+    "dual_bounds",
     "eliminate_constraints",
     "gamma",
     "hull_bounds",
@@ -76,4 +73,5 @@ __all__ = [
     "radius_certificate",
     "reduce_consolidated",
     "reduce_generators",
+    "soften",
 ]

@@ -1,8 +1,11 @@
 """The constrained zonotope ``<c, G, A, b>`` ([Scott2016, Definition 3]) and its set operations.
 
 Linear map, Minkowski sum and (generalised) intersection are exact and cheap ([Scott2016,
-Proposition 1]); questions (hull, emptiness, membership) are the LPs of :mod:`.hull`; reduction
-is :mod:`.elimination` then :mod:`.reduction`.
+Proposition 1]); evaluated in floating point, each adds the proven bound of its rounding
+(:mod:`ivobs.sets.rounding`): a box of generators for the ``x`` part, a slack factor per new
+constraint (``A ξ + diag(s) τ = b``), so the result contains the exact one. Questions (hull,
+emptiness, membership) are the LPs of :mod:`.hull`; reduction is :mod:`.elimination` then
+:mod:`.reduction`.
 """
 
 from __future__ import annotations
@@ -14,9 +17,11 @@ import numpy as np
 from ..._validate import as_float_array, as_matrix, as_vector, check_finite
 from ...errors import InconsistentDataError, IvobsError
 from ..box import Box
-from ..zonotope import Zonotope, center_and_generators
-from .elimination import _drop_zero_idx, _normalise_rows_s, _rescale, eliminate_constraints
-from .hull import _feasibility_radius, certified_empty, hull_bounds
+from ..lp import LinearProgram, csc
+from ..rounding import UNIT_ROUNDOFF, product_error, up
+from ..zonotope import Zonotope, box_generators, center_and_generators
+from .elimination import Reduced, eliminate_constraints, rescale_factors
+from .hull import certified_empty, hull_bounds, radius_certificate
 from .reduction import reduce_generators
 
 __all__ = ["ConstrainedZonotope"]
@@ -98,9 +103,16 @@ class ConstrainedZonotope:
 
     # -- exact operations ([Scott2016, Proposition 1]) ----------------------------------------
     def linear_map(self, M: Any) -> ConstrainedZonotope:
-        """``M Z = <M c, M G, A, b>`` ([Scott2016, Proposition 1])."""
+        """``M Z = <M c, M G, A, b>`` ([Scott2016, Proposition 1]), plus the box of generators
+        of its rounding, ``product_error(|M| (|c| + |G| 1))``."""
         M = as_matrix("M", M, cols=self.dim, vector="row")
-        return ConstrainedZonotope._trusted(M @ self.c, M @ self.G, self.A, self.b)
+        n, m = self.G.shape
+        e = product_error(np.abs(M) @ (np.abs(self.c) + np.abs(self.G).sum(axis=1)), n + m + 1)
+        box = box_generators(e)
+        A = np.concatenate([self.A, np.zeros((self.num_constraints, box.shape[1]))], axis=1)
+        return ConstrainedZonotope._trusted(
+            M @ self.c, np.concatenate([M @ self.G, box], axis=1), A, self.b
+        )
 
     def __rmatmul__(self, M: Any) -> ConstrainedZonotope:
         return self.linear_map(M)
@@ -122,13 +134,16 @@ class ConstrainedZonotope:
                 ]
             )
             return ConstrainedZonotope._trusted(
-                self.c + other.c,
-                np.hstack([self.G, other.G]),
-                A,
-                np.concatenate([self.b, other.b]),
-            )
+                self.c + other.c, np.hstack([self.G, other.G]), A, np.concatenate([self.b, other.b])
+            )._with_sum_error()
         v = as_vector("translation", other, self.dim)
-        return ConstrainedZonotope._trusted(self.c + v, self.G, self.A, self.b)
+        return ConstrainedZonotope._trusted(self.c + v, self.G, self.A, self.b)._with_sum_error()
+
+    def _with_sum_error(self) -> ConstrainedZonotope:
+        """The set with the box of the rounding of its centre, a sum: ``u |c|``."""
+        box = box_generators(up(UNIT_ROUNDOFF * np.abs(self.c)))
+        A = np.concatenate([self.A, np.zeros((self.num_constraints, box.shape[1]))], axis=1)
+        return ConstrainedZonotope._trusted(self.c, np.hstack([self.G, box]), A, self.b)
 
     def __radd__(self, other: Any) -> ConstrainedZonotope:
         """``other + Z`` for a box, zonotope or vector: the left operand's generators first, as
@@ -156,23 +171,32 @@ class ConstrainedZonotope:
         if R is None and other.dim != self.dim:
             raise IvobsError(f"intersect: dimensions differ ({self.dim}, {other.dim})")
         m1, m2 = self.num_generators, other.num_generators
+        # the new rows R G ξ − G_y η = c_y − R c, up to their rounding: a slack factor per row
+        s = product_error(
+            np.abs(R_) @ (np.abs(self.c) + np.abs(self.G).sum(axis=1)) + np.abs(other.c),
+            m1 + self.dim + 1,
+        )
+        p = other.dim
         A = np.block(
             [
-                [self.A, np.zeros((self.num_constraints, m2))],
-                [np.zeros((other.num_constraints, m1)), other.A],
-                [R_ @ self.G, -other.G],
+                [self.A, np.zeros((self.num_constraints, m2 + p))],
+                [
+                    np.zeros((other.num_constraints, m1)),
+                    other.A,
+                    np.zeros((other.num_constraints, p)),
+                ],
+                [R_ @ self.G, -other.G, np.diag(s)],
             ]
         )
         b = np.concatenate([self.b, other.b, other.c - R_ @ self.c])
-        G = np.hstack([self.G, np.zeros((self.dim, m2))])
+        G = np.hstack([self.G, np.zeros((self.dim, m2 + p))])
         return ConstrainedZonotope._trusted(self.c, G, A, b)
 
     def intersect_hyperplane(self, h: Any, y: float) -> ConstrainedZonotope:
-        """``{x ∈ Z : hᵀx = y}``: one constraint ``hᵀG ξ = y - hᵀc`` (``Y`` a point)."""
+        """``{x ∈ Z : hᵀx = y}``: one constraint ``hᵀG ξ = y - hᵀc`` (``Y`` a point), with a
+        slack factor of the size of its rounding."""
         h = as_vector("h", h, self.dim)
-        A = np.vstack([self.A, (h @ self.G)[None, :]])
-        b = np.append(self.b, float(y) - h @ self.c)
-        return ConstrainedZonotope._trusted(self.c, self.G, A, b)
+        return self.intersect(ConstrainedZonotope([float(y)]), R=h[None, :])
 
     def intersect_strip(self, h: Any, y: float, sigma: float) -> ConstrainedZonotope:
         """``{x ∈ Z : |hᵀx - y| <= σ}`` (``Z ∩_R Y`` with ``Y = <y, σ>``, ``R = hᵀ``): one
@@ -204,18 +228,24 @@ class ConstrainedZonotope:
         beq = np.concatenate([x - self.c, self.b])
         if self.num_generators == 0:
             return bool(np.all(np.abs(beq) <= tol))
-        return _feasibility_radius(Aeq, beq) <= 1.0 + tol
+        return radius_certificate(Aeq, beq)[0] <= 1.0 + tol
 
     # -- reduction ([Scott2016, Section 4]) ---------------------------------------------------
     def rescale(self) -> ConstrainedZonotope:
-        """The same set with its factors rescaled to their propagated bounds ([Scott2016,
-        Section 4.2]). Raises :class:`~ivobs.InconsistentDataError` when propagation proves it
-        empty."""
-        A, b, _ = _normalise_rows_s(self.A, self.b)
-        out = _rescale(self.c, self.G, A, b)
+        """The set (a superset, by its rounding) with its factors rescaled to their propagated
+        bounds ([Scott2016, Section 4.2]). Raises :class:`~ivobs.InconsistentDataError` when
+        propagation proves it empty."""
+        out = rescale_factors(self.c, self.G, self.A, self.b)
         if out is None:
             raise InconsistentDataError("rescale: the constrained zonotope is empty")
-        return ConstrainedZonotope._trusted(*_drop_zero_idx(*out[:4])[:4])
+        return ConstrainedZonotope._of(out)
+
+    @classmethod
+    def _of(cls, r: Reduced) -> ConstrainedZonotope:
+        """``<c, G, A, b> ⊕ box(e)`` as one constrained zonotope."""
+        box = box_generators(r.e)
+        A = np.concatenate([r.A, np.zeros((r.A.shape[0], box.shape[1]))], axis=1)
+        return cls._trusted(r.c, np.concatenate([r.G, box], axis=1), A, r.b)
 
     def reduce(
         self, max_generators: int | None = None, max_constraints: int | None = None
@@ -231,7 +261,8 @@ class ConstrainedZonotope:
             out = eliminate_constraints(c, G, A, b, int(max_constraints))
             if out is None:
                 raise InconsistentDataError("reduce: the constrained zonotope is empty")
-            c, G, A, b = out
+            z = ConstrainedZonotope._of(out)
+            c, G, A, b = z.c, z.G, z.A, z.b
         if max_generators is not None:
             c, G, A, b = reduce_generators(c, G, A, b, int(max_generators))
         return ConstrainedZonotope._trusted(c, G, A, b)
@@ -244,23 +275,19 @@ class ConstrainedZonotope:
     def sample(self, size: int, rng: Any = None) -> np.ndarray:
         """Vertices of the set that maximise random linear objectives (one LP each; for tests
         and plots)."""
-        from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
-
         rng = np.random.default_rng(rng)
+        m, nc = self.num_generators, self.num_constraints
+        if m == 0:
+            return np.tile(self.c, (size, 1))
+        lp = LinearProgram(presolve=True)
+        ones = np.ones(m)
+        lp.load(csc(self.A), nc, -ones, ones, self.b, self.b)
         pts = []
-        m = self.num_generators
         for _ in range(size):
-            w = rng.normal(size=self.dim)
-            res = linprog(
-                -(w @ self.G),
-                A_eq=self.A if self.num_constraints else None,
-                b_eq=self.b if self.num_constraints else None,
-                bounds=(-1, 1),
-                method="highs",
-            )
-            if res.status != 0:
+            lp.set_cost(np.arange(m), -(rng.normal(size=self.dim) @ self.G))
+            if lp.solve() != "optimal":
                 raise InconsistentDataError("sample: the constrained zonotope is empty")
-            pts.append(self.c + self.G @ res.x if m else self.c)
+            pts.append(self.c + self.G @ lp.primal())
         return np.array(pts)
 
     def __repr__(self) -> str:

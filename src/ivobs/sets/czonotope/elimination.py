@@ -1,245 +1,246 @@
-"""Constraint elimination of constrained zonotopes ([Scott2016, Section 4.2]), on raw arrays.
+"""Constraint elimination of constrained zonotopes ([Scott2016, Section 4.2]), on raw arrays,
+every rounding bounded.
 
-In turn: normalise the constraints, rescale the factors ``ξ`` to their propagated bounds (an
-exact reparametrisation), drop implied constraints, choose a factor and solve a constraint for
-it. Each step returns a superset of the set it is given. With :class:`~.hull.Certificates` the
-factor chosen is the one whose elimination loosens the certified interval hull least; without,
-the one with the smallest estimate of the Hausdorff error ([Scott2016, eq. (A.8)]).
+In turn: normalise the constraints, rescale the factors ``ξ`` to their propagated bounds, drop
+implied constraints, choose a factor and solve a constraint for it. Each step returns a
+superset of the set it is given. With :class:`~.hull.Certificates` the factor chosen is the one
+whose elimination loosens the certified interval hull least; without, the one with the smallest
+estimate of the Hausdorff error ([Scott2016, eq. (A.8)]).
+
+**Rounding.** While eliminating, the set is kept as
+
+    {c + G ξ + ε : ‖ξ‖∞ <= 1, |A ξ − b| <= s, |ε| <= e}                                  (R)
+
+where ``s`` (per constraint) and ``e`` (per coordinate) collect the proven bounds of every
+rounding so far ([Higham2002, Lemma 3.1]; :mod:`ivobs.sets.rounding`): each computed quantity
+differs from the exact one by at most ``γ_k`` times the same expression on absolute values, and
+the factors are in the unit box, so the error of ``G ξ`` (``A ξ``) for the true ``ξ`` is at most
+the error bound of the coefficients times ``|ξ| <= 1``. At the end the slacks become factors,
+``A ξ + diag(s) τ = b`` (``|τ| <= 1``), so the result is an ordinary constrained zonotope
+``⊕ box(e)``.
 """
 
 from __future__ import annotations
 
-from functools import cache
-from typing import Any
+from typing import NamedTuple
 
 import numpy as np
+import scipy.linalg
 
-try:  # the gufuncs behind np.linalg.qr (private to NumPy: present in 1.26 and 2.x)
-    from numpy.linalg import _umath_linalg as _gufuncs
-except ImportError:  # pragma: no cover - a NumPy without it: the public call
-    _gufuncs = None  # type: ignore[assignment]
-
-from ._elim_kernels import select as _kernels_for
-from ._tolerances import PIVOT_TOL, ROW_TOL, ZERO_TOL
+from ..rounding import ETA, UNIT_ROUNDOFF, down, mid_rad, product_error, up, upper
 from .hull import Certificates
+from .tolerances import PIVOT_TOL, ROW_TOL, ZERO_TOL
 
-_max, _any, _all = np.maximum.reduce, np.logical_or.reduce, np.logical_and.reduce
-
-__all__ = ["eliminate_constraints", "independent_constraints"]
-
-
-def _drop_zero_idx(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray, own: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """Remove (numerically) trivial constraints ``0 ξ = 0`` (all coefficients below
-    :data:`ROW_TOL`: dropping a constraint gives a superset) and generators that are zero in
-    ``G`` and ``A`` (exactly: dropping a small one would give a subset).
-
-    Returns ``(c, G, A, b, rows, cols, consistent)``: the masks of the kept constraints and
-    generators, and False for a dropped constraint ``a ξ = b`` with ``|b| > ‖a‖₁`` (an empty
-    set). ``own``: ``G`` and ``A`` are temporaries of the caller's (never a caller's
-    arrays), which may be returned themselves.
-    """
-    # the ufuncs' reductions called directly (what ndarray.max / any / all call, without their
-    # Python wrappers: a few µs a call, five calls per step on the servo)
-    absA = np.abs(A)
-    scale = 1.0 + (_max(absA, axis=None) if A.size else 0.0)
-    rows = _any(absA > ROW_TOL * scale, axis=1)
-    all_rows, consistent = bool(_all(rows)), True
-    if not all_rows:
-        # a dropped row a ξ = b can only hold if |b| <= ‖a‖₁ (up to rounding)
-        zb, za = b[~rows], absA[~rows].sum(axis=1)
-        consistent = bool((np.abs(zb) <= za + 1e-8 * (1.0 + np.abs(zb))).all())
-        A = A[rows]
-    b = b[rows]
-    # only exactly zero generators: fixing a small nonzero ξ_j at 0 would shrink the set
-    cols = _any(G != 0, axis=0) | _any(A != 0, axis=0)
-    # the copies are made even when nothing is dropped: their memory layout (``G[:, cols]`` is
-    # column-major) decides how BLAS rounds the products that follow; arrays already laid out
-    # as these copies would be (own temporaries, in the loop of eliminate_constraints) are kept
-    if own and all_rows and _all(cols) and _column_major(G) and _column_major(A):
-        return c, G, A, b, rows, cols, consistent
-    return c, G[:, cols], A[:, cols], b, rows, cols, consistent
+__all__ = ["Reduced", "eliminate_constraints", "independent_constraints", "rescale_factors"]
 
 
-def _column_major(M: np.ndarray) -> bool:
-    """Whether ``M`` (2-D float64) has the strides of a fresh column-major copy of itself."""
-    return M.dtype == np.float64 and M.strides == (8, 8 * M.shape[0])
+class Reduced(NamedTuple):
+    """``<c, G, A, b> ⊕ box(e)``: a constrained zonotope and the box of its rounding."""
+
+    c: np.ndarray
+    G: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    e: np.ndarray
 
 
-def _normalise_rows_s(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Scale each constraint so that its largest coefficient is 1 (same set, better
-    conditioned); also returns the scales."""
-    if A.shape[0] == 0:
-        return A, b, np.ones(0)
-    s = _max(np.abs(A), axis=1)
-    if not _all(s):
-        s[s == 0] = 1.0
-    return A / s[:, None], b / s, s
+class _Set:
+    """The set (R) during an elimination (module docstring), changed in place."""
+
+    def __init__(self, c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray) -> None:
+        self.c, self.G, self.A, self.b = c, G, A, b
+        self.s = np.zeros(A.shape[0])
+        self.e = np.zeros(c.shape[0])
+
+    def finish(self, cert: Certificates | None) -> Reduced:
+        """The slacks as factors: ``[G 0], [A diag(s)]`` (rows with ``s > 0`` only)."""
+        rows = np.flatnonzero(self.s > 0)
+        if cert is not None:
+            cert.pad(rows.size)
+        G = np.concatenate([self.G, np.zeros((self.G.shape[0], rows.size))], axis=1)
+        S = np.zeros((self.A.shape[0], rows.size))
+        S[rows, np.arange(rows.size)] = self.s[rows]
+        return Reduced(self.c, G, np.concatenate([self.A, S], axis=1), self.b, self.e)
 
 
-def _propagate(
-    A: np.ndarray, b: np.ndarray, sweeps: int = 3
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Interval bounds ``[ξL, ξU] ⊆ [-1, 1]^m`` on every ``ξ`` with ``A ξ = b`` (constraint
-    propagation, [Scott2016, Section 4.2, Algorithm 1]), or ``None`` when a
-    constraint cannot be met (the set is empty).
+def _drop_zero(z: _Set, cert: Certificates | None) -> bool:
+    """Drop what is negligible, keeping a superset:
 
-    Each row ``a ξ = b`` gives ``ξ_j ∈ (b - Σ_{l≠j} a_l [ξ_l]) / a_j``; all rows are applied at
-    once and the results intersected (``sweeps`` times). The computed intervals are widened by
-    ``1e-10`` (relative) so that rounding never excludes a feasible ``ξ``. On large sets
-    (tank30) the compiled :func:`._elim_nb.propagate` gives the same numbers, bit for bit.
-    """
-    fast = _kernels_for(A, b)
-    if fast is not None:
-        feasible, lo_k, hi_k = fast[0].propagate(A, b, sweeps, fast[1])
-        return (lo_k, hi_k) if feasible else None
-    m = A.shape[1]
-    lo = -np.ones(m)
-    hi = np.ones(m)
-    absA = np.abs(A)
-    nz = absA > ZERO_TOL * np.maximum(1.0, absA.max(axis=1, keepdims=True))
-    safe = np.where(nz, A, 1.0)
-    zero = ~nz
-    any_zero = bool(zero.any())
-    bc = b[:, None]
-    # four scratch arrays of A's shape and layout (the layout decides the order of the row
-    # sums), reused by every sweep: on tank30 (81 x 552) fresh temporaries cost more than the
-    # arithmetic
-    b0, b1, b2, pad = (np.empty_like(A) for _ in range(4))
+    * coefficients of a constraint below :data:`ZERO_TOL` times its largest go to its slack
+      (``|a_ij ξ_j| <= |a_ij|``), entries of ``G`` below ``ZERO_TOL`` times the largest of
+      their row to ``e``: cancellation leaves such noise, down to subnormal numbers, which
+      would fill the sparse constraints and slow every later operation;
+    * constraints whose coefficients are all below :data:`ROW_TOL` (relative; after
+      cancellation or rescaling they carry rounding, which normalising would amplify);
+    * factors that are zero in ``G`` and ``A``.
+
+    False when a dropped constraint cannot hold, ``|b_i| > ‖a_i‖₁ + s_i`` (rounded so that this
+    is certain): the set is empty."""
+    m = z.A.shape[1]
+    absA = np.abs(z.A)
+    noise = (absA <= ZERO_TOL * absA.max(axis=1, initial=0.0)[:, None]) & (absA > 0)
+    if noise.any():
+        z.s = up(z.s + upper(np.where(noise, absA, 0.0).sum(axis=1), m))
+        z.A = np.where(noise, 0.0, z.A)
+        absA = np.abs(z.A)
+    absG = np.abs(z.G)
+    noise = (absG <= ZERO_TOL * absG.max(axis=1, initial=0.0)[:, None]) & (absG > 0)
+    if noise.any():
+        z.e = up(z.e + upper(np.where(noise, absG, 0.0).sum(axis=1), m))
+        z.G = np.where(noise, 0.0, z.G)
+    scale = 1.0 + (absA.max() if absA.size else 0.0)
+    rows = (absA > ROW_TOL * scale).any(axis=1)
+    if not rows.all():
+        reach = upper(absA[~rows].sum(axis=1) + z.s[~rows], m + 1)
+        if (np.abs(z.b[~rows]) > reach).any():
+            return False
+        z.A, z.b, z.s = z.A[rows], z.b[rows], z.s[rows]
+    cols = (z.G != 0).any(axis=0) | (z.A != 0).any(axis=0)
+    if not cols.all():
+        z.G, z.A = z.G[:, cols], z.A[:, cols]
+    if cert is not None:
+        cert.keep(rows, cols)
+    return True
+
+
+def _normalise_rows(z: _Set, cert: Certificates | None) -> None:
+    """Scale each constraint by a power of two so that its largest coefficient is in
+    ``[1, 2)`` (the same set, better conditioned; exact but for underflow, whose error, at most
+    ``ETA`` per entry, goes to the slack)."""
+    if z.A.shape[0] == 0:
+        return
+    top = np.abs(z.A).max(axis=1)
+    d = np.ldexp(1.0, 1 - np.frexp(np.where(top > 0, top, 1.0))[1])
+    z.A, z.b, z.s = z.A * d[:, None], z.b * d, up(z.s * d + (z.A.shape[1] + 1) * ETA)
+    if cert is not None:
+        cert.scale_rows(1.0 / d)
+
+
+class _Entries(NamedTuple):
+    """The nonzero entries of a constraint matrix ``A`` (a few percent of it once the
+    constraints of many steps are in it), sorted by column: rows ``r``, columns ``c``, values
+    ``a``; ``cols`` the columns that have entries and ``starts`` where each begins."""
+
+    r: np.ndarray
+    c: np.ndarray
+    a: np.ndarray
+    cols: np.ndarray
+    starts: np.ndarray
+
+    @classmethod
+    def of(cls, A: np.ndarray) -> _Entries:
+        c, r = np.nonzero(A.T)  # by column, then row
+        starts = np.flatnonzero(np.diff(c, prepend=-1))
+        return cls(r, c, A[r, c], c[starts], starts)
+
+    def col_max(self, v: np.ndarray, m: int) -> np.ndarray:
+        """``max`` of the entry values ``v`` over each column (``-inf`` where none)."""
+        out = np.full(m, -np.inf)
+        if v.size:
+            out[self.cols] = np.maximum.reduceat(v, self.starts)
+        return out
+
+    def row_sum(self, v: np.ndarray, nc: int) -> np.ndarray:
+        """``Σ`` of the entry values ``v`` over each row."""
+        return np.bincount(self.r, weights=v, minlength=nc)
+
+
+def _propagate(z: _Set, sweeps: int = 3) -> tuple[np.ndarray, np.ndarray] | None:
+    """Bounds ``[lo, hi] ⊆ [-1, 1]^m`` on every ``ξ`` of (R) (constraint propagation,
+    [Scott2016, Section 4.2, Algorithm 1]), or ``None`` when they prove the set empty.
+
+    Row ``i`` gives ``a_ij ξ_j ∈ b_i ± s_i − Σ_{l≠j} a_il [ξ_l]`` for every ``j`` with ``a_ij``
+    above :data:`ZERO_TOL` (the rows are normalised); all rows at once (on the nonzero entries
+    of ``A``), the results intersected, ``sweeps`` times. Proof of the rounding: each end
+    ``n_ij`` of that interval is a sum of at most ``m + 3`` rounded terms bounded by
+    ``M_i = |b_i| + s_i + |A_i| w`` (``w = max(|lo|, |hi|)``), so it is within ``γ_{m+3} M_i``
+    of its exact value, and ``|n_ij| <= M_i``; dividing by ``a_ij`` adds at most
+    ``u |n_ij| / |a_ij|``. So each computed quotient is within ``(E_i + 4 u M_i) / |a_ij|`` of
+    the exact one (``E_i``: :func:`product_error`, whose factor 2 absorbs the rounding of this
+    pad), and the bounds are rounded outward once after the max / min over the rows."""
+    A, b, s = z.A, z.b, z.s
+    nc, m = A.shape
+    ent = _Entries.of(A)
+    r, c, a = ent.r, ent.c, ent.a
+    pos, absa = a > 0, np.abs(a)
+    far = np.where(absa > ZERO_TOL, 0.0, np.inf)  # a negligible coefficient: no bound
+    lo, hi = -np.ones(m), np.ones(m)
     for _ in range(sweeps):
-        # the same operations as before, each product once, in place
-        a_lo, a_hi = np.multiply(A, lo, out=b0), np.multiply(A, hi, out=b1)
-        t_lo = np.minimum(a_lo, a_hi, out=b2)
-        t_hi = np.maximum(a_lo, a_hi, out=a_hi)
-        rest_lo = np.subtract(t_lo.sum(axis=1, keepdims=True), t_lo, out=t_lo)
-        rest_hi = np.subtract(t_hi.sum(axis=1, keepdims=True), t_hi, out=t_hi)
-        q1 = np.divide(np.subtract(bc, rest_hi, out=rest_hi), safe, out=rest_hi)
-        q2 = np.divide(np.subtract(bc, rest_lo, out=rest_lo), safe, out=rest_lo)
-        # pad = 1e-10 (1 + |q1| + |q2|), term by term as written
-        np.add(1.0, np.abs(q1, out=pad), out=pad)
-        np.add(pad, np.abs(q2, out=b0), out=pad)
-        np.multiply(1e-10, pad, out=pad)
-        q_lo, q_hi = np.minimum(q1, q2, out=b0), np.maximum(q1, q2, out=q1)
-        q_lo -= pad
-        q_hi += pad
-        if any_zero:  # copyto: the masked assignment without its indexing machinery
-            np.copyto(q_lo, -np.inf, where=zero)
-            np.copyto(q_hi, np.inf, where=zero)
-        new_lo = q_lo.max(axis=0, initial=-np.inf)
-        new_hi = q_hi.min(axis=0, initial=np.inf)
-        lo_next = np.maximum(lo, new_lo)
-        hi_next = np.minimum(hi, new_hi)
-        if (lo_next > hi_next + 1e-9).any():
+        a_lo, a_hi = a * lo[c], a * hi[c]
+        t_lo, t_hi = np.where(pos, a_lo, a_hi), np.where(pos, a_hi, a_lo)  # a_ij [ξ_j]
+        M = np.abs(b) + s + ent.row_sum(absa * np.maximum(np.abs(lo), np.abs(hi))[c], nc)
+        pad = (product_error(M, m + 3) + (4.0 * UNIT_ROUNDOFF) * M)[r] / absa + far
+        q1 = ((b - s - ent.row_sum(t_hi, nc))[r] + t_hi) / a
+        q2 = ((b + s - ent.row_sum(t_lo, nc))[r] + t_lo) / a
+        new_lo = down(ent.col_max(np.minimum(q1, q2) - pad, m))
+        new_hi = up(-ent.col_max(-(np.maximum(q1, q2) + pad), m))
+        lo_next, hi_next = np.maximum(lo, new_lo), np.minimum(hi, new_hi)
+        if (lo_next > hi_next).any():
             return None
-        hi_next = np.maximum(hi_next, lo_next)
         if (lo_next == lo).all() and (hi_next == hi).all():
-            break  # a fixed point: the remaining sweeps would repeat this one exactly
+            break
         lo, hi = lo_next, hi_next
     return lo, hi
 
 
-def _rescale(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """The same set with ``ξ = m + diag(r) ξ'``, ``[m - r, m + r]`` the propagated bounds of ξ
-    ([Scott2016, Section 4.2]): an exact reparametrisation after which more box
-    constraints are redundant. Returns ``(c, G, A, b, r)``, or ``None`` when propagation
-    proves the set empty."""
-    bounds = _propagate(A, b)
+def _rescale(z: _Set, cert: Certificates | None) -> bool:
+    """The factors rescaled to their propagated bounds, ``ξ = μ + diag(r) ξ'`` with
+    ``[lo, hi] ⊆ [μ − r, μ + r]`` ([Scott2016, Section 4.2]; :func:`mid_rad`): after it more
+    box constraints are redundant. ``c + G μ``, ``G diag(r)``, ``A diag(r)``, ``b − A μ`` are
+    dot products of at most ``m + 1`` terms: ``e`` and ``s`` grow by their
+    :func:`product_error` at ``|ξ'| <= 1``. False when propagation proves the set empty."""
+    bounds = _propagate(z)
     if bounds is None:
-        return None
-    lo, hi = bounds
-    mid = 0.5 * (lo + hi)
-    rad = 0.5 * (hi - lo)
-    return c + G @ mid, G * rad, A * rad, b - A @ mid, rad
+        return False
+    mu, r = mid_rad(*bounds)
+    m = z.A.shape[1]
+    w = np.abs(mu) + r
+    z.e = up(z.e + product_error(np.abs(z.c) + np.abs(z.G) @ w, m + 1))
+    z.s = up(z.s + product_error(np.abs(z.b) + np.abs(z.A) @ w, m + 1))
+    z.c, z.G, z.A, z.b = z.c + z.G @ mu, z.G * r, z.A * r, z.b - z.A @ mu
+    if cert is not None:
+        cert.scale_factors(r)
+    return True
 
 
-def _elimination_scores(
-    G: np.ndarray, A: np.ndarray, b: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """For each ``ξ_j``: how far the constraints alone let it leave ``[-1, 1]`` (``R_j``; 0 means
-    its box constraint is redundant and eliminating ``ξ_j`` is exact), and an estimate of the
-    Hausdorff error of eliminating it ([Scott2016, Section 4.2 and eq. (A.8)]).
+def _eliminate(z: _Set, j: int, p: int, cert: Certificates | None) -> None:
+    """Solve constraint ``p`` for ``ξ_j`` and substitute: one constraint and one factor fewer;
+    the box ``|ξ_j| <= 1`` is dropped, so the result contains the original ([Scott2016,
+    Proposition 5, eqs. (27) and (29)]).
 
-    ``R_j = max(0, max|ρ_j| - 1)`` with ``ρ_j = ∩_i (b_i - Σ_{l≠j} a_il [-1, 1]) / a_ij``
-    (:func:`_overshoot`). Dropping ``|ξ_j| <= 1`` lets ``ξ_j`` move by about ``R_j`` along the
-    constraints' null space; the error estimate is ``‖G δ_j‖₂`` for the shortest such move
-    ``δ_j = R_j P e_j / P_jj`` (``P`` the projector onto the null space of ``A``), computed
-    for all ``j`` from one QR factorisation of ``Aᵀ`` (:func:`_hausdorff`).
-    """
-    R = _overshoot(A, b)
-    return R, _hausdorff(G, A, R)
-
-
-def _overshoot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``R_j`` of :func:`_elimination_scores` (``inf``: ``ξ_j`` is in no constraint); on large
-    sets by the compiled :func:`._elim_nb.overshoot` (the same numbers, bit for bit)."""
-    fast = _kernels_for(A, b)
-    if fast is not None:
-        return fast[0].overshoot(A, b, fast[1])
-    absA = np.abs(A)
-    tol = ZERO_TOL * max(1.0, float(absA.max()) if absA.size else 1.0)
-    nz = absA > tol
-    safe = np.where(nz, A, 1.0)
-    spread = (absA.sum(axis=1, keepdims=True) - absA) / np.abs(safe)
-    mid = b[:, None] / safe
-    rho_lo = np.where(nz, mid - spread, -np.inf).max(axis=0, initial=-np.inf)
-    rho_hi = np.where(nz, mid + spread, np.inf).min(axis=0, initial=np.inf)
-    R: np.ndarray = np.maximum(0.0, np.maximum(-1.0 - rho_lo, rho_hi - 1.0))
-    return R
-
-
-def _hausdorff(G: np.ndarray, A: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """The Hausdorff-error estimate of :func:`_elimination_scores` from the overshoots ``R``
-    (0 on the exact eliminations, ``R_j <= 1e-3``, when there are any; ``inf`` where none)."""
-    cand = np.isfinite(R)
-    exact = cand & (R <= 1e-3)
-    if _any(exact):
-        return np.where(exact, 0.0, np.inf)
-    Q = _qr_q(A.T)  # orthonormal basis of the row space of A
-    Pjj = 1.0 - np.einsum("ij,ij->i", Q, Q)
-    GP = G - (G @ Q) @ Q.T  # G P, column j = G P e_j
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # ‖G P e_j‖₂ by np.linalg.norm(GP, axis=0)'s own formula, without its wrapper
-        move = np.sqrt(np.add.reduce(GP * GP, axis=0)) * R / Pjj
-    ok = cand & (Pjj > 1e-12) & np.isfinite(move)
-    out: np.ndarray = np.where(ok, move, np.inf)
-    return out
-
-
-def _qr_q(M: np.ndarray) -> np.ndarray:
-    """``np.linalg.qr(M)[0]`` (the reduced ``Q``) by the two LAPACK gufuncs it calls, without its
-    checks, type dispatch and error-state context (the same calls on the same copy: the same
-    numbers; 5x cheaper on the small systems of a filter step). Failure gives NaNs, which
-    :func:`_hausdorff` treats as no estimate, instead of an exception."""
-    if _gufuncs is None:  # pragma: no cover - a NumPy without the private module
-        return np.linalg.qr(M)[0]
-    a = M.astype(float, copy=True)
-    with np.errstate(all="ignore"):
-        tau = _gufuncs.qr_r_raw(a, signature="d->d")
-        q: np.ndarray = _gufuncs.qr_reduced(a, tau, signature="dd->d")
-    return q
-
-
-def _eliminate(
-    c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray, j: int, i: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Solve constraint ``i`` for ``ξ_j`` and substitute: one constraint and one generator
-    fewer; the box constraint ``|ξ_j| <= 1`` is dropped, so the result contains the original
-    ([Scott2016, Proposition 5, eqs. (27) and (29)])."""
-    piv_row = A[i] / A[i, j]
-    piv_b = b[i] / A[i, j]
-    # ξ_j = piv_b - Σ_{l≠j} piv_row_l ξ_l (the products of np.outer, without its wrapper)
-    c = c + G[:, j] * piv_b
-    G = G - G[:, j, None] * piv_row[None, :]
+    With ``a_p ξ = b_p + t`` (``|t| <= s_p``), ``ξ_j = (b_p + t − Σ_{l≠j} a_pl ξ_l) / a_pj``.
+    The terms in ``t`` are bounded over ``|t| <= s_p``: ``|G_j| s_p / |a_pj|`` joins ``e``,
+    ``|A_ij| s_p / |a_pj|`` joins ``s_i``. Each computed coefficient (``c + G_j (b_p / a_pj)``,
+    ``G_l − G_j (a_pl / a_pj)``, likewise for ``b`` and ``A``) passes through 3 roundings: their
+    :func:`product_error` at ``|ξ| <= 1`` joins ``e`` and ``s``."""
+    if cert is not None:
+        cert.eliminate(z.A, j, p)
+    A, G, b, s = z.A, z.G, z.b, z.s
+    apj = A[p, j]
+    piv_row, piv_b, piv_s = A[p] / apj, b[p] / apj, up(s[p] / abs(apj))
+    w = abs(piv_b) + np.abs(piv_row).sum()
+    aG, aA = np.abs(G), np.abs(A)
+    z.e = up(
+        z.e + upper(aG[:, j] * piv_s, 1) + product_error(np.abs(z.c) + aG.sum(1) + aG[:, j] * w, 3)
+    )
+    s = up(s + upper(aA[:, j] * piv_s, 1) + product_error(np.abs(b) + aA.sum(1) + aA[:, j] * w, 3))
+    c = z.c + G[:, j] * piv_b
+    G = G - np.outer(G[:, j], piv_row)
     b = b - A[:, j] * piv_b
-    A = A - A[:, j, None] * piv_row[None, :]
-    keep_r = np.arange(A.shape[0]) != i
-    keep_c = np.arange(A.shape[1]) != j
-    # two masks in turn rather than np.ix_ (the same entries; the caller's _drop_zero_idx
-    # copies them again, into a layout that does not depend on this one)
-    return c, G[:, keep_c], A[keep_r][:, keep_c], b[keep_r]
+    A = A - np.outer(A[:, j], piv_row)
+    rows, cols = np.arange(A.shape[0]) != p, np.arange(A.shape[1]) != j
+    z.c, z.G, z.A, z.b, z.s = c, G[:, cols], A[np.ix_(rows, cols)], b[rows], s[rows]
+    if cert is not None:
+        cert.keep(rows, cols)
+
+
+def rescale_factors(c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray) -> Reduced | None:
+    """``<c, G, A, b>`` with its constraints normalised and its factors rescaled to their
+    propagated bounds ([Scott2016, Section 4.2]): a superset, its rounding included (the form of
+    :func:`eliminate_constraints`' result), or ``None`` when propagation proves it empty."""
+    z = _Set(c, G, A, b)
+    _normalise_rows(z, None)
+    return z.finish(None) if _rescale(z, None) else None
 
 
 def independent_constraints(A: np.ndarray) -> np.ndarray:
@@ -251,25 +252,52 @@ def independent_constraints(A: np.ndarray) -> np.ndarray:
     keep = np.ones(nc, dtype=bool)
     if nc <= 1:
         return keep
-    # LAPACK's QR with column pivoting directly (what scipy.linalg.qr calls, without the
-    # argument checks and copies that cost more than the factorisation on small systems; a
-    # blocked workspace, as SciPy's size query gives, so the same factorisation)
-    R, jpvt = _dgeqp3()(np.array(A.T, dtype=float, order="F"), lwork=2 * nc + (nc + 1) * 64)[:2]
-    d = np.abs(R.diagonal()[:nc])
+    R, piv = scipy.linalg.qr(A.T, mode="r", pivoting=True, check_finite=False)
+    d = np.abs(np.diagonal(R)[:nc])
     rank = int(np.count_nonzero(d > 1e-10 * d[0])) if d.size and d[0] > 0 else 0
     if rank < nc:
         keep[:] = False
-        keep[jpvt[:rank] - 1] = True
+        keep[piv[:rank]] = True
     return keep
 
 
-@cache
-def _dgeqp3() -> Any:
-    """SciPy's ``dgeqp3``, imported on first use (SciPy is slow to import) and kept (the import
-    statement costs a sixth of a servo-sized factorisation)."""
-    from scipy.linalg.lapack import dgeqp3
+def _overshoot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """For each ``ξ_j``, how far the constraints alone let it leave ``[-1, 1]``:
+    ``R_j = max(0, max|ρ_j| - 1)`` with ``ρ_j = ∩_i (b_i - Σ_{l≠j} a_il [-1, 1]) / a_ij``
+    (``inf``: ``ξ_j`` is in no constraint; 0: its box is redundant and eliminating it is
+    exact). A score, not a bound: no rounding to bound."""
+    m = A.shape[1]
+    absA = np.abs(A)
+    ent = _Entries.of(np.where(absA > ZERO_TOL, A, 0.0))
+    absa = np.abs(ent.a)
+    row_l1 = absA.sum(axis=1)
+    spread = (row_l1[ent.r] - absa) / absa
+    mid = b[ent.r] / ent.a
+    rho_lo = ent.col_max(mid - spread, m)
+    rho_hi = -ent.col_max(-(mid + spread), m)
+    R: np.ndarray = np.maximum(0.0, np.maximum(-1.0 - rho_lo, rho_hi - 1.0))
+    return R
 
-    return dgeqp3
+
+def _hausdorff(G: np.ndarray, A: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """An estimate of the Hausdorff error of eliminating each ``ξ_j`` ([Scott2016, Section 4.2
+    and eq. (A.8)]): dropping ``|ξ_j| <= 1`` lets ``ξ_j`` move by about ``R_j`` along the
+    constraints' null space, so ``‖G δ_j‖₂`` for the shortest such move ``δ_j = R_j P e_j /
+    P_jj`` (``P`` the projector onto the null space of ``A``, from one QR factorisation of
+    ``Aᵀ``). 0 on the exact eliminations (``R_j <= 1e-3``) when there are any; ``inf`` where
+    there is no estimate."""
+    cand = np.isfinite(R)
+    exact = cand & (R <= 1e-3)
+    if exact.any():
+        return np.where(exact, 0.0, np.inf)
+    with np.errstate(all="ignore"):
+        Q = np.linalg.qr(A.T)[0]  # orthonormal basis of the row space of A
+        Pjj = 1.0 - np.einsum("ij,ij->i", Q, Q)
+        GP = G - (G @ Q) @ Q.T  # G P, column j = G P e_j
+        move = np.linalg.norm(GP, axis=0) * R / Pjj
+    ok = cand & (Pjj > 1e-12) & np.isfinite(move)
+    out: np.ndarray = np.where(ok, move, np.inf)
+    return out
 
 
 def _choose_factor(
@@ -278,39 +306,28 @@ def _choose_factor(
     """The factor ``j`` to eliminate and its pivot row ``p`` (largest ``|a_pj|``).
 
     With certificates: the least weighted loosening of the certified bounds, ties broken by the
-    Hausdorff estimate of :func:`_elimination_scores`; without: that estimate alone (or, when
-    ``A`` has no null space, the overshoot ``R_j`` times ``‖G e_j‖``)."""
+    Hausdorff estimate; without: that estimate alone (or, when ``A`` has no null space, the
+    overshoot ``R_j`` times ``‖G e_j‖``)."""
     m = A.shape[1]
     R = _overshoot(A, b)
     piv = np.argmax(np.abs(A), axis=0)
     cand = np.isfinite(R) & (np.abs(A[piv, np.arange(m)]) >= PIVOT_TOL)
-    if not _any(cand):
+    if not cand.any():
         return None
-    if cert is None:
-        j = int(np.argmin(_shape(G, A, R, cand)))
-        return j, int(piv[j])
-    loss = cert.elimination_loss(A, b, piv, cand)
-    best = np.minimum.reduce(loss)
-    ties = loss <= best + 1e-9 * (1.0 + abs(best))
-    if np.count_nonzero(ties) == 1:  # a unique least loss: the Hausdorff estimate is not needed
-        j = int(ties.argmax())
-        return j, int(piv[j])
-    key = np.where(ties, _shape(G, A, R, cand), np.inf)
-    if not _any(np.isfinite(key)):
-        key = loss
-    j = int(key.argmin())
-    return j, int(piv[j])
-
-
-def _shape(G: np.ndarray, A: np.ndarray, R: np.ndarray, cand: np.ndarray) -> np.ndarray:
-    """The shape key of :func:`_choose_factor` on the candidates (``inf`` elsewhere): the
-    Hausdorff estimate, or where it is nowhere finite the overshoot times ``‖G e_j‖``."""
-    err = _hausdorff(G, A, R)
-    shape = np.where(cand & np.isfinite(err), err, np.inf)
-    if not _any(np.isfinite(shape)):
+    if cert is not None:
+        loss = cert.elimination_loss(A, b, piv, cand)
+        best = loss.min()
+        ties = loss <= best + 1e-9 * (1.0 + abs(best))
+        if np.count_nonzero(ties) == 1:
+            j = int(ties.argmax())
+            return j, int(piv[j])
+        cand = cand & ties
+    shape = np.where(cand, _hausdorff(G, A, R), np.inf)
+    if not np.isfinite(shape).any():
         with np.errstate(invalid="ignore"):  # R = inf on the non-candidates
             shape = np.where(cand, R * np.linalg.norm(G, axis=0), np.inf)
-    return shape
+    j = int(shape.argmin())
+    return j, int(piv[j])
 
 
 def eliminate_constraints(
@@ -320,60 +337,40 @@ def eliminate_constraints(
     b: np.ndarray,
     max_constraints: int,
     cert: Certificates | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """Reduce to at most ``max_constraints`` constraints ([Scott2016, Section 4.2]): in
-    turn, rescale the factors to their propagated bounds, choose a factor, eliminate it with
-    the constraint where it has the largest coefficient. The factor is the one with the least
-    loss of the certified bounds ``cert`` (:class:`Certificates`, updated in place), or without
-    certificates the one with the smallest Hausdorff-error estimate. ``None`` when the set is
-    found empty on the way."""
-    c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b)
-    if not ok:
+) -> Reduced | None:
+    """At most ``max_constraints`` constraints ([Scott2016, Section 4.2]): in turn, rescale the
+    factors to their propagated bounds, drop implied constraints, choose a factor, eliminate it
+    with the constraint where it has the largest coefficient. The factor is the one with the
+    least loss of the certified bounds ``cert`` (:class:`Certificates`, updated in place), or
+    without certificates the one with the smallest Hausdorff-error estimate.
+
+    Returns ``<c', G', A', b'> ⊕ box(e)`` containing ``<c, G, A, b>`` in exact arithmetic (the
+    slacks of the module docstring as last factors), or ``None`` when the set is found empty on
+    the way."""
+    z = _Set(c, G, A, b)
+    if not _drop_zero(z, cert):
         return None
-    if cert is not None:
-        cert.keep(rows, cols)
-    while A.shape[0] > max_constraints:
-        A, b, s = _normalise_rows_s(A, b)
-        if cert is not None:
-            cert.scale_rows(s)
-        out = _rescale(c, G, A, b)
-        if out is None:
+    while z.A.shape[0] > max_constraints:
+        _normalise_rows(z, cert)
+        if not _rescale(z, cert) or not _drop_zero(z, cert):
             return None
-        c, G, A, b, rad = out
-        if cert is not None:
-            cert.scale_factors(rad)
-        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b, own=True)
-        if not ok:
-            return None
-        if cert is not None:
-            cert.keep(rows, cols)
-        if A.shape[0] <= max_constraints:
+        if z.A.shape[0] <= max_constraints:
             break
-        A, b, s = _normalise_rows_s(A, b)
-        if cert is not None:
-            cert.scale_rows(s)
-        rows = independent_constraints(A)
-        if not _all(rows):  # implied constraints: dropping them keeps the set
-            A, b = A[rows], b[rows]
+        _normalise_rows(z, cert)
+        rows = independent_constraints(z.A)
+        if not rows.all():  # implied constraints: dropping them keeps the set
+            z.A, z.b, z.s = z.A[rows], z.b[rows], z.s[rows]
             if cert is not None:
-                cert.keep(rows, np.ones(A.shape[1], dtype=bool))
+                cert.keep(rows, np.ones(z.A.shape[1], dtype=bool))
             continue
-        choice = _choose_factor(G, A, b, cert)
-        if choice is None:  # pragma: no cover - no usable pivot: drop the oldest constraint
-            rows = np.arange(A.shape[0]) != 0
-            A, b = A[rows], b[rows]
+        choice = _choose_factor(z.G, z.A, z.b, cert)
+        if choice is None:  # no usable pivot: drop the oldest constraint (a superset)
+            rows = np.arange(z.A.shape[0]) != 0
+            z.A, z.b, z.s = z.A[rows], z.b[rows], z.s[rows]
             if cert is not None:
-                cert.keep(rows, np.ones(A.shape[1], dtype=bool))
+                cert.keep(rows, np.ones(z.A.shape[1], dtype=bool))
             continue
-        j, p = choice
-        if cert is not None:
-            cert.eliminate(A, j, p)
-        c, G, A, b = _eliminate(c, G, A, b, j, p)
-        if cert is not None:
-            cert.keep(np.arange(A.shape[0] + 1) != p, np.arange(G.shape[1] + 1) != j)
-        c, G, A, b, rows, cols, ok = _drop_zero_idx(c, G, A, b, own=True)
-        if not ok:
+        _eliminate(z, *choice, cert)
+        if not _drop_zero(z, cert):
             return None
-        if cert is not None:
-            cert.keep(rows, cols)
-    return c, G, A, b
+    return z.finish(cert)

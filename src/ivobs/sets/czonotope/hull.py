@@ -1,153 +1,108 @@
 """Questions to a constrained zonotope ``<c, G, A, b>`` answered by linear programs in its
 factors ``ξ``: interval hull, emptiness and membership ([Scott2016]).
 
-The LPs are solved with HiGHS (the hull's through ``highspy`` directly, :mod:`._highs`; the
-rare fallbacks and the other questions through ``scipy.optimize.linprog``), and every bound is
-certified by LP duality, so it is a valid bound whatever the solver's tolerances: for any
-multiplier ``μ``,
-``min {gᵀξ : Aξ = b, |ξ| <= 1} >= μᵀb - ‖g - Aᵀμ‖₁``, evaluated with the ``γ_n`` bounds of its
-rounding ([Higham2002, Lemma 3.1]) — safe bounds from an approximate dual, as in
-[Neumaier2004]. Emptiness is claimed only with a dual certificate checked the same way.
-:class:`Certificates` keeps the multipliers of the hull's ``2 n`` bounds, so that a reduction
-can tell what it loosens. SciPy is imported where an LP is solved (it is slow to import).
+Every bound is certified by weak duality, so it holds whatever the solver returns: for any
+multipliers ``μ``,
+
+    min {gᵀξ : A ξ = b, ‖ξ‖∞ <= r}  >=  μᵀb − r ‖g − Aᵀμ‖₁                              (W)
+
+evaluated with the proven bounds of its rounding (:mod:`ivobs.sets.rounding`) — safe bounds
+from an approximate dual, as in [Neumaier2004]. The multipliers are HiGHS's row duals
+(:class:`~ivobs.sets.lp.LinearProgram`). Emptiness is claimed only with a certificate checked
+the same way. :class:`Certificates` keeps the multipliers of the hull's bounds, so that a
+reduction can tell what it loosens.
 """
 
 from __future__ import annotations
 
+import threading
 from functools import cache
-from typing import Any
 
 import numpy as np
 
-from ...linalg import gamma
-from ._elim_kernels import load_compiled
-from ._tolerances import EMPTY_TOL, ZERO_TOL
-
-# ndarray.sum / all without their Python wrappers (the same reductions): called several times
-# per elimination, on small arrays where the wrapper costs as much as the sum
-_add, _all = np.add.reduce, np.logical_and.reduce
+from ..lp import LinearProgram, csc
+from ..rounding import down, product_error, up, upper
+from .tolerances import EMPTY_TOL
 
 __all__ = [
     "Certificates",
     "certified_empty",
+    "dual_bounds",
     "hull_bounds",
     "hull_certificates",
     "radius_certificate",
+    "soften",
 ]
 
 
-def _certified_min(
-    g: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float = 1.0
-) -> tuple[float, np.ndarray, bool]:
-    """A lower bound of ``min {gᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``, its multipliers ``μ`` and
-    whether the set is nonempty.
-
-    The bound is the Lagrangian dual ``μᵀb - radius ‖g - Aᵀμ‖₁`` at HiGHS' equality multipliers
-    ``μ`` (any ``μ`` gives a valid bound; the optimal one gives the optimum). When HiGHS reports
-    infeasibility, ``(nan, 0, False)``; on any other solver failure ``μ = 0`` (the bound of the
-    zonotope without constraints), never an unsound number.
-    """
-    nc = A.shape[0]
-    mu = np.zeros(nc)
-    if nc == 0:
-        return -radius * float(np.abs(g).sum()), mu, True
-    from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
-
-    infeasible = 0
-    for method, options in _LP_ATTEMPTS:
-        res = linprog(g, A_eq=A, b_eq=b, bounds=(-radius, radius), method=method, options=options)
-        if res.status == 0 and getattr(res, "eqlin", None) is not None:
-            marg = np.asarray(res.eqlin.marginals, dtype=float)
-            if marg.shape == mu.shape and np.all(np.isfinite(marg)):
-                mu = marg
-                break
-        infeasible += res.status == 2
-    else:
-        if infeasible == len(_LP_ATTEMPTS):
-            return float("nan"), mu, False
-    return float(_dual_bounds(g[None, :], A, b, mu[None, :], radius)[0]), mu, True
-
-
-_LP_ATTEMPTS: tuple[tuple[str, dict[str, Any]], ...] = (
-    ("highs", {}),
-    ("highs", {"presolve": False}),
-    ("highs-ipm", {}),
-)
-"""HiGHS configurations tried in turn for one bound: on the ill-conditioned programs of a set
-pinned down by its constraints, HiGHS' presolve sometimes fails (status 4) or calls a feasible
-program infeasible; without presolve, or with the interior point method, it usually succeeds.
-Any multiplier gives a valid bound, so a failure only loosens that bound."""
-
-
-def _dual_bounds(
-    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, mu: np.ndarray, radius: float
+def dual_bounds(
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, mu: np.ndarray, radius: float = 1.0
 ) -> np.ndarray:
-    """``μ_iᵀb - radius ‖g_i - Aᵀμ_i‖₁`` for every row, lowered by the bound
-    ``γ_{nc+m+3} (|μ_i|ᵀ|b| + radius (‖g_i‖₁ + |μ_i|ᵀ|A| 1))`` of its rounding: a lower bound of
-    ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}`` in exact arithmetic, whatever ``μ``."""
+    """Lower bounds of ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}`` for every row ``g_i`` of
+    ``Gs`` from any multipliers ``μ_i`` (rows of ``mu``): (W) in exact arithmetic.
+
+    Proof. ``r_i = g_i − Aᵀμ_i`` is a dot product of ``nc + 1`` terms, so its computed value is
+    within ``ε_r = γ_{nc+1} (|g_i| + |A|ᵀ|μ_i|)`` of the exact one (:func:`product_error`);
+    hence ``‖r_i‖₁ <= Σ_j (|fl(r_ij)| + ε_rj)``, a sum of nonnegative terms bounded by
+    :func:`upper`. ``μ_iᵀb`` is within ``γ_{nc} |μ_i|ᵀ|b|`` of its computed value. The bound is
+    ``fl(μᵀb) − (e_b + radius ‖r‖₁)``, the subtracted sum rounded up and the difference rounded
+    down (:func:`up`, :func:`down`)."""
     nc, m = A.shape
     am = np.abs(mu)
-    err = gamma(nc + m + 3) * (
-        am @ np.abs(b) + radius * (_add(np.abs(Gs), axis=1) + am @ _add(np.abs(A), axis=1))
-    )
-    l1 = _add(np.abs(Gs - mu @ A), axis=1)
-    bounds: np.ndarray = mu @ b - radius * l1 - err * (1.0 + gamma(4))
-    return bounds
+    R = Gs - mu @ A
+    err_r = product_error(np.abs(Gs) + am @ np.abs(A), nc + 1)
+    l1 = upper(np.abs(R).sum(axis=1) + err_r.sum(axis=1), 2 * m)
+    e_b = product_error(am @ np.abs(b), nc)
+    out: np.ndarray = down(mu @ b - up(e_b + up(radius * l1)))
+    return out
 
 
 def radius_certificate(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """``(r, r_low)``: HiGHS' value of ``r* = min {‖ξ‖∞ : A ξ = b}`` (``inf`` when it finds no
-    solution, ``0`` on solver trouble) and a lower bound of ``r*`` certified in floating point.
+    """``(r, r_low)``: HiGHS's value of ``r* = min {‖ξ‖∞ : A ξ = b}`` (``inf`` when it finds no
+    solution, ``0`` on solver trouble) and a lower bound of ``r*`` proven in floating point.
 
-    The set ``<c, G, A, b>`` is empty exactly when ``r* > 1``. By duality, every ``μ`` gives
+    The set ``<c, G, A, b>`` is empty exactly when ``r* > 1``. Every ``μ`` gives
     ``r* >= μᵀb / ‖Aᵀμ‖₁`` (``μᵀb = μᵀA ξ <= ‖Aᵀμ‖₁ ‖ξ‖∞``); ``r_low`` is this ratio at the
-    LP's equality multipliers (or, when ``A ξ = b`` has no solution at all, at the
-    least-squares residual ``μ = b - A ξ_ls``, for which ``Aᵀμ ≈ 0``), with the numerator
-    lowered and the denominator raised by the ``γ_n`` bounds of their rounding. ``0`` when no
-    certificate is found: emptiness is then never claimed.
-    """
+    program's row duals (or, when ``A ξ = b`` has no solution at all, at the least-squares
+    residual ``μ = b − A ξ_ls``, for which ``Aᵀμ ≈ 0``), the numerator rounded down and the
+    denominator up with the bounds of their rounding. ``0`` when no certificate is found:
+    emptiness is then never claimed."""
     nc, m = A.shape
     if nc == 0:
         return 0.0, 0.0
     if m == 0:
-        ok = bool(np.all(b == 0))
-        return (0.0, 0.0) if ok else (float("inf"), float("inf"))
-    from scipy.optimize import linprog
-
-    # variables (ξ, s): min s  s.t.  A ξ = b,  ξ - s <= 0,  -ξ - s <= 0
-    eye = np.eye(m)
-    ones = np.ones((m, 1))
-    A_ub = np.vstack([np.hstack([eye, -ones]), np.hstack([-eye, -ones])])
+        return (0.0, 0.0) if bool(np.all(b == 0)) else (float("inf"), float("inf"))
+    # variables (ξ, s): min s  s.t.  A ξ = b,  −s <= ξ_j <= s  (rows ξ_j − s <= 0, ξ_j + s >= 0)
+    eye, ones = np.eye(m), np.ones((m, 1))
+    M = np.block([[A, np.zeros((nc, 1))], [eye, -ones], [eye, ones]])
+    inf = np.full(m, np.inf)
+    row_lo = np.concatenate([b, -inf, np.zeros(m)])
+    row_hi = np.concatenate([b, np.zeros(m), inf])
+    lp = LinearProgram(presolve=True)
+    lo, hi = np.concatenate([-inf, [0.0]]), np.concatenate([inf, [np.inf]])
     cost = np.zeros(m + 1)
     cost[-1] = 1.0
-    res = linprog(
-        cost,
-        A_ub=A_ub,
-        b_ub=np.zeros(2 * m),
-        A_eq=np.hstack([A, np.zeros((nc, 1))]),
-        b_eq=b,
-        bounds=[(None, None)] * m + [(0, None)],
-        method="highs",
-    )
-    if res.status == 2:
+    lp.load(csc(M), M.shape[0], lo, hi, row_lo, row_hi, cost)
+    status = lp.solve()
+    if status == "infeasible":
         r = float("inf")
         mu = b - A @ np.linalg.lstsq(A, b, rcond=None)[0]
-    elif res.status == 0:
-        r = float(res.x[-1])
-        mu = np.asarray(getattr(res.eqlin, "marginals", np.zeros(nc)), dtype=float)
-        if mu.shape != (nc,) or not np.all(np.isfinite(mu)):
+    elif status == "optimal":
+        r = lp.objective()
+        lam = lp.row_duals()
+        if lam is None or not np.isfinite(lam[:nc]).all():
             return r, 0.0
+        mu = lam[:nc]
     else:  # numerical trouble: do not claim emptiness
         return 0.0, 0.0
     am = np.abs(mu)
-    num = float(mu @ b) - gamma(nc + 1) * float(am @ np.abs(b))
-    den = float(np.abs(A.T @ mu).sum()) + gamma(nc + m + 1) * float(am @ np.abs(A).sum(axis=1))
-    den *= 1.0 + gamma(2)
+    num = float(down(mu @ b - product_error(am @ np.abs(b), nc)))
+    den = float(upper(np.abs(A.T @ mu).sum() + product_error(np.abs(A).T @ am, nc).sum(), 2 * m))
     if not num > 0.0:
         return r, 0.0
     if den == 0.0:
         return r, float("inf")
-    return r, num / den * (1.0 - gamma(2))
+    return r, float(down(num / den))
 
 
 def certified_empty(A: np.ndarray, b: np.ndarray) -> bool:
@@ -156,105 +111,249 @@ def certified_empty(A: np.ndarray, b: np.ndarray) -> bool:
     return radius_certificate(A, b)[1] > 1.0 + EMPTY_TOL
 
 
-def _feasibility_radius(A: np.ndarray, b: np.ndarray) -> float:
-    """``min {‖ξ‖∞ : A ξ = b}`` (``inf`` when ``A ξ = b`` has no solution): one LP.
+BLOCK_SIZE = 2000
+"""Largest ``K m`` (objectives times factors) whose ``K`` programs :func:`_multipliers` solves
+as one block program; larger ones are solved as warm-started chains. HiGHS has a fixed cost per
+solve (tens of µs), which dominates small programs (one solve of the block pays it once); a
+large block solved from scratch costs more than ``K`` warm-started solves."""
 
-    The set ``<c, G, A, b>`` is empty exactly when this exceeds 1.
-    """
+_LOCAL = threading.local()
+
+
+def _solver(i: int) -> LinearProgram:
+    """The ``i``-th reused program of this thread (its HiGHS object outlives the step)."""
+    lps: list[LinearProgram] | None = getattr(_LOCAL, "lps", None)
+    if lps is None:
+        lps = _LOCAL.lps = [LinearProgram(), LinearProgram()]
+    return lps[i]
+
+
+def _load(
+    lp: LinearProgram, A: np.ndarray, b: np.ndarray, radius: float, cost: np.ndarray, K: int = 1
+) -> None:
+    """``K`` copies of ``{A ξ = b, ‖ξ‖∞ <= radius}`` side by side (block diagonal)."""
     nc, m = A.shape
-    if m == 0 and nc:
-        return 0.0 if np.all(np.abs(b) <= ZERO_TOL * (1.0 + np.abs(b))) else float("inf")
-    return radius_certificate(A, b)[0]
+    start, index, value = csc(A)
+    if K > 1:
+        nnz = index.size
+        start = np.concatenate([start[:-1] + i * nnz for i in range(K)] + [[K * nnz]])
+        index = np.concatenate([index + i * nc for i in range(K)])
+        value = np.tile(value, K)
+        b = np.tile(b, K)
+    r = np.full(K * m, radius)
+    lp.load((start, index, value), K * nc, -r, r, b, b, cost)
+
+
+def _multipliers(
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float, chains: list[list[int]]
+) -> np.ndarray | None:
+    """Row duals ``μ`` (K, nc) of the ``K`` programs ``min {g_iᵀξ : A ξ = b, ‖ξ‖∞ <= radius}``
+    (zero where no solver finds them: the bound of the set without constraints, valid too),
+    or None when HiGHS calls the set infeasible.
+
+    Small programs (``K m <=`` :data:`BLOCK_SIZE`) are solved as one block program,
+    ``min Σ_i g_iᵀξ_i`` over ``K`` independent copies, whose row duals are those of the ``K``
+    programs. Larger ones share one model per chain of objectives (``chains``), only the cost
+    changing along a chain, each solve warm-started from the previous optimum. A program the
+    shared model fails on is retried from a cold start, then by :func:`_second_opinion`."""
+    K, m = Gs.shape
+    nc = A.shape[0]
+    mu = np.zeros((K, nc))
+    if K * m <= BLOCK_SIZE:
+        lp = _solver(0)
+        _load(lp, A, b, radius, Gs.ravel(), K)
+        status = lp.solve()
+        lam = lp.row_duals() if status == "optimal" else None
+        if lam is not None and np.isfinite(lam).all():
+            return lam.reshape(K, nc)
+        chains = [list(range(K))]
+        shared = False
+    else:
+        shared = True
+    cols = np.arange(m)
+    for n_chain, rows in enumerate(chains):
+        lp = _solver(n_chain % 2)
+        if shared:
+            _load(lp, A, b, radius, np.zeros(m))
+        for i in rows:
+            lam = None
+            if shared:
+                lp.set_cost(cols, Gs[i])
+                status = lp.solve()
+                if status != "optimal":
+                    lp.cold()
+                    status = lp.solve()
+                lam = lp.row_duals() if status == "optimal" else None
+            if lam is None or not np.isfinite(lam).all():
+                lam, infeasible = _second_opinion(Gs[i], A, b, radius)
+                if infeasible:
+                    return None
+            if lam is not None:
+                mu[i] = lam
+    return mu
+
+
+_SECOND_OPINIONS: tuple[dict[str, bool], ...] = ({"presolve": True}, {}, {"ipm": True})
+"""Fresh HiGHS models tried in turn for a program the shared one failed on: on the
+ill-conditioned programs of a set pinned down by its constraints, a warm start can stall or
+call a feasible program infeasible; presolve, a cold start or the interior point method usually
+succeed. Any multipliers give a valid bound, so a failure only loosens that bound."""
+
+
+def _second_opinion(
+    g: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float
+) -> tuple[np.ndarray | None, bool]:
+    """The multipliers of one program from fresh models (:data:`_SECOND_OPINIONS`), or None;
+    and whether every model calls it infeasible."""
+    infeasible = True
+    for options in _SECOND_OPINIONS:
+        lp = LinearProgram(**options)
+        _load(lp, A, b, radius, g)
+        status = lp.solve()
+        lam = lp.row_duals() if status == "optimal" else None
+        if lam is not None and np.isfinite(lam).all():
+            return lam, False
+        infeasible &= status == "infeasible"
+    return None, infeasible
 
 
 def _certified_mins(
-    Gs: np.ndarray,
-    A: np.ndarray,
-    b: np.ndarray,
-    radius: float = 1.0,
-    chains: list[list[int]] | None = None,
-    block_max: int | None = None,
+    Gs: np.ndarray, A: np.ndarray, b: np.ndarray, radius: float, chains: list[list[int]]
 ) -> tuple[np.ndarray, np.ndarray, bool]:
-    """:func:`_certified_min` for every row ``g_i`` of ``Gs``: ``(bounds, μ (K, nc), feasible)``.
-
-    The programs share their constraints and are solved by HiGHS as one chain of objectives,
-    each warm-started from the previous optimum (:func:`._highs.chain_duals`), or, when
-    ``K m <= block_max`` (default :data:`._highs.BLOCK_MAX`), as one block program
-    (:func:`._highs.block_duals`: other optimal multipliers on degenerate programs); should HiGHS
-    fail on one (or call the set infeasible), they are solved one by one with the fallbacks of
-    :data:`_LP_ATTEMPTS` (degenerate, over-determined or ill-conditioned constraints can fool
-    it). All of them, not only the failed one: on tank30 (where one program in ~120 fails)
-    the multipliers of the chain alone, as optimal but different on these degenerate programs,
-    steer the elimination to boxes 1.4 % wider over the record (median; up to 3.8 %).
-    """
+    """:func:`dual_bounds` of every row of ``Gs`` at the solver's multipliers: ``(bounds,
+    μ (K, nc), feasible)``; ``feasible`` False when HiGHS calls the set infeasible."""
     K, nc = Gs.shape[0], A.shape[0]
     if nc == 0 or K == 0:
         return -radius * np.abs(Gs).sum(axis=1), np.zeros((K, nc)), True
-    # the module, not the package (which imports this one): no import cycle
-    from ._highs import BLOCK_MAX, block_duals, chain_duals, linprog_duals
+    mu = _multipliers(Gs, A, b, radius, chains)
+    if mu is None:
+        return np.full(K, np.nan), np.zeros((K, nc)), False
+    return dual_bounds(Gs, A, b, mu, radius), mu, True
 
-    limit = BLOCK_MAX if block_max is None else block_max
-    if K * A.shape[1] <= limit:  # small: one solve of the K programs side by side
-        out = block_duals(Gs, A, b, radius)
-    else:
-        out = chain_duals(Gs, A, b, radius, [list(range(K))] if chains is None else chains)
-    if isinstance(out, np.ndarray):
-        return _dual_bounds(Gs, A, b, out, radius), out, True
-    # linprog's first attempt, its HiGHS called directly (the same multipliers, less work)
-    first = linprog_duals(Gs, A, b, radius)
-    mu = np.zeros((K, nc))
-    vals = np.empty(K)
-    for i in range(K):
-        if first is not None and np.all(np.isfinite(first[i])):
-            mu[i] = first[i]
-            vals[i] = _dual_bounds(Gs[i][None, :], A, b, mu[i][None, :], radius)[0]
-            continue
-        vals[i], mu[i], ok = _certified_min(Gs[i], A, b, radius)
-        if not ok:
-            return np.full(K, np.nan), np.zeros((K, nc)), False
-    return vals, mu, True
+
+@cache
+def _hull_chains(n: int, k: int) -> list[list[int]]:
+    """Two warm-start chains over the rows ``[G; -G; P; -P]`` (``G`` n rows, ``P`` k rows):
+    the minima in order, the maxima in reverse order (neighbouring objectives have close optima,
+    opposite ones do not)."""
+    lo = list(range(n)) + list(range(2 * n, 2 * n + k))
+    hi = list(range(2 * n - 1, n - 1, -1)) + list(range(2 * n + 2 * k - 1, 2 * n + k - 1, -1))
+    return [lo, hi]
 
 
 def hull_bounds(
     c: np.ndarray, G: np.ndarray, A: np.ndarray, b: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Certified interval hull of ``<c, G, A, b>`` (two LPs per coordinate, one HiGHS call), or
-    ``None`` when the set is empty. See :func:`hull_certificates`."""
+    """Certified interval hull of ``<c, G, A, b>``, or ``None`` when the set is certainly
+    empty. See :func:`hull_certificates`."""
     out = hull_certificates(c, G, A, b)
     return None if out is None else (out[0], out[1])
 
 
+def hull_certificates(
+    c: np.ndarray,
+    G: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    extra: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
+    """Certified interval hull ``[lo, hi]`` of ``<c, G, A, b>`` and the certificates of its
+    ``2 n`` bounds (weighted by the inverse width of each coordinate, so that losses are
+    relative), or ``None`` when the set is certainly empty (:func:`certified_empty`).
+
+    ``lo = c + min_ξ G_iξ`` with both terms proven (:func:`dual_bounds`) and the sum rounded
+    down; ``hi`` likewise, rounded up.
+
+    ``extra`` (n', m): more objectives in the factors whose bounds the certificates should
+    also keep (the rows ``P`` and ``-P`` are appended, weighted by the inverse widths of
+    ``P ξ``); the filter passes the hull of its prediction, ``[A G, E R]``.
+
+    When HiGHS calls the set infeasible without a certificate of it (a set that is thin, or
+    empty only by rounding), the bounds are those of the *softened* set with the box
+    ``‖ξ‖∞ <= ρ``, ``ρ = max(1, r*) (1 + EMPTY_TOL)`` (``r*`` the smallest feasible radius
+    found): a superset, so still sound. ``cert.radius`` is then ``ρ``: the caller keeps that
+    larger set (:meth:`Certificates.radius`).
+    """
+    n = G.shape[0]
+    P = np.zeros((0, G.shape[1])) if extra is None else extra
+    k = P.shape[0]
+    Gs = np.concatenate([G, -G, P, -P])
+    chains = _hull_chains(n, k)
+    vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains)
+    radius = 1.0
+    if not ok:
+        r, r_low = radius_certificate(A, b)
+        if r_low > 1.0 + EMPTY_TOL:
+            return None
+        radius = float(up((max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)))
+        vals, mu, ok = _certified_mins(Gs, A, b, radius, chains)
+        if not ok:  # HiGHS contradicting itself: the bound of the zonotope (μ = 0 is valid)
+            mu = np.zeros_like(mu)
+            vals = dual_bounds(Gs, A, b, mu, radius)
+    lo = down(c + vals[:n])
+    hi = up(c - vals[n : 2 * n])
+    width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
+    weight = [1.0 / width, 1.0 / width]
+    if k:
+        p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
+        p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
+        weight += [1.0 / p_width, 1.0 / p_width]
+    return lo, hi, Certificates(Gs, mu, np.concatenate(weight), radius)
+
+
+def soften(
+    G: np.ndarray, A: np.ndarray, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The set ``{c + G ξ : ‖ξ‖∞ <= radius, A ξ = b}`` (:func:`hull_certificates`' softened
+    set) with the unit box: ``G radius``, ``A radius``, plus the rounding of the products:
+    ``e = product_error(|G'| 1, 1)`` per row of ``G`` (the returned box, at ``|ξ| <= 1``) and
+    a slack factor per constraint (``[G' 0]``, ``[A' diag(s)]``)."""
+    G, A = G * radius, A * radius
+    e = product_error(np.abs(G).sum(axis=1), 1)
+    s = product_error(np.abs(A).sum(axis=1), 1)
+    live = np.flatnonzero(s > 0)
+    S = np.zeros((A.shape[0], live.size))
+    S[live, np.arange(live.size)] = s[live]
+    G = np.concatenate([G, np.zeros((G.shape[0], live.size))], axis=1)
+    return G, np.concatenate([A, S], axis=1), e
+
+
 LOSS_CANDIDATES = 24
 """Candidates whose exact elimination loss :meth:`Certificates.elimination_loss` evaluates
-(those with the smallest upper bound of it)."""
+(those with the smallest upper bound of it). More cost ``O(K m)`` each per elimination; fewer
+may miss the factor that loosens the box least."""
 
 
 class Certificates:
     """Dual certificates of some linear bounds of ``<c, G, A, b>``, kept valid through reduction.
 
-    Row ``i`` certifies ``min_ξ D_iᵀξ >= μ_iᵀb - ‖D_i - Aᵀμ_i‖₁`` (``D`` (K, m): objectives in
-    the factors ``ξ``, ``μ`` (K, nc): multipliers, e.g. those of :func:`hull_certificates`).
-    Each reparametrisation of the set (row scaling, rescaling, elimination of a factor) maps the
+    Row ``i`` certifies ``min_ξ D_iᵀξ >= μ_iᵀb - ρ ‖D_i - Aᵀμ_i‖₁`` (``D`` (K, m): objectives in
+    the factors ``ξ``, ``μ`` (K, nc): multipliers, ``ρ``: ``radius``, the factors' box the
+    certificates assume, 1 unless the set was softened by :func:`hull_certificates`). Each
+    reparametrisation of the set (row scaling, rescaling, elimination of a factor) maps the
     objectives and multipliers so that the certificates keep meaning the same linear functions
     of ``x``. What a reduction step does to the certified bounds is then known before it is
     taken: :meth:`elimination_loss` is the loosening, weighted by ``weight`` (K,), of every
-    bound if factor ``j`` were eliminated. This is how the estimator chooses what to eliminate
-    (the bounds of the box it reports stay as tight as possible), instead of the shape-only
+    bound if factor ``j`` were eliminated. This is how the estimators choose what to eliminate
+    (the bounds of the box they report stay as tight as possible), instead of the shape-only
     Hausdorff heuristic of [Scott2016, Section 4.2], which only breaks ties here.
     """
 
     __slots__ = ("D", "mu", "radius", "weight")
 
-    def __init__(self, D: np.ndarray, mu: np.ndarray, weight: np.ndarray):
-        self.D, self.mu, self.weight = D, mu, weight
-        self.radius = 1.0  # see hull_certificates: the factors' box the certificates assume
+    def __init__(self, D: np.ndarray, mu: np.ndarray, weight: np.ndarray, radius: float = 1.0):
+        self.D, self.mu, self.weight, self.radius = D, mu, weight, radius
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
-        """Constraints ``rows`` and factors ``cols`` are kept (the others were zero)."""
-        if not _all(rows):
+        """Constraints ``rows`` and factors ``cols`` are kept (masks; the others were zero)."""
+        if not rows.all():
             self.mu = self.mu[:, rows]
-        if not _all(cols):
+        if not cols.all():
             self.D = self.D[:, cols]
+
+    def pad(self, n_cols: int) -> None:
+        """``n_cols`` new factors, in no objective."""
+        self.D = np.concatenate([self.D, np.zeros((self.D.shape[0], n_cols))], axis=1)
 
     def scale_rows(self, s: np.ndarray) -> None:
         """Constraint ``r`` was divided by ``s_r``."""
@@ -265,7 +364,7 @@ class Certificates:
         self.D = self.D * rad
 
     def elimination_loss(
-        self, A: np.ndarray, b: np.ndarray, piv: np.ndarray, cand: np.ndarray | None = None
+        self, A: np.ndarray, b: np.ndarray, piv: np.ndarray, cand: np.ndarray
     ) -> np.ndarray:
         """Weighted loosening of the certified bounds if factor ``j`` is eliminated with row
         ``piv[j]`` (for every ``j``; ``inf`` outside the candidates ``cand``). The multipliers
@@ -274,25 +373,24 @@ class Certificates:
 
         The exact loss costs ``O(K m)`` per candidate; it is evaluated for the
         :data:`LOSS_CANDIDATES` candidates with the smallest upper bound
-        ``Σ_k w_k |t_kj| (‖A_p‖₁ + |b_p|)`` (``|r - t a| - |r| <= |t| |a|``), so that a step
-        costs ``O(K m)`` rather than ``O(K m²)``; a factor whose bound is zero loses nothing."""
+        ``Σ_k w_k |t_kj| (‖A_p‖₁ + |b_p|)`` (``|r - t a| - |r| <= |t| |a|``)."""
         m = A.shape[1]
-        cand = np.ones(m, dtype=bool) if cand is None else cand
         Rc = self.D - self.mu @ A  # (K, m)
         apj = A[piv, np.arange(m)]
         t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
-        # ‖A_p‖₁ per constraint, then per candidate: the same sums as ``|A[piv]|`` row by row
-        # (each a contiguous row, summed alike) without copying a row per factor (m x m)
-        row_l1 = _add(np.abs(A, order="C"), axis=1)
-        upper = self.weight @ np.abs(t) * (row_l1[piv] + np.abs(b[piv]))
+        bound = self.weight @ np.abs(t) * (np.abs(A).sum(axis=1)[piv] + np.abs(b[piv]))
         idx = cand.nonzero()[0]
         if idx.size > LOSS_CANDIDATES:
-            idx = idx[np.argsort(upper[idx], kind="stable")[:LOSS_CANDIDATES]]
+            idx = idx[np.argsort(bound[idx], kind="stable")[:LOSS_CANDIDATES]]
         out = np.full(m, np.inf)
-        tj = t[:, idx]  # (K, c)
-        new = _shifted_l1(Rc, tj, A[piv[idx]])
-        loss = new - tj * b[piv[idx]][None, :] - _add(np.abs(Rc), axis=1, keepdims=True)
-        out[idx] = self.weight @ loss
+        # only the columns where the pivot row is nonzero change: Σ over them of
+        # |R_k - t_k a_p| - |R_k|, the candidates' supports side by side
+        tj, rows = t[:, idx], A[piv[idx]]
+        which, col = np.nonzero(rows)
+        starts = np.searchsorted(which, np.arange(idx.size))
+        diff = np.abs(Rc[:, col] - tj[:, which] * rows[which, col]) - np.abs(Rc[:, col])
+        change = np.add.reduceat(diff, starts, axis=1) if col.size else np.zeros_like(tj)
+        out[idx] = self.weight @ (change - tj * b[piv[idx]])
         return out
 
     def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
@@ -300,124 +398,4 @@ class Certificates:
         Rc = self.D[:, j] - self.mu @ A[:, j]
         self.mu = self.mu.copy()
         self.mu[:, p] += Rc / A[p, j]
-        self.D = self.D - (self.D[:, j] / A[p, j])[:, None] * A[p][None, :]  # np.outer's product
-
-
-_CHUNK = 1 << 16
-"""Elements of the ``(K, c, m)`` temporaries of :func:`_shifted_l1` per chunk (cache-sized:
-one ``(K, m)`` block at a time is 3x faster than the whole array on tank30)."""
-
-
-def _kernel() -> Any:
-    """The compiled :func:`._loss_nb.shifted_l1`, or None (numba missing, or ``IVOBS_NUMBA=0``:
-    :func:`._elim_kernels.load_compiled`) when first asked."""
-    global _KERNEL
-    if _KERNEL is False:
-        found = load_compiled("_loss_nb", "shifted_l1")
-        _KERNEL = None if found is None else found[0]
-    return _KERNEL
-
-
-_KERNEL: Any = False  # not looked up yet
-_KERNEL_MIN = 1 << 16
-"""``K c m`` from which :func:`_shifted_l1` uses the compiled kernel: below it (the servo's 12 x
-24 x 50) NumPy takes tens of µs and importing numba and loading the kernel (~0.5 s of CPU
-once per process) would not pay."""
-
-
-def _shifted_l1(R: np.ndarray, T: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """``N[k, c] = ‖R_k - T_kc P_c‖₁`` (``R`` (K, m), ``T`` (K, c), ``P`` (c, m)), in chunks of
-    candidates whose temporaries fit in cache (the same sums, term for term); with numba,
-    the same numbers in one compiled pass (:mod:`._loss_nb`; 7x faster on tank30)."""
-    K, m = R.shape
-    # (NumPy may sum rows longer than 8192 in chunks: another order)
-    if K * T.shape[1] * m >= _KERNEL_MIN and m <= 8192:
-        kernel = _kernel()
-        if kernel is not None:
-            f = np.float64
-            out: np.ndarray = kernel(
-                np.ascontiguousarray(R, dtype=f),
-                np.ascontiguousarray(T, dtype=f),
-                np.ascontiguousarray(P, dtype=f),
-            )
-            return out
-    c = T.shape[1]
-    step = max(1, _CHUNK // max(1, K * m))
-    out = np.empty((K, c))
-    for s in range(0, c, step):
-        e = min(c, s + step)
-        buf = T[:, s:e, None] * P[None, s:e, :]
-        np.subtract(R[:, None, :], buf, out=buf)
-        np.abs(buf, out=buf)
-        out[:, s:e] = _add(buf, axis=2)
-    return out
-
-
-@cache
-def _hull_chains(n: int, k: int) -> list[list[int]]:
-    """Two warm-start chains over the rows ``[G; -G; P; -P]`` (``G`` n rows, ``P`` k rows):
-    the minima in order, the maxima in reverse order (kept: the same few sizes every step;
-    read only)."""
-    lo = list(range(n)) + list(range(2 * n, 2 * n + k))
-    hi = list(range(2 * n - 1, n - 1, -1)) + list(range(2 * n + 2 * k - 1, 2 * n + k - 1, -1))
-    return [lo, hi]
-
-
-def hull_certificates(
-    c: np.ndarray,
-    G: np.ndarray,
-    A: np.ndarray,
-    b: np.ndarray,
-    extra: np.ndarray | None = None,
-    block_max: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, Certificates] | None:
-    """Certified interval hull of ``<c, G, A, b>`` and the certificates of its ``2 n`` bounds
-    (weighted by the inverse width of each coordinate, so that losses are relative), or
-    ``None`` when the set is certainly empty (:func:`certified_empty`: a dual certificate,
-    checked in floating point, that even the box ``‖ξ‖∞ <= 1 + EMPTY_TOL`` misses the
-    constraints).
-
-    ``extra`` (n', m): more objectives in the factors whose bounds the certificates should
-    also keep (the rows ``P`` and ``-P`` are appended, weighted by the inverse widths of
-    ``P ξ``); the filter passes the hull of its prediction, ``[A G, E R]``.
-
-    When HiGHS calls the set infeasible without such a certificate (a set that is thin, or
-    empty only by rounding), the bounds are those of the *softened* set with the box
-    ``‖ξ‖∞ <= ρ``, ``ρ = max(1, r*) (1 + EMPTY_TOL)`` (``r*`` the smallest feasible radius
-    found): a superset, so still sound. ``cert.radius`` is then ``ρ``: the certificates are
-    those of ``<c, ρ G, ρ A, b>`` (the same set, with the factors rescaled to the unit box),
-    which the caller should keep instead of the original.
-
-    ``block_max``: the programs are solved as one block program when ``K m`` (objectives times
-    factors) is at most this (:func:`._highs.block_duals`), else as warm-started chains;
-    default :data:`._highs.BLOCK_MAX` (0: always chains). Either way every bound is certified
-    by its multipliers; only which optimal multipliers a degenerate program gets differs.
-    """
-    n = G.shape[0]
-    P = np.zeros((0, G.shape[1])) if extra is None else extra
-    k = P.shape[0]
-    Gs = np.concatenate([G, -G, P, -P] if k else [G, -G])  # np.vstack's call
-    chains = _hull_chains(n, k)
-    vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains, block_max)
-    radius = 1.0
-    if not ok:
-        r, r_low = radius_certificate(A, b)
-        if r_low > 1.0 + EMPTY_TOL:
-            return None
-        radius = (max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)
-        vals, mu, ok = _certified_mins(Gs, A, b, radius, chains, block_max)
-        if not ok:  # HiGHS contradicting itself: the bound of the zonotope (any μ is valid)
-            mu = np.zeros_like(mu)
-            vals = _dual_bounds(Gs, A, b, mu, radius)
-    lo = c + vals[:n]
-    hi = c - vals[n : 2 * n]
-    width = np.maximum(hi - lo, 1e-12 * (1.0 + np.abs(c)))
-    if k:
-        p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
-        p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
-        weight = np.concatenate([1.0 / width, 1.0 / width, 1.0 / p_width, 1.0 / p_width])
-    else:  # the hull alone (the nonlinear filter): no rows of P
-        weight = np.concatenate([1.0 / width, 1.0 / width])
-    cert = Certificates(Gs * radius if radius != 1.0 else Gs, mu, weight)  # (x * 1.0 is x)
-    cert.radius = radius
-    return lo, hi, cert
+        self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])

@@ -9,17 +9,12 @@ step, go to a box ([Higham2002, Lemma 3.1] bounds).
 from __future__ import annotations
 
 import math
-from functools import cache
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 
-try:  # the gufunc behind np.linalg.inv (private to NumPy: present in 1.26 and 2.x)
-    from numpy.linalg import _umath_linalg as _gufuncs
-except ImportError:  # pragma: no cover - a NumPy without it: the public call
-    _gufuncs = None  # type: ignore[assignment]
-
-from ...linalg import UNIT_ROUNDOFF, gamma
+from ..rounding import ETA, UNIT_ROUNDOFF, gamma, upper
 from ..zonotope import MAX_BASIS_CONDITION, reduce_girard
 
 __all__ = ["consolidate_small", "reduce_generators"]
@@ -33,8 +28,8 @@ def consolidate_small(
     rescaling) by two boxes: ``diag(Σ_j |G_j|)`` in ``x`` and ``diag(Σ_j |A_j|)`` in the
     constraints (a slack per row). The segment ``{(G_j; A_j) t}`` lies in the sum of the two,
     so the result contains the original (only correlations between rows of the replaced
-    factors are lost); at most ``n + nc`` columns are left of them (the sums rounded up by
-    ``γ_{k+1}``). Dropping them instead would give a subset."""
+    factors are lost); at most ``n + nc`` columns are left of them (the sums rounded up,
+    :func:`~ivobs.sets.rounding.upper`). Dropping them instead would give a subset."""
     n, m = G.shape
     if m == 0:
         return c, G, A, b
@@ -44,9 +39,8 @@ def consolidate_small(
     k = int(small.sum())
     if k <= 1:
         return c, G, A, b
-    up = 1.0 + gamma(k + 1)
-    gx = np.abs(G[:, small]).sum(axis=1) * up
-    ga = np.abs(A[:, small]).sum(axis=1) * up
+    gx = upper(np.abs(G[:, small]).sum(axis=1), k)
+    ga = upper(np.abs(A[:, small]).sum(axis=1), k)
     ix, ia = (gx > 0).nonzero()[0], (ga > 0).nonzero()[0]
     if ix.size + ia.size >= k:
         return c, G, A, b
@@ -55,7 +49,6 @@ def consolidate_small(
     Ab = np.zeros((nc, ix.size + ia.size))
     Gb[ix, np.arange(ix.size)] = gx[ix]
     Ab[ia, ix.size + np.arange(ia.size)] = ga[ia]
-    # np.concatenate: np.hstack's call on 2-D arrays, without its wrapper
     return c, np.concatenate([G[:, ~small], Gb], 1), np.concatenate([A[:, ~small], Ab], 1), b
 
 
@@ -86,7 +79,7 @@ def reduce_generators(
     At least ``N`` generators are kept, whatever ``max_generators``.
 
     With ``residual=True`` ``(c, G, A, b, box)`` is returned, ``box`` the zero radii of the
-    box aside (kept for callers of the earlier form)."""
+    box aside (the form of ``nl-zonotope``'s reduction)."""
     n, m = G.shape
     N = n + A.shape[0]
     order = max(int(max_generators), N)
@@ -110,7 +103,6 @@ def reduce_generators(
 
 
 _TINY = float(np.finfo(float).tiny)
-_add = np.add.reduce  # ndarray.sum without its Python-level wrapper (the same reduction)
 
 
 def _pow2_scaling(L: np.ndarray) -> np.ndarray | None:
@@ -168,77 +160,33 @@ def _absorb_in_basis(
     N, m = L.shape
     if m <= order:
         return L
-    dgeqp3, dtrtrs = _lapack()
-    R, jpvt, _, _, info = dgeqp3(L)
-    if info != 0 or m < N:
+    if m < N:
         return None
+    R, jpvt = scipy.linalg.qr(L, mode="r", pivoting=True, check_finite=False)
     r_first, r_last = abs(float(R[0, 0])), abs(float(R[N - 1, N - 1]))
     if not r_last * max_condition >= r_first > 0.0:
         return None
-    piv = jpvt - 1
-    basis, others = piv[:N], piv[N:]
-    alpha, info = dtrtrs(R[:N, :N], R[:N, N:])
-    if info != 0 or not np.isfinite(alpha).all():
+    basis, others = jpvt[:N], jpvt[N:]
+    alpha = scipy.linalg.solve_triangular(R[:N, :N], R[:N, N:], check_finite=False)
+    if not np.isfinite(alpha).all():
         return None
-    srt = _add(np.abs(alpha), axis=0).argsort(kind="stable")
+    srt = np.abs(alpha).sum(axis=0).argsort(kind="stable")
     n_rm = m - order
     rm, kept = srt[:n_rm], others[srt[n_rm:]]
     P, a_rm, L_rm = L[:, basis], alpha[:, rm], L[:, others[rm]]
-    a1 = _add(np.abs(a_rm), axis=1)
-    up = 1.0 + gamma(n_rm + 3)
-    rho = (
-        _add(np.abs(L_rm - P @ a_rm), axis=1)
-        + gamma(N + 2) * (_add(np.abs(L_rm), axis=1) + np.abs(P) @ a1)
-    ) * up
+    a1 = np.abs(a_rm).sum(axis=1)
+    rho = upper(
+        np.abs(L_rm - P @ a_rm).sum(axis=1)
+        + gamma(N + 2) * (np.abs(L_rm).sum(axis=1) + np.abs(P) @ a1),
+        n_rm + 3,
+    )
     absorbed = _box_in_basis(P, rho)
     if absorbed is None:
         return None
     tau, mu = absorbed
-    up2, up6 = 1.0 + gamma(2), 1.0 + gamma(6)
-    t: Any
-    if N <= _FEW:  # the same operations on floats
-        zl = [((1.0 + a) * up + b) * up2 for a, b in zip(a1.tolist(), tau.tolist())]
-        c = mu / (1.0 - mu) * max(zl)
-        t = [(x + c) * up6 for x in zl]
-    else:
-        z = ((1.0 + a1) * up + tau) * up2
-        t = (z + mu / (1.0 - mu) * float(z.max())) * up6
-    # [P diag(t), L_kept], column-major as the hstack of the column selections it replaces
-    # (the layout decides the summation order of later reductions: same layout, same bits)
-    out = np.empty((N, order), order="F")
-    np.multiply(P, t, out=out[:, :N])
-    out[:, N:] = L[:, kept]
-    return out
-
-
-@cache
-def _lapack() -> tuple[Any, Any]:
-    """SciPy's ``dgeqp3`` and ``dtrtrs``, imported on first use (SciPy is slow to import) and
-    kept (an import statement in the loop costs as much as a small QR)."""
-    from scipy.linalg.lapack import dgeqp3, dtrtrs
-
-    return dgeqp3, dtrtrs
-
-
-@cache
-def _eye(n: int) -> np.ndarray:
-    """``np.eye(n)``, kept (read-only)."""
-    out = np.eye(n)
-    out.flags.writeable = False
-    return out
-
-
-def _inv(P: np.ndarray) -> np.ndarray:
-    """``np.linalg.inv`` without its checks and wrappers (the same LAPACK call, the same
-    numbers): a singular ``P`` gives NaNs instead of an exception."""
-    if _gufuncs is None:  # pragma: no cover
-        try:
-            return np.linalg.inv(P)
-        except np.linalg.LinAlgError:
-            return np.full_like(P, np.nan)
-    with np.errstate(all="ignore"):
-        out: np.ndarray = _gufuncs.inv(P, signature="d->d")
-    return out
+    z = upper(upper(1.0 + a1, n_rm + 1) + tau, 1)
+    t = upper(z + mu / (1.0 - mu) * float(z.max()), 4)
+    return np.concatenate([P * t, L[:, kept]], axis=1)
 
 
 def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -253,70 +201,26 @@ def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | 
     ``‖|P⁻¹| |P|‖∞ <= ‖|X| |P|‖∞ / (1 - θ)`` (Skeel's condition number, invariant to the scaling
     of the columns; Neumann-series bounds, as in verified linear algebra)."""
     n = P.shape[0]
-    X = _inv(P)
-    if not np.isfinite(X).all():  # singular (NaN) or overflowing
+    try:
+        X = np.linalg.inv(P)
+    except np.linalg.LinAlgError:
         return None
-    aX = np.abs(X)
-    if n <= _FEW:
-        return _box_in_basis_few(aX, X @ P, aX @ np.abs(P), rho)
-    eye = _eye(n)
-    Rm = eye - X @ P
-    aXaP = aX @ np.abs(P)
-    row_sums = (np.abs(Rm) + gamma(n + 1) * (eye + aXaP)).sum(axis=1)
-    theta = float(row_sums.max()) * (1.0 + gamma(n + 2))
+    if not np.isfinite(X).all():
+        return None
+    aX, aP = np.abs(X), np.abs(P)
+    eye = np.eye(n)
+    aXaP = aX @ aP
+    theta = float(upper((np.abs(eye - X @ P) + gamma(n + 1) * (eye + aXaP)).sum(axis=1).max(), n))
     if not theta < 0.5:
         return None
-    up = 1.0 + gamma(2 * n + 4)
-    skeel = float(aXaP.sum(axis=1).max()) * up  # >= ‖|X| |P|‖∞ in exact arithmetic
-    nX = float(aX.sum(axis=1).max()) * up
-    mu = (UNIT_ROUNDOFF * skeel + nX * n * 2.0**-1074) / (1.0 - theta) * up
+    skeel = float(upper(aXaP.sum(axis=1).max(), 2 * n + 2))  # >= ‖|X| |P|‖∞ (exact)
+    nX = float(upper(aX.sum(axis=1).max(), n))
+    mu = float(upper((UNIT_ROUNDOFF * skeel + nX * n * 2.0 * ETA) / (1.0 - theta), 4))
     if not mu < 0.5:
         return None
-    v = (aX @ rho) * (1.0 + gamma(n + 1))
-    tau: np.ndarray = (v + theta / (1.0 - theta) * float(v.max())) * (1.0 + gamma(4))
+    v = upper(aX @ rho, n)
+    tau: np.ndarray = upper(v + theta / (1.0 - theta) * float(v.max()), 4)
     return tau, mu
-
-
-_FEW = 4
-"""Up to this size the ``n``-vectors of :func:`_box_in_basis` are worked on floats (the same
-operations: row sums of fewer than 8 terms are summed in order by NumPy too)."""
-
-
-def _in_order(terms: list[float]) -> float:
-    """The sum from the first term to the last (as NumPy sums fewer than 8 terms; ``sum``
-    may compensate)."""
-    t = 0.0
-    for x in terms:
-        t += x
-    return t
-
-
-def _box_in_basis_few(
-    aX: np.ndarray, XP: np.ndarray, aXaP: np.ndarray, rho: np.ndarray
-) -> tuple[np.ndarray, float] | None:
-    """:func:`_box_in_basis` after its products (``|X|``, ``X P``, ``|X| |P|``), on floats."""
-    n = aX.shape[0]
-    g1 = gamma(n + 1)
-    rows = []
-    for i, (r, a) in enumerate(zip(XP.tolist(), aXaP.tolist())):
-        t = 0.0
-        for j, (rij, aij) in enumerate(zip(r, a)):
-            e = 1.0 if i == j else 0.0
-            t += abs(e - rij) + g1 * (e + aij)
-        rows.append(t)
-    theta = max(rows) * (1.0 + gamma(n + 2))
-    if not theta < 0.5:
-        return None
-    up = 1.0 + gamma(2 * n + 4)
-    skeel = max(_in_order(r) for r in aXaP.tolist()) * up  # >= ‖|X| |P|‖∞ (exact arithmetic)
-    nX = max(_in_order(r) for r in aX.tolist()) * up
-    mu = (UNIT_ROUNDOFF * skeel + nX * n * 2.0**-1074) / (1.0 - theta) * up
-    if not mu < 0.5:
-        return None
-    v = [x * (1.0 + g1) for x in (aX @ rho).tolist()]
-    c = theta / (1.0 - theta) * max(v)
-    up4 = 1.0 + gamma(4)
-    return np.array([(x + c) * up4 for x in v]), mu
 
 
 def reduce_consolidated(
