@@ -10,7 +10,15 @@ from .._validate import as_float_array, as_vector
 from ..errors import IvobsError
 from .scale import SHORT
 
-__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k", "lean_step_data", "lean_u_y"]
+__all__ = [
+    "check_option_types",
+    "check_t",
+    "check_t_k",
+    "check_u_k",
+    "check_y_k",
+    "lean_step_data",
+    "lean_u_y",
+]
 
 _F64 = np.dtype(np.float64)
 _NO_INPUT = np.zeros(0)
@@ -120,3 +128,57 @@ def check_t(sys: Any, t: Any, T: int) -> np.ndarray | None:
     if t_arr.shape[0] != T or np.any(~np.isfinite(t_arr)) or np.any(np.diff(t_arr) <= 0):
         raise IvobsError(f"t: expected {T} finite, strictly increasing sample times")
     return t_arr
+
+
+def _option_kinds(cls: Any) -> dict[str, str]:
+    """The declared type of each keyword option of the method ``cls`` (its annotation)."""
+    import inspect
+
+    kinds: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        init = vars(klass).get("__init__")
+        if init is None:
+            continue
+        for p in inspect.signature(init).parameters.values():
+            if p.kind is p.KEYWORD_ONLY:
+                kinds[p.name] = str(p.annotation)
+    return kinds
+
+
+_SCALARS: dict[str, tuple[type, ...]] = {
+    "str": (str,),
+    "bool": (bool, np.bool_),
+    "int": (int, float, np.integer, np.floating),  # 6.0: the method's check takes it
+    "float": (int, float, np.integer, np.floating),
+}
+
+
+def check_option_types(cls: Any, options: dict[str, Any]) -> dict[str, Any]:
+    """Options whose declared type is a string, a flag or a number must be one (a NumPy array
+    given for them is refused naming the option: ``order=np.array([6, 12])`` is no order);
+    NumPy scalars become Python ones. Options declared ``Any`` (matrices, boxes) are left to
+    the method's own checks."""
+    kinds = _option_kinds(cls)
+    out = dict(options)
+    for name, value in options.items():
+        kind = kinds.get(name, "Any").replace(" ", "")
+        parts = kind.split("|")
+        if value is None and "None" in parts:
+            continue
+        allowed = tuple(t for p in parts for t in _SCALARS.get(p, ()))
+        if not allowed or any(p not in (*_SCALARS, "None") for p in parts):
+            if parts[0] == "str" and isinstance(value, np.ndarray):  # str or a callable
+                raise IvobsError(f"{name}: expected a name (a string), got an array")
+            continue
+        if isinstance(value, bool) and bool not in allowed:
+            raise IvobsError(f"{name}: expected {kind.replace('|', ' or ')}, got {value!r}")
+        if not isinstance(value, allowed):
+            got = (
+                f"an array of shape {value.shape}"
+                if isinstance(value, np.ndarray)
+                else f"{type(value).__name__} {value!r}"[:80]
+            )
+            raise IvobsError(f"{name}: expected {kind.replace('|', ' or ')}, got {got}")
+        if isinstance(value, np.generic):
+            out[name] = value.item()
+    return out
