@@ -102,7 +102,7 @@ def test_a_gap_is_missing_samples_and_every_box_holds_the_truth(tmp_path, seed):
 
 
 def test_run_and_monitor_label_boxes_with_the_log_steps(dropped, capsys):
-    sys, x0, xs, log, folder = dropped
+    _sys, _x0, xs, log, folder = dropped
     out = folder / "bounds.csv"
     assert main(["run", "-s", str(folder / "p.toml"), "-l", str(log), "--out", str(out)]) == 0
     assert "5 skipped by the log" not in capsys.readouterr().out  # 6 were: 20..24 and 41
@@ -155,11 +155,11 @@ def test_an_offset_start_needs_the_prior_of_that_step(tmp_path, capsys):
 
 
 def test_duplicates_huge_jumps_and_gaps_without_inputs_are_refused(dropped, tmp_path):
-    sys, x0, xs, log, folder = dropped
+    sys, _x0, _xs, log, _folder = dropped
     text = log.read_text().splitlines()
     bad = {
-        "dup.csv": (text[:5] + [text[4]] + text[5:], "step 3 does not increase"),
-        "jump.csv": (text[:5] + ["1000000000000,0.1"], "more than 1000000 missing steps"),
+        "dup.csv": ([*text[:5], text[4], *text[5:]], "step 3 does not increase"),
+        "jump.csv": ([*text[:5], "1000000000000,0.1"], "more than 1000000 missing steps"),
         "neg.csv": (["k,y1", "-1,0.1", "0,0.2"], r"expected a step in 0..2\*\*53"),
     }
     for name, (lines, msg) in bad.items():
@@ -189,7 +189,7 @@ def test_minus_nan_is_missing_and_other_digits_are_no_numbers(dropped, tmp_path)
 
 
 def test_a_byte_order_mark_is_skipped_in_system_files_as_in_logs(dropped):
-    sys, x0, xs, log, folder = dropped
+    sys, _x0, _xs, log, folder = dropped
     path = folder / "p.toml"
     path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
     log.write_bytes(b"\xef\xbb\xbf" + log.read_bytes())
