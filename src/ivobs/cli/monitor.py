@@ -257,16 +257,23 @@ class _Session:
     def load(self, clock: StepClock) -> None:
         """Continue from the state file, if it exists (under the lock)."""
         from ..io.statefile import check_monitor_state, malformed, read_state_file
+        from ..monitor.persist import check_model
 
         if self.state_path is None or not self.state_path.exists():
             return
         name = str(self.state_path)
         data = read_state_file(self.state_path)
         mon = self.monitor
-        check_monitor_state(data, mon.sys, mon.estimator, name, self.start)
-        try:
+        saved_monitor = data.get("monitor")
+        try:  # the model first: a state of another plant is refused saying so
+            check_model(
+                mon, saved_monitor.get("model") if isinstance(saved_monitor, dict) else None
+            )
+            check_monitor_state(data, mon.sys, mon.estimator, name, self.start)
             mon.restore(data["monitor"])
         except IvobsError as exc:
+            if str(exc).startswith("--state"):
+                raise
             raise IvobsError(f"--state: {name!r}: {exc}") from None
         except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
             raise malformed(name, "monitor.estimator.state", f"{exc}") from None

@@ -8,9 +8,10 @@ step and time, the columns and a digest of the rows, so that a restarted monitor
 with the same boxes from the right row of the same stream. A checksum covers all of it: a file
 edited by hand (``stream.step`` moved forward, the ``stream`` entry removed) is refused.
 
-Reading one checks what ``Monitor.restore`` takes on trust (lengths, NaN, ``lo <= hi``, types)
-and the estimator's entries (:meth:`ivobs.Estimator.check_state`); a malformed file is refused
-with the key that is wrong.
+Reading one checks, after the model's fingerprint (:mod:`ivobs.monitor.persist`), what
+``Monitor.restore`` takes on trust (lengths, NaN, ``lo <= hi``, types), the estimator's entries
+(:meth:`ivobs.Estimator.check_state`) and the stream's against the monitor's step count; a
+malformed file is refused with the key that is wrong.
 
 **Lock**: while a monitor runs, it holds an exclusive lock on ``FILE.lock`` (``fcntl.flock``:
 released by the operating system when the process ends, however it ends); a second monitor on
@@ -39,6 +40,7 @@ __all__ = [
     "STATE_VERSION",
     "StateLock",
     "check_monitor_state",
+    "check_stream",
     "lock_path",
     "read_state_file",
     "write_state_file",
@@ -162,11 +164,13 @@ def check_monitor_state(
         estimator.check_state(est)
     except IvobsError as exc:
         raise malformed(name, "monitor.estimator.state", str(exc)) from None
-    _check_stream(data.get("stream"), k, name, start)
+    check_stream(data.get("stream"), k, name, start)
 
 
-def _check_stream(stream: Any, k: int, name: str, start: int) -> None:
-    """Where the stream stopped, consistent with the monitor's ``k`` steps from ``start``."""
+def check_stream(stream: Any, k: int, name: str, start: int) -> None:
+    """The ``stream`` entry of a state file ``name``: where the stream stopped, consistent with
+    the ``k`` steps of the restored monitor from ``start``, the prior box's step (the monitor's
+    own entries are checked by :meth:`Monitor.restore <ivobs.monitor.Monitor.restore>`)."""
     keys = {"start", "rows", "step", "t", "columns", "digest", "last"}
     if not isinstance(stream, dict) or set(stream) != keys:
         raise malformed(name, "stream", f"expected the entries {', '.join(sorted(keys))}")
