@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..model import SystemModel
 from .atomic import write_text_atomic
-from .steps import StepClock
+from .steps import LogRow, StepClock
 
 __all__ = [
     "Log",
@@ -78,19 +78,6 @@ def read_number(cell: str) -> float:
     if math.isinf(v):
         raise ValueError("infinite value (use an empty cell or NaN for a missing measurement)")
     return v
-
-
-@dataclass
-class LogRow:
-    """One parsed row: the step and/or time value when the log has them, ``u`` and ``y``;
-    ``filled``: a step the log skipped (its measurements missing)."""
-
-    line: int
-    u: np.ndarray
-    y: np.ndarray
-    step: int | None = None
-    t: float | None = None
-    filled: bool = False
 
 
 class LogParser:

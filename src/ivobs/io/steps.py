@@ -22,19 +22,30 @@ Without a step column the rows are consecutive steps from the prior's.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..errors import IvobsError
 
-if TYPE_CHECKING:
-    from .logs import LogRow
-
-__all__ = ["MAX_MISSING_STEPS", "StepClock", "check_start"]
+__all__ = ["MAX_MISSING_STEPS", "LogRow", "StepClock", "check_start"]
 
 MAX_MISSING_STEPS = 1_000_000
 """Most steps a log may skip in all (each becomes a missing sample)."""
+
+
+@dataclass
+class LogRow:
+    """One parsed row: the step and/or time value when the log has them, ``u`` and ``y``;
+    ``filled``: a step the log skipped (its measurements missing)."""
+
+    line: int
+    u: np.ndarray
+    y: np.ndarray
+    step: int | None = None
+    t: float | None = None
+    filled: bool = False
 
 
 def check_start(system: Any, start: int, where: str) -> None:
@@ -76,8 +87,6 @@ class StepClock:
 
     def place(self, row: LogRow) -> list[LogRow]:
         """The rows of the steps up to ``row``'s: missing-sample rows for a gap, then ``row``."""
-        from .logs import LogRow
-
         if row.step is None:  # consecutive rows
             self.next += 1
             self.started = True
