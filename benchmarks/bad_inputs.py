@@ -308,10 +308,13 @@ def state_cases() -> list[tuple[str, Callable[[Path], None]]]:
         first = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                  env=env)  # fmt: skip
         try:
-            first.stdin.write("k,u1,y1,y2\n")
-            first.stdin.flush()
-            first.stdout.readline()
-            time.sleep(1)
+            first.stdin.write("k,u1,y1,y2\n")  # a resumed monitor prints no header: wait
+            first.stdin.flush()  # for its lock (or a while, for a version without one)
+            lock = folder / "st.json.lock"
+            for _ in range(100):
+                if lock.exists() and lock.read_text():
+                    break
+                time.sleep(0.2)
             second = subprocess.run(cmd, input=(folder / "log.csv").read_text(), env=env,
                                     capture_output=True, text=True, timeout=300)  # fmt: skip
         finally:
