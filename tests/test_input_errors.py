@@ -103,7 +103,7 @@ def test_an_array_option_in_a_system_file_names_its_line(servo_text):
     text = servo_text.replace('name = "interval-split"', 'name = "interval-split"\n'
                               "options = { gain = [1.0, 2.0] }")  # fmt: skip
     spec = loads_system(text)
-    with pytest.raises(IvobsError, match=r"line \d+: method\.options\.gain: expected str"):
+    with pytest.raises(IvobsError, match=r"line \d+: method\.options\.gain: expected a string"):
         spec.make_estimator()
 
 

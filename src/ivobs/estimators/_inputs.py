@@ -145,40 +145,26 @@ def _option_kinds(cls: Any) -> dict[str, str]:
     return kinds
 
 
-_SCALARS: dict[str, tuple[type, ...]] = {
-    "str": (str,),
-    "bool": (bool, np.bool_),
-    "int": (int, float, np.integer, np.floating),  # 6.0: the method's check takes it
-    "float": (int, float, np.integer, np.floating),
-}
+_SCALARS = {"str": "a string", "bool": "True or False", "int": "an integer", "float": "a number"}
+"""The declared option types that are one value, and how an error names them."""
 
 
 def check_option_types(cls: Any, options: dict[str, Any]) -> dict[str, Any]:
-    """Options whose declared type is a string, a flag or a number must be one (a NumPy array
-    given for them is refused naming the option: ``order=np.array([6, 12])`` is no order);
-    NumPy scalars become Python ones. Options declared ``Any`` (matrices, boxes) are left to
-    the method's own checks."""
+    """Options declared as one value (a string, a flag, a number; see the method's signature)
+    refuse a NumPy array, naming the option (``order=np.array([6, 12])`` is no order, and a
+    method's ``if order < 1`` would raise NumPy's "truth value of an array is ambiguous"
+    instead of saying so); NumPy scalars become Python ones. Other values are left to the
+    method's own checks, and options declared ``Any`` (matrices, boxes) to the method."""
     kinds = _option_kinds(cls)
     out = dict(options)
     for name, value in options.items():
-        kind = kinds.get(name, "Any").replace(" ", "")
-        parts = kind.split("|")
-        if value is None and "None" in parts:
+        parts = [p.strip() for p in kinds.get(name, "Any").split("|")]
+        single = [_SCALARS[p] for p in parts if p in _SCALARS]
+        if not single:
             continue
-        allowed = tuple(t for p in parts for t in _SCALARS.get(p, ()))
-        if not allowed or any(p not in (*_SCALARS, "None") for p in parts):
-            if parts[0] == "str" and isinstance(value, np.ndarray):  # str or a callable
-                raise IvobsError(f"{name}: expected a name (a string), got an array")
-            continue
-        if isinstance(value, bool) and bool not in allowed:
-            raise IvobsError(f"{name}: expected {kind.replace('|', ' or ')}, got {value!r}")
-        if not isinstance(value, allowed):
-            got = (
-                f"an array of shape {value.shape}"
-                if isinstance(value, np.ndarray)
-                else f"{type(value).__name__} {value!r}"[:80]
-            )
-            raise IvobsError(f"{name}: expected {kind.replace('|', ' or ')}, got {got}")
+        if isinstance(value, np.ndarray):
+            expected = " or ".join(single + (["None"] if "None" in parts else []))
+            raise IvobsError(f"{name}: expected {expected}, got an array of shape {value.shape}")
         if isinstance(value, np.generic):
             out[name] = value.item()
     return out

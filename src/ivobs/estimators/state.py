@@ -230,8 +230,9 @@ def check_counters(values: dict[str, Any]) -> None:
     converted in place (every state has them, nested or not)."""
     k = values["k"]
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= MAX_STEPS:
+        beyond = " (more than 2**53 steps)" if isinstance(k, int) and k > MAX_STEPS else ""
         raise IvobsError(
-            f"state: entry 'k': expected the step count (an integer in 0..2**53), got {k!r}"
+            f"state: entry 'k': expected the step count (an integer >= 0), got {k!r}{beyond}"
             + _TAMPERED
         )
     values["k"] = int(k)

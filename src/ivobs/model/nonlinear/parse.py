@@ -137,7 +137,8 @@ class _Reader:
         """``a**b``, its size checked before SymPy computes it."""
         if b.is_Rational:
             if abs(b) > MAX_POWER:
-                raise self.fail(node, f"exponent {b} beyond the limit of +-{MAX_POWER}")
+                what = "integer exponent" if b.is_Integer else "exponent"
+                raise self.fail(node, f"{what} {b} beyond the limit of +-{MAX_POWER}")
             if a.is_Rational and a != 0:
                 bits = max(int(a.p).bit_length(), int(a.q).bit_length())
                 if bits * abs(b) > MAX_CONSTANT_BITS:
