@@ -99,6 +99,9 @@ def test_a_gap_is_missing_samples_and_every_box_holds_the_truth(tmp_path, seed):
         assert _contains(res.lower[valid.start :], res.upper[valid.start :], xs, valid), method
         record = Monitor(sys, method, x0=x0).check(log.u, log.y, estimate=res)
         assert not record.alarm.any(), method  # no false alarm after the gap
+    record = Monitor(sys, "interval-split", x0=x0).check(log)  # the Log itself
+    assert record.alarm.shape == (T,) and not record.alarm.any()
+    assert _contains(record.lower, record.upper, xs, range(T))
 
 
 def test_run_and_monitor_label_boxes_with_the_log_steps(dropped, capsys):

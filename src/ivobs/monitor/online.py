@@ -319,6 +319,10 @@ class Monitor:
         ``tight=True``, with the estimator's prediction), so ``check`` may see fewer alarms than
         :meth:`update`; every alarm it raises carries the same guarantee. Leaves the online
         state alone.
+
+        ``u`` may be a :class:`~ivobs.io.Log` (from :func:`~ivobs.io.read_log`): its rows are
+        steps, a gap in its step column a run of missing samples (:mod:`ivobs.io.steps`), as for
+        ``ivobs run`` and ``ivobs monitor`` (also for :meth:`run`).
         """
         u, y, tt = self._record(u, y, t)
         res = estimate
@@ -332,6 +336,12 @@ class Monitor:
         return check_record(self.sys, self.x0, self.margin, self.method, u, y, tt, res)
 
     def _record(self, u: Any, y: Any, t: Any) -> tuple[np.ndarray, np.ndarray, Any]:
+        from ..io.logs import Log
+
+        if isinstance(u, Log):  # the rows of a log, on their steps
+            if y is not None or t is not None:
+                raise IvobsError("u: a Log holds the measurements and times; give it alone")
+            u, y, t = u.u, u.y, u.t if self.sys.is_continuous else None
         y = as_signal("y", y, self.sys.ny, allow_nan=True, allow_batch=False)
         u = as_signal("u", u, self.sys.nu, y.shape[0], allow_batch=False)
         tt = None if t is None else as_float_array("t", t).ravel()
