@@ -11,7 +11,7 @@ import pytest
 
 from ivobs import Estimate, scenarios
 from ivobs.cli import main
-from ivobs.io import atomic_path, read_log, save_system, write_log, write_text_atomic
+from ivobs.io import atomic_path, read_log, save_system, statefile, write_log, write_text_atomic
 
 
 @pytest.fixture
@@ -183,9 +183,14 @@ def test_monitor_refuses_a_corrupted_state(plant, tmp_path, capsys, corrupt, key
     data = _monitor_state(plant, tmp_path, capsys)
     corrupt(data["monitor"])
     bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps(data))
+    bad.write_text(json.dumps(data))  # edited by hand: refused by its checksum
     more = tmp_path / "more.csv"
     more.write_text("k,u1,y1,y2\n40,2.0,0.1,0.1\n")
+    assert main(["monitor", "--system", str(system), "--input", str(more), "--state",
+                 str(bad)]) == 2  # fmt: skip
+    assert "checksum: does not match" in capsys.readouterr().err
+    # written by a program (the checksum recomputed): every entry is still checked
+    statefile.write_state_file(bad, data["method"], data["monitor"], data["stream"])
     assert main(["monitor", "--system", str(system), "--input", str(more), "--state",
                  str(bad)]) == 2  # fmt: skip
     out, err = capsys.readouterr()

@@ -18,7 +18,8 @@ def _shape_str(shape: tuple[Any, ...]) -> str:
 
 
 def as_float_array(name: str, value: Any) -> np.ndarray:
-    """Convert to a float array or raise an error naming ``name``."""
+    """Convert to a float array or raise an error naming ``name``. The masked entries of a
+    ``numpy.ma`` array become NaN (a missing sample where NaN means one, refused elsewhere)."""
     if callable(value):
         raise IvobsError(f"{name}: expected an array, got a callable {value!r}")
     if np.iscomplexobj(value):
@@ -27,6 +28,8 @@ def as_float_array(name: str, value: Any) -> np.ndarray:
             "dropped silently); pass the real part explicitly if that is what you mean"
         )
     try:
+        if isinstance(value, np.ma.MaskedArray):  # a masked sample is a missing one: NaN
+            return np.ma.filled(value.astype(float), np.nan)
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise IvobsError(f"{name}: expected numbers, got {type(value).__name__} ({exc})") from None

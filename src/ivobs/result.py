@@ -134,7 +134,8 @@ class Estimate:
     # -- files ---------------------------------------------------------------------------
     def to_csv(self, path: str | os.PathLike[str]) -> None:
         """Write ``k, [t,] lower_1.., upper_1.., missing, inconsistent`` atomically: bounds with
-        full precision, ``k`` and the flags as integers (``missing``/``inconsistent``: 0 or 1)."""
+        full precision, ``k`` and the flags as integers (``missing``/``inconsistent``: 0 or 1).
+        ``k`` counts from ``info["first_step"]`` (the step of the prior box; default 0)."""
         if self.is_batch:
             raise IvobsError("to_csv: batch estimates are not written as CSV; save lower/upper")
         path = Path(path)
@@ -155,7 +156,8 @@ class Estimate:
 
         with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
             fh.write(header + "\n")
-            for k, (row, flag) in enumerate(zip(data, flags)):
+            first = int(self.info.get("first_step", 0))
+            for k, (row, flag) in enumerate(zip(data, flags), start=first):
                 cells = [str(k), *(_fmt(v) for v in row), *(str(int(f)) for f in flag)]
                 fh.write(",".join(cells) + "\n")
 

@@ -47,10 +47,11 @@ summary are two files, neither of them the spec.
 
 from __future__ import annotations
 
+from .designs import check_designs
 from .job import Job
 from .results import COLUMNS, ResultsFile, read_results
 from .run import CampaignResult, run_campaign
-from .spec import DISTURBANCES, CampaignSpec, MethodEntry, check_designs, load_spec, loads_spec
+from .spec import DISTURBANCES, CampaignSpec, MethodEntry, load_spec, loads_spec
 from .summary import SummaryRow, summarize, summary_markdown
 from .worker import DESIGN_CACHE, run_job
 

@@ -56,13 +56,19 @@ def _parse_table(text: str, path: Path) -> list[dict[str, Any]]:
         lines = lines[:-1]  # a line cut off by a crash (dropped, its job reruns)
     if not lines:
         return []
+    try:
+        return _parse_lines(lines, path)
+    except csv.Error as exc:  # a field over csv's 128 KiB limit, a NUL byte
+        raise IvobsError(f"output: {str(path)!r} is not a results table ({exc})") from None
+
+
+def _parse_lines(lines: list[str], path: Path) -> list[dict[str, Any]]:
     reader = csv.reader(lines)
     header = next(reader)
     if tuple(header) != COLUMNS:
         raise IvobsError(
-            f"output: {str(path)!r} is not a results table of this ivobs version "
-            f"(columns {header[:4]}...; expected {list(COLUMNS[:4])}...); choose another "
-            "output file"
+            f"output: {str(path)!r} is not a results table of this ivobs version (its first "
+            f"line is not the header {','.join(COLUMNS[:4])},...); choose another output file"
         )
     rows = []
     for line, fields in enumerate(reader, start=2):
@@ -71,7 +77,13 @@ def _parse_table(text: str, path: Path) -> list[dict[str, Any]]:
                 f"output: {str(path)!r}, line {line}: expected {len(COLUMNS)} fields, got "
                 f"{len(fields)}; the file was edited: fix or delete that line"
             )
-        rows.append(_parse_row(dict(zip(COLUMNS, fields))))
+        try:
+            rows.append(_parse_row(dict(zip(COLUMNS, fields))))
+        except (ValueError, RecursionError):
+            raise IvobsError(
+                f"output: {str(path)!r}, line {line}: a cell is not what this column holds; "
+                "the file was edited: fix or delete that line"
+            ) from None
     return rows
 
 
@@ -118,7 +130,13 @@ class ResultsFile:
     def _read(self) -> None:
         fh = self.fh
         fh.seek(0)
-        text = fh.read()
+        try:
+            text = fh.read()
+        except UnicodeDecodeError:
+            raise IvobsError(
+                f"output: {str(self.path)!r} is not a results table (not UTF-8 text); choose "
+                "another output file"
+            ) from None
         self.rows = _parse_table(text, self.path)
         if text and not text.endswith("\n"):  # remove the cut-off line before appending
             keep = text.rfind("\n") + 1
@@ -126,13 +144,25 @@ class ResultsFile:
             text = text[:keep]
         fh.seek(0, os.SEEK_END)
         if not text:
-            csv.writer(fh, lineterminator="\n").writerow(COLUMNS)
-            fh.flush()
+            try:
+                csv.writer(fh, lineterminator="\n").writerow(COLUMNS)
+                fh.flush()
+            except OSError as exc:
+                raise IvobsError(
+                    f"output: cannot write {str(self.path)!r}: {exc.strerror or exc}"
+                ) from None
 
     def append(self, row: dict[str, Any]) -> None:
         cells = [_cell(row.get(c)) for c in COLUMNS]
-        csv.writer(self.fh, lineterminator="\n").writerow(cells)
-        self.fh.flush()
+        try:
+            csv.writer(self.fh, lineterminator="\n").writerow(cells)
+            self.fh.flush()
+        except OSError as exc:  # a full disk: the rows before are whole, a cut line is dropped
+            raise IvobsError(
+                f"output: cannot append to {str(self.path)!r}: {exc.strerror or exc}; the rows "
+                "written before are intact (a cut-off last line is dropped when the table is "
+                "read): make room and run the same command again to resume"
+            ) from None
         self.rows.append(_parse_row(dict(zip(COLUMNS, cells))))
 
     def __exit__(self, *exc: Any) -> None:
@@ -148,6 +178,8 @@ def read_results(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise IvobsError(f"results: cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise IvobsError(f"results: {str(path)!r} is not a results table (not UTF-8)") from None
     return list(latest_rows(_parse_table(text, path)).values())
 
 

@@ -62,6 +62,7 @@ def run_campaign(
     on_row: Callable[[dict[str, Any]], None] | None = None,
     allow_code: bool = False,
     allow_outside: bool = False,
+    allow_large: bool = False,
 ) -> CampaignResult:
     """Run the jobs of ``spec`` not yet in its results table and return the whole table's rows.
 
@@ -77,15 +78,18 @@ def run_campaign(
         declined a system declines it again).
     progress : progress bar on stderr (``None``: on a terminal).
     on_row : called with every new row (in the parent process).
-    allow_code, allow_outside : when ``spec`` is a path, as in :func:`~ivobs.campaign.load_spec`
-        (a spec that imports modules, or writes outside its folder, is refused without them).
+    allow_code, allow_outside, allow_large : when ``spec`` is a path, as in
+        :func:`~ivobs.campaign.load_spec` (a spec that imports modules, writes outside its
+        folder, or asks for more than the budget is refused without them).
 
     The results table and the summary must be two files, neither of them the spec itself.
     """
     from .._progress import Progress
 
     if not isinstance(spec, CampaignSpec):
-        spec = load_spec(spec, allow_code=allow_code, allow_outside=allow_outside)
+        spec = load_spec(
+            spec, allow_code=allow_code, allow_outside=allow_outside, allow_large=allow_large
+        )
     out = Path(output) if output is not None else spec.output
     check_outputs(spec, {"output": out, "summary": spec.summary})
     _check_engine(scheduler, workers, limit)
@@ -134,11 +138,26 @@ def run_campaign(
 
 
 def check_outputs(spec: CampaignSpec, outputs: dict[str, Any]) -> None:
-    """Refuse outputs that are the spec file itself, or one file twice (links included)."""
+    """Refuse outputs that are one of the campaign's inputs (the spec, a system file among its
+    scenarios, a bounds file one of those reads) or one file twice (links included)."""
     from ..io.atomic import check_distinct
 
+    check_distinct(outputs, spec_inputs(spec))
+
+
+def spec_inputs(spec: CampaignSpec) -> dict[str, Any]:
+    """The files a campaign reads, by what they are: the spec, its system files (scenarios
+    ending in ``.toml``) and the bounds files those name."""
+    from ..io.systemfile import load_system
+
     source = Path(spec.source)
-    check_distinct(outputs, {"the spec": source if source.is_file() else None})
+    inputs: dict[str, Any] = {"the spec": source if source.is_file() else None}
+    for name in spec.scenarios:
+        if name.endswith(".toml"):
+            inputs[f"scenario {name!r}"] = name
+            for i, csv in enumerate(load_system(name).files):
+                inputs[f"the bounds file {i + 1} of scenario {name!r}"] = csv
+    return inputs
 
 
 def _check_engine(scheduler: Any, workers: int | None, limit: int | None) -> None:

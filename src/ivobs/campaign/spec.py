@@ -8,6 +8,7 @@ import importlib
 import itertools
 import math
 import os
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,7 @@ from typing import Any
 from ..errors import IvobsError
 from ..io.options import check_option, method_class
 from ..io.reader import TomlReader
+from .budget import BUDGET, seed_count
 from .job import Job
 from .worker import cached_scenario
 
@@ -22,7 +24,6 @@ __all__ = [
     "DISTURBANCES",
     "CampaignSpec",
     "MethodEntry",
-    "check_designs",
     "load_spec",
     "loads_spec",
 ]
@@ -104,7 +105,7 @@ class _SpecReader(TomlReader):
         if not isinstance(v, list) or not v:
             raise self.fail(key, f"expected a non-empty list of strings, got {v!r}")
         out = [self.string(key, s) for s in v]
-        dup = sorted({s for s in out if out.count(s) > 1})
+        dup = sorted(s for s, n in Counter(out).items() if n > 1)
         if dup:
             raise self.fail(key, f"listed twice: {', '.join(dup)}")
         return out
@@ -121,10 +122,23 @@ class _SpecReader(TomlReader):
             return {k: self.plain((*key, k), x) for k, x in v.items()}
         return v
 
-    def __init__(self, text: str, source: str, allow_code: bool, allow_outside: bool):
+    def __init__(
+        self, text: str, source: str, allow_code: bool, allow_outside: bool, allow_large: bool
+    ):
         super().__init__(text, source)
         self.allow_code = _flag("allow_code", allow_code)
         self.allow_outside = _flag("allow_outside", allow_outside)
+        self.budget = None if _flag("allow_large", allow_large) else BUDGET
+
+    def within(self, key: tuple[str, ...], what: str, value: int, unit: str) -> None:
+        """Refuse ``value`` beyond the budget's limit of ``unit`` (:mod:`.budget`)."""
+        if self.budget is None:
+            return
+        limit = {"jobs": self.budget.jobs, "steps": self.budget.steps,
+                 "numbers": self.budget.record}[unit]  # fmt: skip
+        msg = self.budget.refusal(what, value, limit, unit)
+        if msg is not None:
+            raise self.fail(key, msg)
 
     def output(self, key: tuple[str, ...], v: Any, base_dir: Path) -> Path:
         """An output of the spec: relative to its folder, and inside it (after following
@@ -158,7 +172,11 @@ class _SpecReader(TomlReader):
                     ("disturbance",),
                     f"unknown disturbance {d!r}; expected one of {', '.join(DISTURBANCES)}",
                 )
+        settings = sum(math.prod(len(v) for v in e.grid.values()) for e in methods)
+        jobs = len(scen) * len(dists) * settings * len(seeds)
+        self.within(("seeds",), "scenarios x disturbances x method settings x seeds", jobs, "jobs")
         sopts = self.scenario_options(scen, doc.get("scenario_options", {}), doc.get("horizon"))
+        self.check_steps(scen, sopts, jobs // len(scen))
         if "recorded" in dists:
             self.check_recorded(scen, sopts)
         burn_in = None
@@ -245,6 +263,9 @@ class _SpecReader(TomlReader):
             cls = self.method_class(key, item["name"])
             grid = self.grid(key, cls, self.table(key, item.get("options", {})))
             entries.append(MethodEntry(cls.name, grid))
+        for e in entries:  # before a grid's combinations are listed
+            combos = math.prod(len(v) for v in e.grid.values())
+            self.within(key, f"the options grid of {e.name}", combos, "jobs")
         listed = {e.name for e in entries}
         for name in grids:
             if name not in listed:
@@ -278,12 +299,13 @@ class _SpecReader(TomlReader):
                 raise self.fail(key, "give either stop (exclusive) or count, e.g. "
                                      "{ start = 0, stop = 10 }")  # fmt: skip
             if "count" in v:
-                seeds = [
-                    start + step * i
-                    for i in range(self.integer((*key, "count"), v["count"], low=1))
-                ]
+                count = self.integer((*key, "count"), v["count"], low=1)
+                self.within(("seeds", "count"), "seeds", count, "jobs")
+                seeds = [start + step * i for i in range(count)]
             else:
-                seeds = list(range(start, self.integer((*key, "stop"), v["stop"]), step))
+                stop = self.integer((*key, "stop"), v["stop"])
+                self.within(("seeds", "stop"), "seeds", seed_count(start, stop, step), "jobs")
+                seeds = list(range(start, stop, step))
             if not seeds:
                 raise self.fail(key, f"the range {v} holds no seed")
             return seeds
@@ -291,7 +313,7 @@ class _SpecReader(TomlReader):
             raise self.fail(key, f"expected a list of integers or {{ start = 0, stop = 10 }}, "
                                  f"got {v!r}")  # fmt: skip
         seeds = [self.integer(key, s) for s in v]
-        dup = sorted({s for s in seeds if seeds.count(s) > 1})
+        dup = sorted(s for s, n in Counter(seeds).items() if n > 1)
         if dup:
             raise self.fail(key, f"listed twice: {dup}")
         return seeds
@@ -315,6 +337,10 @@ class _SpecReader(TomlReader):
                 out[name][opt] = self.plain((*k, opt), val)
         if horizon is not None:
             self.horizon(scen, horizon, out)
+        for name in scen:  # sizes within the budget before anything is built
+            msg = None if self.budget is None else self.budget.scenario_sizes(out[name])
+            if msg is not None:
+                raise self.fail(("scenario_options", name) if name in table else ("horizon",), msg)
         for name in scen:  # build each once here: bad option values fail now, not per job
             try:
                 cached_scenario(name, out[name])
@@ -354,6 +380,18 @@ class _SpecReader(TomlReader):
             if burn_in >= T:
                 raise self.fail(("burn_in",), f"{burn_in} leaves no step of scenario {name!r} "
                                               f"({T} steps); lower it")  # fmt: skip
+
+    def check_steps(self, scen: list[str], sopts: dict[str, dict[str, Any]], jobs: int) -> None:
+        """The records' sizes (steps × states) and the steps of all ``jobs`` per scenario,
+        within the budget (the scenarios are built: their lengths are known)."""
+        total = 0
+        for name in scen:
+            sc = cached_scenario(name, sopts[name])
+            T = int(sc.t.size) if sc.t is not None else int(sc.horizon)
+            key = ("scenario_options", name) if sopts[name] else ("scenarios",)
+            self.within(key, f"scenario {name!r}: steps x states", T * sc.system.nx, "numbers")
+            total += T * jobs
+        self.within(("horizon",), "steps over all jobs", total, "steps")
 
     def check_recorded(self, scen: list[str], sopts: dict[str, dict[str, Any]]) -> None:
         """``disturbance = "recorded"`` needs scenarios with a stored record (every job of the
@@ -401,16 +439,20 @@ def _inside(path: Path, folder: Path) -> bool:
 
 
 def loads_spec(text: str, source: str = "<spec>", base_dir: str | os.PathLike[str] = ".",
-               stem: str = "campaign", *, allow_code: bool = False,
-               allow_outside: bool = False) -> CampaignSpec:  # fmt: skip
+               stem: str = "campaign", *, allow_code: bool = False, allow_outside: bool = False,
+               allow_large: bool = False) -> CampaignSpec:  # fmt: skip
     """Parse and validate a spec given as text (paths relative to ``base_dir``;
-    ``allow_code``, ``allow_outside``: as in :func:`load_spec`)."""
-    reader = _SpecReader(text, source, allow_code, allow_outside)
+    ``allow_code``, ``allow_outside``, ``allow_large``: as in :func:`load_spec`)."""
+    reader = _SpecReader(text, source, allow_code, allow_outside, allow_large)
     return reader.read(Path(base_dir), stem)
 
 
 def load_spec(
-    path: str | os.PathLike[str], *, allow_code: bool = False, allow_outside: bool = False
+    path: str | os.PathLike[str],
+    *,
+    allow_code: bool = False,
+    allow_outside: bool = False,
+    allow_large: bool = False,
 ) -> CampaignSpec:
     """Read and validate a spec file; ``output`` and ``summary`` are relative to its folder.
     Errors (:class:`~ivobs.IvobsError`) name the file, the line and the key.
@@ -418,47 +460,17 @@ def load_spec(
     Loading runs no code and writes nowhere but the spec's folder by default: a spec with
     ``imports = [...]`` is refused unless ``allow_code=True`` (importing a module runs its
     code, here and in every worker), and an ``output`` or ``summary`` outside the spec's folder
-    (absolute, ``../``, or through a symbolic link) unless ``allow_outside=True``."""
+    (absolute, ``../``, or through a symbolic link) unless ``allow_outside=True``. A spec that
+    asks for more work than the budget (:data:`~ivobs.campaign.budget.BUDGET`: jobs, steps,
+    record sizes) is refused before anything is built unless ``allow_large=True``."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise IvobsError(f"spec: cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise IvobsError(f"spec: {str(path)!r} is not UTF-8 text (a TOML file)") from None
     return loads_spec(
         text, source=str(path), base_dir=path.parent, stem=path.stem, allow_code=allow_code,
-        allow_outside=allow_outside,
+        allow_outside=allow_outside, allow_large=allow_large,
     )  # fmt: skip
-
-
-def check_designs(spec: CampaignSpec) -> list[str]:
-    """Construct every estimator of the spec once (per scenario, method and option set): an
-    invalid option value (every job of it would fail) raises :class:`~ivobs.IvobsError` naming
-    the spec and the method's options. Returns one line per design that the method declines
-    (``DesignError``, or a system class it does not support: those jobs are recorded as
-    ``failed``, which is expected)."""
-    from ..errors import DesignError
-    from ..estimators import make_estimator
-
-    for mod in spec.imports:
-        importlib.import_module(mod)
-    declined: list[str] = []
-    seen: set[str] = set()
-    for job in spec.jobs():
-        key = job.design_key()
-        if key in seen:
-            continue
-        seen.add(key)
-        sc = cached_scenario(job.scenario, job.scenario_options)
-        try:
-            make_estimator(job.method, sc.system, x0=sc.x0, **job.options)
-        except DesignError as exc:
-            declined.append(f"{job.method} {job.options or ''} on {job.scenario}: {exc}")
-        except IvobsError as exc:
-            if not job.options or "support" in str(exc):
-                declined.append(f"{job.method} on {job.scenario}: {exc}")
-                continue
-            raise IvobsError(
-                f"{spec.source}: options.{job.method} = {job.options} (scenario "
-                f"{job.scenario}): {exc}"
-            ) from None
-    return declined

@@ -9,7 +9,7 @@ from typing import Any
 
 from ..errors import IvobsError
 
-__all__ = ["add_plant_options", "plant_scenario"]
+__all__ = ["add_plant_options", "plant_inputs", "plant_scenario"]
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, log: bool = True) -> None:
@@ -35,9 +35,19 @@ def add_plant_options(p: argparse.ArgumentParser, *, log: bool = True) -> None:
     )
 
 
-def plant_scenario(args: argparse.Namespace) -> Any:
+def plant_inputs(args: argparse.Namespace, spec: Any = None) -> dict[str, Any]:
+    """The files a command on ``--system`` reads, by option: the system file, the log and the
+    bounds file the system file names (``spec``: the loaded system file)."""
+    inputs = {"--system": args.system, "--log": getattr(args, "log", None)}
+    for i, path in enumerate(() if spec is None else spec.files):
+        inputs["--system's [disturbance] csv" + (f" {i + 1}" if i else "")] = path
+    return inputs
+
+
+def plant_scenario(args: argparse.Namespace, spec: Any = None) -> Any:
     """The :class:`~ivobs.scenarios.Scenario` of ``--system`` (and ``--log`` or
-    ``--horizon``): :func:`ivobs.io.plant.file_scenario`."""
+    ``--horizon``): :func:`ivobs.io.plant.file_scenario` (``spec``: the system file, already
+    loaded)."""
     from ..io.plant import file_scenario
 
     if not getattr(args, "log", None) and getattr(args, "horizon", None) is None:
@@ -46,7 +56,7 @@ def plant_scenario(args: argparse.Namespace) -> Any:
             "the file's prior box)"
         )
     return file_scenario(
-        args.system,
+        spec if spec is not None else args.system,
         log=getattr(args, "log", None),
         horizon=getattr(args, "horizon", None),
         discretize=args.discretize,

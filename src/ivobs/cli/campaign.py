@@ -67,6 +67,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="let the spec's output and summary lie outside the spec's folder (absolute paths, "
         "../, symbolic links); --output and --summary given here may lie anywhere",
     )
+    p.add_argument(
+        "--allow-large",
+        action="store_true",
+        help="run a spec beyond the campaign budget (jobs, steps, record sizes: "
+        "docs/campaign.md); off by default, such a spec is refused before any work",
+    )
     return p
 
 
@@ -75,7 +81,10 @@ def main(args: argparse.Namespace) -> int:
     from ..campaign.run import check_outputs
 
     spec = campaign.load_spec(
-        args.spec, allow_code=args.allow_code, allow_outside=args.allow_outside
+        args.spec,
+        allow_code=args.allow_code,
+        allow_outside=args.allow_outside,
+        allow_large=args.allow_large,
     )
     if args.summary:
         spec.summary = Path(args.summary)

@@ -9,7 +9,7 @@ from typing import Any
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
 from . import add_trust_option, check_disturbance, check_seed, parse_states
-from ._plant import add_plant_options, plant_scenario
+from ._plant import add_plant_options, plant_inputs, plant_scenario
 
 #: Methods whose cost grows fast with the state dimension (LPs over the horizon, generators):
 #: left out of the default set for systems with more than ``LARGE_NX`` states (on heat-1d,
@@ -70,17 +70,24 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def _scenario(args: argparse.Namespace) -> Any:
-    """The scenario, or the plant of ``--system`` (its log as the recorded trajectory)."""
+    """The scenario, or the plant of ``--system`` (its log as the recorded trajectory); the
+    outputs are checked against every file read first."""
     from .. import scenarios
+    from ..io.atomic import check_distinct
 
     if args.system:
+        from ..io.systemfile import load_system
+
         if args.scenario:
             raise IvobsError(f"give either a scenario ({args.scenario!r}) or --system, not both")
         if args.log and args.disturbance not in (None, "recorded"):
             raise IvobsError("--disturbance: with --log the measurements are the log's")
         args.disturbance = "recorded" if args.log else args.disturbance or "vertex"
         check_disturbance(args.disturbance)
-        return plant_scenario(args)
+        spec = load_system(args.system, allow_code=args.allow_code)
+        check_distinct(_outputs(args), plant_inputs(args, spec))
+        return plant_scenario(args, spec)
+    check_distinct(_outputs(args))
     if args.log or args.horizon is not None or args.discretize is not None:
         raise IvobsError("--log/--horizon/--discretize: need --system FILE")
     if not args.scenario:
@@ -99,10 +106,34 @@ def default_methods(sc: Any) -> tuple[list[str], list[str]]:
     return [m for m in names if m not in SLOW_METHODS], [m for m in names if m in SLOW_METHODS]
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Every output path, checked before any work: a bad path fails fast."""
+    from ..io.atomic import check_output_path
+
+    if args.plot:
+        from ..report.plot import figure_path
+
+        args.plot = str(figure_path(args.plot, "--plot"))
+    for opt in ("html", "json"):
+        value = getattr(args, opt)
+        if value and value != "-":
+            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
+
+
+def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
+    """The files the command writes, by option (``--json -``: standard output)."""
+    return {
+        "--json": None if args.json == "-" else args.json,
+        "--html": args.html,
+        "--plot": args.plot,
+    }
+
+
 def main(args: argparse.Namespace) -> int:
     from ..report import compare, markdown_table
 
     check_seed(args.seed)
+    _check_outputs(args)
     sc = _scenario(args)
     states = parse_states(args.states, sc.system.nx) if args.states else None
     if args.states and not args.plot:
@@ -112,17 +143,7 @@ def main(args: argparse.Namespace) -> int:
             f"--burn-in: expected a number of steps in 0..{sc.horizon - 1} "
             f"({sc.name} has {sc.horizon} steps), got {args.burn_in}"
         )
-    plot_path = None
-    if args.plot:
-        from ..report.plot import figure_path
-
-        plot_path = figure_path(args.plot, "--plot")
-    from ..io.atomic import check_output_path
-
-    for opt in ("html", "json"):  # checked before any work: a bad path fails fast
-        value = getattr(args, opt)
-        if value and value != "-":
-            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
+    plot_path = args.plot
     left_out: list[str] = []
     if args.methods:
         names = [m.strip() for m in args.methods.split(",") if m.strip()]

@@ -43,6 +43,15 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _check_figure_paths(out: str, specs: Any) -> None:
+    """The figures' files through the one output guard: no two of them one file (links)."""
+    from pathlib import Path
+
+    from ..io.atomic import check_distinct
+
+    check_distinct({f"--out's {s.stem}.png": Path(out) / f"{s.stem}.png" for s in specs})
+
+
 def main(args: argparse.Namespace) -> int:
     from ..errors import IvobsError
 
@@ -63,7 +72,12 @@ def main(args: argparse.Namespace) -> int:
     from ..report.figures import generate
 
     check_out_dir(args.out, "--out")
+    _check_figure_paths(args.out, specs)
     t0 = time.perf_counter()
-    paths = generate(args.out, papers, scenarios=chosen, verbose=True)
+    try:
+        paths = generate(args.out, papers, scenarios=chosen, verbose=True)
+    except OSError as exc:  # e.g. a full disk
+        where = exc.filename or args.out
+        raise IvobsError(f"--out: cannot write {str(where)!r}: {exc.strerror or exc}") from None
     print(f"{len(paths)} figure(s) in {time.perf_counter() - t0:.1f} s")
     return 0

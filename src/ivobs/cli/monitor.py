@@ -6,13 +6,21 @@ Reads log rows (CSV with a header: ``k``/``t``, ``u1..``, ``y1..``) from standar
 fault_start, fault_duration, fault_outputs`` (the alarm is latched while a fault persists:
 :class:`ivobs.monitor.Monitor`).
 ``--state FILE`` keeps the monitor's state on disk (written atomically after every step, or
-every ``--save-every N`` steps): a restarted monitor continues with the same boxes.
+every ``--save-every N`` steps): a restarted monitor continues with the same boxes. The file is
+locked while the monitor runs (a second one is refused), and refused when it was written for
+another model or another stream (:mod:`ivobs.io.statefile`).
+
+The rows' step column is honoured (:mod:`ivobs.io.steps`): the first row is at the prior's
+step, a gap is a run of missing samples (one line per step). The exit status is 1 when an alarm
+was raised anywhere on the stream, the part before a restart included.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
+import hashlib
 import sys
 import time
 from collections.abc import Iterator
@@ -22,6 +30,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from ..errors import IvobsError
+from ..io.fingerprint import canonical_json
+from ..io.steps import StepClock
 from ..model import LinearSystem
 from . import add_trust_option
 
@@ -96,6 +106,108 @@ def _fmt(v: float) -> str:
     return "nan" if np.isnan(v) else repr(float(v))
 
 
+def _row_digest(row: Any) -> str:
+    """The digest of one row's values (step, time, inputs, measurements)."""
+    y = [None if np.isnan(v) else float(v) for v in row.y]
+    values = [row.step, row.t, [float(v) for v in row.u], y]
+    return hashlib.sha256(canonical_json(values).encode()).hexdigest()[:32]
+
+
+def _chain(digest: str, row: str) -> str:
+    """The digest of the rows so far, extended by one row's."""
+    return hashlib.sha256((digest + row).encode()).hexdigest()[:32]
+
+
+class _Stream:
+    """Where the stream stands: the step of its first row, the rows consumed, the last step and
+    time, the columns, and the digests of all rows and of the last one (what a restarted
+    monitor checks the rows it sees again against)."""
+
+    def __init__(self, start: int):
+        self.start, self.rows = start, 0
+        self.step: int | None = None
+        self.t: float | None = None
+        self.columns: list[str] = []
+        self.digest, self.last = "", ""
+
+    def consume(self, row: Any) -> None:
+        d = _row_digest(row)
+        self.rows, self.step, self.t = self.rows + 1, row.step, row.t
+        self.digest, self.last = _chain(self.digest, d), d
+
+    def entries(self) -> dict[str, Any]:
+        keys = ("start", "rows", "step", "t", "columns", "digest", "last")
+        return {k: getattr(self, k) for k in keys}
+
+    @classmethod
+    def saved(cls, entries: dict[str, Any]) -> _Stream:
+        out = cls(entries["start"])
+        for k, v in entries.items():
+            setattr(out, k, v)
+        return out
+
+
+class _Replay:
+    """The rows a restarted monitor sees again (processed before the restart: by their step or
+    time column, else by position in ``--input``): skipped, and checked to be the rows of the
+    stream the state was built from (the digest of them all when all come again, else that of
+    the last one)."""
+
+    def __init__(self, saved: _Stream, name: str):
+        self.saved, self.name = saved, name
+        self.count, self.digest, self.last_seen = 0, "", False
+
+    def done(self, row: Any, index: int, from_file: bool) -> bool:
+        s = self.saved
+        if row.step is not None and s.step is not None:
+            return bool(row.step <= s.step)
+        if row.t is not None and s.t is not None:
+            return bool(row.t <= s.t)
+        return from_file and index < s.rows
+
+    def see(self, row: Any) -> None:
+        d = _row_digest(row)
+        self.count += 1
+        self.digest = _chain(self.digest, d)
+        s = self.saved
+        last = (
+            row.step == s.step
+            if s.step is not None
+            else row.t == s.t
+            if s.t is not None
+            else self.count == s.rows
+        )
+        if last:
+            if d != s.last:
+                raise self._other(f"its row of the last step processed ({self._where()}) differs")
+            self.last_seen = True
+
+    def finish(self) -> None:
+        """At the first new row (or the end): the rows seen again were the stream's."""
+        if self.count == 0:
+            return
+        if self.count == self.saved.rows and self.digest != self.saved.digest:
+            raise self._other(f"its first {self.count} rows differ from those processed")
+        if not self.last_seen:
+            raise self._other(f"it does not give the last step processed ({self._where()})")
+
+    def _where(self) -> str:
+        s = self.saved
+        return (
+            f"step {s.step}"
+            if s.step is not None
+            else f"t = {s.t}"
+            if s.t is not None
+            else (f"row {s.rows}")
+        )
+
+    def _other(self, why: str) -> IvobsError:
+        return IvobsError(
+            f"--state: {self.name!r} was built from another stream: {why}. A state continues "
+            "the stream it was written for; delete it to start afresh on this one"
+        )
+
+
 class _Session:
     """The monitor plus what is needed to resume the stream where it stopped."""
 
@@ -115,6 +227,17 @@ class _Session:
                 "nonlinear system use 'ivobs run --system FILE --log LOG' (its inconsistent "
                 "steps are the alarms)"
             )
+        self.state_path = None
+        if args.state:  # checked before the first row is printed
+            from ..io.atomic import check_distinct, check_output_path
+            from ..io.statefile import lock_path
+
+            self.state_path = check_output_path(args.state, "--state")
+            inputs = {"--system": args.system, "--input": args.input}
+            for i, path in enumerate(self.spec.files):
+                inputs["--system's [disturbance] csv" + (f" {i + 1}" if i else "")] = path
+            outputs = {"--state": self.state_path, "--state's lock": lock_path(self.state_path)}
+            check_distinct(outputs, inputs)
         est = self.spec.make_estimator(method)
         self.monitor = Monitor(
             self.spec.system,
@@ -123,59 +246,66 @@ class _Session:
             tight=not args.no_tight,
             clear_after=args.clear_after,
         )
-        self.state_path = None
-        if args.state:  # checked before the first row is printed
-            from ..io.atomic import check_distinct, check_output_path
+        self.start = self.spec.x0_step
+        self.stream = _Stream(self.start)
+        self.replay: _Replay | None = None
 
-            self.state_path = check_output_path(args.state, "--state")
-            inputs = {"--system": args.system, "--input": args.input}
-            inputs.update({"--system's [disturbance] csv": next(iter(self.spec.files), None)})
-            check_distinct({"--state": self.state_path}, inputs)
-        self.rows = 0  # data rows consumed (processed or skipped as already done)
-        self.last_step: int | None = None
-        self.last_t: float | None = None
-        self.resumed = False
-        if self.state_path is not None and self.state_path.exists():
-            self._load()
+    @property
+    def resumed(self) -> bool:
+        return self.monitor.k > 0 or self.replay is not None
 
-    def _load(self) -> None:
+    def load(self, clock: StepClock) -> None:
+        """Continue from the state file, if it exists (under the lock)."""
         from ..io.statefile import check_monitor_state, malformed, read_state_file
+        from ..monitor.persist import check_model
 
-        assert self.state_path is not None
+        if self.state_path is None or not self.state_path.exists():
+            return
         name = str(self.state_path)
         data = read_state_file(self.state_path)
-        check_monitor_state(data, self.monitor.sys, self.monitor.estimator, name)
-        try:
-            self.monitor.restore(data["monitor"])
+        mon = self.monitor
+        saved_monitor = data.get("monitor")
+        try:  # the model first: a state of another plant is refused saying so
+            check_model(
+                mon, saved_monitor.get("model") if isinstance(saved_monitor, dict) else None
+            )
+            check_monitor_state(data, mon.sys, mon.estimator, name, self.start)
+            mon.restore(data["monitor"])
         except IvobsError as exc:
+            if str(exc).startswith("--state"):
+                raise
             raise IvobsError(f"--state: {name!r}: {exc}") from None
         except (TypeError, ValueError, KeyError, AttributeError, IndexError) as exc:
             raise malformed(name, "monitor.estimator.state", f"{exc}") from None
-        stream = data.get("stream", {})
-        _probe(self.monitor, name, stream.get("t"))
-        self.rows = int(stream.get("rows", 0))
-        self.last_step = stream.get("step")
-        self.last_t = stream.get("t")
-        self.resumed = True
+        saved = _Stream.saved(data["stream"])
+        _probe(mon, name, saved.t)
+        self.stream = saved
+        if saved.rows:
+            self.replay = _Replay(saved, name)
+        if saved.step is not None:
+            clock.resume(saved.step + 1)
+        elif mon.k:
+            clock.resume(self.start + mon.k)
+
+    def header(self, columns: list[str], source: str, line: int) -> None:
+        """A (restarted) stream's header: the columns of the stream the state was built on."""
+        saved = self.stream.columns
+        if self.resumed and saved and [c.lower() for c in columns] != [c.lower() for c in saved]:
+            raise IvobsError(
+                f"{source}, line {line}: columns {','.join(columns)}, but the state "
+                f"{str(self.state_path)!r} was built from a stream with {','.join(saved)}; "
+                "delete the state to start afresh on this stream"
+            )
+        self.stream.columns = list(columns)
 
     def save(self) -> None:
         if self.state_path is None:
             return
         from ..io.statefile import write_state_file
 
-        stream = {"rows": self.rows, "step": self.last_step, "t": self.last_t}
-        write_state_file(self.state_path, self.monitor.method, self.monitor.state(), stream)
-
-    def already_done(self, row: Any, index: int, from_file: bool) -> bool:
-        """Whether a row was processed before the restart: by its step or time column when the
-        log has one, else by its position (``--input`` only)."""
-        if not self.resumed:
-            return False
-        if row.step is not None and self.last_step is not None:
-            return bool(row.step <= self.last_step)
-        if row.t is not None and self.last_t is not None:
-            return bool(row.t <= self.last_t)
-        return from_file and index < self.rows
+        write_state_file(
+            self.state_path, self.monitor.method, self.monitor.state(), self.stream.entries()
+        )
 
 
 def _probe(mon: Any, name: str, t: Any) -> None:
@@ -204,10 +334,7 @@ def _probe(mon: Any, name: str, t: Any) -> None:
         raise malformed(name, "monitor.estimator.state", "gives an empty or NaN box")
 
 
-def main(args: argparse.Namespace) -> int:
-    from ..io.logs import LogParser
-    from ..monitor.records import output_names
-
+def _check_args(args: argparse.Namespace) -> None:
     if not (np.isfinite(args.poll) and args.poll > 0):
         raise IvobsError(
             f"--poll: expected the seconds between checks of --follow, a number > 0, got "
@@ -224,11 +351,32 @@ def main(args: argparse.Namespace) -> int:
             raise IvobsError(f"--input: {args.input!r} is a directory; expected a CSV file")
         if not Path(args.input).is_file():
             raise IvobsError(f"--input: no such file {args.input!r}")
+
+
+def main(args: argparse.Namespace) -> int:
+    from ..io.statefile import StateLock
+
+    _check_args(args)
     session = _Session(args)
+    with contextlib.ExitStack() as stack:
+        if session.state_path is not None:
+            stack.enter_context(StateLock(session.state_path))
+        return _stream(args, session)
+    return 2  # pragma: no cover - mypy: the with block returns
+
+
+def _stream(args: argparse.Namespace, session: _Session) -> int:
+    """Read the rows, print one line per step, save the state; the exit status says whether an
+    alarm was raised on the whole stream (its resumed parts included)."""
+    from ..io.logs import LogParser
+    from ..monitor.records import output_names
+
     mon = session.monitor
     sys_ = mon.sys
     source = args.input or "<stdin>"
     parser = LogParser(sys_.nu, sys_.ny, source)
+    clock = StepClock(sys_, source, session.start)
+    session.load(clock)
     out = csv.writer(sys.stdout, lineterminator="\n")
     if not session.resumed:
         cols = [f"lower_{i + 1}" for i in range(sys_.nx)] + [
@@ -237,11 +385,11 @@ def main(args: argparse.Namespace) -> int:
         out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS])
         sys.stdout.flush()
     fh: TextIO
-    if args.input:
-        fh = open(args.input, encoding="utf-8-sig", newline="")
-    else:
-        fh = sys.stdin
-    alarms = 0
+    try:
+        fh = open(args.input, encoding="utf-8-sig", newline="") if args.input else sys.stdin
+    except OSError as exc:
+        raise IvobsError(f"--input: cannot read {args.input!r}: {exc.strerror}") from None
+    k0 = session.start
     index = 0
     unsaved = 0
     in_step = False  # a step interrupted half-way leaves a state that must not be saved
@@ -256,37 +404,45 @@ def main(args: argparse.Namespace) -> int:
                         f"{source}, line {lineno}: the system is continuous-time (dt = 0): "
                         "the rows need a time column t"
                     )
+                session.header(parser.columns, source, lineno)
                 continue
             row = parser.row(text, lineno)
             index += 1
-            if session.already_done(row, index - 1, bool(args.input)):
-                continue
+            replay = session.replay
+            if replay is not None:
+                if replay.done(row, index - 1, bool(args.input)):
+                    replay.see(row)
+                    continue
+                replay.finish()
+                session.replay = None
             in_step = True
-            t_k = row.t if sys_.is_continuous else None  # discrete time counts steps
-            step = mon.update(row.u if sys_.nu else None, row.y, t_k)
-            alarms += step.alarm
-            out.writerow(
-                [
-                    step.step,
-                    *map(_fmt, step.lower),
-                    *map(_fmt, step.upper),
-                    int(step.alarm),
-                    step.reason,
-                    "" if step.fault_start is None else step.fault_start,
-                    step.fault_duration,
-                    output_names(step.outputs),
-                ]
-            )
+            for placed in clock.place(row):  # a gap: its steps, measurements missing
+                t_k = placed.t if sys_.is_continuous else None  # discrete time counts steps
+                step = mon.update(placed.u if sys_.nu else None, placed.y, t_k)
+                start = "" if step.fault_start is None else k0 + step.fault_start
+                out.writerow(
+                    [
+                        k0 + step.step,
+                        *map(_fmt, step.lower),
+                        *map(_fmt, step.upper),
+                        int(step.alarm),
+                        step.reason,
+                        start,
+                        step.fault_duration,
+                        output_names(step.outputs),
+                    ]
+                )
             sys.stdout.flush()
             # printed first, saved second: after a crash a step may be printed twice (the same
             # line), never lost
-            session.rows = index
-            session.last_step, session.last_t = row.step, row.t
+            session.stream.consume(row)
             unsaved += 1
             in_step = False
             if unsaved >= args.save_every:
                 session.save()
                 unsaved = 0
+        if session.replay is not None:
+            session.replay.finish()
     except UnicodeDecodeError as exc:
         from ..io.logs import not_utf8
 
@@ -296,4 +452,4 @@ def main(args: argparse.Namespace) -> int:
             session.save()
         if fh is not sys.stdin:
             fh.close()
-    return 1 if alarms else 0
+    return 1 if mon.alarms else 0

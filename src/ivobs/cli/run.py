@@ -19,6 +19,7 @@ from ..errors import IvobsError
 from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
 from . import add_trust_option, check_disturbance, check_seed
+from ._plant import plant_inputs
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -166,8 +167,8 @@ def _run_system(args: argparse.Namespace) -> int:
         raise IvobsError("--system: needs --log FILE (a CSV log with k, u1.., y1.. columns)")
     spec = load_system(args.system, allow_code=args.allow_code)
     spec.system = discretized(spec.system, args.discretize, args.system)
-    check_distinct(_outputs(args), {"--system's [disturbance] csv": next(iter(spec.files), None)})
-    log = read_log(args.log, spec.system)
+    check_distinct(_outputs(args), plant_inputs(args, spec))
+    log = read_log(args.log, spec.system, start=spec.x0_step)
     if args.discretize is not None:
         check_log_times(log.t, args.discretize, args.log)
     method = args.method or spec.method
@@ -195,16 +196,21 @@ def _run_system(args: argparse.Namespace) -> int:
         alarms = np.flatnonzero(record.alarm)
         reasons = {int(k): record.reasons[int(k)] for k in alarms[:1]}
     res.t = log.t
+    res.info["first_step"] = log.start  # the output's k: the log's steps
     name = spec.name or args.system
     print(f"{est.name} on {name} ({args.log})")
     print(f"steps: {res.T}, valid from step {res.valid_from}")
-    print(f"missing samples: {int(np.sum(log.missing))} step(s) with a missing measurement")
+    skipped = 0 if log.filled is None else int(np.sum(log.filled))
+    gaps = f" ({skipped} skipped by the log)" if skipped else ""
+    print(f"missing samples: {int(np.sum(log.missing))} step(s) with a missing measurement{gaps}")
     if res.T > res.valid_from:
         print("mean width per state: " + ", ".join(f"{w:.4g}" for w in res.mean_width()))
     if alarms.size:
-        shown = ", ".join(str(int(k)) for k in alarms[:10]) + (" ..." if alarms.size > 10 else "")
+        k0 = log.start  # rows are steps from the prior's
+        shown = ", ".join(str(int(k) + k0) for k in alarms[:10])
+        shown += " ..." if alarms.size > 10 else ""
         print(f"ALARMS: {alarms.size} step(s) inconsistent with the model: {shown}")
-        print(f"first: step {int(alarms[0])}: {reasons[int(alarms[0])]}")
+        print(f"first: step {int(alarms[0]) + k0}: {reasons[int(alarms[0])]}")
     else:
         print("alarms: none (every measurement is consistent with the model and bounds)")
     _write(

@@ -17,6 +17,7 @@ from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..model.statespace import is_statespace
 from . import base
+from ._inputs import check_option_types
 from .base import ROUNDING, Design, Estimator, nonlinear_refusal
 
 __all__ = [
@@ -127,7 +128,7 @@ def make_estimator(
             f"options: {cls.name} does not accept {', '.join(map(repr, unknown))}; "
             f"accepted options: {', '.join(allowed) or '(none)'}"
         )
-    return cls(sys, x0, **options)
+    return cls(sys, x0, **check_option_types(cls, options))
 
 
 def _methods_with(flag: str) -> list[str]:

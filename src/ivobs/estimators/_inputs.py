@@ -10,7 +10,15 @@ from .._validate import as_float_array, as_vector
 from ..errors import IvobsError
 from .scale import SHORT
 
-__all__ = ["check_t", "check_t_k", "check_u_k", "check_y_k", "lean_step_data", "lean_u_y"]
+__all__ = [
+    "check_option_types",
+    "check_t",
+    "check_t_k",
+    "check_u_k",
+    "check_y_k",
+    "lean_step_data",
+    "lean_u_y",
+]
 
 _F64 = np.dtype(np.float64)
 _NO_INPUT = np.zeros(0)
@@ -120,3 +128,43 @@ def check_t(sys: Any, t: Any, T: int) -> np.ndarray | None:
     if t_arr.shape[0] != T or np.any(~np.isfinite(t_arr)) or np.any(np.diff(t_arr) <= 0):
         raise IvobsError(f"t: expected {T} finite, strictly increasing sample times")
     return t_arr
+
+
+def _option_kinds(cls: Any) -> dict[str, str]:
+    """The declared type of each keyword option of the method ``cls`` (its annotation)."""
+    import inspect
+
+    kinds: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        init = vars(klass).get("__init__")
+        if init is None:
+            continue
+        for p in inspect.signature(init).parameters.values():
+            if p.kind is p.KEYWORD_ONLY:
+                kinds[p.name] = str(p.annotation)
+    return kinds
+
+
+_SCALARS = {"str": "a string", "bool": "True or False", "int": "an integer", "float": "a number"}
+"""The declared option types that are one value, and how an error names them."""
+
+
+def check_option_types(cls: Any, options: dict[str, Any]) -> dict[str, Any]:
+    """Options declared as one value (a string, a flag, a number; see the method's signature)
+    refuse a NumPy array, naming the option (``order=np.array([6, 12])`` is no order, and a
+    method's ``if order < 1`` would raise NumPy's "truth value of an array is ambiguous"
+    instead of saying so); NumPy scalars become Python ones. Other values are left to the
+    method's own checks, and options declared ``Any`` (matrices, boxes) to the method."""
+    kinds = _option_kinds(cls)
+    out = dict(options)
+    for name, value in options.items():
+        parts = [p.strip() for p in kinds.get(name, "Any").split("|")]
+        single = [_SCALARS[p] for p in parts if p in _SCALARS]
+        if not single:
+            continue
+        if isinstance(value, np.ndarray):
+            expected = " or ".join(single + (["None"] if "None" in parts else []))
+            raise IvobsError(f"{name}: expected {expected}, got an array of shape {value.shape}")
+        if isinstance(value, np.generic):
+            out[name] = value.item()
+    return out

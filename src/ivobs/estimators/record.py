@@ -100,8 +100,12 @@ def finalize(est: Estimator, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray |
     vf = est.valid_from
     lo[..., :vf, :] = np.nan
     hi[..., :vf, :] = np.nan
-    if not np.isfinite(np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])):
+    with np.errstate(over="ignore"):  # a sum of finite bounds may overflow: looked at below
+        total = np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])
+    if not np.isfinite(total):
         bad = ~(np.isfinite(lo[..., vf:, :]) & np.isfinite(hi[..., vf:, :]))
+        if not bad.any():  # finite bounds near the float range whose sum overflowed
+            return
         first = np.argwhere(bad)[0]
         k = int(first[-2]) + vf
         row = tuple(int(i) for i in first[:-2])  # the stream of a batch

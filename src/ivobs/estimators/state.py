@@ -89,6 +89,9 @@ def evolve(state: S, **changes: Any) -> S:
     return new
 
 
+MAX_STEPS = 2**53
+"""Largest step count a saved state may hold (steps are counted one by one in floats too)."""
+
 _TAMPERED = "; the state was altered or is not from Estimator.state() of this estimator"
 
 
@@ -226,9 +229,11 @@ def check_counters(values: dict[str, Any]) -> None:
     """The step counter ``k`` and the data scale ``scale`` of a saved state, checked and
     converted in place (every state has them, nested or not)."""
     k = values["k"]
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= MAX_STEPS:
+        beyond = " (more than 2**53 steps)" if isinstance(k, int) and k > MAX_STEPS else ""
         raise IvobsError(
-            f"state: entry 'k': expected the step count (an integer >= 0), got {k!r}" + _TAMPERED
+            f"state: entry 'k': expected the step count (an integer >= 0), got {k!r}{beyond}"
+            + _TAMPERED
         )
     values["k"] = int(k)
     scale = values["scale"]

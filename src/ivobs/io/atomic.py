@@ -16,7 +16,14 @@ from pathlib import Path
 
 from ..errors import IvobsError
 
-__all__ = ["atomic_path", "check_distinct", "check_output_path", "same_file", "write_text_atomic"]
+__all__ = [
+    "atomic_path",
+    "check_distinct",
+    "check_output_path",
+    "same_file",
+    "write_error",
+    "write_text_atomic",
+]
 
 
 def _file_mode(path: Path) -> int:
@@ -98,7 +105,11 @@ def check_distinct(
 def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path next to ``path`` (same suffix); rename it to ``path`` on success,
     delete it on any error. Readers never see a half-written file. The file gets the mode a
-    plain ``open(path, "w")`` would give (the umask's, or the replaced file's)."""
+    plain ``open(path, "w")`` would give (the umask's, or the replaced file's).
+
+    An operating-system error while writing (a full disk, a quota, a folder removed) raises
+    :class:`~ivobs.IvobsError` naming the file and saying that its previous version, if any,
+    is intact (the rename never happened)."""
     path = check_output_path(path)
     folder = path.parent if str(path.parent) else Path(".")
     try:
@@ -112,10 +123,24 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         os.chmod(tmp, _file_mode(path))
         yield Path(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise write_error(path, exc) from None
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def write_error(path: Path, exc: OSError) -> IvobsError:
+    """The error of a write that failed (``exc``) before the rename: nothing was replaced."""
+    before = (
+        "its previous version is intact"
+        if path.exists()
+        else "nothing was written there (no file existed before)"
+    )
+    return IvobsError(f"cannot write {str(path)!r}: {exc.strerror or exc}; {before}")
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:

@@ -28,6 +28,8 @@ class SystemFile:
     """Other files the system file read (its ``[disturbance] csv``)."""
     option_lines: dict[str, int] = field(default_factory=dict)
     """The line of each of ``options`` in the file (for the errors of their values)."""
+    x0_step: int = 0
+    """The step whose state ``x0`` bounds (``[x0] step``): a log must start there."""
 
     def make_estimator(self, method: str | None = None, **options: Any) -> Any:
         """The estimator of the file's method (or ``method``) with the file's prior box.

@@ -1,9 +1,11 @@
 """Measurement logs (CSV): an optional step (``k`` / ``step``) or time (``t`` / ``time``)
 column, the inputs ``u1, u2, ...`` and the measurements ``y1, y2, ...``.
 
-An empty cell or ``NaN`` in a ``y`` column is a missing sample. :func:`read_log` reads a log,
-:class:`LogParser` parses rows one at a time (the streaming monitor), :func:`write_log` writes
-one (atomically).
+An empty cell or ``NaN`` (any spelling: ``nan``, ``-nan``) in a ``y`` column is a missing
+sample. The step column is honoured (:class:`~ivobs.io.steps.StepClock`): a row's ``k`` is its
+step, a gap is a run of missing samples, and the first row must be the step of the prior box.
+:func:`read_log` reads a log, :class:`LogParser` parses rows one at a time (the streaming
+monitor), :func:`write_log` writes one (atomically).
 """
 
 from __future__ import annotations
@@ -21,13 +23,29 @@ import numpy as np
 from ..errors import IvobsError
 from ..model import SystemModel
 from .atomic import write_text_atomic
+from .steps import LogRow, StepClock
 
-__all__ = ["Log", "LogParser", "LogRow", "log_from_frame", "not_utf8", "read_log", "write_log"]
+__all__ = [
+    "Log",
+    "LogParser",
+    "LogRow",
+    "log_from_frame",
+    "not_utf8",
+    "read_log",
+    "read_number",
+    "write_log",
+]
 
 _STEP_COLS = ("k", "step")
 _TIME_COLS = ("t", "time")
-_SIGNAL = re.compile(r"^(?P<kind>[uy])(?:\d+|[_\[(.].*)?$", re.IGNORECASE)
-_NUMBERED = re.compile(r"^[uy](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$", re.IGNORECASE)
+_SIGNAL = re.compile(r"^(?P<kind>[uy])(?:\d+|[_\[(.].*)?$", re.IGNORECASE | re.ASCII)
+_NUMBERED = re.compile(
+    r"^[uy](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$", re.IGNORECASE | re.ASCII
+)
+_INTEGER = re.compile(r"^[+-]?[0-9]+$")
+
+MAX_STEP = 2**53
+"""Largest step number a log may give (beyond it a float cannot count steps one by one)."""
 
 
 def _signal_number(column: str) -> int | None:
@@ -36,15 +54,30 @@ def _signal_number(column: str) -> int | None:
     return None if m is None else int(next(g for g in m.groups() if g is not None))
 
 
-@dataclass
-class LogRow:
-    """One parsed row: the step and/or time value when the log has them, ``u`` and ``y``."""
+def _shown(text: str) -> str:
+    """A cell quoted in an error, cut short (a field may be 128 KiB long)."""
+    return repr(text) if len(text) <= 40 else repr(text[:37] + "...")
 
-    line: int
-    u: np.ndarray
-    y: np.ndarray
-    step: int | None = None
-    t: float | None = None
+
+def read_number(cell: str) -> float:
+    """One CSV cell as a number: NaN for an empty cell and for every spelling of NaN (``nan``,
+    ``-nan``, ``NaN``); ``ValueError`` naming what is wrong for anything else that is not a
+    finite number written in ASCII (``float`` also reads ``1_000`` and other scripts' digits,
+    which a CSV number is not)."""
+    s = cell.strip()
+    if s == "":
+        return math.nan
+    if not s.isascii():
+        raise ValueError("expected a number written with the digits 0-9")
+    if "_" in s:  # float() reads 1_000; a CSV number does not
+        raise ValueError("expected a number")
+    try:
+        v = float(s)
+    except ValueError:
+        raise ValueError("expected a number") from None
+    if math.isinf(v):
+        raise ValueError("infinite value (use an empty cell or NaN for a missing measurement)")
+    return v
 
 
 class LogParser:
@@ -74,15 +107,17 @@ class LogParser:
     def fail(self, line: int, msg: str) -> IvobsError:
         return IvobsError(f"{self.source}, line {line}: {msg}")
 
-    @staticmethod
-    def _cells(text: str) -> list[str]:
-        return next(csv.reader([text]))
+    def _cells(self, text: str, line: int) -> list[str]:
+        try:
+            return next(csv.reader([text]), [])
+        except csv.Error as exc:  # a field over csv's 128 KiB limit, a NUL byte
+            raise self.fail(line, f"not a CSV row ({exc})") from None
 
     def header(self, text: str, line: int = 1) -> None:
         """Read the header: signal columns numbered ``u1, u2, ...`` (also ``y[2]``, ``y_2``)
         are mapped by their number, whatever their order; unnumbered ones (``u_speed``) are
         taken in header order. A UTF-8 byte-order mark (Excel) is ignored."""
-        cols = [c.strip() for c in self._cells(text.lstrip("\ufeff"))]
+        cols = [c.strip() for c in self._cells(text.lstrip("\ufeff"), line)]
         self.columns = cols
         seen: set[str] = set()
         for i, c in enumerate(cols):
@@ -139,7 +174,7 @@ class LogParser:
     def row(self, text: str, line: int) -> LogRow:
         if not self.columns:
             raise self.fail(line, "no header line before the data")
-        cells = self._cells(text)
+        cells = self._cells(text, line)
         if len(cells) != len(self.columns):
             raise self.fail(
                 line,
@@ -147,24 +182,12 @@ class LogParser:
             )
         vals = np.empty(len(cells))
         for i, cell in enumerate(cells):
-            s = cell.strip()
-            if s == "" or s.lower() == "nan":
-                vals[i] = np.nan
-                continue
             try:
-                if "_" in s:  # float() accepts 1_000; a CSV number does not
-                    raise ValueError(s)
-                vals[i] = float(s)
-            except ValueError:
+                vals[i] = read_number(cell)
+            except ValueError as exc:
                 raise self.fail(
-                    line, f"column {self.columns[i]!r}: expected a number, got {s!r}"
+                    line, f"column {self.columns[i]!r}: {exc}, got {_shown(cell.strip())}"
                 ) from None
-            if not math.isfinite(vals[i]):
-                raise self.fail(
-                    line,
-                    f"column {self.columns[i]!r}: infinite value {s!r} (use "
-                    "an empty cell or NaN for a missing measurement)",
-                )
         for i in [
             *self._u,
             *([] if self._step is None else [self._step]),
@@ -175,12 +198,7 @@ class LogParser:
                 raise self.fail(line, f"column {self.columns[i]!r} is missing ({what})")
         out = LogRow(line=line, u=vals[self._u], y=vals[self._y])
         if self._step is not None:
-            v = vals[self._step]
-            if v != int(v):
-                raise self.fail(
-                    line, f"column {self.columns[self._step]!r}: expected an integer step, got {v}"
-                )
-            out.step = int(v)
+            out.step = self._step_of(cells[self._step].strip(), vals[self._step], line)
             if (
                 self._last is not None
                 and self._last.step is not None
@@ -189,7 +207,7 @@ class LogParser:
                 raise self.fail(
                     line,
                     f"step {out.step} does not increase (previous "
-                    f"{self._last.step}, line {self._last.line})",
+                    f"{self._last.step}, line {self._last.line}): each step once, in order",
                 )
         if self._time is not None:
             out.t = float(vals[self._time])
@@ -201,6 +219,19 @@ class LogParser:
                 )
         self._last = out
         return out
+
+    def _step_of(self, text: str, value: float, line: int) -> int:
+        """The step of a row: an integer in ``0..MAX_STEP`` (read exactly when written as one:
+        a float cannot tell 2**53 + 1 from 2**53)."""
+        col = self.columns[self._step or 0]
+        step = int(text) if _INTEGER.match(text) and len(text) <= 20 else value
+        if step != int(step):
+            raise self.fail(line, f"column {col!r}: expected an integer step, got {value}")
+        if not 0 <= step <= MAX_STEP:
+            raise self.fail(
+                line, f"column {col!r}: expected a step in 0..2**53, got {_shown(text)}"
+            )
+        return int(step)
 
 
 def not_utf8(source: str, exc: UnicodeDecodeError) -> IvobsError:
@@ -218,14 +249,19 @@ def _is_skipped(text: str) -> bool:
 
 @dataclass
 class Log:
-    """A measurement record: ``u`` ``(T, nu)``, ``y`` ``(T, ny)`` (NaN = missing), the step and
-    time columns when present."""
+    """A measurement record: ``u`` ``(T, nu)``, ``y`` ``(T, ny)`` (NaN = missing), one row per
+    step from ``start`` (the step of the prior box), the step and time columns when present.
+
+    ``filled``: ``(T,)`` bool, the steps the file skipped (a gap in its step column: their
+    measurements are missing, their times interpolated between the rows around them)."""
 
     u: np.ndarray
     y: np.ndarray
     t: np.ndarray | None = None
     steps: np.ndarray | None = None
     columns: list[str] = field(default_factory=list)
+    start: int = 0
+    filled: np.ndarray | None = None
 
     @property
     def T(self) -> int:
@@ -238,22 +274,49 @@ class Log:
         return rows
 
 
-def read_log(path: str | os.PathLike[str], system: SystemModel) -> Log:
-    """Read a CSV log for ``system`` (its ``nu`` inputs and ``ny`` measurements).
+def _model_and_start(system: Any, start: int | None) -> tuple[Any, int]:
+    """The model of ``system`` (a model or a loaded system file) and the step of the prior box:
+    ``start``, else the system file's ``[x0] step``, else 0."""
+    if start is None:
+        start = int(getattr(system, "x0_step", 0))
+    model = getattr(system, "system", system)  # a loaded system file: its model
+    if not hasattr(model, "nu"):
+        raise IvobsError(f"system: expected an ivobs system, got {type(model).__name__}")
+    return model, start
 
-    Lines starting with ``#`` and blank lines are skipped. Errors name the line and the column:
-    a wrong number of fields, text where a number belongs, a missing input, a step or time that
-    does not increase.
+
+def _stack(rows: list[LogRow], parser: LogParser, clock: StepClock, model: Any) -> Log:
+    T = len(rows)
+    return Log(
+        u=np.array([r.u for r in rows]).reshape(T, model.nu),
+        y=np.array([r.y for r in rows]).reshape(T, model.ny),
+        t=np.array([r.t for r in rows], dtype=float) if parser.has_time else None,
+        steps=np.arange(clock.start, clock.start + T) if parser.has_step else None,
+        columns=parser.columns,
+        start=clock.start,
+        filled=np.array([r.filled for r in rows], dtype=bool),
+    )
+
+
+def read_log(path: str | os.PathLike[str], system: SystemModel, *, start: int | None = None) -> Log:
+    """Read a CSV log for ``system`` (a model, or a loaded system file: its ``nu`` inputs and
+    ``ny`` measurements).
+
+    Lines starting with ``#`` and blank lines are skipped. The step column is honoured
+    (:mod:`ivobs.io.steps`): the first row must be at ``start``, the step of the prior box
+    (default: the system file's ``[x0] step``, else 0), and a gap in ``k`` is a run of missing
+    samples. Errors name the line and the column: a wrong number of fields, text where a
+    number belongs, a missing input, a step or time that does not increase, a log that starts
+    at another step than the prior's.
     """
-    system = getattr(system, "system", system)  # a loaded system file: its model
-    if not hasattr(system, "nu"):
-        raise IvobsError(f"system: expected an ivobs system, got {type(system).__name__}")
+    model, start = _model_and_start(system, start)
     path = Path(path)
     if path.is_dir():
         raise IvobsError(f"log file {str(path)!r} is a directory; expected a CSV file")
     if not path.is_file():
         raise IvobsError(f"log file {str(path)!r} not found")
-    parser = LogParser(system.nu, system.ny, str(path))
+    parser = LogParser(model.nu, model.ny, str(path))
+    clock = StepClock(model, str(path), start)
     rows: list[LogRow] = []
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -263,49 +326,44 @@ def read_log(path: str | os.PathLike[str], system: SystemModel) -> Log:
                 if not parser.columns:
                     parser.header(text, i)
                 else:
-                    rows.append(parser.row(text, i))
+                    rows.extend(clock.place(parser.row(text, i)))
     except UnicodeDecodeError as exc:
         raise not_utf8(str(path), exc) from None
+    except OSError as exc:
+        raise IvobsError(f"log file {str(path)!r}: cannot read it ({exc.strerror})") from None
     if not parser.columns:
         raise IvobsError(f"{path}: empty log (expected a header line such as k,u1,y1,y2)")
     if not rows:
         raise IvobsError(f"{path}: the log has a header but no data rows")
-    return Log(
-        u=np.array([r.u for r in rows]).reshape(len(rows), system.nu),
-        y=np.array([r.y for r in rows]).reshape(len(rows), system.ny),
-        t=np.array([r.t for r in rows]) if parser.has_time else None,
-        steps=np.array([r.step for r in rows]) if parser.has_step else None,
-        columns=parser.columns,
-    )
+    return _stack(rows, parser, clock, model)
 
 
-def log_from_frame(frame: Any, system: SystemModel) -> Log:
+def log_from_frame(frame: Any, system: SystemModel, *, start: int | None = None) -> Log:
     """A :class:`Log` from a ``pandas.DataFrame`` with the columns of a CSV log (``k``/``step``
     or ``t``/``time``, ``u1..``, ``y1..``; NaN = missing sample). The rows go through the same
-    parser as a file (the same checks and messages; "line" counts the header as line 1). A
-    non-default index (e.g. a time index) is kept as a column only if it is named ``k``,
-    ``step``, ``t`` or ``time``."""
+    parser and step clock as a file (the same checks and messages; "line" counts the header as
+    line 1). A non-default index (e.g. a time index) is kept as a column only if it is named
+    ``k``, ``step``, ``t`` or ``time``."""
+    model, start = _model_and_start(system, start)
     cols = getattr(frame, "columns", None)
     if cols is None or not hasattr(frame, "itertuples"):
         raise IvobsError(f"frame: expected a pandas DataFrame, got {type(frame).__name__}")
     index_name = getattr(frame.index, "name", None)
     if isinstance(index_name, str) and index_name.lower() in _STEP_COLS + _TIME_COLS:
         frame = frame.reset_index()
-    parser = LogParser(system.nu, system.ny, "<DataFrame>")
+    parser = LogParser(model.nu, model.ny, "<DataFrame>")
     parser.header(",".join(str(c) for c in frame.columns))
+    clock = StepClock(model, "<DataFrame>", start)
     rows = [
-        parser.row(",".join("" if _blank(v) else repr(float(v)) for v in values), i)
+        placed
         for i, values in enumerate(frame.itertuples(index=False, name=None), start=2)
+        for placed in clock.place(
+            parser.row(",".join("" if _blank(v) else repr(float(v)) for v in values), i)
+        )
     ]
     if not rows:
         raise IvobsError("<DataFrame>: no data rows")
-    return Log(
-        u=np.array([r.u for r in rows]).reshape(len(rows), system.nu),
-        y=np.array([r.y for r in rows]).reshape(len(rows), system.ny),
-        t=np.array([r.t for r in rows]) if parser.has_time else None,
-        steps=np.array([r.step for r in rows]) if parser.has_step else None,
-        columns=parser.columns,
-    )
+    return _stack(rows, parser, clock, model)
 
 
 def _blank(v: Any) -> bool:

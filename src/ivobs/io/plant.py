@@ -14,6 +14,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..scenarios import Scenario
 from ..simulate import Trajectory
+from .loaded import SystemFile
 
 __all__ = ["DEFAULT_HORIZON", "check_log_times", "discretized", "file_scenario"]
 
@@ -46,7 +47,7 @@ def check_log_times(t: np.ndarray | None, ts: float, where: str) -> None:
 
 
 def file_scenario(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | SystemFile,
     *,
     log: str | os.PathLike[str] | None = None,
     horizon: int | None = None,
@@ -55,11 +56,13 @@ def file_scenario(
 ) -> Scenario:
     """The plant of the system file ``path`` as a scenario: with ``log``, the log is its
     ``recorded`` trajectory (no true state); otherwise it is simulated for ``horizon`` steps
-    (true initial state: the centre of the prior box ``[x0]``, inputs zero)."""
+    (true initial state: the centre of the prior box ``[x0]``, inputs zero). ``path`` may be
+    a system file already loaded."""
     from .logs import read_log
     from .systemfile import load_system
 
-    spec = load_system(path, allow_code=allow_code)
+    spec = path if isinstance(path, SystemFile) else load_system(path, allow_code=allow_code)
+    path = spec.source or "<system file>"
     system = discretized(spec.system, discretize, str(path))
     if spec.x0 is None:
         raise IvobsError(f"{path}: the system file needs a prior box [x0] for this command")
@@ -68,7 +71,7 @@ def file_scenario(
     if log is not None:
         if horizon is not None:
             raise IvobsError("horizon: only without a log (the log sets the horizon)")
-        rec = read_log(log, system)
+        rec = read_log(log, system, start=spec.x0_step)
         if system.is_continuous and rec.t is None:
             raise IvobsError(
                 f"{log}: the system is continuous-time (dt = 0): the log needs a time "

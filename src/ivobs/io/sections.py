@@ -45,6 +45,15 @@ class PlantSections(TomlReader):
             out[k] = tuple(v)
         return SignalNames(**out)
 
+    def x0_step(self) -> int:
+        """``[x0] step``: the step whose state the prior box bounds (default 0); a log must
+        start there (:mod:`ivobs.io.steps`)."""
+        tab = self.table(("x0",)) or {}
+        step = tab.get("step", 0)
+        if isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= 2**53:
+            raise self.fail(("x0", "step"), f"expected a step in 0..2**53, got {step!r}")
+        return step
+
     def x0(self, nx: int) -> Box | None:
         tab = self.table(("x0",))
         if tab is None:

@@ -1,18 +1,31 @@
 """Monitor state files (``ivobs monitor --state FILE``): JSON, written atomically, checked
-entry by entry when read back.
+entry by entry when read back, locked while a monitor uses them.
 
 A state file holds the monitor's state (:meth:`ivobs.monitor.Monitor.state`: its counters, the
-previous box and the estimator's saved state) and where the stream stopped (rows consumed, the
-last step and time), so that a restarted monitor continues with the same boxes. Reading one
-checks what ``Monitor.restore`` takes on trust (lengths, NaN, ``lo <= hi``, types) and the
-estimator's entries (:meth:`ivobs.Estimator.check_state`); a malformed file is refused with the
-key that is wrong.
+previous box, the estimator's saved state and the fingerprint of the model, prior box and
+settings) and where the stream stopped: the step of its first row, the rows consumed, the last
+step and time, the columns and a digest of the rows, so that a restarted monitor continues
+with the same boxes from the right row of the same stream. A checksum covers all of it: a file
+edited by hand (``stream.step`` moved forward, the ``stream`` entry removed) is refused.
+
+Reading one checks, after the model's fingerprint (:mod:`ivobs.monitor.persist`), what
+``Monitor.restore`` takes on trust (lengths, NaN, ``lo <= hi``, types), the estimator's entries
+(:meth:`ivobs.Estimator.check_state`) and the stream's against the monitor's step count; a
+malformed file is refused with the key that is wrong.
+
+**Lock**: while a monitor runs, it holds an exclusive lock on ``FILE.lock`` (``fcntl.flock``:
+released by the operating system when the process ends, however it ends); a second monitor on
+the same state file is refused, naming the process that holds it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import datetime as _dt
+import hashlib
 import json
 import os
+import socket
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -20,10 +33,25 @@ import numpy as np
 
 from ..errors import IvobsError
 from .atomic import write_text_atomic
+from .fingerprint import canonical_json
 
-__all__ = ["STATE_FORMAT", "check_monitor_state", "read_state_file", "write_state_file"]
+__all__ = [
+    "STATE_FORMAT",
+    "STATE_VERSION",
+    "StateLock",
+    "check_monitor_state",
+    "check_stream",
+    "lock_path",
+    "read_state_file",
+    "write_state_file",
+]
 
 STATE_FORMAT = "ivobs-monitor-state"
+STATE_VERSION = 2
+"""2: the stream's first step, columns and row digests, and a checksum of the whole file."""
+
+MAX_STATE_BYTES = 1 << 30
+"""Largest state file read (the largest methods' states are a few megabytes)."""
 
 
 class _Dims(Protocol):
@@ -39,15 +67,36 @@ class _StateChecker(Protocol):
     def check_state(self, state: Any) -> Any: ...
 
 
+def _checksum(data: dict[str, Any]) -> str:
+    payload = {k: data.get(k) for k in ("format", "version", "method", "monitor", "stream")}
+    return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
+
+
 def read_state_file(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """The JSON of a state file, refused unless it is an ivobs monitor state."""
+    """The JSON of a state file, refused unless it is an intact ivobs monitor state of this
+    version (its checksum matches)."""
     name = str(path)
     try:
+        if Path(path).stat().st_size > MAX_STATE_BYTES:
+            raise IvobsError(f"--state: {name!r} is larger than {MAX_STATE_BYTES} bytes")
         data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise IvobsError(f"--state: cannot read {name!r}: {exc}") from None
+    except (OSError, ValueError) as exc:  # ValueError: not UTF-8 or not JSON
+        if isinstance(exc, IvobsError):
+            raise
+        why = exc.strerror if isinstance(exc, OSError) else f"not JSON ({type(exc).__name__})"
+        raise IvobsError(f"--state: cannot read {name!r}: {why}") from None
+    except RecursionError:
+        raise IvobsError(f"--state: {name!r} is not a monitor state (nested too deeply)") from None
     if not isinstance(data, dict) or data.get("format") != STATE_FORMAT:
         raise IvobsError(f"--state: {name!r} is not an ivobs monitor state")
+    if data.get("version") != STATE_VERSION:
+        raise IvobsError(
+            f"--state: {name!r} was written by another ivobs version (state file version "
+            f"{data.get('version', 1)!r}; this one writes {STATE_VERSION}): it cannot be checked "
+            "against this monitor; delete it to start afresh"
+        )
+    if data.get("checksum") != _checksum(data):
+        raise malformed(name, "checksum", "does not match the content")
     return data
 
 
@@ -55,7 +104,15 @@ def write_state_file(
     path: str | os.PathLike[str], method: str, monitor: dict[str, Any], stream: dict[str, Any]
 ) -> None:
     """Write a state file atomically: a crash never leaves half a state behind."""
-    data = {"format": STATE_FORMAT, "method": method, "monitor": monitor, "stream": stream}
+    data: dict[str, Any] = {
+        "format": STATE_FORMAT,
+        "version": STATE_VERSION,
+        "method": method,
+        "monitor": monitor,
+        "stream": stream,
+    }
+    data = json.loads(json.dumps(data))  # the values as read back: what the checksum covers
+    data["checksum"] = _checksum(data)
     write_text_atomic(path, json.dumps(data))
 
 
@@ -82,20 +139,21 @@ def _numbers(name: str, key: str, v: Any, n: int, nan: bool = True) -> np.ndarra
 
 
 def _count(name: str, key: str, v: Any) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-        raise malformed(name, key, f"expected an integer >= 0, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 2**53:
+        raise malformed(name, key, f"expected an integer in 0..2**53, got {v!r}"[:200])
     return v
 
 
 def check_monitor_state(
-    data: dict[str, Any], sys: _Dims, estimator: _StateChecker, name: str
+    data: dict[str, Any], sys: _Dims, estimator: _StateChecker, name: str, start: int
 ) -> None:
     """Check the entries of a state file read by :func:`read_state_file` for a monitor of the
-    system ``sys`` running ``estimator``; ``name`` is the file's name in the errors."""
+    system ``sys`` running ``estimator`` on a stream that starts at step ``start`` (the prior
+    box's); ``name`` is the file's name in the errors."""
     m = data.get("monitor")
     if not isinstance(m, dict):
         raise malformed(name, "monitor", f"expected a table, got {m!r}"[:200])
-    _count(name, "monitor.k", m.get("k"))
+    k = _count(name, "monitor.k", m.get("k"))
     _count(name, "monitor.alarms", m.get("alarms"))
     _check_prev(m.get("prev"), sys, name)
     est = m.get("estimator")
@@ -106,17 +164,40 @@ def check_monitor_state(
         estimator.check_state(est)
     except IvobsError as exc:
         raise malformed(name, "monitor.estimator.state", str(exc)) from None
-    stream = data.get("stream", {})
-    if not isinstance(stream, dict):
-        raise malformed(name, "stream", f"expected a table, got {stream!r}"[:200])
-    _count(name, "stream.rows", stream.get("rows", 0))
-    if stream.get("step") is not None:
-        _count(name, "stream.step", stream["step"])
-    t = stream.get("t")
+    check_stream(data.get("stream"), k, name, start)
+
+
+def check_stream(stream: Any, k: int, name: str, start: int) -> None:
+    """The ``stream`` entry of a state file ``name``: where the stream stopped, consistent with
+    the ``k`` steps of the restored monitor from ``start``, the prior box's step (the monitor's
+    own entries are checked by :meth:`Monitor.restore <ivobs.monitor.Monitor.restore>`)."""
+    keys = {"start", "rows", "step", "t", "columns", "digest", "last"}
+    if not isinstance(stream, dict) or set(stream) != keys:
+        raise malformed(name, "stream", f"expected the entries {', '.join(sorted(keys))}")
+    if _count(name, "stream.start", stream["start"]) != start:
+        raise IvobsError(
+            f"--state: {name!r}: the stream of this state starts at step {stream['start']}, "
+            f"the system file's prior box is at step {start} ([x0] step): another system file "
+            "or another stream; delete the state to start afresh"
+        )
+    if _count(name, "stream.rows", stream["rows"]) > k:
+        raise malformed(name, "stream.rows", f"{stream['rows']} rows for {k} steps")
+    step = stream["step"]  # None: no step column, or no row yet
+    if step is not None and _count(name, "stream.step", step) != start + k - 1:
+        raise malformed(
+            name, "stream.step", f"{step}, but {k} steps from step {start} end at {start + k - 1}"
+        )
+    t = stream["t"]
     if t is not None and (
         isinstance(t, bool) or not isinstance(t, (int, float)) or not np.isfinite(t)
     ):
-        raise malformed(name, "stream.t", f"expected a finite number, got {t!r}")
+        raise malformed(name, "stream.t", f"expected a finite number, got {t!r}"[:200])
+    cols = stream["columns"]
+    if not isinstance(cols, list) or not all(isinstance(c, str) for c in cols):
+        raise malformed(name, "stream.columns", "expected the list of the log's columns")
+    for key in ("digest", "last"):
+        if stream[key] is not None and not isinstance(stream[key], str):
+            raise malformed(name, f"stream.{key}", "expected a digest (text)")
 
 
 def _check_prev(prev: Any, sys: _Dims, name: str) -> None:
@@ -133,3 +214,82 @@ def _check_prev(prev: Any, sys: _Dims, name: str) -> None:
         raise malformed(name, "monitor.prev", f"lo > hi at component {i}: {lo[i]} > {hi[i]}")
     _numbers(name, "monitor.prev.u", prev["u"], sys.nu, nan=False)
     _numbers(name, "monitor.prev.y", prev["y"], sys.ny)
+
+
+# -- the lock ----------------------------------------------------------------------------
+def lock_path(path: str | os.PathLike[str]) -> Path:
+    """The lock file of the state file ``path``: ``path`` with ``.lock`` appended."""
+    p = Path(path)
+    return p.with_name(p.name + ".lock")
+
+
+class StateLock:
+    """An exclusive lock on a state file, held while a monitor runs (``with StateLock(path):``);
+    a second monitor is refused, naming the process that holds it. The lock file is removed
+    when the lock is released (a killed monitor leaves it behind, unlocked: harmless)."""
+
+    def __init__(self, path: str | os.PathLike[str]):
+        self.state = Path(path)
+        self.path = lock_path(path)
+        self.fh: Any = None
+
+    def __enter__(self) -> StateLock:
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - Windows: no lock (docs/operating.md)
+            return self
+        while self.fh is None:
+            try:
+                fh = open(self.path, "a+", encoding="utf-8")
+            except OSError as exc:
+                raise IvobsError(
+                    f"--state: cannot create the lock file {str(self.path)!r}: {exc.strerror}"
+                ) from None
+            try:
+                fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # held by another process
+                fh.seek(0)
+                holder = _holder(fh.read(1000))
+                fh.close()
+                raise IvobsError(
+                    f"--state: {str(self.state)!r} is in use by another monitor ({holder}); "
+                    "two monitors on one state file would overwrite each other's state: stop "
+                    "that one, or give this one another state file"
+                ) from None
+            if _same_inode(fh, self.path):
+                self.fh = fh
+            else:  # the holder removed it as we opened it: lock the file now at that path
+                fh.close()
+        with contextlib.suppress(OSError):  # who holds it, for the error of the next one
+            self.fh.seek(0)
+            self.fh.truncate()
+            since = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+            info = {"pid": os.getpid(), "host": socket.gethostname(), "since": since}
+            self.fh.write(json.dumps(info))
+            self.fh.flush()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.fh is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.path)  # removed while still held: see _same_inode
+            self.fh.close()  # releases the lock
+            self.fh = None
+
+
+def _same_inode(fh: Any, path: Path) -> bool:
+    """Whether the open file ``fh`` is still the file at ``path`` (a lock taken on a file that
+    its holder removed meanwhile locks nothing anyone else sees)."""
+    try:
+        return os.path.samestat(os.fstat(fh.fileno()), os.stat(path))
+    except OSError:
+        return False
+
+
+def _holder(text: str) -> str:
+    """``pid N on HOST since T`` from a lock file's content."""
+    try:
+        info = json.loads(text)
+        return f"process {int(info['pid'])} on {str(info['host'])[:100]} since {info['since']}"
+    except (ValueError, TypeError, KeyError):
+        return "a process that is starting"

@@ -19,7 +19,6 @@ Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line 
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import re
@@ -32,6 +31,7 @@ from ..errors import IvobsError
 from ..model import LinearSystem
 from ..model.uncertain import INTERVAL_MATRICES
 from ..sets import Box
+from .boundsfile import read_bounds_csv
 from .callables import make_callable
 from .loaded import SystemFile
 from .nlsystemfile import read_nonlinear
@@ -47,7 +47,7 @@ _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
     (): ("format", "name", "description", "system", "disturbance", "x0", "method", "names"),
     ("system",): ("dt", *MATRICES, *_NONLINEAR),
     ("disturbance",): ("lower", "upper", "csv", "python", "params"),
-    ("x0",): ("lower", "upper"),
+    ("x0",): ("lower", "upper", "step"),
     ("method",): ("name", "options"),
     ("names",): ("states", "units", "inputs", "outputs", "disturbances"),
 }
@@ -264,7 +264,7 @@ class _SystemReader(PlantSections):
         lines = {o: self.lines.line(("method", "options", o)) for o in options}
         return SystemFile(
             system, x0, method, options, name, desc, self.source, tuple(self.files),
-            {o: n for o, n in lines.items() if n is not None},
+            {o: n for o, n in lines.items() if n is not None}, self.x0_step(),
         )  # fmt: skip
 
     def string(self, key: tuple[str, ...], value: Any) -> str:
@@ -386,8 +386,8 @@ class _SystemReader(PlantSections):
                     if v not in table:
                         raise self.fail(
                             key,
-                            f"entry [{i}]: no column {v!r} in the bounds file "
-                            f"(columns: {', '.join(table)})",
+                            f"entry [{i}]: no column {v!r} in the bounds file (its header "
+                            f"names {len(table)} columns)",
                         )
                     cols.append(table[v])
                 else:
@@ -409,39 +409,10 @@ class _SystemReader(PlantSections):
         if not path.is_file():
             raise self.fail(key, f"bounds file {str(path)!r} not found")
         self.files.append(str(path))
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = [
-                (i, r)
-                for i, r in enumerate(csv.reader(fh), start=1)
-                if r and not r[0].lstrip().startswith("#")
-            ]
-        if len(rows) < 2:
-            raise self.fail(key, f"bounds file {str(path)!r} needs a header and one row per step")
-        header = [h.strip() for h in rows[0][1]]
-        data = np.empty((len(rows) - 1, len(header)))
-        for j, (line, r) in enumerate(rows[1:]):
-            if len(r) != len(header):
-                raise self.fail(
-                    key, f"{path}, line {line}: expected {len(header)} fields, got {len(r)}"
-                )
-            for c, cell in enumerate(r):
-                try:
-                    if "_" in cell:  # float() accepts 1_000; a CSV number does not
-                        raise ValueError(cell)
-                    data[j, c] = float(cell)
-                except ValueError:
-                    raise self.fail(
-                        key,
-                        f"{path}, line {line}, column {header[c]!r}: expected a "
-                        f"number, got {cell!r}",
-                    ) from None
-                if not math.isfinite(data[j, c]):
-                    raise self.fail(
-                        key,
-                        f"{path}, line {line}, column {header[c]!r}: bounds "
-                        f"must be finite, got {cell!r}",
-                    )
-        return {h: data[:, c] for c, h in enumerate(header)}
+        try:
+            return read_bounds_csv(path)
+        except IvobsError as exc:
+            raise self.fail(key, str(exc)) from None
 
     def method(self) -> tuple[str | None, dict[str, Any]]:
         tab = self.table(("method",))
@@ -483,4 +454,6 @@ def load_system(path: str | os.PathLike[str], *, allow_code: bool = False) -> Sy
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise IvobsError(f"{path}: not a UTF-8 text file ({exc})") from None
+    except OSError as exc:
+        raise IvobsError(f"system file {str(path)!r}: cannot read it ({exc.strerror})") from None
     return loads_system(text, source=str(path), base_dir=path.parent, allow_code=allow_code)

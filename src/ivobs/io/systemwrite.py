@@ -180,6 +180,7 @@ def dumps_system(
     description: str = "",
 ) -> str:
     """The TOML text of a system file (see :func:`save_system`)."""
+    x0_step = int(getattr(system, "x0_step", 0))  # a loaded system file's [x0] step
     system, x0, method, options, name, description = _unpack(
         system, x0, method, options, name, description
     )
@@ -204,7 +205,7 @@ def dumps_system(
         out += ["", *dump_nonlinear(system, _scalar, _value)]
         if system.names.units:
             out += ["", "[names]", f"units = {_value(list(system.names.units))}"]
-        return "\n".join(out + _tail(x0, method, options)) + "\n"
+        return "\n".join(out + _tail(x0, method, options, x0_step)) + "\n"
     out += ["", "[system]", f"dt = {_scalar(system.dt)}"]
     skip = {"B": system.nu == 0, "D": system.nu == 0, "E": system.nd == 0, "F": system.nd == 0}
     sparse_tables = []
@@ -240,16 +241,17 @@ def dumps_system(
                 "disturbances") if getattr(names, k, None)}  # fmt: skip
     if labelled:
         out += ["", "[names]"] + [f"{k} = {_value(list(v))}" for k, v in labelled.items()]
-    return "\n".join(out + _tail(x0, method, options)) + "\n"
+    return "\n".join(out + _tail(x0, method, options, x0_step)) + "\n"
 
 
-def _tail(x0: Any, method: str | None, options: dict[str, Any]) -> list[str]:
+def _tail(x0: Any, method: str | None, options: dict[str, Any], x0_step: int = 0) -> list[str]:
     """The ``[x0]`` and ``[method]`` tables."""
     out: list[str] = []
     if x0 is not None:
         if not isinstance(x0, Box) or x0.is_time_varying:
             raise IvobsError(f"save_system: x0 must be a constant ivobs.Box, got {x0!r}")
         out += ["", "[x0]", f"lower = {_value(x0.lo)}", f"upper = {_value(x0.hi)}"]
+        out += [f"step = {x0_step}"] if x0_step else []
     if method is not None:
         out += ["", "[method]", f"name = {_scalar(method)}"]
         if options:

@@ -14,14 +14,13 @@ from ..io.systemwrite import equal_systems
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box, image_bounds, neg, pos
-from ._codec import _decode, _encode_prev, _vector
+from ._codec import _vector
 from .latch import Latch
 from .offline import check_record, refuse_uncertain
+from .persist import monitor_state, restore_monitor
 from .records import MonitorRecord, MonitorStep, output_names, stack_steps
 
 __all__ = ["Monitor"]
-
-STATE_VERSION = 1
 
 
 class Monitor:
@@ -320,6 +319,10 @@ class Monitor:
         ``tight=True``, with the estimator's prediction), so ``check`` may see fewer alarms than
         :meth:`update`; every alarm it raises carries the same guarantee. Leaves the online
         state alone.
+
+        ``u`` may be a :class:`~ivobs.io.Log` (from :func:`~ivobs.io.read_log`): its rows are
+        steps, a gap in its step column a run of missing samples (:mod:`ivobs.io.steps`), as for
+        ``ivobs run`` and ``ivobs monitor`` (also for :meth:`run`).
         """
         u, y, tt = self._record(u, y, t)
         res = estimate
@@ -333,6 +336,12 @@ class Monitor:
         return check_record(self.sys, self.x0, self.margin, self.method, u, y, tt, res)
 
     def _record(self, u: Any, y: Any, t: Any) -> tuple[np.ndarray, np.ndarray, Any]:
+        from ..io.logs import Log
+
+        if isinstance(u, Log):  # the rows of a log, on their steps
+            if y is not None or t is not None:
+                raise IvobsError("u: a Log holds the measurements and times; give it alone")
+            u, y, t = u.u, u.y, u.t if self.sys.is_continuous else None
         y = as_signal("y", y, self.sys.ny, allow_nan=True, allow_batch=False)
         u = as_signal("u", u, self.sys.nu, y.shape[0], allow_batch=False)
         tt = None if t is None else as_float_array("t", t).ravel()
@@ -442,52 +451,15 @@ class Monitor:
 
     # -- persistence ---------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
-        """The monitor's state (estimator state, previous box, counters, the open fault):
-        JSON-serialisable."""
-        prev = _encode_prev(self._prev)
-        return {
-            "version": STATE_VERSION,
-            "method": self.method,
-            "k": self._k,
-            "alarms": self.alarms,
-            "prev": prev,
-            "fault": self.latch.state(),
-            "trial": None
-            if self._trial is None
-            else {
-                "estimator": self.estimator.save_state(self._trial[0]),
-                "prev": _encode_prev(self._trial[1]),
-            },
-            "estimator": self.estimator.save_state(self._est),
-        }
+        """The monitor's state (estimator state, previous box, counters, the open fault, the
+        fingerprint of the model, prior and settings): JSON-serialisable
+        (:mod:`ivobs.monitor.persist`)."""
+        return monitor_state(self)
 
     def restore(self, state: dict[str, Any]) -> None:
-        """Continue from :meth:`state` (same system, method and design)."""
-        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
-            raise IvobsError("state: expected the dict returned by Monitor.state()")
-        try:
-            est = self.estimator.check_state(state["estimator"])
-            prev = state["prev"]
-            prev = None if prev is None else {k: _decode(v) for k, v in prev.items()}
-            k, alarms = int(state["k"]), int(state["alarms"])
-            trial = state.get("trial")
-            if trial is not None:
-                t_prev = trial["prev"]
-                trial = (
-                    self.estimator.check_state(trial["estimator"]),
-                    None if t_prev is None else {k: _decode(v) for k, v in t_prev.items()},
-                )
-        except (KeyError, TypeError, ValueError) as exc:
-            if isinstance(exc, IvobsError):
-                raise
-            raise IvobsError(f"state: malformed monitor state ({exc!r})") from None
-        if est.k != k:
-            raise IvobsError(f"state: the estimator is at step {est.k}, the monitor at {k}")
-        self.latch.restore(state.get("fault"), self.sys.ny, k)
-        if trial is not None and (self.latch.start is None or trial[0].k != k):
-            raise IvobsError("state: trial: a trial estimate needs an open fault at the same step")
-        self._est, self._prev, self._k, self.alarms = est, prev, k, alarms
-        self._trial = trial
+        """Continue from :meth:`state`: the same model (matrices, bounds), prior box, settings,
+        method and design, or the state is refused naming what differs."""
+        restore_monitor(self, state)
 
     @property
     def estimator_state(self) -> Any:

@@ -72,6 +72,22 @@ class DualWindowState(OnlineState):
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (("x_lo", "x_hi"),)
 
 
+MAX_CACHE_VALUES = 2**26
+"""Most numbers the multiplier cache ``mu`` (2 nx, cache, window + 1, ny) may hold (512 MiB)."""
+
+
+def check_cache_size(design: DualWindowDesign, nx: int, ny: int) -> None:
+    """Refuse a ``cache`` or ``window`` whose multiplier cache would not fit in memory, before
+    allocating it."""
+    size = 2 * nx * design.cache * (design.window + 1) * ny
+    if size > MAX_CACHE_VALUES:
+        raise IvobsError(
+            f"cache, window: the multiplier cache holds 2 nx * cache * (window + 1) * ny = {size} "
+            f"numbers (cache = {design.cache}, window = {design.window}), more than the limit of "
+            f"{MAX_CACHE_VALUES}; give a smaller cache or window"
+        )
+
+
 @register
 class DualWindow(Estimator):
     """The moving-window exact hull, certified each step from a cache of LP multipliers.
@@ -128,6 +144,7 @@ class DualWindow(Estimator):
             cache=as_int("cache", cache, 1),
             refresh=as_int("refresh", refresh, 1),
         )
+        check_cache_size(self.design, sys.nx, sys.ny)
         self.lay = Layout(sys.nx, sys.nu, sys.ny, sys.nd, self.design.window)
         self.mats = tuple(np.asarray(m, dtype=float) for m in sys.matrices_at(0))
         d = sys.d_at(0)

@@ -24,7 +24,7 @@ from ._runtime import DomainError
 from .codegen import enclose_float
 from .contract import build_contractor
 from .forms import Forms, build_forms
-from .parse import RESERVED, parse_expression
+from .parse import RESERVED, folded_name, parse_expression
 from .trace import expression_text, trace_callable
 
 __all__ = ["NonlinearSystem"]
@@ -48,6 +48,9 @@ def _names(what: str, value: Any) -> list[str]:
             )
         if n in RESERVED:
             raise IvobsError(f"{what}: {n!r} is a reserved name (a function or constant)")
+        if folded_name(n) != n:
+            raise IvobsError(f"{what}: {n!r} is read as {folded_name(n)!r} in expressions "
+                             f"(Unicode NFKC folding); name it {folded_name(n)!r}")  # fmt: skip
     return names
 
 
