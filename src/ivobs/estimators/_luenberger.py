@@ -16,31 +16,31 @@ consistency test of a measurement, the data-independent part of the bounds
 
 **Rounding** ([Higham2002]; :mod:`ivobs.sets.rounding`). The design's ``M = fl(A - L C)`` and
 ``G = fl(E - L F)`` are float matrices; the exact ones differ by ``|A - LC - M| <= ΔM``,
-``|E - LF - G| <= ΔG`` (``product_error(|L| |C|) + 2u |M|``). The step computes ``ν`` and
-``x̂+`` in floats; both are dot products evaluated in some order, so ([Higham2002, eq. (3.5)])
+``|E - LF - G| <= ΔG`` (:func:`difference`). The step computes ``ν`` and ``x̂+`` in floats;
+both are dot products evaluated in some order, so ([Higham2002, eq. (3.5)])
 
-    |fl(ν) - ν|    <= e_ν = γ (|y| + |C| |x̂| + |D| |u| + |F| |c|)
-    |fl(x̂+) - x̂+(fl ν)| <= γ (|A| |x̂| + |B| |u| + |E| |c| + |L| |fl ν|),
+    fl(ν) = ν + η,                          |η| <= e_ν = γ (|y| + |C| |x̂| + |D| |u| + |F| |c|)
+    fl(x̂+) = A x̂ + B u + E c + L fl(ν) + ζ,  |ζ| <= ε = γ (|A| |x̂| + ... + |L| |fl(ν)|),
 
-and the exact ``ν`` enters ``x̂+`` through ``L``: the computed ``x̂+`` is the exact observer's plus
-at most ``ε = γ (...) + |L| e_ν``, one linear function of the magnitudes
-``z = [|x̂|, |u|, |c|, |y|, |ν|, 1]``, ``[ε; e_ν] <= W z`` (``W`` built once per gain, rounded up,
-``γ = 2 γ_{n+2}`` with ``n`` the terms of each sum, plus underflow). So the float observer's error
-obeys, exactly,
+one linear function of the magnitudes ``z = [|x̂|, |u|, |c|, |y|, |ν|, 1]``, ``[ε; e_ν] <= W z``
+(:func:`rounding_matrix`). So the float observer's error obeys, exactly,
 
-    e+ = M e + G δ + ξ,     |ξ| <= ε + ΔM |e| + ΔG r,
+    e+ = M e + G δ - L η + ξ,     |ξ| <= ε + ΔM |e| + ΔG r,
 
-an error ``ξ`` per step that each method propagates with its set: as the ball ``‖·‖∞ <= q`` of
-:class:`~ivobs.sets.rounding.DecayBound` (``‖M^i‖∞ <= c λ^i`` for the exact powers of the float
-``M``: ``q+ = λ' q + c ‖ε + ΔG r + ...‖∞``, ``λ' = λ + c ‖ΔM‖∞`` takes ``ΔM`` acting on the
-ball), or as generators of its set. The vectorised run evaluates ``x̂`` by another algorithm (a
-linear filter over the record) and bounds the exact residual of the computed sequence, ``x̃[k+1]
-- (A x̃[k] + B u + E c + L ν[k])``, by the same ``W`` plus the computed residual: any sequence of
-floats is an observer with that error, so its bounds are proven the same way.
+two errors per step that each method propagates with its set: as generators, ``L diag(e_ν)``
+and ``diag(ε + ...)`` (through ``L``: with a large gain, ``|M^i L|`` is far smaller than
+``|M^i| |L|``), or, where ``M`` is the same at every step, by two scalars: with proven
+envelopes ``|M^i L| 1 <= a_L λ^i`` and ``|M^i| 1 <= a_x λ^i`` (:class:`Channels`), the errors of
+all steps so far are within ``a_L q_L + a_x q_x``, ``q_L+ = λ q_L + ‖e_ν‖∞``, ``q_x+ = λ q_x +
+‖ε + ...‖∞`` (:meth:`~ivobs.sets.rounding.DecayBound.next`, rounded up). The vectorised run
+evaluates ``x̂`` by another algorithm (a linear filter over the record) and bounds the exact
+residual of the computed sequence, ``x̃[k+1] - (A x̃[k] + B u + E c + L ν[k])``, by the same
+``W`` plus the computed residual: any sequence of floats is an observer with that error, so its
+bounds are proven the same way.
 
 **Consistency.** A measurement is inconsistent when ``|ν_i| > ȳ_i`` for an observed output,
 ``ȳ`` the radius of ``y - C x̂ - D u - F c`` the model and the error set allow; it is flagged
-only when ``|fl(ν_i)| > up(ȳ_i + e_ν,i)``, i.e. proven inconsistent: an admissible sample within
+only when ``fl(|fl(ν_i)| - e_ν,i) > ȳ_i``, i.e. proven inconsistent: an admissible sample within
 rounding of its bound is never flagged.
 
 **Missing outputs.** Keeping the gain of the outputs present can make ``A - L_S C_S`` unstable
@@ -50,6 +50,7 @@ own gain (:func:`pattern_gain`), designed once when the pattern first occurs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -76,11 +77,14 @@ __all__ = [
 _ONE = np.ones(1)
 
 THETAS = (0.5, 0.25, 0.1)
-"""Decay targets ``θ`` tried for the envelope ``‖M^i‖∞ <= c λ^i`` (:func:`decay_of`)."""
+"""Decay targets ``θ`` tried for the rate ``λ`` of the envelopes (:func:`decay_of`): the one
+with the smallest sum ``(a_L + a_x) / (1 - λ)`` is kept."""
 
+TAIL = 2.0**-30
+"""An envelope (:func:`envelope`) stops at the power whose tail is below this fraction of it."""
 
-def _ball_gain(d: DecayBound) -> float:
-    return d.c / (1.0 - d.lam)
+MAX_POWERS = 100_000
+"""Most powers of ``M`` an envelope is computed over (the tail beyond is bounded, wider)."""
 
 
 @dataclass(frozen=True)
@@ -161,12 +165,90 @@ def decay_of(M: np.ndarray, theta: float = 0.5, max_power: int = 100_000) -> Dec
     )
 
 
+def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
+    """``a`` with ``|M^i X| 1 <= a λ^i`` for every ``i >= 0`` (exact powers of the float ``M``,
+    ``λ = decay.lam``).
+
+    ``P_{i+1} = fl(M P_i)``, ``P_0 = X``, differs from ``M^i X`` by ``Σ_{j<i} M^{i-1-j} E_j``
+    (``|E_j| 1 <= product_error(|M| |P_j| 1)``), at most ``c S_i`` with ``S_{i+1} = λ S_i +
+    ‖|E_i| 1‖∞`` (``‖M^m‖∞ <= c λ^m``, :func:`decay_of`). So ``κ_i = |P_i| 1 + c S_i`` bounds
+    ``|M^i X| 1``, ``a = max_i κ_i / λ^i``; beyond the last power ``K`` computed,
+    ``|M^j X| 1 <= c λ^{j-K} ‖κ_K‖∞``, which the maximum includes. Everything rounded up."""
+    n, m = X.shape
+    lam, c = decay.lam, decay.c
+    absM = np.abs(M)
+    inv = math.nextafter(1.0 / lam, math.inf) if lam > 0 else math.inf
+    P, S, scale = X.astype(float), 0.0, 1.0  # scale >= λ^{-i}
+    a = np.zeros(n)
+    for _ in range(MAX_POWERS):
+        rows = upper(np.abs(P).sum(axis=1), m)
+        kappa = upper(rows + c * S, 2)
+        a = np.maximum(a, up(kappa * scale))
+        tail = float(up(c * float(kappa.max()) * scale))
+        if not P.any() or tail <= TAIL * float(a.max()) or not scale < 1e300:
+            break
+        S = (lam * S + float(product_error(absM @ rows, n).max())) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+        P = M @ P
+        scale = math.nextafter(scale * inv, math.inf)
+    out: np.ndarray = np.maximum(a, tail)
+    return out
+
+
+@dataclass(frozen=True)
+class Channels:
+    """Where the observer's rounding goes while ``M`` is the same at every step (module
+    docstring): ``|M^i L| 1 <= a_L λ^i``, ``|M^i| 1 <= a_x λ^i`` (:func:`envelope`); the rounding
+    of all steps so far is within ``a_L q_L + a_x q_x``. ``L``, ``x``: the scalar recursions of
+    ``q_L`` (rate ``λ``) and ``q_x`` (rate ``λ + β_x``: ``ΔM`` acting on that part, ``β_x =
+    ‖ΔM a_x‖∞``; ``β_L = ‖ΔM a_L‖∞`` multiplies ``q_L`` into ``q_x``'s input); ``cL``, ``cx``:
+    ``|C| a_L``, ``|C| a_x``, their image in ``y``; ``K = [[a_L, a_x], [c_L, c_x]]``."""
+
+    aL: np.ndarray
+    ax: np.ndarray
+    cL: np.ndarray
+    cx: np.ndarray
+    K: np.ndarray
+    betaL: float
+    L: DecayBound
+    x: DecayBound
+
+    @classmethod
+    def of(cls, M: np.ndarray, dM: np.ndarray, L: np.ndarray, C: np.ndarray) -> Channels:
+        """The envelopes for ``M`` (its rate chosen among :data:`THETAS`)."""
+        best: tuple[float, np.ndarray, np.ndarray, float] | None = None
+        for theta in THETAS:
+            decay = decay_of(M, theta)
+            aL, ax = envelope(M, L, decay), envelope(M, np.eye(M.shape[0]), decay)
+            score = float(aL.max() + ax.max()) / (1.0 - decay.lam)
+            if best is None or score < best[0]:
+                best = (score, aL, ax, decay.lam)
+        assert best is not None
+        _, aL, ax, lam = best
+        n = M.shape[0]
+        betaL = float(upper(dM @ aL, n).max())
+        lam_x = float(up(lam + float(upper(dM @ ax, n).max())))
+        if not lam_x < 1.0:
+            raise DesignError(
+                "the rounding of the observer cannot be bounded: the decay rate of A - LC with "
+                f"its rounding is {lam_x:.17g} >= 1"
+            )
+        cL, cx = upper(np.abs(C) @ aL, n), upper(np.abs(C) @ ax, n)
+        K = np.vstack([np.column_stack([aL, ax]), np.column_stack([cL, cx])])
+        return cls(aL, ax, cL, cx, K, betaL, DecayBound(1.0, lam), DecayBound(1.0, lam_x))
+
+    def widen(self, s: np.ndarray, qL: float, qx: float) -> np.ndarray:
+        """``>= s + K [q_L; q_x]`` for ``s = [ρ; ȳ]`` (or its first rows, ``ρ``)."""
+        out: np.ndarray = upper(s + self.K[: s.shape[0]] @ np.array((qL, qx)), 4)
+        return out
+
+
 def rounding_matrix(mats: tuple[np.ndarray, ...], L: np.ndarray, c_used: np.ndarray) -> np.ndarray:
     """``W`` with ``[ε; e_ν] <= fl(W z)``, ``z = [|x̂|; |u|; |c|; |y|; |ν|; 1]``, for one step
-    of the observer with gain ``L`` (module docstring).
+    of the observer with gain ``L`` (module docstring: ``ε`` bounds the rounding of ``x̂+`` given
+    ``fl(ν)``, ``e_ν`` that of ``ν``, which enters ``x̂+`` through ``L``).
 
     Row ``i`` of ``ν = y - fl([C D F] [x̂; u; c])`` sums ``n_i`` products and ``y_i``, row ``i``
-    of ``x̂+ = fl([A B E] [x̂; u; c]) + fl(L ν)`` the products of both: ``γ_{n_i}`` of the sum
+    of ``x̂+ = fl([A B E] [x̂; u; c]) + fl(L fl(ν))`` the products of both: ``γ_{n_i}`` of the sum
     of their magnitudes bounds the error ([Higham2002, eq. (3.5)], any order of evaluation),
     ``n_i`` counting the nonzero coefficients only (a zero product adds no error; ``c_used``:
     the components of ``c`` that may be nonzero), plus ``n_i η`` of underflow. ``W``'s entries
@@ -181,8 +263,7 @@ def rounding_matrix(mats: tuple[np.ndarray, ...], L: np.ndarray, c_used: np.ndar
     C_x = np.hstack([np.abs(A), np.abs(B), np.abs(E) * c_used, np.zeros((nx, ny)), aL])
     n_x = np.count_nonzero(C_x, axis=1) + 1
     W_x = np.hstack([C_x * gamma_rows(n_x), (n_x + 1)[:, None] * ETA])
-    W_x += aL @ W_nu  # the error of ν enters x̂+ through L
-    W = upper(np.vstack([W_x, W_nu]), ny + 4)
+    W = upper(np.vstack([W_x, W_nu]), 4)
     m = W.shape[1]  # fl(W z) >= (1 - γ_m) W z - m η
     W *= 1.0 + 2.0 * gamma(m + 2)
     W[:, -1] += (m + 2) * ETA
@@ -249,7 +330,6 @@ class ObserverEstimator(Estimator):
         if self._unc is not None:  # d̃ = [d; w; v]: v enters y alone
             nx, ny = A.shape[0], C.shape[0]
             self._absF = np.hstack([self._absF, np.zeros((ny, nx)), np.eye(ny)])
-        self._cq = upper(np.abs(C).sum(axis=1), A.shape[0])  # |C| 1: the ball q seen in y
         self._O = np.block([[A, B, E], [C, D, F]])  # the model acting on [x̂; u; c]
         # the components of c that can be nonzero (a zero product adds no rounding)
         self._c_used = np.ones(E.shape[1]) if self._const is None else (self._const[0] != 0) * 1.0
@@ -257,18 +337,10 @@ class ObserverEstimator(Estimator):
         self._gains: dict[bytes, Gain] = {}
         self._full = self._gain_of(Lm)
         self._gains[np.ones(C.shape[0], dtype=bool).tobytes()] = self._full
-        # the envelope c λ^i of ‖M^i‖ whose sum c / (1 - λ) (the ball's gain) is smallest
-        decay = min((decay_of(self._full.M, theta) for theta in THETAS), key=_ball_gain)
-        norm = float(upper(self._full.dM.sum(axis=1).max(), A.shape[0]))  # ‖ΔM‖∞
-        lam = float(up(decay.lam + up(decay.c * norm)))
-        if not lam < 1.0:
-            raise DesignError(
-                f"{self.name}: the rounding of the observer cannot be bounded: the decay rate of "
-                f"A - LC with its rounding is {lam:.17g} >= 1"
-            )
-        self._decay = DecayBound(decay.c, lam)  # ΔM acting on the ball: λ' = λ + c ‖ΔM‖∞
+        self._channels = Channels.of(self._full.M, self._full.dM, Lm, C)
         self._gain_weights = np.ones(E.shape[1]) if self._const is None else self._const[1]
         self._filter: LinearFilter | None = None  # the vectorised run's observer
+        self._refiner: LinearFilter | None = None  # and its refinement
         kind = "user" if L is not None else ("radius" if gain is None else gain)
         return ObserverDesign(L=Lm, gamma=gamma_, P=P, spectral_radius=rho, gain=kind)
 
@@ -309,12 +381,13 @@ class ObserverEstimator(Estimator):
 
     def _observe(
         self, xh: np.ndarray, u_k: np.ndarray, y_k: np.ndarray, c: np.ndarray, ybound: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, bool, Gain]:
-        """One step of the observer [Tang2019, eq. (10)]: ``(x̂+, ε, inconsistent, gain)``.
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, Gain]:
+        """One step of the observer [Tang2019, eq. (10)]: ``(x̂+, ε, e_ν, inconsistent, gain)``.
 
         ``ybound``: an upper bound of the radius of ``y - C x̂ - D u - F c`` the model allows
-        (``|C| ρ + |F| r``). ``ε >= |x̂+ - x̂+_exact|`` (module docstring). A measurement
-        proven inconsistent is reported and not used (the gain of no output)."""
+        (``|C| ρ + |F| r``). ``fl(x̂+) = x̂+ + L_k η + ζ`` with ``|η| <= e_ν``, ``|ζ| <= ε`` (module
+        docstring). A measurement proven inconsistent is reported and not used (no output's
+        gain)."""
         nx = xh.shape[0]
         v = np.concatenate((xh, u_k, c))
         Ov = self._O @ v  # [A x̂ + B u + E c; C x̂ + D u + F c]
@@ -329,14 +402,14 @@ class ObserverEstimator(Estimator):
             gain = self._gain_at(obs)
         z = np.abs(np.concatenate((v, y_k, nu, _ONE)))
         err = gain.W @ z  # >= [ε; e_ν] (W rounded up for its own evaluation)
+        e_nu = err[nx:]
         # inconsistent only when proven: |ν| - e_ν > ȳ (one rounding, monotone)
-        excess = (np.abs(nu) - err[nx:]).tolist()
+        excess = (np.abs(nu) - e_nu).tolist()
         if any(a > b for a, b in zip(excess, ybound.tolist())):
             gain = self._gain_at(np.zeros(nu.shape[0], dtype=bool))
-            nu = np.zeros_like(nu)
             z[-1 - nu.shape[0] : -1] = 0.0
-            return Ov[:nx], (gain.W @ z)[:nx], True, gain
-        return Ov[:nx] + gain.L @ nu, err[:nx], False, gain  # A x̂ + B u + E c + L ν
+            return Ov[:nx], (gain.W @ z)[:nx], e_nu, True, gain
+        return Ov[:nx] + gain.L @ nu, err[:nx], e_nu, False, gain  # A x̂ + B u + E c + L ν
 
     # -- offline, vectorised --------------------------------------------------------------------
     def _run(
@@ -344,56 +417,84 @@ class ObserverEstimator(Estimator):
     ) -> tuple[np.ndarray, ...] | None:
         """The record (or batch) at once, for constant bounds and complete data: the
         data-independent radii once (:class:`DataFreeBounds`), ``x̂`` by a linear filter of the
-        record, the exact residual of that sequence bounded a posteriori (module docstring) and
-        the rounding ball ``q`` by :meth:`~ivobs.sets.rounding.DecayBound.accumulate`. Streams
-        of a batch with a measurement found inconsistent are redone by the loop."""
+        record (:meth:`_filtered`), the exact residual of that sequence bounded a posteriori
+        (module docstring) and the rounding's scalars ``q_L``, ``q_x`` by
+        :meth:`~ivobs.sets.rounding.DecayBound.accumulate`. Streams of a batch with a
+        measurement found inconsistent are redone by the loop."""
         free, T = self._free, y.shape[-2]
         if free is None or not T or np.isnan(y).any():
             return None
-        assert self._const is not None  # (a data-free part exists only for constant bounds)
-        c, g = self._const[0], self._full
-        A, B, C, D, E, F = self._mats
-        nx, nu_, nd, ny = A.shape[0], B.shape[1], E.shape[1], C.shape[0]
+        ch, nx = self._channels, self.sys.nx
         rho_bar, yb, e_free = free.arrays(T)
-        if self._filter is None:
-            self._filter = LinearFilter(
-                g.M, [g.L, B - g.L @ D], [np.eye(nx)], g=E @ c - g.L @ (F @ c)
-            )
-        xh = self._filter.run([y, u], x0=free.x0)[0]  # x̃: any sequence of floats
-        # the observer's image of x̃ and its rounding bound, as in the step
-        xu = np.concatenate([xh, np.broadcast_to(u, (*xh.shape[:-1], nu_))], axis=-1)
-        image = xu @ self._O[:, : nx + nu_].T  # [A x̃ + B u; C x̃ + D u]
-        Oc = self._O[:, nx + nu_ :] @ c  # [E c; F c]
-        nu = y - image[..., nx:]
-        nu -= Oc[nx:]  # ν = y - C x̃ - D u - F c
-        res = image[..., :nx]
-        res += Oc[:nx]
-        res += nu @ g.L.T  # A x̃ + B u + E c + L ν
-        W = g.W
-        err = np.abs(xu) @ W[:, : nx + nu_].T  # >= [ε; e_ν] (the m terms in any order)
-        err += np.abs(y) @ W[:, nx + nu_ + nd : nx + nu_ + nd + ny].T
-        err += np.abs(nu) @ W[:, nx + nu_ + nd + ny : -1].T
-        err += W[:, nx + nu_ : nx + nu_ + nd] @ np.abs(c) + W[:, -1]
-        # exact residual of x̃: |x̃[k+1] - fl(A x̃ + ... + L ν)| (one rounding) + ε
-        np.subtract(xh[..., 1:, :], res[..., :-1, :], out=res[..., :-1, :])
+        filtered = self._filtered(u, y)
+        if filtered is None:
+            return None
+        xh, nu, res, err = filtered
+        # |x̃[k+1] - x̃+_exact| <= |fl(x̃[k+1] - ...)| (one rounding) + ε: the state's channel
         np.abs(res, out=res)
         res[..., :-1, :] += err[..., :-1, :nx]
-        step = upper(_rowmax(res[..., :-1, :]) + e_free[:-1], 3)  # (residual rounding: upper)
-        q = np.zeros((*step.shape[:-1], T))
-        for idx in np.ndindex(*step.shape[:-1]):
-            q[idx][1:] = self._decay.accumulate(step[idx])
+        sigma = upper(_rowmax(res[..., :-1, :]) + e_free[:-1], 3)
+        mu = _rowmax(err[..., :-1, nx:])
+        qL = np.zeros((*sigma.shape[:-1], T))
+        qx = np.zeros_like(qL)
+        for idx in np.ndindex(*sigma.shape[:-1]):
+            qL[idx][1:] = ch.L.accumulate(mu[idx])
+            qx[idx][1:] = ch.x.accumulate(upper(sigma[idx] + ch.betaL * qL[idx][:-1], 2))
         # proven inconsistent: |ν| - e_ν > |C| ρ + |F| r (one rounding, monotone)
         nu = np.abs(nu, out=nu)
         nu -= err[..., nx:]
-        bad = nu > upper(yb + q[..., None] * self._cq, 2)
-        rho = rho_bar + q[..., None]
-        rho *= 1.0 + 4.0 * UNIT_ROUNDOFF  # >= the exact sum ρ̄ + q
-        lo, hi = enclose(xh, rho)
+        qL, qx = qL[..., None], qx[..., None]
+        bad = nu > upper(yb + qL * ch.cL + qx * ch.cx, 4)
+        lo, hi = enclose(xh, upper(rho_bar + qL * ch.aL + qx * ch.ax, 4))
         if not bad.any():
             return lo, hi
         if y.ndim != 3:
             return None
         return redo_streams(self, u, y, t, lo, hi, bad.any(axis=(-1, -2)))
+
+    def _filtered(
+        self, u: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """``x̃`` over the record by a linear filter (``x̃+ = M x̃ + L y + (B - LD) u + G c``),
+        with ``ν = fl(y - C x̃ - D u - F c)``, the residual ``fl(x̃[k+1] - (A x̃ + B u + E c +
+        L ν))`` and ``[ε; e_ν]`` of that evaluation (:func:`rounding_matrix`). Where the
+        filter's own rounding left a residual above the step's (large gains: it sums ``L y``),
+        the sequence is refined once, ``x̃ -= d``, ``d+ = M d + residual``; None when its
+        residual is still above ``4 ε`` (then the loop is tighter: a strongly non-normal
+        ``A - LC`` amplifies the rounding of any float sequence that is not the loop's own)."""
+        assert self._const is not None and self._free is not None
+        c, g = self._const[0], self._full
+        A, B, C, D, E, F = self._mats
+        nx, nu_, nd, ny = A.shape[0], B.shape[1], E.shape[1], C.shape[0]
+        if self._filter is None:
+            self._filter = LinearFilter(
+                g.M, [g.L, B - g.L @ D], [np.eye(nx)], g=E @ c - g.L @ (F @ c)
+            )
+        xh = self._filter.run([y, u], x0=self._free.x0)[0]
+        Oc = self._O[:, nx + nu_ :] @ c  # [E c; F c]
+        W = g.W
+        for refine in (True, False):
+            xu = np.concatenate([xh, np.broadcast_to(u, (*xh.shape[:-1], nu_))], axis=-1)
+            image = xu @ self._O[:, : nx + nu_].T  # [A x̃ + B u; C x̃ + D u]
+            nu = y - image[..., nx:]
+            nu -= Oc[nx:]  # ν = y - C x̃ - D u - F c
+            res = image[..., :nx]
+            res += Oc[:nx]
+            res += nu @ g.L.T  # A x̃ + B u + E c + L ν
+            np.subtract(xh[..., 1:, :], res[..., :-1, :], out=res[..., :-1, :])
+            res[..., -1, :] = 0.0
+            err = np.abs(xu) @ W[:, : nx + nu_].T  # >= [ε; e_ν] (the m terms in any order)
+            err += np.abs(y) @ W[:, nx + nu_ + nd : nx + nu_ + nd + ny].T
+            err += np.abs(nu) @ W[:, nx + nu_ + nd + ny : -1].T
+            err += W[:, nx + nu_ : nx + nu_ + nd] @ np.abs(c) + W[:, -1]
+            if not (np.abs(res) > 4.0 * err[..., :nx]).any():
+                break
+            if not refine:
+                return None
+            if self._refiner is None:
+                self._refiner = LinearFilter(g.M, [np.eye(nx)], [np.eye(nx)])
+            xh = xh - self._refiner.run([res])[0]  # d[k+1] = M d[k] + residual[k], d[0] = 0
+        return xh, nu, res, err
 
 
 def _rowmax(a: np.ndarray) -> np.ndarray:
@@ -435,6 +536,7 @@ class DataFreeBounds:
         self.rho: list[np.ndarray] = []
         self.yb: list[np.ndarray] = []
         self.e: list[float] = []
+        self._both: list[np.ndarray] = []
         self.settled: int | None = None
         self.period = 1
         self._mark: tuple[Any, int, int] = (start, 0, 1)  # Brent: state, index, power
@@ -450,6 +552,7 @@ class DataFreeBounds:
             self.rho.append(rho)
             self.yb.append(yb)
             self.e.append(e)
+            self._both.append(np.concatenate([rho, yb]))
             n_done = len(self.rho)
             self._next = nxt
             if nxt is None:
@@ -466,11 +569,11 @@ class DataFreeBounds:
             return k
         return self.settled + (k - self.settled) % self.period
 
-    def at(self, k: int) -> tuple[np.ndarray, np.ndarray, float]:
-        """``(rho[k], yb[k], e[k])``."""
+    def at(self, k: int) -> tuple[np.ndarray, float]:
+        """``([rho[k]; yb[k]], e[k])``."""
         self._extend(k + 1)
         j = self._index(k)
-        return self.rho[j], self.yb[j], self.e[j]
+        return self._both[j], self.e[j]
 
     def state(self, k: int) -> Any:
         """The recursion's state of step ``k`` when kept (the same object every time), else

@@ -57,13 +57,15 @@ class ReachabilityState(OnlineState):
     """``x[k] ∈ x̂[k] ± ρ[k]``: the observer's state ``xh`` (``x̂[k]``) and what gives ``ρ[k]``.
 
     ``mode``: :data:`EXACT` (constant bounds, every measurement used so far): ``ρ[k]`` is
-    Algorithm 1's data-free radius plus the rounding ball ``q``; then :data:`WINDOW`: ``slots``
-    ``(n_s, nx, 2 nx + nd)``, slot ``j`` is ``[Φ(k, j) diag ρ_j, Φ(k, j+1) [G_j diag r_j,
-    diag ξ_j]]`` for the last ``K`` steps ``j`` (oldest first), ``err`` ``(n_s, 2, nx)`` bounds
-    the rounding of their row sums (both parts)."""
+    Algorithm 1's data-free radius plus the rounding so far, ``a_L qL + a_x qx``
+    (:class:`~ivobs.estimators._luenberger.Channels`); then :data:`WINDOW`: ``slots``
+    ``(n_s, nx, 2 nx + nd + ny)``, slot ``j`` is ``[Φ(k, j) diag ρ_j, Φ(k, j+1) [G_j diag r_j,
+    L_j diag e_ν, diag ξ_j]]`` for the last ``K`` steps ``j`` (oldest first), ``err``
+    ``(n_s, 2, nx)`` bounds the rounding of their row sums (both parts)."""
 
     xh: np.ndarray
-    q: float
+    qL: float
+    qx: float
     mode: int
     slots: np.ndarray
     err: np.ndarray
@@ -225,36 +227,39 @@ class Reachability(ObserverEstimator):
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ReachabilityState:
         nx, ng = self.sys.nx, self._full.G.shape[1]  # G̃ = [G, I, -L] with interval matrices
+        ny = self.sys.ny
         return ReachabilityState(
             xh=self._xc.copy(),
-            q=0.0,
+            qL=0.0,
+            qx=0.0,
             mode=EXACT if self._free is not None else WINDOW,
-            slots=np.zeros((0, nx, 2 * nx + ng)),
+            slots=np.zeros((0, nx, 2 * nx + ng + ny)),
             err=np.zeros((0, 2, nx)),
         )
 
     def _step(
         self, state: ReachabilityState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ReachabilityState]:
-        xh, q = state.xh, state.q
-        if state.mode == EXACT:  # Algorithm 1: ρ[k] data-free, plus the rounding ball
-            rho_bar, yb, e = self._free.at(state.k)  # type: ignore[union-attr]
-            rho = up(rho_bar + q)
-            lo, hi = enclose(xh, rho)
+        xh, ch = state.xh, self._channels
+        if state.mode == EXACT:  # Algorithm 1: ρ[k] data-free, plus the rounding so far
+            free, e = self._free.at(state.k)  # type: ignore[union-attr]
+            both = ch.widen(free, state.qL, state.qx)  # [ρ; |C| ρ + |F| r]
+            rho, ybound = both[: xh.shape[0]], both[xh.shape[0] :]
             c, r = self._const  # type: ignore[misc]
-            ybound = up(yb + self._cq * q)  # |C| ρ + |F| r
         else:
             rho = self._window_radius(state)
-            lo, hi = enclose(xh, rho)
-            c, r = self._bounds(state.k, y_k, lo, hi, u_k)
+            c, r = self._bounds(state.k, y_k, *enclose(xh, rho), u_k)
             ybound = upper(np.abs(self._mats[2]) @ rho + self._absF @ r, rho.shape[0] + r.shape[0])
-        xh_next, eps, inconsistent, gain = self._observe(xh, u_k, y_k, c, ybound)
-        if state.mode == EXACT and gain is self._full:
-            q_next = self._decay.next(q, (max(eps.tolist()) + e) * (1.0 + 4.0 * UNIT_ROUNDOFF))
-            return Step(evolve(state, xh=xh_next, q=q_next), lo, hi, False)
-        n = rho.shape[0] + r.shape[0]
-        xi = upper(eps + gain.dM @ rho + gain.dG @ r, n + 2)  # the step's rounding, ξ_k
-        return Step(self._window_step(state, xh_next, rho, r, gain, xi), lo, hi, inconsistent)
+        lo, hi = enclose(xh, rho)
+        xh_next, eps, e_nu, inconsistent, gain = self._observe(xh, u_k, y_k, c, ybound)
+        if state.mode == EXACT and gain is self._full:  # the rounding joins q_L, q_x
+            qL = ch.L.next(state.qL, max(e_nu.tolist()))
+            sigma = (max(eps.tolist()) + e + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+            return Step(evolve(state, xh=xh_next, qL=qL, qx=ch.x.next(state.qx, sigma)), lo, hi)
+        xi = upper(eps + gain.dM @ rho + gain.dG @ r, rho.shape[0] + r.shape[0] + 2)
+        rounding = np.hstack([gain.L * e_nu, np.diag(xi)])  # L_k η + ξ_k
+        new = self._window_step(state, xh_next, rho, r, gain, rounding)
+        return Step(new, lo, hi, inconsistent)
 
     def _window_radius(self, state: ReachabilityState) -> np.ndarray:
         """``ρ[k]``: the smallest bound of the window (class docstring)."""
@@ -275,11 +280,11 @@ class Reachability(ObserverEstimator):
         rho: np.ndarray,
         r: np.ndarray,
         gain: Gain,
-        xi: np.ndarray,
+        rounding: np.ndarray,
     ) -> ReachabilityState:
         """The window moves on by one step with ``M_k`` (class docstring); a new slot
-        ``[M_k diag ρ_k, G_k diag r_k, diag ξ_k]`` (the disturbance and rounding of step ``k``
-        enter ``e[k+1]`` unpropagated)."""
+        ``[M_k diag ρ_k, G_k diag r_k, L_k diag e_ν, diag ξ_k]`` (the disturbance and rounding
+        of step ``k`` enter ``e[k+1]`` unpropagated)."""
         nx = self.sys.nx
         slots, err = state.slots, state.err
         if state.mode == EXACT:  # the first missing sample: ρ_k (ball included) starts it
@@ -288,8 +293,8 @@ class Reachability(ObserverEstimator):
         w = S.shape[2]
         rows = np.stack([S[:, :, :nx].sum(axis=2), S[:, :, nx:].sum(axis=2)], axis=1)
         err = upper(err @ gain.absM.T + product_error(upper(rows, w) @ gain.absM.T, nx), nx + 2)
-        G = gain.G * r
-        new = np.hstack([gain.M * rho, G, np.diag(xi)])
+        G = np.hstack([gain.G * r, rounding])  # (L_k diag e_ν: products, rounded)
+        new = np.hstack([gain.M * rho, G])
         new_err = np.stack(
             [product_error(gain.absM @ rho, 1), product_error(np.abs(G).sum(axis=1), G.shape[1])]
         )
@@ -297,4 +302,4 @@ class Reachability(ObserverEstimator):
         err = np.concatenate([err, new_err[None]])
         if slots.shape[0] > self.design.memory:  # the oldest term leaves
             slots, err = slots[1:], err[1:]
-        return evolve(state, xh=xh_next, q=0.0, mode=WINDOW, slots=slots, err=err)
+        return evolve(state, xh=xh_next, qL=0.0, qx=0.0, mode=WINDOW, slots=slots, err=err)

@@ -12,10 +12,10 @@ import numpy as np
 
 from .._validate import as_int, as_matrix
 from ..errors import DesignError, IvobsError
-from ..linalg import spectral_radius
+from ..linalg import UNIT_ROUNDOFF, spectral_radius
 from ..model import LinearSystem
 from ..sets import Box, Zonotope, box_generators
-from ..sets.rounding import enclose, mid_rad, product_error, up, upper
+from ..sets.rounding import enclose, mid_rad, product_error, upper
 from . import register
 from ._luenberger import DataFreeBounds, Gain, ObserverDesign, ObserverEstimator
 from .base import check_size
@@ -72,12 +72,14 @@ class ZonotopeDesign(ObserverDesign):
 
 @dataclass(frozen=True)
 class ZonotopeState(OnlineState):
-    """``x[k] ∈ <p, H> ⊕ Ball∞(q)``: centre ``p`` (nx,) and generators ``H`` (nx, ·) of
-    [Tang2019, eq. (34)], and ``q`` the radius of the ball of the centre's rounding."""
+    """``x[k] ∈ <p, H> ⊕ Box(a_L qL + a_x qx)``: centre ``p`` (nx,) and generators ``H``
+    (nx, ·) of [Tang2019, eq. (34)], and the centre's rounding so far, ``qL``, ``qx``
+    (:class:`~ivobs.estimators._luenberger.Channels`)."""
 
     p: np.ndarray
     H: np.ndarray
-    q: float
+    qL: float
+    qx: float
 
 
 @register
@@ -231,20 +233,21 @@ class ZonotopeEstimator(ObserverEstimator):
         gain: Gain,
         r: np.ndarray,
         rad: np.ndarray,
-        extra: np.ndarray | None = None,
+        rounding: np.ndarray | None = None,
     ) -> np.ndarray:
         """``H[k+1] = [M_k ↓_{q,W} H, G_k diag r]`` [Tang2019, eq. (34b)] with the boxes of its
         rounding (class docstring); ``rad >= |H| 1`` (the bound of the error the matrices' own
-        difference acts on), ``extra``: a rounding box of the step to append."""
+        difference acts on); ``rounding``: generators of the centre's rounding at this step
+        (``[L_k diag e_ν, diag ε]``), appended."""
         reduced = Zonotope._trusted(np.zeros(H.shape[0]), H).reduce(
             self.design.order, self.design.weight
         )
         image = gain.M @ reduced  # M ↓H and the box of its rounding
         GR = gain.G * r
         n = H.shape[0] + r.shape[0]
-        box = gain.dM @ rad + gain.dG @ r + product_error(np.abs(GR).sum(axis=1), r.shape[0])
-        if extra is not None:
-            box += extra
+        if rounding is not None:
+            GR = np.hstack([GR, rounding])
+        box = gain.dM @ rad + gain.dG @ r + product_error(np.abs(GR).sum(axis=1), GR.shape[1])
         return np.hstack([image.G, box_generators(upper(box, n + 3)), GR])
 
     def _output_radius(self, H: np.ndarray, rad: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -333,34 +336,39 @@ class ZonotopeEstimator(ObserverEstimator):
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ZonotopeState:
         H0 = self._free.state(0) if self._free is not None else self._H0.copy()
-        return ZonotopeState(p=self._p0.copy(), H=H0, q=0.0)
+        return ZonotopeState(p=self._p0.copy(), H=H0, qL=0.0, qx=0.0)
 
     def _step(
         self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ZonotopeState]:
-        p, H, q, k = state.p, state.H, state.q, state.k
+        p, H, k, ch = state.p, state.H, state.k, self._channels
         free = self._free is not None and self._free.state(k) is H  # H[k] without data
-        if free:
-            radH, yb, _ = self._free.at(k)  # type: ignore[union-attr]
+        nx = p.shape[0]
+        if free:  # [|H| 1; |C H| 1 + |F| r] of the data-free sequence, and the rounding so far
+            both = ch.widen(self._free.at(k)[0], state.qL, state.qx)  # type: ignore[union-attr]
+            rad, ybound = both[:nx], both[nx:]
             c, r = self._const  # type: ignore[misc]
         else:
             radH = upper(np.abs(H).sum(axis=1), H.shape[1])
-        rad = up(radH + q)  # [Tang2019, eq. (35)], the ball of rounding included
+            rad = ch.widen(radH, state.qL, state.qx)  # [Tang2019, eq. (35)], rounding too
+            c, r = self._bounds(k, y_k, *enclose(p, rad), u_k)
+            ybound = ch.widen(np.concatenate([radH, self._output_radius(H, radH, r)]),
+                              state.qL, state.qx)[nx:]  # fmt: skip
         lo, hi = enclose(p, rad)
-        if not free:
-            c, r = self._bounds(k, y_k, lo, hi, u_k)
-            yb = self._output_radius(H, radH, r)
-        p_next, eps, inconsistent, gain = self._observe(p, u_k, y_k, c, up(yb + self._cq * q))
-        if gain is self._full:  # (34a) with L; its rounding joins the ball of M's powers
+        p_next, eps, e_nu, inconsistent, gain = self._observe(p, u_k, y_k, c, ybound)
+        if gain is self._full:  # (34a) with L; its rounding joins q_L, q_x
             H_next = self._free.state(k + 1) if free else None  # type: ignore[union-attr]
             if H_next is None:
                 H_next = self._predict(H, gain, r, radH)  # (34b)
-            q_next = self._decay.next(q, max(eps.tolist()))
-        else:  # another gain: the ball becomes generators, the step's rounding a box
-            Hq = np.hstack([H, box_generators(np.full(H.shape[0], q))])
-            H_next = self._predict(Hq, gain, r, rad, extra=eps)
-            q_next = 0.0
-        return Step(evolve(state, p=p_next, H=H_next, q=q_next), lo, hi, inconsistent)
+            qL = ch.L.next(state.qL, max(e_nu.tolist()))
+            sigma = (max(eps.tolist()) + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+            new = evolve(state, p=p_next, H=H_next, qL=qL, qx=ch.x.next(state.qx, sigma))
+            return Step(new, lo, hi, inconsistent)
+        # another gain: the rounding so far becomes a box of generators, this step's too
+        Hq = np.hstack([H, box_generators(ch.widen(np.zeros(nx), state.qL, state.qx))])
+        H_next = self._predict(Hq, gain, r, rad, np.hstack([gain.L * e_nu, np.diag(eps)]))
+        new = evolve(state, p=p_next, H=H_next, qL=0.0, qx=0.0)
+        return Step(new, lo, hi, inconsistent)
 
     def _advance_free(self, H: np.ndarray) -> np.ndarray:
         """(34b) without data, for :func:`settle` (a fixed point maps to itself)."""
