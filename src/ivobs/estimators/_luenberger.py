@@ -80,11 +80,12 @@ THETAS = (0.5, 0.25, 0.1)
 """Decay targets ``θ`` tried for the rate ``λ`` of the envelopes (:func:`decay_of`): the one
 with the smallest sum ``(a_L + a_x) / (1 - λ)`` is kept."""
 
-TAIL = 2.0**-30
+TAIL = 2.0**-20
 """An envelope (:func:`envelope`) stops at the power whose tail is below this fraction of it."""
 
-MAX_POWERS = 100_000
-"""Most powers of ``M`` an envelope is computed over (the tail beyond is bounded, wider)."""
+MAX_POWERS = 2000
+"""Most powers of ``M`` an envelope is computed over: beyond, the tail bound of the last one
+holds (wider for a slowly converging gain: about ``c`` times the first powers)."""
 
 
 @dataclass(frozen=True)
@@ -126,43 +127,51 @@ def difference(A: np.ndarray, L: np.ndarray, C: np.ndarray) -> tuple[np.ndarray,
     return M, dM
 
 
-def decay_of(M: np.ndarray, theta: float = 0.5, max_power: int = 100_000) -> DecayBound:
-    """Proven ``‖Mⁱ‖∞ <= c λⁱ`` for the exact powers of the float matrix ``M``
-    (:class:`~ivobs.sets.rounding.DecayBound`).
+def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np.ndarray:
+    """``N_0, ..., N_K``: proven ``‖Mⁱ‖∞ <= N_i`` for the exact powers of the float matrix
+    ``M``, up to the first ``N_K <= θ``.
 
     ``P_{i+1} = fl(M P_i)`` differs from ``M^{i+1}`` by ``Σ_{j<=i} M^{i-j} E_j``, ``E_j =
     M P_j - fl(M P_j)``, ``‖E_j‖∞ <= e_j = ‖product_error(|M| |P_j|)‖∞``; so, from the bounds
     already proven for the lower powers, ``‖M^i‖∞ <= N_i = ‖P_i‖∞ + Σ_{j<i} N_{i-1-j} e_j``
-    (rounded up). The first ``K`` with ``N_K <= θ`` gives ``λ = θ^{1/K}`` and ``c = max_j N_j /
-    λ^j`` (``i = q K + j``: ``‖M^i‖ <= θ^q N_j``). Unlike enclosures propagated by ``|M|``, this
-    bound grows only with the true powers, also when ``|M|`` is far from Schur (large gains).
-    Raises :class:`~ivobs.DesignError` when no such ``K <= max_power`` is found."""
+    (rounded up). Unlike enclosures propagated by ``|M|``, this grows only with the true
+    powers, also when ``|M|`` is far from Schur (large gains). Raises
+    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within ``max_power`` powers."""
     n = M.shape[0]
-    if n == 0:
-        return DecayBound(1.0, 0.0)
     absM = np.abs(M)
     P = np.eye(n)
-    norms, errs = [1.0], []
-    for _ in range(max_power):
-        errs.append(float(product_error(absM @ np.abs(P).sum(axis=1), n).max()))
+    norms, errs = np.empty(max_power + 1), np.empty(max_power)
+    norms[0] = 1.0
+    for i in range(1, max_power + 1):
+        errs[i - 1] = float(product_error(absM @ np.abs(P).sum(axis=1), n).max())
         P = M @ P
-        drift = float(np.dot(norms[::-1], errs))  # Σ_{j<i} N_{i-1-j} e_j
-        N = float(upper(float(upper(np.abs(P).sum(axis=1).max(), n)) + drift, len(errs) + 2))
+        drift = float(np.dot(norms[i - 1 :: -1] if i > 1 else norms[:1], errs[:i]))
+        N = float(upper(float(upper(np.abs(P).sum(axis=1).max(), n)) + drift, i + 2))
+        norms[i] = N
         if not N < 1e150:
             break
         if N <= theta:
-            K = len(norms)
-            lam = float(up(theta ** (1.0 / K) * (1.0 + 1e-12)))
-            if not lam < 1.0:
-                break
-            c = float(up(max(np.asarray(norms) / lam ** np.arange(K)) * (1.0 + 1e-12)))
-            return DecayBound(max(c, 1.0), lam)
-        norms.append(N)
+            return norms[: i + 1].copy()
     raise DesignError(
         "the rounding of the observer cannot be bounded: the powers of A - LC do not "
-        f"certifiably decay (‖M^i‖∞ after {len(norms)} powers: {norms[-1]:.3g}); the matrix is "
-        "not Schur stable or too close to the unit circle"
+        f"certifiably decay (‖M^i‖∞ after {i} powers: {norms[i]:.3g}); the matrix is not Schur "
+        "stable or too close to the unit circle"
     )
+
+
+def decay_of(norms: np.ndarray, theta: float) -> DecayBound | None:
+    """``‖Mⁱ‖∞ <= c λⁱ`` for every ``i`` from :func:`certified_norms`: the first ``K`` with
+    ``N_K <= θ`` gives ``λ = θ^{1/K}`` and ``c = max_{j<K} N_j / λ^j`` (``i = q K + j``:
+    ``‖M^i‖ <= θ^q N_j``); None when no ``N_K <= θ``."""
+    reached = np.flatnonzero(norms <= theta)
+    if not reached.size or norms.shape[0] == 1:
+        return DecayBound(1.0, 0.0) if norms.shape[0] == 1 else None
+    K = int(max(reached[0], 1))
+    lam = float(up(theta ** (1.0 / K) * (1.0 + 1e-12)))
+    if not lam < 1.0:
+        return None
+    c = float(up(float(np.max(norms[:K] / lam ** np.arange(K))) * (1.0 + 1e-12)))
+    return DecayBound(max(c, 1.0), lam)
 
 
 def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
@@ -173,7 +182,9 @@ def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
     (``|E_j| 1 <= product_error(|M| |P_j| 1)``), at most ``c S_i`` with ``S_{i+1} = λ S_i +
     ‖|E_i| 1‖∞`` (``‖M^m‖∞ <= c λ^m``, :func:`decay_of`). So ``κ_i = |P_i| 1 + c S_i`` bounds
     ``|M^i X| 1``, ``a = max_i κ_i / λ^i``; beyond the last power ``K`` computed,
-    ``|M^j X| 1 <= c λ^{j-K} ‖κ_K‖∞``, which the maximum includes. Everything rounded up."""
+    ``|M^j X| 1 <= c λ^{j-K} ‖κ_K‖∞``, which the maximum includes; ``K`` is the first power
+    whose own part of that tail is below :data:`TAIL` of ``a`` (at most :data:`MAX_POWERS`).
+    Everything rounded up."""
     n, m = X.shape
     lam, c = decay.lam, decay.c
     absM = np.abs(M)
@@ -185,7 +196,9 @@ def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
         kappa = upper(rows + c * S, 2)
         a = np.maximum(a, up(kappa * scale))
         tail = float(up(c * float(kappa.max()) * scale))
-        if not P.any() or tail <= TAIL * float(a.max()) or not scale < 1e300:
+        # stop once the powers themselves are negligible (the rounding part of the tail, c S_i
+        # λ^{-i}, no longer decreases: it is kept, at about γ c² of a)
+        if c * float(rows.max()) * scale <= TAIL * float(a.max()) or not scale < 1e300:
             break
         S = (lam * S + float(product_error(absM @ rows, n).max())) * (1.0 + 4.0 * UNIT_ROUNDOFF)
         P = M @ P
@@ -216,8 +229,11 @@ class Channels:
     def of(cls, M: np.ndarray, dM: np.ndarray, L: np.ndarray, C: np.ndarray) -> Channels:
         """The envelopes for ``M`` (its rate chosen among :data:`THETAS`)."""
         best: tuple[float, np.ndarray, np.ndarray, float] | None = None
+        norms = certified_norms(M, min(THETAS)) if M.shape[0] else np.ones(1)
         for theta in THETAS:
-            decay = decay_of(M, theta)
+            decay = decay_of(norms, theta)
+            if decay is None:
+                continue
             aL, ax = envelope(M, L, decay), envelope(M, np.eye(M.shape[0]), decay)
             score = float(aL.max() + ax.max()) / (1.0 - decay.lam)
             if best is None or score < best[0]:

@@ -342,7 +342,8 @@ class ZonotopeEstimator(ObserverEstimator):
         self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ZonotopeState]:
         p, H, k, ch = state.p, state.H, state.k, self._channels
-        free = self._free is not None and self._free.state(k) is H  # H[k] without data
+        Hk = self._free.state(k) if self._free is not None else None  # H[k] without data
+        free = Hk is not None and (Hk is H or _same(Hk, H))  # (restored: the same values)
         nx = p.shape[0]
         if free:  # [|H| 1; |C H| 1 + |F| r] of the data-free sequence, and the rounding so far
             both = ch.widen(self._free.at(k)[0], state.qL, state.qx)  # type: ignore[union-attr]
