@@ -14,24 +14,25 @@ the gain of each pattern of missing outputs, the observer step with its rounding
 consistency test of a measurement, the data-independent part of the bounds
 (:class:`DataFreeBounds`), and the vectorised run over a record.
 
-**Rounding** ([Higham2002]; :mod:`ivobs.sets.rounding`). The design's ``M = fl(A - L C)`` and
-``G = fl(E - L F)`` are float matrices; the exact ones differ by ``|A - LC - M| <= ΔM``,
-``|E - LF - G| <= ΔG`` (:func:`difference`). The step computes ``ν`` and ``x̂+`` in floats;
-both are dot products evaluated in some order, so ([Higham2002, eq. (3.5)])
+**Rounding** ([Higham2002]; :mod:`ivobs.sets.rounding`; the bounds themselves are in
+:mod:`ivobs.estimators._observer_rounding`). The design's ``M = fl(A - L C)`` and ``G = fl(E -
+L F)`` are float matrices; the exact ones differ by ``|A - LC - M| <= ΔM``, ``|E - LF - G| <=
+ΔG`` (``difference``). The step computes ``ν`` and ``x̂+`` in floats; both are dot products
+evaluated in some order, so ([Higham2002, eq. (3.5)])
 
     fl(ν) = ν + η,                          |η| <= e_ν = γ (|y| + |C| |x̂| + |D| |u| + |F| |c|)
     fl(x̂+) = A x̂ + B u + E c + L fl(ν) + ζ,  |ζ| <= ε = γ (|A| |x̂| + ... + |L| |fl(ν)|),
 
 one linear function of the magnitudes ``z = [|x̂|, |u|, |c|, |y|, |ν|, 1]``, ``[ε; e_ν] <= W z``
-(:func:`rounding_matrix`). So the float observer's error obeys, exactly,
+(``rounding_matrix``). So the float observer's error obeys, exactly,
 
     e+ = M e + G δ - L η + ξ,     |ξ| <= ε + ΔM |e| + ΔG r,
 
 two errors per step that each method propagates with its set: as generators, ``L diag(e_ν)``
 and ``diag(ε + ...)`` (through ``L``: with a large gain, ``|M^i L|`` is far smaller than
 ``|M^i| |L|``), or, where ``M`` is the same at every step, by two scalars: with proven
-envelopes ``|M^i L| 1 <= a_L λ^i`` and ``|M^i| 1 <= a_x λ^i`` (:class:`Channels`), the errors of
-all steps so far are within ``a_L q_L + a_x q_x``, ``q_L+ = λ q_L + ‖e_ν‖∞``, ``q_x+ = λ q_x +
+envelopes ``|M^i L| 1 <= a_L λ^i`` and ``|M^i| 1 <= a_x λ^i`` (``Channels``), the errors of all
+steps so far are within ``a_L q_L + a_x q_x``, ``q_L+ = λ q_L + ‖e_ν‖∞``, ``q_x+ = λ q_x +
 ‖ε + ...‖∞`` (:meth:`~ivobs.sets.rounding.DecayBound.next`, rounded up). The vectorised run
 evaluates ``x̂`` by another algorithm (a linear filter over the record) and bounds the exact
 residual of the computed sequence, ``x̃[k+1] - (A x̃[k] + B u + E c + L ν[k])``, by the same
@@ -50,7 +51,6 @@ own gain (:func:`pattern_gain`), designed once when the pattern first occurs.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -59,9 +59,10 @@ import numpy as np
 
 from ..design.hinf import observer_gain
 from ..errors import DesignError
-from ..linalg import UNIT_ROUNDOFF, gamma, spectral_radius
-from ..sets.rounding import ETA, DecayBound, enclose, mid_rad, product_error, up, upper
+from ..linalg import spectral_radius
+from ..sets.rounding import enclose, mid_rad, upper
 from . import _uncertain as uncertain
+from ._observer_rounding import Channels, difference, rounding_matrix
 from ._recursion import LinearFilter, redo_streams
 from .base import Design, Estimator
 
@@ -70,22 +71,10 @@ __all__ = [
     "Gain",
     "ObserverDesign",
     "ObserverEstimator",
-    "difference",
     "pattern_gain",
 ]
 
 _ONE = np.ones(1)
-
-THETAS = (0.5, 0.25, 0.1)
-"""Decay targets ``θ`` tried for the rate ``λ`` of the envelopes (:func:`decay_of`): the one
-with the smallest sum ``(a_L + a_x) / (1 - λ)`` is kept."""
-
-TAIL = 2.0**-20
-"""An envelope (:func:`envelope`) stops at the power whose tail is below this fraction of it."""
-
-MAX_POWERS = 2000
-"""Most powers of ``M`` an envelope is computed over: beyond, the tail bound of the last one
-holds (wider for a slowly converging gain: about ``c`` times the first powers)."""
 
 
 @dataclass(frozen=True)
@@ -116,180 +105,6 @@ class Gain(NamedTuple):
     dM: np.ndarray
     dG: np.ndarray
     W: np.ndarray
-
-
-def difference(A: np.ndarray, L: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(M, ΔM)``: ``M = fl(A - fl(L C))`` and ``ΔM >= |A - L C - M|`` exactly: the product's
-    error (``product_error(|L| |C|)``) plus the subtraction's (``u |M|``, doubled to cover the
-    rounding of this sum), rounded up."""
-    M = A - L @ C
-    dM = up(product_error(np.abs(L) @ np.abs(C), L.shape[1]) + 2.0 * UNIT_ROUNDOFF * np.abs(M))
-    return M, dM
-
-
-def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np.ndarray:
-    """``N_0, ..., N_K``: proven ``‖Mⁱ‖∞ <= N_i`` for the exact powers of the float matrix
-    ``M``, up to the first ``N_K <= θ``.
-
-    ``P_{i+1} = fl(M P_i)`` differs from ``M^{i+1}`` by ``Σ_{j<=i} M^{i-j} E_j``, ``E_j =
-    M P_j - fl(M P_j)``, ``‖E_j‖∞ <= e_j = ‖product_error(|M| |P_j|)‖∞``; so, from the bounds
-    already proven for the lower powers, ``‖M^i‖∞ <= N_i = ‖P_i‖∞ + Σ_{j<i} N_{i-1-j} e_j``
-    (rounded up). Unlike enclosures propagated by ``|M|``, this grows only with the true
-    powers, also when ``|M|`` is far from Schur (large gains). Raises
-    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within ``max_power`` powers."""
-    n = M.shape[0]
-    absM = np.abs(M)
-    P = np.eye(n)
-    norms, errs = np.empty(max_power + 1), np.empty(max_power)
-    norms[0] = 1.0
-    for i in range(1, max_power + 1):
-        errs[i - 1] = float(product_error(absM @ np.abs(P).sum(axis=1), n).max())
-        P = M @ P
-        drift = float(np.dot(norms[i - 1 :: -1] if i > 1 else norms[:1], errs[:i]))
-        N = float(upper(float(upper(np.abs(P).sum(axis=1).max(), n)) + drift, i + 2))
-        norms[i] = N
-        if not N < 1e150:
-            break
-        if N <= theta:
-            return norms[: i + 1].copy()
-    raise DesignError(
-        "the rounding of the observer cannot be bounded: the powers of A - LC do not "
-        f"certifiably decay (‖M^i‖∞ after {i} powers: {norms[i]:.3g}); the matrix is not Schur "
-        "stable or too close to the unit circle"
-    )
-
-
-def decay_of(norms: np.ndarray, theta: float) -> DecayBound | None:
-    """``‖Mⁱ‖∞ <= c λⁱ`` for every ``i`` from :func:`certified_norms`: the first ``K`` with
-    ``N_K <= θ`` gives ``λ = θ^{1/K}`` and ``c = max_{j<K} N_j / λ^j`` (``i = q K + j``:
-    ``‖M^i‖ <= θ^q N_j``); None when no ``N_K <= θ``."""
-    reached = np.flatnonzero(norms <= theta)
-    if not reached.size or norms.shape[0] == 1:
-        return DecayBound(1.0, 0.0) if norms.shape[0] == 1 else None
-    K = int(max(reached[0], 1))
-    lam = float(up(theta ** (1.0 / K) * (1.0 + 1e-12)))
-    if not lam < 1.0:
-        return None
-    c = float(up(float(np.max(norms[:K] / lam ** np.arange(K))) * (1.0 + 1e-12)))
-    return DecayBound(max(c, 1.0), lam)
-
-
-def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
-    """``a`` with ``|M^i X| 1 <= a λ^i`` for every ``i >= 0`` (exact powers of the float ``M``,
-    ``λ = decay.lam``).
-
-    ``P_{i+1} = fl(M P_i)``, ``P_0 = X``, differs from ``M^i X`` by ``Σ_{j<i} M^{i-1-j} E_j``
-    (``|E_j| 1 <= product_error(|M| |P_j| 1)``), at most ``c S_i`` with ``S_{i+1} = λ S_i +
-    ‖|E_i| 1‖∞`` (``‖M^m‖∞ <= c λ^m``, :func:`decay_of`). So ``κ_i = |P_i| 1 + c S_i`` bounds
-    ``|M^i X| 1``, ``a = max_i κ_i / λ^i``; beyond the last power ``K`` computed,
-    ``|M^j X| 1 <= c λ^{j-K} ‖κ_K‖∞``, which the maximum includes; ``K`` is the first power
-    whose own part of that tail is below :data:`TAIL` of ``a`` (at most :data:`MAX_POWERS`).
-    Everything rounded up."""
-    n, m = X.shape
-    lam, c = decay.lam, decay.c
-    absM = np.abs(M)
-    inv = math.nextafter(1.0 / lam, math.inf) if lam > 0 else math.inf
-    P, S, scale = X.astype(float), 0.0, 1.0  # scale >= λ^{-i}
-    a = np.zeros(n)
-    for _ in range(MAX_POWERS):
-        rows = upper(np.abs(P).sum(axis=1), m)
-        kappa = upper(rows + c * S, 2)
-        a = np.maximum(a, up(kappa * scale))
-        tail = float(up(c * float(kappa.max()) * scale))
-        # stop once the powers themselves are negligible (the rounding part of the tail, c S_i
-        # λ^{-i}, no longer decreases: it is kept, at about γ c² of a)
-        if c * float(rows.max()) * scale <= TAIL * float(a.max()) or not scale < 1e300:
-            break
-        S = (lam * S + float(product_error(absM @ rows, n).max())) * (1.0 + 4.0 * UNIT_ROUNDOFF)
-        P = M @ P
-        scale = math.nextafter(scale * inv, math.inf)
-    out: np.ndarray = np.maximum(a, tail)
-    return out
-
-
-@dataclass(frozen=True)
-class Channels:
-    """Where the observer's rounding goes while ``M`` is the same at every step (module
-    docstring): ``|M^i L| 1 <= a_L λ^i``, ``|M^i| 1 <= a_x λ^i`` (:func:`envelope`); the rounding
-    of all steps so far is within ``a_L q_L + a_x q_x``. ``L``, ``x``: the scalar recursions of
-    ``q_L`` (rate ``λ``) and ``q_x`` (rate ``λ + β_x``: ``ΔM`` acting on that part, ``β_x =
-    ‖ΔM a_x‖∞``; ``β_L = ‖ΔM a_L‖∞`` multiplies ``q_L`` into ``q_x``'s input); ``cL``, ``cx``:
-    ``|C| a_L``, ``|C| a_x``, their image in ``y``; ``K = [[a_L, a_x], [c_L, c_x]]``."""
-
-    aL: np.ndarray
-    ax: np.ndarray
-    cL: np.ndarray
-    cx: np.ndarray
-    K: np.ndarray
-    betaL: float
-    L: DecayBound
-    x: DecayBound
-
-    @classmethod
-    def of(cls, M: np.ndarray, dM: np.ndarray, L: np.ndarray, C: np.ndarray) -> Channels:
-        """The envelopes for ``M`` (its rate chosen among :data:`THETAS`)."""
-        best: tuple[float, np.ndarray, np.ndarray, float] | None = None
-        norms = certified_norms(M, min(THETAS)) if M.shape[0] else np.ones(1)
-        for theta in THETAS:
-            decay = decay_of(norms, theta)
-            if decay is None:
-                continue
-            aL, ax = envelope(M, L, decay), envelope(M, np.eye(M.shape[0]), decay)
-            score = float(aL.max() + ax.max()) / (1.0 - decay.lam)
-            if best is None or score < best[0]:
-                best = (score, aL, ax, decay.lam)
-        assert best is not None
-        _, aL, ax, lam = best
-        n = M.shape[0]
-        betaL = float(upper(dM @ aL, n).max())
-        lam_x = float(up(lam + float(upper(dM @ ax, n).max())))
-        if not lam_x < 1.0:
-            raise DesignError(
-                "the rounding of the observer cannot be bounded: the decay rate of A - LC with "
-                f"its rounding is {lam_x:.17g} >= 1"
-            )
-        cL, cx = upper(np.abs(C) @ aL, n), upper(np.abs(C) @ ax, n)
-        K = np.vstack([np.column_stack([aL, ax]), np.column_stack([cL, cx])])
-        return cls(aL, ax, cL, cx, K, betaL, DecayBound(1.0, lam), DecayBound(1.0, lam_x))
-
-    def widen(self, s: np.ndarray, qL: float, qx: float) -> np.ndarray:
-        """``>= s + K [q_L; q_x]`` for ``s = [ρ; ȳ]`` (or its first rows, ``ρ``)."""
-        out: np.ndarray = upper(s + self.K[: s.shape[0]] @ np.array((qL, qx)), 4)
-        return out
-
-
-def rounding_matrix(mats: tuple[np.ndarray, ...], L: np.ndarray, c_used: np.ndarray) -> np.ndarray:
-    """``W`` with ``[ε; e_ν] <= fl(W z)``, ``z = [|x̂|; |u|; |c|; |y|; |ν|; 1]``, for one step
-    of the observer with gain ``L`` (module docstring: ``ε`` bounds the rounding of ``x̂+`` given
-    ``fl(ν)``, ``e_ν`` that of ``ν``, which enters ``x̂+`` through ``L``).
-
-    Row ``i`` of ``ν = y - fl([C D F] [x̂; u; c])`` sums ``n_i`` products and ``y_i``, row ``i``
-    of ``x̂+ = fl([A B E] [x̂; u; c]) + fl(L fl(ν))`` the products of both: ``γ_{n_i}`` of the sum
-    of their magnitudes bounds the error ([Higham2002, eq. (3.5)], any order of evaluation),
-    ``n_i`` counting the nonzero coefficients only (a zero product adds no error; ``c_used``:
-    the components of ``c`` that may be nonzero), plus ``n_i η`` of underflow. ``W``'s entries
-    are rounded up and enlarged by the rounding of the product ``W z`` itself."""
-    A, B, C, D, E, F = mats
-    nx, ny = A.shape[0], C.shape[0]
-    aL = np.abs(L)
-    C_nu = np.hstack([np.abs(C), np.abs(D), np.abs(F) * c_used, np.eye(ny)])  # |y| last
-    n_nu = np.count_nonzero(C_nu, axis=1)
-    W_nu = np.hstack([C_nu, np.zeros((ny, ny))]) * gamma_rows(n_nu)
-    W_nu = np.hstack([W_nu, (n_nu + 1)[:, None] * ETA])
-    C_x = np.hstack([np.abs(A), np.abs(B), np.abs(E) * c_used, np.zeros((nx, ny)), aL])
-    n_x = np.count_nonzero(C_x, axis=1) + 1
-    W_x = np.hstack([C_x * gamma_rows(n_x), (n_x + 1)[:, None] * ETA])
-    W = upper(np.vstack([W_x, W_nu]), 4)
-    m = W.shape[1]  # fl(W z) >= (1 - γ_m) W z - m η
-    W *= 1.0 + 2.0 * gamma(m + 2)
-    W[:, -1] += (m + 2) * ETA
-    out: np.ndarray = up(W)
-    return out
-
-
-def gamma_rows(n: np.ndarray) -> np.ndarray:
-    """``γ_{n_i}`` ([Higham2002, Lemma 3.1]) as a column, one per row count ``n_i``."""
-    return np.array([gamma(int(k)) for k in n])[:, None]
 
 
 def pattern_gain(
@@ -473,8 +288,8 @@ class ObserverEstimator(Estimator):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """``x̃`` over the record by a linear filter (``x̃+ = M x̃ + L y + (B - LD) u + G c``),
         with ``ν = fl(y - C x̃ - D u - F c)``, the residual ``fl(x̃[k+1] - (A x̃ + B u + E c +
-        L ν))`` and ``[ε; e_ν]`` of that evaluation (:func:`rounding_matrix`). Where the
-        filter's own rounding left a residual above the step's (large gains: it sums ``L y``),
+        L ν))`` and ``[ε; e_ν]`` of that evaluation (``rounding_matrix``). Where the filter's
+        own rounding left a residual above the step's (large gains: it sums ``L y``),
         the sequence is refined once, ``x̃ -= d``, ``d+ = M d + residual``; None when its
         residual is still above ``4 ε`` (then the loop is tighter: a strongly non-normal
         ``A - LC`` amplifies the rounding of any float sequence that is not the loop's own)."""

@@ -58,7 +58,7 @@ class ReachabilityState(OnlineState):
 
     ``mode``: :data:`EXACT` (constant bounds, every measurement used so far): ``ρ[k]`` is
     Algorithm 1's data-free radius plus the rounding so far, ``a_L qL + a_x qx``
-    (:class:`~ivobs.estimators._luenberger.Channels`); then :data:`WINDOW`: ``slots``
+    (:class:`~ivobs.estimators._observer_rounding.Channels`); then :data:`WINDOW`: ``slots``
     ``(n_s, nx, 2 nx + nd + ny)``, slot ``j`` is ``[Φ(k, j) diag ρ_j, Φ(k, j+1) [G_j diag r_j,
     L_j diag e_ν, diag ξ_j]]`` for the last ``K`` steps ``j`` (oldest first), ``err``
     ``(n_s, 2, nx)`` bounds the rounding of their row sums (both parts)."""

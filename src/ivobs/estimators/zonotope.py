@@ -74,7 +74,7 @@ class ZonotopeDesign(ObserverDesign):
 class ZonotopeState(OnlineState):
     """``x[k] ∈ <p, H> ⊕ Box(a_L qL + a_x qx)``: centre ``p`` (nx,) and generators ``H``
     (nx, ·) of [Tang2019, eq. (34)], and the centre's rounding so far, ``qL``, ``qx``
-    (:class:`~ivobs.estimators._luenberger.Channels`)."""
+    (:class:`~ivobs.estimators._observer_rounding.Channels`)."""
 
     p: np.ndarray
     H: np.ndarray
@@ -346,8 +346,11 @@ class ZonotopeEstimator(ObserverEstimator):
         free = Hk is not None and (Hk is H or _same(Hk, H))  # (restored: the same values)
         nx = p.shape[0]
         if free:  # [|H| 1; |C H| 1 + |F| r] of the data-free sequence, and the rounding so far
-            both = ch.widen(self._free.at(k)[0], state.qL, state.qx)  # type: ignore[union-attr]
-            rad, ybound = both[:nx], both[nx:]
+            stacked = self._free.at(k)[0]  # type: ignore[union-attr]
+            radH, (rad, ybound) = (
+                stacked[:nx],
+                np.split(ch.widen(stacked, state.qL, state.qx), [nx]),
+            )
             c, r = self._const  # type: ignore[misc]
         else:
             radH = upper(np.abs(H).sum(axis=1), H.shape[1])
