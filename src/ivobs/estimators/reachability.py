@@ -1,33 +1,29 @@
 """Interval estimation by reachability analysis of an H∞ observer's error [Tang2019, Section III].
 
 [Tang2019, Algorithm 1, Theorem 2, eqs. (10), (13), (21)-(26)]; the gain by [Tang2019,
-Theorem 1, problem (20)] (:mod:`ivobs.design.hinf`). The observer itself and what
+Theorem 1, problem (20)] (:mod:`ivobs.design.hinf`) or the radius gain
+(:mod:`ivobs.design.radius`). The observer itself, its rounding bound and what
 ``reachability`` shares with ``zonotope`` are in :mod:`ivobs.estimators._luenberger`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .._validate import as_int
+from ..linalg import UNIT_ROUNDOFF
 from ..model import LinearSystem
 from ..sets import Box
+from ..sets.rounding import enclose, mid_rad, product_error, up, upper
 from . import register
-from ._luenberger import (
-    ObserverDesign,
-    ObserverEstimator,
-    consistent,
-    observer_bounds,
-    observer_filter,
-)
-from ._recursion import SplitFilter, redo_streams
+from ._luenberger import DataFreeBounds, Gain, ObserverDesign, ObserverEstimator
 from .base import check_size
 from .state import OnlineState, Step, evolve
 
-__all__ = ["Reachability", "ReachabilityDesign", "ReachabilityState", "radius_sequence"]
+__all__ = ["Reachability", "ReachabilityDesign", "ReachabilityState"]
 
 TAIL = 1e-3
 """Default memory: the smallest ``K`` with ``‖ |(A - LC)^K| ‖∞ <= TAIL`` (see ``memory``)."""
@@ -35,11 +31,16 @@ TAIL = 1e-3
 MAX_MEMORY = 500
 """Upper limit of the default memory (slowly converging gains)."""
 
+SETTLED = 2.0**-40
+"""Algorithm 1's data-free radius is computed until ``‖ |M^k [H0, G R]| 1 ‖∞`` falls below this
+fraction of ``‖s_k‖∞``; what is left is bounded as rounding (a rounding-level widening)."""
+
+MAX_TERMS = 1 << 16
+"""At most this many steps of that radius are computed (slowly converging gains); the rest is
+bounded as rounding too (sound, wider)."""
+
 EXACT, WINDOW = 0, 1
 """Modes of :class:`ReachabilityState`: Algorithm 1's exact state, or the finite-memory window."""
-
-_CHUNK = 1 << 21
-"""Floats per block when the data-independent radius sequence is computed (memory bound)."""
 
 
 @dataclass(frozen=True)
@@ -55,18 +56,19 @@ class ReachabilityDesign(ObserverDesign):
 class ReachabilityState(OnlineState):
     """``x[k] ∈ x̂[k] ± ρ[k]``: the observer's state ``xh`` (``x̂[k]``) and what gives ``ρ[k]``.
 
-    ``mode``: :data:`EXACT` (constant bounds, no missing sample yet): Algorithm 1's
-    ``X = [M^k H0, M^k G diag r]`` and ``s = Σ_{i<k} |M^i G| r``; then :data:`WINDOW`:
-    ``Z = Φ(k, k0) Z0`` while complete (no columns once its oldest term left), and ``slots``
-    ``(n_s, nx, nx + nd)``: slot ``j`` is ``[Φ(k, j) diag ρ_j, Φ(k, j+1) G_j diag r_j]`` for the
-    last ``K`` steps ``j`` (oldest first)."""
+    ``mode``: :data:`EXACT` (constant bounds, every measurement used so far): ``ρ[k]`` is
+    Algorithm 1's data-free radius plus the rounding so far, ``a_L qL + a_x qx``
+    (:class:`~ivobs.estimators._observer_rounding.Channels`); then :data:`WINDOW`: ``slots``
+    ``(n_s, nx, 2 nx + nd + ny)``, slot ``j`` is ``[Φ(k, j) diag ρ_j, Φ(k, j+1) [G_j diag r_j,
+    L_j diag e_ν, diag ξ_j]]`` for the last ``K`` steps ``j`` (oldest first), ``err``
+    ``(n_s, 2, nx)`` bounds the rounding of their row sums (both parts)."""
 
     xh: np.ndarray
+    qL: float
+    qx: float
     mode: int
-    X: np.ndarray
-    s: np.ndarray
-    Z: np.ndarray
     slots: np.ndarray
+    err: np.ndarray
 
 
 def default_memory(M: np.ndarray, tail: float = TAIL, cap: int = MAX_MEMORY) -> int:
@@ -83,18 +85,31 @@ def default_memory(M: np.ndarray, tail: float = TAIL, cap: int = MAX_MEMORY) -> 
 class Reachability(ObserverEstimator):
     """Reachability-based interval estimation [Tang2019, Algorithm 1, Theorem 2].
 
-    Observer [Tang2019, eq. (10)], with ``d ∈ [c - r, c + r]`` re-centred (``G = E - L F``)::
+    Observer [Tang2019, eq. (10)] (:mod:`~ivobs.estimators._luenberger`), ``d ∈ [c - r, c + r]``::
 
-        x̂[k+1] = A x̂[k] + B u[k] + L (y[k] - C x̂[k] - D u[k]) + G c[k],   x̂[0] = center(x0)
+        x̂[k+1] = A x̂[k] + B u[k] + E c[k] + L (y[k] - C x̂[k] - D u[k] - F c[k]),
+        x̂[0] = center(x0)
 
-    Its error ``e = x - x̂`` obeys ``e+ = M e + G δ``, ``M = A - L C``, ``|δ| <= r``, so
-    [Tang2019, eqs. (21)-(26), Algorithm 1] ``x[k] ∈ x̂[k] ± ρ[k]`` with the exact interval hull
-    of the reachable set::
+    Its error ``e = x - x̂`` obeys ``e+ = M e + G δ``, ``M = A - L C``, ``G = E - L F``,
+    ``|δ| <= r``, so [Tang2019, eqs. (21)-(26), Algorithm 1] ``x[k] ∈ x̂[k] ± ρ[k]`` with the
+    exact interval hull of the reachable set::
 
-        ρ[k] = |M^k| h0 + Σ_{i<k} |M^i G| r[k-1-i],        h0 = radius(x0)   (H0 = diag h0)
+        ρ[k] = |M^k| h0 + Σ_{i<k} |M^i G| r,           h0 = radius(x0)
 
-    ([Tang2019, Property 4]: ``Box(<0, X>)`` has radius ``|X| 1``; ``|·|`` elementwise).
-    Over-approximation happens only in these Box operations [Tang2019, Remark 1].
+    ([Tang2019, Property 4]: ``Box(<0, X>)`` has radius ``|X| 1``; ``|·|`` elementwise), from
+    ``X_k = M^k [H0, G diag r]`` and the running sum ``s_k = Σ_{i<k} |M^i G| r``:
+    ``ρ[k] = |X_k^H| 1 + s_k``. It does not depend on the data: it is computed once, as far as
+    a run needs it, until ``X_k`` is negligible, and then stays constant.
+
+    **Rounding, proven** (the observer's: :mod:`~ivobs.estimators._luenberger`). ``X_{k+1} =
+    fl(M X_k)`` differs from ``M X_k`` by ``E_k``, ``|E_k| <= product_error(|M| |X_k|)``. Those
+    errors enter the error set as ``Σ_j M^{k-1-j} ξ_j`` with ``‖ξ_j‖∞ <= ‖|E_j^H| 1‖∞ +
+    Σ_{i<j} ‖|E_i^G| 1‖∞`` (a term ``|M^a G R|`` of the sum is computed with ``a`` roundings; the
+    ones of the same age are the same matrix), plus the exact matrices' difference
+    ``ΔM ρ + ΔG r``, plus the observer's rounding ``ε``. Their sum is the ball ``q`` of
+    :class:`~ivobs.sets.rounding.DecayBound` (``‖M^i‖∞ <= c λ^i``, the exact powers of the float
+    ``M``): ``x[k] ∈ x̂[k] ± (ρ[k] + q[k])``, every sum rounded up. Where ``X_k`` is dropped
+    (negligible), its remainder ``M X_k`` is one more such ``E_k``.
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``
     (the paper's convention); ``y[k]`` enters the box of ``x[k+1]``.
@@ -102,30 +117,24 @@ class Reachability(ObserverEstimator):
     **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
     :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
     (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
-    docs/gains.md. Or ``L=`` gives it
-    explicitly (the papers' comparisons "with the same gain"); ``A - LC`` must be Schur.
+    docs/gains.md. Or ``L=`` gives it explicitly (the papers' comparisons "with the same
+    gain"); ``A - LC`` must be Schur.
 
-    **Constant bounds, no missing sample:** Algorithm 1 exactly (``ρ`` by the running sums of
-    ``|M^i G| r``; with :meth:`run` the whole sequence is computed once, data-independent
-    (:func:`radius_sequence`), and ``x̂`` by the shared linear-filter kernel; batches
-    ``(B, T, n)`` too).
+    **Time-varying or measurement-dependent bounds ``r[k]``, missing samples:** with missing
+    components of ``y[k]`` the step uses the gain of the outputs present
+    (:func:`~ivobs.estimators._luenberger.pattern_gain`: ``L_k``, ``M_k = A - L_k C``,
+    ``G_k = E - L_k F``), so the error dynamics become time-varying. Sound finite-memory form:
+    with ``Φ(k, j) = M_{k-1} ... M_j`` and any ``j <= k``,
 
-    **Time-varying or measurement-dependent bounds ``r[k]``, missing samples:** the sum is a
-    convolution and, with missing components of ``y[k]`` (gain column set to zero at that step:
-    ``L_k``, ``M_k = A - L_k C``, ``G_k = E - L_k F``), the error dynamics become time-varying.
-    Sound finite-memory form: with ``Φ(k, j) = M_{k-1} ... M_j`` and any ``j <= k``,
+        e_k ∈ Φ(k, j) Box(ρ_j) ⊕ ⊕_{j<=i<k} Φ(k, i+1) (G_i <0, diag r_i> ⊕ Box(ξ_i)),
 
-        Ω_k ⊆ Φ(k, j) Box(Ω_j) ⊕ ⊕_{j<=i<k} Φ(k, i+1) G_i <0, diag r_i>,
-
-    so ``ρ[k] <= |Φ(k, j) diag ρ[j]| 1 + Σ_{j<=i<k} |Φ(k, i+1) G_i diag r_i| 1`` for every ``j``.
-    The last ``K = memory`` steps are kept as matrices propagated with the *actual* ``M_i``
-    (``Φ(k, j) diag ρ[j]`` and ``Φ(k, i+1) G_i diag r_i``) and ``ρ[k]`` is the elementwise
-    minimum of these bounds over the window (for constant ``M`` this is at least as tight as
-    ``ρ_k <= Σ_{i<K} |M^i G| r_{k-1-i} + |M^K| ρ_{k-K}``). Older terms are boxed (``Box(Ω_j)``)
-    before being propagated, which loses at most ``|Φ(k, k-K)|``-small amounts. The exact
-    Algorithm 1 state is kept until the first missing sample; the switch keeps ``M^k H0`` and
-    boxes the accumulated disturbance part (``<0, [M^k H0, diag s_k]>``, ``s_k`` its exact
-    interval hull radius) and continues with the window.
+    ``ξ_i`` the step's rounding (above), so ``ρ[k]`` is bounded by every ``j`` of the window of
+    the last ``K = memory`` steps, each term propagated with the *actual* ``M_i``; ``ρ[k]`` is
+    the elementwise minimum of these bounds (for constant ``M`` at least as tight as
+    ``ρ_k <= Σ_{i<K} |M^i G| r_{k-1-i} + |M^K| ρ_{k-K}``). Their float products carry their
+    rounding bounds (``|M_i|`` times the previous bound plus ``product_error``; a bound that
+    grows makes its term lose the minimum, never the containment). Algorithm 1's state is kept
+    until the first missing (or inconsistent) sample; then ``ρ[k]`` starts the window.
 
     **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the gain is designed for
     the nominal matrices; the plant adds ``w = ΔA x + ΔB u`` to the state and ``v = ΔC x +
@@ -134,9 +143,9 @@ class Reachability(ObserverEstimator):
     (:mod:`ivobs.estimators._uncertain`, rounded upwards). Time-varying radii are what the
     finite-memory form handles (sound for every window): it runs from the first step.
 
-    **Inconsistent data:** ``y[k]`` is consistent only if
-    ``|y[k] - C x̂[k] - D u[k] - F c[k]| <= |C| ρ[k] + |F| r[k]``; otherwise it is reported and
-    treated as missing.
+    **Inconsistent data:** ``y[k]`` is inconsistent when
+    ``|y[k] - C x̂[k] - D u[k] - F c[k]| > |C| ρ[k] + |F| r[k]`` (proven, its rounding
+    included); it is then reported and treated as missing.
 
     Parameters
     ----------
@@ -146,7 +155,8 @@ class Reachability(ObserverEstimator):
     gain : ``"radius"`` (default), ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not
         given (docs/gains.md)
     memory : window ``K`` for time-varying bounds / missing samples (default: smallest ``K``
-        with ``‖ |M^K| ‖∞ <= 1e-3``, at most 500)
+        with ``‖ |M^K| ‖∞ <= 1e-3``, at most 500). Larger: tighter after a missing sample for a
+        slowly converging gain, at ``O(K nx^2 (nx + nd))`` work per step
     """
 
     name = "reachability"
@@ -176,129 +186,92 @@ class Reachability(ObserverEstimator):
         )
         K = None if memory is None else as_int("memory", memory, 1)
         observer = self._design_observer(L, gain)
-        K = default_memory(self._M) if K is None else K
+        K = default_memory(self._full.M) if K is None else K
         self.design = ReachabilityDesign(**observer.as_dict(), memory=K)
         assert self.x0 is not None
-        self._xc = self.x0.center.copy()
-        self._h0 = self.x0.radius.copy()
-        self._vec: tuple[int, np.ndarray, np.ndarray, SplitFilter] | None = None
-        self._fast = self._fast_operators()
+        self._xc, self._h0 = mid_rad(self.x0.lo, self.x0.hi)
+        self._free = None
+        if self._const is not None:
+            r = self._const[1]
+            X0 = np.hstack([np.diag(self._h0), self._full.G * r])
+            e0 = float(up(UNIT_ROUNDOFF * upper(np.abs(X0[:, self.sys.nx :]).sum(axis=1).max(), 2)))
+            start = (X0, np.zeros(self.sys.nx), e0, 0)  # (X_k, s_k, Σ_{i<k} ‖E_i^G‖, k)
+            self._free = DataFreeBounds(start, self._algorithm1, self._xc)
 
-    def _fast_operators(self) -> tuple[np.ndarray, ...] | None:
-        """Design-time constants of the common step (constant bounds, complete ``y``): the
-        observer and its innovation as one product (:meth:`_fused_observer`), the selector
-        ``Σ`` giving both row sums of ``|X| = |[M^k H0, M^k G diag r]|`` in one product, and
-        ``|F| r`` (a list of floats: the fast step tests in floats). None when the bounds are
-        not constant (the general step)."""
-        fused = self._fused_observer()
-        if fused is None or self._const is None:
-            return None
-        nx = self._M.shape[0]
-        sel = np.zeros((nx + self._G.shape[1], 2))
-        sel[:nx, 0] = 1.0
-        sel[nx:, 1] = 1.0
-        return *fused, sel, (self._absF @ self._const[1]).tolist()
+    def _algorithm1(self, state: Any) -> tuple[np.ndarray, np.ndarray, float, Any]:
+        """One step of [Tang2019, Algorithm 1] without data: ``ρ[k] = |X_k^H| 1 + s_k``,
+        ``yb = |C| ρ + |F| r`` and the rounding ``e[k]`` it adds (class docstring), then
+        ``X_{k+1} = M X_k``, ``s_{k+1} = s_k + |X_k^G| 1``."""
+        X, s, cum, k = state
+        g, r = self._full, self._const[1]  # type: ignore[index]
+        C, nx, nd = self._mats[2], self.sys.nx, r.shape[0]
+        aH = upper(np.abs(X[:, :nx]).sum(axis=1), nx)
+        aG = upper(np.abs(X[:, nx:]).sum(axis=1), nd)
+        rho = up(aH + s)  # [Tang2019, eq. (21)]
+        yb = upper(np.abs(C) @ rho + self._absF @ r, nx + nd)
+        mismatch = float(upper(g.dM @ rho + g.dG @ r, nx + nd).max())  # (A - LC - M) e, ...
+        if not X.any():  # M^k X0 is gone: ρ stays
+            return rho, yb, float(upper(cum + mismatch, 2)), None
+        X_next = g.M @ X
+        eH = product_error(g.absM @ aH, nx)  # fl(M X) - M X
+        eG = product_error(g.absM @ aG, nx)
+        left = upper(np.abs(X_next).sum(axis=1), nx + nd)
+        s_next = up(s + aG)
+        if left.max() <= SETTLED * s_next.max() or k + 1 >= MAX_TERMS:
+            eH = eH + upper(np.abs(X_next[:, :nx]).sum(axis=1), nx)  # dropped: M X_k is its error
+            eG = eG + upper(np.abs(X_next[:, nx:]).sum(axis=1), nd)
+            X_next = np.zeros_like(X)
+        e = float(upper(eH.max() + cum + mismatch, 3))
+        return rho, yb, e, (X_next, s_next, float(up(cum + upper(eG.max(), 2))), k + 1)
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ReachabilityState:
-        nx, nd = self.sys.nx, self._G.shape[1]  # d̃ = [d; w; v] with interval matrices
-        if self._const is not None:  # exact Algorithm 1: X = [M^k H0, M^k G diag r]
-            X = np.hstack([np.diag(self._h0), self._G * self._const[1]])
-            Z = np.zeros((nx, 0))
-        else:
-            X, Z = np.zeros((nx, 0)), np.diag(self._h0)
+        nx, ng = self.sys.nx, self._full.G.shape[1]  # G̃ = [G, I, -L] with interval matrices
+        ny = self.sys.ny
         return ReachabilityState(
             xh=self._xc.copy(),
-            mode=EXACT if self._const is not None else WINDOW,
-            X=X,
-            s=np.zeros(nx),
-            Z=Z,
-            slots=np.zeros((0, nx, nx + nd)),
+            qL=0.0,
+            qx=0.0,
+            mode=EXACT if self._free is not None else WINDOW,
+            slots=np.zeros((0, nx, 2 * nx + ng + ny)),
+            err=np.zeros((0, 2, nx)),
         )
-
-    def _radius(self, state: ReachabilityState) -> np.ndarray:
-        """``ρ[k]``: Algorithm 1's running sum while exact, else the window's bound."""
-        nx = self.sys.nx
-        if state.mode == EXACT:
-            rho: np.ndarray = np.abs(state.X[:, :nx]).sum(axis=1) + state.s
-            return rho
-        S = np.abs(state.slots)
-        g = S[:, :, nx:].sum(axis=2)  # (n_s, nx)
-        suffix = np.cumsum(g[::-1], axis=0)[::-1]  # Σ over slots j' >= j
-        cand = S[:, :, :nx].sum(axis=2) + suffix
-        if not state.Z.shape[1]:
-            window: np.ndarray = cand.min(axis=0)
-            return window
-        z: np.ndarray = np.abs(state.Z).sum(axis=1) + (suffix[0] if suffix.shape[0] else 0.0)
-        return np.minimum(z, cand.min(axis=0)) if cand.shape[0] else z
 
     def _step(
         self, state: ReachabilityState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ReachabilityState]:
-        if self._fast is not None and state.mode == EXACT:
-            fast = self._fast_step(state, u_k, y_k)
-            if fast is not None:
-                return fast
-        xh = state.xh
-        rho = self._radius(state)
-        lo, hi = xh - rho, xh + rho
-
-        A, B, C, D, E, F = self._mats
-        c, r = self._bounds(state.k, y_k, lo, hi, u_k)
-        obs = ~np.isnan(y_k)
-        full = bool(obs.all())
-        if full and self._fast is not None:  # the product of the fast step
-            out = self._fast[0].dot(np.concatenate((xh, u_k, y_k)))
-            out += self._fast[1]
-            innov = out[xh.shape[0] :]
+        xh, ch = state.xh, self._channels
+        if state.mode == EXACT:  # Algorithm 1: ρ[k] data-free, plus the rounding so far
+            free, e = self._free.at(state.k)  # type: ignore[union-attr]
+            both = ch.widen(free, state.qL, state.qx)  # [ρ; |C| ρ + |F| r]
+            rho, ybound = both[: xh.shape[0]], both[xh.shape[0] :]
+            c, r = self._const  # type: ignore[misc]
         else:
-            innov = (y_k if full else np.where(obs, y_k, 0.0)) - C @ xh - D @ u_k - F @ c
-        inconsistent = False
-        if (full or obs.any()) and not consistent(
-            innov, self._absC @ rho + self._absF @ r, y_k, obs
-        ):
-            inconsistent = True
-            obs, full = np.zeros_like(obs), False
-        Lk, Mk, Gk = self._gain_at(obs)
-        if full and self._fast is not None:
-            xh_next = out[: xh.shape[0]]
-        elif full:  # [Tang2019, eq. (10)]
-            xh_next = A @ xh + B @ u_k + E @ c + Lk @ innov
-        else:
-            xh_next = A @ xh + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
-
-        if state.mode == EXACT and full:  # Algorithm 1
-            nx = self.sys.nx
-            new = replace(
-                state, xh=xh_next, s=state.s + np.abs(state.X[:, nx:]).sum(axis=1), X=Mk @ state.X
-            )
-        else:
-            new = self._window_step(state, xh_next, rho, r, Mk, Gk)
+            rho = self._window_radius(state)
+            c, r = self._bounds(state.k, y_k, *enclose(xh, rho), u_k)
+            ybound = upper(np.abs(self._mats[2]) @ rho + self._absF @ r, rho.shape[0] + r.shape[0])
+        lo, hi = enclose(xh, rho)
+        xh_next, eps, e_nu, inconsistent, gain = self._observe(xh, u_k, y_k, c, ybound)
+        if state.mode == EXACT and gain is self._full:  # the rounding joins q_L, q_x
+            qL = ch.L.next(state.qL, max(e_nu.tolist()))
+            sigma = (max(eps.tolist()) + e + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+            return Step(evolve(state, xh=xh_next, qL=qL, qx=ch.x.next(state.qx, sigma)), lo, hi)
+        xi = upper(eps + gain.dM @ rho + gain.dG @ r, rho.shape[0] + r.shape[0] + 2)
+        rounding = np.hstack([gain.L * e_nu, np.diag(xi)])  # L_k η + ξ_k
+        new = self._window_step(state, xh_next, rho, r, gain, rounding)
         return Step(new, lo, hi, inconsistent)
 
-    def _fast_step(
-        self, state: ReachabilityState, u_k: np.ndarray, y_k: np.ndarray
-    ) -> Step[ReachabilityState] | None:
-        """Algorithm 1 with constant bounds and a complete, consistent ``y[k]``: the same
-        recursion as :meth:`_step` in a few fused products (:meth:`_fast_operators`); ``None``
-        (the general step) for a missing or inconsistent measurement."""
-        O, o, sel, Fr = self._fast  # type: ignore[misc]
-        xh = state.xh
-        nx = xh.shape[0]
-        sums = np.abs(state.X).dot(sel)  # |M^k H0| 1 and |M^k G diag r| 1
-        rho = sums[:, 0] + state.s
-        out = O.dot(np.concatenate((xh, u_k, y_k)))
-        out += o
-        innov = out.tolist()[nx:]  # |y - C x̂ - D u - F c| - (|C| ρ + |F| r), in floats
-        for i, b, f in zip(innov, self._absC.dot(rho).tolist(), Fr):
-            if not abs(i) - (b + f) <= 0.0:  # maybe inconsistent (or NaN): the general step
-                return None
-        new = evolve(state, xh=out[:nx], X=self._M.dot(state.X), s=state.s + sums[:, 1])
-        lo, hi = [], []  # (a loop: cheaper than comprehensions on three numbers)
-        for a, b in zip(xh.tolist(), rho.tolist()):
-            lo.append(a - b)
-            hi.append(a + b)
-        return Step(new, lo, hi, False)
+    def _window_radius(self, state: ReachabilityState) -> np.ndarray:
+        """``ρ[k]``: the smallest bound of the window (class docstring)."""
+        if not state.slots.shape[0]:  # step 0 of a run that starts windowed
+            return self._h0
+        nx = self.sys.nx
+        S = np.abs(state.slots)
+        h = S[:, :, :nx].sum(axis=2) + state.err[:, 0]
+        g = S[:, :, nx:].sum(axis=2) + state.err[:, 1]
+        suffix = np.cumsum(g[::-1], axis=0)[::-1]  # Σ over the slots j' >= j
+        rho: np.ndarray = upper(h + suffix, S.shape[2] + S.shape[0] + 2).min(axis=0)
+        return rho
 
     def _window_step(
         self,
@@ -306,90 +279,27 @@ class Reachability(ObserverEstimator):
         xh_next: np.ndarray,
         rho: np.ndarray,
         r: np.ndarray,
-        Mk: np.ndarray,
-        Gk: np.ndarray,
+        gain: Gain,
+        rounding: np.ndarray,
     ) -> ReachabilityState:
-        """The finite-memory bound (class docstring): the window moves on by one step."""
+        """The window moves on by one step with ``M_k`` (class docstring); a new slot
+        ``[M_k diag ρ_k, G_k diag r_k, L_k diag e_ν, diag ξ_k]`` (the disturbance and rounding
+        of step ``k`` enter ``e[k+1]`` unpropagated)."""
         nx = self.sys.nx
-        if state.mode == EXACT:  # first missing sample: box the disturbance part, go on windowed
-            state = replace(
-                state,
-                mode=WINDOW,
-                Z=np.hstack([state.X[:, :nx], np.diag(state.s)]),
-                X=np.zeros((nx, 0)),
-                s=np.zeros(nx),
-            )
-        slots = np.concatenate([state.slots, np.zeros((1, nx, nx + self._G.shape[1]))])
-        slots[-1, :, :nx] = np.diag(rho)
-        slots = Mk @ slots
-        slots[-1, :, nx:] = Gk * r  # d[k] enters e[k+1] unpropagated
-        Z = Mk @ state.Z
-        if slots.shape[0] > self.design.memory:  # oldest slot leaves: Z loses a term
-            slots = slots[1:]
-            Z = np.zeros((nx, 0))
-        return replace(state, xh=xh_next, slots=slots, Z=Z)
-
-    # -- offline, vectorised --------------------------------------------------------------------
-    def _run(
-        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
-    ) -> tuple[np.ndarray, ...] | None:
-        """Algorithm 1 over a record or a batch: ``ρ`` once (:func:`radius_sequence`, kept for
-        the record length), ``x̂`` by the shared linear-filter kernel; streams of a batch with
-        an inconsistent measurement are redone by the loop."""
-        if self._const is None or not y.shape[-2] or np.isnan(y).any():
-            return None  # (an empty record: the loop)
-        c, r = self._const
-        T = y.shape[-2]
-        if self._vec is None or self._vec[0] != T:
-            rho = radius_sequence(self._M, np.diag(self._h0), self._G * r, T)
-            yrad = rho @ self._absC.T + self._absF @ r  # |C| ρ + |F| r: consistency of y
-            filt = (
-                self._vec[3]
-                if self._vec is not None
-                else observer_filter(self._M, self._mats, self._L, c)
-            )
-            self._vec = (T, rho, yrad, filt)
-        _, rho, yrad, filt = self._vec
-        out = observer_bounds(
-            self._M, self._mats, self._L, c, self._xc, u, y, rho, yrad, filt, streams=True
+        slots, err = state.slots, state.err
+        if state.mode == EXACT:  # the first missing sample: ρ_k (ball included) starts it
+            slots, err = slots[:0], err[:0]
+        S = np.abs(slots)
+        w = S.shape[2]
+        rows = np.stack([S[:, :, :nx].sum(axis=2), S[:, :, nx:].sum(axis=2)], axis=1)
+        err = upper(err @ gain.absM.T + product_error(upper(rows, w) @ gain.absM.T, nx), nx + 2)
+        G = np.hstack([gain.G * r, rounding])  # (L_k diag e_ν: products, rounded)
+        new = np.hstack([gain.M * rho, G])
+        new_err = np.stack(
+            [product_error(gain.absM @ rho, 1), product_error(np.abs(G).sum(axis=1), G.shape[1])]
         )
-        if out is None or len(out) == 2:
-            return out
-        return redo_streams(self, u, y, t, *out)
-
-
-def radius_sequence(M: np.ndarray, H0: np.ndarray, GR: np.ndarray, T: int) -> np.ndarray:
-    """``ρ[k] = |M^k H0| 1 + Σ_{i<k} |M^i GR| 1`` for ``k < T`` [Tang2019, eq. (21)], shape
-    ``(T, nx)``.
-
-    Data-independent. The powers ``M^i [H0 GR]`` are built by doubling (``M^(s..2s-1) X =
-    M^s M^(0..s-1) X``), then block by block; once a block is exactly zero (the powers of a
-    Schur ``M`` underflow) the terms stop and ``ρ`` stays constant.
-    """
-    nx = M.shape[0]
-    X = np.hstack([H0, GR])
-    a = np.zeros((T, nx))  # |M^k H0| 1
-    b = np.zeros((T, nx))  # |M^k GR| 1
-    limit = max(1, _CHUNK // max(X.size, 1))
-    blk = X[None]
-    Mp = M.copy()
-    while blk.shape[0] < min(T, limit):
-        new = (Mp @ blk)[: T - blk.shape[0]]
-        blk = np.concatenate([blk, new])
-        if not new.any():
-            break
-        Mp = Mp @ Mp
-    step = np.linalg.matrix_power(M, blk.shape[0])
-    start = 0
-    while start < T:
-        n = min(blk.shape[0], T - start)
-        absb = np.abs(blk[:n])
-        a[start : start + n] = absb[:, :, :nx].sum(axis=2)
-        b[start : start + n] = absb[:, :, nx:].sum(axis=2)
-        if not blk[n - 1].any():
-            break
-        start += n
-        blk = step @ blk
-    rho = a
-    rho[1:] += np.cumsum(b[:-1], axis=0)
-    return rho
+        slots = np.concatenate([gain.M @ slots, new[None]])
+        err = np.concatenate([err, new_err[None]])
+        if slots.shape[0] > self.design.memory:  # the oldest term leaves
+            slots, err = slots[1:], err[1:]
+        return evolve(state, xh=xh_next, qL=0.0, qx=0.0, mode=WINDOW, slots=slots, err=err)

@@ -6,18 +6,18 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import partial
 from typing import Any
 
 import numpy as np
 
 from .._validate import as_int, as_matrix
 from ..errors import DesignError, IvobsError
-from ..linalg import spectral_radius
+from ..linalg import UNIT_ROUNDOFF, spectral_radius
 from ..model import LinearSystem
-from ..sets import Box, Zonotope
+from ..sets import Box, Zonotope, box_generators
+from ..sets.rounding import enclose, mid_rad, product_error, upper
 from . import register
-from ._luenberger import ObserverDesign, ObserverEstimator, consistent, observer_bounds
+from ._luenberger import DataFreeBounds, Gain, ObserverDesign, ObserverEstimator
 from .base import check_size
 from .state import OnlineState, Step, evolve
 
@@ -30,7 +30,7 @@ SETTLE_STEPS = 2000
 """Steps of the generator recursion (34b) iterated at design (more when ``A - LC`` is slow)."""
 
 SEQUENCE_FLOATS = 1 << 21
-"""Most floats kept of the data-independent generator sequence (34b) for ``step()``."""
+"""Most floats kept of the data-independent generators (34b) for ``step()``."""
 
 WIDTH_STEPS = 60
 """Steps of (34b) over which the default gain is chosen when the reduction can grow."""
@@ -40,18 +40,18 @@ SETTLE_WORK = 2e9
 
 
 def settle(
-    M: np.ndarray, GR: np.ndarray, H0: np.ndarray, reduce: Any, steps: int
+    H0: np.ndarray, advance: Callable[[np.ndarray], np.ndarray], steps: int
 ) -> tuple[int | None, np.ndarray]:
-    """Iterate ``H[k+1] = [M ↓H[k], GR]`` ([Tang2019, eq. (34b)], constant bounds: no data) for
-    at most ``steps`` steps, exactly as the estimator computes it. Returns the step at which
-    ``H`` repeats an earlier value bitwise (a fixed point or a cycle, found by Brent's method:
-    from then on the recursion repeats itself, so its widths are bounded by those seen) or
-    ``None``, and the summed widths ``2 Σ |H[k]| 1`` of the steps iterated."""
+    """Iterate ``H[k+1] = advance(H[k])`` (the data-independent recursion (34b) exactly as the
+    estimator computes it) for at most ``steps`` steps. Returns the step at which ``H`` repeats
+    an earlier value bitwise (a fixed point or a cycle, found by Brent's method: from then on
+    the recursion repeats itself, so its widths are bounded by those seen) or ``None``, and the
+    summed widths ``2 Σ |H[k]| 1`` of the steps iterated."""
     H, mark, power, lam = H0, H0, 1, 0
     sums = np.empty(steps + 1)
     sums[0] = 2.0 * np.abs(H0).sum()
     for k in range(1, steps + 1):
-        H = np.hstack([M @ reduce(H), GR])
+        H = advance(H)
         sums[k] = 2.0 * np.abs(H).sum()
         lam += 1
         if H.shape == mark.shape and np.array_equal(H, mark):
@@ -72,11 +72,14 @@ class ZonotopeDesign(ObserverDesign):
 
 @dataclass(frozen=True)
 class ZonotopeState(OnlineState):
-    """``x[k] ∈ <p, H>``: centre ``p`` (nx,) and generators ``H`` (nx, ·) of [Tang2019,
-    eq. (34)]."""
+    """``x[k] ∈ <p, H> ⊕ Box(a_L qL + a_x qx)``: centre ``p`` (nx,) and generators ``H``
+    (nx, ·) of [Tang2019, eq. (34)], and the centre's rounding so far, ``qL``, ``qx``
+    (:class:`~ivobs.estimators._observer_rounding.Channels`)."""
 
     p: np.ndarray
     H: np.ndarray
+    qL: float
+    qx: float
 
 
 @register
@@ -88,30 +91,44 @@ class ZonotopeEstimator(ObserverEstimator):
     [Tang2019, eq. (33)] and re-centring ``d ∈ [c - r, c + r]`` (``d = c + diag(r) b``,
     ``|b| <= 1``)::
 
-        p[k+1] = (A - LC) p[k] + B u[k] + L (y[k] - D u[k]) + (E - LF) c[k]          (34a)
+        p[k+1] = A p[k] + B u[k] + E c[k] + L (y[k] - C p[k] - D u[k] - F c[k])     (34a)
         H[k+1] = [ (A - LC) ↓_{q,W} H[k],  (E - LF) diag(r[k]) ]                      (34b)
 
-    ``x[0] ∈ <p0, H0>`` with ``p0 = center(x0)``, ``H0 = diag(radius(x0))``. [Tang2019]'s (34b)
-    writes ``E, -LF`` without the bounds' scaling (it takes ``W = <0, Dw>``, ``V = <0, Dv>``);
-    the generators must be scaled by the bounds, as above. The box of ``x[k]`` is the interval
-    hull ``p[k] ± |H[k]| 1`` [Tang2019, eq. (35), Property 4]. ``↓_{q,W}`` sorts generators by
-    ``hᵀ W h``, keeps the ``q - nx`` largest and encloses the rest in a box
-    (:meth:`ivobs.Zonotope.reduce`), so ``H`` has at most ``q + nd`` columns.
+    ((34a) is [Tang2019]'s ``(A - LC) p + B u + L (y - D u) + (E - LF) c`` written as the
+    observer of eq. (10).) ``x[0] ∈ <p0, H0>`` with ``p0 = center(x0)``, ``H0 =
+    diag(radius(x0))``. [Tang2019]'s (34b) writes ``E, -LF`` without the bounds' scaling (it
+    takes ``W = <0, Dw>``, ``V = <0, Dv>``); the generators must be scaled by the bounds, as
+    above. The box of ``x[k]`` is the interval hull ``p[k] ± |H[k]| 1`` [Tang2019, eq. (35),
+    Property 4]. ``↓_{q,W}`` sorts generators by ``hᵀ W h``, keeps the ``q - nx`` largest and
+    encloses the rest in a box (:meth:`ivobs.Zonotope.reduce`), so ``H`` has at most
+    ``q + nx + nd`` columns (the ``nx`` of a box of rounding, below).
+
+    **Rounding, proven.** (34b) is evaluated with the set verbs, each containing its exact
+    result: the reduction rounds its box up, ``M @ Z`` appends the box of its product's
+    rounding (:meth:`ivobs.Zonotope.linear_map`); the exact ``A - LC`` and ``E - LF`` differ from
+    the float ``M``, ``G`` by ``ΔM``, ``ΔG`` (:mod:`~ivobs.estimators._luenberger`), which
+    appends the box ``ΔM |H| 1 + ΔG r`` (and the rounding of ``G diag r``). The centre's
+    rounding (the observer's, :mod:`~ivobs.estimators._luenberger`) is the ball ``q`` of
+    :class:`~ivobs.sets.rounding.DecayBound` for the powers of ``M``: ``x[k] ∈ <p, H> ⊕
+    Ball∞(q)``, the box ``p ± (|H| 1 + q)`` rounded outward. At a step with another gain (a
+    missing or inconsistent measurement) the ball joins the generators (``[H, q I]``) and that
+    step's rounding is a box of generators too.
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``.
 
     **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
     :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
     (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
-    docs/gains.md. Or ``L=`` explicitly
-    (e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the reachability box is inside this one
-    with the same gain); ``A - LC`` must be Schur.
+    docs/gains.md. Or ``L=`` explicitly (e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the
+    reachability box is inside this one with the same gain); ``A - LC`` must be Schur.
 
-    **Missing samples** (NaN components of ``y[k]``): the gain columns of the missing outputs are
-    zero at that step, ``L_k``, and (34) uses ``A - L_k C``, ``E - L_k F``: the set is still an
-    outer bound. **Time-varying / measurement-dependent bounds:** ``c[k], r[k]`` at each step.
-    **Inconsistent data:** ``y[k]`` must satisfy ``|y - C p - D u - F c| <= |C H| 1 + |F| r``;
-    otherwise it is reported and treated as missing.
+    **Missing samples** (NaN components of ``y[k]``): that step uses the gain of the outputs
+    present (:func:`~ivobs.estimators._luenberger.pattern_gain`: ``A - L_k C`` Schur whenever
+    those outputs detect the plant; designed once per pattern), and (34) uses ``A - L_k C``,
+    ``E - L_k F``: the set is still an outer bound and stays bounded. **Time-varying /
+    measurement-dependent bounds:** ``c[k], r[k]`` at each step. **Inconsistent data:** ``y[k]``
+    is inconsistent when ``|y - C p - D u - F c| > |C H| 1 + |C| 1 q + |F| r`` (proven, its
+    rounding included); it is then reported and treated as missing.
 
     **Interval matrices** (``supports_uncertain``; docs/uncertain.md): the gain is designed for
     the nominal matrices and the matrix uncertainty is a generator term. The plant is the
@@ -121,9 +138,10 @@ class ZonotopeEstimator(ObserverEstimator):
     (:mod:`ivobs.estimators._uncertain`, rounded upwards), and the consistency test widens by
     ``v̄``. Every step is the loop (the term depends on the box).
 
-    **Vectorised run** (constant bounds, no missing sample): ``H[k]`` does not depend on the
-    data, so its radii are computed once (stopping at a fixed point of (34b)) and ``p[k]`` by a
-    vectorised recursion; batches ``(B, T, n)`` share them.
+    **Constant bounds, complete data:** ``H[k]`` does not depend on the data, so its radii are
+    computed once, as far as a run needs them, until (34b) reaches a fixed point
+    (:class:`~ivobs.estimators._luenberger.DataFreeBounds`); ``step()`` takes them from there
+    and :meth:`run` computes ``p[k]`` by a vectorised recursion (batches ``(B, T, n)`` too).
 
     Parameters
     ----------
@@ -188,28 +206,78 @@ class ZonotopeEstimator(ObserverEstimator):
             if not np.allclose(W, W.T) or np.linalg.eigvalsh(0.5 * (W + W.T)).min() <= 0:
                 raise IvobsError("weight: expected a symmetric positive definite matrix W")
         assert self.x0 is not None
-        self._p0 = self.x0.center.copy()
-        self._H0 = np.diag(self.x0.radius)
+        self._p0, h0 = mid_rad(self.x0.lo, self.x0.hi)
+        self._H0 = np.diag(h0)
         observer = self._design_observer(L, gain)
         self.design = ZonotopeDesign(**observer.as_dict(), order=q, weight=W)
         if L is None and gain is None and self._const is not None:
             self._gain_by_width()
-        if q == nx and spectral_radius(np.abs(self._M)) >= 1.0:
+        absM = self._full.absM
+        if q == nx and spectral_radius(absM) >= 1.0:
             raise DesignError(
                 f"order: q = nx = {nx} boxes the set at every step, so the boxes grow like "
-                f"|A - LC|^k, whose spectral radius is {spectral_radius(np.abs(self._M)):.4g} "
+                f"|A - LC|^k, whose spectral radius is {spectral_radius(absM):.4g} "
                 ">= 1 (they would diverge); use order > nx (default 10 nx)"
             )
+        self._free = None
         if self._const is not None:
             self._check_bounded()
-        self._fused = self._fused_observer()
-        self._gens: GeneratorSequence | None = None
-        if self._fused is not None and self._const is not None:  # (34b) is data-independent
-            C, GR = self._mats[2], self._G * self._const[1]
-            self._gens = GeneratorSequence(
-                self._H0.copy(), self._M, GR, C, self._absF @ self._const[1], self._reduce
+            self._free = DataFreeBounds(
+                self._H0, self._free_step, self._p0, keep=SEQUENCE_FLOATS, same=_same
             )
 
+    # -- (34b) --------------------------------------------------------------------------------
+    def _predict(
+        self,
+        H: np.ndarray,
+        gain: Gain,
+        r: np.ndarray,
+        rad: np.ndarray,
+        rounding: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """``H[k+1] = [M_k ↓_{q,W} H, G_k diag r]`` [Tang2019, eq. (34b)] with the boxes of its
+        rounding (class docstring); ``rad >= |H| 1`` (the bound of the error the matrices' own
+        difference acts on); ``rounding``: generators of the centre's rounding at this step
+        (``[L_k diag e_ν, diag ε]``), appended."""
+        reduced = Zonotope._trusted(np.zeros(H.shape[0]), H).reduce(
+            self.design.order, self.design.weight
+        )
+        image = gain.M @ reduced  # M ↓H and the box of its rounding
+        GR = gain.G * r
+        n = H.shape[0] + r.shape[0]
+        if rounding is not None:
+            GR = np.hstack([GR, rounding])
+        box = gain.dM @ rad + gain.dG @ r + product_error(np.abs(GR).sum(axis=1), GR.shape[1])
+        return np.hstack([image.G, box_generators(upper(box, n + 3)), GR])
+
+    def _output_radius(self, H: np.ndarray, rad: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """``>= |C H| 1 + |F| r``: the radius of ``y - C p - D u - F c`` (rounding included)."""
+        C = self._mats[2]
+        CH = C @ H
+        s = np.abs(CH).sum(axis=1) + product_error(np.abs(C) @ rad, C.shape[1])
+        out: np.ndarray = upper(s + self._absF @ r, CH.shape[1] + r.shape[0] + 2)
+        return out
+
+    def _free_step(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, Any]:
+        """One step of (34b) without data (constant bounds, the full gain): the radius
+        ``|H| 1``, its image in ``y``, and ``H[k+1]`` (None at a fixed point)."""
+        r = self._const[1]  # type: ignore[index]
+        rad = upper(np.abs(H).sum(axis=1), H.shape[1])
+        H_next = self._predict(H, self._full, r, rad)
+        return rad, self._output_radius(H, rad, r), 0.0, None if _same(H_next, H) else H_next
+
+    def _free_radii(self, T: int) -> np.ndarray:
+        """``|H[k]| 1`` of (34b) without data for ``k < T`` (design checks)."""
+        H, out = self._H0, np.empty((T, self.sys.nx))
+        for k in range(T):
+            out[k], _, _, H_next = self._free_step(H)
+            if H_next is None:
+                out[k:] = out[k]
+                break
+            H = H_next
+        return out
+
+    # -- design checks --------------------------------------------------------------------------
     def _gain_by_width(self) -> None:
         """Default gain: the radius gain minimises the box of Algorithm 1, which the zonotope
         reaches only up to its reduction; when ``|A - LC|`` is not Schur the boxed part of the
@@ -217,194 +285,101 @@ class ZonotopeEstimator(ObserverEstimator):
         the radius gain and the H∞ gain are both run through the data-independent recursion
         (34b) for :data:`WIDTH_STEPS` steps and the one with the smaller mean radius over the
         second half is kept (``design.gain`` says which)."""
-        C, r, T = self._mats[2], self._const[1], WIDTH_STEPS  # type: ignore[index]
+        T = WIDTH_STEPS
         work = T * self.sys.nx**2 * (self.design.order + self.sys.nd)
-        if spectral_radius(np.abs(self._M)) < 1.0 or work > SETTLE_WORK:
+        if spectral_radius(self._full.absM) < 1.0 or work > SETTLE_WORK:
             return
         widths = {}
         for gain in ("hinf", "radius"):  # the radius gain last: kept on a tie
             observer = self._design_observer(None, gain)  # cached: no second design
             self.design = replace(self.design, **observer.as_dict())
-            widths[gain] = float(self._generator_radii(C, self._G * r, T)[0][T // 2 :].mean())
+            widths[gain] = float(self._free_radii(T)[T // 2 :].mean())
         if widths["hinf"] < widths["radius"]:
             observer = self._design_observer(None, "hinf")
             self.design = replace(self.design, **observer.as_dict())
 
     def _check_bounded(self) -> None:
         """Refuse an order whose reduced recursion (34b) is not shown bounded (see ``order``)."""
-        M, GR = self._M, self._G * self._const[1]  # type: ignore[index]
+        M, r = self._full.M, self._const[1]  # type: ignore[index]
         nx, q = self.sys.nx, self.design.order
         rho = spectral_radius(M)
         slow = int(30 * 37 / -np.log(rho)) if 0.0 < rho < 1.0 else 0
         steps = min(max(SETTLE_STEPS, slow), 20 * SETTLE_STEPS)
-        if spectral_radius(np.abs(M)) < 1.0 or steps * nx * nx * (q + GR.shape[1]) > SETTLE_WORK:
+        absM = self._full.absM
+        if spectral_radius(absM) < 1.0 or steps * nx * nx * (q + r.shape[0]) > SETTLE_WORK:
             return  # |A - LC| Schur: bounded for every order (docs); too large: not checked
-        at, sums = settle(M, GR, self._H0, self._reduce, steps)
+        at, sums = settle(self._H0, self._advance_free, steps)
         if at is not None or sums[-1] <= sums[steps // 4 : steps // 2 + 1].max() * (1.0 + 1e-9):
             return
         hint = ""
-        for q2 in range(q + 1, min(q + 8, ORDER_PER_STATE * nx) + 1):
-            at2, _ = settle(
-                M, GR, self._H0, partial(_reduce, design=replace(self.design, order=q2)), steps
-            )
-            if at2 is not None:
-                hint = f" (order = {q2} settles at k = {at2})"
-                break
+        design = self.design
+        try:
+            for q2 in range(q + 1, min(q + 8, ORDER_PER_STATE * nx) + 1):
+                self.design = replace(design, order=q2)
+                at2, _ = settle(self._H0, self._advance_free, steps)
+                if at2 is not None:
+                    hint = f" (order = {q2} settles at k = {at2})"
+                    break
+        finally:
+            self.design = design
         k50 = min(50, steps)
         raise DesignError(
             f"order: q = {q} keeps {q - nx} generator(s) of the zonotope and boxes the others at "
             f"every step; the boxed part is propagated like |A - LC| (spectral radius "
-            f"{spectral_radius(np.abs(M)):.4g} >= 1), and iterating the reduced recursion "
+            f"{spectral_radius(absM):.4g} >= 1), and iterating the reduced recursion "
             f"(34b) (it does not depend on the data) for {steps} steps it neither settled nor "
             f"stopped growing: summed width {sums[k50]:.4g} at k = {k50}, "
             f"{sums[steps // 2]:.4g} at k = {steps // 2}, {sums[-1]:.4g} at k = {steps}; ivobs "
             f"cannot show that the boxes stay bounded: use a larger order{hint}"
         )
 
-    def _reduce(self, H: np.ndarray) -> np.ndarray:
-        """``↓_{q,W} H`` [Tang2019, Remark 2]."""
-        return _reduce(H, self.design)
-
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ZonotopeState:
-        H0 = self._gens.seq[0][0] if self._gens else self._H0.copy()  # never modified: shared
-        return ZonotopeState(p=self._p0.copy(), H=H0)
+        H0 = self._free.state(0) if self._free is not None else self._H0.copy()
+        return ZonotopeState(p=self._p0.copy(), H=H0, qL=0.0, qx=0.0)
 
     def _step(
         self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[ZonotopeState]:
-        if self._fused is not None:
-            fast = self._fast_step(state, u_k, y_k)
-            if fast is not None:
-                return fast
-        p, H = state.p, state.H
-        rad = np.abs(H).sum(axis=1)
-        lo, hi = p - rad, p + rad
-        A, B, C, _, E, _ = self._mats
-        c, r = self._bounds(state.k, y_k, lo, hi, u_k)
-        obs = ~np.isnan(y_k)
-        p_full, innov = self._innovation(p, u_k, y_k, obs, c)
-        inconsistent = False
-        if obs.any():
-            bound = np.abs(C @ H).sum(axis=1) + self._absF @ r
-            if not consistent(innov, bound, y_k, obs):
-                inconsistent = True
-                obs, p_full = np.zeros_like(obs), None
-        Lk, Mk, Gk = self._gain_at(obs)
-        if p_full is not None:  # (34a), complete y: the product of the fast step
-            p_next = p_full
-        else:  # (34a) without the missing outputs
-            p_next = A @ p + B @ u_k + E @ c + Lk @ np.where(obs, innov, 0.0)
-        H_next = np.hstack([Mk @ self._reduce(H), Gk * r])  # (34b)
-        return Step(replace(state, p=p_next, H=H_next), lo, hi, inconsistent)
-
-    def _innovation(
-        self, p: np.ndarray, u_k: np.ndarray, y_k: np.ndarray, obs: np.ndarray, c: np.ndarray
-    ) -> tuple[np.ndarray | None, np.ndarray]:
-        """``(p+, ν)``: (34a) and the innovation ``ν = y − C p − D u − F c`` of a complete
-        ``y`` by the one product of :meth:`_fused_observer` (constant bounds), as the fast
-        step; else ``(None, ν)`` with missing outputs read as 0."""
-        _, _, C, D, _, F = self._mats
-        if self._fused is not None and obs.all():
-            O, o = self._fused
-            out = O.dot(np.concatenate((p, u_k, y_k)))
-            out += o
-            return out[: p.shape[0]], out[p.shape[0] :]
-        return None, np.where(obs, y_k, 0.0) - C @ p - D @ u_k - F @ c
-
-    def _fast_step(
-        self, state: ZonotopeState, u_k: np.ndarray, y_k: np.ndarray
-    ) -> Step[ZonotopeState] | None:
-        """:meth:`_step` with constant bounds and a complete ``y[k]`` inside its bounds: the
-        generators from the kept sequence (:class:`GeneratorSequence`), (34a) as one product
-        (:meth:`_fused_observer`); None (the general step) otherwise."""
-        gen = None if self._gens is None else self._gens.at(state.k, state.H)
-        if gen is None:
-            return None
-        rad, ybound, H_next = gen
-        O, o = self._fused  # type: ignore[misc]
-        p = state.p
+        p, H, k, ch = state.p, state.H, state.k, self._channels
+        Hk = self._free.state(k) if self._free is not None else None  # H[k] without data
+        free = Hk is not None and (Hk is H or _same(Hk, H))  # (restored: the same values)
         nx = p.shape[0]
-        out = O.dot(np.concatenate((p, u_k, y_k)))  # as _innovation
-        out += o
-        excess = np.abs(out[nx:])  # |y - C p - D u - F c| - (|C H| 1 + |F| r)
-        excess -= ybound
-        for v in excess.tolist():
-            if v > 0.0 or v != v:  # maybe inconsistent (or NaN): the general step decides
-                return None
-        return Step(evolve(state, p=out[:nx], H=H_next), p - rad, p + rad, False)
+        if free:  # [|H| 1; |C H| 1 + |F| r] of the data-free sequence, and the rounding so far
+            stacked = self._free.at(k)[0]  # type: ignore[union-attr]
+            radH, (rad, ybound) = (
+                stacked[:nx],
+                np.split(ch.widen(stacked, state.qL, state.qx), [nx]),
+            )
+            c, r = self._const  # type: ignore[misc]
+        else:
+            radH = upper(np.abs(H).sum(axis=1), H.shape[1])
+            rad = ch.widen(radH, state.qL, state.qx)  # [Tang2019, eq. (35)], rounding too
+            c, r = self._bounds(k, y_k, *enclose(p, rad), u_k)
+            ybound = ch.widen(np.concatenate([radH, self._output_radius(H, radH, r)]),
+                              state.qL, state.qx)[nx:]  # fmt: skip
+        lo, hi = enclose(p, rad)
+        p_next, eps, e_nu, inconsistent, gain = self._observe(p, u_k, y_k, c, ybound)
+        if gain is self._full:  # (34a) with L; its rounding joins q_L, q_x
+            H_next = self._free.state(k + 1) if free else None  # type: ignore[union-attr]
+            if H_next is None:
+                H_next = self._predict(H, gain, r, radH)  # (34b)
+            qL = ch.L.next(state.qL, max(e_nu.tolist()))
+            sigma = (max(eps.tolist()) + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+            new = evolve(state, p=p_next, H=H_next, qL=qL, qx=ch.x.next(state.qx, sigma))
+            return Step(new, lo, hi, inconsistent)
+        # another gain: the rounding so far becomes a box of generators, this step's too
+        Hq = np.hstack([H, box_generators(ch.widen(np.zeros(nx), state.qL, state.qx))])
+        H_next = self._predict(Hq, gain, r, rad, np.hstack([gain.L * e_nu, np.diag(eps)]))
+        new = evolve(state, p=p_next, H=H_next, qL=0.0, qx=0.0)
+        return Step(new, lo, hi, inconsistent)
 
-    # -- offline, vectorised --------------------------------------------------------------------
-    def _run(
-        self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
-    ) -> tuple[np.ndarray, ...] | None:
-        if self._const is None or np.isnan(y).any():
-            return None
-        c, r = self._const
-        rad, crad = self._generator_radii(self._mats[2], self._G * r, y.shape[-2])
-        yrad = crad + self._absF @ r  # |C H| 1 + |F| r: consistency of y
-        return observer_bounds(self._M, self._mats, self._L, c, self._p0, u, y, rad, yrad)
-
-    def _generator_radii(
-        self, C: np.ndarray, GR: np.ndarray, T: int
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``|H[k]| 1`` and ``|C H[k]| 1`` for ``k < T``: data-independent for constant bounds
-        ([Tang2019, eq. (34b)]). A fixed point ``H[k+1] = H[k]`` ends the loop early."""
-        rad = np.empty((T, self.sys.nx))
-        crad = np.empty((T, self.sys.ny))
-        H = self._H0.copy()
-        for k in range(T):
-            rad[k] = np.abs(H).sum(axis=1)
-            crad[k] = np.abs(C @ H).sum(axis=1)
-            H_next = np.hstack([self._M @ self._reduce(H), GR])
-            if H_next.shape == H.shape and np.array_equal(H_next, H):
-                rad[k + 1 :] = rad[k]
-                crad[k + 1 :] = crad[k]
-                break
-            H = H_next
-        return rad, crad
+    def _advance_free(self, H: np.ndarray) -> np.ndarray:
+        """(34b) without data, for :func:`settle` (a fixed point maps to itself)."""
+        H_next = self._free_step(H)[3]
+        return H if H_next is None else H_next
 
 
-class GeneratorSequence:
-    """The generators ``H[k]`` of (34b) from ``H0`` with constant bounds and complete data (they
-    do not depend on the data), each with ``|H| 1`` and ``|C H| 1 + |F| r``, computed once by
-    ``step()`` and kept up to their fixed point (:data:`SEQUENCE_FLOATS` at most)."""
-
-    def __init__(
-        self, H0: np.ndarray, M: np.ndarray, GR: np.ndarray, C: np.ndarray, Fr: np.ndarray,
-        reduce: Callable[[np.ndarray], np.ndarray],
-    ):  # fmt: skip
-        self.M, self.GR, self.C, self.Fr, self.reduce = M, GR, C, Fr, reduce
-        self.seq = [self.entry(H0)]
-        self.fixed = False
-
-    def entry(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return H, np.abs(H).sum(axis=1), np.abs(self.C @ H).sum(axis=1) + self.Fr
-
-    def at(self, k: int, H: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """``(|H| 1, |C H| 1 + |F| r, H[k+1])`` when ``H`` is this sequence's ``H[k]`` (the
-        same object), else None."""
-        seq = self.seq
-        j = min(k, len(seq) - 1)
-        if seq[j][0] is not H:
-            return None
-        _, rad, ybound = seq[j]
-        if j + 1 < len(seq):
-            return rad, ybound, seq[j + 1][0]
-        if self.fixed:
-            return rad, ybound, H
-        if j != k:
-            return None
-        H_next = np.hstack([self.M @ self.reduce(H), self.GR])  # (34b), as _step
-        if H_next.shape == H.shape and np.array_equal(H_next, H):
-            self.fixed = True
-            return rad, ybound, H
-        if len(seq) * H.size < SEQUENCE_FLOATS:
-            seq.append(self.entry(H_next))
-        return rad, ybound, H_next
-
-
-def _reduce(H: np.ndarray, design: ZonotopeDesign) -> np.ndarray:
-    """``↓_{q,W} H`` [Tang2019, Remark 2] with the design's ``q`` and ``W``."""
-    z = Zonotope._trusted(np.zeros(H.shape[0]), H)
-    return z.reduce(design.order, design.weight).G
+def _same(H1: np.ndarray, H2: np.ndarray) -> bool:
+    """The same generators, bit for bit (the recursion (34b) then repeats itself)."""
+    return H1.shape == H2.shape and bool(np.array_equal(H1, H2))

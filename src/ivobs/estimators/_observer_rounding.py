@@ -1,0 +1,217 @@
+"""The proven bounds of the rounding of the Luenberger observer behind ``reachability`` and
+``zonotope`` (the proof: :mod:`ivobs.estimators._luenberger`).
+
+* :func:`difference`: a float matrix ``M = fl(A - L C)`` and the bound of its difference to the
+  exact ``A - L C``;
+* :func:`rounding_matrix`: ``W``, the rounding of one observer step as a linear function of the
+  magnitudes it involves ([Higham2002, eq. (3.5)]);
+* :func:`certified_norms`, :func:`decay_of`, :func:`envelope`: proven bounds of the powers of the
+  float ``M`` (``‖M^i‖∞``, ``|M^i X| 1 <= a λ^i``), computed from float powers and the bounds of
+  their own rounding;
+* :class:`Channels`: where the observer's rounding goes while ``M`` is the same at every step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DesignError
+from ..linalg import UNIT_ROUNDOFF, gamma
+from ..sets.rounding import ETA, DecayBound, product_error, up, upper
+
+__all__ = [
+    "Channels",
+    "certified_norms",
+    "decay_of",
+    "difference",
+    "envelope",
+    "rounding_matrix",
+]
+
+THETAS = (0.5, 0.25, 0.1)
+"""Decay targets ``θ`` tried for the rate ``λ`` of the envelopes (:func:`decay_of`): the one
+with the smallest sum ``(a_L + a_x) / (1 - λ)`` is kept."""
+
+TAIL = 2.0**-20
+"""An envelope (:func:`envelope`) stops at the power whose tail is below this fraction of it."""
+
+MAX_POWERS = 2000
+"""Most powers of ``M`` an envelope is computed over: beyond, the tail bound of the last one
+holds (wider for a slowly converging gain: about ``c`` times the first powers)."""
+
+
+def difference(A: np.ndarray, L: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, ΔM)``: ``M = fl(A - fl(L C))`` and ``ΔM >= |A - L C - M|`` exactly: the product's
+    error (``product_error(|L| |C|)``) plus the subtraction's (``u |M|``, doubled to cover the
+    rounding of this sum), rounded up."""
+    M = A - L @ C
+    dM = up(product_error(np.abs(L) @ np.abs(C), L.shape[1]) + 2.0 * UNIT_ROUNDOFF * np.abs(M))
+    return M, dM
+
+
+def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np.ndarray:
+    """``N_0, ..., N_K``: proven ``‖Mⁱ‖∞ <= N_i`` for the exact powers of the float matrix
+    ``M``, up to the first ``N_K <= θ``.
+
+    ``P_{i+1} = fl(M P_i)`` differs from ``M^{i+1}`` by ``Σ_{j<=i} M^{i-j} E_j``, ``E_j =
+    M P_j - fl(M P_j)``, ``‖E_j‖∞ <= e_j = ‖product_error(|M| |P_j|)‖∞``; so, from the bounds
+    already proven for the lower powers, ``‖M^i‖∞ <= N_i = ‖P_i‖∞ + Σ_{j<i} N_{i-1-j} e_j``
+    (rounded up). Unlike enclosures propagated by ``|M|``, this grows only with the true
+    powers, also when ``|M|`` is far from Schur (large gains). Raises
+    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within ``max_power`` powers."""
+    n = M.shape[0]
+    absM = np.abs(M)
+    P = np.eye(n)
+    norms, errs = np.empty(max_power + 1), np.empty(max_power)
+    norms[0] = 1.0
+    for i in range(1, max_power + 1):
+        errs[i - 1] = float(product_error(absM @ np.abs(P).sum(axis=1), n).max())
+        P = M @ P
+        drift = float(np.dot(norms[i - 1 :: -1] if i > 1 else norms[:1], errs[:i]))
+        N = float(upper(float(upper(np.abs(P).sum(axis=1).max(), n)) + drift, i + 2))
+        norms[i] = N
+        if not N < 1e150:
+            break
+        if N <= theta:
+            return norms[: i + 1].copy()
+    raise DesignError(
+        "the rounding of the observer cannot be bounded: the powers of A - LC do not "
+        f"certifiably decay (‖M^i‖∞ after {i} powers: {norms[i]:.3g}); the matrix is not Schur "
+        "stable or too close to the unit circle"
+    )
+
+
+def decay_of(norms: np.ndarray, theta: float) -> DecayBound | None:
+    """``‖Mⁱ‖∞ <= c λⁱ`` for every ``i`` from :func:`certified_norms`: the first ``K`` with
+    ``N_K <= θ`` gives ``λ = θ^{1/K}`` and ``c = max_{j<K} N_j / λ^j`` (``i = q K + j``:
+    ``‖M^i‖ <= θ^q N_j``); None when no ``N_K <= θ``."""
+    reached = np.flatnonzero(norms <= theta)
+    if not reached.size or norms.shape[0] == 1:
+        return DecayBound(1.0, 0.0) if norms.shape[0] == 1 else None
+    K = int(max(reached[0], 1))
+    lam = float(up(theta ** (1.0 / K) * (1.0 + 1e-12)))
+    if not lam < 1.0:
+        return None
+    c = float(up(float(np.max(norms[:K] / lam ** np.arange(K))) * (1.0 + 1e-12)))
+    return DecayBound(max(c, 1.0), lam)
+
+
+def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
+    """``a`` with ``|M^i X| 1 <= a λ^i`` for every ``i >= 0`` (exact powers of the float ``M``,
+    ``λ = decay.lam``).
+
+    ``P_{i+1} = fl(M P_i)``, ``P_0 = X``, differs from ``M^i X`` by ``Σ_{j<i} M^{i-1-j} E_j``
+    (``|E_j| 1 <= product_error(|M| |P_j| 1)``), at most ``c S_i`` with ``S_{i+1} = λ S_i +
+    ‖|E_i| 1‖∞`` (``‖M^m‖∞ <= c λ^m``, :func:`decay_of`). So ``κ_i = |P_i| 1 + c S_i`` bounds
+    ``|M^i X| 1``, ``a = max_i κ_i / λ^i``; beyond the last power ``K`` computed,
+    ``|M^j X| 1 <= c λ^{j-K} ‖κ_K‖∞``, which the maximum includes; ``K`` is the first power
+    whose own part of that tail is below :data:`TAIL` of ``a`` (at most :data:`MAX_POWERS`).
+    Everything rounded up."""
+    n, m = X.shape
+    lam, c = decay.lam, decay.c
+    absM = np.abs(M)
+    inv = math.nextafter(1.0 / lam, math.inf) if lam > 0 else math.inf
+    P, S, scale = X.astype(float), 0.0, 1.0  # scale >= λ^{-i}
+    a = np.zeros(n)
+    for _ in range(MAX_POWERS):
+        rows = upper(np.abs(P).sum(axis=1), m)
+        kappa = upper(rows + c * S, 2)
+        a = np.maximum(a, up(kappa * scale))
+        tail = float(up(c * float(kappa.max()) * scale))
+        # stop once the powers themselves are negligible (the rounding part of the tail, c S_i
+        # λ^{-i}, no longer decreases: it is kept, at about γ c² of a)
+        if c * float(rows.max()) * scale <= TAIL * float(a.max()) or not scale < 1e300:
+            break
+        S = (lam * S + float(product_error(absM @ rows, n).max())) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+        P = M @ P
+        scale = math.nextafter(scale * inv, math.inf)
+    out: np.ndarray = np.maximum(a, tail)
+    return out
+
+
+@dataclass(frozen=True)
+class Channels:
+    """Where the observer's rounding goes while ``M`` is the same at every step (module
+    docstring): ``|M^i L| 1 <= a_L λ^i``, ``|M^i| 1 <= a_x λ^i`` (:func:`envelope`); the rounding
+    of all steps so far is within ``a_L q_L + a_x q_x``. ``L``, ``x``: the scalar recursions of
+    ``q_L`` (rate ``λ``) and ``q_x`` (rate ``λ + β_x``: ``ΔM`` acting on that part, ``β_x =
+    ‖ΔM a_x‖∞``; ``β_L = ‖ΔM a_L‖∞`` multiplies ``q_L`` into ``q_x``'s input); ``cL``, ``cx``:
+    ``|C| a_L``, ``|C| a_x``, their image in ``y``; ``K = [[a_L, a_x], [c_L, c_x]]``."""
+
+    aL: np.ndarray
+    ax: np.ndarray
+    cL: np.ndarray
+    cx: np.ndarray
+    K: np.ndarray
+    betaL: float
+    L: DecayBound
+    x: DecayBound
+
+    @classmethod
+    def of(cls, M: np.ndarray, dM: np.ndarray, L: np.ndarray, C: np.ndarray) -> Channels:
+        """The envelopes for ``M`` (its rate chosen among :data:`THETAS`)."""
+        best: tuple[float, np.ndarray, np.ndarray, float] | None = None
+        norms = certified_norms(M, min(THETAS)) if M.shape[0] else np.ones(1)
+        for theta in THETAS:
+            decay = decay_of(norms, theta)
+            if decay is None:
+                continue
+            aL, ax = envelope(M, L, decay), envelope(M, np.eye(M.shape[0]), decay)
+            score = float(aL.max() + ax.max()) / (1.0 - decay.lam)
+            if best is None or score < best[0]:
+                best = (score, aL, ax, decay.lam)
+        assert best is not None
+        _, aL, ax, lam = best
+        n = M.shape[0]
+        betaL = float(upper(dM @ aL, n).max())
+        lam_x = float(up(lam + float(upper(dM @ ax, n).max())))
+        if not lam_x < 1.0:
+            raise DesignError(
+                "the rounding of the observer cannot be bounded: the decay rate of A - LC with "
+                f"its rounding is {lam_x:.17g} >= 1"
+            )
+        cL, cx = upper(np.abs(C) @ aL, n), upper(np.abs(C) @ ax, n)
+        K = np.vstack([np.column_stack([aL, ax]), np.column_stack([cL, cx])])
+        return cls(aL, ax, cL, cx, K, betaL, DecayBound(1.0, lam), DecayBound(1.0, lam_x))
+
+    def widen(self, s: np.ndarray, qL: float, qx: float) -> np.ndarray:
+        """``>= s + K [q_L; q_x]`` for ``s = [ρ; ȳ]`` (or its first rows, ``ρ``)."""
+        out: np.ndarray = upper(s + self.K[: s.shape[0]] @ np.array((qL, qx)), 4)
+        return out
+
+
+def rounding_matrix(mats: tuple[np.ndarray, ...], L: np.ndarray, c_used: np.ndarray) -> np.ndarray:
+    """``W`` with ``[ε; e_ν] <= fl(W z)``, ``z = [|x̂|; |u|; |c|; |y|; |ν|; 1]``, for one step
+    of the observer with gain ``L`` (module docstring: ``ε`` bounds the rounding of ``x̂+`` given
+    ``fl(ν)``, ``e_ν`` that of ``ν``, which enters ``x̂+`` through ``L``).
+
+    Row ``i`` of ``ν = y - fl([C D F] [x̂; u; c])`` sums ``n_i`` products and ``y_i``, row ``i``
+    of ``x̂+ = fl([A B E] [x̂; u; c]) + fl(L fl(ν))`` the products of both: ``γ_{n_i}`` of the sum
+    of their magnitudes bounds the error ([Higham2002, eq. (3.5)], any order of evaluation),
+    ``n_i`` counting the nonzero coefficients only (a zero product adds no error; ``c_used``:
+    the components of ``c`` that may be nonzero), plus ``n_i η`` of underflow. ``W``'s entries
+    are rounded up and enlarged by the rounding of the product ``W z`` itself."""
+    A, B, C, D, E, F = mats
+    nx, ny = A.shape[0], C.shape[0]
+    aL = np.abs(L)
+    C_nu = np.hstack([np.abs(C), np.abs(D), np.abs(F) * c_used, np.eye(ny)])  # |y| last
+    n_nu = np.count_nonzero(C_nu, axis=1)
+    W_nu = np.hstack([C_nu, np.zeros((ny, ny))]) * gamma_rows(n_nu)
+    W_nu = np.hstack([W_nu, (n_nu + 1)[:, None] * ETA])
+    C_x = np.hstack([np.abs(A), np.abs(B), np.abs(E) * c_used, np.zeros((nx, ny)), aL])
+    n_x = np.count_nonzero(C_x, axis=1) + 1
+    W_x = np.hstack([C_x * gamma_rows(n_x), (n_x + 1)[:, None] * ETA])
+    W = upper(np.vstack([W_x, W_nu]), 4)
+    m = W.shape[1]  # fl(W z) >= (1 - γ_m) W z - m η
+    W *= 1.0 + 2.0 * gamma(m + 2)
+    W[:, -1] += (m + 2) * ETA
+    out: np.ndarray = up(W)
+    return out
+
+
+def gamma_rows(n: np.ndarray) -> np.ndarray:
+    """``γ_{n_i}`` ([Higham2002, Lemma 3.1]) as a column, one per row count ``n_i``."""
+    return np.array([gamma(int(k)) for k in n])[:, None]
