@@ -17,7 +17,7 @@ from ...sets.rounding import enclose
 from .. import register
 from ..base import Estimator, check_size
 from ..state import OnlineState, Step, evolve
-from . import batch
+from .batch import RecordWindows
 from .design import (
     PAPER_WINDOW_STATES,
     FixedTimeDesign,
@@ -36,11 +36,13 @@ __all__ = ["FixedTimeEstimator", "FixedTimeState"]
 @dataclass(frozen=True, kw_only=True)
 class FixedTimeState(OnlineState):
     """The last ``2 s + 2`` samples, most recent first (row ``i`` holds step ``k - 1 - i``
-    before the step of ``k``): ``z = [u; y; c]`` as recorded (NaN where ``y`` is missing, and
-    in the rows before step 0), ``c`` the centre and ``r`` the radii of the bounds of ``d``;
-    and the box ``[lo, hi]`` of step ``k - 1`` (meaningful once ``has_box``)."""
+    before the step of ``k``): ``z = [u; y; c]`` (``y`` zero where missing, ``c`` the centre of
+    the bounds of ``d``), ``ymiss`` (1 where ``y`` is missing, and in the rows before step 0),
+    ``r`` (the radii of the bounds of ``d``); and the box ``[lo, hi]`` of step ``k - 1``
+    (meaningful once ``has_box``)."""
 
     z: np.ndarray
+    ymiss: np.ndarray
     r: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
@@ -199,8 +201,9 @@ class FixedTimeEstimator(Estimator):
         """Samples kept: the longest window, extended back through missing samples."""
         des = self._designer
         self._const = (des.centre, des.radius) if des.const_bounds else None
-        self._ycols = slice(sys.nu, sys.nu + sys.ny)
-        self._nz = self._designer.nz
+        self._records = None
+        if self._complete is not None:  # time-invariant: the whole-record path
+            self._records = RecordWindows(self._gains, self._complete, self.x0, self.memory)
 
     def _initial_design(self, choose: bool) -> FixedTimeDesign:
         """The design of the window ``0..s``; for a time-invariant system without a given ``L``
@@ -232,7 +235,8 @@ class FixedTimeEstimator(Estimator):
         sys, n = self.sys, self.memory
         r = self._const[1] if self._const is not None else np.zeros(sys.nd)
         return FixedTimeState(
-            z=np.full((n, self._designer.nz), np.nan),
+            z=np.zeros((n, self._designer.nz)),
+            ymiss=np.ones((n, sys.ny)),
             r=np.tile(r, (n, 1)),
             lo=np.zeros(sys.nx),
             hi=np.zeros(sys.nx),
@@ -247,40 +251,40 @@ class FixedTimeEstimator(Estimator):
         (:func:`.window.combine`)."""
         k, nx, const = state.k, self.sys.nx, self._const
         c, r = const if const is not None else self._bounds(k, y_k)  # d_k ∈ [c - r, c + r]
+        miss = np.isnan(y_k)
         # the samples k, k-1, … (most recent first), each z = [u; y; c]
-        z = np.concatenate((u_k, y_k, c[: self._designer.nc], state.z.ravel()[: -self._nz]))
-        z = z.reshape(state.z.shape)
+        z = np.concatenate((u_k, np.where(miss, 0.0, y_k), c[: self._designer.nc], state.z.ravel()))
+        z = z[: state.z.size].reshape(state.z.shape)
+        ymiss = np.concatenate((miss[None], state.ymiss[:-1]))
         rr = state.r if const is not None else np.concatenate((r[None], state.r[:-1]))
-        gain, missing = self._window(k, z)
+        gain, missing = self._window(k, ymiss)
         bad: Any = False
         if gain is not None:
-            w, n = z[: gain.lags].ravel(), gain.lags
-            if missing:  # (their columns of the gain are zero)
-                w = np.where(np.isnan(w), 0.0, w)
+            n = gain.lags
+            w = z[:n].ravel()
             lo, hi, bad = evaluate(gain, w, None if const else rr[:n].ravel())  # eqs. (7), (11)
         else:
             lo = hi = np.full(nx, np.nan)  # (no box)
         if gain is None or bad or missing:
             lo, hi, bad = combine(lo, hi, bad, *self._prediction(state, k))
             if k >= self.s and np.isnan(lo).any():
-                rank = self._gains.get(k, np.isnan(z[: self.s + 1, self._ycols])).rank
+                rank = self._gains.get(k, ymiss[: self.s + 1] > 0).rank
                 raise no_box_error(nx, self.s, k, rank)
         if gain is not None or not np.isnan(lo).any():
-            new = evolve(state, z=z, r=rr, lo=lo, hi=hi, has_box=True)
+            new = evolve(state, z=z, ymiss=ymiss, r=rr, lo=lo, hi=hi, has_box=True)
         else:  # no box yet (k < s without x0)
-            new = evolve(state, z=z, r=rr)
+            new = evolve(state, z=z, ymiss=ymiss, r=rr)
         return Step(new, lo, hi, bool(bad))
 
-    def _window(self, k: int, z: np.ndarray) -> tuple[WindowGain | None, bool]:
+    def _window(self, k: int, ymiss: np.ndarray) -> tuple[WindowGain | None, bool]:
         """The gain of the window ending at ``k``: the complete window of ``s + 1`` samples, or,
         where samples are missing, the shortest window (``s + 1`` samples and more, back to
         step 0) whose available samples determine the state (None if there is none); and
         whether it misses samples."""
         s = self.s
-        total = z[: s + 1].sum()
-        if total == total and self._complete is not None:  # (no NaN: no sample missing)
+        if self._complete is not None and not ymiss[: s + 1].any():
             return self._complete, False
-        missing = np.isnan(z[:, self._ycols])
+        missing = ymiss > 0
         if k < s:
             return None, bool(missing[: k + 1].any())
         for lags in range(s + 1, min(self.memory, k + 1) + 1):
@@ -318,6 +322,7 @@ class FixedTimeEstimator(Estimator):
     def _run(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Every window of the record (or batch) at once (:func:`.batch.run`); None (the loop
-        over :meth:`_step`) for time-varying systems and bounds that depend on ``y``."""
-        return batch.run(self, u, y)
+        """Every window of the record (or batch) at once (:class:`.batch.RecordWindows`); None
+        (the loop over :meth:`_step`) for time-varying systems and bounds that depend on
+        ``y``."""
+        return None if self._records is None else self._records.run(u, y)
