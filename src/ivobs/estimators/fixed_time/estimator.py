@@ -130,13 +130,13 @@ class FixedTimeEstimator(Estimator):
     (:func:`ivobs.design.certify.window_bound`, [Higham2002, Lemma 3.1] in extended precision):
     in exact arithmetic ``|x_k - G w| <= HP 𝐫 + c' ‖w‖_∞`` row by row, ``HP`` the certified
     ``|T Md|`` (:meth:`.gains.WindowGains._certify`). (2) The evaluation ``fl(G w)`` and the
-    rounding of the recorded ``y`` add ``γ_{n+1} ‖G_i‖₁ ‖w‖_∞`` and an underflow term; the
-    radius is evaluated with its own rounding bounded and the bounds are rounded outward
-    (:func:`.gains.finish`). (3) The parity test uses the same proven radius, so an admissible
-    sample is never flagged. (4) The prediction and the intersection are
-    :func:`ivobs.sets.image_bounds` (rounding included) and ``max``/``min`` (exact). The box kept
-    for the next step is the box returned. ``proven_rounding = True``: the base class adds no
-    margin.
+    rounding of the recorded ``y`` add ``γ_{n+2} ‖G_i‖₁ ‖w‖_∞`` and an underflow term; the
+    constants of the radius are enlarged so that its own rounding and that of ``x̂ ∓ rad`` are
+    covered (:func:`.gains.finish`: the bounds contain ``x_k`` as computed). (3) The parity test
+    uses the same proven radius, so an admissible sample is never flagged. (4) The prediction
+    and the intersection are :func:`ivobs.sets.image_bounds` (rounding included) and
+    ``max``/``min`` (exact). The box kept for the next step is the box returned.
+    ``proven_rounding = True``: the base class adds no margin.
     """
 
     name = "fixed-time"
