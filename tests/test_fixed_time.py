@@ -1,6 +1,8 @@
-"""The fixed-time parity-space estimator [Wang2020]: the paper's design and bounds,
-containment under vertex disturbances (LTI/LTV, singular A, asymmetric bounds, D u), the
-fixed-time property, missing samples, batches, online use, errors."""
+"""The fixed-time parity-space estimator [Wang2020]: the paper's design and bounds, the
+fixed-time property (Remark 3), per-step designs (Remark 4), the output injection (Remark 1),
+missing samples, batches, online use, inconsistent data, errors. Containment with an exact
+simulator: tests/test_fixed_time_containment.py; missing samples on random plants:
+tests/test_fixed_time_missing_samples.py."""
 
 import dataclasses
 import json
@@ -91,7 +93,25 @@ def test_frobenius_norm_never_grows_with_s_but_width_criterion_is_narrower(dinh)
     assert np.all(np.diff(np.array(widths), axis=0) <= 1e-9)
 
 
-# -- soundness on random systems -------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("name", "ratio"), [("dinh2019", [1.40, 1.70]), ("servo-motor", [3.5, 2.1, 1.9])]
+)
+def test_width_against_the_exact_hull(name, ratio):
+    """Tightness over 300 steps of vertex disturbances: the mean width of each state against
+    the exact hull (``exact``, a moving window of 10 samples and the prior, so at least as much
+    data as the fixed-time window) stays within the measured ratios (dinh2019 1.34 / 1.62, servo
+    motor 3.37 / 2.00 / 1.84), and is never below it."""
+    sc = ivobs.scenarios.get(name, horizon=300)
+    tr = sc.simulate("vertex", seed=0)
+    est = ivobs.make_estimator("fixed-time", sc.system)
+    res = est.run(tr.u, tr.y)
+    ex = ivobs.make_estimator("exact", sc.system, x0=sc.x0, window=10).run(tr.u, tr.y)
+    vf = est.valid_from
+    r = res.width[vf:].mean(axis=0) / ex.width[vf:].mean(axis=0)
+    assert np.all(r <= ratio) and np.all(r >= 1.0)
+
+
+# -- fixed-time convergence (Remark 3) -----------------------------------------------------------
 CASES = [
     # (seed, nx, ny, invertible, symmetric, feedthrough, s_extra)
     (0, 2, 1, True, True, False, 0),
@@ -100,26 +120,10 @@ CASES = [
     (3, 3, 2, False, False, True, 2),
     (4, 4, 1, False, False, False, 0),
     (5, 4, 2, True, False, True, 1),
-    (6, 2, 2, False, True, True, 3),
-    (7, 3, 1, True, True, True, 0),
 ]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_containment_with_vertex_disturbances(case):
-    seed, nx, ny, inv, sym, ft, extra = case
-    sys = random_system(
-        seed, nx=nx, ny=ny, nu=2, invertible=inv, symmetric_bounds=sym, feedthrough=ft
-    )
-    tr = adversarial_run(sys, Box(-np.ones(nx), np.ones(nx)), 150, seed=seed)
-    est, _ = _check(sys, tr, s=nx - 1 + extra)
-    assert (est.design.L is None) == inv
-    assert (est.design.Mc is None) == sym
-    if ft:  # D u enters the first block row of Mu (the paper has D = 0)
-        np.testing.assert_allclose(est.design.Mu[:ny, :2], sys.D - 0.0)
-
-
-@pytest.mark.parametrize("case", CASES[:6])
 def test_fixed_time_property_without_disturbance(case):
     """Remark 3: with d at the centre of its bounds (δ = 0), x̂_k = x_k for every k >= s."""
     seed, nx, ny, inv, sym, ft, extra = case
@@ -296,8 +300,8 @@ def test_step_reproduces_run_and_state_restores():
 
 
 def test_advance_returns_a_new_state_and_leaves_the_given_one_unchanged():
-    """The online state is a frozen FixedTimeState: a step builds new ring buffers and a new
-    box, the given state and its arrays stay as they were (missing samples included)."""
+    """The online state is a frozen FixedTimeState: a step builds a new window of samples and
+    a new box, the given state and its arrays stay as they were (missing samples included)."""
     sys = random_system(8, nx=3, ny=1, nu=1, invertible=False)
     tr = adversarial_run(sys, Box(-np.ones(3), np.ones(3)), 16, seed=8)
     y = tr.y.copy()
@@ -306,17 +310,20 @@ def test_advance_returns_a_new_state_and_leaves_the_given_one_unchanged():
     loop = est.run(tr.u, y, vectorize=False)
     state = est.initial_state()
     assert isinstance(state, FixedTimeState) and not state.has_box
+    assert state.z.shape == (est.memory, 2) and (state.ymiss == 1).all()  # no sample yet
     with pytest.raises(dataclasses.FrozenInstanceError):
         state.has_box = True
-    names = ("z", "ymiss", "dlo", "dhi", "lo", "hi")
+    names = ("z", "ymiss", "r", "lo", "hi")
     for k in range(16):
         before = {name: getattr(state, name).copy() for name in names}
         new, box = est.advance(state, tr.u[k], y[k])
         for name in names:
             np.testing.assert_array_equal(getattr(state, name), before[name])
         assert state.k == k and new.k == k + 1 and new.has_box == (k >= est.s)
+        np.testing.assert_array_equal(new.z[0], np.concatenate([tr.u[k], np.nan_to_num(y[k])]))
+        np.testing.assert_array_equal(new.ymiss[0], np.isnan(y[k]))
         if k >= est.s:
-            np.testing.assert_array_equal(box.lo, loop.lower[k])
+            np.testing.assert_allclose(box.lo, loop.lower[k], rtol=1e-14, atol=1e-14)
         state = new
 
 
@@ -373,13 +380,13 @@ def test_explicit_S_and_L(dinh):
     assert est.design.My is not None
 
 
-def test_vectorised_chunks_blocks_and_inconsistency_match_the_loop(monkeypatch):
-    """Small chunks and blocks (so that every boundary is crossed), missing samples, a gap,
-    inconsistent spikes, a batch: the vectorised path reproduces the loop, flags included."""
-    import ivobs.estimators.fixed_time.windows as ft
+def test_vectorised_chunks_and_inconsistency_match_the_loop(monkeypatch):
+    """Small chunks (so that every boundary is crossed), missing samples, a gap, inconsistent
+    spikes, a batch: the whole-record path gives the loop's boxes to rounding, flags
+    included."""
+    import ivobs.estimators.fixed_time.batch as ft
 
     monkeypatch.setattr(ft, "_CHUNK", 37)
-    monkeypatch.setattr(ft, "_BLOCK", 8)
     sys = random_system(12, nx=3, ny=2, nu=1, symmetric_bounds=False, feedthrough=True)
     x0 = Box(-np.ones(3), np.ones(3))
     trs = [adversarial_run(sys, x0, 200, seed=s) for s in range(3)]

@@ -308,7 +308,7 @@ def test_window_bound_detects_a_wrong_gain():
     sc = ivobs.scenarios.get("dinh2019")
     sys = sc.system
     est = ivobs.make_estimator("fixed-time", sys, s=2)
-    kern = est._kernel(2, np.zeros((3, 1), dtype=bool))
+    kern = est._gains.complete(2)
     fw = forward_window([sys.matrices_at(0)] * 3, centre=False)
     good = window_bound(kern.GQ, 2, fw, refine=False)
     assert good.Rx.sum(axis=1).max() < 1e-14 and good.Rv.sum(axis=1).max() < 1e-14

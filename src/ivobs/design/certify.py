@@ -4,30 +4,24 @@ The stacked matrices of [Wang2020, eq. (6)] come from inverses (eq. (4)), so a c
 gain satisfies eqs. (8)-(9) only to rounding amplified by the conditioning of ``A`` (or of
 ``A - LC`` with the output injection of Remark 1). :func:`forward_window` writes the window
 forward (products of the model matrices, no inverse) and :func:`window_bound` bounds, entry by
-entry, what a given gain really does, with a ``γ_n`` rounding bound (:func:`gamma`,
-[Higham2002, Lemma 3.1]), and refines it once. No loops over time here: a window has ``s + 1``
-steps, and that is all these functions see.
+entry, what a given gain really does, with a ``γ_n`` rounding bound ([Higham2002, Lemma 3.1]),
+and refines it once. No loops over time here: a window has a few steps, and that is all these
+functions see.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..linalg import gamma as _gamma
+from ..linalg import gamma
+from ..sets.rounding import up, upper
 
-__all__ = ["ForwardWindow", "WindowBound", "forward_window", "gamma", "window_bound"]
+__all__ = ["ForwardWindow", "WindowBound", "drop_outputs", "forward_window", "window_bound"]
 
 _EPS = np.finfo(float).eps
-
-
-def gamma(n: int) -> float:
-    """``γ_n`` with ``ε = 2⁻⁵²`` (twice the unit roundoff, so conservative):
-    :func:`ivobs.linalg.gamma` with ``unit = ε`` ([Higham2002, Lemma 3.1 and §3.5])."""
-    return _gamma(n, _EPS)
-
 
 _WORK = np.longdouble
 """Working precision of the certification (:func:`forward_window`, :func:`window_bound`): the
@@ -38,8 +32,8 @@ _EPS_WORK = float(np.finfo(_WORK).eps)
 
 
 def _gamma_work(n: int) -> float:
-    ne = n * _EPS_WORK
-    return ne / (1.0 - ne) if ne < 0.5 else np.inf
+    """``γ_n`` of the working precision (its ``ε``: twice its unit roundoff, conservative)."""
+    return gamma(n, _EPS_WORK)
 
 
 @dataclass(frozen=True)
@@ -54,7 +48,8 @@ class ForwardWindow:
     to ``x_k``; ``Za``, ``Xa`` are the same recursions on absolute values (for the rounding
     bound). All four in the working precision :data:`_WORK`. ``y_rows``: the rows of ``w``
     holding available outputs of lags ``<= a``; ``v_rows``, ``v_cols``: the rows of ``w``
-    holding ``u`` and ``c`` and the columns of ``ξ`` they equal.
+    holding ``u`` and ``c`` and the columns of ``ξ`` they equal; ``out_rows[i, j]``: the row of
+    ``w`` of output ``j`` at lag ``i``.
     """
 
     Z: np.ndarray
@@ -69,6 +64,19 @@ class ForwardWindow:
     x_cols: slice
     v_slice: slice
     d_slice: slice
+    out_rows: np.ndarray
+
+
+def drop_outputs(fw: ForwardWindow, missing: np.ndarray) -> ForwardWindow:
+    """``fw`` with the outputs ``missing`` (``(s+1, ny)`` bool) zero in ``w`` and left out of
+    ``y_rows`` (a missing sample is not data)."""
+    rows = fw.out_rows[np.asarray(missing, dtype=bool)]
+    if not rows.size:
+        return fw
+    Z, Za = fw.Z.copy(), fw.Za.copy()
+    Z[rows] = 0.0
+    Za[rows] = 0.0
+    return replace(fw, Z=Z, Za=Za, y_rows=fw.y_rows[~np.isin(fw.y_rows, rows)])
 
 
 def forward_window(
@@ -114,15 +122,9 @@ def forward_window(
         Y[:, cols_d] += FF
         if nc:
             Y[:, cols_c] += FF
-        if missing is not None and np.any(missing[i]):
-            avail = ~np.asarray(missing[i], dtype=bool)
-            Y[:ny][~avail] = 0.0
-            Y[ny:][~avail] = 0.0
-        else:
-            avail = np.ones(ny, dtype=bool)
         Z[r0 + nu : r0 + nu + ny] = Y[:ny]
         Za[r0 + nu : r0 + nu + ny] = Y[ny:]
-        y_rows.extend((r0 + nu + np.nonzero(avail)[0]).tolist())
+        y_rows.extend(range(r0 + nu, r0 + nu + ny))
         vr = list(range(r0, r0 + nu)) + list(range(r0 + nu + ny, r0 + nz))
         v_rows.extend(vr)
         v_cols.extend(range(cu, cu + nv))
@@ -136,7 +138,7 @@ def forward_window(
             if nc:
                 P[:, cols_c] += EE
     X, Xa = P[:nx], P[nx:]
-    return ForwardWindow(
+    fw = ForwardWindow(
         Z=Z,
         Za=Za,
         X=X,
@@ -149,7 +151,9 @@ def forward_window(
         x_cols=slice(0, nx),
         v_slice=slice(nx, d0),
         d_slice=slice(d0, nxi),
+        out_rows=np.arange(s + 1)[:, None] * nz + nu + np.arange(ny)[None, :],
     )
+    return fw if missing is None else drop_outputs(fw, missing)
 
 
 @dataclass(frozen=True)
@@ -177,15 +181,17 @@ def _residual(
     """``(R, bound)``: ``R = target - G Z`` computed in the working precision (signed), and
     ``bound >= |target - G Z|`` in exact arithmetic, elementwise (``float64``).
 
-    ``bound = (|R| + γ_2N (|G| Za + |target|)) (1 + ε₆₄)``: ``γ`` of the working precision,
-    ``N`` the roundings along the longest product path (the forward recursion, the product with
-    ``G`` of inner size ``m``, the subtraction); the factor 2 in ``γ_2N`` covers the rounding of
-    the bound itself (nonnegative terms), ``1 + ε₆₄`` its conversion to ``float64``."""
+    ``bound = |R| + γ_2N (|G| Za + |target|)``, converted to ``float64`` upward: ``γ`` of the
+    working precision, ``N`` the roundings along the longest product path (the forward
+    recursion, the product with ``G`` of inner size ``m``, the subtraction); the factor 2 in
+    ``γ_2N`` covers the rounding of the bound itself (nonnegative terms). The conversion rounds
+    to nearest, so the next double up (:func:`~ivobs.sets.rounding.up`) is an upper bound, also
+    below the subnormal range."""
     Gw = np.asarray(G, dtype=_WORK)
     n = fw.n_rounds + G.shape[1] + 2
     R = target - Gw @ fw.Z
     B = np.abs(R) + _gamma_work(2 * n) * (np.abs(Gw) @ fw.Za + target_abs)
-    return R, B.astype(float) * (1.0 + _EPS)
+    return R, up(B.astype(float))
 
 
 def _anchor(fw: ForwardWindow, nx: int) -> tuple[np.ndarray | None, float, np.ndarray]:
@@ -209,13 +215,15 @@ def _anchor(fw: ForwardWindow, nx: int) -> tuple[np.ndarray | None, float, np.nd
     tgt = np.zeros((nx, fw.Z.shape[1]), dtype=_WORK)
     tgt[:, fw.x_cols] = np.eye(nx)
     _, Rp = _residual(Gp, tgt, np.abs(tgt), fw)
-    rho = float(Rp[:, fw.x_cols].sum(axis=1).max())
+    rho = float(upper(Rp[:, fw.x_cols].sum(axis=1), nx).max())
     if not rho < 0.5:
         return fail
-    gn = float(np.abs(Gp).sum(axis=1).max()) * (1.0 + gamma(Gp.shape[1] + 2))
-    rv = float(Rp[:, fw.v_slice].sum(axis=1).max(initial=0.0))
-    kappa = (gn + rv) / (1.0 - rho) * (1.0 + gamma(4))
-    nu = Rp[:, fw.d_slice].sum(axis=0) / (1.0 - rho) * (1.0 + gamma(nx + 4))
+    gn = float(upper(np.abs(Gp).sum(axis=1), Gp.shape[1]).max())
+    nv = fw.v_slice.stop - fw.v_slice.start
+    rv = float(upper(Rp[:, fw.v_slice].sum(axis=1), nv).max(initial=0.0))
+    # (1 - rho) is rounded: the quotients carry 1 + γ for it, the division and the product
+    kappa = float(upper((gn + rv) / (1.0 - rho), 4))
+    nu = upper(Rp[:, fw.d_slice].sum(axis=0) / (1.0 - rho), nx + 3)
     return Gp, kappa, nu
 
 

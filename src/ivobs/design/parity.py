@@ -21,7 +21,7 @@ of the window. Non-invertible ``A`` [Wang2020, Remark 1]: :func:`injection_candi
 ``A - LC`` well-conditioned; ``L y`` then enters as a known input.
 
 Certification of a computed window gain (not in the paper): :mod:`ivobs.design.certify`
-(:func:`forward_window`, :func:`window_bound`, :func:`gamma`, re-exported here).
+(:func:`forward_window`, :func:`window_bound`, re-exported here).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DesignError, IvobsError
-from .certify import ForwardWindow, WindowBound, forward_window, gamma, window_bound
+from .certify import ForwardWindow, WindowBound, forward_window, window_bound
 from .injection import SINGULAR_RCOND, injection_candidates, invertible_injection, is_invertible
 from .injection import rcond as _rcond
 
@@ -45,7 +45,6 @@ __all__ = [
     "OptimalT",
     "WindowBound",
     "forward_window",
-    "gamma",
     "general_T",
     "injection_candidates",
     "invertible_injection",

@@ -14,19 +14,20 @@ The parts, in the order of the paper:
 
 * :mod:`.design`: the stacked matrices ``Mx, Mu, Md`` (eq. (6)), ``T`` (Theorem 1, eq. (13);
   Lemma 2), the output injection of Remark 1, per window for time-varying systems (Remark 4);
-* :mod:`.gains`: the window gain ``x̂ = G w`` and the certified radius of eq. (11), per missing
-  pattern, and the choice of the output injection by certified accuracy;
-* :mod:`.recursion`: the online step and its state :class:`FixedTimeState`;
-* :mod:`.vectorised` and :mod:`.windows`: every window of a record or batch at once (tested
-  equal to the step);
-* :mod:`.estimator`: :class:`FixedTimeEstimator`, the method ``fixed-time``.
+* :mod:`.gains`: the window gain ``x̂ = G w`` certified (its radius ``|T Md| 𝐫`` of eq. (11) and
+  its rounding proven), per missing pattern, the box of a window (:func:`.gains.evaluate`), and
+  the choice of the output injection by certified accuracy;
+* :mod:`.window`: the model prediction and its intersection with a window's box (missing
+  samples, inconsistent data);
+* :mod:`.estimator`: :class:`FixedTimeEstimator` (the method ``fixed-time``: the step) and its
+  state :class:`FixedTimeState`;
+* :mod:`.batch`: every window of a record or batch at once.
 """
 
 from __future__ import annotations
 
 from .design import MAX_WINDOW, FixedTimeDesign
-from .estimator import FixedTimeEstimator
+from .estimator import FixedTimeEstimator, FixedTimeState
 from .gains import ACCURACY
-from .recursion import FixedTimeState
 
 __all__ = ["ACCURACY", "MAX_WINDOW", "FixedTimeDesign", "FixedTimeEstimator", "FixedTimeState"]

@@ -27,8 +27,8 @@ from ...design.parity import general_T, optimal_T, pinv_perp, stack_window, widt
 from ...errors import DesignError, IvobsError
 from ...linalg import check_observable
 from ...model import LinearSystem
-from ...sets import Box
 from ..base import Design
+from .window import centre_radius
 
 __all__ = [
     "MAX_WINDOW",
@@ -192,9 +192,8 @@ def _centre_size(sys: LinearSystem) -> int:
     if sys.nd == 0:
         return 0
     if sys.has_constant_bounds:
-        box = sys.d
-        assert isinstance(box, Box)
-        return 0 if np.all(box.lo + box.hi == 0) else int(sys.nd)
+        box = sys.d_at(0)
+        return 0 if np.all(box.lo == -box.hi) else int(sys.nd)
     return int(sys.nd)
 
 
@@ -223,6 +222,11 @@ class WindowDesigner:
         self.nc = _centre_size(sys)
         self.nz = sys.nu + sys.ny + self.nc
         """Entries of ``z = [u; y; c]`` per sample of the window vector ``w``."""
+        self.centre, self.radius = np.zeros(sys.nd), np.zeros(sys.nd)
+        """The constant bounds of ``d`` as ``c ± r`` (:func:`centre_radius`), if they are."""
+        if self.const_bounds:
+            box = sys.d_at(0)
+            self.centre, self.radius = centre_radius(box.lo, box.hi)
         self.criterion = criterion
         self.weighted = weighted
         self.S = S
@@ -231,7 +235,7 @@ class WindowDesigner:
         self.L: np.ndarray | None = None
         self.design: FixedTimeDesign | None = None
         self._mats: OrderedDict[int, tuple[np.ndarray, ...]] = OrderedDict()
-        self.selection = self._selection()
+        self._stacks: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         if not self.tv:
             A, _, C, _, _, _ = sys.matrices_at(0)
             try:
@@ -269,27 +273,37 @@ class WindowDesigner:
             self._mats.popitem(last=False)
         return out
 
-    def stack(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(Mx, Mv, Md)`` of the window ending at ``k`` ([Wang2020, eq. (6), Remark 4])."""
-        mats = [self.matrices(k - i)[:6] for i in range(self.s + 1)]
-        return stack_window(mats)
+    def stack(self, k: int, lags: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(Mx, Mv, Md)`` of the window of ``lags`` samples (default ``s + 1``) ending at
+        ``k`` ([Wang2020, eq. (6), Remark 4])."""
+        n = self.s + 1 if lags is None else lags
+        if self.tv:
+            return stack_window([self.matrices(k - i)[:6] for i in range(n)])
+        hit = self._stacks.get(n)
+        if hit is None:
+            hit = stack_window([self.matrices(0)[:6]] * n)
+            for M in hit:
+                M.flags.writeable = False  # (shared by every window of that length)
+            self._stacks[n] = hit
+        return hit
 
-    def _selection(self) -> np.ndarray:
-        """``Sel`` with ``Sel w = 𝐲`` (the outputs of the window vector ``w``)."""
-        s, ny, nu, nz = self.s, self.sys.ny, self.sys.nu, self.nz
-        Sel = np.zeros(((s + 1) * ny, (s + 1) * nz))
-        for i in range(s + 1):
+    def selection(self, lags: int) -> np.ndarray:
+        """``Sel`` with ``Sel w = 𝐲`` (the outputs of a window vector ``w`` of ``lags``
+        samples)."""
+        ny, nu, nz = self.sys.ny, self.sys.nu, self.nz
+        Sel = np.zeros((lags * ny, lags * nz))
+        for i in range(lags):
             Sel[i * ny : (i + 1) * ny, i * nz + nu : i * nz + nu + ny] = np.eye(ny)
         return Sel
 
     # -- T ----------------------------------------------------------------------------------
-    def weights(self) -> np.ndarray | None:
-        """Column weights ``Wd`` of the criterion (``None``: the paper's ``‖T Md‖_F``)."""
+    def weights(self, lags: int | None = None) -> np.ndarray | None:
+        """Column weights ``Wd`` of the criterion over ``lags`` samples (default ``s + 1``;
+        ``None``: the paper's ``‖T Md‖_F``)."""
         if not (self.weighted or self.criterion == "width") or self.sys.nd == 0:
             return None
-        box = self.sys.d
-        assert isinstance(box, Box)
-        return np.tile(box.radius, self.s + 1)
+        box = self.sys.d_at(0)
+        return np.tile(box.radius, self.s + 1 if lags is None else lags)
 
     def T_full(self, Mx: np.ndarray, Md: np.ndarray) -> tuple[np.ndarray, Any]:
         """``T`` of a complete window, and Theorem 1's quantities (``None`` for a given ``T``
@@ -309,6 +323,7 @@ class WindowDesigner:
         with ``A`` itself); the result becomes :attr:`design`."""
         self.L = L
         self._mats.clear()
+        self._stacks.clear()
         self.design = self.window(self.s)
         return self.design
 
@@ -341,9 +356,7 @@ class WindowDesigner:
         cols = np.arange((s + 1) * nz).reshape(s + 1, nz)
         H = None
         if self.const_bounds and sys.nd:
-            box = sys.d
-            assert isinstance(box, Box)
-            H = -T @ Md * np.tile(box.radius, s + 1)[None, :]
+            H = -T @ Md * np.tile(sys.d_at(0).radius, s + 1)[None, :]
         elif sys.nd == 0:
             H = np.zeros((nx, 0))
         L = self.matrices(k)[6] if self.L is not None or self.tv else None

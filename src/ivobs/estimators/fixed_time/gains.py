@@ -1,33 +1,33 @@
-"""The window gains of the fixed-time estimator [Wang2020] and their certified radii.
+"""The window gains of the fixed-time estimator [Wang2020], certified, and the box of a window.
 
-A window gain maps the window vector ``w = [z_k; …; z_{k-s}]``, ``z = [u; y; c]`` (``y`` zero
-where missing, ``c`` the centre of ``d``), to the estimate ``x̂_k = T(𝐲_k - Mu 𝐮_k)``
-[Wang2020, eq. (7)] and to the parity residual ``ρ = N(𝐲 - Mv 𝐯)``, ``N Mx = 0``. It is computed
-once per missing-data pattern (and per step for a time-varying system, [Wang2020, Remark 4]),
-certified on the forward form of the window (:func:`ivobs.design.certify.window_bound`), and
-cached by :class:`WindowGains`. :func:`evaluate_window` gives the bounds of eq. (11) of one
-window; :func:`choose_injection` picks the output injection of [Wang2020, Remark 1] by the
-certified accuracy of the complete window's gain.
+A window gain maps the window vector ``w = [z_k; …; z_{k-L+1}]`` of ``L`` samples,
+``z = [u; y; c]`` (``y`` zero where missing, ``c`` the centre of ``d``), to the estimate
+``x̂_k = T(𝐲_k - Mv 𝐯_k)`` [Wang2020, eq. (7)] and to the parity residual
+``ρ = N(𝐲_k - Mv 𝐯_k)``, ``N Mx = 0``. It is computed once per missing-data pattern (and per step
+for a time-varying system, [Wang2020, Remark 4]), certified on the forward form of the window
+(:func:`ivobs.design.certify.window_bound`), and cached by :class:`WindowGains`. :func:`evaluate`
+gives the box of eq. (11) and the parity test of any number of windows; the step and the
+whole-record path both call it. :func:`choose_injection` picks the output injection of
+[Wang2020, Remark 1] by the certified accuracy of the complete window's gain.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from ...design.certify import forward_window, gamma, window_bound
+from ...design.certify import ForwardWindow, drop_outputs, forward_window, window_bound
 from ...design.injection import injection_candidates
 from ...design.parity import optimal_T, pinv_perp
 from ...errors import DesignError
-from ...sets import Box
+from ...sets.rounding import ETA, gamma, upper
 from .design import CACHE_SIZE, WindowDesigner
 
-__all__ = ["ACCURACY", "WindowGain", "WindowGains", "choose_injection", "evaluate_window"]
+__all__ = ["ACCURACY", "WindowGain", "WindowGains", "choose_injection", "evaluate", "finish"]
 
-_EPS = np.finfo(float).eps
 ACCURACY = 1e-9
 """A design whose certified error exceeds ``ACCURACY ‖G_i‖₁ ‖w‖_∞`` (:meth:`WindowGains.
 _certify`) is replaced by an output injection ([Wang2020, Remark 1]), when one does better."""
@@ -35,45 +35,111 @@ _certify`) is replaced by an output injection ([Wang2020, Remark 1]), when one d
 
 @dataclass(frozen=True)
 class WindowGain:
-    """Gains of one window (one missing-data pattern, one step for time-varying systems).
+    """The certified gain of one window (one missing-data pattern over ``L`` samples; one step
+    for time-varying systems).
 
-    On the window vector ``w`` and the stacked radii ``𝐫``: ``GQ w = [x̂; ρ]`` (estimate,
-    eq. 7, and parity residual); ``HP 𝐫 = [|T Md| 𝐫; |N Md| 𝐫]`` (radius, eq. 11, and the bound
-    of ``ρ``). ``rad_coef``, ``tol_coef``: rounding margins per unit of ``‖w‖_∞`` (see
-    :func:`evaluate_window`). ``ok`` is False when the window does not determine the state
-    (``rank`` of the available rows of ``Mx`` below ``nx``, or no certificate).
+    For the true state and data, with ``w`` the window vector and ``𝐫`` the stacked radii of
+    ``d`` (lag-major), in exact arithmetic, row by row:
+
+        ``|x_k - G w| <= HP 𝐫 + c' ‖w‖_∞``,   ``|N' w| <= HP 𝐫 + c' ‖w‖_∞``
+
+    (``GQ = [G; N']``: estimate rows, eq. (7), then parity rows; ``HP`` is ``|T Md|`` of
+    eq. (11) as certified, :meth:`WindowGains._certify`). ``coef`` is ``c'`` plus the rounding
+    of the evaluation ``fl(GQ w)`` and of the recorded data, and ``eta`` their underflow, both
+    enlarged for the rounding of the radius itself (:func:`finish` has the proof); ``rhp`` is
+    :meth:`radius` for constant bounds. ``lags``: the samples of the window (``L``). ``ok`` is
+    False when the window does not determine the state (``rank`` of the available rows of
+    ``Mx`` below ``nx``, or no certificate).
     """
 
     ok: bool
     rank: int
     nx: int = 0
+    lags: int = 0
     GQ: np.ndarray | None = None
     HP: np.ndarray | None = None
-    rad_coef: np.ndarray | None = None
-    tol_coef: np.ndarray | None = None
+    coef: np.ndarray | None = None
+    eta: np.ndarray | None = None
+    rhp: np.ndarray | None = None
     accuracy: float = np.inf
 
+    def radius(self, R: np.ndarray | None) -> np.ndarray:
+        """``(HP 𝐫 + eta) / (1 - u)² + η`` rounded up (:func:`finish`), for stacked radii
+        ``R`` ``(..., L n_d)``; ``None``: the constant bounds of the system (computed once,
+        :attr:`rhp`)."""
+        if R is None:
+            assert self.rhp is not None
+            return self.rhp
+        assert self.HP is not None
+        rhp: np.ndarray = upper(R @ self.HP.T + self.eta, self.HP.shape[1] + 3)
+        return rhp
 
-def evaluate_window(
-    gain: WindowGain, w: np.ndarray, r: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Eq. (11) for one window ``w`` with radii ``r``: ``(lo, hi)`` and whether the parity
-    residual exceeds its bound, ``|ρ| > |N Md| 𝐫`` (tolerance ``1e-9`` relative).
 
-    The radius is ``HP 𝐫 + rad_coef ‖w‖_∞``: the certified disturbance gain and remainder of
-    :meth:`WindowGains._certify`, plus the evaluation rounding ``64 (s+1) n_z ε ‖G_i‖₁``."""
-    assert gain.GQ is not None and gain.HP is not None and gain.rad_coef is not None
-    assert gain.tol_coef is not None
+def finish(
+    gain: WindowGain,
+    out: np.ndarray,
+    wmax: np.ndarray,
+    rhp: np.ndarray,
+    dest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bounds of eq. (11) and the parity test from ``out = fl(GQ w) = [x̂; ρ]`` (rows of
+    windows, ``(..., nx + n_ρ)``), ``wmax = ‖w‖_∞`` ``(..., 1)`` and ``rhp``
+    (:meth:`WindowGain.radius`), as ``(lo, hi, inconsistent)`` (written into ``dest`` when
+    given)::
+
+        rad = ‖w‖_∞ coef + rhp,    x_k ∈ [x̂ - rad, x̂ + rad],    consistent: |ρ| <= rad
+
+    Proof ([Higham2002, Lemma 3.1, eq. (3.5), Lemma 3.3]; ``u = 2⁻⁵³``, ``η = 2⁻¹⁰⁷⁵``: an
+    underflow of a product costs at most ``η``, a subnormal sum is exact; ``ŵ`` is the window
+    as recorded and evaluated, ``w`` the true one). (i) In exact arithmetic
+    ``|x_k - G w| <= HP 𝐫 + c' ‖w‖_∞`` (:class:`WindowGain`). (ii) A recorded output may be
+    the rounding of the true one, ``|y - ŷ| <= γ_1 |ŷ| + η``: ``G w`` and ``G ŵ`` differ by at
+    most ``γ_1 ‖g_i‖₁ ‖ŵ‖_∞ + ‖g_i‖₁ η``, and ``‖w‖_∞ <= (1 + γ_1) ‖ŵ‖_∞ + η``. (iii)
+    ``fl(g_i ŵ)`` is a sum of ``n = L n_z`` products in some order (BLAS blocking, FMA, a sum
+    over lags), so ``|fl(g_i ŵ) - g_i ŵ| <= γ_n ‖g_i‖₁ ‖ŵ‖_∞ + n η``, and (iv)
+    ``|x̂_i| <= (1 + γ_n) ‖g_i‖₁ ‖ŵ‖_∞ + n η``. So ``R + u |x̂| <= HP 𝐫 + eta' + c ‖ŵ‖_∞``,
+    ``R`` the bound of ``|x_k - x̂|`` from (i)-(iii), ``c = (1 + γ_1) c' + γ_{n+2} ‖g_i‖₁``
+    (``γ_{n+1} + γ_1 (1 + γ_n) <= γ_{n+2}``), ``eta' = (n + 1 + ‖g_i‖₁ + c') η``. (v) ``rad``
+    is one product and one sum, each within a factor ``(1 - u)`` (and ``η``) of exact: with
+    ``coef >= c / (1 - u)³`` and ``rhp >= (HP 𝐫 + eta') / (1 - u)² + η`` (rounded up at design
+    with :func:`~ivobs.sets.rounding.upper`, which also covers the rounding of ``γ`` itself),
+    ``rad (1 - u) >= R + u |x̂|``. (vi) Then ``fl(x̂ - rad) <= x̂ - rad + u |x̂ - rad| <=
+    x̂ - R <= x_k``, and likewise above: the bounds contain ``x_k`` as computed. (vii) The
+    parity rows have target 0: an admissible record has ``|ρ_i| <= rad_i``, so
+    ``|ρ_i| > rad_i`` proves the data inconsistent (never an admissible sample, even one within
+    rounding of its bound).
+    """
+    assert gain.coef is not None
     nx = gain.nx
-    out = gain.GQ @ w
-    rhp = gain.HP @ r
-    wmax = float(np.abs(w).max()) if w.size else 0.0
-    rad = wmax * gain.rad_coef + rhp[:nx]
-    bad = False
-    if out.shape[0] > nx:
-        bound = wmax * gain.tol_coef + (rhp[nx:] * (1.0 + 1e-9) + 1e-9)
-        bad = bool((np.abs(out[nx:]) > bound).any())
-    return out[:nx] - rad, out[:nx] + rad, bad
+    rad = wmax * gain.coef
+    rad += rhp
+    xhat, r = out[..., :nx], rad[..., :nx]
+    lo = np.subtract(xhat, r, out=None if dest is None else dest[0])
+    hi = np.add(xhat, r, out=None if dest is None else dest[1])
+    over = np.abs(out[..., nx:]) > rad[..., nx:]
+    if dest is None:
+        return lo, hi, over.any(axis=-1)
+    bad = dest[2]
+    bad[...] = False
+    for j in range(over.shape[-1]):  # (an OR per row of N: a reduction over a short axis is slow)
+        bad |= over[..., j]
+    return lo, hi, bad
+
+
+def evaluate(
+    gain: WindowGain, W: np.ndarray, R: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The boxes of eq. (11) and the parity test of windows ``W`` ``(..., L n_z)`` with stacked
+    radii ``R`` ``(..., L n_d)`` (``None``: the constant bounds of the system):
+    ``(lo, hi, inconsistent)``::
+
+        [x̂; ρ] = GQ w                                  (eq. 7; ρ the parity residual)
+        x_k ∈ x̂ ± (|T Md| 𝐫 + coef ‖w‖_∞ + …)          (eq. 11, certified, rounding included)
+
+    (:func:`finish` has the proof)."""
+    assert gain.GQ is not None
+    out = W @ gain.GQ.T
+    return finish(gain, out, np.abs(W).max(axis=-1, keepdims=True), gain.radius(R))
 
 
 class WindowGains:
@@ -87,14 +153,16 @@ class WindowGains:
         self.check = check
         self._gains: OrderedDict[Any, WindowGain] = OrderedDict()
         self._models: OrderedDict[int, tuple[np.ndarray, ...]] = OrderedDict()
+        self._forward: dict[tuple[int, int], ForwardWindow] = {}  # time-invariant: per length
 
     def clear(self) -> None:
         """Forget the gains (the design changed)."""
         self._gains.clear()
 
     def get(self, k: int, missing: np.ndarray) -> WindowGain:
-        """The window gain for step ``k`` and missing pattern ``missing`` ((s+1, ny) bool)."""
-        key = (k if self.designer.tv else 0, missing.tobytes())
+        """The gain of the window of ``L = len(missing)`` samples ending at step ``k``, with
+        the outputs ``missing`` (``(L, ny)`` bool, most recent first) left out."""
+        key = (k if self.designer.tv else 0, missing.shape[0], missing.tobytes())
         hit = self._gains.get(key)
         if hit is not None:
             return hit
@@ -105,27 +173,27 @@ class WindowGains:
         return gain
 
     def complete(self, k: int) -> WindowGain:
-        """The gain of the complete window ending at ``k``."""
+        """The gain of the complete window of ``s + 1`` samples ending at ``k``."""
         return self.get(k, np.zeros((self.s + 1, self.sys.ny), dtype=bool))
 
     def _make(self, k: int, missing: np.ndarray) -> WindowGain:
         des = self.designer
-        nx, ny, nu, nz, s = self.sys.nx, self.sys.ny, self.sys.nu, des.nz, self.s
-        Mx, Mv, Md = des.stack(k)
+        nx, ny, nu, nz = self.sys.nx, self.sys.ny, self.sys.nu, des.nz
+        lags = missing.shape[0]
+        Mx, Mv, Md = des.stack(k, lags)
         rows = ~missing.ravel()
         if not rows.all():
             # a missing y_{k-j} is also an unknown input through L y (Remark 1): drop the rows
             # that depend on it
-            ycols = (np.arange(s + 1)[:, None] * nz + nu + np.arange(ny)[None, :]).ravel()
-            miss_cols = ycols[missing.ravel()]
-            rows &= np.all(Mv[:, miss_cols] == 0, axis=1)
+            ycols = (np.arange(lags)[:, None] * nz + nu + np.arange(ny)[None, :]).ravel()
+            rows &= np.all(Mv[:, ycols[missing.ravel()]] == 0, axis=1)
         MxR = Mx[rows]
         if MxR.shape[0] < nx:
             return WindowGain(ok=False, rank=int(np.linalg.matrix_rank(MxR)) if MxR.size else 0)
         _, _, N, rank = pinv_perp(MxR)
         if rank < nx:
             return WindowGain(ok=False, rank=rank)
-        if rows.all():  # the design's T (time-invariant: computed once, e.g. the width LP)
+        if rows.all() and lags == self.s + 1:  # the design's T (e.g. the width LP)
             if des.tv:
                 T_R = des.T_full(Mx, Md)[0]
             else:
@@ -133,33 +201,37 @@ class WindowGains:
                 T_R = des.design.T
         else:
             try:
-                T_R = optimal_T(MxR, Md[rows], des.weights()).T
+                T_R = optimal_T(MxR, Md[rows], des.weights(lags)).T
             except DesignError:
                 return WindowGain(ok=False, rank=rank)
-        K = des.selection - Mv
+        K = des.selection(lags) - Mv
         T_pad = np.zeros((nx, Mx.shape[0]))
         T_pad[:, rows] = T_R
-        G = T_pad @ K
         N_pad = np.zeros((N.shape[0] if self.check else 0, Mx.shape[0]))
         if self.check:
             N_pad[:, rows] = N
-        GQ = np.vstack([G, N_pad @ K])
-        cert = self._certify(k, missing, GQ)
+        cert = self._certify(k, missing, np.vstack([T_pad @ K, N_pad @ K]))
         if cert is None:  # the window does not determine its oldest state: use the prediction
             return WindowGain(ok=False, rank=rank)
         GQ, HP, extra = cert
-        # rounding of the evaluation x̂ = G w (and of the recorded data), |G_i| |w| <= l1_i ‖w‖_∞
-        l1 = np.abs(GQ).sum(axis=1) * (64.0 * (s + 1) * nz * _EPS)
-        return WindowGain(
+        n = GQ.shape[1]
+        l1 = upper(np.abs(GQ).sum(axis=1), n)  # >= ‖g_i‖₁
+        gain = WindowGain(
             ok=True,
             rank=rank,
             nx=nx,
+            lags=lags,
             GQ=GQ,
             HP=HP,
-            rad_coef=l1[:nx] + extra[:nx],
-            tol_coef=l1[nx:] * (1e-9 / (64.0 * (s + 1) * nz * _EPS)) + extra[nx:],
-            accuracy=float(np.max(extra[:nx] / np.maximum(np.abs(GQ[:nx]).sum(axis=1), 1e-300))),
+            # (roundings on a path: gamma() 2, the product, the sum; one more covers 1 + γ_1)
+            coef=upper(upper(extra + gamma(n + 2) * l1, 5), 3),
+            eta=upper((n + 1 + l1 + extra) * ETA, 3),
+            accuracy=float(np.max(extra[:nx] / np.maximum(l1[:nx], 1e-300))),
         )
+        if not des.const_bounds:
+            return gain
+        r = np.tile(des.radius, lags)
+        return replace(gain, rhp=gain.radius(r))
 
     def _certify(
         self, k: int, missing: np.ndarray, GQ: np.ndarray
@@ -180,23 +252,22 @@ class WindowGains:
 
         ``|x_k - x̂_k|_i <= (|R_δ| + a ν)_i 𝐫 + (Σ_j |R_v|_ij + a_i κ) ‖w‖_∞``
 
-        returned as ``(GQ, HP, extra)``: ``GQ`` after one step of iterative refinement (it
-        moves by the size of its error only), ``HP`` (times ``1 + γ`` for the evaluation of
-        ``HP 𝐫``) replaces ``|T Md|``; ``extra`` is added to the per-``‖w‖_∞`` radius. With
-        re-centred bounds, ``c = (lo + hi)/2`` and ``r = (hi - lo)/2`` are rounded:
-        ``|d - c| <= (1 + ε) r + ε |c|``, ``|c| <= ‖w‖_∞``. None when the window does not
+        returned as ``(GQ, HP, extra)`` (every sum and product rounded up): ``GQ`` after one
+        step of iterative refinement (it moves by the size of its error only), ``HP`` replaces
+        ``|T Md|``, ``extra`` is the per-``‖w‖_∞`` remainder. None when the window does not
         determine ``x_{k-a}`` (the prediction is used instead).
         """
-        s, nz = self.s, self.designer.nz
-        used = np.any(GQ.reshape(GQ.shape[0], s + 1, nz) != 0.0, axis=(0, 2))
+        lags, nz = missing.shape[0], self.designer.nz
+        used = np.any(GQ.reshape(GQ.shape[0], lags, nz) != 0.0, axis=(0, 2))
         lag = int(np.nonzero(used)[0].max()) if used.any() else 0
-        mats = [self._model(k - i) for i in range(s + 1)]
+        mats = [self._model(k - i) for i in range(lags)]
         # the anchor: the oldest lag the gain uses; with a singular A (Remark 1) a gain may use
         # only recent samples yet rely on x_k lying in the range of A (the parity relations of
         # the injected system), which only an older anchor shows: then the whole window, then
         # the lags in between while none determines its anchor state
+        last = lags - 1
         best: tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
-        order = [lag] + ([s] if s > lag else []) + list(range(lag + 1, s))
+        order = [lag] + ([last] if last > lag else []) + list(range(lag + 1, last))
         for i, a in enumerate(order):
             if i >= 2 and best is not None:
                 break
@@ -216,18 +287,19 @@ class WindowGains:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """:meth:`_certify` with the anchor ``x_{k-a}`` (None when the window does not
         determine it)."""
-        s, nx, nd, nc = self.s, self.sys.nx, self.sys.nd, self.designer.nc
-        fw = forward_window(mats, centre=bool(nc), lag=a, missing=missing)
-        wb = window_bound(GQ, nx, fw)
+        nx = self.sys.nx
+        key = (len(mats), a)
+        fw = None if self.designer.tv else self._forward.get(key)
+        if fw is None:
+            fw = forward_window(mats, centre=bool(self.designer.nc), lag=a)
+            if not self.designer.tv:
+                self._forward[key] = fw
+        wb = window_bound(GQ, nx, drop_outputs(fw, missing))
         if not np.isfinite(wb.kappa):
             return None
-        ax = wb.Rx.sum(axis=1)
-        HP = wb.Rd + ax[:, None] * wb.nu[None, :]
-        extra = wb.Rv.sum(axis=1) + ax * wb.kappa
-        if nc:
-            extra += _EPS * (1.0 + _EPS) * HP.sum(axis=1)
-            HP *= 1.0 + _EPS
-        HP *= 1.0 + gamma((s + 1) * nd + 2)
+        ax = upper(wb.Rx.sum(axis=1), nx)
+        HP = upper(wb.Rd + ax[:, None] * wb.nu[None, :], 2)
+        extra = upper(wb.Rv.sum(axis=1) + ax * wb.kappa, wb.Rv.shape[1] + 2)
         return wb.G, HP, extra
 
     def _model(self, j: int) -> tuple[np.ndarray, ...]:
@@ -249,11 +321,7 @@ class WindowGains:
             return np.inf, np.inf
         assert gain.HP is not None
         nx, nd = self.sys.nx, self.sys.nd
-        r = np.ones(nd)
-        if self.designer.const_bounds and nd:
-            box = self.sys.d
-            assert isinstance(box, Box)
-            r = box.radius
+        r = self.sys.d_at(0).radius if self.designer.const_bounds else np.ones(nd)
         return gain.accuracy, float(np.sum(gain.HP[:nx] @ np.tile(r, self.s + 1)))
 
 
