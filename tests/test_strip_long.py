@@ -11,7 +11,7 @@ import pytest
 
 import ivobs
 from ivobs import Box, scenarios
-from ivobs.sets.zonotope import MAX_BASIS_CONDITION, reduce_girard, reduce_parallelotope
+from ivobs.sets.reduction import MAX_BASIS_CONDITION, reduce_girard, reduce_parallelotope
 from ivobs.testing import random_system
 
 CORA = ["cora-2dim", "cora-vehicle6", "cora-pedestrian4", "cora-slip4", "cora-tank30"]
