@@ -235,12 +235,16 @@ def weighted_quantiles(
         else:  # the thresholds part here (or both hit the pivot): each finished alone
             v1 = v2 = float(piv)
             if side1 != 1:
-                v1 = _select(b, w, lo, lt, base, t1, piv) if side1 == 0 else _select(
-                    b, w, gt, hi, upto, t1, piv
+                v1 = (
+                    _select(b, w, lo, lt, base, t1, piv)
+                    if side1 == 0
+                    else _select(b, w, gt, hi, upto, t1, piv)
                 )
             if side2 != 1:
-                v2 = _select(b, w, lo, lt, base, t2, piv) if side2 == 0 else _select(
-                    b, w, gt, hi, upto, t2, piv
+                v2 = (
+                    _select(b, w, lo, lt, base, t2, piv)
+                    if side2 == 0
+                    else _select(b, w, gt, hi, upto, t2, piv)
                 )
             return v1, v2
     return float(piv), float(piv)
@@ -399,9 +403,10 @@ def intersect_strip(
     e = t - hz
     # (1), its γ terms doubled for their own evaluation, and the underflow of the sums of s
     g_e, g_s = 2.0 * _gamma(nz + 1), 2.0 * _gamma(nz)
-    sigma_z = _upper(sigma + h_acc + g_e * (abs(t) + h_z) + g_s * h_rows, nz + 5) + (m + 1) * (
-        nz + 2
-    ) * ETA
+    sigma_z = (
+        _upper(sigma + h_acc + g_e * (abs(t) + h_z) + g_s * h_rows, nz + 5)
+        + (m + 1) * (nz + 2) * ETA
+    )
     s1 = 0.0
     for col in range(m):
         s1 += abs(s[col])
@@ -426,7 +431,7 @@ def intersect_strip(
     g, ae, se = 2.0 * _gamma(4), abs(e), s1 + sigma_z
     for r in range(nz):
         row = H[r]
-        lam = _dot(row, s, m) / den  # λ* [Alamo2005]; any λ is exact in the identity of the docstring
+        lam = _dot(row, s, m) / den  # λ* [Alamo2005]; any λ is exact in the docstring's identity
         if not abs(lam) < _INF:
             lam = 0.0
         al = abs(lam)

@@ -33,6 +33,7 @@ PARALLELOTOPE, GIRARD, NONE = 0, 1, 2
 
 _gamma = jit(gamma)
 _INF = np.inf
+Arr = np.ndarray
 
 
 @jit
@@ -45,7 +46,7 @@ def _upper(s: float, n: int) -> float:
 def joint_set(
     p: np.ndarray, H: np.ndarray, e: np.ndarray, jc: np.ndarray, cd: np.ndarray,
     rd: np.ndarray, dlo: np.ndarray, dhi: np.ndarray, room: int,
-) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[Arr, Arr, int, Arr, Arr, Arr, Arr]:  # fmt: skip
     """``(z, Hz, m, acc, rows, lo, hi)``: ``(x_k, d_jc) ∈ <z, Hz[:, :m]> ⊕ box(acc)`` from ``x_k
     ∈ <p, H> ⊕ box(e)`` and ``d ∈ [dlo, dhi] ⊆ <cd, diag(rd)>`` (no rounding: copies), ``Hz``
     with ``room`` free columns for the strips, ``rows = |Hz| 1``; the box ``[lo, hi]`` of the
