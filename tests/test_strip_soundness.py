@@ -22,12 +22,12 @@ from ivobs import Box
 from ivobs.testing import random_system
 
 
-def exact_case(seed: int, scale: float, gain: float, rho: float, T: int, noise: float = 0.0):
-    """A 3-state, 2-output plant ``x+ = A x + B u + w``, ``y = C x + D u + v`` (``C``
-    entries up to ``gain``), states and inputs of size ``scale``, disturbances of size
-    ``noise`` (default: ``scale``), and an exact record."""
-    noise = noise or scale
+def exact_system(seed: int, scale: float, gain: float, rho: float, noise: float = 0.0):
+    """A 3-state, 2-output plant ``x+ = A x + B u + w``, ``y = C x + D u + v`` (``C`` entries
+    up to ``gain``), states and inputs of size ``scale``, disturbances of size ``noise``
+    (default: ``scale``): ``(sys, x0, x_true0, rng)``."""
     rng = np.random.default_rng(seed)
+    noise = noise or scale
     nx, ny = 3, 2
     A = rng.normal(size=(nx, nx))
     A *= rho / max(abs(np.linalg.eigvals(A)))
@@ -38,7 +38,12 @@ def exact_case(seed: int, scale: float, gain: float, rho: float, T: int, noise: 
         A, rng.normal(size=(nx, 1)), C, np.eye(nx), np.eye(ny), W, V, D=D
     )
     x_true0 = rng.uniform(-1, 1, nx) * scale
-    x0 = Box(x_true0 - 0.5 * scale, x_true0 + 0.5 * scale)
+    return sys_, Box(x_true0 - 0.5 * scale, x_true0 + 0.5 * scale), x_true0, rng
+
+
+def exact_case(seed: int, scale: float, gain: float, rho: float, T: int, noise: float = 0.0):
+    """:func:`exact_system` and an exact record of ``T`` steps with inputs of size ``scale``."""
+    sys_, x0, x_true0, rng = exact_system(seed, scale, gain, rho, noise)
     u = rng.normal(size=(T, 1)) * scale
     return sys_, x0, simulate_linear(sys_, x_true0, T, u, seed=seed)
 
