@@ -76,29 +76,34 @@ class IntersectDesign(Design):
     skipped: tuple[str, ...] = ()
 
 
-def _pinned(
-    y: Any, u: np.ndarray, D_r: np.ndarray, F_r: np.ndarray, d_lo: np.ndarray,
-    d_hi: np.ndarray, c: float,
-) -> tuple[Any, Any]:  # fmt: skip
-    """Bounds of ``x_i = (y - D_r u - F_r d) / c`` for ``d`` in ``[d_lo, d_hi]`` (``y``, ``u``
-    of one step or a record): the numerator by :func:`ivobs.image_bounds` of ``[1, -D_r,
-    -F_r]`` over the box of ``(y, u, d)``, widened by the rounding of a float64 evaluation of
-    the output row (a sample within rounding of its bound is admissible: ``γ_n`` times ``|y| +
+def _strip_bounds(
+    lo: np.ndarray, hi: np.ndarray, y: np.ndarray, u: np.ndarray, D: np.ndarray, F: np.ndarray,
+    d: Box, rows: list[tuple[int, int, float]],
+) -> None:  # fmt: skip
+    """Intersect ``[lo, hi]`` (in place; one step or a record, ``(..., nx)``) with the bounds
+    of each pinned state ``x_i = (y_r - D_r u - F_r d) / c`` for ``d`` in its box: the
+    numerators of all ``rows`` ``(r, i, c)`` by one :func:`ivobs.image_bounds` of ``[I, -D_R,
+    -F_R]`` over the box of ``(y_R, u, d)``, widened by the rounding of a float64 evaluation of
+    the output rows (a sample within rounding of its bound is admissible: ``γ_n`` times ``|y| +
     2 (|D_r||u| + |F_r| max(|d_lo|, |d_hi|))``, which bounds ``|c x| + |D_r u| + |F_r d|``),
-    the quotient rounded outwards."""
-    y = np.asarray(y, dtype=float)
-    u = np.broadcast_to(u, (*y.shape, u.shape[-1]))
-    lo_in = np.concatenate([y[..., None], u, np.broadcast_to(d_lo, (*y.shape, d_lo.shape[0]))], -1)
-    hi_in = np.concatenate([y[..., None], u, np.broadcast_to(d_hi, (*y.shape, d_hi.shape[0]))], -1)
-    M = np.concatenate([[1.0], -D_r, -F_r])[None, :]
-    v_lo, v_hi = (b[..., 0] for b in image_bounds(M, lo_in, hi_in))
-    n = u.shape[-1] + d_lo.shape[0] + 1
-    mag = np.abs(u) @ np.abs(D_r) + float(np.abs(F_r) @ np.maximum(np.abs(d_lo), np.abs(d_hi)))
-    w = upper(2.0 * gamma(n) * (np.abs(y) + 2.0 * mag), n + 2)
+    the quotients rounded outwards. A NaN sample gives NaN bounds: ignored."""
+    r = [row[0] for row in rows]
+    c = np.array([row[2] for row in rows])
+    yR, DR, FR = y[..., r], D[r], F[r]
+    lead, n = yR.shape[:-1], u.shape[-1] + d.lo.shape[0] + 1
+    ends = [np.concatenate([yR, np.broadcast_to(u, (*lead, u.shape[-1])),
+                            np.broadcast_to(dv, (*lead, dv.shape[0]))], axis=-1)
+            for dv in (d.lo, d.hi)]  # fmt: skip
+    v_lo, v_hi = image_bounds(np.hstack([np.eye(len(rows)), -DR, -FR]), *ends)
+    mag = np.abs(u) @ np.abs(DR).T + np.abs(FR) @ np.maximum(np.abs(d.lo), np.abs(d.hi))
+    w = upper(2.0 * gamma(n) * (np.abs(yR) + 2.0 * mag), n + 2)
     v_lo, v_hi = down(v_lo - w), up(v_hi + w)
-    if c < 0.0:
-        v_lo, v_hi = v_hi, v_lo
-    return down(v_lo / c), up(v_hi / c)
+    neg = c < 0.0
+    b_lo = down(np.where(neg, v_hi, v_lo) / c)
+    b_hi = up(np.where(neg, v_lo, v_hi) / c)
+    for j, (_, state, _) in enumerate(rows):  # a state pinned by several rows: each counts
+        lo[..., state] = np.fmax(lo[..., state], b_lo[..., j])
+        hi[..., state] = np.fmin(hi[..., state], b_hi[..., j])
 
 
 def _pinning_rows(C: np.ndarray) -> list[tuple[int, int, float]]:
@@ -269,12 +274,8 @@ class Intersect(Estimator):
         _, _, C, D, _, F = self.sys.matrices_at(t_k if self.sys.is_continuous else k)
         rows = self._strip_rows if not self.sys.is_time_varying else _pinning_rows(C)
         rows = [row for row in rows if not np.isnan(y_k[row[0]])]
-        if not rows:
-            return lo, hi
-        d = self.sys.d_at(k, y_k)
-        for r, i, c in rows:
-            a, b = _pinned(y_k[r], u_k, D[r], F[r], d.lo, d.hi, c)
-            lo[i], hi[i] = max(lo[i], float(a)), min(hi[i], float(b))
+        if rows:
+            _strip_bounds(lo, hi, y_k, u_k, D, F, self.sys.d_at(k, y_k), rows)
         return lo, hi
 
     def _strip_run(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -291,12 +292,8 @@ class Intersect(Estimator):
         if not self.sys.has_constant_bounds:
             return None
         _, _, _, D, _, F = self.sys.matrices_at(0)
-        d = self.sys.d_at(0, None)
-        for r, i, c in self._strip_rows:
-            with np.errstate(invalid="ignore"):  # NaN (missing) stays NaN: no information
-                lo_r, hi_r = _pinned(y[..., r], u, D[r], F[r], d.lo, d.hi, c)
-            lo[..., i] = np.fmax(lo[..., i], lo_r)
-            hi[..., i] = np.fmin(hi[..., i], hi_r)
+        with np.errstate(invalid="ignore"):  # NaN (missing) stays NaN: no information
+            _strip_bounds(lo, hi, y, u, D, F, self.sys.d_at(0, None), self._strip_rows)
         return lo, hi
 
     # -- combining ------------------------------------------------------------------------
