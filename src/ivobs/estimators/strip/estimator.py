@@ -12,17 +12,27 @@ from ...errors import IvobsError
 from ...linalg import gamma
 from ...model import LinearSystem
 from ...sets import Box, Zonotope
+from ...sets.reduction import reduce_girard, reduce_parallelotope
 from ...sets.rounding import mid_rad
 from .. import _uncertain as uncertain
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from . import recursion as rec
+from .recursion import (
+    GIRARD,
+    NONE,
+    PARALLELOTOPE,
+    joint_set,
+    measure,
+    predict,
+    state_box,
+    step,
+)
 
 __all__ = ["REDUCTIONS", "StripDesign", "StripEstimator", "StripState"]
 
 REDUCTIONS = ("parallelotope", "girard", "box")
-_CODE = {"parallelotope": rec.PARALLELOTOPE, "girard": rec.GIRARD, "box": rec.NONE}
+_CODE = {"parallelotope": PARALLELOTOPE, "girard": GIRARD, "box": NONE}
 
 Model = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
               np.ndarray, np.ndarray]  # fmt: skip
@@ -203,9 +213,7 @@ class StripEstimator(Estimator):
         args = (state.p, H, state.e, u, y, cd, rd, dlo, dhi, model, self.design.order)
         if self.sys.uncertainty is None:
             code = _CODE[self.design.reduction]
-            p, H, e, lo, hi, inconsistent, finite = rec.step(
-                *args, code, self._g_meas, self._n_plant
-            )
+            p, H, e, lo, hi, inconsistent, finite = step(*args, code, self._g_meas, self._n_plant)
         else:
             p, H, e, lo, hi, inconsistent, finite = self._uncertain_step(*args)
         if not finite:
@@ -227,19 +235,19 @@ class StripEstimator(Estimator):
         assert unc is not None
         D, h, jc, pc, mc, M, Ep, B = model
         nx = self.sys.nx
-        z, Hz, m, acc, rows, lo, hi = rec.joint_set(p, H, e, jc, cd, rd, dlo, dhi, y.shape[0])
+        z, Hz, m, acc, rows, lo, hi = joint_set(p, H, e, jc, cd, rd, dlo, dhi, y.shape[0])
         v = uncertain.terms(unc, lo[:nx], hi[:nx], u)[1]
-        m, inconsistent = rec.measure(z, Hz, m, acc, rows, lo, hi, y, u, v, D, h, nx,
+        m, inconsistent = measure(z, Hz, m, acc, rows, lo, hi, y, u, v, D, h, nx,
                                       self._g_meas)  # fmt: skip
-        xlo, xhi, crossed = rec.state_box(z, rows, acc, m, lo, hi, nx)
+        xlo, xhi, crossed = state_box(z, rows, acc, m, lo, hi, nx)
         w = uncertain.terms(unc, xlo, xhi, u)[0]
-        pn, Hn = rec.predict(z, Hz, m, rows, acc, u, cd, rd, w, M, mc, Ep, pc, B, self._n_plant)
+        pn, Hn = predict(z, Hz, m, rows, acc, u, cd, rd, w, M, mc, Ep, pc, B, self._n_plant)
         inconsistent = inconsistent or crossed
         if not (np.isfinite(pn).all() and np.isfinite(Hn).all()):
             return pn, Hn, np.zeros(nx), xlo, xhi, inconsistent, False
         e_next = np.zeros(nx)
         if self.design.reduction == "parallelotope":
-            Hn, e_next = rec.reduce_parallelotope(Hn, order)
+            Hn, e_next = reduce_parallelotope(Hn, order)
         elif self.design.reduction == "girard":
-            Hn = rec.reduce_girard(Hn, order)
+            Hn = reduce_girard(Hn, order)
         return pn, Hn, e_next, xlo, xhi, inconsistent, True
