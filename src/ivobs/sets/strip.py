@@ -302,10 +302,11 @@ def section_hull(
     is ``-max (-H_j) ξ``: the quantile ``(W + e) / 2``, ``z_j - f_j(-μ)`` with ``f_j(-μ) = -μ e
     + |μ| σ + ‖H_j - μ s‖₁``.
 
-    The weights are the same for every coordinate and usually concentrated, so the
-    :data:`HEAVY` heaviest breakpoints bracket each quantile (:func:`_bracket`), often to one
-    breakpoint; otherwise one pass gathers the breakpoints inside the bracket and
-    :func:`weighted_quantiles` selects among them.
+    The weights are the same for every coordinate and usually concentrated, so when there
+    are more than ``4 HEAVY`` breakpoints the :data:`HEAVY` heaviest bracket each quantile
+    (:func:`_bracket`), often to one breakpoint; otherwise one pass gathers the breakpoints
+    inside the bracket and :func:`weighted_quantiles` selects among them (among all of them
+    when there are few).
 
     ``f_j(μ)`` evaluated in floats has at most ``m + 3`` roundings per term, of terms no larger
     than ``|μ| (|e| + σ + ‖s‖₁) + ‖H_j‖₁``: that times ``2 γ_{m+4}`` (plus underflow) is added,
@@ -327,36 +328,40 @@ def section_hull(
             nb += 1
     cols[nb], w[nb] = -1, sigma
     nb += 1
-    order = np.argsort(-w[:nb])
-    cols, w = cols[order], w[order]
+    heavy = nb > 4 * HEAVY  # fewer breakpoints: the selection over all of them at once
+    if heavy:
+        order = np.argsort(-w[:nb])
+        cols, w = cols[order], w[order]
     total = 0.0
     for k in range(nb):
         total += w[k]
     t_up, t_lo = 0.5 * (total - e), 0.5 * (total + e)
-    n_heavy = min(HEAVY, nb)
-    rest = total
-    for k in range(n_heavy):
-        rest -= w[k]
+    rest = total  # the weight of all but the heaviest
+    if heavy:
+        for k in range(HEAVY):
+            rest -= w[k]
     rest = max(rest, 0.0)
-    hv, hw = np.empty(n_heavy), np.empty(n_heavy)
+    hv, hw = np.empty(HEAVY), np.empty(HEAVY)
     gb, gw = np.empty(nb), np.empty(nb)
     g, tail = 2.0 * _gamma(m + 4), abs(e) + sigma + s1
     for j in range(n):
         mu_up = mu_lo = 0.0
         if smax > 0.0:
             row = H[j]
-            for k in range(n_heavy):  # insertion by value
-                v, i = _breakpoint(row, s, cols[k]), k
-                while i > 0 and hv[i - 1] > v:
-                    hv[i], hw[i] = hv[i - 1], hw[i - 1]
-                    i -= 1
-                hv[i], hw[i] = v, w[k]
-            va_up, vb_up = _bracket(hv, hw, n_heavy, rest, t_up)
-            va_lo, vb_lo = _bracket(hv, hw, n_heavy, rest, t_lo)
-            if va_up == vb_up and va_lo == vb_lo:
+            lo_b, hi_b, decided = -_INF, _INF, False
+            if heavy:  # the heaviest breakpoints, inserted by value, bracket the quantiles
+                for k in range(HEAVY):
+                    v, i = _breakpoint(row, s, cols[k]), k
+                    while i > 0 and hv[i - 1] > v:
+                        hv[i], hw[i] = hv[i - 1], hw[i - 1]
+                        i -= 1
+                    hv[i], hw[i] = v, w[k]
+                va_up, vb_up = _bracket(hv, hw, HEAVY, rest, t_up)
+                va_lo, vb_lo = _bracket(hv, hw, HEAVY, rest, t_lo)
+                decided = va_up == vb_up and va_lo == vb_lo
                 mu_up, mu_lo = vb_up, vb_lo
-            else:  # the breakpoints inside the bracket, and the weight below it
                 lo_b, hi_b = min(va_up, va_lo), max(vb_up, vb_lo)
+            if not decided:  # the breakpoints inside the bracket, and the weight below it
                 below, ng = 0.0, 0
                 for k in range(nb):
                     v = _breakpoint(row, s, cols[k])
@@ -365,6 +370,7 @@ def section_hull(
                     elif v <= hi_b:
                         gb[ng], gw[ng] = v, w[k]
                         ng += 1
+                mu_up = mu_lo = 0.0
                 if ng > 0:
                     mu_up, mu_lo = weighted_quantiles(gb, gw, ng, t_up - below, t_lo - below)
         spread_up = _spread(H[j], mu_up, s, m)
