@@ -45,7 +45,7 @@ equation (a record from a float64 simulation).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -56,7 +56,7 @@ from ..sets import Box
 from ..sets.rounding import down, mid_rad, up, upper
 from . import register
 from .base import Design, Estimator, check_size
-from .state import OnlineState, Step
+from .state import OnlineState, Step, evolve
 
 __all__ = ["EllipsoidDesign", "EllipsoidEstimator", "EllipsoidState", "box_ellipsoid"]
 
@@ -244,7 +244,7 @@ class EllipsoidEstimator(Estimator):
         rad = up(np.sqrt(np.maximum(np.diag(Q), 0.0)))
         lo, hi = down(c - rad), up(c + rad)
         c_next, Q_next = self._predict(c, Q, rad, u_k, cd, rd, Q_w)
-        return Step(replace(state, c=c_next, Q=Q_next), lo, hi, inconsistent)
+        return Step(evolve(state, c=c_next, Q=Q_next), lo, hi, inconsistent)
 
     def _strip(
         self, i: int, c: np.ndarray, mag: np.ndarray, u_k: np.ndarray, y_k: np.ndarray,

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import hashlib
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -56,7 +56,7 @@ from ..sets.rounding import down, up, upper
 from . import get, make_estimator, methods, register
 from .base import Design, Estimator
 from .persistence import check_version
-from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step, check_counters
+from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step, check_counters, evolve
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -339,7 +339,7 @@ class Intersect(Estimator):
         else:
             lo_s, hi_s = self._strip_box(k, u_k, y_k, t_k)
         lo, hi, empty = self._combine(np.array(los), np.array(his), lo_s, hi_s)
-        new = replace(state, members=tuple(members))
+        new = evolve(state, members=tuple(members))
         return Step(new, lo, hi, flagged or bool(empty))
 
     # -- offline --------------------------------------------------------------------------

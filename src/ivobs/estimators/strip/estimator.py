@@ -17,7 +17,7 @@ from ...sets.rounding import mid_rad
 from .. import _uncertain as uncertain
 from .. import register
 from ..base import Design, Estimator, check_size
-from ..state import OnlineState, Step
+from ..state import OnlineState, Step, evolve
 from .recursion import (
     GIRARD,
     NONE,
@@ -221,7 +221,7 @@ class StripEstimator(Estimator):
         if self.design.reduction == "box":
             zp = Zonotope._trusted(p, H).reduce(self.design.order, self.design.weight)
             p, H = zp.c, np.ascontiguousarray(zp.G)
-        return Step(StripState(p=p, H=H, e=e, k=k, scale=state.scale), lo, hi, inconsistent)
+        return Step(evolve(state, p=p, H=H, e=e), lo, hi, inconsistent)
 
     def _uncertain_step(
         self, p: np.ndarray, H: np.ndarray, e: np.ndarray, u: np.ndarray, y: np.ndarray,
