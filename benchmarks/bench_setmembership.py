@@ -151,8 +151,9 @@ def cost(horizons: list[int]) -> None:
                 for k in range(T):
                     box = est.step(tr.u[k], tr.y[k])
                     assert box.contains(tr.x[k]), f"{m} lost the state at step {k}"
-                    G = est._state.get("G", est._state.get("H"))
-                    nc = est._state["A"].shape[0] if "A" in est._state else 0
+                    st = est._state  # the typed state: strip's H, constrained-zonotope's G, A
+                    G = st.H if hasattr(st, "H") else st.G
+                    nc = st.A.shape[0] if hasattr(st, "A") else 0
                     size = np.maximum(size, [G.shape[1], nc])
                 cpu = 1e3 * (time.process_time() - start) / T
                 cells.append(f"{cpu:7.2f} [{size[0]:3d},{size[1]:3d}]")

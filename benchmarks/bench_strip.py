@@ -2,6 +2,9 @@
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_strip.py [speed|tank|growth|drift] [key=value]
 
+The step runs compiled when numba is installed; ``IVOBS_NUMBA=0`` in the environment runs the
+same source interpreted (what users without numba get).
+
 * ``speed``: online ``step()`` steps/s on the servo motor (2,000 steps, median of 5) and on CORA's
   tank30 (the 235 recorded steps, median of 3), wall and CPU time, with tank30's mean
   interval-hull radius at the 1-based time points k = 20 and k = 235 (row k - 1) beside CORA

@@ -358,3 +358,65 @@ def test_predict_between_steps_leaves_the_members_warm_starts_alone():
         est.predict(tr.u[k])
         his.append(est.step(tr.u[k], tr.y[k]).hi)
     np.testing.assert_array_equal(np.array(his)[est.valid_from :], ref.upper[est.valid_from :])
+
+
+# -- soundness at every scale, missing samples -----------------------------------------------
+@pytest.mark.parametrize(
+    ("scale", "gain", "noise"),
+    [(1.0, 1.0, 0.0), (1e6, 1e3, 0.0), (1e10, 1e3, 1e-2)],
+    ids=["unit", "1e6-gain1e3", "1e10-thin"],
+)
+def test_exact_trajectories_are_contained_at_every_scale(scale, gain, noise):
+    """Exact records (tests/exactsim.py) with members whose rounding is proven, the
+    measurement strip of an output that pins a state, a JSON round trip at every step: no
+    miss, no flag, never wider than a member."""
+    from exactsim import simulate_linear
+    from test_strip_soundness import exact_system
+
+    sys, x0, x_true0, rng = exact_system(int(np.log10(scale)) + 50, scale, gain, 0.95, noise)
+    C = sys.C.copy()
+    C[1] = [0.0, 2.0, 0.0]  # y2 pins x2
+    sys = LinearSystem(sys.A, sys.B, C, sys.D, E=sys.E, F=sys.F, d=sys.d)
+    rec = simulate_linear(sys, x_true0, 100, rng.normal(size=(100, 1)) * scale, seed=3)
+    est = intersect(sys, x0, methods=["strip", "ellipsoid"])
+    assert est.design.strip_rows == (1,)
+    res = est.run(rec.U, rec.Y)
+    assert rec.misses(res.lower, res.upper).size == 0 and not res.inconsistent.any()
+    for m in est.members:
+        assert_within(res, m.run(rec.U, rec.Y))
+    est.reset()
+    for k in range(rec.Y.shape[0]):
+        box = est.step(rec.U[k], rec.Y[k])
+        assert np.array_equal(box.lo, res.lower[k]) and np.array_equal(box.hi, res.upper[k])
+        est.restore(json.loads(json.dumps(est.state())))
+
+
+def test_a_sample_rounded_past_its_bound_is_not_a_contradiction():
+    """``y = x + v`` with ``x = -0.1`` and ``v`` at its bound ``-0.005``: a float64 record holds
+    ``fl(-0.1 + -0.005) = -0.10500000000000001``, outside the exact set by rounding. The
+    measurement strip includes that rounding: it meets the members' boxes (no flag) and holds
+    ``x``."""
+    y = -0.1 + -0.005
+    sys = LinearSystem([[0.5]], None, [[1.0]], E=[[0.0, 0.0]], F=[[0.0, 1.0]],
+                       d=Box([-0.01, -0.005], [0.01, 0.005]))  # fmt: skip
+    est = intersect(sys, Box([-0.1], [-0.1]), methods=["strip"], on_inconsistent="raise")
+    box = est.step(None, [y])
+    assert box.lo[0] <= -0.1 <= box.hi[0] and not est.last_inconsistent
+
+
+@pytest.mark.parametrize(("seed", "T"), [(0, 600), pytest.param(1, 3000, marks=pytest.mark.slow)])
+def test_missing_samples_leave_the_widths_bounded(seed, T):
+    """10 % of the output components missing at random on a random stable plant: every box
+    holds the state, widths within 20x of those with every sample."""
+    rng = np.random.default_rng(seed)
+    sys = random_system(seed + 80, nx=3, ny=2, nu=1, rho=0.85)
+    x0 = Box(-np.ones(3), np.ones(3))
+    tr = adversarial_run(sys, x0, T, seed=seed)
+    gaps = tr.y.copy()
+    gaps[rng.random(gaps.shape) < 0.1] = np.nan
+    est = intersect(sys, x0, methods=["strip", "ellipsoid"])
+    full, missing = est.run(tr.u, tr.y), est.run(tr.u, gaps)
+    assert_contains(full, tr.x)
+    assert_contains(missing, tr.x)
+    ratio = missing.width[50:].mean() / full.width[50:].mean()
+    assert 1.0 <= ratio < 20.0

@@ -11,7 +11,6 @@ import pytest
 
 import ivobs
 from ivobs import Box, scenarios
-from ivobs.sets.zonotope import MAX_BASIS_CONDITION, reduce_girard, reduce_parallelotope
 from ivobs.testing import random_system
 
 CORA = ["cora-2dim", "cora-vehicle6", "cora-pedestrian4", "cora-slip4", "cora-tank30"]
@@ -130,35 +129,6 @@ def test_random_systems_300_steps_low_order(seed: int) -> None:
         assert np.all(np.isfinite(res.upper))
         if reduction == "parallelotope":  # the boxes may diverge on such systems (docs)
             assert res.width[150:].max() < 1e2
-
-
-def _contained(G: np.ndarray, G2: np.ndarray, rho: np.ndarray, rng: np.random.Generator) -> bool:
-    """Vertices of <0, G> in <0, G2> ⊕ box(rho) (one LP each)."""
-    Z = ivobs.Zonotope(np.zeros(G.shape[0]), np.hstack([G2, np.diag(rho)]))
-    pts = ivobs.Zonotope(np.zeros(G.shape[0]), G).sample(40, rng, vertices=True)
-    return all(Z.contains(p, tol=1e-12) for p in pts)
-
-
-def test_reductions_enclose_the_zonotope() -> None:
-    rng = np.random.default_rng(5)
-    for _ in range(6):
-        n, m = int(rng.integers(2, 6)), int(rng.integers(8, 30))
-        G = rng.normal(size=(n, m)) * rng.lognormal(size=m)
-        for q in (n, n + 2, m - 1):
-            G2, rho = reduce_parallelotope(G, q)
-            assert G2.shape[1] <= q and _contained(G, G2, rho, rng)
-            G3 = reduce_girard(G, q)
-            assert G3.shape[1] <= q and _contained(G, G3, np.zeros(n), rng)
-
-
-def test_an_ill_conditioned_basis_falls_back_to_girard() -> None:
-    """Nearly parallel generators: any basis of two of them is nearly singular (condition
-    ~1e7 > MAX_BASIS_CONDITION); the reduction is Girard's box."""
-    G = np.array([[1.0, 2.0, 3.0, -1.0, 1.5], [1.0, 2.0 + 1e-7, 3.0 - 2e-7, -1.0, 1.5 + 1e-7]])
-    G2, rho = reduce_parallelotope(G, 3)
-    assert MAX_BASIS_CONDITION < 1e6
-    np.testing.assert_array_equal(G2, reduce_girard(G, 3))
-    assert not rho.any()
 
 
 def test_box_reductions_refuse_the_orders_where_they_diverge() -> None:

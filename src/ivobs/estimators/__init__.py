@@ -50,7 +50,7 @@ METHODS: dict[str, Entry] = {
     "interval-transformed": Entry("interval.observers", "TransformedIntervalObserver", 50),
     "interval-split": Entry("interval.observers", "SplitIntervalObserver", 60),
     "kkl": Entry("kkl.estimator", "KKL", 70),
-    "strip": Entry("strip", "StripEstimator", 80),
+    "strip": Entry("strip.estimator", "StripEstimator", 80),
     "ellipsoid": Entry("ellipsoid", "EllipsoidEstimator", 85),
     "constrained-zonotope": Entry("constrained_zonotope", "ConstrainedZonotopeEstimator", 90),
     "exact": Entry("exact.estimator", "Exact", 100),

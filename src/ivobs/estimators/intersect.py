@@ -12,19 +12,28 @@ keeps its own recursion), so the result is as sound as the weakest assumption am
 
 **Measurement strip.** A row ``r`` of ``C`` with a single nonzero entry ``c`` (state ``i``
 measured directly, possibly scaled) gives ``c x_i = y_r - D_r u - F_r d`` with ``d`` in its box,
-hence by Lemma 1 (003/004, :func:`ivobs.image_bounds`)::
+hence by [Efimov2013, Lemma 1] (:func:`ivobs.image_bounds`, applied to ``[1, -D_r, -F_r]`` over
+the box of ``(y_r, u, d)``)::
 
     x_i ∈ (y_r - D_r u - [F_r⁺ d_lo - F_r⁻ d_hi, F_r⁺ d_hi - F_r⁻ d_lo]) / c
 
 (the ends swapped when ``c < 0``). This box is intersected as well (option ``strip``).
+
+**Rounding, proven** (``proven_rounding``; no margin of its own). The intersection and the hull
+are comparisons of floats: exact. Each member's box is the member's own, rounded by its own
+rules. The strip's numerator is enclosed by :func:`ivobs.image_bounds` (its evaluation bounded
+by ``γ_n`` [Higham2002] and rounded outwards) and widened by the rounding of a float64
+evaluation of the output row (a record from a float64 simulation: a sample within rounding of
+its bound is admissible), and the quotient by ``c`` is rounded outwards (one ``nextafter``).
 
 **Inconsistent data.** An empty intersection means two guaranteed enclosures of the same state
 do not meet: the data contradict the model and the bounds (a fault). The step is reported
 (``on_inconsistent``), and the box returned is the *hull of the members' boxes* (the strip left
 out, as it is what a faulty sample corrupts first): each member handled the fault by its own
 rules (e.g. ``exact`` predicts without the sample), so the hull contains the state as long as one
-member's enclosure does, and it is never empty or inverted. Steps a member itself reports as
-inconsistent are reported too.
+member's enclosure does, and it is never empty or inverted. Every enclosure contains the state
+of an admissible record, so a crossing of two bounds, by however little, is a contradiction:
+no tolerance. Steps a member itself reports as inconsistent are reported too.
 
 Data used: the union of what the members use (``u[0..k]``, ``y[0..k]`` at most, each member
 its own prior ``x0``); the strip uses ``u[k]``, ``y[k]``.
@@ -34,19 +43,20 @@ from __future__ import annotations
 
 import hashlib
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..errors import DesignError, IvobsError
+from ..linalg import gamma
 from ..model import LinearSystem
 from ..sets import Box, image_bounds
+from ..sets.rounding import down, up, upper
 from . import get, make_estimator, methods, register
 from .base import Design, Estimator
-from .intersect_state import check_members, save_members
-from .rounding import ROUNDING, outward
-from .state import OnlineState, Step
+from .persistence import check_version
+from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step, check_counters, evolve
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -64,6 +74,36 @@ class IntersectDesign(Design):
     strip: bool
     strip_rows: tuple[int, ...]
     skipped: tuple[str, ...] = ()
+
+
+def _strip_bounds(
+    lo: np.ndarray, hi: np.ndarray, y: np.ndarray, u: np.ndarray, D: np.ndarray, F: np.ndarray,
+    d: Box, rows: list[tuple[int, int, float]],
+) -> None:  # fmt: skip
+    """Intersect ``[lo, hi]`` (in place; one step or a record, ``(..., nx)``) with the bounds
+    of each pinned state ``x_i = (y_r - D_r u - F_r d) / c`` for ``d`` in its box: the
+    numerators of all ``rows`` ``(r, i, c)`` by one :func:`ivobs.image_bounds` of ``[I, -D_R,
+    -F_R]`` over the box of ``(y_R, u, d)``, widened by the rounding of a float64 evaluation of
+    the output rows (a sample within rounding of its bound is admissible: ``γ_n`` times ``|y| +
+    2 (|D_r||u| + |F_r| max(|d_lo|, |d_hi|))``, which bounds ``|c x| + |D_r u| + |F_r d|``),
+    the quotients rounded outwards. A NaN sample gives NaN bounds: ignored."""
+    r = [row[0] for row in rows]
+    c = np.array([row[2] for row in rows])
+    yR, DR, FR = y[..., r], D[r], F[r]
+    lead, n = yR.shape[:-1], u.shape[-1] + d.lo.shape[0] + 1
+    ends = [np.concatenate([yR, np.broadcast_to(u, (*lead, u.shape[-1])),
+                            np.broadcast_to(dv, (*lead, dv.shape[0]))], axis=-1)
+            for dv in (d.lo, d.hi)]  # fmt: skip
+    v_lo, v_hi = image_bounds(np.hstack([np.eye(len(rows)), -DR, -FR]), *ends)
+    mag = np.abs(u) @ np.abs(DR).T + np.abs(FR) @ np.maximum(np.abs(d.lo), np.abs(d.hi))
+    w = upper(2.0 * gamma(n) * (np.abs(yR) + 2.0 * mag), n + 2)
+    v_lo, v_hi = down(v_lo - w), up(v_hi + w)
+    neg = c < 0.0
+    b_lo = down(np.where(neg, v_hi, v_lo) / c)
+    b_hi = up(np.where(neg, v_lo, v_hi) / c)
+    for j, (_, state, _) in enumerate(rows):  # a state pinned by several rows: each counts
+        lo[..., state] = np.fmax(lo[..., state], b_lo[..., j])
+        hi[..., state] = np.fmin(hi[..., state], b_hi[..., j])
 
 
 def _pinning_rows(C: np.ndarray) -> list[tuple[int, int, float]]:
@@ -115,7 +155,7 @@ class Intersect(Estimator):
     supports_continuous = True
     supports_time_varying = True
     needs_x0 = False
-    rounds_itself = True  # members rounded before intersecting (base.outward)
+    proven_rounding = True  # comparisons of the members' boxes, a strip rounded outwards
     supports_uncertain = True  # members that accept interval matrices; exact rows' strips
 
     def __init__(
@@ -234,15 +274,8 @@ class Intersect(Estimator):
         _, _, C, D, _, F = self.sys.matrices_at(t_k if self.sys.is_continuous else k)
         rows = self._strip_rows if not self.sys.is_time_varying else _pinning_rows(C)
         rows = [row for row in rows if not np.isnan(y_k[row[0]])]
-        if not rows:
-            return lo, hi
-        d = self.sys.d_at(k, y_k)
-        for r, i, c in rows:
-            f_lo, f_hi = image_bounds(F[r : r + 1], d.lo, d.hi)
-            v = y_k[r] - D[r] @ u_k
-            a, b = (v - f_hi[0]) / c, (v - f_lo[0]) / c
-            lo[i] = max(lo[i], min(a, b))
-            hi[i] = min(hi[i], max(a, b))
+        if rows:
+            _strip_bounds(lo, hi, y_k, u_k, D, F, self.sys.d_at(k, y_k), rows)
         return lo, hi
 
     def _strip_run(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -259,15 +292,8 @@ class Intersect(Estimator):
         if not self.sys.has_constant_bounds:
             return None
         _, _, _, D, _, F = self.sys.matrices_at(0)
-        d = self.sys.d_at(0, None)
-        for r, i, c in self._strip_rows:
-            f_lo, f_hi = image_bounds(F[r : r + 1], d.lo, d.hi)
-            v = y[..., r] - u @ D[r]
-            a, b = (v - f_hi[0]) / c, (v - f_lo[0]) / c
-            with np.errstate(invalid="ignore"):  # NaN (missing) stays NaN: no information
-                lo_r, hi_r = np.minimum(a, b), np.maximum(a, b)
-            lo[..., i] = np.fmax(lo[..., i], lo_r)
-            hi[..., i] = np.fmin(hi[..., i], hi_r)
+        with np.errstate(invalid="ignore"):  # NaN (missing) stays NaN: no information
+            _strip_bounds(lo, hi, y, u, D, F, self.sys.d_at(0, None), self._strip_rows)
         return lo, hi
 
     # -- combining ------------------------------------------------------------------------
@@ -277,17 +303,13 @@ class Intersect(Estimator):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Intersect the members' boxes (NaN rows = not yet valid: ignored) and the strip.
 
-        Returns ``(lo, hi, empty)`` over the leading axes; where ``empty``, the hull of the
-        members' boxes instead (see the module docstring). Crossings within the rounding margin
-        are rounding, not faults: the bounds are swapped there.
+        Returns ``(lo, hi, empty)`` over the leading axes; where ``empty`` (two bounds cross),
+        the hull of the members' boxes instead (see the module docstring).
         """
         lo = np.fmax(np.fmax.reduce(los, axis=0), s_lo)
         hi = np.fmin(np.fmin.reduce(his, axis=0), s_hi)
         with np.errstate(invalid="ignore"):
-            tol = 4 * ROUNDING * (1.0 + np.maximum(np.abs(lo), np.abs(hi)))
-            cross = lo > hi
-            empty = np.any(lo > hi + tol, axis=-1)
-        lo, hi = np.where(cross, hi, lo), np.where(cross, lo, hi)
+            empty = np.any(lo > hi, axis=-1)
         if np.any(empty):
             hull_lo = np.fmin.reduce(los, axis=0)
             hull_hi = np.fmax.reduce(his, axis=0)
@@ -315,9 +337,9 @@ class Intersect(Estimator):
         if k < self.valid_from:
             lo_s = hi_s = np.full(nx, np.nan)
         else:
-            lo_s, hi_s = outward(*self._strip_box(k, u_k, y_k, t_k), state.scale)
+            lo_s, hi_s = self._strip_box(k, u_k, y_k, t_k)
         lo, hi, empty = self._combine(np.array(los), np.array(his), lo_s, hi_s)
-        new = replace(state, members=tuple(members))
+        new = evolve(state, members=tuple(members))
         return Step(new, lo, hi, flagged or bool(empty))
 
     # -- offline --------------------------------------------------------------------------
@@ -330,7 +352,6 @@ class Intersect(Estimator):
         strip = self._strip_run(u, y)
         if strip is None:
             return None
-        strip = outward(*strip, self._data_scale(u, y, t))
         los, his = [], []
         for m in self.members:
             out = _member_run(m, u, y, t)
@@ -349,12 +370,46 @@ class Intersect(Estimator):
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
     def save_state(self, st: Any) -> dict[str, Any]:
-        """The online state (JSON-serialisable): the members' saved states, nested."""
-        return save_members(self, st)
+        """The online state (JSON-serialisable): the members' saved states, each in its own
+        envelope (method, design fingerprint), nested in the intersection's."""
+        return {
+            "format": STATE_FORMAT,
+            "version": STATE_VERSION,
+            "method": self.name,
+            "fingerprint": self.fingerprint(),
+            "state": {
+                "k": st.k,
+                "scale": st.scale,
+                "inconsistent": st.inconsistent,
+                "members": [
+                    m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)
+                ],
+            },
+        }
 
     def check_state(self, state: Any) -> IntersectState:
-        """The state saved by :meth:`state`, checked (same members, same designs)."""
-        return IntersectState(**check_members(self, state))
+        """The state saved by :meth:`state`, checked: the same members with the same designs,
+        the counters, and each member's state by the member."""
+        if not isinstance(state, dict) or not isinstance(state.get("state"), dict):
+            raise IvobsError("state: expected the dict returned by Estimator.state()")
+        if state.get("method") != self.name or state.get("fingerprint") != self.fingerprint():
+            raise IvobsError(
+                f"state: saved by method {state.get('method')!r} with other members or "
+                f"designs; it can only be restored into the same {self.name!r} estimator"
+            )
+        check_version(state)
+        saved = state["state"]
+        counters = {"k": saved.get("k"), "scale": saved.get("scale", 0.0)}
+        check_counters(counters)
+        members = saved.get("members")
+        if not isinstance(members, list) or len(members) != len(self.members):
+            raise IvobsError(f"state: expected the states of {len(self.members)} members")
+        return IntersectState(
+            members=tuple(m.check_state(s) for m, s in zip(self.members, members, strict=True)),
+            k=counters["k"],
+            scale=counters["scale"],
+            inconsistent=bool(saved.get("inconsistent", False)),
+        )
 
 
 def _member_run(
