@@ -391,13 +391,15 @@ class NonlinearZonotopeEstimator(Estimator):
         joint = _Joint(joint.z, joint.Hz, joint.acc, vl, vh)
         lin = linearise(self.model.evaluators("h"), vl, vh, joint.z, u_k, nx, False)
         n = lin.c.shape[0]
-        # t = y - h0 + J c and its rounding; |y* - y| <= up(y) - y (the measurement interval)
-        t = y_k - lin.g0 + lin.J @ lin.c
-        spread = up(np.maximum(np.array(yhi) - y_k, y_k - np.array(ylo)))
-        mag = np.abs(y_k) + np.abs(lin.g0) + np.abs(lin.J) @ np.abs(lin.c)
-        sigma = upper(lin.rho + spread + product_error(mag, n + 2), 3)
-        for i in np.flatnonzero(~np.isnan(y_k)).tolist():
-            cut = joint.strip(lin.J[i], float(t[i]), float(sigma[i]), nx)
+        Jc, mag_Jc = (lin.J @ lin.c).tolist(), (np.abs(lin.J) @ np.abs(lin.c)).tolist()
+        g0, rho = lin.g0.tolist(), lin.rho.tolist()
+        for i, y in enumerate(y_k.tolist()):
+            if y != y:  # missing
+                continue
+            t = y - g0[i] + Jc[i]  # y - h0 + J c, and its rounding
+            spread = max(yhi[i] - y, y - ylo[i])  # |y* - y| (exact: neighbouring doubles)
+            err = product_error(abs(y) + abs(g0[i]) + mag_Jc[i], n + 2)
+            cut = joint.strip(lin.J[i], t, upper(rho[i] + spread + err, 2), nx)
             if cut is None:
                 return None
             joint = cut
