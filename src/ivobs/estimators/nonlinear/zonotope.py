@@ -82,7 +82,7 @@ from ...sets.czonotope import reduce_generators
 from ...sets.rounding import ETA, down, mid_rad, product_error, up, upper
 from ...sets.zonotope import box_generators
 from .. import register
-from .._strip_hull import _add, propagate_lists, section_hull
+from .._strip_hull import propagate_lists, section_hull
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
 from .meanvalue import contract_back, linearise, measurement
@@ -90,6 +90,7 @@ from .meanvalue import contract_back, linearise, measurement
 __all__ = ["NonlinearZonotopeDesign", "NonlinearZonotopeEstimator", "NonlinearZonotopeState"]
 
 _INF = math.inf
+_add = np.add.reduce  # the ufunc's reduction called directly: ndarray.sum adds a Python wrapper
 
 BOX_STRIP_RATIO = 0.9
 """A box strip (``box_strips=True``) is applied to ``Z`` where the box is narrower than this
