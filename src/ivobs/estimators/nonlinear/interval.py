@@ -93,8 +93,7 @@ class NonlinearIntervalEstimator(Estimator):
     x0 : prior box of ``x[0]`` (required)
     lag : 1 (default) to contract one step back through ``h∘f``; 0 not to: when every state
         is seen by the outputs of its own step, or when ``h∘f`` is costly (a validated flow of
-        a continuous-time plant steps back through its Jacobian, 5-12 times the cost of a
-        step without it; docs/nonlinear.md)
+        a continuous-time plant steps back through its Jacobian; docs/nonlinear.md)
     """
 
     name = "nl-interval"
