@@ -1,7 +1,7 @@
 """Soundness of the guaranteed methods over long runs with vertex-switching unknowns.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py [steps] [method,method,...]
-        [--exact] [--scenarios a,b]
+        [--scenarios a,b]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py --random N [steps] [methods]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py --linear N [steps] [methods]
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_sound.py --servo STEPS [-] [methods]
@@ -9,11 +9,10 @@
 
 Default: for each scenario of :mod:`ivobs.scenarios.nonlinear` and each nonlinear method,
 ``steps`` steps (default 10^5) with the disturbances and the uncertain parameters switching
-between the vertices of their bounds at every step, the scenario's inputs repeated. The record
-is simulated in float64 by :func:`ivobs.simulate_nonlinear` (the estimators' 1e-10 margin covers
-its one-step rounding, see docs/nonlinear.md), or with ``--exact`` by the rigorous simulator of
-tests/exactsim.py (60-digit intervals, each state and measurement an exact value of the model:
-no margin relied on).
+between the vertices of their bounds at every step, the scenario's inputs repeated. Every record
+comes from the rigorous simulator of tests/exactsim.py (60-digit intervals, each state and
+measurement an exact value of the model): the estimators add no margin, so a float64 run, which
+is not a trajectory of the model, would not be a fair test.
 
 ``--random N``: ``N`` random nonlinear systems of tests/randsys.py (seeds 0..N-1), ``steps``
 each (default 10^4), exact simulator. ``--linear N``: ``N`` random interval-matrix linear
@@ -68,22 +67,16 @@ def _line(
     )
 
 
-def run(name: str, method: str, steps: int, exact: bool = False) -> None:
+def run(name: str, method: str, steps: int) -> None:
+    import exactsim
+
     sc = ivobs.scenarios.get(name)
     sys_ = sc.system
     u = np.resize(sc.u, (steps, sys_.nu)) if sys_.nu else None
-    if exact:
-        import exactsim
-
-        rec = exactsim.simulate(sys_, sc.x_true0, steps, u, seed=3)
-        est, cpu, wall = _estimate(method, sys_, sc.x0, u, rec.Y)
-        bad = len(rec.misses(est.lower, est.upper))
-    else:
-        tr = ivobs.simulate_nonlinear(sys_, sc.x_true0, u, "vertex", p="vertex", T=steps, seed=3)
-        est, cpu, wall = _estimate(method, sys_, sc.x0, tr.u, tr.y)
-        inside = (est.lower <= tr.x) & (tr.x <= est.upper)
-        bad = int(np.count_nonzero(~inside.all(axis=1)))
-    _line(name + (" (exact)" if exact else ""), method, steps, bad, est.width[100:], cpu, wall)
+    rec = exactsim.simulate(sys_, sc.x_true0, steps, u, seed=3)
+    est, cpu, wall = _estimate(method, sys_, sc.x0, u, rec.Y)
+    bad = len(rec.misses(est.lower, est.upper))
+    _line(name, method, steps, bad, est.width[100:], cpu, wall)
 
 
 def run_cases(cases: list[tuple[str, Any, Any]], methods: list[str], steps: int) -> None:
@@ -170,7 +163,6 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("steps", nargs="?", type=int)
     ap.add_argument("methods", nargs="?")
-    ap.add_argument("--exact", action="store_true")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--random", type=int, metavar="N")
     ap.add_argument("--linear", type=int, metavar="N")
@@ -191,7 +183,7 @@ def main() -> None:
         return
     for m in methods or METHODS:
         for s in a.scenarios.split(","):
-            run(s, m, a.steps or 100_000, exact=a.exact)
+            run(s, m, a.steps or 100_000)
 
 
 if __name__ == "__main__":

@@ -1,72 +1,33 @@
 """The nonlinear scenarios (ivobs.scenarios.nonlinear): each simulates inside its bounds, every
 nonlinear method contains the true state at every step with parameters and disturbances on the
-vertices of their bounds (simulated here in 40-digit mpmath from the model's own expressions,
-not by ivobs), and widths stay bounded over long runs."""
+vertices of their bounds (tests/exactsim.py: the exact trajectory from the model's own
+expressions, not ivobs' simulator), and widths stay bounded over long runs."""
 
 from __future__ import annotations
 
-import re
-from typing import Any
+from functools import cache
 
 import mpmath as mp
 import numpy as np
 import pytest
+import sympy as sp
 
 import ivobs
-from nlsystems import simulate, violations
+from nlsystems import Record, simulate
 
 NL_SCENARIOS = ["henon-nl", "pendulum-nl", "cora-tank6-nl", "cstr", "unicycle-range", "chain10-nl"]
 NL_METHODS = ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"]
-HORIZON = {"henon-nl": 2000, "pendulum-nl": 1000, "cora-tank6-nl": 500, "cstr": 1000,
-           "unicycle-range": 500, "chain10-nl": 300}  # fmt: skip
-"""Short enough for the whole file to stay under a minute (constrained zonotopes are slow)."""
-
-_NUMBER = re.compile(r"(?<![A-Za-z_\d.])(\d+\.?\d*(?:[eE][+-]?\d+)?)")
-_ENV = {n: getattr(mp, n) for n in ("sin", "cos", "tan", "exp", "log", "sqrt", "tanh", "atan")}
+HORIZON = {"henon-nl": 1000, "pendulum-nl": 600, "cora-tank6-nl": 200, "cstr": 600,
+           "unicycle-range": 200, "chain10-nl": 100}  # fmt: skip
+"""Short enough for each test to stay within a few seconds (constrained zonotopes are slow);
+the long runs are benchmarks/bench_nl_sound.py."""
 
 
-def _exact(text: str) -> Any:
-    """The expression with every literal an exact mpf (``1/50`` is not a double division)."""
-    return compile(_NUMBER.sub(r"mpf('\1')", text), "<expr>", "eval")
-
-
-def _mp_model(sys: ivobs.NonlinearSystem) -> tuple[Any, Any, dict, dict, list]:
-    """``f``, ``g`` (h without its additive noise), parameter, process and noise bounds."""
-    known = {n: mp.mpf(str(v)) for n, v in sys.known_params.items()}
-    fc = [_exact(t) for t in sys.f_text]
-    noise_names = []
-    for t in sys.h_text:
-        [v] = [n for n in sys.signal_names if re.search(rf"\b{n}\b", t)]
-        noise_names.append(v)
-    hc = [_exact(t) for t in sys.h_text]
-
-    def scope(x: Any, u: Any, p: Any) -> dict[str, Any]:
-        ns = {**_ENV, "mpf": mp.mpf, **known, **p}
-        ns.update(zip(sys.state_names, x))
-        ns.update(zip(sys.input_names, u))
-        return ns
-
-    def f(x: Any, u: Any, p: Any, d: Any) -> list[Any]:
-        ns = {**scope(x, u, p), **d}
-        return [eval(c, ns) for c in fc]
-
-    def g(x: Any, u: Any, p: Any) -> list[Any]:
-        ns = {**scope(x, u, p), **{n: mp.mpf(0) for n in noise_names}}
-        return [eval(c, ns) for c in hc]
-
-    process = {n: b for n, b in sys.signal_bounds.items() if n not in noise_names}
-    noise = [sys.signal_bounds[n] for n in noise_names]
-    return f, g, dict(sys.param_bounds), process, noise
-
-
-def _truth(name: str, T: int, seed: int = 0) -> tuple[ivobs.scenarios.Scenario, list, np.ndarray]:
+@cache
+def _truth(name: str, T: int, seed: int = 0) -> tuple[ivobs.scenarios.Scenario, Record]:
     sc = ivobs.scenarios.get(name, horizon=T)
-    f, g, params, process, noise = _mp_model(sc.system)
-    X, Y = simulate(
-        f, g, sc.x_true0.tolist(), T, params=params, process=process, noise=noise,
-        u=sc.u if sc.system.nu else None, seed=seed,
-    )  # fmt: skip
-    return sc, X, Y
+    u = sc.u if sc.system.nu else None
+    return sc, simulate(sc.system, sc.x_true0, T, u, seed=seed)
 
 
 @pytest.mark.parametrize("name", NL_SCENARIOS)
@@ -85,16 +46,22 @@ def test_scenario_simulates_inside_its_bounds(name: str) -> None:
 
 
 def test_float_simulator_agrees_with_the_exact_one_over_a_few_steps() -> None:
-    """On the (non-chaotic) tanks the float64 simulator stays within 1e-12 of the 40-digit one
-    fed the same signals."""
+    """On the (non-chaotic) tanks the float64 simulator stays within 1e-12 of the model
+    evaluated at 50 digits (SymPy's lambdify on mpmath) fed the same signals."""
     sc = ivobs.scenarios.get("cora-tank6-nl", horizon=50)
+    sys = sc.system
     tr = sc.simulate("vertex", seed=5)
-    f, _, _, _, _ = _mp_model(sc.system)
-    x = [mp.mpf(float(v)) for v in sc.x_true0]
-    for k in range(49):
-        d = dict(zip(sc.system.signal_names, (mp.mpf(float(v)) for v in tr.d[k])))
-        x = f(x, [mp.mpf(float(v)) for v in tr.u[k]], {}, d)
-        assert max(abs(float(a) - b) for a, b in zip(x, tr.x[k + 1])) < 1e-12
+    names = [*sys.state_names, *sys.input_names, *sys.signal_names]
+    plain = {q: sp.Symbol(q.name) for e in sys.f_exprs for q in e.free_symbols}
+    known = {sp.Symbol(n): sp.Rational(repr(v)) for n, v in sys.known_params.items()}
+    exprs = [e.xreplace(plain).xreplace(known) for e in sys.f_exprs]
+    f = sp.lambdify([sp.Symbol(n) for n in names], exprs, "mpmath")
+    with mp.workdps(50):
+        x = [mp.mpf(float(v)) for v in sc.x_true0]
+        for k in range(49):
+            args = [*x, *(mp.mpf(float(v)) for v in tr.u[k]), *(mp.mpf(float(v)) for v in tr.d[k])]
+            x = f(*args)
+            assert max(abs(float(a) - b) for a, b in zip(x, tr.x[k + 1])) < 1e-12
 
 
 def test_recorded_tank_data() -> None:
@@ -109,19 +76,22 @@ def test_recorded_tank_data() -> None:
 @pytest.mark.parametrize("method", NL_METHODS)
 @pytest.mark.parametrize("name", NL_SCENARIOS)
 def test_methods_contain_the_exact_vertex_trajectory(name: str, method: str) -> None:
-    sc, X, Y = _truth(name, HORIZON[name], seed=7)
-    res = ivobs.make_estimator(method, sc.system, x0=sc.x0).run(sc.u, Y)
-    assert violations(X, res.lower, res.upper) == []
+    T = HORIZON[name] if method != "nl-constrained-zonotope" else HORIZON[name] // 4
+    sc, rec = _truth(name, T, seed=7)
+    res = ivobs.make_estimator(method, sc.system, x0=sc.x0).run(sc.u, rec.Y)
+    assert rec.misses(res.lower, res.upper).tolist() == []
+    assert not res.inconsistent.any()
     w = res.upper - res.lower
     assert np.isfinite(w[1:]).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NL_SCENARIOS)
 def test_widths_stay_bounded_over_long_runs(name: str) -> None:
     T = 3000
-    sc, X, Y = _truth(name, T, seed=11)
-    res = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0).run(sc.u, Y)
-    assert violations(X, res.lower, res.upper) == []
+    sc, rec = _truth(name, T, seed=11)
+    res = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0).run(sc.u, rec.Y)
+    assert rec.misses(res.lower, res.upper).tolist() == []
     w = res.upper - res.lower
     early, late = w[200:1000].mean(axis=0), w[-800:].mean(axis=0)
     assert np.isfinite(w).all()

@@ -11,7 +11,7 @@ import pytest
 import ivobs
 from ivobs.cli import main
 from ivobs.io.logs import write_log
-from nlsystems import HENON_X0, henon, henon_mp, simulate
+from nlsystems import HENON_X0, henon, henon_record
 
 HENON_TOML = """\
 format = 1
@@ -92,17 +92,7 @@ def test_ivobs_run_estimates_a_nonlinear_system_from_a_log(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     (tmp_path / "henon.toml").write_text(HENON_TOML)
-    f, g = henon_mp("x2")
-    _, Y = simulate(
-        f,
-        g,
-        [0.3, 0.1],
-        400,
-        params={"a": (1.39, 1.41)},
-        process={"w1": (-0.005, 0.005)},
-        noise=[(-0.02, 0.02)],
-        seed=4,
-    )
+    Y = henon_record(400, seed=4, output="x2")[1].Y.copy()
     write_log(tmp_path / "log.csv", None, Y)
     out = tmp_path / "bounds.csv"
     code = main(

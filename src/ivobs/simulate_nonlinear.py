@@ -8,14 +8,15 @@ The unknown parameters ``p`` (``sys.param_names``) and signals ``d`` (``sys.sign
 given as ``(T, n)`` arrays or as a kind (``"vertex"``, ``"uniform"``, ``"zero"``,
 ``"sinusoidal"``, :func:`~ivobs.simulate.disturbance`) filling their bounds.
 
-**This is not the true trajectory of a chaotic map.** Each step rounds (a few ulps per
-operation), and on a chaotic map such as Hénon those errors grow exponentially, so after a few
-dozen steps a float64 run is far from the exact trajectory from the same ``x0``. What holds is
-the one-step statement: every simulated ``x[k+1]`` is within a few ulps of ``f`` evaluated
-exactly at the simulated ``x[k]``, and the nonlinear estimators' rounding margin (1e-10,
-relative, on every predicted box; docs/nonlinear.md) covers that. A float64 run is thus a
-trajectory of the model with a disturbance a few ulps outside its bounds, which the estimators
-contain; the soundness tests use their own high-precision simulators (tests/nlsystems.py).
+**This is not an exact trajectory of the model.** Each step rounds (a few ulps per operation),
+and on a chaotic map such as Hénon those errors grow exponentially, so after a few dozen steps a
+float64 run is far from the exact trajectory from the same ``x0``. Every simulated ``x[k+1]`` is
+within a few ulps of ``f`` evaluated exactly at the simulated ``x[k]``: a trajectory of the model
+with unknowns a few ulps outside their bounds. The nonlinear estimators bound their own rounding
+and add no margin (docs/nonlinear.md), so they are not promised to contain such a record where
+it touches the edge of the exact set (in practice the boxes are far wider than those ulps). A
+record whose every step is exact comes from interval arithmetic at high precision
+(tests/exactsim.py, what the soundness tests use).
 """
 
 from __future__ import annotations

@@ -56,8 +56,8 @@ METHODS: dict[str, Entry] = {
     "exact": Entry("exact.estimator", "Exact", 100),
     "dual-window": Entry("dual_window.estimator", "DualWindow", 105),
     "intersect": Entry("intersect", "Intersect", 110),
-    "nl-interval": Entry("nonlinear_interval", "NonlinearIntervalEstimator", 900),
-    "nl-zonotope": Entry("nl_zonotope", "NonlinearZonotopeEstimator", 910),
+    "nl-interval": Entry("nonlinear.interval", "NonlinearIntervalEstimator", 900),
+    "nl-zonotope": Entry("nonlinear.zonotope", "NonlinearZonotopeEstimator", 910),
     "nl-constrained-zonotope": Entry("nl_czonotope", "NonlinearConstrainedZonotopeEstimator", 920),
 }
 """The built-in methods, imported on first use (see the module docstring)."""

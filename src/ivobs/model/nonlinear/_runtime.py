@@ -342,11 +342,6 @@ def heaviside(al: float, ah: float) -> tuple[float, float]:
     return (1.0 if al > 0.0 else 0.0), (0.0 if ah < 0.0 else 1.0)
 
 
-def hull_nan(lo: float, hi: float) -> tuple[float, float]:
-    """A pair with NaN replaced by the whole line (last-resort guard of generated code)."""
-    return (lo if lo == lo else NINF), (hi if hi == hi else INF)
-
-
 NAMESPACE = {
     "_nx": _nx,
     "_NI": NINF,

@@ -6,22 +6,30 @@ parameters, d)`` in the constant box ``[w]`` (:class:`~ivobs.NonlinearSystem`), 
 the predicted box ``[x]_k^-`` of ``x[k]``:
 
 1. **Correction** (forward-backward contractor, HC4-revise [Jaulin2001, Ch. 4]): contract
-   ``([x]_k^-, [w])`` with ``h(x, u_k, w) = y_k`` -> ``([x]_k, [w]_k)``;
+   ``([x]_k^-, [w])`` with ``h(x, u_k, w) ∈ [y_k]`` -> ``([x]_k, [w]_k)``;
 2. **One step back** (``lag=1``): contract ``([x]_{k-1}, [w]_{k-1}, [w]_k)`` with
-   ``h(f(x', u_{k-1}, w'), u_k, w) = y_k``, then ``[x]_k <- [x]_k ∩ F([x]_{k-1}, u_{k-1},
-   [w]_{k-1})`` and contract with ``y_k`` again. This bounds states the output sees only
+   ``h(f(x', u_{k-1}, w'), u_k, w) ∈ [y_k]``, then ``[x]_k <- [x]_k ∩ F([x]_{k-1}, u_{k-1},
+   [w]_{k-1})`` and contract with ``[y_k]`` again. This bounds states the output sees only
    through the dynamics (the Hénon map with ``y = x2``: ``x1[k-1] = x2[k]/b``);
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
    intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
 
-Every bound is rounded outward by the generated code (the method rounds itself). Besides, as
-the linear methods do (:mod:`ivobs.estimators.rounding`), the measurement is taken as
-``y ± ROUNDING (1 + |y|)`` and the predicted box is widened by ``ROUNDING (1 + |bound|)``
-(``ROUNDING = 1e-10``): records from double-precision simulators, whose states and outputs
-carry their own rounding, are covered as they are for the linear methods. The box of
-``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output component is
-skipped; a measurement that no point of the box can produce (an empty contraction) is reported
-inconsistent and not used: the step continues from the prediction.
+``[y_k]`` is the measurement interval ``[down(y_k), up(y_k)]``: the reals the recorded double
+stands for (:func:`~ivobs.estimators.nonlinear.meanvalue.measurement`), so a sample within
+rounding of its bound is consistent.
+
+**Rounding (proof).** Every bound is computed by the model's generated interval code, which
+rounds each operation outward (:mod:`ivobs.model.nonlinear`: ``+ - * /`` and powers by one
+ulp with ``nextafter``, elementary functions by their documented libm error): each returned
+box contains the exact image of the exact boxes it was computed from, at every magnitude.
+The contractors only remove points that cannot explain ``[y_k]``, and intersections of such
+enclosures are exact operations. By induction the box of ``x[k]`` contains the true state
+whenever the plant follows the model with ``w[k] ∈ [w]`` and ``y[k]`` is its output rounded
+to a double; no margin is added (``proven_rounding``).
+
+The box of ``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output
+component is skipped; a measurement that no point of the box can produce (an empty
+contraction) is reported inconsistent and not used: the step continues from the prediction.
 """
 
 from __future__ import annotations
@@ -32,14 +40,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validate import as_int
-from ..errors import IvobsError
-from ..model import LinearSystem, NonlinearSystem
-from ..sets import Box
-from . import register
-from .base import Design, Estimator
-from .rounding import ROUNDING
-from .state import OnlineState, Step
+from ..._validate import as_int
+from ...errors import IvobsError
+from ...model import LinearSystem, NonlinearSystem
+from ...sets import Box
+from .. import register
+from ..base import Design, Estimator
+from ..state import OnlineState, Step
+from .meanvalue import measurement
 
 __all__ = ["NonlinearIntervalDesign", "NonlinearIntervalEstimator", "NonlinearIntervalState"]
 
@@ -83,7 +91,9 @@ class NonlinearIntervalEstimator(Estimator):
     sys : :class:`~ivobs.NonlinearSystem` (a time-invariant discrete-time
         :class:`~ivobs.LinearSystem` with constant bounds is converted)
     x0 : prior box of ``x[0]`` (required)
-    lag : 1 (default) to contract one step back through ``h∘f``, 0 not to
+    lag : 1 (default) to contract one step back through ``h∘f``; 0 not to: when every state
+        is seen by the outputs of its own step, or when ``h∘f`` is costly (a validated flow of
+        a continuous-time plant steps back through its Jacobian; docs/nonlinear.md)
     """
 
     name = "nl-interval"
@@ -96,7 +106,7 @@ class NonlinearIntervalEstimator(Estimator):
     data_used = "filter"
     needs_x0 = True
     supports_nonlinear = True
-    rounds_itself = True
+    proven_rounding = True
 
     def __init__(self, sys: Any, x0: Box | None = None, *, lag: int = 1, **options: Any):
         super().__init__(sys, x0, **options)
@@ -126,66 +136,28 @@ class NonlinearIntervalEstimator(Estimator):
             prev_u=np.zeros(m.nu),
         )
 
-    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
-        return 0.0  # the generated code rounds every operation: no data-scale margin
-
-    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
-        return np.zeros(y.shape[:-1])
-
-    def _back(
-        self,
-        st: NonlinearIntervalState,
-        vl: list[float],
-        vh: list[float],
-        u: list[float],
-        y: tuple[list[float], list[float]],
-    ) -> bool:
-        """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place); False when
-        the measurement is found inconsistent."""
-        sys, nx, nw = self.model, self.model.nx, self.model.nw
-        bl = st.prev_lo.tolist() + vl[nx:]
-        bh = st.prev_hi.tolist() + vh[nx:]
-        pu = st.prev_u.tolist()
-        assert self._hf is not None
-        for (fn, sites), a, b in zip(self._hf, *y):
-            if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
-                return False
-        m = nx + nw
-        f = sys._f
-        fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
-        for i in range(nx):
-            lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
-            if lo > hi:
-                return False
-            vl[i], vh[i] = lo, hi
-        vl[nx:], vh[nx:] = bl[m:], bh[m:]
-        return bool(sys.contract_lists(vl, vh, u, *y))
-
     def _step(
         self, state: NonlinearIntervalState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[NonlinearIntervalState]:
         sys, nx = self.model, self.model.nx
-        xl, xh = state.lo.tolist(), state.hi.tolist()
         u = u_k.tolist()
-        vl, vh = xl + self._wl, xh + self._wh
+        # the joint box (x[k], w[k]) as lists: the generated contractors narrow it in place
+        vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
         inconsistent = False
-        yl = y_k.tolist()
-        if any(v == v for v in yl):
-            y = _data(yl)
-            ok = sys.contract_lists(vl, vh, u, *y)
+        ylo, yhi = measurement(y_k)
+        if any(v == v for v in ylo):
+            ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
             if ok and self._hf is not None and state.back:
-                ok = self._back(state, vl, vh, u, y)
-            if not ok:
+                ok = self._back(state, vl, vh, u, ylo, yhi)  # 2. one step back
+            if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
-                vl, vh = xl + self._wl, xh + self._wh
-        f = sys._f
+                vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
+        f = sys._f  # 3. prediction: natural ∩ mean-value form
         pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
-        # the library's data margin (module docstring), as rounding.outward computes it
-        m = [ROUNDING * (1.0 + max(abs(a), abs(b))) for a, b in zip(pl, ph)]
-        new = NonlinearIntervalState(  # fresh (faster than replace): the base sets k and scale
-            lo=np.array([a - e for a, e in zip(pl, m)]),
-            hi=np.array([b + e for b, e in zip(ph, m)]),
+        new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
+            lo=np.array(pl, dtype=float),
+            hi=np.array(ph, dtype=float),
             prev_lo=prev_lo,
             prev_hi=prev_hi,
             prev_u=u_k.copy(),
@@ -193,8 +165,33 @@ class NonlinearIntervalEstimator(Estimator):
         )
         return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
 
-
-def _data(y: list[float]) -> tuple[list[float], list[float]]:
-    """A measurement as the interval ``y ± ROUNDING (1 + |y|)`` (NaN stays NaN)."""
-    m = [ROUNDING * (1.0 + abs(v)) for v in y]
-    return [v - e for v, e in zip(y, m)], [v + e for v, e in zip(y, m)]
+    def _back(
+        self,
+        st: NonlinearIntervalState,
+        vl: list[float],
+        vh: list[float],
+        u: list[float],
+        ylo: list[float],
+        yhi: list[float],
+    ) -> bool:
+        """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place); False when
+        the measurement is found inconsistent."""
+        sys, nx, nw = self.model, self.model.nx, self.model.nw
+        # the box of (x[k-1], w[k-1], w[k])
+        bl = st.prev_lo.tolist() + vl[nx:]
+        bh = st.prev_hi.tolist() + vh[nx:]
+        pu = st.prev_u.tolist()
+        assert self._hf is not None
+        for (fn, sites), a, b in zip(self._hf, ylo, yhi):
+            if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
+                return False
+        m = nx + nw
+        f = sys._f
+        fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
+        for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
+            lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
+            if lo > hi:
+                return False
+            vl[i], vh[i] = lo, hi
+        vl[nx:], vh[nx:] = bl[m:], bh[m:]
+        return bool(sys.contract_lists(vl, vh, u, ylo, yhi))
