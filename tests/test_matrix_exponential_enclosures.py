@@ -149,5 +149,5 @@ def test_bad_input_is_refused_with_the_argument_named():
         scaled(np.eye(2), (1.0, 0.0))
     with pytest.raises(IvobsError, match="A, B: expected"):
         expm_integral(np.eye(2), np.ones((3, 1)), 1.0)
-    E, R = expm(np.zeros((0, 0)))
+    E, _ = expm(np.zeros((0, 0)))
     assert E.shape == (0, 0)

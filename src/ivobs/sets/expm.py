@@ -105,7 +105,7 @@ def expm(M: Any, R: Any = None) -> IntervalMatrix:
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(R))):
         raise IvobsError("M: expected finite entries (and radii)")
     nu = _norm_inf(M, R)
-    s = 0 if nu <= THETA else int(math.ceil(math.log2(nu / THETA)))
+    s = 0 if nu <= THETA else math.ceil(math.log2(nu / THETA))
     if s > 1000:
         raise IvobsError(f"M: norm {nu:.3g} too large for an enclosure of its exponential")
     # scaling by 2^-s is exact (up to underflow: ETA added to the radius)
