@@ -10,10 +10,13 @@ Prints steps per second (best of a few repeats, ``time.process_time``) for
 * the offline design time (default target with gradient refinement).
 
 ``--widths``: the mean width over whole records of every scenario of ``suite.py`` that ``kkl``
-runs (vertex disturbances); ``--missing``: the width ratio with 10 % of the output components
+runs (vertex disturbances); ``--ct-widths``: the same for the continuous-time records (Example 1
+in continuous time, the pendulum with its input between samples, plants with slow targets and
+missing samples); ``--missing``: the width ratio with 10 % of the output components
 missing on random 4-state plants (``rho = 0.8``, 3,000 steps).
 
-Usage: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_kkl.py [--quick | --widths | --missing]``.
+Usage: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_kkl.py [--quick | --widths | --ct-widths |
+--missing]``.
 """
 
 from __future__ import annotations
@@ -119,6 +122,55 @@ def widths() -> None:
         print(f"{name:18s} T={tr.T:5d} mean_width={w:.10g} contains={ok}")
 
 
+def _pendulum_u(t: object) -> list[object]:
+    """The pendulum's input ``0.15 sin 3t`` ([Dinh2024, Example 2]) between samples too."""
+    from ivobs import nlmath
+
+    return [0.15 * nlmath.sin(3 * t)]
+
+
+def ct_widths() -> None:
+    """Mean width (sum over the states) over whole continuous-time records."""
+    from ivobs import Box, LinearSystem
+
+    cases: list[tuple[str, object, object, dict[str, object], object]] = []
+    for kind in ("vertex", "paper"):
+        sc = ivobs.scenarios.get("kkl-random8", continuous=True, t_final=10.0)
+        cases.append((f"kkl-random8 CT {kind}", sc, sc.simulate(kind, seed=0), {}, None))
+        pend = ivobs.scenarios.get("pendulum", t_final=15.0)
+        opts = {"input_hold": _pendulum_u}
+        cases.append((f"pendulum {kind}", pend, pend.simulate(kind, seed=0), opts, None))
+    plant = LinearSystem(
+        [[0.2, 1.0], [0.0, -6.0]], None, [[1.0, 0.3]], E=0.05 * np.eye(2), F=[[0.0, 0.02]],
+        d=ivobs.Box.symmetric([1.0, 1.0]), dt=0,
+    )  # fmt: skip
+    t = np.arange(400) * 0.05
+    x0 = Box(-np.ones(2), np.ones(2))
+    tr = ivobs.simulate(plant, [1.0, -1.0], None, ivobs.vertex_disturbance(plant.d, 400, seed=0), t=t)
+    y = tr.y.copy()
+    y[np.random.default_rng(0).random(y.shape) < 0.1] = np.nan
+    slow = {"A_z": np.diag([-1.0, -2.0]), "B_z": np.ones((2, 1))}
+    for name, yy, opts in (
+        ("slow target", tr.y, slow),
+        ("slow target, 10 % missing", y, slow),
+        ("default target, 10 % missing", y, {}),
+    ):
+        cases.append((name, (plant, x0, t), tr, opts, yy))
+    for name, sc, trj, opts, yy in cases:
+        if isinstance(sc, tuple):
+            system, x0_, tt = sc
+        else:
+            system, x0_, tt = sc.system, sc.x0, sc.t  # type: ignore[attr-defined]
+        est = ivobs.make_estimator("kkl", system, x0=x0_, **opts)
+        y_ = trj.y if yy is None else yy  # type: ignore[attr-defined]
+        t0 = clock()
+        res = est.run(trj.u, y_, t=tt)  # type: ignore[attr-defined]
+        dt = clock() - t0
+        w = res.width.sum(axis=1).mean()
+        ok = bool(res.contains(trj.x).all())  # type: ignore[attr-defined]
+        print(f"{name:30s} T={len(y_):5d} mean_width={w:.10g} contains={ok} cpu={dt:.2f}s")
+
+
 def missing() -> None:
     """Mean width with 10 % of the output components missing / with complete data."""
     from ivobs.testing import adversarial_run, random_system
@@ -139,6 +191,8 @@ def missing() -> None:
 if __name__ == "__main__":
     if "--widths" in sys.argv:
         widths()
+    elif "--ct-widths" in sys.argv:
+        ct_widths()
     elif "--missing" in sys.argv:
         missing()
     else:

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import nlmath
 from ..errors import IvobsError
 from ..linalg import is_observable
 from ..model import LinearSystem
@@ -91,11 +92,13 @@ def _kkl_random8(
     )
 
 
-def pendulum_A(t: float, *, L0: float, L1: float, omega: float) -> np.ndarray:
+def pendulum_A(t: Any, *, L0: float, L1: float, omega: float) -> np.ndarray:
     """``A(t) = [[0, 1], [-g / L(t), -c]]``, ``L(t) = L0 + L1 sin(ωt)``, ``g = 9.8``, ``c = 1``
-    ([Dinh2024, Example 2]; module-level so that system files can name it)."""
+    ([Dinh2024, Example 2]; module-level so that system files can name it). Written with
+    :mod:`ivobs.nlmath`, so that a symbolic ``t`` gives its expression (the continuous-time
+    ``kkl`` observer bounds it between samples)."""
     c, g = 1.0, 9.8
-    return np.array([[0.0, 1.0], [-g / (L0 + L1 * np.sin(omega * t)), -c]])
+    return np.array([[0.0, 1.0], [-g / (L0 + L1 * nlmath.sin(omega * t)), -c]])
 
 
 @register_scenario(

@@ -44,9 +44,9 @@ class KKL(Estimator):
     max_cond : largest ``cond(T)`` accepted (LTI: else :class:`DesignError`; LTV: the threshold of
         left-invertibility that decides ``valid_from``). Default 1e7.
     tune : refine the default time-invariant target by gradient descent on the predicted width.
-    input_hold : continuous time: ``u`` between samples: ``"zero"`` (default), ``"linear"`` or a
-        callable ``t -> u(t)`` (e.g. the known input signal itself).
-    rtol, atol : continuous time: integration tolerances.
+    input_hold : continuous time: ``u`` between samples: ``"zero"`` (default: zero-order hold, as
+        a digital controller), ``"linear"`` or a callable ``t -> u(t)`` (the known input signal
+        itself, written with :mod:`ivobs.nlmath` so that it can be bounded between samples).
 
     Notes
     -----
@@ -54,10 +54,9 @@ class KKL(Estimator):
     and (15); discrete-time LTI with the vectorised run of :mod:`.vectorised`),
     :class:`~.sampled.ContinuousLTI` and :class:`~.continuous.ContinuousLTV` (observers (3)/(10)
     in sampled-data form). Their modules give the equations, what is guaranteed, the data used
-    at each step and the treatment of missing samples. Discrete time: every floating-point
-    error is bounded by a proven model (``proven_rounding``); continuous time: the rounding of
-    the arithmetic likewise, the integration of the flows up to the stated margin of
-    :mod:`.continuous`.
+    at each step and the treatment of missing samples. Every floating-point error is bounded by
+    a proven model (``proven_rounding``), in continuous time the flows between samples too
+    (validated exponentials and interval Taylor steps, :mod:`.flow`).
     """
 
     name = "kkl"
@@ -84,8 +83,6 @@ class KKL(Estimator):
         max_cond: float = 1e7,
         tune: bool = True,
         input_hold: str | Callable[[float], Any] = "zero",
-        rtol: float = 1e-10,
-        atol: float = 1e-12,
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
@@ -100,8 +97,6 @@ class KKL(Estimator):
             max_cond=max_cond,
             tune=tune,
             input_hold=input_hold,
-            rtol=rtol,
-            atol=atol,
         )
         self.max_cond = float(max_cond)
         seq: TransformSequence | None = None
@@ -121,20 +116,16 @@ class KKL(Estimator):
             )
         self.valid_from = self.design.k_star
         self._vector: VectorisedLTI | None = None
-        self._observer = self._choose(seq, input_hold, float(rtol), float(atol))
+        self._observer = self._choose(seq, input_hold)
 
     def _choose(
-        self,
-        seq: TransformSequence | None,
-        hold: str | Callable[[float], Any],
-        rtol: float,
-        atol: float,
+        self, seq: TransformSequence | None, hold: str | Callable[[float], Any]
     ) -> Observer[Any]:
         """The observer of the system's kind (and, discrete-time LTI, the vectorised run)."""
         sys, x0, design = self.sys, self.x0, self.design
         if sys.is_continuous:
             cls = ContinuousLTV if sys.is_time_varying else ContinuousLTI
-            return cls(sys, x0, design, self.max_cond, hold, rtol, atol)
+            return cls(sys, x0, design, self.max_cond, hold)
         observer = Discrete(sys, x0, design, self.max_cond, seq)
         if seq is None:
             assert x0 is not None  # design_lti requires it

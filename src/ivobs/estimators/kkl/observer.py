@@ -47,7 +47,6 @@ def recover(
     zlo: np.ndarray,
     zhi: np.ndarray,
     zabs: np.ndarray | None = None,
-    margin: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(3.c-d)/(10.d)/(15.d): a box certain to contain ``x`` when ``z̲ <= T x <= z̄``.
 
@@ -64,7 +63,7 @@ def recover(
     nx = tr.P.shape[0]
     r = tr.W @ np.concatenate((zlo, zhi, zabs))
     b, s = r[: 2 * nx], r[2 * nx :]
-    err = (tr.c_err + margin) * s
+    err = tr.c_err * s
     err += s.max() * tr.c_resid + tr.eta  # r_i ‖x‖∞ <= max r ‖x‖∞
     b[:nx] -= err
     b[nx:] += err

@@ -59,8 +59,6 @@ def check_options(
     max_cond: Any,
     tune: Any,
     input_hold: Any,
-    rtol: Any,
-    atol: Any,
 ) -> None:
     """Every option of :class:`~ivobs.estimators.kkl.KKL` checked against the system's kind."""
     ct, tv = sys.is_continuous, sys.is_time_varying
@@ -88,8 +86,6 @@ def check_options(
         if val is not None:
             number(nm, val, above=0.0)
     number("max_cond", max_cond, at_least=1.0, why="; cond(T) >= 1 for every T")
-    number("rtol", rtol, above=0.0, below=1.0)
-    number("atol", atol, above=0.0)
     if not isinstance(tune, (bool, np.bool_)):
         raise IvobsError(f"tune: expected True or False, got {tune!r}")
     hold_ok = isinstance(input_hold, str) and input_hold in ("linear", "zero")

@@ -1,5 +1,11 @@
 """The matrices of one sampling period of the continuous-time time-invariant KKL observer
-(:mod:`.sampled`), computed once per period: data-free, so design rather than recursion."""
+(:mod:`.sampled`), enclosed once per period: data-free, so design rather than recursion.
+
+A period is kept for an interval of lengths ``H = [h (1 − 1e-11), h (1 + 1e-11)]`` around a
+rounded ``h`` (:func:`period_key`), so that a grid such as ``np.arange(0, 10, 0.01)``, whose
+steps differ by rounding, uses one set of matrices: every enclosure holds for every length in
+``H``, and the exact length of each interval is checked to lie in it.
+"""
 
 from __future__ import annotations
 
@@ -8,115 +14,99 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...model import LinearSystem
+from ...sets.expm import IntervalMatrix, expm, interval_product, scaled
+from ...sets.rounding import down, product_error, up, upper
 from .design import Transform, left_inverse
+from .flow import Passage, Scalar, lti_kernel, pieces_for, target_exponential
 
-__all__ = ["Anchor", "PeriodData", "make_anchor", "period_data"]
+__all__ = ["Anchor", "lti_passage", "make_anchor", "period_key"]
+
+SPREAD = 1e-11
+"""Relative spread of the lengths a kept period covers."""
+
+
+def period_key(h: float) -> tuple[float, Scalar]:
+    """The key of the period of length ``h`` (``h`` rounded to 12 digits) and the interval of
+    lengths its matrices cover."""
+    key = round(float(h), 12)
+    return key, (float(down(key * (1.0 - SPREAD))), float(up(key * (1.0 + SPREAD))))
+
+
+def lti_passage(sys: LinearSystem, A_z: np.ndarray, H: Scalar, callable_input: bool) -> Passage:
+    """:class:`~.flow.Passage` of a time-invariant system for every length in ``H``:
+    ``e^{A h}``, ``G0 = ∫_0^h e^{A(h−s)} B ds``, ``G1 = ∫_0^h e^{A(h−s)} B (s/h) ds`` and
+    ``GE = ∫_0^h e^{A(h−s)} E ds`` as blocks of one validated exponential ([VanLoan1978]):
+
+        exp([[A h, B h, 0, E h], [0, 0, I, 0], [0, 0, 0, 0], [0, 0, 0, 0]])
+            = [[e^{A h}, G0, G1, GE], [0, I, I, 0], [0, 0, I, 0], [0, 0, 0, I]],
+
+    the kernel of ``E`` (and of ``B`` for a callable input) and ``e^{A_z h}``."""
+    A, B, E = sys.A_at(0), sys.B_at(0), sys.E_at(0)
+    n, m, q = sys.nx, sys.nu, sys.nd
+    top = np.zeros((n + 2 * m + q, n + 2 * m + q))
+    top[:n, :n], top[:n, n : n + m], top[:n, n + 2 * m :] = A, B, E
+    Mc, Mr = scaled(top, H)
+    Mc[n : n + m, n + m : n + 2 * m] = np.eye(m)  # exact, radius 0
+    Ec, Er = expm(Mc, Mr)
+
+    def block(cols: slice) -> IntervalMatrix:
+        return Ec[:n, cols], Er[:n, cols]
+
+    alpha = float(upper(np.max(np.abs(A).sum(axis=1)), n + 1)) if n else 0.0
+    P = pieces_for(alpha, H[1])
+    ell = (float(down(H[0] / P)), float(up(H[1] / P)))
+    eA = expm(*scaled(A, ell))
+    return Passage(
+        h=H,
+        Phi=block(slice(0, n)),
+        Phiz=target_exponential(A_z, H),
+        G0=block(slice(n, n + m)),
+        G1=block(slice(n + m, n + 2 * m)),
+        GE=block(slice(n + 2 * m, None)),
+        kE=lti_kernel(A, E, ell, P, eA),
+        kB=lti_kernel(A, B, ell, P, eA) if callable_input else None,
+    )
 
 
 @dataclass(frozen=True)
 class Anchor:
     """The constant ``T_h`` of a regular grid (``T``, with its left inverse ``tr``), ``T(t_k-)
-    = T_h - h B_z C`` (``Tm``, with ``trm``), the residual term ``res = |D T_h⁻¹|``, the ``d``
-    radius matrix ``rad`` of one interval and the input matrices multiplied by ``Tm`` (see
-    :meth:`ivobs.estimators.kkl.sampled.ContinuousLTI.anchor`)."""
+    = T_h − h B_z C`` (``Tm``, with ``trm``) and ``Xmag >= |Tm Φ − e^{A_z h} T_h|`` (exact
+    ``Φ``, ``e^{A_z h}``), see :meth:`ivobs.estimators.kkl.sampled.ContinuousLTI.anchor`."""
 
     T: np.ndarray
     tr: Transform
     Tm: np.ndarray
     trm: Transform
-    res: np.ndarray
-    rad: np.ndarray
-    TG0: np.ndarray
-    TG1: np.ndarray
-    TGE: np.ndarray
-    TgB: np.ndarray | None
+    Xmag: np.ndarray
 
 
-@dataclass
-class PeriodData:
-    """One sampling interval of length ``h``: ``Phi_z = e^{A_z h}``, ``Psi = e^{-A h}``,
-    ``eA = e^{A h}``, ``∫ e^{A(h-s)} B (1, s/h) ds`` (``G0``, ``G1``, Van Loan), ``GE = ∫ e^{A(h-s)}
-    E ds``, ``e^{A(h-s)} E`` at the ``N`` midpoints (``nodesE``) with the bound ``var`` of their
-    variation, and Gauss–Legendre nodes ``gl = (s, w, e^{A(h-s)} B)`` for a callable input.
-    The anchor of the period and the radius matrices of the model prediction are added when
-    first needed."""
-
-    h: float
-    Phi_z: np.ndarray
-    Psi: np.ndarray
-    eA: np.ndarray
-    G0: np.ndarray
-    G1: np.ndarray
-    GE: np.ndarray
-    nodesE: np.ndarray
-    N: int
-    var: np.ndarray
-    gl: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-    anchor: Anchor | None = None
-    anchor_done: bool = False
-    T_h: np.ndarray | None = None
-    _identity: tuple[np.ndarray, np.ndarray] | None = None
-
-    def identity_radius(self) -> tuple[np.ndarray, np.ndarray]:
-        """The ``d`` radius matrix of one interval with ``T = I`` and ``|e^{A h}|`` (the model
-        prediction of the previous box)."""
-        if self._identity is None:
-            radI = self.h / self.N * np.abs(self.nodesE).sum(axis=0) + self.var[None, :]
-            self._identity = (radI, np.abs(self.eA))
-        return self._identity
-
-
-def period_data(sys: LinearSystem, A_z: np.ndarray, h: float, gauss: bool) -> PeriodData:
-    """:class:`PeriodData` of a time-invariant system for the period ``h`` (``gauss``: with the
-    Gauss–Legendre nodes of a callable input)."""
-    from scipy.linalg import expm
-
-    A, B, E = sys.A_at(0), sys.B_at(0), sys.E_at(0)
-    n, m, q = sys.nx, sys.nu, sys.nd
-    M = np.zeros((n + 2 * m, n + 2 * m))  # Van Loan: ∫ e^{A(h-s)} B (1, s/h) ds
-    M[:n, :n], M[:n, n : n + m], M[n : n + m, n + m :] = A, B, np.eye(m) / h
-    eM = expm(M * h)
-    Me = np.zeros((n + q, n + q))
-    Me[:n, :n], Me[:n, n:] = A, E
-    normA = float(np.linalg.norm(A, 2))
-    growth = normA * h * np.exp(normA * h)
-    N = int(np.clip(np.ceil(400 * growth), 1, 256))  # sub-intervals for the d radius
-    mids = (np.arange(N) + 0.5) * h / N
-    gl = None
-    if gauss:  # Gauss-Legendre nodes for a smooth u(t)
-        xg, wg = np.polynomial.legendre.leggauss(8)
-        sg = 0.5 * h * (xg + 1.0)
-        gl = (sg, 0.5 * h * wg, np.stack([expm(A * (h - s)) @ B for s in sg]))
-    return PeriodData(
-        h=h,
-        Phi_z=expm(A_z * h),
-        Psi=expm(-A * h),
-        eA=eM[:n, :n],
-        G0=eM[:n, n : n + m],
-        G1=eM[:n, n + m :],
-        GE=expm(Me * h)[:n, n:],
-        nodesE=np.stack([expm(A * (h - s)) @ E for s in mids]),
-        N=N,
-        var=0.5 * h * h / N * np.exp(normA * h) * np.linalg.norm(A @ E, axis=0),
-        gl=gl,
-    )
+def mismatch(Tp: np.ndarray, ps: Passage, T: np.ndarray) -> np.ndarray:
+    """``>= |T' Φ − e^{A_z h} T|`` elementwise for the exact ``Φ``, ``e^{A_z h}`` of ``ps``:
+    the coefficient of ``x(t0)`` in ``T' x(t1) = e^{A_z h} T x(t0) + (T' Φ − e^{A_z h} T) x(t0)
+    + ...`` (:mod:`.continuous`)."""
+    a, ra = interval_product(Tp, None, *ps.Phi)
+    b, rb = interval_product(ps.Phiz[0], ps.Phiz[1], T, None)
+    d = a - b
+    out: np.ndarray = up(up(np.abs(d) + upper(ra + rb, 2)) + product_error(np.abs(d), 1))
+    return out
 
 
 def make_anchor(
-    c: PeriodData, B_z: np.ndarray, C: np.ndarray, max_cond: float
+    ps: Passage, B_z: np.ndarray, C: np.ndarray, h: float, max_cond: float
 ) -> tuple[Anchor | None, np.ndarray | None]:
-    """The :class:`Anchor` of the period ``c`` (None if ``T_h`` is singular, ill-conditioned or
+    """The :class:`Anchor` of the period ``ps`` (None if ``T_h`` is singular, ill-conditioned or
     not an exact fixed point of the computed jump) and ``T_h`` itself (None if not computed)."""
     from scipy.linalg import solve_sylvester
 
-    h, Phi, eA = c.h, c.Phi_z, c.eA
-    Q = h * B_z @ C
+    Phi, eA = ps.Phiz[0], ps.Phi[0]
+    Q = (h * B_z) @ C
     try:
         with np.errstate(all="ignore"):
             Th = solve_sylvester(-Phi, eA, Q @ eA)
     except (np.linalg.LinAlgError, ValueError):
         return None, None
-    for _ in range(4):  # make T_h an exact fixed point of the computed jump
+    for _ in range(4):  # make T_h a fixed point of the computed jump
         Tm = Th - Q
         if np.array_equal(Tm + Q, Th):
             break
@@ -126,18 +116,5 @@ def make_anchor(
     trh = left_inverse(Th, max_cond)
     if not (trh.ok and np.all(np.isfinite(Tm))):
         return None, Th
-    D = Phi @ Th - Tm @ eA
-    anchor = Anchor(
-        T=Th,
-        tr=trh,
-        Tm=Tm,
-        trm=left_inverse(Tm, max_cond),
-        res=np.abs(D @ trh.P),
-        rad=(h / c.N) * np.abs(Tm @ c.nodesE).sum(axis=0)
-        + np.linalg.norm(Tm, axis=1)[:, None] * c.var[None, :],
-        TG0=Tm @ c.G0,
-        TG1=Tm @ c.G1,
-        TGE=Tm @ c.GE,
-        TgB=Tm @ c.gl[2] if c.gl is not None else None,
-    )
+    anchor = Anchor(T=Th, tr=trh, Tm=Tm, trm=left_inverse(Tm, max_cond), Xmag=mismatch(Tm, ps, Th))
     return anchor, Th

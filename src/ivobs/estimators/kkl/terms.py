@@ -117,9 +117,11 @@ class Consistency:
         uabs: np.ndarray,
         dlo: np.ndarray,
         dhi: np.ndarray,
+        slack: np.ndarray | None = None,
     ) -> bool:
         """Whether ``y_o`` is certainly outside ``C_o [x̲, x̄] + D_o u + F_o [d̲, d̄]`` (an
-        admissible sample, also one within rounding of the set's boundary, never is)."""
+        admissible sample, also one within rounding of the set's boundary, never is);
+        ``slack``: the exact output is known to lie within ``y_o ± slack``."""
         no = y_o.shape[0]
         if self.const:
             r = self.M @ np.concatenate((lo, hi, u, xabs, uabs, _ONE))
@@ -132,6 +134,10 @@ class Consistency:
         b, err = r[: 2 * no], r[2 * no :]
         b[:no] -= err
         b[no:] += err
+        if slack is not None:
+            b[:no] -= slack
+            b[no:] += slack
+            np.nextafter(b, self.outward, out=b)
         np.nextafter(b, self.outward, out=b)
         return bool(np.count_nonzero(y_o < b[:no]) or np.count_nonzero(y_o > b[no:]))
 
