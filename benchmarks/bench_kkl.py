@@ -146,7 +146,9 @@ def ct_widths() -> None:
     )  # fmt: skip
     t = np.arange(400) * 0.05
     x0 = Box(-np.ones(2), np.ones(2))
-    tr = ivobs.simulate(plant, [1.0, -1.0], None, ivobs.vertex_disturbance(plant.d, 400, seed=0), t=t)
+    tr = ivobs.simulate(
+        plant, [1.0, -1.0], None, ivobs.vertex_disturbance(plant.d, 400, seed=0), t=t
+    )
     y = tr.y.copy()
     y[np.random.default_rng(0).random(y.shape) < 0.1] = np.nan
     slow = {"A_z": np.diag([-1.0, -2.0]), "B_z": np.ones((2, 1))}
