@@ -1,5 +1,6 @@
-"""The package's shape: imports flow one way (no cycle), modules and estimator classes stay
-small, and code cites papers by reference key (docs/references.md), not by internal labels."""
+"""The package's shape: imports flow one way (no cycle), and code cites papers by reference key
+(docs/references.md), not by internal labels. Module size is not a rule here (one concept per
+module; a large module is a smell to discuss in review)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,8 @@ import ast
 import re
 from pathlib import Path
 
-import pytest
-
 SRC = Path(__file__).resolve().parents[1] / "src" / "ivobs"
 ROOT = SRC.parents[1]
-MAX_MODULE_LINES = 500
-MAX_ESTIMATOR_CLASS_LINES = 300
 
 
 def _module_name(path: Path) -> str:
@@ -99,30 +96,6 @@ def _cycles() -> list[list[str]]:
 
 def test_no_import_cycle() -> None:
     assert _cycles() == []
-
-
-@pytest.mark.parametrize("name", sorted(MODULES))
-def test_module_is_small(name: str) -> None:
-    lines = MODULES[name].read_text(encoding="utf-8").count("\n")
-    assert lines <= MAX_MODULE_LINES, f"{name}: {lines} lines > {MAX_MODULE_LINES}"
-
-
-def test_estimator_classes_are_small() -> None:
-    """Every registered method's class and the ivobs classes it derives from."""
-    import inspect
-
-    import ivobs
-    from ivobs.estimators import get
-
-    classes = {c for name in ivobs.methods() for c in get(name).__mro__}
-    too_long = []
-    for cls in sorted(classes, key=lambda c: c.__qualname__):
-        if not cls.__module__.startswith("ivobs."):
-            continue
-        length = len(inspect.getsourcelines(cls)[0])
-        if length > MAX_ESTIMATOR_CLASS_LINES:
-            too_long.append(f"{cls.__module__}.{cls.__qualname__}: {length} lines")
-    assert too_long == []
 
 
 _LABELS = re.compile(
