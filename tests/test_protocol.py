@@ -10,8 +10,7 @@ import pytest
 
 import ivobs
 from ivobs import Box, IvobsError, LinearSystem, image_bounds, make_estimator
-from ivobs.estimators import ROUNDING, Estimator
-from ivobs.estimators.base import outward
+from ivobs.estimators import Estimator
 from ivobs.estimators.state import OnlineState, Step
 from ivobs.testing import adversarial_run, random_system
 
@@ -71,12 +70,6 @@ def test_run_is_sound_and_step_reproduces_it_bit_for_bit():
         np.testing.assert_array_equal(box.lo, res.lower[k])
         np.testing.assert_array_equal(box.hi, res.upper[k])
     assert est.k == tr.T
-
-
-def test_outward_rounding_margin():
-    lo, hi = outward(np.array([1.0, -2.0]), np.array([3.0, 0.0]))
-    np.testing.assert_allclose(lo, [1.0 - ROUNDING * 4, -2.0 - ROUNDING * 3])
-    np.testing.assert_allclose(hi, [3.0 + ROUNDING * 4, 0.0 + ROUNDING * 3])
 
 
 def test_valid_from_rows_are_nan_and_step_returns_unknown_box():

@@ -18,11 +18,10 @@ from ..model import LinearSystem, NonlinearSystem
 from ..model.statespace import is_statespace
 from . import base
 from ._inputs import check_option_types
-from .base import ROUNDING, Design, Estimator, nonlinear_refusal
+from .base import Design, Estimator, nonlinear_refusal
 
 __all__ = [
     "METHODS",
-    "ROUNDING",
     "Design",
     "Entry",
     "Estimator",
@@ -58,7 +57,9 @@ METHODS: dict[str, Entry] = {
     "intersect": Entry("intersect", "Intersect", 110),
     "nl-interval": Entry("nonlinear.interval", "NonlinearIntervalEstimator", 900),
     "nl-zonotope": Entry("nonlinear.zonotope", "NonlinearZonotopeEstimator", 910),
-    "nl-constrained-zonotope": Entry("nl_czonotope", "NonlinearConstrainedZonotopeEstimator", 920),
+    "nl-constrained-zonotope": Entry(
+        "nonlinear.czonotope", "NonlinearConstrainedZonotopeEstimator", 920
+    ),
 }
 """The built-in methods, imported on first use (see the module docstring)."""
 

@@ -8,7 +8,6 @@ import numpy as np
 
 from .._validate import as_float_array, as_vector
 from ..errors import IvobsError
-from .scale import SHORT
 
 __all__ = [
     "check_option_types",
@@ -16,7 +15,6 @@ __all__ = [
     "check_t_k",
     "check_u_k",
     "check_y_k",
-    "lean_step_data",
     "lean_u_y",
 ]
 
@@ -27,20 +25,10 @@ _NO_INPUT.flags.writeable = False
 
 def lean_u_y(sys: Any, u_k: Any, y_k: Any) -> tuple[np.ndarray, np.ndarray] | None:
     """``(u_k, y_k)`` when they are already what :func:`check_u_k` and :func:`check_y_k` would
-    return (float vectors of the right lengths, ``u_k`` finite, ``y_k`` finite: a cheap test
-    for the common case of one step), else ``None`` (then the full checks run and name what is
-    wrong). A finite sum of the values means every value is finite (NaN and infinities
-    propagate; an overflow of the sum only sends the call to the full checks)."""
-    lean = lean_step_data(sys, [], 0.0, u_k, y_k)  # the same checks; the scale is not used
-    return None if lean is None else (lean[0], lean[1])
-
-
-def lean_step_data(
-    sys: Any, g: list[float], c: float, u_k: Any, y_k: Any
-) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """:func:`lean_u_y` and the data scale of the step (:meth:`DataScale.of_step` with the
-    constant terms ``g``, ``c``: ``max(c, |y_i|, g_i |u_i|)``, the same number) from one
-    conversion of each vector to floats; ``None`` where :func:`lean_u_y` gives ``None``."""
+    return (float vectors of the right lengths, both finite: a cheap test for the common case
+    of one step), else ``None`` (then the full checks run and name what is wrong). A finite sum
+    of the values means every value is finite (NaN and infinities propagate; an overflow of the
+    sum only sends the call to the full checks)."""
     # (``dtype is _F64``: the canonical float64 descriptor; any other goes the full way)
     if type(y_k) is not np.ndarray or y_k.dtype is not _F64 or y_k.ndim != 1:
         return None
@@ -50,20 +38,13 @@ def lean_step_data(
         u_k = _NO_INPUT
     elif type(u_k) is not np.ndarray or u_k.dtype is not _F64 or u_k.ndim != 1:
         return None
-    ys, us = y_k.tolist(), u_k.tolist()
-    if len(ys) != sys.ny or len(us) != sys.nu or len(ys) + len(us) > SHORT:
+    if y_k.shape[0] != sys.ny or u_k.shape[0] != sys.nu:
         return None
+    ys, us = y_k.tolist(), u_k.tolist()
     total = sum(ys) + sum(us)
     if total - total != 0.0:  # NaN or an infinity somewhere (or an overflow): full checks
         return None
-    a = c
-    for v in ys:
-        v = abs(v)
-        a = v if v > a else a
-    for v, gi in zip(us, g):
-        v = abs(v) * gi
-        a = v if v > a else a
-    return u_k, y_k, a
+    return u_k, y_k
 
 
 def check_u_k(sys: Any, u_k: Any) -> np.ndarray:

@@ -17,9 +17,8 @@ Luenberger observers of ``reachability``/``zonotope`` through their output injec
 ``constrained-zonotope`` as a box of generators in the prediction (``w``) and a wider strip /
 slack per measured row (``v``).
 
-**Rounding.** Every bound here is an upper bound of the exact real value: ``m`` is widened by
-the base margin :data:`~ivobs.estimators.rounding.ROUNDING` (so the term holds for every state of
-the *returned*, rounded box), a sum of ``n`` nonnegative products computed in floating point is
+**Rounding.** Every bound here is an upper bound of the exact real value: ``m = max(|x̲|, |x̄|)`` is
+exact, a sum of ``n`` nonnegative products computed in floating point is
 at most ``γ_n`` below its exact value ([Higham2002, Chapter 3]), hence multiplied by
 ``1 + 2 γ_{n+1}``, plus ``n`` half-subnormals for underflow, then one step up (``nextafter``);
 adding a term to a bound steps the result one float outwards (the sum is rounded to nearest).
@@ -31,7 +30,6 @@ import numpy as np
 
 from ..linalg import gamma
 from ..model.uncertain import MatrixUncertainty
-from .rounding import ROUNDING
 
 __all__ = ["growth_radius", "magnitude", "observer_term", "terms", "up", "widen"]
 
@@ -49,10 +47,8 @@ def up(s: np.ndarray, n: int) -> np.ndarray:
 
 
 def magnitude(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """``m >= |x|`` entrywise for every ``x`` of ``[lo, hi]`` widened by the base rounding
-    margin ``ROUNDING (1 + |bound|)``."""
-    m = np.maximum(np.abs(lo), np.abs(hi))
-    out: np.ndarray = np.nextafter(m * (1.0 + 2.0 * ROUNDING) + ROUNDING, np.inf)
+    """``m >= |x|`` entrywise for every ``x`` of ``[lo, hi]`` (exact: no arithmetic)."""
+    out: np.ndarray = np.maximum(np.abs(lo), np.abs(hi))
     return out
 
 

@@ -1,7 +1,7 @@
 """The estimator protocol shared by every method (scikit-learn's idea: one interface).
 
 Subclasses implement the method; the base class owns validation, the online state, the
-offline loop, missing samples bookkeeping, inconsistency reporting and outward rounding.
+offline loop, missing samples bookkeeping and inconsistency reporting.
 
 A subclass provides
 
@@ -12,18 +12,21 @@ A subclass provides
   :class:`~ivobs.estimators.state.OnlineState` (arrays named as in the paper).
 * ``_step(state, u_k, y_k, t_k) -> Step[S]``: the method's recursion, written once: from the
   state at step ``k = state.k``, the next state and the bounds of ``x[k]`` from ``u[0..k]``,
-  ``y[0..k]`` (before outward rounding). It never modifies ``state``; the state it returns is
-  built in that step (``dataclasses.replace``), and the base class sets its counters. ``y_k``
-  may contain NaN (missing components: predict without them). A measurement that contradicts
-  the model is reported by ``Step(..., inconsistent=True)`` and not used.
+  ``y[0..k]``, every rounding error of the step already bounded (below). It never modifies
+  ``state``; the state it returns is built in that step (``dataclasses.replace``), and the base
+  class sets its counters. ``y_k`` may contain NaN (missing components: predict without
+  them). A measurement that contradicts the model is reported by
+  ``Step(..., inconsistent=True)`` and not used.
 * optionally ``_run(u, y, t) -> (lo, hi) | (lo, hi, inconsistent) | None``: the whole record
   at once (vectorised; batch ``(B, T, n)`` inputs allowed) from a shared kernel, tested equal to
   the loop over ``_step``; fresh arrays the base class may modify in place; ``inconsistent`` a
   ``(..., T)`` bool array of steps whose measurement was found inconsistent (and not used).
   Return ``None`` to fall back to the loop (e.g. missing samples).
 
-Rounding: every bound is widened outwards by :func:`~ivobs.estimators.rounding.outward`
-(see :mod:`ivobs.estimators.rounding`).
+Rounding: the base class adds no margin. Each method's ``_step`` and ``_run`` return bounds
+that contain the exact sets, every floating-point error bounded by a proven model
+([Higham2002] or directed rounding: :mod:`ivobs.sets.rounding`); ``proven_rounding = True``
+declares it, and :func:`ivobs.testing.check_estimator` checks it against exact trajectories.
 """
 
 from __future__ import annotations
@@ -43,16 +46,14 @@ from ..errors import DesignError, InconsistentDataError, IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
 from ..sets import Box
-from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_step_data, lean_u_y
+from ..sets.rounding import overflowed
+from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
 from .persistence import Persistence
 from .record import VECTOR_MIN_STEPS, check_record, run_record
-from .rounding import ROUNDING, lean_outward, outward, overflowed
-from .scale import DataScale
 from .state import OnlineState, Step, evolve
 
 __all__ = [
     "MAX_DENSE_STATES",
-    "ROUNDING",
     "VECTOR_MIN_STEPS",
     "Design",
     "Estimator",
@@ -214,14 +215,11 @@ class Estimator(Persistence):
     ...)``), each saying why in its docstring; the others refuse such a system."""
     needs_x0: ClassVar[bool] = True
     proven_rounding: ClassVar[bool] = False
-    """True for methods whose ``_step`` (and ``_run``) return bounds that already enclose the
-    exact sets, every floating-point error of the recursion bounded by a proven model
-    ([Higham2002] or directed rounding; :mod:`ivobs.sets.rounding`): the base class then adds no
-    margin and computes no data scale."""
-    rounds_itself: ClassVar[bool] = False
-    """True for methods that apply the rounding margin themselves (``intersect``: its members'
-    boxes are rounded before they are intersected, which needs no arithmetic); the data scale
-    ``s_k`` is then in ``state.scale`` when ``_step`` runs."""
+    """Declares that ``_step`` (and ``_run``) return bounds that enclose the exact sets, every
+    floating-point error of the recursion bounded by a proven model ([Higham2002] or directed
+    rounding; :mod:`ivobs.sets.rounding`). The base class adds no margin to any method: every
+    built-in method declares it; a method of your own should earn it
+    (:func:`ivobs.testing.check_estimator`)."""
 
     def __init__(self, sys: Any, x0: Box | None = None, *, on_inconsistent: str = "warn"):
         check_system(self, sys)
@@ -237,11 +235,6 @@ class Estimator(Persistence):
         self.last_inconsistent: bool = False
         """Whether the measurement of the last ``step()`` was found inconsistent (not used)."""
         self._state: OnlineState | None = None
-        self._data_scales = DataScale(sys)
-        self._scale_gain = 1.0  # factor of the data scale (> 1: rounding that grows faster)
-        lean = sys.dt != 0 and not self.rounds_itself and not self.proven_rounding
-        lean = lean and type(self)._step_scale is Estimator._step_scale
-        self._lean = self._data_scales.steady_list() if lean else None  # step()'s cheap path
         self._branching = False
         """True while a step runs that will not be continued (:meth:`predict`): a method with
         warm-started solver caches (exact) leaves them with the state they belong to."""
@@ -279,15 +272,7 @@ class Estimator(Persistence):
         ``valid_from``). ``y_k`` may hold NaN for missing components; ``None`` means the whole
         measurement is missing. Continuous-time methods need the sample time ``t``."""
         state = self._state if self._state is not None else self.initial_state()
-        lean = lean_step_data(self.sys, *self._lean, u_k, y_k) if self._lean and t is None else None
-        if lean is None:
-            self._state, box = self.advance(state, u_k, y_k, t)
-        else:  # checked float vectors and their data scale in one pass (_inputs.lean_step_data)
-            a = lean[2] * self._scale_gain if self._scale_gain > 1.0 else lean[2]
-            new, lo, hi, _ = self._advance(state, lean[0], lean[1], None, True, a)
-            self._state = new  # (no lean path for the methods that round themselves)
-            rounded = lean_outward(lo, hi, new.scale) if state.k >= self.valid_from else None
-            box = Box._trusted(*rounded) if rounded is not None else self._box(state.k, lo, hi, new)
+        self._state, box = self.advance(state, u_k, y_k, t)
         self.last_inconsistent = self._state.inconsistent
         if self.last_inconsistent:
             self._report_inconsistent([state.k])
@@ -330,25 +315,14 @@ class Estimator(Persistence):
         u_k: np.ndarray,
         y_k: np.ndarray,
         t_k: float | None,
-        online: bool = True,
-        step_scale: float | None = None,
     ) -> tuple[OnlineState, Bound, Bound, bool]:
-        """One step: the data scale, the method's recursion, the counter. ``online=False``
-        (the loop of :meth:`run`, which rounds with the record's scales) skips the data scale
-        unless the method rounds itself. ``step_scale``: :meth:`_step_scale`, if known."""
-        scale = state.scale
-        if step_scale is not None:
-            scale = scale if scale >= step_scale else step_scale
-        elif (online or self.rounds_itself) and not self.proven_rounding:
-            scale = max(scale, self._step_scale(state.k, u_k, y_k, t_k))
-            if self.rounds_itself and scale != state.scale:  # it needs s_k inside its step
-                state = dataclasses.replace(state, scale=scale)
+        """One step: the method's recursion, then the counters."""
         new, lo, hi, flag = self._step(state, u_k, y_k, t_k)
         flag = bool(flag)
         if new is state:  # the method kept its state: a new object for the new counters
-            new = evolve(new, k=state.k + 1, scale=scale, inconsistent=flag)
+            new = evolve(new, k=state.k + 1, inconsistent=flag)
         else:  # a fresh state the method just built and nobody else holds: set its counters
-            new.__dict__.update(k=state.k + 1, scale=scale, inconsistent=flag)
+            new.__dict__.update(k=state.k + 1, inconsistent=flag)
         return new, lo, hi, flag
 
     def _box(
@@ -359,18 +333,11 @@ class Estimator(Persistence):
         state: OnlineState,
         finite: bool = True,
     ) -> Box:
-        """The returned box of step ``k`` (``state``: the state after it): rounded outwards,
-        NaN before ``valid_from``."""
+        """The returned box of step ``k`` (``state``: the state after it), NaN before
+        ``valid_from``."""
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
-        margin = not (self.rounds_itself or self.proven_rounding)
-        if margin:
-            box = lean_outward(lo, hi, state.scale)
-            if box is not None:  # short finite bounds, rounded in floats (rounding.py)
-                return Box._trusted(*box)
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
-        if margin:
-            outward(lo, hi, state.scale)
         if finite and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
             what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"
             raise self._non_finite_error(k, overflowed(lo, hi, *_arrays(state)), what)
@@ -381,19 +348,6 @@ class Estimator(Persistence):
         without changing the online state."""
         state = self._state if self._state is not None else self.initial_state()
         return self.advance(state, u_k, None, t, keep=False)[1]
-
-    # -- data scale of the rounding margin (scale.py) ----------------------------------------
-    def _step_scale(self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None) -> float:
-        """The magnitude of the data terms of one step (its running maximum is ``s_k``)."""
-        a = self._data_scales.of_step(k, u_k, y_k, t_k)
-        return a * self._scale_gain if self._scale_gain > 1.0 else a
-
-    def _data_scale(self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> np.ndarray:
-        """``s_k`` over a record or batch, ``(..., T)`` (the same numbers as the online path)."""
-        s = self._data_scales.of_record(u, y, t)
-        if self._scale_gain > 1.0:
-            s *= self._scale_gain
-        return s
 
     # -- offline --------------------------------------------------------------------------
     def run(
@@ -437,8 +391,7 @@ class Estimator(Persistence):
     def _loop(
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, bar: Any = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The record step by step through the same recursion as :meth:`step` (bounds before
-        rounding)."""
+        """The record step by step through the same recursion as :meth:`step`."""
         T = y.shape[0]
         state = self.initial_state()
         lo = np.empty((T, self.sys.nx))
@@ -446,7 +399,7 @@ class Estimator(Persistence):
         inc = np.zeros(T, dtype=bool)
         for k in range(T):
             t_k = None if t is None else float(t[k])
-            state, lo[k], hi[k], inc[k] = self._advance(state, u[k], y[k], t_k, online=False)
+            state, lo[k], hi[k], inc[k] = self._advance(state, u[k], y[k], t_k)
             if bar is not None:
                 bar.update()
         return lo, hi, inc

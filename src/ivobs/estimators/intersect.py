@@ -379,7 +379,6 @@ class Intersect(Estimator):
             "fingerprint": self.fingerprint(),
             "state": {
                 "k": st.k,
-                "scale": st.scale,
                 "inconsistent": st.inconsistent,
                 "members": [
                     m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)
@@ -399,7 +398,7 @@ class Intersect(Estimator):
             )
         check_version(state)
         saved = state["state"]
-        counters = {"k": saved.get("k"), "scale": saved.get("scale", 0.0)}
+        counters = {"k": saved.get("k")}
         check_counters(counters)
         members = saved.get("members")
         if not isinstance(members, list) or len(members) != len(self.members):
@@ -407,7 +406,6 @@ class Intersect(Estimator):
         return IntersectState(
             members=tuple(m.check_state(s) for m, s in zip(self.members, members, strict=True)),
             k=counters["k"],
-            scale=counters["scale"],
             inconsistent=bool(saved.get("inconsistent", False)),
         )
 

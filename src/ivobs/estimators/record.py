@@ -11,7 +11,7 @@ import numpy as np
 
 from .._validate import as_signal
 from ..errors import IvobsError
-from .rounding import outward, overflowed
+from ..sets.rounding import overflowed
 
 if TYPE_CHECKING:
     from .base import Estimator
@@ -50,11 +50,11 @@ def check_record(sys: Any, u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
 def run_record(
     est: Estimator, u: np.ndarray, y: np.ndarray, t: np.ndarray | None, vectorize: bool, bar: Any
 ) -> Arrays:
-    """Rounded bounds ``(lo, hi)`` and the inconsistency flags of a record or batch."""
+    """Bounds ``(lo, hi)`` and the inconsistency flags of a record or batch."""
     if y.ndim == 2:
         lo, hi, inc = _block(est, u, y, t, vectorize, bar)
         lo, hi = _owned(lo), _owned(hi)
-        finalize(est, lo, hi, None if est.proven_rounding else est._data_scale(u, y, t))
+        finalize(est, lo, hi)
         return lo, hi, inc
     # streams in cache-sized chunks written into one output: large fresh temporaries cost more
     # in page faults than the arithmetic itself
@@ -65,8 +65,7 @@ def run_record(
     for b0 in range(0, B, chunk):
         sl = slice(b0, min(B, b0 + chunk))
         lo[sl], hi[sl], inc[sl] = _block(est, u[sl], y[sl], t, vectorize, bar)
-        scale = None if est.proven_rounding else est._data_scale(u[sl], y[sl], t)
-        finalize(est, lo[sl], hi[sl], scale)
+        finalize(est, lo[sl], hi[sl])
     return lo, hi, inc
 
 
@@ -92,11 +91,8 @@ def _block(
     )
 
 
-def finalize(est: Estimator, lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None) -> None:
-    """In place: outward rounding (``scale``: the data scale ``s_k``, ``(..., T)``), NaN before
-    ``valid_from``, no non-finite bound after."""
-    if not (est.rounds_itself or est.proven_rounding):
-        outward(lo, hi, scale)
+def finalize(est: Estimator, lo: np.ndarray, hi: np.ndarray) -> None:
+    """In place: NaN before ``valid_from``, no non-finite bound after."""
     vf = est.valid_from
     lo[..., :vf, :] = np.nan
     hi[..., :vf, :] = np.nan

@@ -1,8 +1,8 @@
 """The typed online state of an estimator, and its one serialisation.
 
 Every method keeps what it carries from one step to the next in a frozen dataclass derived from
-:class:`OnlineState` (arrays named as in its paper, plus the step counter ``k``, the data scale
-``s_k`` of the rounding margin and whether the last measurement was inconsistent). A step never
+:class:`OnlineState` (arrays named as in its paper, plus the step counter ``k`` and whether the last
+measurement was inconsistent). A step never
 modifies a state: it returns a new one (so :meth:`Estimator.predict` needs no copy, and a saved
 state cannot change behind the caller's back).
 
@@ -46,13 +46,10 @@ States saved by ivobs before typed states (no ``version`` entry) are refused by 
 class OnlineState:
     """What every method's online state holds besides its own arrays.
 
-    ``k``: steps processed; ``scale``: the data scale ``s_k`` of the rounding margin (the
-    running maximum of the data magnitudes, :mod:`ivobs.estimators.rounding`);
-    ``inconsistent``: whether the measurement of the last step contradicted the model (it was
-    then not used)."""
+    ``k``: steps processed; ``inconsistent``: whether the measurement of the last step
+    contradicted the model (it was then not used)."""
 
     k: int = 0
-    scale: float = 0.0
     inconsistent: bool = False
 
     bounds: ClassVar[tuple[tuple[str, str], ...]] = ()
@@ -124,9 +121,9 @@ def _dump_value(val: Any) -> Any:
 # -- load --------------------------------------------------------------------------------------
 def load_state(saved: Any, fresh: S) -> S:
     """The state saved by :func:`dump_state`, rebuilt with the types of ``fresh`` (a state of
-    the same estimator at step 0) and checked against it: the step counter, the data scale,
-    every array (dimensions, fixed axes, finite values), scalars' types, and ``lower <= upper``
-    for the pairs in ``fresh.bounds``."""
+    the same estimator at step 0) and checked against it: the step counter, every array
+    (dimensions, fixed axes, finite values), scalars' types, and ``lower <= upper`` for the
+    pairs in ``fresh.bounds``."""
     if not isinstance(saved, Mapping):
         raise IvobsError(
             "state: expected entry 'state' to be the dict of saved values from "
@@ -156,7 +153,7 @@ def _load_value(key: str, val: Any, fresh: Any) -> Any:
         return tuple(load_state(v, f) for v, f in zip(val, fresh, strict=True))
     if isinstance(fresh, np.ndarray):
         return _load_array(key, val, fresh)
-    if key in ("k", "scale"):
+    if key == "k":
         return val  # checked by check_counters
     if isinstance(fresh, (bool, np.bool_)):
         if not isinstance(val, (bool, np.bool_)):
@@ -226,8 +223,8 @@ def _load_array(key: str, val: Any, fresh: np.ndarray) -> np.ndarray:
 
 
 def check_counters(values: dict[str, Any]) -> None:
-    """The step counter ``k`` and the data scale ``scale`` of a saved state, checked and
-    converted in place (every state has them, nested or not)."""
+    """The step counter ``k`` of a saved state, checked and converted in place (every state
+    has it, nested or not)."""
     k = values["k"]
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= MAX_STEPS:
         beyond = " (more than 2**53 steps)" if isinstance(k, int) and k > MAX_STEPS else ""
@@ -236,18 +233,6 @@ def check_counters(values: dict[str, Any]) -> None:
             + _TAMPERED
         )
     values["k"] = int(k)
-    scale = values["scale"]
-    if (
-        isinstance(scale, bool)
-        or not isinstance(scale, (int, float, np.number))
-        or not np.isfinite(scale)
-        or scale < 0
-    ):
-        raise IvobsError(
-            "state: entry 'scale': expected the data scale (a finite number >= 0), got "
-            f"{scale!r}" + _TAMPERED
-        )
-    values["scale"] = float(scale)
 
 
 def _check_pair(lo_name: str, hi_name: str, lo: np.ndarray, hi: np.ndarray) -> None:

@@ -40,6 +40,7 @@ __all__ = [
     "gamma",
     "matvec",
     "mid_rad",
+    "overflowed",
     "product_error",
     "up",
     "upper",
@@ -172,3 +173,14 @@ class DecayBound:
             0
         ]
         return out
+
+
+_HUGE = 1e300
+"""A bound this large is one step of growth away from the end of the float range."""
+
+
+def overflowed(*arrays: np.ndarray) -> bool:
+    """Whether any array holds an infinity or a finite value beyond ``1e300`` (the bounds ran
+    out of the float range; NaN then comes from ``inf - inf``)."""
+    with np.errstate(invalid="ignore"):
+        return any(bool(np.any(np.abs(a) > _HUGE)) for a in arrays if a.dtype.kind == "f")

@@ -450,7 +450,7 @@ class ContinuousObserver(Observer[ContinuousState]):
             lo, hi = self.first_box(lo, hi)
         new = ContinuousState(
             T=T, zlo=zlo, zhi=zhi, t_prev=float(t_k), u_prev=u_k.copy(), dlo_prev=d.lo.copy(),
-            dhi_prev=d.hi.copy(), xlo=lo.copy(), xhi=hi.copy(), k=k, scale=state.scale,
+            dhi_prev=d.hi.copy(), xlo=lo.copy(), xhi=hi.copy(), k=k,
             inconsistent=state.inconsistent,
         )  # fmt: skip
         return Step(new, lo, hi, bad or crossed)

@@ -14,7 +14,7 @@ model's forward-backward contractor of ``h = y_k``.
 
 * **Measurement update** ([Rego2020], with the mean-value extension of ``h``,
   [Rego2020]): over ``B``, ``h(ζ) ∈ h0 + J (ζ - c̄) ± ρ``
-  (:mod:`ivobs.estimators._meanvalue`); each measured ``y_i`` adds the constraint
+  (:mod:`ivobs.estimators.nonlinear.meanvalue`); each measured ``y_i`` adds the constraint
 
       J_i G_z ξ + σ_i τ_i = y_i - h0_i + J_i c̄ - J_i z,        τ_i ∈ [-1, 1]
 
@@ -32,22 +32,20 @@ model's forward-backward contractor of ``h = y_k``.
 * **Reduction** [Scott2016, Section 4]: constraint elimination and generator reduction
   (:func:`ivobs.czonotope.eliminate_constraints`, :func:`ivobs.czonotope.reduce_generators`).
 
-**Soundness under rounding (proof).** Every floating-point error of the recursion is bounded
-where it occurs (``proven_rounding``: the base class adds no margin). The linearisation bounds
-its own rounding (:mod:`ivobs.estimators._meanvalue`); a measured row is computed in floating
-point, and for the true factors ``ξ`` the computed row satisfies
-``|fl(J_i G_z) ξ - fl(t_i - J_i z)| <= σ_i``, ``σ_i`` including ``γ_n |J_i| |G_z| 1`` and
-``γ_{n+1} (|t_i| + |J_i| |z|)`` (the errors of the row and of the right-hand side, [Higham2002,
-Section 3.1]) besides ``ρ_i + |t̃_i - t_i|`` and ``|J_i| e``, the sum enlarged by
-``(1 + γ_{n+6})`` for its own rounding; the row is then scaled by a power of two (exact). The
-hull bounds are proven by weak duality at the solver's multipliers
-(:func:`ivobs.czonotope.hull_certificates`), then ``∓ e``, rounded outward. The prediction's box
-of generators holds the rounding of ``f0 + J (z - c̄)`` and ``J G_z`` and the image of the box
-aside; the reduction returns supersets, its own rounding included, and the rounding of the
-re-centring goes to ``e``. A float64 record of the model is covered by data margins in the
-recursion, relative to the terms of ``f`` and ``h`` (``ROUNDING (1 + |f0| + |J| (|z - c| +
-|G_z| 1))`` in the prediction's box, ``ROUNDING (1 + |y_i|)`` in each measured row).
-"""
+**Soundness under rounding (proof).** Every floating-point error of the recursion is bounded where
+it occurs (``proven_rounding``: the base class adds no margin). The linearisation bounds its own
+rounding (:mod:`.meanvalue`); a measured row is computed in floating point, and for the true factors
+``ξ`` the computed row satisfies ``|fl(J_i G_z) ξ - fl(t_i - J_i z)| <= σ_i``, ``σ_i`` including
+``γ_n |J_i| |G_z| 1`` and ``γ_{n+1} (|t_i| + |J_i| |z|)`` (the errors of the row and of the
+right-hand side, [Higham2002, Section 3.1]) besides ``ρ_i + |t̃_i - t_i|`` and ``|J_i| e``, the sum
+enlarged by ``(1 + γ_{n+6})`` for its own rounding; the row is then scaled by a power of two
+(exact). The hull bounds are proven by weak duality at the solver's multipliers
+(:func:`ivobs.czonotope.hull_certificates`), then ``∓ e``, rounded outward. The prediction's box of
+generators holds the rounding of ``f0 + J (z - c̄)`` and ``J G_z`` and the image of the box aside;
+the reduction returns supersets, its own rounding included, and the rounding of the re-centring goes
+to ``e``. A float64 record of the model is covered by data margins in the recursion, relative to the
+terms of ``f`` and ``h`` (``RECORD_MARGIN (1 + |f0| + |J| (|z - c| + |G_z| 1))`` in the prediction's
+box, ``RECORD_MARGIN (1 + |y_i|)`` in each measured row). """
 
 from __future__ import annotations
 
@@ -56,10 +54,10 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_int
-from ..model import LinearSystem, NonlinearSystem
-from ..sets import Box
-from ..sets.czonotope import (
+from ..._validate import as_int
+from ...model import LinearSystem, NonlinearSystem
+from ...sets import Box
+from ...sets.czonotope import (
     eliminate_constraints,
     gamma,
     hull_certificates,
@@ -67,18 +65,23 @@ from ..sets.czonotope import (
     reduce_consolidated,
     soften,
 )
-from ..sets.rounding import UNIT_ROUNDOFF, down, up, upper
-from . import register
-from ._meanvalue import Linearisation, contract_back, linearise
-from .base import ROUNDING, Design, Estimator, check_size
-from .constrained_zonotope import TOLS, default_limits
-from .state import OnlineState, Step
+from ...sets.rounding import UNIT_ROUNDOFF, down, up, upper
+from .. import register
+from ..base import Design, Estimator, check_size
+from ..constrained_zonotope import TOLS, default_limits
+from ..state import OnlineState, Step
+from .meanvalue import Linearisation, contract_back, linearise
 
 __all__ = [
     "NonlinearConstrainedZonotopeDesign",
     "NonlinearConstrainedZonotopeEstimator",
     "NonlinearConstrainedZonotopeState",
 ]
+
+RECORD_MARGIN = 1e-10
+"""Relative allowance for a record of the model computed in float64 (a simulation whose state
+differs from the exact model's by its own rounding): added to the prediction's box and to each
+measured row, relative to the terms involved."""
 
 
 @dataclass(frozen=True)
@@ -251,7 +254,6 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         lo, hi = joint.lo[:nx].copy(), joint.hi[:nx].copy()
         new = NonlinearConstrainedZonotopeState(  # not dataclasses.replace: 10x cheaper
             k=state.k,
-            scale=state.scale,
             inconsistent=state.inconsistent,
             z=joint.z,
             Gz=np.ascontiguousarray(joint.Gz),
@@ -356,7 +358,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         yo, go = y_k[obs], lin.g0[obs]
         t = yo - go + J @ lin.c
         t_err = gamma(n + 3) * (np.abs(yo) + np.abs(go) + aJ @ np.abs(lin.c))
-        t_err += ROUNDING * (1.0 + np.abs(yo))  # the data margin of a float64 record
+        t_err += RECORD_MARGIN * (1.0 + np.abs(yo))  # the data margin of a float64 record
         rhs = t - J @ joint.z
         coeff = J @ joint.Gz
         sigma = (
@@ -383,8 +385,8 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         n = z.shape[0]
         err = (
             # + the data margin of a float64 simulation of f, relative to its terms over the
-            # set (TermwiseMargin)
-            (2.0 * gamma(n + 3) + ROUNDING)
+            # set
+            (2.0 * gamma(n + 3) + RECORD_MARGIN)
             * (1.0 + np.abs(lin.g0) + aJ @ (np.abs(d) + np.abs(Gz).sum(axis=1)))
             + (aJ @ joint.acc) * (1.0 + gamma(n + 1))
             + lin.rho
