@@ -45,7 +45,8 @@ generators holds the rounding of ``f0 + J (z - c̄)`` and ``J G_z`` and the imag
 the reduction returns supersets, its own rounding included, and the rounding of the re-centring goes
 to ``e``. A float64 record of the model is covered by data margins in the recursion, relative to the
 terms of ``f`` and ``h`` (``RECORD_MARGIN (1 + |f0| + |J| (|z - c| + |G_z| 1))`` in the prediction's
-box, ``RECORD_MARGIN (1 + |y_i|)`` in each measured row). """
+box, ``RECORD_MARGIN (1 + |y_i|)`` in each measured row).
+"""
 
 from __future__ import annotations
 
