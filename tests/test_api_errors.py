@@ -163,7 +163,6 @@ def test_restore_rejects_a_state_that_is_not_a_dict():
         ("hi", 3.0, r"state: entry 'hi': expected a saved array, got float"),
         ("k", -2, r"state: entry 'k': expected the step count \(an integer >= 0\), got -2"),
         ("k", "3", r"state: entry 'k': expected the step count"),
-        ("scale", float("nan"), r"state: entry 'scale': expected the data scale"),
     ],
 )
 def test_restore_names_the_corrupted_entry(key, value, pattern):

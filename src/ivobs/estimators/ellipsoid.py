@@ -79,18 +79,35 @@ def _frobenius(M: np.ndarray) -> float:
     return _up(math.sqrt(upper(float(np.vdot(M, M)), M.size + 1)))
 
 
-def _add_diagonal(S: np.ndarray, rho: float) -> np.ndarray:
-    """``S + ρ I`` in place, each diagonal entry rounded up."""
+def _add_diagonal(S: np.ndarray, rho: float | np.ndarray) -> np.ndarray:
+    """``S + diag(ρ)`` in place (``ρ`` a number or a vector), each diagonal entry rounded up."""
     diag = S.reshape(-1)[:: S.shape[0] + 1]  # a view: S is C-contiguous
     diag[:] = up(diag + rho)
     return S
 
 
 def _cover(Q: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """``sym(Q) + ρ I ⪰`` every symmetric matrix within ``M`` (entrywise) of ``Q`` (module
-    docstring): ``ρ`` bounds ``‖M‖_F`` and the rounding of the symmetrisation."""
+    """``sym(Q) + ρ D² ⪰`` every symmetric matrix within ``M`` (entrywise) of ``Q`` (module
+    docstring), with the rounding of the symmetrisation (``2u |S|``) added to ``M``. For any
+    positive diagonal ``D``, a symmetric ``E`` with ``|E| <= M`` satisfies ``E = D (D⁻¹ E D⁻¹) D
+    ⪯ ‖D⁻¹ M D⁻¹‖_F D²``; ``D² = diag(M)`` keeps each coordinate's cover at the scale of its
+    own error (one isotropic ball would add the largest coordinate's error to the smallest)."""
     S = 0.5 * (Q + Q.T)
-    return _add_diagonal(S, _up(_frobenius(M) + 2.0 * UNIT_ROUNDOFF * _frobenius(S)))
+    Mp = up(M + 2.0 * UNIT_ROUNDOFF * np.abs(S))
+    d = np.sqrt(np.diagonal(Mp))
+    top = float(d.max()) if d.size else 0.0
+    if not top > 0.0:
+        if not np.any(Mp):
+            return S  # no error to cover
+        d = np.ones_like(d)
+    else:
+        d = np.maximum(d, top * 2.0**-26)  # positive: a zero diagonal would scale by infinity
+    Ms = up(up(Mp / d[:, None]) / d[None, :])  # >= D⁻¹ M D⁻¹ entrywise
+    return _add_diagonal(S, up(_frobenius(Ms) * up(d * d)))
+
+
+_TAU_MIN = 2.0**-40
+"""Smallest factor ``τ`` (and ``1/p``) of the ellipsoids' Minkowski-sum covers."""
 
 
 def _cover_centre(Q: np.ndarray, eps: np.ndarray) -> np.ndarray:
@@ -102,10 +119,10 @@ def _cover_centre(Q: np.ndarray, eps: np.ndarray) -> np.ndarray:
         return Q
     n = Q.shape[0]
     tr = max(float(np.trace(Q)), e2)
-    a = 1.0 + math.sqrt(n * e2 / tr)
+    # τ >= 2⁻⁴⁰ so that a - 1 is exact and positive (ε far below Q: then (1 + 1/τ) ‖ε‖² is
+    # still far below Q, while τ = 1 would double Q)
+    a = 1.0 + max(math.sqrt(n * e2 / tr), _TAU_MIN)
     tau = _down(a - 1.0)
-    if not tau > 0.0:  # ε far below Q: τ = 1
-        a, tau = 2.0, 1.0
     aQ = a * Q
     ball = _up(_up(1.0 + _up(1.0 / tau)) * e2)
     return _add_diagonal(aQ, _up(ball + _up(2.0 * UNIT_ROUNDOFF * _frobenius(aQ))))
@@ -343,7 +360,8 @@ class EllipsoidEstimator(Estimator):
         a, w = float(np.trace(AQA)), float(np.trace(Q_w))
         if w > 0.0:
             # any p > 0: c1 = 1 + 1/p is the float, 1 + p rounded up from p = 1 / (c1 - 1)
-            c1 = 1.0 + 1.0 / (math.sqrt(a / w) if a > 0.0 else 1.0)
+            # (1/p >= 2⁻⁴⁰: c1 - 1 exact and positive when A Q Aᵀ dwarfs Q_w)
+            c1 = 1.0 + max(1.0 / (math.sqrt(a / w) if a > 0.0 else 1.0), _TAU_MIN)
             c2 = _up(1.0 + _up(1.0 / _down(c1 - 1.0)))
             Q_next, M = c1 * AQA + c2 * Q_w, c1 * aAQA + c2 * np.abs(Q_w)
         else:  # E d is a point (Q_w = 0)
