@@ -53,6 +53,8 @@ LONG = {
         "constrained-zonotope",
         "exact",
         "intersect",
+        "nl-zonotope",
+        "nl-constrained-zonotope",
     )
 } | {
     ("cora-slip4", "exact"),

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ivobs
-from ivobs import Box, DesignError, IvobsError, LinearSystem, make_estimator, simulate
+from ivobs import Box, DesignError, IvobsError, LinearSystem, make_estimator, nlmath, simulate
 from ivobs.testing import adversarial_run, assert_contains, random_system
 
 
@@ -331,7 +331,7 @@ def test_bounds_computed_from_the_measurement_henon():
 
 # ------------------------------------------------------------------ continuous time -------------
 def _pendulum_u(t):
-    return np.array([0.15 * np.sin(3 * t)])  # the known input of Example 2, between samples too
+    return np.array([0.15 * nlmath.sin(3 * t)])  # the known input of Example 2, between samples too
 
 
 def test_pendulum_contains_the_truth_on_the_fine_grid():
@@ -521,7 +521,7 @@ def test_time_varying_flow_rule_at_t0_and_default_ell():
     assert make_estimator("kkl", pend.system, x0=pend.x0).design.ell == 2.0  # Example 2
 
     def A_t(t):
-        return np.array([[0.0, 1.0], [-20.0 - np.sin(t), -12.0]])  # modes about -2 and -10
+        return np.array([[0.0, 1.0], [-20.0 - nlmath.sin(t), -12.0]])  # modes about -2 and -10
 
     fast = LinearSystem(A_t, None, [[1.0, 0.0]], dt=0)
     est = make_estimator("kkl", fast, x0=Box(-np.ones(2), np.ones(2)))
@@ -577,7 +577,9 @@ def test_long_gap_predicts_with_the_model_instead_of_raising():
     kw = {"A_z": np.diag([-1.0, -6.0, -30.0]), "B_z": np.ones((3, 1))}
     res = make_estimator("kkl", sys, x0=x0, **kw).run(None, y, t=t)
     assert_contains(res, tr.x)
-    assert np.all(np.isfinite(res.upper)) and np.max(res.width) < 30.0
+    # the gap's boxes come from the box-wise model prediction, which wraps over 40 samples
+    # (measured 184 at the gap's end; 18 before the flows were proven: BENCHMARKS.md)
+    assert np.all(np.isfinite(res.upper)) and np.max(res.width) < 300.0
     assert np.max(res.width[-50:]) < 1.0  # back to the observer's width after the gap
 
 
@@ -663,7 +665,7 @@ def test_errors_name_the_argument():
 
 @pytest.mark.parametrize(
     "option, system",
-    [("max_cond", "lti"), ("rtol", "ct"), ("atol", "ct"), ("gamma", "dt-ltv"), ("ell", "ct-ltv")],
+    [("max_cond", "lti"), ("gamma", "dt-ltv"), ("ell", "ct-ltv")],
 )
 def test_numeric_options_are_checked_and_named(option, system):
     if system == "lti":
@@ -678,17 +680,17 @@ def test_numeric_options_are_checked_and_named(option, system):
     if option != "gamma" and option != "ell":
         bad.append(None)  # gamma / ell: None means the default
     for val in bad:
-        with pytest.raises(IvobsError, match=rf"^{option}: expected a (real|finite) number"):
+        with pytest.raises(IvobsError, match=rf"^{option}: expected a (real |finite )?number"):
             make_estimator("kkl", sc.system, x0=sc.x0, **{option: val})
-    make_estimator("kkl", sc.system, x0=sc.x0, **{option: np.float64(0.5) if option in ("rtol",
-                   "atol", "gamma") else np.array(3.0)})  # fmt: skip
+    good = np.float64(0.5) if option == "gamma" else np.array(3.0)
+    make_estimator("kkl", sc.system, x0=sc.x0, **{option: good})
 
 
 def test_other_options_are_checked_and_named():
     sc = ivobs.scenarios.get("servo-motor")
     with pytest.raises(IvobsError, match=r"max_cond: expected a finite number >= 1"):
         make_estimator("kkl", sc.system, x0=sc.x0, max_cond=0.5)
-    with pytest.raises(IvobsError, match=r"rtol: .*< 1"):
+    with pytest.raises(IvobsError, match=r"does not accept 'rtol'"):  # proven flows: no tolerance
         make_estimator("kkl", sc.system, x0=sc.x0, rtol=2.0)
     with pytest.raises(IvobsError, match="tune: expected True or False"):
         make_estimator("kkl", sc.system, x0=sc.x0, tune="no")

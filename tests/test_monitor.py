@@ -24,7 +24,15 @@ METHODS = ivobs.methods()
 SLOW = {"exact", "constrained-zonotope"}  # one optimisation per step: shorter records
 # no vectorised run: shorter here; 10,000 online steps in bench_fault_detection.py --fault-free
 ONLINE_STEPS = {"strip": 200, "intersect": 200, "exact": 40, "constrained-zonotope": 30}
-LONG_STEPS = {"strip": 1000, "intersect": 1000, "exact": 150, "constrained-zonotope": 60}
+LONG_STEPS = {
+    "strip": 1000,
+    "intersect": 1000,
+    "exact": 150,
+    "constrained-zonotope": 60,
+    "nl-constrained-zonotope": 1000,
+    "nl-zonotope": 3000,
+    "ellipsoid": 3000,
+}
 VBAR = 0.0564  # servo motor: bound of the measurement noise
 
 

@@ -178,16 +178,16 @@ def test_flags_match():
 
 # -- soundness -----------------------------------------------------------------------------
 SLOW = ("constrained-zonotope", "intersect")
-"""An LP per bound at every step: one record of 1,000 steps (the others: two)."""
+"""An LP per bound at every step: one record (the others: two)."""
 
 
 @pytest.mark.parametrize(
     "method", [pytest.param(m, marks=pytest.mark.slow) if m in SLOW else m for m in ACCEPTING]
 )
 def test_contains_truth_with_vertex_matrices(method):
-    """Every step of 1,000 with A, B, C, D and d on vertices."""
+    """Every step of 300 with A, B, C, D and d on vertices."""
     sys = uncertain_system()
-    T = 1000
+    T = 300
     u = inputs(T)
     est = ivobs.make_estimator(method, sys, x0=X0)
     widths = []
@@ -231,7 +231,7 @@ def test_contains_truth_far_from_the_origin():
         box(A, 1e-6), np.array([[1.0], [0.0]]), np.array([[1.0, 0.0]]),
         E=np.eye(2), F=np.zeros((1, 2)), d=ivobs.Box.symmetric([1e-3, 1e-3]),
     )  # fmt: skip
-    T = 1000
+    T = 300
     u = np.full((T, 1), 1e4)
     x0 = ivobs.Box([9e4, -1e4], [1.1e5, 1e4])
     x, y = simulate_vertices(sys, T, 5, np.array([1e5, 0.0]), u)
@@ -241,7 +241,7 @@ def test_contains_truth_far_from_the_origin():
 
 
 def test_servo_scenario_vertex_and_paper():
-    sc = ivobs.scenarios.get("servo-uncertain", horizon=1000)
+    sc = ivobs.scenarios.get("servo-uncertain", horizon=300)
     for kind in ("vertex", "paper"):
         traj = sc.simulate(kind, seed=4)
         for method in ("interval-transformed", "zonotope", "strip"):
@@ -417,7 +417,7 @@ def test_missing_samples_and_batches(method):
     """10 % of the measurements missing (the gain's columns set to zero: the term is then
     ``|S| w̄`` alone), and a batch of two records equal to the records run one by one."""
     sys = uncertain_system()
-    T = 1000
+    T = 300
     u = inputs(T)
     rng = np.random.default_rng(8)
     ys, xs = [], []

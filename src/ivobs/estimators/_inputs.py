@@ -143,6 +143,9 @@ def check_option_types(cls: Any, options: dict[str, Any]) -> dict[str, Any]:
         single = [_SCALARS[p] for p in parts if p in _SCALARS]
         if not single:
             continue
+        if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "biuf":
+            out[name] = value.item()  # a 0-d array of a number is that number
+            continue
         if isinstance(value, np.ndarray):
             expected = " or ".join(single + (["None"] if "None" in parts else []))
             raise IvobsError(f"{name}: expected {expected}, got an array of shape {value.shape}")

@@ -119,7 +119,7 @@ def _pendulum(
     t = np.arange(0.0, t_final + dt / 2, dt)
 
     def u_fn(tt: float) -> np.ndarray:
-        return np.array([0.15 * np.sin(3 * tt)])
+        return np.array([0.15 * nlmath.sin(3 * tt)])  # traced between samples (input_hold)
 
     def d_ct(tt: float, x: np.ndarray) -> np.ndarray:
         return np.array([0.04 * np.sin(1.2 * tt), 0.04 * np.sin(1.2 * tt), 0.02 * np.cos(20 * tt)])

@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from .conformance import check_estimator
+from .conformance import check_estimator, conformance_plants
 from .exact import ExactLinear, exact_misses, exact_run
 from .systems import adversarial_run, assert_contains, random_system
 
@@ -20,6 +20,7 @@ __all__ = [
     "adversarial_run",
     "assert_contains",
     "check_estimator",
+    "conformance_plants",
     "exact_misses",
     "exact_run",
     "random_system",
