@@ -92,7 +92,7 @@ def _cover(Q: np.ndarray, M: np.ndarray) -> np.ndarray:
     positive diagonal ``D``, a symmetric ``E`` with ``|E| <= M`` satisfies ``E = D (D⁻¹ E D⁻¹) D
     ⪯ ‖D⁻¹ M D⁻¹‖_F D²``; ``D² = diag(M)`` keeps each coordinate's cover at the scale of its
     own error (one isotropic ball would add the largest coordinate's error to the smallest)."""
-    S = 0.5 * (Q + Q.T)
+    S: np.ndarray = 0.5 * (Q + Q.T)
     Mp = up(M + 2.0 * UNIT_ROUNDOFF * np.abs(S))
     d = np.sqrt(np.diagonal(Mp))
     top = float(d.max()) if d.size else 0.0
