@@ -328,7 +328,7 @@ class Intersect(Estimator):
         los, his, members = [], [], []
         flagged = False
         for m, ms in zip(self.members, state.members, strict=True):
-            # each member's box rounded by its own margin (its data scale, its rounding model)
+            # each member's box is proven by the member (its own rounding model)
             ms, box = m.advance(ms, u_k, y_k, t_k, finite=False, keep=not self._branching)
             members.append(ms)
             flagged |= ms.inconsistent

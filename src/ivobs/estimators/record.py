@@ -1,6 +1,6 @@
 """A whole record (or a batch of records) through an estimator: the vectorised path where the
-method has one, else the loop over its one recursion; then outward rounding with the data scale
-of every step, NaN before ``valid_from``, and a clear error for bounds that left the float range.
+method has one, else the loop over its one recursion; then NaN before ``valid_from``, and a clear
+error for bounds that left the float range.
 """
 
 from __future__ import annotations
