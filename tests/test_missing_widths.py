@@ -16,7 +16,7 @@ from ivobs.testing import exact_misses, exact_run
 
 pytestmark = pytest.mark.slow
 
-STEPS = {"exact": 300, "constrained-zonotope": 300, "dual-window": 600, "intersect": 600}
+STEPS = {"exact": 150, "constrained-zonotope": 150, "dual-window": 600, "intersect": 600}
 """Steps per record for the methods with a program per step (the others: 1,500)."""
 
 
