@@ -263,8 +263,8 @@ class Chain:
             self._relax()
             status = prog.solve()
         if status == "infeasible" and not self._certified(data):
-            prog.cold()  # no certificate: a second opinion from the primal simplex
-            status = prog.solve(primal=True)
+            prog.cold()  # no certificate: a second opinion from a cold start
+            status = prog.solve()
         if status == "infeasible":
             return (INFEASIBLE if self._certified(data) else UNSURE), status
         return None, status
