@@ -247,7 +247,9 @@ class Chain:
             # (S) holds for any multipliers: those of the last basis even if it is not optimal
             # (and the variable bound, λ = 0, if there are none)
             lam = prog.row_duals()
-            if lam is not None:
+            # (multipliers of another program, e.g. one whose rows did not fit the model after
+            # data beyond the float range, give no bound: the variable bound stays)
+            if lam is not None and lam.shape == data.free.shape:
                 out[i] = safe_min(np.where(data.free, 0.0, lam), data, col, self.sense)
         return out, OK
 
