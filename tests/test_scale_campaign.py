@@ -47,6 +47,11 @@ others run 20,000. ``IVOBS_CAMPAIGN_STEPS=N`` runs N steps for every method (the
 of 100,000 steps per method is recorded in BENCHMARKS.md)."""
 
 
+STALLS_WHEN_BADLY_SCALED = {"exact", "dual-window"}
+"""Their window programs, on coordinates 1e16 apart, make HiGHS's simplex stall (each solve then
+stops at its time limit, still sound): minutes per plant, run only with ``IVOBS_CAMPAIGN_STEPS``
+(docs/exact.md)."""
+
 DIVERGES_WHEN_BADLY_SCALED = {"ellipsoid"}
 """Its trace criterion follows the largest coordinate: on plants whose coordinates are many
 orders of magnitude apart it may end in the clear overflow error (docs/ellipsoid.md); it must
@@ -129,6 +134,8 @@ def _quiet(fn, *a, **k):
 
 @pytest.mark.parametrize("method", _methods())
 def test_no_box_misses_the_exact_state_at_any_scale(method):
+    if method in STALLS_WHEN_BADLY_SCALED and not _ENV:
+        pytest.skip(f"{method}: HiGHS stalls on the badly scaled programs (IVOBS_CAMPAIGN_STEPS)")
     STEPS = _steps(method)
     done, seed, refused, runs = 0, 0, {}, 0
     failures: list[str] = []
