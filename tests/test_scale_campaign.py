@@ -48,9 +48,8 @@ of 100,000 steps per method is recorded in BENCHMARKS.md)."""
 
 
 STALLS_WHEN_BADLY_SCALED = {"exact", "dual-window"}
-"""Their window programs, on coordinates 1e16 apart, make HiGHS's simplex stall (each solve then
-stops at its time limit, still sound): minutes per plant, run only with ``IVOBS_CAMPAIGN_STEPS``
-(docs/exact.md)."""
+"""Their window programs, on coordinates 1e16 apart, make HiGHS's simplex run to its iteration
+limit (still sound): minutes per plant, run only with ``IVOBS_CAMPAIGN_STEPS`` (docs/exact.md)."""
 
 DIVERGES_WHEN_BADLY_SCALED = {"ellipsoid"}
 """Its trace criterion follows the largest coordinate: on plants whose coordinates are many

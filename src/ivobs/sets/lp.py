@@ -67,8 +67,6 @@ class LinearProgram:
     presolve : HiGHS's presolve (off: the basis of one solve warm-starts the next).
     iteration_limit : simplex iterations per solve (None: HiGHS's); a solve stopped by it
         reports ``"limit"`` and its last multipliers.
-    time_limit : seconds per solve (None: none), the same way: a guard against a simplex that
-        stalls on a badly scaled program (its last multipliers still give a safe bound).
     scale : HiGHS's scaling of the matrix (off when a rebuilt program must be solved the same
         way as one extended row by row).
     ipm : the interior-point method instead of the simplex (a second opinion when the simplex
@@ -82,7 +80,6 @@ class LinearProgram:
         dual_tol: float = 1e-10,
         presolve: bool = False,
         iteration_limit: int | None = None,
-        time_limit: float | None = None,
         scale: bool = True,
         ipm: bool = False,
     ) -> None:
@@ -96,8 +93,6 @@ class LinearProgram:
         h.setOptionValue("dual_feasibility_tolerance", dual_tol)
         if iteration_limit is not None:
             h.setOptionValue("simplex_iteration_limit", int(iteration_limit))
-        if time_limit is not None:
-            h.setOptionValue("time_limit", float(time_limit))
         if not scale:
             h.setOptionValue("simplex_scale_strategy", 0)
         status = self._hs.HighsModelStatus
@@ -106,7 +101,6 @@ class LinearProgram:
             status.kInfeasible: "infeasible",
             status.kUnboundedOrInfeasible: "infeasible",
             status.kIterationLimit: "limit",
-            status.kTimeLimit: "limit",
         }
 
     # -- the model ------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...sets.lp import LinearProgram, basis_of
-from ..exact.highs import ITERATION_LIMIT, STALL_SECONDS
+from ..exact.highs import ITERATION_LIMIT
 from .certificate import Layout
 
 __all__ = ["WindowLP"]
@@ -50,9 +50,7 @@ class WindowLP:
         self.n_col, self.n_row, self.n_meas = blocks * nb, self.M.shape[0], blocks * ny
         # as the exact method's models: no scaling, bounded iterations (the duals only go to
         # the cache; any of them certifies)
-        self.prog = LinearProgram(
-            iteration_limit=ITERATION_LIMIT, time_limit=STALL_SECONDS, scale=False
-        )
+        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
         inf, rinf = np.full(self.n_col, np.inf), np.full(self.n_row, np.inf)
         self.prog.add_cols(-inf, inf)
         self.prog.add_rows((self.M.indptr, self.M.indices, self.M.data), -rinf, rinf)

@@ -37,18 +37,13 @@ OK, INFEASIBLE, UNSURE = "ok", "infeasible", "unsure"
 no certificate (the sample is dropped without a report)."""
 
 
-STALL_SECONDS = 10.0
-"""Seconds one solve may take before it is stopped like an iteration limit (a guard against a
-simplex that stalls on a badly scaled program; typical solves take milliseconds)."""
-
-
 def _program() -> LinearProgram:
     """A HiGHS model of the trajectory program. HiGHS's scaling is off: it would be kept from
     the first solve and extended row by row as the program grows, so a program rebuilt after
     ``restore()`` would be scaled (and solved) differently from the one built step by step; the
     shift to the centres already scales the program. The iteration limit bounds a solve that
     stalls (its last multipliers still give a safe bound)."""
-    return LinearProgram(iteration_limit=ITERATION_LIMIT, time_limit=STALL_SECONDS, scale=False)
+    return LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
 
 
 _POOL: ThreadPoolExecutor | None = None
