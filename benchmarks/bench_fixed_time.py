@@ -24,23 +24,12 @@ import warnings
 from collections.abc import Callable
 
 import numpy as np
+from suite import DEFAULT_SCENARIOS  # benchmarks/ is on the path of a script run from it
 
 import ivobs
 from ivobs import Box, LinearSystem
 
-SUITE = [
-    "dinh2019",
-    "servo-motor",
-    "tang-example2",
-    "efimov-planar",
-    "henon",
-    "kkl-random8",
-    "kkl-ltv-dt",
-    "cora-2dim",
-    "cora-vehicle6",
-    "cora-pedestrian4",
-    "cora-slip4",
-]
+SUITE = DEFAULT_SCENARIOS  # the scenarios of benchmarks/suite.py
 
 
 def cpu(fn: Callable[[], object], repeat: int = 3) -> float:
