@@ -95,7 +95,7 @@ def test_run_discretizes_a_continuous_system_file(tmp_path, capsys):
         E=[[0.1], [0.0]], d=ivobs.Box([-1.0], [1.0]), dt=0,
     )  # fmt: skip
     ivobs.save_system(tmp_path / "ct.toml", ct, x0=ivobs.Box([-1.0, -1.0], [1.0, 1.0]))
-    sd = ct.discretize(0.1)
+    sd = ct.discretize(0.1, disturbances="held")
     x, ys = np.zeros(2), []
     for k in range(30):  # the test's own simulator, disturbance on a vertex
         ys.append(sd.C @ x)
@@ -106,5 +106,10 @@ def test_run_discretizes_a_continuous_system_file(tmp_path, capsys):
     assert "give --discretize TS" in capsys.readouterr().err
     assert main([*base, "--method", "interval-split", "--discretize", "0.1"]) == 0
     assert "alarms: none" in capsys.readouterr().out
+    held = [*base, "--method", "interval-split", "--discretize", "0.1", "--held-disturbances"]
+    assert main(held) == 0
+    assert "alarms: none" in capsys.readouterr().out
+    assert main([*base, "--method", "interval-split", "--held-disturbances"]) == 2
+    assert "only with --discretize" in capsys.readouterr().err
     assert main([*base, "--method", "interval-split", "--discretize", "0.2"]) == 2
     assert "not sampled every --discretize 0.2" in capsys.readouterr().err

@@ -140,7 +140,7 @@ def test_discretize_is_exact_for_held_signals():
     Ac = np.array([[0.0, 1.0], [-2.0, -0.5]])
     s = LinearSystem(Ac, [[0.0], [1.0]], [[1.0, 0.0]], E=[[0.0], [1.0]], d=Box([-1], [1]), dt=0)
     assert s.is_continuous
-    sd = s.discretize(0.1)
+    sd = s.discretize(0.1, disturbances="held")
     np.testing.assert_allclose(sd.A, expm(Ac * 0.1))
     # B_d = ∫_0^Ts e^{As} ds B = A⁻¹(e^{A Ts} − I) B for invertible A
     integral = np.linalg.solve(Ac, expm(Ac * 0.1) - np.eye(2))

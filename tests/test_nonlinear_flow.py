@@ -114,7 +114,7 @@ def samples(lo, hi, n):
 @pytest.mark.parametrize("name", list(CASES))
 def test_box_enclosure_contains_the_flow(name: str) -> None:
     make, rhs, Ts, (xl, xh), u = CASES[name]
-    sys = make().discretize(Ts, order=4)
+    sys = make().discretize(Ts, order=4, disturbances="held")
     wl, wh = sys.w_box.lo, sys.w_box.hi
     lo, hi = sys.f_box(xl, xh, u, wl, wh)
     assert np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))
@@ -130,7 +130,7 @@ def test_box_enclosure_contains_the_flow(name: str) -> None:
 
 def test_point_enclosures_contain_mpmath_taylor_truth() -> None:
     """No margin: 25-digit ``mpmath.odefun`` (a Taylor-series integrator)."""
-    sys = pendulum().discretize(0.1, order=6)
+    sys = pendulum().discretize(0.1, order=6, disturbances="held")
     mp.mp.dps = 25
     try:
         for x0, L, d1 in (
@@ -159,7 +159,8 @@ def test_widths_shrink_with_order_and_substeps() -> None:
     x0, w = [1.2, -0.3], [0.01, 0.0]
 
     def width(order: int, substeps: int) -> float:
-        lo, hi = cont.discretize(0.2, order=order, substeps=substeps).f_box(x0, x0, [], w, w)
+        flow = cont.discretize(0.2, order=order, substeps=substeps, disturbances="held")
+        lo, hi = flow.f_box(x0, x0, [], w, w)
         return float(np.max(hi - lo))
 
     by_order = [width(k, 1) for k in (1, 2, 3, 4, 5, 6)]
@@ -172,7 +173,7 @@ def test_widths_shrink_with_order_and_substeps() -> None:
 @pytest.mark.parametrize("name", ["pendulum", "tank6"])
 def test_jacobian_encloses_the_variational_solution(name: str) -> None:
     make, rhs, Ts, (xl, xh), u = CASES[name]
-    sys = make().discretize(Ts, order=4)
+    sys = make().discretize(Ts, order=4, disturbances="held")
     wl, wh = sys.w_box.lo, sys.w_box.hi
     Jxl, Jxh, Jwl, Jwh = sys.f_jac_box(xl, xh, u, wl, wh)
     nx, nw = sys.nx, sys.nw
@@ -240,7 +241,12 @@ def test_api_and_refusals() -> None:
     a = fs.f_box([0.5, 0.0], [0.6, 0.1], [0.0], fs.w_box.lo, fs.w_box.hi)
     b = back.f_box([0.5, 0.0], [0.6, 0.1], [0.0], fs.w_box.lo, fs.w_box.hi)
     assert np.array_equal(a[0], b[0]) and back.spec() == fs.spec()
-    assert fs.spec()["discretize"] == {"Ts": 0.1, "order": 3, "substeps": 2}
+    assert fs.spec()["discretize"] == {
+        "Ts": 0.1,
+        "order": 3,
+        "substeps": 2,
+        "disturbances": "varying",
+    }
 
 
 LIMIT = {"nl-interval": 0.2, "nl-zonotope": 0.2, "nl-constrained-zonotope": 0.1}
@@ -274,7 +280,7 @@ PEND_X0 = ivobs.Box([0.3, -0.3], [0.7, 0.3])
 @pytest.mark.parametrize("method", ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"])
 def test_estimators_contain_the_sampled_pendulum(method: str) -> None:
     T, Ts = 50, 0.1
-    sys = pendulum().discretize(Ts, order=4)
+    sys = pendulum().discretize(Ts, order=4, disturbances="held")
     U, X, Y = pendulum_record(T, Ts)
     res = ivobs.make_estimator(method, sys, x0=PEND_X0).run(U, Y)
     assert np.all(res.lower - MARGIN <= X) and np.all(X <= res.upper + MARGIN)
@@ -287,7 +293,7 @@ def test_the_step_back_through_the_flow_bounds_the_unmeasured_rate() -> None:
     the rate, seen only through the dynamics, is several times tighter than without it
     (measured 0.152 against 1.008 with lag=0)."""
     T, Ts = 50, 0.1
-    sys = pendulum().discretize(Ts, order=4)
+    sys = pendulum().discretize(Ts, order=4, disturbances="held")
     U, X, Y = pendulum_record(T, Ts)
     widths = []
     for lag in (0, 1):
@@ -299,7 +305,7 @@ def test_the_step_back_through_the_flow_bounds_the_unmeasured_rate() -> None:
 
 def test_nl_interval_contains_the_sampled_six_tank() -> None:
     T, Ts = 40, 0.5
-    sys = tank6().discretize(Ts, order=3)
+    sys = tank6().discretize(Ts, order=3, disturbances="held")
     U = np.full((T, 1), 0.1)
     Wp = RNG.choice([-0.001, 0.001], (T, 6))
     V = RNG.choice([-0.2, 0.2], (T, 3))

@@ -31,7 +31,14 @@ def add_plant_options(p: argparse.ArgumentParser, *, log: bool = True) -> None:
         type=float,
         metavar="TS",
         default=None,
-        help="--system: discretise a continuous-time system (zero-order hold, period TS)",
+        help="--system: discretise a continuous-time system (inputs held over each period "
+        "TS; disturbances vary between samples unless --held-disturbances)",
+    )
+    p.add_argument(
+        "--held-disturbances",
+        action="store_true",
+        help="--discretize: the disturbances are held over each period (default: any signal "
+        "in their bounds between samples, which the estimates then cover)",
     )
 
 
@@ -60,5 +67,6 @@ def plant_scenario(args: argparse.Namespace, spec: Any = None) -> Any:
         log=getattr(args, "log", None),
         horizon=getattr(args, "horizon", None),
         discretize=args.discretize,
+        held_disturbances=getattr(args, "held_disturbances", False),
         allow_code=getattr(args, "allow_code", False),
     )

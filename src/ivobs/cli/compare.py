@@ -90,6 +90,8 @@ def _scenario(args: argparse.Namespace) -> Any:
     check_distinct(_outputs(args))
     if args.log or args.horizon is not None or args.discretize is not None:
         raise IvobsError("--log/--horizon/--discretize: need --system FILE")
+    if args.held_disturbances:
+        raise IvobsError("--held-disturbances: needs --system FILE and --discretize TS")
     if not args.scenario:
         raise IvobsError("give a scenario name (see `ivobs scenarios`) or --system FILE")
     args.disturbance = check_disturbance(args.disturbance or "paper")

@@ -39,8 +39,15 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         type=float,
         metavar="TS",
         default=None,
-        help="--system: discretise a continuous-time system (zero-order hold, period TS); the "
-        "log's time column must then be sampled every TS",
+        help="--system: discretise a continuous-time system (inputs held over each period "
+        "TS; disturbances vary between samples unless --held-disturbances); the log's time "
+        "column must then be sampled every TS",
+    )
+    p.add_argument(
+        "--held-disturbances",
+        action="store_true",
+        help="--discretize: the disturbances are held over each period (default: any signal "
+        "in their bounds between samples, which the estimates then cover)",
     )
     p.add_argument(
         "--method",
@@ -90,7 +97,7 @@ def main(args: argparse.Namespace) -> int:
                 "--disturbance/--seed: only with a scenario (a log gives the measurements)"
             )
         return _run_system(args)
-    if args.log or args.discretize is not None:
+    if args.log or args.discretize is not None or args.held_disturbances:
         raise IvobsError("--log/--discretize: need --system FILE (the model of the logged plant)")
     if not args.scenario:
         raise IvobsError("give a scenario name (see `ivobs scenarios`) or --system FILE --log FILE")
@@ -166,7 +173,9 @@ def _run_system(args: argparse.Namespace) -> int:
     if not args.log:
         raise IvobsError("--system: needs --log FILE (a CSV log with k, u1.., y1.. columns)")
     spec = load_system(args.system, allow_code=args.allow_code)
-    spec.system = discretized(spec.system, args.discretize, args.system)
+    spec.system = discretized(
+        spec.system, args.discretize, args.system, held=args.held_disturbances
+    )
     check_distinct(_outputs(args), plant_inputs(args, spec))
     log = read_log(args.log, spec.system, start=spec.x0_step)
     if args.discretize is not None:

@@ -26,6 +26,7 @@ A continuous-time model (``dt = 0``) may carry its guaranteed discretisation, th
     Ts = 0.1
     order = 4
     substeps = 1
+    disturbances = "varying"    # or "held" (docs/continuous.md)
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from .reader import TomlReader
 __all__ = ["NONLINEAR_KEYS", "dump_nonlinear", "read_nonlinear"]
 
 NONLINEAR_KEYS = ("dt", "states", "inputs", "outputs", "f", "h", "params", "d", "discretize")
-DISCRETIZE_KEYS = ("Ts", "order", "substeps")
+DISCRETIZE_KEYS = ("Ts", "order", "substeps", "disturbances")
 
 
 def _strings(reader: TomlReader, key: tuple[str, ...], value: Any, what: str) -> list[str]:
@@ -112,6 +113,10 @@ def _discretized(reader: Any, model: NonlinearSystem, table: Any) -> NonlinearSy
         raise reader.fail(
             key, f"only a continuous-time model (dt = 0) is discretised; dt = {model.dt}"
         )
+    if spec.get("disturbances", "varying") not in ("varying", "held"):
+        raise reader.fail(
+            (*key, "disturbances"), f"expected 'varying' or 'held', got {spec['disturbances']!r}"
+        )
     for k in ("order", "substeps"):
         if k in spec and (isinstance(spec[k], bool) or not isinstance(spec[k], int)):
             raise reader.fail((*key, k), f"expected an integer, got {spec[k]!r}")
@@ -120,7 +125,10 @@ def _discretized(reader: Any, model: NonlinearSystem, table: Any) -> NonlinearSy
         raise reader.fail((*key, "Ts"), f"expected a finite sampling period > 0, got {ts!r}")
     try:
         return model.discretize(
-            float(ts), order=spec.get("order", 4), substeps=spec.get("substeps", 1)
+            float(ts),
+            order=spec.get("order", 4),
+            substeps=spec.get("substeps", 1),
+            disturbances=spec.get("disturbances", "varying"),
         )
     except IvobsError as exc:
         raise reader.fail(key, str(exc)) from None

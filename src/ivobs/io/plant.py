@@ -22,15 +22,18 @@ DEFAULT_HORIZON = 200
 """Steps simulated from a system file when neither a log nor a horizon is given (campaigns)."""
 
 
-def discretized(system: Any, ts: float | None, where: str) -> Any:
-    """``system`` discretised with period ``ts`` (``--discretize``), or unchanged."""
+def discretized(system: Any, ts: float | None, where: str, held: bool = False) -> Any:
+    """``system`` discretised with period ``ts`` (``--discretize``; disturbances that vary
+    between samples, or ``held``: ``--held-disturbances``), or unchanged."""
     if ts is None:
+        if held:
+            raise IvobsError("--held-disturbances: only with --discretize TS")
         return system
     if not (isinstance(ts, (int, float)) and math.isfinite(ts) and ts > 0):
         raise IvobsError(f"--discretize: expected a sampling period > 0, got {ts!r}")
     if not system.is_continuous:
         raise IvobsError(f"--discretize: {where} is already discrete-time (dt = {system.dt})")
-    return system.discretize(float(ts))
+    return system.discretize(float(ts), disturbances="held" if held else "varying")
 
 
 def check_log_times(t: np.ndarray | None, ts: float, where: str) -> None:
@@ -53,6 +56,7 @@ def file_scenario(
     horizon: int | None = None,
     discretize: float | None = None,
     allow_code: bool = False,
+    held_disturbances: bool = False,
 ) -> Scenario:
     """The plant of the system file ``path`` as a scenario: with ``log``, the log is its
     ``recorded`` trajectory (no true state); otherwise it is simulated for ``horizon`` steps
@@ -63,7 +67,7 @@ def file_scenario(
 
     spec = path if isinstance(path, SystemFile) else load_system(path, allow_code=allow_code)
     path = spec.source or "<system file>"
-    system = discretized(spec.system, discretize, str(path))
+    system = discretized(spec.system, discretize, str(path), held=held_disturbances)
     if spec.x0 is None:
         raise IvobsError(f"{path}: the system file needs a prior box [x0] for this command")
     name = spec.name or Path(path).stem

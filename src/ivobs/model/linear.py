@@ -108,6 +108,9 @@ class LinearSystem(IntervalMatrices):
 
     names: SignalNames = SignalNames()
     """Names of states, inputs, outputs and disturbances (plots and tables); unnamed by default."""
+    sampling: dict[str, Any] | None = None
+    """How a continuous-time system was sampled (``Ts``, ``disturbances``, ``pieces``), set
+    by :meth:`discretize`."""
 
     def __init__(
         self,
@@ -451,36 +454,45 @@ class LinearSystem(IntervalMatrices):
             self.A, np.hstack([self.B, self.E]), self.C, np.hstack([self.D, self.F]), self.dt
         )
 
-    def discretize(self, Ts: float) -> LinearSystem:
-        """Exact discretisation for inputs and disturbances held constant over each period.
+    def discretize(
+        self,
+        Ts: float,
+        *,
+        disturbances: str = "varying",
+        pieces: int | None = None,
+        interval_matrices: bool = False,
+    ) -> LinearSystem:
+        """The discrete-time model sampled every ``Ts``, inputs ``u`` held over each period
+        (zero-order hold), time-invariant continuous-time systems only
+        (:mod:`ivobs.model.sampling`, docs/continuous.md).
 
-        ``A_d = e^{A Ts}``, ``[B_d E_d] = ∫_0^Ts e^{A s} ds [B E]`` (zero-order hold). The bounds
-        stay valid only under that hold assumption (a disturbance that varies inside a period is
-        not covered); time-invariant continuous-time systems only.
+        ``disturbances="varying"`` (default): sound for every measurable ``d(t)`` in its box
+        between samples: ``x+ = e^{A Ts} x + Γ B u + Σ_k Ĝ_k d̄_k + ρ``, one disturbance per
+        piece of the period (``pieces``, a power of two, chosen when None) and a remainder per
+        state, so ``nd`` grows. ``disturbances="held"``: ``d`` constant over each period
+        (``[B_d E_d] = ∫_0^Ts e^{A s} ds [B E]``), for signals that really are held.
+        ``interval_matrices=True``: ``A_d``, ``B_d`` as interval matrices containing the exact
+        exponential and integral (rounding included), for the methods that accept them.
         """
-        from scipy.linalg import expm
+        from dataclasses import replace
+
+        from .sampling import check_options, sample
 
         if not self.is_continuous:
             raise IvobsError("discretize: the system is already discrete-time")
         self._require_lti("discretize")
-        if not (isinstance(Ts, (int, float)) and Ts > 0):
-            raise IvobsError(f"Ts: expected a sampling period > 0, got {Ts!r}")
-        n, m = self.nx, self.nu + self.nd
-        M = np.zeros((n + m, n + m))
-        M[:n, :n] = self.A
-        M[:n, n:] = np.hstack([self.B, self.E])
-        Md = expm(M * Ts)
-        Ad, BE = Md[:n, :n], Md[:n, n:]
-        return LinearSystem(
-            Ad,
-            BE[:, : self.nu],
-            self.C,
-            D=self.D,
-            E=BE[:, self.nu :] if self.nd else None,
-            F=self.F if self.nd else None,
-            d=self._d,
-            dt=float(Ts),
+        Ts = check_options(Ts, disturbances, pieces, interval_matrices)
+        A, B, C, D, E, F = (
+            np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float)
+            for M in (self.A, self.B, self.C, self.D, self.E, self.F)
         )
+        m = sample(A, B, E, F, self._d, Ts, disturbances, pieces, interval_matrices, self.names)
+        out = LinearSystem(m.A, m.B, C, D=D, E=m.E, F=m.F, d=m.d, dt=Ts)
+        out.names = self.names
+        if m.disturbance_names is not None:
+            out.names = replace(self.names, disturbances=m.disturbance_names)
+        out.sampling = m.sampling
+        return out
 
     def _repr_html_(self) -> str:
         """Jupyter: dimensions, time base, the disturbance bounds and the signal names."""

@@ -87,7 +87,8 @@ def quadtank_system(
     E = np.hstack([np.eye(4), np.zeros((4, 2))])
     F = np.hstack([np.zeros((2, 4)), np.eye(2)])
     r = np.r_[np.full(4, w), np.full(2, v)]
-    return LinearSystem(A, B, C, E=E, F=F, d=Box(-r, r), dt=0).discretize(Ts)
+    # the scenario simulates this sampled model: its disturbances are held over each period
+    return LinearSystem(A, B, C, E=E, F=F, d=Box(-r, r), dt=0).discretize(Ts, disturbances="held")
 
 
 @register_scenario(

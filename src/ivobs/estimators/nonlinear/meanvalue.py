@@ -36,6 +36,13 @@ not finite (a domain edge) the row falls back to the natural inclusion ``g(B) �
 
 The natural inclusion returned beside it is tightened by the centred form (MV over the box,
 its sums' rounding bounded by ``2 γ_{n+4}`` of their magnitudes) and by monotonicity.
+
+**Spread** (a set-valued map). A sampled plant whose disturbances vary between samples maps a
+state to a set: ``g(ζ) ⊆ g_c(ζ) ± s(B)`` for every ``ζ ∈ B``, with ``g_c`` a single-valued map
+(the flow with the signals held at their centre) and ``s(B) >= 0``
+(:class:`~ivobs.model.nonlinear.flow.FlowSystem`). The evaluators then have a third member
+returning ``s(B)``; (MV) applies to ``g_c``, and ``ρ`` and the natural inclusion are widened by
+``s(B)`` (rounded up): every point of every ``g(ζ)`` stays within ``g0 + J̃ (ζ - c) ± ρ``.
 """
 
 from __future__ import annotations
@@ -47,13 +54,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ...linalg import gamma
-from ...sets.rounding import ETA, mid_rad, upper
+from ...sets.rounding import ETA, down, mid_rad, up, upper
 
 __all__ = ["Linearisation", "contract_back", "linearise", "measurement"]
 
-Evals = tuple[Callable[..., Any], Callable[..., Any]]
-"""``(natural, natjac)`` of the model's ``f`` or ``h`` on lists
-(:meth:`~ivobs.NonlinearSystem.evaluators`)."""
+Evals = tuple[Callable[..., Any], ...]
+"""``(natural, natjac)`` of the model's ``f`` or ``h`` on lists, and for a set-valued ``f``
+its spread (:meth:`~ivobs.NonlinearSystem.evaluators`, module docstring)."""
 
 Vector = np.ndarray | Sequence[float]
 
@@ -104,7 +111,7 @@ def linearise(
 
     Written on Python floats, one row at a time: the vectors of one step are a handful of
     numbers, for which scalar arithmetic costs a fraction of NumPy's per-call overhead."""
-    value, natjac = evals
+    value, natjac = evals[0], evals[1]
     bl, bh = _floats(lo), _floats(hi)
     cl = [min(max(a, p), q) for a, p, q in zip(c.tolist(), bl, bh)]
     ul = u.tolist()
@@ -136,6 +143,11 @@ def linearise(
         _monotone(value, key, bl, bh, ul, nx, members, nl, nh)
     nat_lo, nat_hi = np.array(nl, dtype=float), np.array(nh, dtype=float)
     g0, rho_arr = np.array(g0s, dtype=float), np.array(rhos)
+    if len(evals) > 2:  # a set-valued map: g(ζ) ⊆ g_c(ζ) ± spread over the box (Spread)
+        spread = np.array(evals[2](bl[:nx], bh[:nx], ul, bl[nx:], bh[nx:]), dtype=float)
+        if spread.size:
+            nat_lo, nat_hi = down(nat_lo - spread), up(nat_hi + spread)
+            rho_arr = up(rho_arr + spread)
     if edges:
         g0[edges], rho_arr[edges] = mid_rad(nat_lo[edges], nat_hi[edges])
     J_arr = np.array(rows, dtype=float).reshape(m, n)

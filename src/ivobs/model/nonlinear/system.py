@@ -247,18 +247,24 @@ class NonlinearSystem:
     def is_discrete(self) -> bool:
         return not self.is_continuous
 
-    def discretize(self, Ts: float, *, order: int = 4, substeps: int = 1) -> NonlinearSystem:
+    def discretize(
+        self, Ts: float, *, order: int = 4, substeps: int = 1, disturbances: str = "varying"
+    ) -> NonlinearSystem:
         """The guaranteed discretisation of this continuous-time system (``dt=0``) with
         sampling period ``Ts``: a discrete-time model whose ``f`` encloses the exact flow over
         one period, by the interval Taylor method of order ``order`` with ``substeps`` substeps
         (halved further where the a priori enclosure fails) [Nedialkov1999], [Lohner1987].
-        ``u`` and the unknowns ``(p, d)`` are held constant over each period (any value of their
-        box per period). :class:`~ivobs.model.nonlinear.flow.FlowSystem`, docs/nonlinear.md."""
+        ``u`` and the unknown parameters ``p`` are constant over each period; the signals ``d``
+        vary in their box at every instant (``disturbances="varying"``, a differential
+        inclusion [Kapela2009]) or are held (``"held"``: any value of their box per period).
+        :class:`~ivobs.model.nonlinear.flow.FlowSystem`, docs/continuous.md."""
         # FlowSystem derives from this class (flow -> system): it is looked up when called,
         # as the method registry loads its modules, so the dependency stays one-way and the
         # Taylor machinery loads only for continuous-time models
         flow = importlib.import_module(f"{__package__}.flow")
-        result: NonlinearSystem = flow.FlowSystem(self, Ts, order=order, substeps=substeps)
+        result: NonlinearSystem = flow.FlowSystem(
+            self, Ts, order=order, substeps=substeps, disturbances=disturbances
+        )
         return result
 
     @property

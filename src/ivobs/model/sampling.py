@@ -1,0 +1,238 @@
+"""Sampled-data models of a continuous-time :class:`~ivobs.LinearSystem` (docs/continuous.md).
+
+The plant ``x' = A x + B u + E d``, ``y = C x + D u + F d`` is sampled every ``Ts``; the input
+``u`` is held over each period (zero-order hold: it is commanded). Over one period
+
+    x(t+Ts) = e^{A Ts} x(t) + ∫_0^Ts e^{A s} ds B u + ∫_0^Ts e^{A s} E d(t + Ts − s) ds.
+
+**Held disturbances** (``disturbances="held"``): ``d`` constant over each period, the last term
+is ``Γ E d`` with ``Γ = ∫_0^Ts e^{A s} ds`` — the classical model [VanLoan1978]. Physical
+disturbances (wind, load torque, flow) are not held: a ``d(t)`` that switches sign inside a
+period reaches states that no held value reaches, and an estimator built on the held model can
+lose the true state.
+
+**Varying disturbances** (the default): the last term ranges over the Aumann integral
+``S = {∫_0^Ts e^{A s} E d(s) ds : d measurable, d(s) ∈ [d]}``, a convex set ([Aubin1984],
+the reachable set of one period from ``0``). ``[0, Ts]`` is cut into ``N`` pieces
+``P_k = [k h, (k+1) h]``, ``h = Ts / N``; on each, with ``G_k = ∫_{P_k} e^{A s} ds E`` and the
+mean ``d̄_k = (1/h) ∫_{P_k} d(s) ds ∈ [d]`` (the box is convex),
+
+    ∫_{P_k} e^{A s} E d(s) ds = Ĝ_k d̄_k + (G_k − Ĝ_k) c + ∫_{P_k} (e^{A s} E − Ĝ_k / h) δ(s) ds
+
+for any matrix ``Ĝ_k`` (the double nearest ``G_k``), ``d = c + δ``, ``|δ| <= r`` (centre and
+radius of ``[d]``): the last two terms are at most ``ρ_k = |G_k − Ĝ_k| |c| + K_k r`` with
+``K_k = ∫_{P_k} |e^{A s} E − Ĝ_k / h| ds`` (elementwise). So ``S ⊆ Σ_k Ĝ_k [d] ⊕ [−ρ, ρ]``,
+``ρ = Σ_k ρ_k``: the discrete model has one disturbance per piece and per process disturbance
+(the mean of ``d`` over the piece, in ``[d]``) and one per state (the remainder, in
+``[−ρ, ρ]``). ``K_k`` is bounded by cutting ``P_k`` into ``S`` intervals ``J`` and enclosing
+``e^{A J} E`` by validated exponentials of interval matrices (:mod:`ivobs.sets.expm`):
+``∫_J |X − g| <= |J| max_{X ∈ [X]} |X − g|``. The remainder shrinks as ``h²``: ``N`` is the
+smallest power of two (at most :data:`MAX_PIECES`) whose remainder is at most
+:data:`REMAINDER_SHARE` of the hull of the disturbance's effect on every state.
+
+The measurement sees ``d`` at the sampling instant, which the integral does not constrain: a
+disturbance that enters both ``E`` and ``F`` gets separate columns for its means and its sample.
+``e^{A Ts}`` and ``Γ B`` are the doubles nearest their validated enclosures (relative error
+within a few units of rounding); ``interval_matrices=True`` makes them interval matrices that
+contain the exact ones, for the methods that accept interval matrices (docs/uncertain.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import IvobsError
+from ..sets import Box
+from ..sets.expm import expm, expm_integral, interval_product, scaled
+from ..sets.rounding import up, upper
+
+__all__ = ["DISTURBANCES", "MAX_PIECES", "REMAINDER_SHARE", "Sampled", "check_options", "sample"]
+
+DISTURBANCES = ("varying", "held")
+"""How disturbances behave between samples: any measurable signal in the box, or held."""
+MAX_PIECES = 8
+"""Most pieces chosen automatically (each adds one disturbance per process disturbance)."""
+REMAINDER_SHARE = 0.05
+"""Largest share of the remainder in the per-state hull chosen automatically."""
+SUBINTERVALS = 16
+"""Intervals per piece over which the remainder's integral is bounded."""
+
+
+@dataclass
+class Sampled:
+    """The matrices and bounds of a sampled model (``x+ = A x + B u + E d``, ``y = C x + D u +
+    F d``, ``d ∈ d``; ``A``, ``B`` interval matrices as Boxes when asked), the names of its
+    disturbances (None: those of the continuous system) and how it was sampled."""
+
+    A: Any
+    B: Any
+    E: np.ndarray | None
+    F: np.ndarray | None
+    d: Any
+    disturbance_names: tuple[str, ...] | None
+    sampling: dict[str, Any]
+
+
+def check_options(Ts: Any, disturbances: Any, pieces: Any, interval_matrices: Any) -> float:
+    """``Ts`` as a float, after checking the options of ``discretize``."""
+    if isinstance(Ts, bool) or not isinstance(Ts, (int, float)) or not 0 < Ts < math.inf:
+        raise IvobsError(f"Ts: expected a sampling period > 0, got {Ts!r}")
+    if disturbances not in DISTURBANCES:
+        raise IvobsError(
+            f"disturbances: expected 'varying' (any signal in the box between samples) or "
+            f"'held' (constant over each period), got {disturbances!r}"
+        )
+    if not isinstance(interval_matrices, bool):
+        raise IvobsError(f"interval_matrices: expected True or False, got {interval_matrices!r}")
+    if pieces is not None and (
+        isinstance(pieces, bool)
+        or not isinstance(pieces, (int, np.integer))
+        or not 1 <= pieces <= 64
+        or pieces & (pieces - 1)
+    ):
+        raise IvobsError(f"pieces: expected None or a power of two in [1, 64], got {pieces!r}")
+    return float(Ts)
+
+
+def sample(
+    A: np.ndarray,
+    B: np.ndarray,
+    E: np.ndarray,
+    F: np.ndarray,
+    d: Any,
+    Ts: float,
+    disturbances: str,
+    pieces: int | None,
+    interval_matrices: bool,
+    names: Any,
+) -> Sampled:
+    """The sampled model of ``x' = A x + B u + E d`` (module docstring); ``names``: the
+    continuous system's :class:`~ivobs.model.statespace.SignalNames`."""
+    nx, nd = A.shape[0], E.shape[1]
+    if disturbances == "held" or nd == 0:
+        (Ad, RA), (BE, RBE) = expm_integral(A, np.hstack([B, E]), Ts)
+        nu = B.shape[1]
+        A_m, B_m = _matrices(Ad, RA, BE[:, :nu], RBE[:, :nu], interval_matrices)
+        info = {"Ts": Ts, "disturbances": disturbances, "pieces": 1}
+        return Sampled(A_m, B_m, BE[:, nu:] if nd else None, F if nd else None, d, None, info)
+    if not isinstance(d, Box):
+        raise IvobsError(
+            "d: disturbances that vary between samples need their bounds as a Box (constant "
+            "or per step); bounds computed from the measurement hold only at the samples: "
+            "discretize(Ts, disturbances='held')"
+        )
+    if not d.is_bounded:
+        raise IvobsError("d: varying disturbances need finite bounds")
+    (Ad, RA), (GB, RB) = expm_integral(A, B, Ts)
+    process = np.flatnonzero(np.any(E != 0.0, axis=0))
+    n_pieces, gens, K, RG = _choose(A, E[:, process], d, Ts, pieces, process)
+    shared = [j for j in process if np.any(F[:, j] != 0.0)]
+    own = [j for j in process if j not in shared]
+    lo, hi = np.asarray(d.lo, dtype=float), np.asarray(d.hi, dtype=float)
+    cols_E = [np.zeros(nx)] * nd
+    cols_F = [F[:, j] for j in range(nd)]
+    los, his = [lo[..., j] for j in range(nd)], [hi[..., j] for j in range(nd)]
+    dnames = list(names.disturbances or [f"d{j + 1}" for j in range(nd)])
+    pos = {j: i for i, j in enumerate(process)}
+    for j in own:
+        cols_E[j] = gens[0][:, pos[j]]
+    for k in range(n_pieces):
+        for j in process:
+            if k == 0 and j in own:
+                continue
+            cols_E.append(gens[k][:, pos[j]])
+            cols_F.append(np.zeros(F.shape[0]))
+            los.append(lo[..., j])
+            his.append(hi[..., j])
+            dnames.append(f"{dnames[j]} (mean over piece {k + 1})")
+    c = 0.5 * lo[..., process] + 0.5 * hi[..., process]
+    r = up(np.maximum(hi[..., process] - c, c - lo[..., process]))
+    rho = upper(r @ K.T + np.abs(c) @ RG.T, 2 * len(process) + 2)
+    keep = np.flatnonzero(np.any(rho > 0.0, axis=0) if rho.ndim == 2 else rho > 0.0)
+    for i in keep:
+        cols_E.append(np.eye(nx)[:, i])
+        cols_F.append(np.zeros(F.shape[0]))
+        los.append(-rho[..., i])
+        his.append(rho[..., i])
+        state = f"x{i + 1}" if names.states is None else names.states[i]
+        dnames.append(f"remainder {state}")
+    box = Box(np.stack(los, axis=-1), np.stack(his, axis=-1))
+    A_m, B_m = _matrices(Ad, RA, GB, RB, interval_matrices)
+    info = {"Ts": Ts, "disturbances": "varying", "pieces": n_pieces}
+    E_d, F_d = np.column_stack(cols_E), np.column_stack(cols_F)
+    return Sampled(A_m, B_m, E_d, F_d, box, tuple(dnames), info)
+
+
+def _matrices(Ad: Any, RA: Any, GB: Any, RB: Any, interval: bool) -> tuple[Any, Any]:
+    if not interval:
+        return Ad, GB
+    Bm = Box(GB - RB, GB + RB) if GB.size and np.any(RB > 0.0) else GB
+    return Box(Ad - RA, Ad + RA), Bm
+
+
+def _choose(
+    A: np.ndarray, E: np.ndarray, d: Box, Ts: float, pieces: Any, process: np.ndarray
+) -> tuple[int, list[np.ndarray], np.ndarray, np.ndarray]:
+    """``(N, [Ĝ_k], K, R_G)``: the pieces' generators, ``K = Σ_k K_k`` and ``R_G = Σ_k
+    |G_k − Ĝ_k|`` bounds (module docstring); ``N`` given or the smallest power of two whose
+    remainder is within :data:`REMAINDER_SHARE` of the hull."""
+    lo, hi = np.asarray(d.lo, dtype=float), np.asarray(d.hi, dtype=float)
+    lo, hi = lo[..., process], hi[..., process]
+    r = np.max(np.atleast_2d(0.5 * hi - 0.5 * lo), axis=0)
+    c = np.max(np.atleast_2d(np.abs(0.5 * hi + 0.5 * lo)), axis=0)
+    N = 1 if pieces is None else int(pieces)
+    while True:
+        gens, K, RG = _pieces(A, E, Ts, N)
+        if pieces is not None or N >= MAX_PIECES:
+            return N, gens, K, RG
+        rest = K @ r + RG @ c
+        hull = sum(np.abs(G) for G in gens) @ r + rest
+        if np.all(rest <= REMAINDER_SHARE * hull):
+            return N, gens, K, RG
+        N *= 2
+
+
+def _pieces(
+    A: np.ndarray, E: np.ndarray, Ts: float, N: int
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """For ``N`` pieces of ``[0, Ts]``: the generators ``Ĝ_k``, ``Σ_k K_k`` and ``Σ_k |G_k −
+    Ĝ_k|`` (upper bounds; module docstring)."""
+    n, m = E.shape
+    h = Ts / N  # exact: N is a power of two (an underflow is caught below)
+    s = h / SUBINTERVALS
+    if h * N != Ts or s * SUBINTERVALS != h or s == 0.0:
+        raise IvobsError(f"Ts: {Ts!r} is too small to be cut into {N} pieces")
+    (Ph, RPh), (Gh, RGh) = expm_integral(A, E, h)  # e^{A h}, ∫_0^h e^{A s} ds E
+    Ps, RPs = expm(*scaled(A, s))
+    W, RW = interval_product(*expm(*scaled(A, (0.0, s))), E, None)  # e^{A [0, s]} E
+    V, RV = [W], [RW]  # e^{A j s} e^{A [0, s]} E, j < SUBINTERVALS
+    for _ in range(SUBINTERVALS - 1):
+        Vj, RVj = interval_product(Ps, RPs, V[-1], RV[-1])
+        V.append(Vj)
+        RV.append(RVj)
+    P, RP = np.eye(n), np.zeros((n, n))  # e^{A k h}
+    gens: list[np.ndarray] = []
+    K = np.zeros((n, m))
+    RG = np.zeros((n, m))
+    for _ in range(N):
+        G, RGk = interval_product(P, RP, Gh, RGh)
+        gens.append(G)
+        RG = up(RG + RGk)
+        g = G / h  # within one rounding of the exact G / h
+        slack = np.abs(g) * 2.0**-52
+        total = np.zeros((n, m))
+        for Vj, RVj in zip(V, RV):
+            X, RX = interval_product(P, RP, Vj, RVj)  # e^{A (k h + J)} E
+            total = total + (up(np.abs(X - g)) + RX + slack)
+        K = up(K + up(upper(total, SUBINTERVALS * 3) * s))
+        P, RP = interval_product(P, RP, Ph, RPh)
+    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(RG))):
+        raise IvobsError(
+            "discretize: the disturbance's effect over one period could not be bounded "
+            "(the exponential overflowed); use a smaller Ts"
+        )
+    return gens, K, RG
