@@ -24,6 +24,7 @@ SLOW = (
     "tests/test_adversarial.py::test_strip_rounding_when_the_measurements_pin_the_state",
     "tests/test_continuous_disturbances.py::test_linear_methods_contain_a_switching_disturbance[interval-transformed]",
     "tests/test_continuous_disturbances.py::test_linear_methods_contain_a_switching_disturbance[strip]",
+    "tests/test_continuous_disturbances.py::test_between_samples_nonlinear",
     "tests/test_continuous_disturbances.py::test_more_pieces_tighten",
     "tests/test_continuous_disturbances.py::test_nonlinear_methods_contain_a_switching_disturbance[nl-interval]",
     "tests/test_continuous_disturbances.py::test_nonlinear_methods_contain_a_switching_disturbance[nl-zonotope]",

@@ -309,3 +309,93 @@ def test_nonlinear_options_round_trip(tmp_path) -> None:
         ivobs.load_system(tmp_path / "bad.toml")
     with pytest.raises(IvobsError, match="disturbances: expected 'varying'"):
         nl_vdp().discretize(0.1, disturbances="sometimes")
+
+
+# -- between samples -------------------------------------------------------------------------
+
+
+def test_kkl_on_the_continuous_plant_contains_a_switching_disturbance() -> None:
+    """``kkl`` takes the ``dt=0`` system itself (its flows between samples cover any ``d(t)``)."""
+    xs, ys = simulate_oscillator()
+    est = ivobs.make_estimator("kkl", oscillator(), x0=X0_BOX)
+    res = est.run(y=ys, t=TS_OSC * np.arange(T_OSC))
+    assert misses(res, xs, 1e-12) == 0
+
+
+def fine_oscillator(seed: int = 4, T: int = 30, Ts: float = 0.6, inner: int = 6):
+    """Samples every ``Ts`` and, between them, the state at ``inner`` times of each of
+    ``SWITCHES`` pieces (exact exponentials), with an input held per period."""
+    rng = np.random.default_rng(seed)
+    A = A_OSC
+    B = np.array([0.0, 1.0])
+    h = Ts / SWITCHES
+    x = np.array([0.5, -0.3])
+    xs, ys, us, paths = [], [], [], []
+    for k in range(T):
+        xs.append(x.copy())
+        ys.append([x[0] + 0.01 * rng.choice([-1.0, 1.0])])
+        u = np.sin(0.3 * k)
+        us.append([u])
+        path = [x.copy()]
+        for _ in range(SWITCHES):
+            d = 1.0 if x[1] >= 0 else -1.0
+            for s in np.linspace(h / inner, h, inner):
+                P = expm(A * s)
+                path.append(P @ x + np.linalg.solve(A, P - np.eye(2)) @ (B * (u + d)))
+            x = path[-1]
+        paths.append(np.array(path))
+    return np.array(xs), np.array(ys), np.array(us), paths
+
+
+def test_between_samples_linear() -> None:
+    Ts = 0.6
+    xs, ys, us, paths = fine_oscillator(Ts=Ts)
+    plant = ivobs.LinearSystem(
+        A_OSC, [[0.0], [1.0]], [[1.0, 0.0]], E=[[0.0, 0.0], [1.0, 0.0]], F=[[0.0, 1.0]],
+        d=ivobs.Box([-1.0, -0.01], [1.0, 0.01]), dt=0,
+    )  # fmt: skip
+    res = ivobs.make_estimator("exact", plant.discretize(Ts), x0=X0_BOX).run(us, ys)
+    assert misses(res, xs, 1e-12) == 0
+    tube = ivobs.between_samples(plant, res, us, Ts=Ts)
+    assert tube.method == "exact (between samples)" and tube.info["Ts"] == Ts
+    for k, path in enumerate(paths):
+        assert np.all(tube.lower[k] - 1e-12 <= path) and np.all(path <= tube.upper[k] + 1e-12), k
+    # it contains the sample boxes and is not much wider than the state's range in a period
+    assert np.all(tube.lower <= res.lower) and np.all(res.upper <= tube.upper)
+    span = np.mean([np.ptp(p[:, 1]) for p in paths[10:]])
+    assert np.mean(tube.width[10:, 1]) <= 2.5 * span + np.mean(res.width[10:, 1])
+    with pytest.raises(IvobsError, match="Ts: give the sampling period"):
+        ivobs.between_samples(plant, res, us)
+    with pytest.raises(IvobsError, match="continuous-time plant"):
+        ivobs.between_samples(plant.discretize(Ts), res, us, Ts=Ts)
+    with pytest.raises(IvobsError, match="u: expected finite inputs of shape"):
+        ivobs.between_samples(plant, res, us[:5], Ts=Ts)
+
+
+def test_between_samples_nonlinear() -> None:
+    Ts, T = 0.1, 25
+    rng = np.random.default_rng(5)
+    x = np.array([1.0, 0.5])
+    xs, ys, paths = [], [], []
+    for _ in range(T):
+        xs.append(x.copy())
+        ys.append([x[0] + 0.01 * rng.choice([-1.0, 1.0])])
+        path = [x.copy()]
+        for _ in range(SWITCHES):
+            d = 1.0 if x[1] >= 0 else -1.0
+            sol = solve_ivp(
+                lambda t, z, d=d: vdp_rhs(z, d), (0.0, Ts / SWITCHES), x, method="DOP853",
+                rtol=1e-12, atol=1e-13, t_eval=np.linspace(0.0, Ts / SWITCHES, 5),
+            )  # fmt: skip
+            path.extend(sol.y.T)
+            x = sol.y[:, -1]
+        paths.append(np.array(path))
+    xs, ys = np.array(xs), np.array(ys)
+    sd = nl_vdp().discretize(Ts)
+    res = ivobs.make_estimator("nl-zonotope", sd, x0=ivobs.Box([0.9, 0.4], [1.1, 0.6])).run(y=ys)
+    assert misses(res, xs, MARGIN) == 0
+    for system in (sd, nl_vdp()):
+        tube = ivobs.between_samples(system, res, Ts=Ts)
+        for k, path in enumerate(paths):
+            assert np.all(tube.lower[k] - MARGIN <= path) and np.all(path <= tube.upper[k] + MARGIN)
+        assert np.all(tube.lower <= res.lower) and np.all(res.upper <= tube.upper)

@@ -11,6 +11,7 @@ returns at each step a box that is certain to contain the true state.
 """
 
 from . import io, linalg, monitor, nlmath, scenarios
+from .between import between_samples
 from .errors import DesignError, InconsistentDataError, IvobsError
 from .estimators import Design, Estimator, make_estimator, methods
 from .io import equal_systems, load_system, save_system
@@ -46,6 +47,7 @@ __all__ = [
     "Trajectory",
     "Zonotope",
     "__version__",
+    "between_samples",
     "disturbance",
     "equal_systems",
     "image_bounds",

@@ -48,9 +48,17 @@ import numpy as np
 from ..errors import IvobsError
 from ..sets import Box
 from ..sets.expm import expm, expm_integral, interval_product, scaled
-from ..sets.rounding import up, upper
+from ..sets.rounding import UNIT_ROUNDOFF, down, mid_rad, product_error, up, upper
 
-__all__ = ["DISTURBANCES", "MAX_PIECES", "REMAINDER_SHARE", "Sampled", "check_options", "sample"]
+__all__ = [
+    "DISTURBANCES",
+    "MAX_PIECES",
+    "REMAINDER_SHARE",
+    "Sampled",
+    "check_options",
+    "period_hull",
+    "sample",
+]
 
 DISTURBANCES = ("varying", "held")
 """How disturbances behave between samples: any measurable signal in the box, or held."""
@@ -236,3 +244,60 @@ def _pieces(
             "(the exponential overflowed); use a smaller Ts"
         )
     return gens, K, RG
+
+
+def period_hull(
+    A: np.ndarray,
+    B: np.ndarray,
+    E: np.ndarray,
+    d: Any,
+    Ts: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    u: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes ``(lo, hi)`` (shape ``(T, nx)``) containing ``x(t_k + τ)`` for every ``τ`` in
+    ``[0, Ts]`` and every path from ``x(t_k) ∈ [lo_k, hi_k]`` with ``u_k`` held and ``d(t)``
+    anywhere in its box (``d``: a Box, constant or per step, or None without disturbances).
+
+    On each of :data:`SUBINTERVALS` intervals ``J`` of ``[0, Ts]``, with ``τ ∈ J``:
+    ``x(t_k + τ) = e^{A τ} x_k + Γ(τ) B u_k + Γ(τ) E c + ∫_0^τ e^{A s} E δ(τ − s) ds``
+    (``d = c + δ``, ``|δ| <= r``), whose first three terms lie in validated enclosures over
+    ``J`` (:func:`~ivobs.sets.expm.expm_integral` with ``t = J``) applied to the boxes, and the
+    last within ``∫_0^{max J} |e^{A s} E| ds r``; the hull of the ``J`` boxes is returned."""
+    n = A.shape[0]
+    T = lo.shape[0]
+    c, rx = mid_rad(lo, hi)
+    nd = E.shape[1] if d is not None else 0
+    if nd:
+        dl = np.broadcast_to(np.asarray(d.lo, dtype=float)[:T], (T, nd))
+        dh = np.broadcast_to(np.asarray(d.hi, dtype=float)[:T], (T, nd))
+        cd, rd = mid_rad(dl, dh)
+    M = np.hstack([B, E]) if nd else B
+    step = Ts / SUBINTERVALS
+    out_lo = np.full((T, n), np.inf)
+    out_hi = np.full((T, n), -np.inf)
+    spread = np.zeros((n, nd))  # ∫_0^{end of J} |e^{A s} E| ds, rounded up
+    for j in range(SUBINTERVALS):
+        a, b = j * step, (Ts if j == SUBINTERVALS - 1 else (j + 1) * step)
+        (P, RP), (G, RG) = expm_integral(A, M, (down(a) if a else 0.0, up(b)))
+        if nd:
+            W, RW = interval_product(*expm(*scaled(A, (down(a) if a else 0.0, up(b)))), E, None)
+            spread = up(spread + up(upper(np.abs(W) + RW, 2) * up(b - a)))
+        # e^{A τ} x: |P c − e^{Aτ} x| <= |P| r + RP (|c| + r) + rounding of P c
+        mid = c @ P.T
+        rad = np.abs(c) @ RP.T + rx @ up(np.abs(P) + RP).T
+        rad = rad + product_error(np.abs(c) @ np.abs(P).T, n)
+        GB, RGB = G[:, : B.shape[1]], RG[:, : B.shape[1]]
+        if GB.size:
+            mid = mid + u @ GB.T
+            rad = rad + np.abs(u) @ RGB.T + product_error(np.abs(u) @ np.abs(GB).T, GB.shape[1])
+        if nd:
+            GE, RGE = G[:, B.shape[1] :], RG[:, B.shape[1] :]
+            mid = mid + cd @ GE.T
+            rad = rad + np.abs(cd) @ RGE.T + product_error(np.abs(cd) @ np.abs(GE).T, nd)
+            rad = rad + rd @ spread.T
+        rad = upper(rad, 4 * n + 2 * nd + 8) + 8 * np.abs(mid) * UNIT_ROUNDOFF  # the sums
+        out_lo = np.minimum(out_lo, down(mid - rad))
+        out_hi = np.maximum(out_hi, up(mid + rad))
+    return out_lo, out_hi

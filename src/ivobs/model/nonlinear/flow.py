@@ -165,6 +165,7 @@ class FlowSystem(NonlinearSystem):
             (FlowBackContractor(self, i) if back else _no_contraction, []) for i in range(self.ny)
         ]
         self._spread_cache: tuple[Any, list[float]] | None = None
+        self._collect: list[tuple[Vec, Vec]] | None = None  # a priori boxes (period_box)
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
         self._back_cache: Any = None  # the step back's last linearisation (.flowback)
         self._f = _FlowForms(self)  # type: ignore[assignment]
@@ -201,6 +202,22 @@ class FlowSystem(NonlinearSystem):
         lo, hi, A, _ = self._run(xl, xh, u, wl, wh, True)
         assert A is not None
         return lo, hi, A[0][: self.nx].ravel().tolist(), A[1][: self.nx].ravel().tolist()
+
+    def period_box(self, xl: Any, xh: Any, u: Any, wl: Any, wh: Any) -> tuple[Vec, Vec]:
+        """``(lo, hi)`` containing ``x(t)`` for every ``t`` in the period, from every ``x(0)``
+        in ``[xl, xh]`` (and every signal path, when they vary): the hull of the substeps' a
+        priori enclosures (step 1 of the module docstring; halved substeps included)."""
+        self._collect = []
+        try:
+            self._run(xl, xh, u, wl, wh, False)
+            boxes = self._collect
+        finally:
+            self._collect = None
+        if not boxes:  # an unbounded start: the whole space
+            return [-math.inf] * self.nx, [math.inf] * self.nx
+        lo = [min(b[0][i] for b in boxes) for i in range(self.nx)]
+        hi = [max(b[1][i] for b in boxes) for i in range(self.nx)]
+        return lo, hi
 
     def evaluators(self, which: str) -> tuple[Any, ...]:
         """As :meth:`NonlinearSystem.evaluators`; for ``f`` with varying signals a third
@@ -300,6 +317,8 @@ class FlowSystem(NonlinearSystem):
             xl, xh, A, z = self._advance(xl, xh, u, wl, wh, half, A, depth + 1, z, vary)
             return self._advance(xl, xh, u, wl, wh, half, A, depth + 1, z, vary)
         assert B is not None
+        if self._collect is not None and vary is None:
+            self._collect.append(B)  # x(t) over the substep (held signals)
         args = (xl, xh, u, wl, wh, B[0], B[1], h[0], h[1])
         if A is not None:
             assert M is not None
@@ -323,6 +342,8 @@ class FlowSystem(NonlinearSystem):
         B = self._apriori(bl, bh, u, fl, fh, h[1])
         if B is None:
             return None
+        if self._collect is not None:
+            self._collect.append(B)  # x(t) over the substep, whatever d(t) does
         if not self.smooth:  # first order: x(h) ∈ B, x̃(h) ∈ [xl, xh] ⊆ B
             return [_up(b - a) for a, b in zip(B[0], B[1])]
         f = self.continuous._f
