@@ -1,8 +1,8 @@
 """Continuous-time nonlinear plants: cost of the validated flow (``NonlinearSystem(dt=0)
 .discretize(Ts, order=..., substeps=...)``) per sampling step.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_flow.py [repeats]
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_flow.py methods
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_flow.py [repeats] [varying|held]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_nl_flow.py methods [varying|held]
 
 For a pendulum (Ts = 0.1), a Van der Pol oscillator (Ts = 0.1) and a six-tank cascade with
 ``sqrt`` outflows (Ts = 0.5), each order and substep count: the time to build the generated
@@ -90,11 +90,14 @@ def record(cont: ivobs.NonlinearSystem, x0: list[float], u: list[float], w, Ts: 
     return np.array(Y, dtype=float)
 
 
+MODE = "varying"
+
+
 def bench(name: str, order: int, substeps: int, repeats: int) -> None:
     spec, Ts, xl, xh, u = CASES[name]
     cont = ivobs.NonlinearSystem(**spec, dt=0)
     c0 = time.process_time()
-    fs = cont.discretize(Ts, order=order, substeps=substeps)
+    fs = cont.discretize(Ts, order=order, substeps=substeps, disturbances=MODE)
     build = time.process_time() - c0
     wl, wh = fs.w_box.lo, fs.w_box.hi
     xm = [0.5 * (a + b) for a, b in zip(xl, xh)]
@@ -129,7 +132,7 @@ def bench(name: str, order: int, substeps: int, repeats: int) -> None:
 def methods() -> None:
     spec, Ts, xl, xh, u = CASES["pendulum"]
     cont = ivobs.NonlinearSystem(**spec, dt=0)
-    fs = cont.discretize(Ts, order=4)
+    fs = cont.discretize(Ts, order=4, disturbances=MODE)
     T = 100
     U = np.tile(np.asarray(u, float), (T, 1))
     xm = [0.5 * (a + b) for a, b in zip(xl, xh)]
@@ -144,10 +147,13 @@ def methods() -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["methods"]:
+    args = sys.argv[1:]
+    if args and args[-1] in ("varying", "held"):
+        MODE = args.pop()
+    if args == ["methods"]:
         methods()
         sys.exit()
-    reps = int(sys.argv[1]) if len(sys.argv) > 1 else 5
+    reps = int(args[0]) if args else 5
     print(
         "| plant | order | substeps | build (s, CPU) | f_box ms CPU / wall | f_jac_box ms CPU / "
         "wall | nl-interval ms/step CPU / wall | lag=0 | width from a point | width from the box |"

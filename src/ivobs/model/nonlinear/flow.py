@@ -54,6 +54,20 @@ methods linearise ``Φ_c`` and add ``z`` as a spread
 (:mod:`ivobs.estimators.nonlinear.meanvalue`). For a non-smooth ``f`` the bound is the a priori
 box itself (first order). Only the signals that ``f`` reads vary; those in ``h`` alone
 are the sensor's noise at the sampling instant.
+
+**The mean form** (used when ``f`` is smooth and ``h`` reads none of the varying signals).
+Hold the signals at their *mean over the period* ``d̄ = (1/Ts) ∫ d ∈ [d]`` instead of the centre:
+``x̄`` is then the held flow with ``w``'s signal column equal to ``d̄`` — the discrete model's
+``w[k]`` keeps its Jacobian, so the set methods keep the correlation a held ``d`` has — and
+``y = x − x̄`` obeys ``y' = J_c y + (J − J_c) y + G_c (d − d̄) + (G − G_c)(d − d̄)`` with ``[J]``,
+``[G] = ∂f/∂(x, d)`` over an a priori box ``B`` of the inclusion over the whole period
+(:meth:`FlowSystem._period_apriori`), ``|G − G_c| <= R_G``, ``|d − d̄| <= 2 r``. Since
+``∫_0^Ts (d − d̄) = 0``, for any matrix ``M̄``,
+``∫ e^{J_c σ} G_c (d − d̄) = ∫ (e^{J_c σ} − M̄) G_c δ + (M̄ Ts − ∫ e^{J_c σ}) G_c δ̄`` with
+``δ = d − c``, ``δ̄ = d̄ − c`` (``|δ|, |δ̄| <= r``): with ``M̄`` the average of the pieces'
+enclosures of ``e^{J_c σ}`` both terms are second order in ``Ts``. With
+``Y >= sup |y|`` found as above (``a = ∫|e^{J_c σ} G_c| 2r + I R_G 2r``),
+``|y(Ts)| <= (∫|(e^{J_c σ} − M̄) G_c| + Σ |J| rad) r + I (R Y + R_G 2r)``.
 """
 
 from __future__ import annotations
@@ -81,6 +95,8 @@ TRIES = 8
 """Inflate-and-retry rounds of one a priori enclosure."""
 INFLATE_REL, INFLATE_ABS = 0.1, 1e-9
 SPREAD_PIECES = 8
+MEAN_PIECES = 16
+"""Pieces of the period over which ``e^{J_c s}`` is integrated (the mean form's spread)."""
 """Pieces of a substep over which the magnitude of ``e^{J_c s}`` is integrated (the spread)."""
 
 Vec = list[float]
@@ -158,13 +174,20 @@ class FlowSystem(NonlinearSystem):
             if disturbances == "varying" and self._sym[n] in used
         ]
         # no symbolic h∘Φ: one step back through the flow's mean-value form, per output (it
-        # needs the flow's Jacobian: a non-smooth f has none here, its contractors do nothing;
-        # nor does a flow whose signals vary: the step back would need its spread)
-        back = self.smooth and not self._varying
+        # needs the flow's Jacobian: a non-smooth f has none here, its contractors do nothing)
+        back = self.smooth
+        # the mean form (module docstring): d's column in w is its mean over the period, which
+        # h must not read (h sees d at the sampling instant, another value)
+        in_h = set().union(*(e.free_symbols for e in self.h_exprs)) if self.h_exprs else set()
+        self._mean = (
+            bool(self._varying)
+            and self.smooth
+            and not any(self._sym[self.signal_names[j - np_]] in in_h for j in self._varying)
+        )
         self._hf = [
             (FlowBackContractor(self, i) if back else _no_contraction, []) for i in range(self.ny)
         ]
-        self._spread_cache: tuple[Any, list[float]] | None = None
+        self._spread_cache: list[tuple[tuple[float, ...], list[float]]] = []
         self._collect: list[tuple[Vec, Vec]] | None = None  # a priori boxes (period_box)
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
         self._back_cache: Any = None  # the step back's last linearisation (.flowback)
@@ -174,7 +197,7 @@ class FlowSystem(NonlinearSystem):
     def _enclose(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Vec, Vec]:
         """``(lo, hi)`` lists enclosing ``Φ_Ts(x, u, w)`` for every ``x ∈ [xl, xh]``,
         ``w ∈ [wl, wh]`` (every signal path in its box, when the signals vary)."""
-        lo, hi, _, z = self._run(xl, xh, u, wl, wh, False)
+        lo, hi, _, z = self._run(xl, xh, u, wl, wh, False, True)
         if z is not None:
             lo = [_dn(a - e) for a, e in zip(lo, z)]
             hi = [_up(b + e) for b, e in zip(hi, z)]
@@ -189,7 +212,7 @@ class FlowSystem(NonlinearSystem):
                 "or max), so nl-zonotope and nl-constrained-zonotope cannot take it; use "
                 "nl-interval"
             )
-        _, _, A, _ = self._run(xl, xh, u, wl, wh, True)
+        _, _, A, _ = self._run(xl, xh, u, wl, wh, True, False)
         assert A is not None
         return A[0][: self.nx].ravel(), A[1][: self.nx].ravel()
 
@@ -199,8 +222,11 @@ class FlowSystem(NonlinearSystem):
         lists, the Jacobian row-major over ``(x, w)``."""
         if not self.smooth:
             self._enclose_jacobian(xl, xh, u, wl, wh)  # the refusal, with its message
-        lo, hi, A, _ = self._run(xl, xh, u, wl, wh, True)
+        lo, hi, A, z = self._run(xl, xh, u, wl, wh, True, True)
         assert A is not None
+        if z is not None:  # the box of the set-valued flow, as _enclose gives it
+            lo = [_dn(a - e) for a, e in zip(lo, z)]
+            hi = [_up(b + e) for b, e in zip(hi, z)]
         return lo, hi, A[0][: self.nx].ravel().tolist(), A[1][: self.nx].ravel().tolist()
 
     def period_box(self, xl: Any, xh: Any, u: Any, wl: Any, wh: Any) -> tuple[Vec, Vec]:
@@ -209,7 +235,7 @@ class FlowSystem(NonlinearSystem):
         priori enclosures (step 1 of the module docstring; halved substeps included)."""
         self._collect = []
         try:
-            self._run(xl, xh, u, wl, wh, False)
+            self._run(xl, xh, u, wl, wh, False, True)
             boxes = self._collect
         finally:
             self._collect = None
@@ -229,28 +255,29 @@ class FlowSystem(NonlinearSystem):
         return self._held_value, self._held_natjac, self._spread_of
 
     def _held_value(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Vec, Vec]:
-        lo, hi, _, z = self._run(xl, xh, u, wl, wh, False)
-        self._spread_cache = ((xl, xh, u, wl, wh), z or [])
+        lo, hi, _, _ = self._run(xl, xh, u, wl, wh, False, False)
         return lo, hi
 
     def _held_natjac(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Any, ...]:
-        lo, hi, A, z = self._run(xl, xh, u, wl, wh, True)
+        lo, hi, A, _ = self._run(xl, xh, u, wl, wh, True, True)
         assert A is not None
-        self._spread_cache = ((xl, xh, u, wl, wh), z or [])
         return lo, hi, A[0][: self.nx].ravel().tolist(), A[1][: self.nx].ravel().tolist()
 
     def _spread_of(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> list[float]:
-        cached = self._spread_cache
-        if cached is not None and cached[0] == (xl, xh, u, wl, wh):
-            return cached[1]
-        return self._run(xl, xh, u, wl, wh, False)[3] or []
+        """The spread over the box (the last boxes' are cached: the forward step, the
+        linearisation and the step back of one estimator step ask for the same box)."""
+        key = _key(xl, xh, u, wl, wh)
+        for k, z in self._spread_cache:
+            if k == key:
+                return z
+        return self._run(xl, xh, u, wl, wh, False, True)[3] or []
 
     def _run(
-        self, xl: Any, xh: Any, u: Any, wl: Any, wh: Any, jac: bool
+        self, xl: Any, xh: Any, u: Any, wl: Any, wh: Any, jac: bool, spread: bool = True
     ) -> tuple[Vec, Vec, Pair, Vec | None]:
         """The substeps from ``[xl, xh]``: the box at ``Ts``, (``jac``) the augmented
         Jacobian ``∂(x, w)(Ts)/∂(x0, w)`` ``(lo, hi)`` or None, and the spread of the varying
-        signals (None when none vary)."""
+        signals (None when none vary, or when not asked for in the mean form)."""
         xl, xh = [float(v) for v in xl], [float(v) for v in xh]
         wl, wh, u = [float(v) for v in wl], [float(v) for v in wh], [float(v) for v in u]
         nz = self.nx + self.nw
@@ -259,6 +286,15 @@ class FlowSystem(NonlinearSystem):
             full = np.full((nz, nz), np.inf)
             inf = [math.inf] * self.nx
             return [-math.inf] * self.nx, inf, (-full, full) if jac else None, None
+        x0l, x0h, w0l, w0h = xl, xh, wl, wh
+        if self._mean:  # the flow held at the period's mean of d, plus its spread
+            for _ in range(self.substeps):
+                xl, xh, A, _ = self._advance(xl, xh, u, wl, wh, self._h_step, A, 0)
+            if not spread:
+                return xl, xh, A, None
+            spread_ = self._mean_spread(x0l, x0h, u, w0l, w0h)
+            self._spread_cache = [(_key(x0l, x0h, u, w0l, w0h), spread_), *self._spread_cache[:3]]
+            return xl, xh, A, spread_
         vary = self._inclusion(wl, wh) if self._varying else None
         z: Vec | None = None
         if vary is not None:
@@ -268,6 +304,8 @@ class FlowSystem(NonlinearSystem):
         if A is not None and vary is not None:  # Φ_c does not read the varying signals
             cols = [self.nx + j for j in self._varying]
             A[0][:, cols], A[1][:, cols] = 0.0, 0.0
+        if z is not None:
+            self._spread_cache = [(_key(x0l, x0h, u, w0l, w0h), z), *self._spread_cache[:3]]
         return xl, xh, A, z
 
     def _inclusion(self, wl: Vec, wh: Vec) -> tuple[Vec, Vec, Vec, Vec]:
@@ -317,7 +355,7 @@ class FlowSystem(NonlinearSystem):
             xl, xh, A, z = self._advance(xl, xh, u, wl, wh, half, A, depth + 1, z, vary)
             return self._advance(xl, xh, u, wl, wh, half, A, depth + 1, z, vary)
         assert B is not None
-        if self._collect is not None and vary is None:
+        if self._collect is not None and not self._varying:
             self._collect.append(B)  # x(t) over the substep (held signals)
         args = (xl, xh, u, wl, wh, B[0], B[1], h[0], h[1])
         if A is not None:
@@ -394,6 +432,104 @@ class FlowSystem(NonlinearSystem):
         if not np.all(np.isfinite(out)):
             return None
         return [float(v) for v in out]
+
+    def _mean_spread(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> Vec:
+        """The spread of the mean form over the whole period (module docstring, "The mean
+        form"): ``|x(Ts) − x̄(Ts)|`` for ``x̄`` held at the mean ``d̄`` of ``d`` over the
+        period."""
+        from ...sets.expm import expm, interval_product, scaled
+        from ...sets.rounding import up, upper
+
+        nx, nz = self.nx, self.nx + self.nw
+        fl, fh, _, r = self._inclusion(wl, wh)
+        B = self._period_apriori(xl, xh, u, fl, fh)
+        f = self.continuous._f
+        jl, jh = self.continuous._call(f.jacobian, f.sites, B[0], B[1], u, fl, fh)
+        Jl, Jh = _arr(jl, nx, nz), _arr(jh, nx, nz)
+        if not (np.all(np.isfinite(Jl)) and np.all(np.isfinite(Jh))):
+            raise IvobsError(
+                "discretize: the Jacobian of f is not bounded over the period's enclosure "
+                f"[{B[0]}, {B[1]}]; use a smaller Ts"
+            )
+        Jc = 0.5 * Jl[:, :nx] + 0.5 * Jh[:, :nx]
+        R = up(np.maximum(Jh[:, :nx] - Jc, Jc - Jl[:, :nx]))
+        cols = [nx + j for j in self._varying]
+        Gc = 0.5 * Jl[:, cols] + 0.5 * Jh[:, cols]
+        RG = up(np.maximum(Jh[:, cols] - Gc, Gc - Jl[:, cols]))
+        r2 = np.array([up(2.0 * r[j]) for j in self._varying])  # >= |d(s) − d̄|
+        Ts = float(self._h_step[1]) * self.substeps  # >= the period (h rounded up, times n)
+        Ts = float(up(Ts))
+        step = Ts / MEAN_PIECES
+        Ps, RPs = expm(*scaled(Jc, step))
+        Q, RQ = expm(*scaled(Jc, (0.0, step)))
+        Qs, RQs = [], []
+        for _ in range(MEAN_PIECES):
+            Qs.append(Q)
+            RQs.append(RQ)
+            Q, RQ = interval_product(Ps, RPs, Q, RQ)
+        Qa, RQa = np.array(Qs), np.array(RQs)  # (pieces, nx, nx): e^{J_c σ} on each piece
+        Mbar = Qa.mean(axis=0)  # any matrix: the estimate of the mean
+        D = Qa - Mbar
+        RD = up(RQa + np.abs(D) * 2.0**-52 + 5e-324)  # the enclosure and the subtraction
+        # per piece, rounded up: |e| (integral), |e G_c| (moved), |(e − M̄) G_c| + |e − M̄|'s
+        # enclosure error through |M̄ Ts − ∫ e| G_c (deviation): summed over the pieces
+        integral = np.sum(up(np.abs(Qa) + RQa), axis=0)
+        moved = np.sum(_product_bound(Qa, Gc, RQa), axis=0)
+        # the mean's rounding and the period's (Ts rounded up): a few units of rounding of
+        # |e| + |M̄| per piece (module docstring, "The mean form")
+        slack = (MEAN_PIECES + 4) * 2.0**-52 * (np.abs(Qa) + RQa + np.abs(Mbar))
+        extra = upper((RQa + slack) @ np.abs(Gc), nx + 1)
+        deviation = np.sum(_product_bound(D, Gc, RD) + extra, axis=0)
+        integral = up(upper(integral, MEAN_PIECES) * step)
+        moved = up(upper(moved, MEAN_PIECES) * step)
+        deviation = up(upper(deviation, 2 * MEAN_PIECES) * step)
+        r1 = np.array([r[j] for j in self._varying])
+        a = upper(moved @ r2 + integral @ upper(RG @ r2, len(cols) + 1), 2 * nx + len(cols) + 4)
+        K = upper(integral @ R, nx + 1)
+        try:  # Y with a + K Y <= Y and K Y < Y: sup |x − x̄| <= Y over the period
+            Y = np.linalg.solve(np.eye(nx) - K, a)
+        except np.linalg.LinAlgError:
+            Y = np.full(nx, np.nan)
+        Y = np.maximum(Y, 0.0) * (1.0 + 1e-9) + 1e-300
+        KY = upper(K @ Y, nx + 1)
+        if not (np.all(np.isfinite(Y)) and np.all(KY < Y) and np.all(up(a + KY) <= Y)):
+            raise IvobsError(
+                "discretize: the effect of the varying signals over one period could not be "
+                "bounded (the linearised dynamics grow too fast over the period); use a smaller "
+                "Ts or disturbances='held' for held signals"
+            )
+        out = upper(
+            deviation @ r1 + integral @ up(R @ Y + upper(RG @ r2, len(cols) + 1)),
+            2 * nx + 2 * len(cols) + 4,
+        )
+        return [float(v) for v in out]
+
+    def _period_apriori(self, xl: Vec, xh: Vec, u: Vec, fl: Vec, fh: Vec) -> tuple[Vec, Vec]:
+        """A box containing every path of the inclusion over the whole period from
+        ``[xl, xh]``: the hull of a chain of a priori boxes over ``n`` substeps (each one's box
+        contains the state at its end, the next one's start), ``n`` doubled until found."""
+        n = self.substeps
+        for _ in range(MAX_HALVINGS + 1):
+            h = float(self._h_step[1]) * self.substeps / n
+            h = float(math.nextafter(h, math.inf))
+            sl, sh = xl, xh
+            lo, hi = list(xl), list(xh)
+            for _ in range(n):
+                B = self._apriori(sl, sh, u, fl, fh, h)
+                if B is None:
+                    break
+                sl, sh = B
+                lo = [min(a, b) for a, b in zip(lo, B[0])]
+                hi = [max(a, b) for a, b in zip(hi, B[1])]
+            else:
+                if self._collect is not None:
+                    self._collect.append((lo, hi))
+                return lo, hi
+            n *= 2
+        raise IvobsError(
+            f"discretize: no a priori enclosure of the flow with varying signals over Ts = "
+            f"{self.dt:g} from x in [{xl}, {xh}]: use a smaller Ts or check the model"
+        )
 
     def _generated(self, fn: Any, args: tuple[Any, ...]) -> Any:
         try:
@@ -517,6 +653,29 @@ class FlowSystem(NonlinearSystem):
             f"FlowSystem(nx={self.nx}, nu={self.nu}, ny={self.ny}, Ts={self.dt:g}, "
             f"order={self.order}, substeps={self.substeps})"
         )
+
+
+def _key(*vectors: Any) -> tuple[float, ...]:
+    return tuple(float(v) for vec in vectors for v in vec)
+
+
+def _ulp(X: np.ndarray) -> np.ndarray:
+    """A bound of the rounding of the one operation that gave ``X`` (elementwise)."""
+    from ...sets.rounding import ETA
+
+    out: np.ndarray = np.abs(X) * 2.0**-52 + ETA
+    return out
+
+
+def _product_bound(X: np.ndarray, G: np.ndarray, RX: np.ndarray) -> np.ndarray:
+    """``>= |Y G|`` (elementwise) for every ``|Y − X| <= RX``: ``|fl(X G)|`` plus its rounding
+    ([Higham2002, Lemma 3.1]) plus ``RX |G|``, rounded up."""
+    from ...sets.rounding import product_error, upper
+
+    n = X.shape[-1]
+    aG = np.abs(G)
+    out: np.ndarray = upper(np.abs(X @ G) + product_error(np.abs(X) @ aG, n) + RX @ aG, n + 2)
+    return out
 
 
 def _no_contraction(*args: Any) -> bool:

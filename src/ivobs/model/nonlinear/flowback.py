@@ -14,6 +14,8 @@
 
    the already narrowed ``z'_l`` used in the sum (they stay inside the box over which ``[J]``
    holds, and ``c`` need not be in them). Every operation is outward rounded (:mod:`._runtime`).
+   When the flow's signals vary between samples, ``Φ(z') ⊆ Φ_c(z') ± s`` over the box (its
+   spread, :mod:`.flow`): ``Φ_c(c)`` is widened by the box's ``s``.
 
 An empty intersection proves the measurement inconsistent (``False``).
 """
@@ -75,7 +77,13 @@ class FlowBackContractor:
                 hit: tuple[Any, ...] = last[3]
                 return hit
         c = [min(max(0.5 * a + 0.5 * b, a), b) for a, b in zip(zl, zh)]
-        pl, ph = fs._enclose(c[:nx], c[:nx], up, c[nx:], c[nx:])
+        if fs._varying:  # Φ(z') ⊆ Φ_c(z') ± s over the box: Φ_c(c) widened by the box's s
+            pl, ph, _, _ = fs._run(c[:nx], c[:nx], up, c[nx:], c[nx:], False, False)
+            s = fs._spread_of(zl[:nx], zh[:nx], up, zl[nx:], zh[nx:]) or [0.0] * nx
+            pl = [math.nextafter(a - e, _NI) for a, e in zip(pl, s)]
+            ph = [math.nextafter(b + e, _PI) for b, e in zip(ph, s)]
+        else:
+            pl, ph = fs._enclose(c[:nx], c[:nx], up, c[nx:], c[nx:])
         Jl, Jh = fs._enclose_jacobian(zl[:nx], zh[:nx], up, zl[nx:], zh[nx:])
         out = (c, pl, ph, Jl, Jh)
         fs._back_cache = (list(up), list(zl), list(zh), out)
