@@ -298,6 +298,19 @@ class LinearSystem(IntervalMatrices):
             )
         return d.lo[:T], d.hi[:T]
 
+    def d_widths(self) -> np.ndarray:
+        """Widths ``Δ`` of the bounds of ``d`` for design objectives: constant bounds as they
+        are, time-varying bounds their largest width per component, bounds computed from the
+        measurement ([Efimov2013, Remark 1]) ones (no better information before the data)."""
+        if not self.nd:
+            return np.zeros(0)
+        if self.bounds_depend_on_y:
+            return np.ones(self.nd)
+        d = self._d
+        assert isinstance(d, Box)
+        w = np.asarray(d.hi - d.lo, dtype=float)
+        return np.max(w, axis=0) if w.ndim == 2 else w
+
     @property
     def is_sparse(self) -> bool:
         """True when ``A`` was given as a ``scipy.sparse`` matrix (large systems)."""

@@ -100,6 +100,11 @@ class LinearModel(SystemModel, Protocol):
         """Whether ``d`` is a callable of ``(k, y_k)``."""
         ...
 
+    def d_widths(self) -> np.ndarray:
+        """Widths of the bounds of ``d`` for design objectives (largest over the steps; ones
+        for bounds computed from the measurement)."""
+        ...
+
     def d_over(self, T: int) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``d[0..T-1]`` as ``(T, nd)`` arrays (not for a callable ``d``)."""
         ...

@@ -32,7 +32,6 @@ from ...design.width_lp import MAX_LP_STATES, width_gain
 from ...errors import DesignError, IvobsError
 from ...linalg import spectral_radius
 from ...model import LinearSystem
-from ...sets import Box
 from ..base import Design
 
 __all__ = [
@@ -40,7 +39,6 @@ __all__ = [
     "IntervalDesign",
     "SplitDesign",
     "check_design_size",
-    "design_delta",
     "interval_design",
     "sparse_gain_check",
     "sparse_radius",
@@ -78,23 +76,6 @@ class SplitDesign(Design):
     gain: str
     steady_width: np.ndarray | None
     missing_radius: np.ndarray | None = None
-
-
-def design_delta(sys: LinearSystem) -> np.ndarray:
-    """Widths ``Δ`` of the ``d`` box used by the width objectives: constant bounds as they
-    are, time-varying bounds their largest width per component, callable bounds
-    ([Efimov2013, Remark 1]) ones (no better information before the data arrive)."""
-    if not sys.nd:
-        return np.zeros(0)
-    if sys.bounds_depend_on_y:
-        return np.ones(sys.nd)
-    if sys.has_constant_bounds:
-        box = sys.d_at(0)
-        return np.asarray(box.hi - box.lo)
-    tabulated = sys.d  # a time-varying Box: its widest step per component
-    assert isinstance(tabulated, Box)
-    w: np.ndarray = np.max(tabulated.hi - tabulated.lo, axis=0)
-    return w
 
 
 MAX_DENSE_DESIGN = MAX_LMI_STATES
@@ -201,8 +182,8 @@ def _steady(sys: LinearSystem, D: Any, L: np.ndarray) -> np.ndarray | None:
         from scipy.sparse.linalg import spsolve
 
         M = (identity(D.shape[0], format="csc") - abs(D)).tocsc()
-        return np.atleast_1d(spsolve(M, np.abs(G) @ design_delta(sys)))
-    return steady_width(D, G, design_delta(sys))
+        return np.atleast_1d(spsolve(M, np.abs(G) @ sys.d_widths()))
+    return steady_width(D, G, sys.d_widths())
 
 
 def _missing_radius(sys: LinearSystem, L: np.ndarray) -> np.ndarray | None:
@@ -222,12 +203,12 @@ def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalD
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
             _lp_size(sys, who)
-            L, _ = width_gain(A, C, E, F, design_delta(sys), nonnegative=True, who=who)
+            L, _ = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
         else:
             check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
             L = nonnegative_gain(A, C, who)
             if gain == "lmi+width":
-                L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=True)
+                L = refine_width(A, C, E, F, sys.d_widths(), L, nonnegative=True)
     else:
         gain = "given"
     return _checked(IntervalDesign, sys, L, gain, who, nonnegative=True)
@@ -245,7 +226,7 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
             _lp_size(sys, who)
-            L, _ = width_gain(A, C, E, F, design_delta(sys), nonnegative=False, who=who)
+            L, _ = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
             return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
         what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
         check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
@@ -267,7 +248,7 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
                     "try 'interval-transformed' (needs only A − LC Schur)"
                 )
             if gain == "margin+width":
-                L = refine_width(A, C, E, F, design_delta(sys), L, nonnegative=False)
+                L = refine_width(A, C, E, F, sys.d_widths(), L, nonnegative=False)
     else:
         gain = "given"
     return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)

@@ -137,7 +137,6 @@ class Operators:
     def _other_gains(self, obs: np.ndarray) -> list[np.ndarray]:
         """Zero, and the width-optimal gain of the observed outputs in ``z`` coordinates."""
         from ...design.width_lp import MAX_LP_STATES, width_gain
-        from .design import design_delta
 
         zero = np.zeros_like(self.L)
         if not obs.any() or self.nx > MAX_LP_STATES:
@@ -145,7 +144,7 @@ class Operators:
         A, _, C, _, E, F = self.mats
         S, Si = (np.eye(self.nx), np.eye(self.nx)) if self.tr is None else (self.tr.S, self.tr.Si)
         try:
-            Lz, _ = width_gain(S @ A @ Si, C[obs] @ Si, S @ E, F[obs], design_delta(self.sys),
+            Lz, _ = width_gain(S @ A @ Si, C[obs] @ Si, S @ E, F[obs], self.sys.d_widths(),
                                nonnegative=False, who=self.who)  # fmt: skip
         except DesignError:
             return [zero]

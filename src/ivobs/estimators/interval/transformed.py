@@ -32,7 +32,7 @@ from ...errors import DesignError, IvobsError
 from ...linalg import observability_matrix, spectral_radius
 from ...model import LinearSystem
 from ..base import Design
-from .design import check_design_size, check_gain, design_delta
+from .design import check_design_size, check_gain
 
 __all__ = ["SEARCH_MAX_STATES", "TransformedDesign", "transformed_design"]
 
@@ -77,7 +77,7 @@ def transformed_design(
     if transform not in ("auto", "search", "schur"):
         raise IvobsError(f"transform: expected 'auto', 'search' or 'schur', got {transform!r}")
     A, _, C, _, E, F = sys.matrices_at(0)
-    delta = design_delta(sys)
+    delta = sys.d_widths()
     if L is not None and poles is not None:
         raise IvobsError("L, poles: give the gain L or the poles to place, not both")
     if S is not None and (e1 is not None or e2 is not None):
@@ -146,7 +146,7 @@ def _schur(sys: LinearSystem, who: str, L: Any, poles: Any) -> TransformedDesign
     """The design in real Schur coordinates (:func:`ivobs.design.schur_transform.schur_design`):
     ``S = Zᵀ`` orthogonal, ``R`` quasi-triangular with ``ρ(|R|) < 1``, checked."""
     A, _, C, _, E, F = sys.matrices_at(0)
-    delta = design_delta(sys)
+    delta = sys.d_widths()
     gain = "schur"
     if L is None and poles is None and sys.nx <= MAX_LP_STATES:
         # S = I is a valid transformation when some gain makes A − LC itself nonnegative and

@@ -201,7 +201,7 @@ def design_lti(
             f"pair (A, C) is not observable: rank {observability_rank(A, C)} of {sys.nx}; "
             "the kkl method needs observability ([Dinh2024, Assumption 1 (I)])"
         )
-    delta = _d_delta(sys)
+    delta = sys.d_widths()
     tuned = False
     if A_z is None:
         choice = default_target(
@@ -226,7 +226,7 @@ def design_lti(
             "invertible); choose another (A_z, B_z)"
         )
     pw = None
-    if sys.has_constant_bounds or isinstance(sys.d, Box):
+    if not sys.bounds_depend_on_y:
         pw = predicted_width(Tm, Az, Bz, E, F, delta, ct)
     return KKLDesign(
         A_z=Az,
@@ -253,17 +253,6 @@ def _checked_T(T: Any, A: np.ndarray, C: np.ndarray, Az: np.ndarray, Bz: np.ndar
             f"T: does not solve T A = A_z T + B_z C (eq. 4): relative residual {res / scale:.2e}"
         )
     return Tm
-
-
-def _d_delta(sys: LinearSystem) -> np.ndarray:
-    """Widths of the bounds of ``d`` for scoring designs (ones for bounds computed from y)."""
-    if sys.nd == 0:
-        return np.zeros(0)
-    d = sys.d
-    if isinstance(d, Box):
-        w: np.ndarray = d.hi - d.lo
-        return np.asarray(np.max(w, axis=0)) if w.ndim == 2 else w
-    return np.ones(sys.nd)
 
 
 # -- time-varying ------------------------------------------------------------------------------
