@@ -95,7 +95,7 @@ def test_the_held_model_loses_the_state_and_the_varying_one_is_tight() -> None:
     res_held = held.run(y=ys)
     assert misses(res_held, xs) > T_OSC // 2 and np.sum(res_held.inconsistent) > 10
     sd = oscillator().discretize(TS_OSC)
-    assert sd.sampling == {"Ts": TS_OSC, "disturbances": "varying", "pieces": 8}
+    assert sd.sampling == {"Ts": TS_OSC, "disturbances": "varying", "pieces": 8, "moments": False}
     res = ivobs.make_estimator("exact", sd, x0=X0_BOX).run(y=ys)
     assert misses(res, xs, 1e-12) == 0
     # measured 1.31 (the held model's estimate, having lost the state: about 24)
@@ -151,6 +151,40 @@ def test_one_period_lies_in_the_model_zonotope(seed: int) -> None:
         assert res.status == 0, (seed, res.message)
 
 
+def test_first_moments_lie_in_the_model_zonotope() -> None:
+    """An unstable plant sampled slowly: the automatic choice takes the pieces' first moments
+    as generators too; one period of a switching ``d`` is a point of the model's set."""
+    g, l_ = 9.81, 0.5
+    A = np.array([[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, -0.981, 0.0], [0.0, 0.0, 0.0, 1.0],
+                  [0.0, 0.0, 1.1 * g / l_, 0.0]])  # fmt: skip
+    E = np.array([[0.0], [1.0], [0.0], [-1.0 / l_]])
+    sys = ivobs.LinearSystem(A, None, np.eye(2, 4), E=E, d=ivobs.Box([-0.5], [0.5]), dt=0)
+    sd = sys.discretize(0.1)
+    assert sd.sampling["moments"] and sd.nd == 8 + 8 + 4
+    rng = np.random.default_rng(11)
+    pieces = 64
+    Ph = expm(A * 0.1 / pieces)
+    M = np.zeros((5, 5))  # A is singular: ∫ e^{As} ds E from the block exponential
+    M[:4, :4], M[:4, 4:] = A, E
+    G = expm(M * 0.1 / pieces)[:4, 4:]
+    Ed = np.asarray(sd.E)
+    for _ in range(6):
+        x0 = rng.normal(size=4)
+        x = x0.copy()
+        for _ in range(pieces):
+            x = Ph @ x + G[:, 0] * rng.choice([-0.5, 0.5])
+        target = x - sd.A @ x0
+        tol = 1e-11 * (1.0 + np.abs(target))
+        res = linprog(
+            np.zeros(Ed.shape[1]),
+            A_ub=np.vstack([Ed, -Ed]),
+            b_ub=np.concatenate([target + tol, -target + tol]),
+            bounds=list(zip(sd.d.lo, sd.d.hi)),
+            method="highs",
+        )
+        assert res.status == 0, res.message
+
+
 def test_options_and_refusals() -> None:
     sys = oscillator()
     sd = sys.discretize(0.1, pieces=1)
@@ -191,7 +225,7 @@ def test_a_disturbance_in_both_equations_gets_its_own_means() -> None:
         A_OSC, None, [[1.0, 0.0]], E=[[0.0], [1.0]], F=[[0.1]], d=ivobs.Box([-1.0], [1.0]), dt=0
     )
     sd = sys.discretize(0.2, pieces=2)
-    assert sd.nd == 1 + 2 + 2
+    assert sd.nd == 1 + 2 + 2  # the sample, two means, two remainders
     assert np.all(np.asarray(sd.E)[:, 0] == 0.0) and np.asarray(sd.F)[0, 0] == 0.1
     assert np.all(np.asarray(sd.F)[0, 1:] == 0.0)
 

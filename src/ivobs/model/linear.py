@@ -481,8 +481,9 @@ class LinearSystem(IntervalMatrices):
 
         ``disturbances="varying"`` (default): sound for every measurable ``d(t)`` in its box
         between samples: ``x+ = e^{A Ts} x + Γ B u + Σ_k Ĝ_k d̄_k + ρ``, one disturbance per
-        piece of the period (``pieces``, a power of two, chosen when None) and a remainder per
-        state, so ``nd`` grows. ``disturbances="held"``: ``d`` constant over each period
+        piece of the period (``pieces``, a power of two; chosen when None, possibly with the
+        pieces' first moments, ``sys.sampling`` says) and a remainder per state, so ``nd``
+        grows. ``disturbances="held"``: ``d`` constant over each period
         (``[B_d E_d] = ∫_0^Ts e^{A s} ds [B E]``), for signals that really are held.
         ``interval_matrices=True``: ``A_d``, ``B_d`` as interval matrices containing the exact
         exponential and integral (rounding included), for the methods that accept them.
