@@ -161,3 +161,47 @@ def test_bad_options_are_refused() -> None:
         warnings.simplefilter("error")
         box = est.step(None, None)  # a missing sample: the prior box
     np.testing.assert_array_equal(box.lo, HENON_X0.lo)
+
+
+def _random_stable_nonlinear_form(seed: int, n: int):
+    """A stable linear plant written as a NonlinearSystem (``ρ(A) = 0.95``), one output."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n))
+    A *= 0.95 / max(abs(np.linalg.eigvals(A)))
+    C = rng.normal(size=n)
+    f = [
+        " + ".join(f"({float(A[i, j])!r})*x{j + 1}" for j in range(n)) + f" + w{i + 1}"
+        for i in range(n)
+    ]
+    h = [" + ".join(f"({float(C[j])!r})*x{j + 1}" for j in range(n)) + " + v"]
+    d = {f"w{i + 1}": (-0.1, 0.1) for i in range(n)}
+    d["v"] = (-0.1, 0.1)
+    sys = ivobs.NonlinearSystem(states=[f"x{i + 1}" for i in range(n)], f=f, h=h, d=d)
+    x, ys = np.zeros(n), []
+    for _ in range(150):
+        ys.append([C @ x + 0.1 * rng.choice([-1.0, 1.0])])
+        x = A @ x + 0.1 * rng.choice([-1.0, 1.0], n)
+    return sys, np.array(ys)
+
+
+def test_wrapping_is_said_with_its_figures():
+    """A stable plant whose boxes wrap (``ρ(A) = 0.95``, ``ρ(|A|) = 1.25``): nl-interval says
+    so once, with both spectral radii, and names the methods that keep it bounded."""
+    sys, ys = _random_stable_nonlinear_form(1, 4)
+    est = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)))
+    with pytest.warns(UserWarning, match="wraps") as rec:
+        res = est.run(y=ys)
+    msgs = [str(w.message) for w in rec if "wraps" in str(w.message)]
+    assert len(msgs) == 1 and "spectral radius 0.95" in msgs[0] and "nl-zonotope" in msgs[0]
+    assert np.sum(res.width[-1]) > 1e6  # sound, and as wide as the warning says
+    zono = ivobs.make_estimator("nl-zonotope", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)))
+    assert np.sum(zono.run(y=ys).width[-1]) < 20.0
+
+
+def test_no_wrapping_warning_on_a_plant_that_stays_bounded():
+    sc = ivobs.scenarios.get("henon-nl")
+    tr = sc.simulate("vertex", seed=0)
+    est = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        est.run(tr.u, tr.y)

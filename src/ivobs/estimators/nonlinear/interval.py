@@ -27,6 +27,12 @@ enclosures are exact operations. By induction the box of ``x[k]`` contains the t
 whenever the plant follows the model with ``w[k] ∈ [w]`` and ``y[k]`` is its output rounded
 to a double; no margin is added (``proven_rounding``).
 
+**Wrapping.** Boxes are not closed under rotation: a map that contracts (``ρ(J) < 1``) can
+still grow a box when ``ρ(|J|) > 1`` (a random stable linear plant: widths of 1e36–1e140 after
+400 steps). This form does not prevent it; when the summed width passes :data:`WRAP_GROWTH`
+times the prior's, a warning says so with the two spectral radii at the box's centre and names
+the methods that keep such plants bounded (their zonotopes rotate with the map).
+
 The box of ``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output
 component is skipped; a measurement that no point of the box can produce (an empty
 contraction) is reported inconsistent and not used: the step continues from the prediction.
@@ -35,6 +41,7 @@ contraction) is reported inconsistent and not used: the step continues from the 
 from __future__ import annotations
 
 import hashlib
+import warnings
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -49,7 +56,16 @@ from ..base import Design, Estimator
 from ..state import OnlineState, Step
 from .meanvalue import measurement
 
-__all__ = ["NonlinearIntervalDesign", "NonlinearIntervalEstimator", "NonlinearIntervalState"]
+__all__ = [
+    "WRAP_GROWTH",
+    "NonlinearIntervalDesign",
+    "NonlinearIntervalEstimator",
+    "NonlinearIntervalState",
+]
+
+WRAP_GROWTH = 1e6
+"""Growth of the summed width over the prior's (or the unknowns' box, or 1) that is reported
+as wrapping."""
 
 
 @dataclass(frozen=True)
@@ -124,6 +140,46 @@ class NonlinearIntervalEstimator(Estimator):
         )
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
         self._hf = sys.hf_contractors() if lag and sys.ny else None
+        # growth that says the interval form wraps (module docstring, "Wrapping")
+        prior = float(np.sum(self.x0.hi - self.x0.lo)) if self.x0 is not None else 0.0
+        self._wrap_limit = WRAP_GROWTH * max(prior, float(np.sum(w.hi - w.lo)), 1.0)
+        self._wrapping_said = False
+
+    def _say_wrapping(self, k: int, lo: list[float], hi: list[float], u: list[float]) -> None:
+        """Warn once that the boxes grew past :data:`WRAP_GROWTH` times the prior's width,
+        with the spectral radii of the Jacobian at the box's centre and of its magnitude."""
+        self._wrapping_said = True
+        width = sum(hi) - sum(lo)
+        why = ""
+        if all(np.isfinite(lo)) and all(np.isfinite(hi)):
+            c = [0.5 * a + 0.5 * b for a, b in zip(lo, hi)]
+            wc = [0.5 * a + 0.5 * b for a, b in zip(self._wl, self._wh)]
+            try:
+                jl, jh = self.model.f_jac_box(c, c, u, wc, wc)[:2]  # d f / d x
+                J = 0.5 * np.asarray(jl) + 0.5 * np.asarray(jh)
+            except IvobsError:
+                J = np.full((1, 1), np.nan)
+            if np.all(np.isfinite(J)):
+                rho = float(np.max(np.abs(np.linalg.eigvals(J))))
+                rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
+                why = (
+                    f"the Jacobian at the box's centre has spectral radius {rho:.3g}, its "
+                    f"magnitude {rho_abs:.3g}"
+                )
+                if rho < 1.0 <= rho_abs:
+                    why = (
+                        f": the interval form wraps ({why}: boxes of a map that rotates or "
+                        "couples its states grow even where the map contracts); it stays sound "
+                        "but says little. nl-zonotope or nl-constrained-zonotope keep such "
+                        "plants bounded"
+                    )
+                else:
+                    why = f" ({why}): the outputs do not bound what the model lets grow"
+        warnings.warn(
+            f"{self.name}: the box grew to a width of {width:.3g} by step {k + 1}, more than "
+            f"{WRAP_GROWTH:.0e} times the prior's{why}",
+            stacklevel=4,
+        )
 
     def _initial_state(self) -> NonlinearIntervalState:
         assert self.x0 is not None
@@ -154,6 +210,8 @@ class NonlinearIntervalEstimator(Estimator):
                 vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
         f = sys._f  # 3. prediction: natural ∩ mean-value form
         pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
+        if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
+            self._say_wrapping(state.k, pl, ph, u)
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
             lo=np.array(pl, dtype=float),
