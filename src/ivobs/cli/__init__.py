@@ -17,7 +17,7 @@ __all__ = ["main"]
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ivobs",
-        description="Guaranteed interval state estimation for linear systems.",
+        description="Guaranteed interval state estimation for linear and nonlinear systems.",
     )
     from .. import __version__
 
