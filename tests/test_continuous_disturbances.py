@@ -233,26 +233,25 @@ def test_a_disturbance_in_both_equations_gets_its_own_means() -> None:
 # -- nonlinear -------------------------------------------------------------------------------
 
 
-def nl_oscillator() -> ivobs.NonlinearSystem:
+def second_order(velocity: str) -> ivobs.NonlinearSystem:
+    """``p' = v``, ``v' = velocity`` (an expression of ``p``, ``v``, ``d``), position measured;
+    ``|d| <= 1``, noise ``|n| <= 0.01``."""
     return ivobs.NonlinearSystem(
         states=["p", "v"],
         outputs=["y"],
-        f=["v", "-p - 0.04*v + d"],
+        f=["v", velocity],
         h=["p + n"],
         d={"d": (-1.0, 1.0), "n": (-0.01, 0.01)},
         dt=0,
     )
+
+
+def nl_oscillator() -> ivobs.NonlinearSystem:
+    return second_order("-p - 0.04*v + d")
 
 
 def nl_vdp() -> ivobs.NonlinearSystem:
-    return ivobs.NonlinearSystem(
-        states=["p", "v"],
-        outputs=["y"],
-        f=["v", "(1 - p**2)*v - p + 0.3*d"],
-        h=["p + n"],
-        d={"d": (-1.0, 1.0), "n": (-0.01, 0.01)},
-        dt=0,
-    )
+    return second_order("(1 - p**2)*v - p + 0.3*d")
 
 
 def simulate_nl(rhs, x0, Ts: float, T: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
