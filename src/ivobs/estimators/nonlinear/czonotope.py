@@ -71,7 +71,7 @@ from .. import register
 from ..base import Design, Estimator, check_size
 from ..constrained_zonotope import TOLS, default_limits
 from ..state import OnlineState, Step
-from .meanvalue import Linearisation, contract_back, linearise
+from .meanvalue import Linearisation, contract_back, linearise, measurement
 
 __all__ = [
     "NonlinearConstrainedZonotopeDesign",
@@ -311,9 +311,11 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         inconsistent = False
         lo0, hi0 = joint.lo, joint.hi  # restored if y_k is found inconsistent (not used)
         if obs.size:
-            # the model's forward-backward contractor of h(x, u, w) = y on the box first
-            vl, vh, yl = joint.lo.tolist(), joint.hi.tolist(), y_k.tolist()
-            if not self.model.contract_lists(vl, vh, u_k.tolist(), yl, yl):
+            # the model's forward-backward contractor of h(x, u, w) ∈ [y] on the box first,
+            # [y] the reals the recorded doubles stand for (meanvalue.measurement)
+            vl, vh = joint.lo.tolist(), joint.hi.tolist()
+            ylo, yhi = measurement(y_k)
+            if not self.model.contract_lists(vl, vh, u_k.tolist(), ylo, yhi):
                 inconsistent = True
             else:
                 joint.lo, joint.hi = np.array(vl), np.array(vh)
