@@ -350,6 +350,7 @@ SLOW = (
     "tests/test_nl_sets.py::test_run_equals_step[nl-constrained-zonotope]",
     "tests/test_nl_sets.py::test_tank_sound_vertex_switching[nl-constrained-zonotope]",
     "tests/test_nl_sets.py::test_tank_sound_vertex_switching[nl-zonotope]",
+    "tests/test_nl_sets.py::test_the_cstr_with_its_physical_rate_constant",
     "tests/test_nl_sets.py::test_widths_bounded_long_run[nl-constrained-zonotope-2000]",
     "tests/test_nl_sets.py::test_widths_bounded_long_run[nl-zonotope-10000]",
     "tests/test_nl_sound_random.py::test_chaotic_henon_contains_the_exact_state[nl-constrained-zonotope]",
