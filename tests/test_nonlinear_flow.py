@@ -342,3 +342,24 @@ def test_a_sampled_model_saves_and_loads_with_its_discretisation(tmp_path) -> No
         )
         with pytest.raises(IvobsError, match=msg):
             ivobs.load_system(path)
+
+
+def test_a_diverging_run_returns_the_steps_before_it() -> None:
+    """``x' = x²`` from ``x(0) ∈ [0.5, 0.6]`` escapes before ``t = 2``: the validated flow
+    finds no a priori enclosure at the step that reaches it; ``run()`` says so with the step
+    and keeps the boxes before it (they contain the exact solution ``1 / (1/x0 − t)``)."""
+    sys = ivobs.NonlinearSystem(f=["x**2"], h=["x"], states=["x"], dt=0).discretize(0.1)
+    est = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box([0.5], [0.6]))
+    y = np.full((30, 1), np.nan)  # no measurement: the prediction alone
+    with pytest.warns(UserWarning, match=r"diverged at step \d+ and stops there"):
+        res = est.run(None, y)
+    k = res.info["stopped"]["step"]
+    assert 5 <= k < 17 and "substeps" in res.info["stopped"]["reason"]
+    assert np.all(np.isnan(res.lower[k:])) and np.all(np.isfinite(res.lower[:k]))
+    t = 0.1 * np.arange(k)
+    for x0 in (0.5, 0.6):
+        exact = 1.0 / (1.0 / x0 - t)
+        assert np.all(res.lower[:k, 0] <= exact) and np.all(exact <= res.upper[:k, 0])
+    with pytest.raises(ivobs.DivergenceError, match="substeps"):  # step(): the error itself
+        for _ in range(30):
+            est.step()

@@ -12,7 +12,7 @@ returns at each step a box that is certain to contain the true state.
 
 from . import io, linalg, monitor, nlmath, scenarios
 from .between import between_samples
-from .errors import DesignError, InconsistentDataError, IvobsError
+from .errors import DesignError, DivergenceError, InconsistentDataError, IvobsError
 from .estimators import Design, Estimator, make_estimator, methods
 from .io import equal_systems, load_system, save_system
 from .model import LinearSystem, NonlinearSystem
@@ -36,6 +36,7 @@ __all__ = [
     "Box",
     "Design",
     "DesignError",
+    "DivergenceError",
     "Estimate",
     "Estimator",
     "InconsistentDataError",

@@ -18,6 +18,12 @@ class DesignError(IvobsError):
     """
 
 
+class DivergenceError(IvobsError):
+    """The model could not be evaluated over the current box: a validated flow found no a
+    priori enclosure (the solution may escape within the period, or the box grew too wide for
+    the sampling period). ``run()`` stops there and returns the steps before it."""
+
+
 class InconsistentDataError(IvobsError):
     """Measurements that no state, disturbance and initial condition of the model can explain.
 

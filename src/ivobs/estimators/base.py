@@ -42,7 +42,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .._validate import as_bool
-from ..errors import DesignError, InconsistentDataError, IvobsError
+from ..errors import DesignError, DivergenceError, InconsistentDataError, IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
 from ..sets import Box
@@ -181,9 +181,20 @@ def check_system(method: Any, sys: Any) -> None:
             f"{type(sys).__name__}"
         )
     if sys.is_continuous and not method.supports_continuous:
+        if isinstance(sys, NonlinearSystem):
+            hint = (
+                "Use sys.discretize(Ts): the validated flow over each sampling period, for "
+                "every method for nonlinear systems (docs/continuous.md)"
+            )
+        else:
+            ct = ", ".join(repr(n) for n in methods_with("supports_continuous"))
+            hint = (
+                f"Use sys.discretize(Ts) (docs/continuous.md), or a method that takes the "
+                f"continuous-time system itself: {ct}"
+            )
         raise IvobsError(
             f"sys: the {name} method is for discrete-time systems; this one is "
-            "continuous-time (dt=0). Use 'kkl', or sys.discretize(Ts)"
+            f"continuous-time (dt=0). {hint}"
         )
     if sys.is_time_varying and not method.supports_time_varying:
         raise IvobsError(
@@ -373,10 +384,20 @@ class Estimator(Persistence):
             vectorize = as_bool("vectorize", vectorize)
         from .._progress import Progress
 
+        self._stopped: tuple[int, str] | None = None
         with Progress(int(np.prod(y.shape[:-1])), self.name, enabled=progress) as bar:
             lo, hi, inconsistent = run_record(self, u, y, t_arr, vectorize, bar)
         if np.any(inconsistent):
             self._report_inconsistent(sorted(set(np.argwhere(inconsistent)[:, -1].tolist())))
+        info: dict[str, Any] = {}
+        if self._stopped is not None:
+            k, why = self._stopped
+            info["stopped"] = {"step": k, "reason": why}
+            warnings.warn(
+                f"{self.name}: the estimate diverged at step {k} and stops there (the boxes "
+                f"of steps 0..{k - 1} stand; NaN after): {why}",
+                stacklevel=2,
+            )
         return Estimate(
             lower=lo,
             upper=hi,
@@ -385,7 +406,7 @@ class Estimator(Persistence):
             t=t_arr,
             missing=np.any(np.isnan(y), axis=-1),
             inconsistent=inconsistent,
-            info={"run_time": time.perf_counter() - start},
+            info={"run_time": time.perf_counter() - start, **info},
         )
 
     def _loop(
@@ -399,7 +420,14 @@ class Estimator(Persistence):
         inc = np.zeros(T, dtype=bool)
         for k in range(T):
             t_k = None if t is None else float(t[k])
-            state, lo[k], hi[k], inc[k] = self._advance(state, u[k], y[k], t_k)
+            try:
+                state, lo[k], hi[k], inc[k] = self._advance(state, u[k], y[k], t_k)
+            except DivergenceError as exc:  # the steps before it stand (run() says so)
+                if k == 0:
+                    raise
+                lo[k:], hi[k:] = np.nan, np.nan
+                self._stopped = (k, str(exc))
+                break
             if bar is not None:
                 bar.update()
         return lo, hi, inc

@@ -100,6 +100,10 @@ def finalize(est: Estimator, lo: np.ndarray, hi: np.ndarray) -> None:
         total = np.sum(lo[..., vf:, :]) + np.sum(hi[..., vf:, :])
     if not np.isfinite(total):
         bad = ~(np.isfinite(lo[..., vf:, :]) & np.isfinite(hi[..., vf:, :]))
+        stopped = getattr(est, "_stopped", None)
+        if stopped is not None:  # a diverged run: the rows from the step it stopped at
+            bad[..., stopped[0] - vf :, :] = False
+            bad &= ~(np.isnan(lo[..., vf:, :]) & np.isnan(hi[..., vf:, :]))
         if not bad.any():  # finite bounds near the float range whose sum overflowed
             return
         first = np.argwhere(bad)[0]

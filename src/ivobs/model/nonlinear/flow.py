@@ -78,7 +78,7 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import IvobsError
+from ...errors import DivergenceError, IvobsError
 from ._runtime import DomainError
 from .codegen import _enclose_fraction
 from .flowback import FlowBackContractor
@@ -290,6 +290,7 @@ class FlowSystem(NonlinearSystem):
         if self._mean:  # the flow held at the period's mean of d, plus its spread
             for _ in range(self.substeps):
                 xl, xh, A, _ = self._advance(xl, xh, u, wl, wh, self._h_step, A, 0)
+            self._check_finite(x0l, x0h, xl, xh)
             if not spread:
                 return xl, xh, A, None
             spread_ = self._mean_spread(x0l, x0h, u, w0l, w0h)
@@ -301,12 +302,24 @@ class FlowSystem(NonlinearSystem):
             wl, wh, z = vary[2], vary[2], [0.0] * self.nx  # the flow held at the centre
         for _ in range(self.substeps):
             xl, xh, A, z = self._advance(xl, xh, u, wl, wh, self._h_step, A, 0, z, vary)
+        self._check_finite(x0l, x0h, xl, xh)
         if A is not None and vary is not None:  # Φ_c does not read the varying signals
             cols = [self.nx + j for j in self._varying]
             A[0][:, cols], A[1][:, cols] = 0.0, 0.0
         if z is not None:
             self._spread_cache = [(_key(x0l, x0h, u, w0l, w0h), z), *self._spread_cache[:3]]
         return xl, xh, A, z
+
+    def _check_finite(self, xl: Vec, xh: Vec, lo: Vec, hi: Vec) -> None:
+        """A finite box whose flow overflowed: the solution escapes within the period, or the
+        box is too wide for it (:class:`~ivobs.DivergenceError`)."""
+        if not all(map(math.isfinite, lo + hi)):
+            raise DivergenceError(
+                f"discretize: the enclosure of the flow over Ts = {self.dt:g} ({self.substeps} "
+                f"substep(s)) from x in [{xl}, {xh}] overflowed: the solution may escape within "
+                "the period, or the box has grown too wide for it; more substeps, a smaller Ts, "
+                "or a method that keeps the box narrower"
+            )
 
     def _inclusion(self, wl: Vec, wh: Vec) -> tuple[Vec, Vec, Vec, Vec]:
         """``(wl, wh)`` with the varying signals over their whole box (the differential
@@ -345,11 +358,13 @@ class FlowSystem(NonlinearSystem):
         if B is None or (A is not None and M is None) or (vary is not None and Z is None):
             if depth >= MAX_HALVINGS or h[0] * 0.5 == 0.0:
                 what = "the flow" if B is None else "the flow's Jacobian"
-                raise IvobsError(
-                    f"discretize: no a priori enclosure of {what} over {h[1]:.6g} (Ts = "
-                    f"{self.dt:g} halved {depth} times) from x in [{xl}, {xh}]: the solution "
-                    "may leave every bounded set within the period (finite escape), or f is "
-                    "unbounded near the box; use a smaller Ts or check the model"
+                raise DivergenceError(
+                    f"discretize: no a priori enclosure of {what} over {h[1]:.6g} (a substep "
+                    f"Ts / substeps = {self.dt:g} / {self.substeps}, halved {depth} times) from "
+                    f"x in [{xl}, {xh}]: the solution may leave every bounded set within the "
+                    "period (finite escape), f is unbounded near the box, or the box has grown "
+                    "too wide for the period; more substeps, a smaller Ts, or a method that "
+                    "keeps the box narrower"
                 )
             half = (h[0] * 0.5, h[1] * 0.5)  # exact: a power of two
             xl, xh, A, z = self._advance(xl, xh, u, wl, wh, half, A, depth + 1, z, vary)
@@ -526,9 +541,9 @@ class FlowSystem(NonlinearSystem):
                     self._collect.append((lo, hi))
                 return lo, hi
             n *= 2
-        raise IvobsError(
+        raise DivergenceError(
             f"discretize: no a priori enclosure of the flow with varying signals over Ts = "
-            f"{self.dt:g} from x in [{xl}, {xh}]: use a smaller Ts or check the model"
+            f"{self.dt:g} from x in [{xl}, {xh}]: more substeps, a smaller Ts, or check the model"
         )
 
     def _generated(self, fn: Any, args: tuple[Any, ...]) -> Any:
