@@ -39,6 +39,7 @@ SLOW = (
     "tests/test_cli.py::test_compare_takes_a_system_file_and_a_log",
     "tests/test_cli.py::test_console_entry_point_runs",
     "tests/test_cli.py::test_demo_writes_figure_and_table",
+    "tests/test_cli.py::test_options_on_the_command_line_and_from_the_system_file",
     "tests/test_cli_errors.py::test_campaign_where_every_job_fails_exits_1",
     "tests/test_cli_errors.py::test_compare_prints_full_reasons",
     "tests/test_cli_errors.py::test_compare_states_selects_panels",

@@ -113,3 +113,42 @@ def test_run_discretizes_a_continuous_system_file(tmp_path, capsys):
     assert "only with --discretize" in capsys.readouterr().err
     assert main([*base, "--method", "interval-split", "--discretize", "0.2"]) == 2
     assert "not sampled every --discretize 0.2" in capsys.readouterr().err
+
+
+def test_options_on_the_command_line_and_from_the_system_file(tmp_path, capsys):
+    """``--option`` gives a method's design options as the API takes them; ``compare
+    --system`` honours the file's ``[method.options]`` (the numbers of ``run`` and of the API
+    with the same options)."""
+    sc = ivobs.scenarios.get("servo-motor")
+    path = tmp_path / "servo.toml"
+    ivobs.save_system(path, sc.system, x0=sc.x0, method="zonotope", options={"order": 8})
+    # the API with the file's options, then with other ones, on the record compare simulates
+    from ivobs.io.plant import file_scenario
+
+    plant = file_scenario(path, horizon=200)
+    tr = plant.simulate("vertex", seed=0)
+    api4 = ivobs.make_estimator("zonotope", sc.system, x0=sc.x0, order=8).run(tr.u, tr.y)
+    api60 = ivobs.make_estimator("zonotope", sc.system, x0=sc.x0, order=60).run(tr.u, tr.y)
+    burn = 200 // 10
+    widths = {}
+    for extra, key in (([], 4), (["--option", "zonotope.order=60"], 60)):
+        args = ["compare", "--system", str(path), "--horizon", "200", "--methods", "zonotope"]
+        assert main(args + extra + ["--json", "-"]) == 0
+        out = capsys.readouterr().out
+        import json
+
+        rows = json.loads(out[out.index("[") : out.rindex("]") + 1])
+        widths[key] = np.array(rows[0]["mean_width"])
+    np.testing.assert_allclose(widths[4], api4.mean_width(burn), rtol=1e-12)
+    np.testing.assert_allclose(widths[60], api60.mean_width(burn), rtol=1e-12)
+    assert not np.allclose(widths[4], widths[60])
+    # run takes KEY=VALUE for its one method; bad items are clear errors
+    assert main(["run", "servo-motor", "-m", "zonotope", "--option", "order=60"]) == 0
+    capsys.readouterr()
+    assert main(["run", "servo-motor", "-m", "zonotope", "--option", "order"]) == 2
+    assert "expected [METHOD.]KEY=VALUE" in capsys.readouterr().err
+    two = ["compare", "servo-motor", "--methods", "zonotope,reachability"]
+    assert main([*two, "--option", "order=3"]) == 2
+    assert "names no method" in capsys.readouterr().err
+    assert main(["compare", "servo-motor", "--methods", "zonotope", "--option", "exact.x=1"]) == 2
+    assert "which this command does not run" in capsys.readouterr().err

@@ -115,3 +115,54 @@ def use_agg() -> Any:
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
+
+
+def add_option_argument(p: argparse.ArgumentParser, *, per_method: bool) -> None:
+    """``--option [METHOD.]KEY=VALUE``, repeatable: a design option of a method, as in the API
+    and in a system file's ``[method.options]``."""
+    what = "METHOD.KEY=VALUE" if per_method else "KEY=VALUE"
+    p.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar=what,
+        help=f"a method's design option ({what}; repeatable), as make_estimator(..., KEY=VALUE) "
+        "takes it and a system file's [method.options] holds it; VALUE is a Python literal "
+        "(2, 0.5, true, 'radius', [1, 2]) or else a string",
+    )
+
+
+def parse_options(items: list[str], methods: list[str] | None) -> dict[str, dict[str, Any]]:
+    """``[METHOD.]KEY=VALUE`` items as ``{method: {key: value}}`` (``methods``: the methods
+    the command runs; a single method takes ``KEY=VALUE`` alone). Values are literals read by
+    :func:`ast.literal_eval` (never executed), ``true``/``false`` as booleans, else strings."""
+    import ast
+
+    out: dict[str, dict[str, Any]] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise IvobsError(f"--option: expected [METHOD.]KEY=VALUE, got {item!r}")
+        method, dot, name = key.strip().rpartition(".")
+        if not dot:
+            if methods is None or len(methods) != 1:
+                raise IvobsError(
+                    f"--option: {item!r} names no method; write METHOD.{key.strip()}=VALUE"
+                )
+            method = methods[0]
+        elif methods is not None and method not in methods:
+            raise IvobsError(
+                f"--option: {item!r} is for {method!r}, which this command does not run "
+                f"({', '.join(methods)})"
+            )
+        text = text.strip()
+        lowered = text.lower()
+        if lowered in ("true", "false"):
+            value: Any = lowered == "true"
+        else:
+            try:
+                value = ast.literal_eval(text)
+            except (ValueError, SyntaxError):
+                value = text
+        out.setdefault(method, {})[name] = value
+    return out

@@ -8,7 +8,14 @@ from typing import Any
 
 from ..errors import IvobsError
 from ..scenarios import DISTURBANCES
-from . import add_trust_option, check_disturbance, check_seed, parse_states
+from . import (
+    add_option_argument,
+    add_trust_option,
+    check_disturbance,
+    check_seed,
+    parse_options,
+    parse_states,
+)
 from ._plant import add_plant_options, plant_inputs, plant_scenario
 
 #: Methods whose cost grows fast with the state dimension (LPs over the horizon, generators):
@@ -42,6 +49,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios and --log; default: "
         "paper, or vertex for --system --horizon)",
     )
+    add_option_argument(p, per_method=True)
     p.add_argument("--seed", type=int, default=0, help="random seed for vertex/uniform (>= 0)")
     p.add_argument(
         "--burn-in",
@@ -85,6 +93,7 @@ def _scenario(args: argparse.Namespace) -> Any:
         args.disturbance = "recorded" if args.log else args.disturbance or "vertex"
         check_disturbance(args.disturbance)
         spec = load_system(args.system, allow_code=args.allow_code)
+        args._spec = spec
         check_distinct(_outputs(args), plant_inputs(args, spec))
         return plant_scenario(args, spec)
     check_distinct(_outputs(args))
@@ -155,8 +164,14 @@ def main(args: argparse.Namespace) -> int:
             )
     else:
         names, left_out = default_methods(sc)
+    options = _options(args, names)
     traj, results = compare(
-        sc, names, disturbance=args.disturbance, seed=args.seed, burn_in=args.burn_in
+        sc,
+        names,
+        disturbance=args.disturbance,
+        seed=args.seed,
+        burn_in=args.burn_in,
+        options=options,
     )
     burn = sc.horizon // 10 if args.burn_in is None else args.burn_in
     print(f"# {sc.name}: {sc.source}")
@@ -195,6 +210,22 @@ def main(args: argparse.Namespace) -> int:
         )
         print(f"\nfigure: {save_figure(fig, plot_path)}")
     return 1 if any(r.ok and r.contains is False for r in results) else 0
+
+
+def _options(args: argparse.Namespace, names: list[str]) -> dict[str, dict[str, Any]]:
+    """The design options per method: a system file's ``[method.options]`` for its method (as
+    ``ivobs run`` and ``load_system(...).make_estimator()`` use them), then ``--option``."""
+    from ..io.options import same_method
+
+    out: dict[str, dict[str, Any]] = {}
+    spec = getattr(args, "_spec", None)
+    if spec is not None and spec.method and spec.options:
+        for name in names:
+            if same_method(name, spec.method):
+                out[name] = dict(spec.options)
+    for name, opts in parse_options(args.option, names).items():
+        out.setdefault(name, {}).update(opts)
+    return out
 
 
 def _write_json(path: str, sc: Any, results: Any, has_truth: bool) -> None:

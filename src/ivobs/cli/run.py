@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
-from . import add_trust_option, check_disturbance, check_seed
+from . import add_option_argument, add_trust_option, check_disturbance, check_seed, parse_options
 from ._plant import plant_inputs
 
 
@@ -54,6 +54,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "-m",
         help="method name (see `ivobs methods`; with --system, default: the file's [method])",
     )
+    add_option_argument(p, per_method=False)
     p.add_argument(
         "--disturbance",
         default=None,
@@ -146,7 +147,8 @@ def _run_scenario(args: argparse.Namespace) -> int:
 
     sc = scenarios.get(args.scenario)
     traj = sc.simulate(args.disturbance, args.seed)
-    est = make_estimator(args.method, sc.system, x0=sc.x0)
+    opts = parse_options(args.option, [args.method]).get(args.method, {})
+    est = make_estimator(args.method, sc.system, x0=sc.x0, **opts)
     res = _estimate(est, traj.u, traj.y, traj.t if sc.system.is_continuous else None, args)
     has_truth = traj.has_truth
     ok = bool(np.all(res.contains(traj.x))) if has_truth else True
@@ -186,7 +188,7 @@ def _run_system(args: argparse.Namespace) -> int:
             f"--method: {args.system} names no method ([method] name = ...); give --method"
         )
     _check_time_base(spec.system, method, args.system)
-    est = spec.make_estimator(method)
+    est = spec.make_estimator(method, **parse_options(args.option, [method]).get(method, {}))
     if spec.system.is_continuous and log.t is None:
         raise IvobsError(
             f"{args.log}: the system is continuous-time (dt = 0): the log needs a time column t"
