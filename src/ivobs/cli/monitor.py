@@ -32,7 +32,6 @@ import numpy as np
 from ..errors import IvobsError
 from ..io.fingerprint import canonical_json
 from ..io.steps import StepClock
-from ..model import LinearSystem
 from . import add_trust_option
 
 FAULT_COLUMNS = ("fault_start", "fault_duration", "fault_outputs")
@@ -220,12 +219,6 @@ class _Session:
         if method is None:
             raise IvobsError(
                 f"--method: {args.system} names no method ([method] name = ...); give --method"
-            )
-        if not isinstance(self.spec.system, LinearSystem):
-            raise IvobsError(
-                f"{args.system}: the monitor's predicted bands need a linear model; for a "
-                "nonlinear system use 'ivobs run --system FILE --log LOG' (its inconsistent "
-                "steps are the alarms)"
             )
         self.state_path = None
         if args.state:  # checked before the first row is printed

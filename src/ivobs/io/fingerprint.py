@@ -80,8 +80,16 @@ def digest(*values: Any) -> str:
 
 
 def model_fingerprint(sys: Any, x0: Any, settings: dict[str, Any]) -> dict[str, str]:
-    """The fingerprint of a linear model ``sys``, its prior box ``x0`` and a monitor's
-    ``settings``: one digest per part of :data:`PARTS`."""
+    """The fingerprint of a model ``sys``, its prior box ``x0`` and a monitor's ``settings``:
+    one digest per part of :data:`PARTS` (a nonlinear model: its specification for the
+    matrices' part, its unknowns' box for the bounds')."""
+    if hasattr(sys, "spec") and not hasattr(sys, "interval_matrices"):  # NonlinearSystem
+        return {
+            "matrices": digest(canonical_json(sys.spec()), sys.dt),
+            "bounds": digest(sys.w_box),
+            "prior": digest(x0),
+            "settings": digest(settings),
+        }
     matrices = [getattr(sys, m) for m in ("A", "B", "C", "D", "E", "F")]
     return {
         "matrices": digest(matrices, sys.dt, sys.interval_matrices()),

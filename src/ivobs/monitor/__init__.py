@@ -4,7 +4,8 @@ At step ``k`` the :class:`Monitor` predicts, *from the data before k only*, a bo
 contains ``x[k]``:
 
 * the model's one-step prediction from the previous box ([Efimov2013, Lemma 1],
-  [Dinh2024, Lemma 1], :func:`ivobs.image_bounds`)::
+  [Dinh2024, Lemma 1], :func:`ivobs.image_bounds`; interval matrices and nonlinear models by
+  their inclusions, :mod:`ivobs.monitor.bands`)::
 
       x[k] ∈ A_{k-1} [X_{k-1}] + B_{k-1} u[k-1] + E_{k-1} [d[k-1]]
 

@@ -11,10 +11,11 @@ from .._validate import as_float_array, as_signal
 from ..errors import IvobsError
 from ..estimators import Estimator, make_estimator
 from ..io.systemwrite import equal_systems
-from ..model import LinearSystem
+from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
-from ..sets import Box, image_bounds, neg, pos
+from ..sets import Box
 from ._codec import _vector
+from .bands import bands_for
 from .latch import Latch
 from .offline import check_record, refuse_uncertain
 from .persist import monitor_state, restore_monitor
@@ -28,7 +29,9 @@ class Monitor:
 
     Parameters
     ----------
-    sys : the model.
+    sys : the model: a :class:`~ivobs.LinearSystem` (exactly known or with interval matrices)
+        or a discrete-time :class:`~ivobs.NonlinearSystem` (the sampled model of a
+        continuous-time one); :mod:`ivobs.monitor.bands` gives its prediction and band.
     method : a method name (``ivobs.methods()``) or an :class:`~ivobs.Estimator` already built
         for ``sys``.
     x0 : prior box on ``x[0]`` (passed to the method, and the first prediction).
@@ -55,7 +58,7 @@ class Monitor:
 
     def __init__(
         self,
-        sys: LinearSystem,
+        sys: LinearSystem | NonlinearSystem,
         method: str | Estimator = "reachability",
         x0: Box | None = None,
         *,
@@ -64,9 +67,16 @@ class Monitor:
         clear_after: int = 10,
         **options: Any,
     ):
-        if not isinstance(sys, LinearSystem):
-            raise IvobsError(f"sys: expected an ivobs.LinearSystem, got {type(sys).__name__}")
-        refuse_uncertain(sys)
+        if not isinstance(sys, (LinearSystem, NonlinearSystem)):
+            raise IvobsError(
+                "sys: expected an ivobs.LinearSystem or ivobs.NonlinearSystem, got "
+                f"{type(sys).__name__}"
+            )
+        if isinstance(sys, NonlinearSystem) and sys.is_continuous:
+            raise IvobsError(
+                "sys: a continuous-time NonlinearSystem (dt=0): monitor its sampled model, "
+                "sys.discretize(Ts) (docs/continuous.md)"
+            )
         if isinstance(method, Estimator):
             if options:
                 raise IvobsError(
@@ -92,8 +102,7 @@ class Monitor:
         if isinstance(clear_after, bool) or not isinstance(clear_after, int) or clear_after < 1:
             raise IvobsError(f"clear_after: expected an integer >= 1 (steps), got {clear_after!r}")
         self.latch = Latch(clear_after)
-        self._split: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        self._dimg: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._bands = bands_for(sys)
         # The estimator's inconsistency reports (in check(), through run()) become alarms, not
         # warnings.
         est.on_inconsistent = "ignore"
@@ -324,6 +333,12 @@ class Monitor:
         steps, a gap in its step column a run of missing samples (:mod:`ivobs.io.steps`), as for
         ``ivobs run`` and ``ivobs monitor`` (also for :meth:`run`).
         """
+        if not isinstance(self.sys, LinearSystem):
+            raise IvobsError(
+                "check: the vectorised offline test needs a LinearSystem; for a nonlinear "
+                "model use run() (the same alarms step by step)"
+            )
+        refuse_uncertain(self.sys)
         u, y, tt = self._record(u, y, t)
         res = estimate
         if res is None:
@@ -361,44 +376,13 @@ class Monitor:
         return y
 
     def _predict(self, k: int, prev: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray] | None:
-        """``A[X_{k-1}] + B u[k-1] + E[d[k-1]]`` ([Efimov2013, Lemma 1]), or the prior box at
-        ``k = 0``."""
+        """The model's one-step prediction of ``x[k]`` from the box of ``x[k-1]``
+        (:mod:`ivobs.monitor.bands`), or the prior box at ``k = 0``."""
         if k == 0:
             return None if self.x0 is None else (self.x0.lo.copy(), self.x0.hi.copy())
-        if prev is None or self.sys.is_continuous:
+        if prev is None:
             return None
-        p = prev
-        lo, hi = self._image("A", k - 1, p["lo"], p["hi"])
-        e_lo, e_hi = self._disturbance_image("E", k - 1, p["y"])
-        bu = self.sys.B_at(k - 1) @ p["u"]
-        return lo + bu + e_lo, hi + bu + e_hi
-
-    def _image(
-        self, name: str, k: Any, lo: np.ndarray, hi: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """[Efimov2013, Lemma 1] for ``M = A`` or ``C`` at step ``k`` (``M⁺``, ``M⁻`` cached
-        when constant)."""
-        if name in self._split:
-            Mp, Mn = self._split[name]
-        else:
-            M = self.sys.A_at(k) if name == "A" else self.sys.C_at(k)
-            Mp, Mn = pos(M), neg(M)
-            if not self.sys.is_time_varying:
-                self._split[name] = (Mp, Mn)
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-            return image_bounds(Mp - Mn, lo, hi)
-        return Mp @ lo - Mn @ hi, Mp @ hi - Mn @ lo
-
-    def _disturbance_image(self, name: str, k: Any, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``E[d[k]]`` or ``F[d[k]]`` (cached for constant matrices and bounds)."""
-        if name in self._dimg:
-            return self._dimg[name]
-        M = self.sys.E_at(k) if name == "E" else self.sys.F_at(k)
-        d = self.sys.d_at(k, y)
-        out = image_bounds(M, d.lo, d.hi)
-        if not self.sys.is_time_varying and self.sys.has_constant_bounds:
-            self._dimg[name] = out
-        return out
+        return self._bands.predict(k, prev)
 
     def _probe(
         self, st: Any, u: np.ndarray, t: float | None
@@ -438,15 +422,13 @@ class Monitor:
         u: np.ndarray,
         y: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``C[P_k] + D u[k] + F[d[k]]``, widened by the rounding margin."""
+        """The output band of ``P_k`` (:mod:`ivobs.monitor.bands`), widened by the rounding
+        margin."""
         ny = self.sys.ny
         if pred is None:
             return np.full(ny, -np.inf), np.full(ny, np.inf)
         key = t if self.sys.is_continuous else k
-        lo, hi = self._image("C", key, pred[0], pred[1])
-        f_lo, f_hi = self._disturbance_image("F", k, y)
-        du = self.sys.D_at(key) @ u
-        lo, hi = lo + du + f_lo, hi + du + f_hi
+        lo, hi = self._bands.band(k, key, pred, u, y)
         return lo - self.margin * (1.0 + np.abs(lo)), hi + self.margin * (1.0 + np.abs(hi))
 
     # -- persistence ---------------------------------------------------------------------

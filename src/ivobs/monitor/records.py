@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model import LinearSystem
+from ..model.protocol import SystemModel
 from ..sets import Box
 
 __all__ = ["Fault", "MonitorRecord", "MonitorStep", "output_names", "stack_steps"]
@@ -110,7 +110,7 @@ class MonitorRecord:
         return int(idx[0]) if idx.size else None
 
 
-def stack_steps(steps: list[MonitorStep], sys: LinearSystem) -> MonitorRecord:
+def stack_steps(steps: list[MonitorStep], sys: SystemModel) -> MonitorRecord:
     T = len(steps)
     faults: list[Fault] = []
     for s in steps:
