@@ -494,6 +494,7 @@ SLOW = (
     "tests/test_uncertain.py::test_missing_samples_and_batches[strip]",
     "tests/test_uncertain.py::test_missing_samples_and_batches[zonotope]",
     "tests/test_uncertain.py::test_servo_scenario_vertex_and_paper",
+    "tests/test_uncertain.py::test_the_monitor_takes_uncertain_systems_online_only",
     "tests/test_uncertain.py::test_widths_shrink_to_exact[reachability]",
     "tests/test_uncertain.py::test_widths_shrink_to_exact[strip]",
     "tests/test_uncertain.py::test_widths_shrink_to_exact[zonotope]",
