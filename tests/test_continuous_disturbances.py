@@ -115,6 +115,21 @@ def test_more_pieces_tighten() -> None:
     assert widths == sorted(widths, reverse=True) and widths[-1] < 0.7 * widths[0], widths
 
 
+def assert_in_model_set(sd: ivobs.LinearSystem, target: np.ndarray) -> None:
+    """``E_d ξ = target`` (within the simulator's rounding) for some ``ξ`` in the sampled
+    model's box: a feasibility LP over its disturbances."""
+    Ed = np.asarray(sd.E)
+    tol = 1e-11 * (1.0 + np.abs(target))
+    res = linprog(
+        np.zeros(Ed.shape[1]),
+        A_ub=np.vstack([Ed, -Ed]),
+        b_ub=np.concatenate([target + tol, -target + tol]),
+        bounds=list(zip(sd.d.lo, sd.d.hi)),
+        method="highs",
+    )
+    assert res.status == 0, res.message
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_one_period_lies_in_the_model_zonotope(seed: int) -> None:
     """For random plants and disturbances switching 64 times in a period, ``x(Ts) −
@@ -137,18 +152,7 @@ def test_one_period_lies_in_the_model_zonotope(seed: int) -> None:
         for _ in range(pieces):
             d = np.where(rng.random(m) < 0.5, lo, hi) if rng.random() < 0.8 else rng.uniform(lo, hi)
             x = Ph @ x + G @ d
-        target = x - sd.A @ x0
-        Ed = np.asarray(sd.E)
-        # E_d ξ = target within the simulator's rounding, ξ in the model's box
-        tol = 1e-11 * (1.0 + np.abs(target))
-        res = linprog(
-            np.zeros(Ed.shape[1]),
-            A_ub=np.vstack([Ed, -Ed]),
-            b_ub=np.concatenate([target + tol, -target + tol]),
-            bounds=list(zip(sd.d.lo, sd.d.hi)),
-            method="highs",
-        )
-        assert res.status == 0, (seed, res.message)
+        assert_in_model_set(sd, x - sd.A @ x0)
 
 
 def test_first_moments_lie_in_the_model_zonotope() -> None:
@@ -167,22 +171,12 @@ def test_first_moments_lie_in_the_model_zonotope() -> None:
     M = np.zeros((5, 5))  # A is singular: ∫ e^{As} ds E from the block exponential
     M[:4, :4], M[:4, 4:] = A, E
     G = expm(M * 0.1 / pieces)[:4, 4:]
-    Ed = np.asarray(sd.E)
     for _ in range(6):
         x0 = rng.normal(size=4)
         x = x0.copy()
         for _ in range(pieces):
             x = Ph @ x + G[:, 0] * rng.choice([-0.5, 0.5])
-        target = x - sd.A @ x0
-        tol = 1e-11 * (1.0 + np.abs(target))
-        res = linprog(
-            np.zeros(Ed.shape[1]),
-            A_ub=np.vstack([Ed, -Ed]),
-            b_ub=np.concatenate([target + tol, -target + tol]),
-            bounds=list(zip(sd.d.lo, sd.d.hi)),
-            method="highs",
-        )
-        assert res.status == 0, res.message
+        assert_in_model_set(sd, x - sd.A @ x0)
 
 
 def test_options_and_refusals() -> None:

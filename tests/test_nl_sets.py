@@ -345,19 +345,10 @@ def test_the_cstr_with_its_physical_rate_constant():
     factor): the set methods handle the scale inside and stay within 2× of nl-interval's widths
     (measured: 1.00×), and contain the trajectory."""
     sc = ivobs.scenarios.get("cstr", horizon=80)
-    h, rate = 0.02, "k0*exp(-8750/T)*C"
-    sys = ivobs.NonlinearSystem(
-        f=[
-            f"C + {h}*((1 - C) - {rate}) + w1",
-            f"T + {h}*((350 - T) + 209.2*{rate} + 2.092*(Tc - T)) + w2",
-        ],
-        h=["T + v1"],
-        states=["C", "T"],
-        inputs=["Tc"],
-        params={"k0": (7.056e10, 7.344e10)},
-        d={"w1": (-1e-4, 1e-4), "w2": (-0.01, 0.01), "v1": (-0.1, 0.1)},
-        dt=h,
-    )
+    spec = sc.system.spec()  # the scenario's model with k0 = 7.2e10 kr as the parameter
+    spec["f"] = [f.replace("kr", "(k0/72000000000)") for f in spec["f"]]
+    spec["params"] = {"k0": (7.056e10, 7.344e10)}
+    sys = ivobs.NonlinearSystem(**spec)
     tr = sc.simulate("vertex", seed=0)
     ref = ivobs.make_estimator("nl-interval", sys, x0=sc.x0).run(tr.u, tr.y).mean_width(20)
     for method in ("nl-zonotope", "nl-constrained-zonotope"):
