@@ -135,7 +135,7 @@ def sample(
         (Ad, RA), (BE, RBE) = expm_integral(A, np.hstack([B, E]), Ts)
         nu = B.shape[1]
         A_m, B_m = _matrices(Ad, RA, BE[:, :nu], RBE[:, :nu], interval_matrices)
-        info = {"Ts": Ts, "disturbances": disturbances, "pieces": 1}
+        info = {"Ts": Ts, "disturbances": disturbances, "pieces": 1, "moments": False}
         return Sampled(A_m, B_m, BE[:, nu:] if nd else None, F if nd else None, d, None, info)
     if not isinstance(d, Box):
         raise IvobsError(

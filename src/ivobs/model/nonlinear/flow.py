@@ -427,14 +427,8 @@ class FlowSystem(NonlinearSystem):
         integral = up(upper(integral, SPREAD_PIECES) * step)
         zz = np.array(z)
         a = upper(peak @ zz + integral @ delta, 2 * nx + 2)
-        K = upper(integral @ R, nx + 1)
-        try:  # Y with a + K Y <= Y and K Y < Y: then sup |y| <= Y over the substep
-            Y = np.linalg.solve(np.eye(nx) - K, a)
-        except np.linalg.LinAlgError:
-            return None
-        Y = np.maximum(Y, 0.0) * (1.0 + 1e-9) + 1e-300
-        KY = upper(K @ Y, nx + 1)
-        if not (np.all(np.isfinite(Y)) and np.all(KY < Y) and np.all(up(a + KY) <= Y)):
+        Y = _sup_bound(a, upper(integral @ R, nx + 1))  # sup |y| over the substep
+        if Y is None:
             return None
         out = upper(up(np.abs(E1) + RE1) @ zz + integral @ up(R @ Y + delta), 2 * nx + 3)
         # the componentwise comparison system z' = M z + δ (M: the Metzler bound of [J]) bounds
@@ -500,14 +494,8 @@ class FlowSystem(NonlinearSystem):
         deviation = up(upper(deviation, 2 * MEAN_PIECES) * step)
         r1 = np.array([r[j] for j in self._varying])
         a = upper(moved @ r2 + integral @ upper(RG @ r2, len(cols) + 1), 2 * nx + len(cols) + 4)
-        K = upper(integral @ R, nx + 1)
-        try:  # Y with a + K Y <= Y and K Y < Y: sup |x − x̄| <= Y over the period
-            Y = np.linalg.solve(np.eye(nx) - K, a)
-        except np.linalg.LinAlgError:
-            Y = np.full(nx, np.nan)
-        Y = np.maximum(Y, 0.0) * (1.0 + 1e-9) + 1e-300
-        KY = upper(K @ Y, nx + 1)
-        if not (np.all(np.isfinite(Y)) and np.all(KY < Y) and np.all(up(a + KY) <= Y)):
+        Y = _sup_bound(a, upper(integral @ R, nx + 1))  # sup |x − x̄| over the period
+        if Y is None:
             raise IvobsError(
                 "discretize: the effect of the varying signals over one period could not be "
                 "bounded (the linearised dynamics grow too fast over the period); use a smaller "
@@ -668,6 +656,24 @@ class FlowSystem(NonlinearSystem):
             f"FlowSystem(nx={self.nx}, nu={self.nu}, ny={self.ny}, Ts={self.dt:g}, "
             f"order={self.order}, substeps={self.substeps})"
         )
+
+
+def _sup_bound(a: np.ndarray, K: np.ndarray) -> np.ndarray | None:
+    """A ``Y > 0`` with ``a + K Y <= Y`` and ``K Y < Y`` (``a, K >= 0``), checked with rounding
+    upward, or None. Then ``ρ(K) < 1`` and every ``W >= 0`` with ``W <= a + K W`` is below
+    ``Y`` (module docstring, "Signals that vary"): ``Y`` bounds the deviation over the interval."""
+    from ...sets.rounding import up, upper
+
+    n = a.shape[0]
+    try:
+        Y = np.linalg.solve(np.eye(n) - K, a)
+    except np.linalg.LinAlgError:
+        return None
+    Y = np.maximum(Y, 0.0) * (1.0 + 1e-9) + 1e-300
+    KY = upper(K @ Y, n + 1)
+    if not (np.all(np.isfinite(Y)) and np.all(KY < Y) and np.all(up(a + KY) <= Y)):
+        return None
+    return Y
 
 
 def _key(*vectors: Any) -> tuple[float, ...]:
