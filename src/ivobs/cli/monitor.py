@@ -36,7 +36,18 @@ from . import add_trust_option
 
 FAULT_COLUMNS = ("fault_start", "fault_duration", "fault_outputs")
 """After the existing columns: the open fault's first step, its duration so far (steps, this one
-included; 0 without alarm) and the outputs it found inconsistent (``y1;y3``)."""
+included; 0 without alarm) and the outputs it found inconsistent (``y1;y3``); then
+``bias_lower_i``, ``bias_upper_i`` per output: the estimated bias of a faulty output (empty
+elsewhere, :mod:`ivobs.monitor.bias`)."""
+
+
+def _or_nan(v: np.ndarray | None, n: int) -> np.ndarray:
+    return np.full(n, np.nan) if v is None else v
+
+
+def _bias(v: float) -> str:
+    """A bias bound, empty where none is estimated."""
+    return "" if np.isnan(v) else repr(float(v))
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -375,7 +386,8 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
         cols = [f"lower_{i + 1}" for i in range(sys_.nx)] + [
             f"upper_{i + 1}" for i in range(sys_.nx)
         ]
-        out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS])
+        bias = [f"bias_{b}_{i + 1}" for b in ("lower", "upper") for i in range(sys_.ny)]
+        out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS, *bias])
         sys.stdout.flush()
     fh: TextIO
     try:
@@ -423,6 +435,8 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
                         start,
                         step.fault_duration,
                         output_names(step.outputs),
+                        *map(_bias, _or_nan(step.bias_lower, sys_.ny)),
+                        *map(_bias, _or_nan(step.bias_upper, sys_.ny)),
                     ]
                 )
             sys.stdout.flush()

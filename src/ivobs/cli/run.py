@@ -222,6 +222,7 @@ def _run_system(args: argparse.Namespace) -> int:
         shown += " ..." if alarms.size > 10 else ""
         print(f"ALARMS: {alarms.size} step(s) inconsistent with the model: {shown}")
         print(f"first: step {int(alarms[0]) + k0}: {reasons[int(alarms[0])]}")
+        _print_episodes(spec, est, log, t, k0)
     else:
         print("alarms: none (every measurement is consistent with the model and bounds)")
     _write(
@@ -233,6 +234,27 @@ def _run_system(args: argparse.Namespace) -> int:
         state_names=spec.system.names.state_labels(),
     )
     return 1 if alarms.size else 0
+
+
+def _print_episodes(spec: Any, est: Any, log: Any, t: Any, k0: int) -> None:
+    """The log's fault episodes as the online monitor sees them (the faulty outputs left
+    out of the estimate, the alarm latched, each sensor fault's bias estimated): a persistent
+    fault is one episode, not the few steps where it contradicts the method's estimate."""
+    from ..monitor import Monitor
+
+    record = Monitor(spec.system, est, x0=spec.x0).run(log.u, log.y, t=t)
+    print(f"fault episodes (ivobs monitor, the faulty outputs left out): {len(record.faults)}")
+    for f in record.faults[:10]:
+        end = "open at the end of the log" if f.end is None else f"cleared at step {f.end + k0}"
+        line = f"  from step {f.start + k0}, {f.duration} step(s), {end}: {f.names or '-'}"
+        if f.bias_lower is not None and f.bias_upper is not None:
+            bias = [
+                f"{f'y{i + 1}'} in [{f.bias_lower[i]:.4g}, {f.bias_upper[i]:.4g}]"
+                for i in f.outputs
+                if not np.isnan(f.bias_lower[i])
+            ]
+            line += f"; bias {', '.join(bias)}" if bias else ""
+        print(line)
 
 
 def _estimate(est: Any, u: Any, y: Any, t: Any, args: argparse.Namespace) -> Any:

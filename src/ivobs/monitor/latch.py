@@ -30,14 +30,25 @@ class Latch:
         self.outputs: tuple[int, ...] = ()
         self.clean = 0
 
-    def observe(self, k: int, bad: tuple[int, ...], evidence: bool, held_missing: bool) -> None:
+    def observe(
+        self,
+        k: int,
+        bad: tuple[int, ...],
+        evidence: bool,
+        held_missing: bool,
+        proven: bool = False,
+    ) -> None:
         """Step ``k``: ``bad``, the outputs its data contradict; ``evidence``, whether they
-        contradict the model at all; ``held_missing``, an excluded output is not measured."""
+        contradict the model at all; ``held_missing``, an excluded output is not measured;
+        ``proven``, the data of the episode still prove the fault (its bias estimate excludes
+        0, :mod:`ivobs.monitor.bias`): the step does not count towards clearing."""
         if evidence:
             if self.start is None:
                 self.start, self.outputs = k, bad
             else:
                 self.outputs = tuple(sorted(set(self.outputs) | set(bad)))
+            self.clean = 0
+        elif self.start is not None and proven:
             self.clean = 0
         elif self.start is not None and not held_missing:
             self.clean += 1

@@ -19,7 +19,7 @@ from ..errors import IvobsError
 from ..model import LinearSystem
 from ..result import Estimate
 from ..sets import Box, image_bounds
-from .records import MonitorRecord
+from .records import Fault, MonitorRecord
 
 __all__ = ["check_record", "refuse_uncertain"]
 
@@ -84,7 +84,21 @@ def check_record(
                 f"[{P_lo[k, i]:.6g}, {P_hi[k, i]:.6g}])"
             )
         reasons[int(k)] = "; ".join(why)
-    return MonitorRecord(X_lo.copy(), X_hi.copy(), alarm, reasons, b_lo, b_hi)
+    return MonitorRecord(
+        X_lo.copy(), X_hi.copy(), alarm, reasons, b_lo, b_hi, faults=_episodes(alarm, out)
+    )
+
+
+def _episodes(alarm: np.ndarray, out: np.ndarray) -> list[Fault]:
+    """The runs of consecutive alarmed steps as episodes, with the outputs outside their band
+    (``end``: the first step after the run; None when the run reaches the last step)."""
+    T = alarm.shape[0]
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], alarm.astype(np.int8), [0]])))
+    faults = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        outputs = tuple(int(i) for i in np.flatnonzero(out[a:b].any(axis=0)))
+        faults.append(Fault(int(a), outputs, None if b >= T else int(b), int(b) - 1))
+    return faults
 
 
 def refuse_uncertain(sys: LinearSystem) -> None:

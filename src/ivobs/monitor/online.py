@@ -16,6 +16,7 @@ from ..result import Estimate
 from ..sets import Box
 from ._codec import _vector
 from .bands import bands_for
+from .bias import BiasEstimate
 from .latch import Latch
 from .offline import check_record, refuse_uncertain
 from .persist import monitor_state, restore_monitor
@@ -116,6 +117,7 @@ class Monitor:
         self._trial: tuple[Any, dict[str, Any] | None] | None = None
         self._k = 0
         self._prev: dict[str, Any] | None = None  # box of x[k-1], u[k-1], y[k-1]
+        self._bias: BiasEstimate | None = None  # the open fault's bias, estimated (.bias)
         self.alarms = 0
 
     @property
@@ -181,18 +183,27 @@ class Monitor:
             else:
                 self._trial = (t_new, t_prev)
         evidence = bool(reasons)
+        proven = self._bias_step(k, (pred, (band_lo, band_hi)), u, u_e, y, t, reasons)
         start = self.latch.start
-        self.latch.observe(k, tuple(sorted(bad)), evidence, held_missing)
-        if evidence:
+        self.latch.observe(k, tuple(sorted(bad)), evidence, held_missing, proven)
+        if evidence or proven:
             self._trial = None
         alarm = self.latch.start is not None
+        if alarm and (self._bias is None or self._bias.outputs != self.latch.outputs):
+            # a new episode, or new outputs in it: the bias estimate starts at this step
+            self._begin_bias(k, (pred, (band_lo, band_hi)), None, u, u_e, y, t)
         if alarm and not evidence:
             reasons.append(self.latch.describe())
+            if self._bias is not None:
+                reasons.append(self._bias.describe(self._output_labels))
         elif not alarm and start is not None:
             reasons.append(f"cleared: the fault of {output_names(held)} since step {start}")
             if self._trial is not None:  # verified for clear_after steps: it continues
                 new, prev = self._trial
             self._trial = None
+        if not alarm:
+            self._bias = None
+        b_lo, b_hi = self._bias_bounds()
         self.alarms += alarm
         self._est, self._prev, self._k = new, prev, k + 1
         return MonitorStep(
@@ -207,7 +218,79 @@ class Monitor:
             tuple(sorted(bad)),
             self.latch.start,
             self.latch.outputs if alarm else (),
+            b_lo,
+            b_hi,
         )
+
+    def _bias_step(
+        self,
+        k: int,
+        ref: tuple[Any, tuple[np.ndarray, np.ndarray]],
+        u: np.ndarray,
+        u_e: np.ndarray | None,
+        y: np.ndarray,
+        t: float | None,
+        reasons: list[str],
+    ) -> bool:
+        """Advance the open fault's bias estimate (:mod:`ivobs.monitor.bias`) with all the
+        outputs of step ``k``; True when its interval excludes 0 (the data since its start
+        prove the fault). A bias that no longer fits (the fault ended or jumped) restarts the
+        estimate at this step, from the reference's prediction ``ref`` met with the old
+        estimate's own."""
+        est = self._bias
+        if est is None:
+            return False
+        if est.step(u_e, y, t):
+            return est.excludes_zero
+        reasons.append(
+            f"{output_names(est.outputs)}: the bias estimated since step {est.start} changed "
+            "(the fault is no constant bias): re-estimated"
+        )
+        carry = est.predict(u_e, t) if est.outputs == self.latch.outputs else None
+        self._begin_bias(k, ref, carry, u, u_e, y, t)
+        return self._bias is not None and self._bias.excludes_zero
+
+    def _begin_bias(
+        self,
+        k: int,
+        ref: tuple[Any, tuple[np.ndarray, np.ndarray]],
+        carry: tuple[np.ndarray, np.ndarray] | None,
+        u: np.ndarray,
+        u_e: np.ndarray | None,
+        y: np.ndarray,
+        t: float | None,
+    ) -> None:
+        """A bias estimate of the held outputs from step ``k`` (:meth:`BiasEstimate.begin`):
+        from the reference's prediction, met with ``carry`` when given; after a drift that
+        prediction contradicts the data, and the reference's alone is used."""
+        pred, band = ref
+        starts = [(pred, band)]
+        if carry is not None and pred is not None:
+            met = self._meet(carry, pred, [], "")  # pred when disjoint
+            starts.insert(0, (met, self._band(k, t, met, u, y)))
+        for p, b in starts:
+            self._bias = BiasEstimate.begin(self.sys, self.latch.outputs, k, p, b, y)
+            if self._bias is None or self._bias.step(u_e, y, t):
+                return
+            self._bias = None  # not even one step: a fault that is no constant bias
+
+    def _bias_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bias of each output as estimated at this step (NaN where none is)."""
+        lo, hi = np.full(self.sys.ny, np.nan), np.full(self.sys.ny, np.nan)
+        if self._bias is not None:
+            idx = list(self._bias.outputs)
+            lo[idx], hi[idx] = self._bias.lower, self._bias.upper
+        return lo, hi
+
+    @property
+    def bias(self) -> BiasEstimate | None:
+        """The open fault's bias estimate (None without an open fault, or where the model
+        cannot be augmented)."""
+        return self._bias
+
+    @property
+    def _output_labels(self) -> list[str]:
+        return [f"y{i + 1}" for i in range(self.sys.ny)]
 
     def _prediction(
         self,
@@ -328,6 +411,12 @@ class Monitor:
         ``tight=True``, with the estimator's prediction), so ``check`` may see fewer alarms than
         :meth:`update`; every alarm it raises carries the same guarantee. Leaves the online
         state alone.
+
+        The estimator's run uses every sample, the faulty ones too, so a fault shows here only
+        where it contradicts that estimate (often its onset alone); the record's ``faults`` are
+        the runs of consecutive alarmed steps, without latch or bias estimate. :meth:`run` is
+        the monitor proper: the faulty output left out, latched, its bias estimated
+        (``ivobs run`` reports a log's faults that way).
 
         ``u`` may be a :class:`~ivobs.io.Log` (from :func:`~ivobs.io.read_log`): its rows are
         steps, a gap in its step column a run of missing samples (:mod:`ivobs.io.steps`), as for

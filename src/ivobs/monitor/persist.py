@@ -2,9 +2,10 @@
 :meth:`~ivobs.monitor.Monitor.restore`): JSON-serialisable, with the fingerprint of what it
 belongs to.
 
-A state holds the estimator's saved state, the box of the previous step, the counters and the
-open fault. It continues only the monitor that wrote it: the estimator's state carries the
-fingerprint of its design (method and gains), and the monitor's the fingerprint of the model
+A state holds the estimator's saved state, the box of the previous step, the counters, the
+open fault and its bias estimate (:mod:`ivobs.monitor.bias`). It continues only the monitor
+that wrote it: the estimator's state carries the fingerprint of its design (method and gains),
+and the monitor's the fingerprint of the model
 (matrices, disturbance bounds, prior box) and of its settings (:mod:`ivobs.io.fingerprint`).
 Two plants with the same gains but other bounds or another prior give other boxes: a state of
 one is refused by the other, naming what differs.
@@ -19,6 +20,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..io.fingerprint import PARTS, model_fingerprint
 from ._codec import _decode, _encode_prev
+from .bias import BiasEstimate
 
 if TYPE_CHECKING:
     from .online import Monitor
@@ -57,6 +59,7 @@ def monitor_state(mon: Monitor) -> dict[str, Any]:
             "prev": _encode_prev(trial[1]),
         },
         "estimator": mon.estimator.save_state(mon._est),
+        "bias": None if mon._bias is None else mon._bias.save(),
     }
 
 
@@ -136,5 +139,8 @@ def restore_monitor(mon: Monitor, state: Any) -> None:
     mon.latch.restore(state.get("fault"), mon.sys.ny, k)
     if trial is not None and (mon.latch.start is None or trial[0].k != k):
         raise IvobsError("state: trial: a trial estimate needs an open fault at the same step")
+    bias = BiasEstimate.restore(mon.sys, state.get("bias"), k)
+    if bias is not None and (mon.latch.start is None or bias.state.k != k - bias.start):
+        raise IvobsError("state: bias: a bias estimate needs an open fault, up to the same step")
     mon._est, mon._prev, mon._k, mon.alarms = est, prev, k, alarms
-    mon._trial = trial
+    mon._trial, mon._bias = trial, bias

@@ -3,6 +3,7 @@ record, and the :class:`Fault` episodes they report."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,13 +27,17 @@ class Fault:
     ``outputs``: the outputs found inconsistent during the episode (0-based; ``y1`` is 0),
     excluded from the estimate until it clears (empty when the contradiction could not be
     traced to outputs: the estimate disjoint from the model's prediction); ``last``: the last
-    step of the record the episode was seen in.
+    step of the record the episode was seen in; ``bias_lower``/``bias_upper``: the bias of
+    each output (NaN for the others) as estimated at the episode's last alarmed step
+    (:mod:`ivobs.monitor.bias`; None where the model cannot be augmented).
     """
 
     start: int
     outputs: tuple[int, ...]
     end: int | None
     last: int
+    bias_lower: np.ndarray | None = None
+    bias_upper: np.ndarray | None = None
 
     @property
     def duration(self) -> int:
@@ -56,7 +61,9 @@ class MonitorStep:
     why (empty without alarm); ``band_lower``/``band_upper``: the output band the data before
     ``k`` predict for ``y[k]`` (infinite where nothing is known yet); ``evidence``: the data of
     this very step contradict the model; ``inconsistent``: the outputs that do so at this step;
-    ``fault_start``/``outputs``: the open episode's first step and inconsistent outputs.
+    ``fault_start``/``outputs``: the open episode's first step and inconsistent outputs;
+    ``bias_lower``/``bias_upper``: the episode's estimate of a constant bias on each faulty
+    output (NaN elsewhere and without an estimate; :mod:`ivobs.monitor.bias`).
     """
 
     step: int
@@ -70,6 +77,8 @@ class MonitorStep:
     inconsistent: tuple[int, ...] = ()
     fault_start: int | None = None
     outputs: tuple[int, ...] = ()
+    bias_lower: np.ndarray | None = None
+    bias_upper: np.ndarray | None = None
 
     @property
     def box(self) -> Box:
@@ -87,7 +96,8 @@ class MonitorRecord:
 
     ``alarm``: latched alarms; ``evidence``: the steps whose own data contradict the model
     (:meth:`Monitor.check` reports these only: ``alarm`` equals ``evidence`` there);
-    ``faults``: the episodes, in order.
+    ``faults``: the episodes, in order; ``bias_lower``/``bias_upper``: ``(T, ny)``, the
+    estimated bias of each faulty output (NaN elsewhere; None from :meth:`Monitor.check`).
     """
 
     lower: np.ndarray
@@ -98,6 +108,8 @@ class MonitorRecord:
     band_upper: np.ndarray
     evidence: np.ndarray | None = None
     faults: list[Fault] = field(default_factory=list)
+    bias_lower: np.ndarray | None = None
+    bias_upper: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.evidence is None:
@@ -113,14 +125,17 @@ class MonitorRecord:
 def stack_steps(steps: list[MonitorStep], sys: SystemModel) -> MonitorRecord:
     T = len(steps)
     faults: list[Fault] = []
+    nan = np.full(sys.ny, np.nan)
     for s in steps:
         if s.alarm and s.fault_start is not None:
+            f = Fault(s.fault_start, s.outputs, None, s.step, s.bias_lower, s.bias_upper)
             if faults and faults[-1].start == s.fault_start and faults[-1].end is None:
-                faults[-1] = Fault(s.fault_start, s.outputs, None, s.step)
+                faults[-1] = f
             else:
-                faults.append(Fault(s.fault_start, s.outputs, None, s.step))
+                faults.append(f)
         elif faults and faults[-1].end is None:
-            faults[-1] = Fault(faults[-1].start, faults[-1].outputs, s.step, s.step)
+            faults[-1] = dataclasses.replace(faults[-1], end=s.step, last=s.step)
+    bias = [(nan, nan) if s.bias_lower is None else (s.bias_lower, s.bias_upper) for s in steps]
     return MonitorRecord(
         lower=np.array([s.lower for s in steps]).reshape(T, sys.nx),
         upper=np.array([s.upper for s in steps]).reshape(T, sys.nx),
@@ -130,4 +145,6 @@ def stack_steps(steps: list[MonitorStep], sys: SystemModel) -> MonitorRecord:
         band_upper=np.array([s.band_upper for s in steps]).reshape(T, sys.ny),
         evidence=np.array([s.evidence for s in steps], dtype=bool),
         faults=faults,
+        bias_lower=np.array([b[0] for b in bias]).reshape(T, sys.ny),
+        bias_upper=np.array([b[1] for b in bias]).reshape(T, sys.ny),
     )
