@@ -9,7 +9,7 @@ from typing import Any
 
 from ..errors import IvobsError
 
-__all__ = ["add_plant_options", "plant_inputs", "plant_scenario"]
+__all__ = ["add_plant_options", "add_truth_option", "plant_inputs", "plant_scenario"]
 
 
 def add_plant_options(p: argparse.ArgumentParser, *, log: bool = True) -> None:
@@ -42,10 +42,25 @@ def add_plant_options(p: argparse.ArgumentParser, *, log: bool = True) -> None:
     )
 
 
+def add_truth_option(p: argparse.ArgumentParser) -> None:
+    """``--truth FILE``: the true state of the logged record."""
+    p.add_argument(
+        "--truth",
+        metavar="FILE",
+        help="--log: the true state of the logged record (CSV: an optional step k or time t "
+        "column, one column per state named by the system's states or x1..xn, one row per "
+        "step of the log); containment and the figure's truth line come from it",
+    )
+
+
 def plant_inputs(args: argparse.Namespace, spec: Any = None) -> dict[str, Any]:
-    """The files a command on ``--system`` reads, by option: the system file, the log and the
-    bounds file the system file names (``spec``: the loaded system file)."""
-    inputs = {"--system": args.system, "--log": getattr(args, "log", None)}
+    """The files a command on ``--system`` reads, by option: the system file, the log, its true
+    state and the bounds file the system file names (``spec``: the loaded system file)."""
+    inputs = {
+        "--system": args.system,
+        "--log": getattr(args, "log", None),
+        "--truth": getattr(args, "truth", None),
+    }
     for i, path in enumerate(() if spec is None else spec.files):
         inputs["--system's [disturbance] csv" + (f" {i + 1}" if i else "")] = path
     return inputs
@@ -69,4 +84,5 @@ def plant_scenario(args: argparse.Namespace, spec: Any = None) -> Any:
         discretize=args.discretize,
         held_disturbances=getattr(args, "held_disturbances", False),
         allow_code=getattr(args, "allow_code", False),
+        truth=getattr(args, "truth", None),
     )

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Any
 
 from ..errors import IvobsError
+from ..report.baseline import BASELINES
 from ..scenarios import DISTURBANCES
 from . import (
     add_option_argument,
@@ -16,7 +16,7 @@ from . import (
     parse_options,
     parse_states,
 )
-from ._plant import add_plant_options, plant_inputs, plant_scenario
+from ._plant import add_plant_options, add_truth_option, plant_inputs, plant_scenario
 
 #: Methods whose cost grows fast with the state dimension (LPs over the horizon, generators):
 #: left out of the default set for systems with more than ``LARGE_NX`` states (on heat-1d,
@@ -36,6 +36,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("scenario", nargs="?", help="scenario name (see `ivobs scenarios`)")
     add_plant_options(p)
+    add_truth_option(p)
     add_trust_option(p)
     p.add_argument(
         "--methods",
@@ -48,6 +49,13 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         default=None,
         help=f"{' | '.join(DISTURBANCES)} (recorded: cora-* scenarios and --log; default: "
         "paper, or vertex for --system --horizon)",
+    )
+    p.add_argument(
+        "--baseline",
+        choices=list(BASELINES),
+        help="add a row that is NOT guaranteed, to see what the guarantee costs: kalman, a "
+        "Kalman filter's mean ± 3σ (bounded signals taken as uniform, variance r²/3; linear "
+        "models with exact matrices); its misses of the true state are counted, not failures",
     )
     add_option_argument(p, per_method=True)
     p.add_argument("--seed", type=int, default=0, help="random seed for vertex/uniform (>= 0)")
@@ -97,6 +105,11 @@ def _scenario(args: argparse.Namespace) -> Any:
         check_distinct(_outputs(args), plant_inputs(args, spec))
         return plant_scenario(args, spec)
     check_distinct(_outputs(args))
+    if args.truth:
+        raise IvobsError(
+            "--truth: the true state of a measurement log; give --system FILE --log FILE (a "
+            "scenario's simulated record has its own true state)"
+        )
     if args.log or args.horizon is not None or args.discretize is not None:
         raise IvobsError("--log/--horizon/--discretize: need --system FILE")
     if args.held_disturbances:
@@ -172,6 +185,7 @@ def main(args: argparse.Namespace) -> int:
         seed=args.seed,
         burn_in=args.burn_in,
         options=options,
+        baselines=[args.baseline] if args.baseline else [],
     )
     burn = sc.horizon // 10 if args.burn_in is None else args.burn_in
     print(f"# {sc.name}: {sc.source}")
@@ -186,7 +200,13 @@ def main(args: argparse.Namespace) -> int:
     print(markdown_table(results, sc.state_names, reference=ref))
     print_reasons(results)
     if args.json:
-        _write_json(args.json, sc, results, traj.has_truth)
+        from ._summary import summary_document, write_json
+
+        spec = getattr(args, "_spec", None)
+        doc = summary_document(sc.name, sc.source, results, horizon=sc.horizon, burn_in=burn,
+                               state_names=sc.state_names,
+                               first_step=0 if spec is None else spec.x0_step)  # fmt: skip
+        write_json(args.json, doc)
     if args.html:
         _write_html(args.html, sc, traj, results)
     if plot_path is not None:
@@ -196,7 +216,7 @@ def main(args: argparse.Namespace) -> int:
         from ..report.compare_figure import comparison_figure
         from ..report.plot import save_figure
 
-        good = {r.method: r.estimate for r in results if r.estimate is not None}
+        good = _estimates(results)
         if not good:
             raise IvobsError("--plot: no method gave an estimate; nothing to plot")
         truth = traj.x if traj.has_truth else None
@@ -209,7 +229,16 @@ def main(args: argparse.Namespace) -> int:
             title=f"{sc.name}",
         )
         print(f"\nfigure: {save_figure(fig, plot_path)}")
-    return 1 if any(r.ok and r.contains is False for r in results) else 0
+    return 1 if any(r.ok and r.guaranteed and r.contains is False for r in results) else 0
+
+
+def _estimates(results: Any) -> dict[str, Any]:
+    """The estimates to draw, by label: a baseline's says it is not guaranteed."""
+    return {
+        r.method if r.guaranteed else f"{r.method} (NOT guaranteed)": r.estimate
+        for r in results
+        if r.estimate is not None
+    }
 
 
 def _options(args: argparse.Namespace, names: list[str]) -> dict[str, dict[str, Any]]:
@@ -228,39 +257,10 @@ def _options(args: argparse.Namespace, names: list[str]) -> dict[str, dict[str, 
     return out
 
 
-def _write_json(path: str, sc: Any, results: Any, has_truth: bool) -> None:
-    """The comparison as JSON: per method its widths, containment, timings or its error."""
-    import json
-
-    rows = []
-    for r in results:
-        est = r.estimate
-        rows.append(
-            {
-                "method": r.method,
-                "ok": bool(r.ok),
-                "error": r.error or None,
-                "mean_width": None if r.mean_width is None else [_num(w) for w in r.mean_width],
-                "contains_truth": None if not has_truth or r.contains is None else bool(r.contains),
-                "design_time_s": _num(r.design_time),
-                "run_time_s": _num(r.run_time),
-                "valid_from": None if est is None else int(est.valid_from),
-            }
-        )
-    doc = {"scenario": sc.name, "source": sc.source, "horizon": sc.horizon, "methods": rows}
-    text = json.dumps(doc, indent=2, allow_nan=False)
-    if path == "-":
-        print(text)
-        return
-    from ..io.atomic import write_text_atomic
-
-    write_text_atomic(path, text + "\n")
-
-
 def _write_html(path: str, sc: Any, traj: Any, results: Any) -> None:
     from ..report.html import html_report, results_table
 
-    good = {r.method: r.estimate for r in results if r.estimate is not None}
+    good = _estimates(results)
     if not good:
         raise IvobsError("--html: no method gave an estimate; nothing to show")
     page = html_report(
@@ -274,12 +274,6 @@ def _write_html(path: str, sc: Any, traj: Any, results: Any) -> None:
         notes=[f"{sc.source}; {sc.horizon} steps"],
     )
     print(f"\nreport: {page}")
-
-
-def _num(v: Any) -> float | None:
-    """A finite number, or None (JSON has no NaN or infinity)."""
-    v = float(v)
-    return v if math.isfinite(v) else None
 
 
 def print_reasons(results: Any) -> None:

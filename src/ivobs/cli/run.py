@@ -11,7 +11,8 @@ file behind.
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import time
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,7 +20,10 @@ from ..errors import IvobsError
 from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
 from . import add_option_argument, add_trust_option, check_disturbance, check_seed, parse_options
-from ._plant import plant_inputs
+from ._plant import add_truth_option, plant_inputs
+
+if TYPE_CHECKING:
+    from ..report import MethodResult
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -34,6 +38,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "--system", "-s", metavar="FILE", help="system file (TOML) instead of a scenario"
     )
     p.add_argument("--log", "-l", metavar="FILE", help="measurement log (CSV) for --system")
+    add_truth_option(p)
     p.add_argument(
         "--discretize",
         type=float,
@@ -78,6 +83,13 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         help="write a self-contained interactive HTML report (zoomable bands, alarms; needs "
         "plotly: ivobs[html])",
     )
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="also write a summary as JSON, as `ivobs compare --json` does (the method, its "
+        "options, mean widths per state, steps, inconsistent steps, containment or null, "
+        "timings; '-' for standard output)",
+    )
     add_trust_option(p)
     p.add_argument(
         "--progress",
@@ -98,8 +110,11 @@ def main(args: argparse.Namespace) -> int:
                 "--disturbance/--seed: only with a scenario (a log gives the measurements)"
             )
         return _run_system(args)
-    if args.log or args.discretize is not None or args.held_disturbances:
-        raise IvobsError("--log/--discretize: need --system FILE (the model of the logged plant)")
+    if args.log or args.truth or args.discretize is not None or args.held_disturbances:
+        raise IvobsError(
+            "--log/--truth/--discretize: need --system FILE (the model of the logged plant; a "
+            "scenario's simulated record has its own true state)"
+        )
     if not args.scenario:
         raise IvobsError("give a scenario name (see `ivobs scenarios`) or --system FILE --log FILE")
     if not args.method:
@@ -128,17 +143,51 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
     if args.csv:
         args.csv = str(check_output_path(args.csv, "--csv"))
-    if args.html:
-        args.html = str(check_output_path(args.html, "--html"))
+    for opt in ("html", "json"):
+        value = getattr(args, opt)
+        if value and value != "-":
+            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
     if args.plot:
         from ..report.plot import figure_path
 
         args.plot = str(figure_path(args.plot, "--plot"))
-    check_distinct(_outputs(args), {"--system": args.system, "--log": args.log})
+    check_distinct(_outputs(args), plant_inputs(args))
 
 
 def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
-    return {"--csv": args.csv, "--plot": args.plot, "--html": args.html}
+    json = None if args.json == "-" else args.json  # "-": standard output
+    return {"--csv": args.csv, "--plot": args.plot, "--html": args.html, "--json": json}
+
+
+def _measured(
+    est: Any, res: Any, times: tuple[float, float, float], truth: Any, burn: int, opts: Any
+) -> MethodResult:
+    """The run as a row of ``ivobs compare``'s table: ``times`` from :func:`_design_and_run`,
+    containment of ``truth`` (None: unknown), mean widths from step ``burn``."""
+    from ..report import MethodResult
+
+    design, run, cpu = times
+    r = MethodResult(est.name, res, options=opts, design_time=design, run_time=run, cpu_time=cpu)
+    r.measure(truth, burn)
+    return r
+
+
+def _summary(
+    args: argparse.Namespace, r: Any, name: str, source: str, burn: int, **kw: Any
+) -> None:
+    """``--json``: the summary ``ivobs compare --json`` writes, with this one method."""
+    if args.json:
+        from ._summary import summary_document, write_json
+
+        doc = summary_document(name, source, [r], horizon=r.estimate.T, burn_in=burn, **kw)
+        write_json(args.json, doc)
+
+
+def _contained(r: Any) -> str:
+    """The summary's line on containment."""
+    if r.contains is None:
+        return "n/a (no recorded true state)"
+    return "yes" if r.contains else f"NO ({r.misses} of {r.estimate.T} steps)"
 
 
 def _run_scenario(args: argparse.Namespace) -> int:
@@ -148,21 +197,22 @@ def _run_scenario(args: argparse.Namespace) -> int:
     sc = scenarios.get(args.scenario)
     traj = sc.simulate(args.disturbance, args.seed)
     opts = parse_options(args.option, [args.method]).get(args.method, {})
-    est = make_estimator(args.method, sc.system, x0=sc.x0, **opts)
-    res = _estimate(est, traj.u, traj.y, traj.t if sc.system.is_continuous else None, args)
-    has_truth = traj.has_truth
-    ok = bool(np.all(res.contains(traj.x))) if has_truth else True
+    est, res, times = _design_and_run(
+        lambda: make_estimator(args.method, sc.system, x0=sc.x0, **opts),
+        traj.u, traj.y, traj.t if sc.system.is_continuous else None, args,
+    )  # fmt: skip
+    truth = traj.x if traj.has_truth else None
     burn = sc.horizon // 10
-    mw = res.mean_width(max(burn, res.valid_from))
+    r = _measured(est, res, times, truth, burn, opts)
     print(f"{args.method} on {sc.name} ({sc.source})")
     print(f"steps: {res.T}, valid from step {res.valid_from}")
-    print("mean width per state: " + ", ".join(f"{w:.4g}" for w in mw))
-    seen = ("yes" if ok else "NO") if has_truth else "n/a (no recorded true state)"
-    print(f"contains the true state at every step: {seen}")
+    if r.mean_width is not None:
+        print("mean width per state: " + ", ".join(f"{w:.4g}" for w in r.mean_width))
+    print(f"contains the true state at every step: {_contained(r)}")
+    _summary(args, r, sc.name, sc.source, burn, state_names=sc.state_names)
     title = f"{args.method} on {sc.name}"
-    truth = traj.x if has_truth else None
     _write(res, args, truth=truth, t=traj.t, state_names=sc.state_names, title=title)
-    return 0 if ok else 1
+    return 1 if r.contains is False else 0
 
 
 def _run_system(args: argparse.Namespace) -> int:
@@ -182,21 +232,31 @@ def _run_system(args: argparse.Namespace) -> int:
     log = read_log(args.log, spec.system, start=spec.x0_step)
     if args.discretize is not None:
         check_log_times(log.t, args.discretize, args.log)
+    truth = None
+    if args.truth:
+        from ..io.truth import read_truth
+
+        truth = read_truth(args.truth, spec.system, log, what="--truth")
     method = args.method or spec.method
     if method is None:
         raise IvobsError(
             f"--method: {args.system} names no method ([method] name = ...); give --method"
         )
     _check_time_base(spec.system, method, args.system)
-    est = spec.make_estimator(method, **parse_options(args.option, [method]).get(method, {}))
     if spec.system.is_continuous and log.t is None:
         raise IvobsError(
             f"{args.log}: the system is continuous-time (dt = 0): the log needs a time column t"
         )
-    est.on_inconsistent = "ignore"  # reported below, once, as ALARMS (from the Monitor)
+    opts = parse_options(args.option, [method]).get(method, {})
+
+    def design() -> Any:
+        est = spec.make_estimator(method, **opts)
+        est.on_inconsistent = "ignore"  # reported below, once, as ALARMS (from the Monitor)
+        return est
+
     # a discrete-time system counts steps: a time column only labels the rows of the output
     t = log.t if spec.system.is_continuous else None
-    res = _estimate(est, log.u, log.y, t, args)
+    est, res, times = _design_and_run(design, log.u, log.y, t, args)
     if isinstance(spec.system, NonlinearSystem) or spec.system.is_uncertain:
         # the monitor's bands need a linear model with exact matrices: the method's own
         # inconsistency reports are the alarms
@@ -214,8 +274,11 @@ def _run_system(args: argparse.Namespace) -> int:
     skipped = 0 if log.filled is None else int(np.sum(log.filled))
     gaps = f" ({skipped} skipped by the log)" if skipped else ""
     print(f"missing samples: {int(np.sum(log.missing))} step(s) with a missing measurement{gaps}")
-    if res.T > res.valid_from:
-        print("mean width per state: " + ", ".join(f"{w:.4g}" for w in res.mean_width()))
+    r = _measured(est, res, times, truth, 0, opts)
+    if r.mean_width is not None:
+        print("mean width per state: " + ", ".join(f"{w:.4g}" for w in r.mean_width))
+    if truth is not None:
+        print(f"contains the true state at every step: {_contained(r)}")
     if alarms.size:
         k0 = log.start  # rows are steps from the prior's
         shown = ", ".join(str(int(k) + k0) for k in alarms[:10])
@@ -225,15 +288,32 @@ def _run_system(args: argparse.Namespace) -> int:
         _print_episodes(spec, est, log, t, k0)
     else:
         print("alarms: none (every measurement is consistent with the model and bounds)")
+    labels = spec.system.names.state_labels()
+    _summary(args, r, name, f"{args.system} + {args.log}", 0, state_names=labels,
+             first_step=log.start, inconsistent={r.method: alarms})  # fmt: skip
     _write(
         res,
         args,
+        truth=truth,
         t=log.t,
         alarms=alarms,
         title=f"{est.name} on {name}",
-        state_names=spec.system.names.state_labels(),
+        state_names=labels,
     )
-    return 1 if alarms.size else 0
+    return 1 if alarms.size or r.contains is False else 0
+
+
+def _design_and_run(
+    design: Any, u: Any, y: Any, t: Any, args: argparse.Namespace
+) -> tuple[Any, Any, tuple[float, float, float]]:
+    """The estimator ``design()`` and its run, with the design and run times (wall-clock) and
+    their processor time."""
+    c0, t0 = time.process_time(), time.perf_counter()
+    est = design()
+    t1 = time.perf_counter()
+    res = _estimate(est, u, y, t, args)
+    t2 = time.perf_counter()
+    return est, res, (t1 - t0, t2 - t1, time.process_time() - c0)
 
 
 def _print_episodes(spec: Any, est: Any, log: Any, t: Any, k0: int) -> None:

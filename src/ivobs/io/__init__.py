@@ -22,7 +22,8 @@
   Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line and the key
   (:mod:`ivobs.io.reader`). The format is documented in ``docs/operating.md``.
 * **Logs** (CSV, :mod:`ivobs.io.logs`): a step or time column, ``u1, u2, ...`` and
-  ``y1, y2, ...``; an empty cell or ``NaN`` is a missing sample.
+  ``y1, y2, ...``; an empty cell or ``NaN`` is a missing sample. The true state of a logged
+  record (:mod:`ivobs.io.truth`) is read by the same parser, one column per state.
 * **Monitor state files** (JSON, :mod:`ivobs.io.statefile`).
 * **Atomic writes** (:mod:`ivobs.io.atomic`): every file ivobs writes goes to a temporary file
   in the same folder and is then renamed, so a crash or an error never leaves a half-written
@@ -57,6 +58,7 @@ if TYPE_CHECKING:
     from .reader import KeyLines
     from .systemfile import SystemFile, load_system, loads_system
     from .systemwrite import dumps_system, equal_systems, save_system
+    from .truth import read_truth
 
 __all__ = [
     "KeyLines",
@@ -75,6 +77,7 @@ __all__ = [
     "log_from_frame",
     "not_utf8",
     "read_log",
+    "read_truth",
     "same_file",
     "save_system",
     "write_log",
@@ -102,6 +105,7 @@ _WHERE = {
     "dumps_system": "systemwrite",
     "equal_systems": "systemwrite",
     "save_system": "systemwrite",
+    "read_truth": "truth",
 }
 
 

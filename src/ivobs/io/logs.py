@@ -125,7 +125,6 @@ class LogParser:
             if low in seen:
                 raise self.fail(line, f"duplicate column {c!r}")
             seen.add(low)
-            m = _SIGNAL.match(c)
             if low in _STEP_COLS:
                 if self._step is not None:
                     raise self.fail(line, "two step columns (k, step): keep one")
@@ -134,15 +133,27 @@ class LogParser:
                 if self._time is not None:
                     raise self.fail(line, "two time columns (t, time): keep one")
                 self._time = i
-            elif m:
-                (self._u if m.group("kind").lower() == "u" else self._y).append(i)
             else:
-                raise self.fail(
-                    line,
-                    f"unexpected column {c!r}: a log has an optional step "
-                    "(k or step) or time (t or time) column, input columns u1, u2, "
-                    "... and measurement columns y1, y2, ...",
-                )
+                self._signal_column(i, c, line)
+        self._check_signals(line)
+
+    def _signal_column(self, i: int, column: str, line: int) -> None:
+        """Column ``i``, neither a step nor a time column: an input or a measurement (a reader
+        of other files, :func:`~ivobs.io.truth.read_truth`, takes its own columns here)."""
+        m = _SIGNAL.match(column)
+        if m:
+            (self._u if m.group("kind").lower() == "u" else self._y).append(i)
+            return
+        raise self.fail(
+            line,
+            f"unexpected column {column!r}: a log has an optional step "
+            "(k or step) or time (t or time) column, input columns u1, u2, "
+            "... and measurement columns y1, y2, ...",
+        )
+
+    def _check_signals(self, line: int) -> None:
+        """As many ``u`` and ``y`` columns as the system has inputs and outputs, by number."""
+        cols = self.columns
         for kind, idx, n in (("u", self._u, self.nu), ("y", self._y, self.ny)):
             if len(idx) != n:
                 names = [cols[i] for i in idx]
@@ -311,12 +322,21 @@ def read_log(path: str | os.PathLike[str], system: SystemModel, *, start: int | 
     """
     model, start = _model_and_start(system, start)
     path = Path(path)
-    if path.is_dir():
-        raise IvobsError(f"log file {str(path)!r} is a directory; expected a CSV file")
-    if not path.is_file():
-        raise IvobsError(f"log file {str(path)!r} not found")
     parser = LogParser(model.nu, model.ny, str(path))
     clock = StepClock(model, str(path), start)
+    rows = read_rows(path, parser, clock, "log file", "k,u1,y1,y2")
+    return _stack(rows, parser, clock, model)
+
+
+def read_rows(
+    path: Path, parser: LogParser, clock: StepClock, what: str, example: str
+) -> list[LogRow]:
+    """The rows of the CSV file ``path`` read by ``parser`` and placed on their steps by
+    ``clock`` (``what`` names the file in errors, ``example`` is a header line it could have)."""
+    if path.is_dir():
+        raise IvobsError(f"{what} {str(path)!r} is a directory; expected a CSV file")
+    if not path.is_file():
+        raise IvobsError(f"{what} {str(path)!r} not found")
     rows: list[LogRow] = []
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -328,14 +348,14 @@ def read_log(path: str | os.PathLike[str], system: SystemModel, *, start: int | 
                 else:
                     rows.extend(clock.place(parser.row(text, i)))
     except UnicodeDecodeError as exc:
-        raise not_utf8(str(path), exc) from None
+        raise not_utf8(parser.source, exc) from None
     except OSError as exc:
-        raise IvobsError(f"log file {str(path)!r}: cannot read it ({exc.strerror})") from None
+        raise IvobsError(f"{what} {str(path)!r}: cannot read it ({exc.strerror})") from None
     if not parser.columns:
-        raise IvobsError(f"{path}: empty log (expected a header line such as k,u1,y1,y2)")
+        raise IvobsError(f"{parser.source}: empty file (expected a header line such as {example})")
     if not rows:
-        raise IvobsError(f"{path}: the log has a header but no data rows")
-    return _stack(rows, parser, clock, model)
+        raise IvobsError(f"{parser.source}: the file has a header but no data rows")
+    return rows
 
 
 def log_from_frame(frame: Any, system: SystemModel, *, start: int | None = None) -> Log:

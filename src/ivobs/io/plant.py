@@ -57,11 +57,13 @@ def file_scenario(
     discretize: float | None = None,
     allow_code: bool = False,
     held_disturbances: bool = False,
+    truth: str | os.PathLike[str] | None = None,
 ) -> Scenario:
     """The plant of the system file ``path`` as a scenario: with ``log``, the log is its
-    ``recorded`` trajectory (no true state); otherwise it is simulated for ``horizon`` steps
-    (true initial state: the centre of the prior box ``[x0]``, inputs zero). ``path`` may be
-    a system file already loaded."""
+    ``recorded`` trajectory (its true state from the CSV file ``truth``, read by
+    :func:`~ivobs.io.truth.read_truth`, named ``--truth`` in errors; else none); otherwise it
+    is simulated for ``horizon`` steps (true initial state: the centre of the prior box
+    ``[x0]``, inputs zero). ``path`` may be a system file already loaded."""
     from .logs import read_log
     from .systemfile import load_system
 
@@ -85,13 +87,23 @@ def file_scenario(
             check_log_times(rec.t, discretize, str(log))
         T = rec.T
         t = rec.t if rec.t is not None else np.arange(T) * system.sampling_period
-        nan = np.full((T, system.nx), np.nan)
-        recorded = Trajectory(x=nan, y=rec.y, u=rec.u, d=np.full((T, system.nd), np.nan), t=t)
+        if truth is not None:
+            from .truth import read_truth
+
+            x = read_truth(truth, system, rec, what="--truth")
+        else:
+            x = np.full((T, system.nx), np.nan)
+        recorded = Trajectory(x=x, y=rec.y, u=rec.u, d=np.full((T, system.nd), np.nan), t=t)
         return Scenario(
             name=name, system=system, x0=spec.x0, x_true0=spec.x0.center, u=rec.u, horizon=T,
             source=f"{path} + {log}", t=rec.t if system.is_continuous else None,
             state_names=labels, recorded=recorded,
         )  # fmt: skip
+    if truth is not None:
+        raise IvobsError(
+            "--truth: the true state of a measurement log; give the log too (a simulated "
+            "record has its own true state)"
+        )
     if horizon is None or isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
         raise IvobsError(
             "horizon: give a log (measurements) or a number of steps >= 1 to simulate from "

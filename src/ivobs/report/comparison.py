@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -35,10 +35,26 @@ class MethodResult:
     run_time: float = float("nan")
     contains: bool | None = None
     mean_width: np.ndarray | None = None
+    misses: int | None = None
+    """Steps whose box misses the true state (None: no true state)."""
+    cpu_time: float = float("nan")
+    """Processor seconds of the design and the run together."""
+    guaranteed: bool = True
+    """False for a baseline (:mod:`~ivobs.report.baseline`): its misses are expected."""
+    options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
         return self.estimate is not None
+
+    def measure(self, truth: np.ndarray | None, burn_in: int) -> None:
+        """Containment of ``truth`` (None: unknown) and the mean widths from ``burn_in``."""
+        assert self.estimate is not None
+        if truth is not None:
+            self.misses = int(np.sum(~self.estimate.contains(truth)))
+            self.contains = self.misses == 0
+        if max(burn_in, self.estimate.valid_from) < self.estimate.T:
+            self.mean_width = self.estimate.mean_width(burn_in)
 
 
 def compare(
@@ -50,22 +66,30 @@ def compare(
     burn_in: int | None = None,
     options: dict[str, dict[str, Any]] | None = None,
     trajectory: Trajectory | None = None,
+    baselines: Sequence[str] = (),
 ) -> tuple[Trajectory, list[MethodResult]]:
     """Simulate the scenario once and run every method on the same record.
 
     A method that cannot be designed for the system (``DesignError``, or unsupported system
-    class) is reported with its reason instead of a result.
+    class) is reported with its reason instead of a result. ``baselines`` (``"kalman"``:
+    :mod:`~ivobs.report.baseline`) add rows that are **not guaranteed**, after the methods; a
+    baseline the system cannot have is an :class:`IvobsError`, before any method runs.
     """
+    from .baseline import BASELINES, check_baseline
+
+    for name in baselines:
+        check_baseline(name, scenario.system)
     traj = trajectory if trajectory is not None else scenario.simulate(disturbance, seed)
     names = list(all_methods() if methods is None else methods)
     burn = scenario.horizon // 10 if burn_in is None else int(burn_in)
+    truth = traj.x if traj.has_truth else None
     out: list[MethodResult] = []
     for name in names:
         get_method(name)  # unknown names fail loudly, not as a table row
-        res = MethodResult(method=name)
         opts = dict((options or {}).get(name, {}))
+        res = MethodResult(method=name, options=opts)
         try:
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             est = make_estimator(name, scenario.system, x0=scenario.x0, **opts)
             res.design_time = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -73,14 +97,19 @@ def compare(
                 traj.u, traj.y, t=traj.t if scenario.system.is_continuous else None
             )
             res.run_time = time.perf_counter() - t0
+            res.cpu_time = time.process_time() - c0
         except IvobsError as exc:
             res.error = f"{type(exc).__name__}: {exc}"
             out.append(res)
             continue
-        if traj.has_truth:
-            res.contains = bool(np.all(res.estimate.contains(traj.x)))
-        if burn < res.estimate.T:
-            res.mean_width = res.estimate.mean_width(burn)
+        res.measure(truth, burn)
+        out.append(res)
+    for name in baselines:
+        c0, t0 = time.process_time(), time.perf_counter()
+        band = BASELINES[name](scenario.system, scenario.x0, traj.u, traj.y)
+        res = MethodResult(method=band.method, estimate=band, guaranteed=False, design_time=0.0)
+        res.run_time, res.cpu_time = time.perf_counter() - t0, time.process_time() - c0
+        res.measure(truth, burn)
         out.append(res)
     return traj, out
 
@@ -113,12 +142,21 @@ def markdown_table(
                 f"| {r.method} | " + " | ".join(["—"] * (len(head) - 2)) + f" | {reason} |"
             )
             continue
-        cells = [r.method] + [f"{w:.4g}" for w in r.mean_width]
+        label = r.method if r.guaranteed else f"{r.method} (NOT guaranteed)"
+        cells = [label] + [f"{w:.4g}" for w in r.mean_width]
         if ref is not None:
             cells.append(_ratio_cell(r, ref, point))
         seen = {True: "yes", False: "**NO**", None: "n/a"}[r.contains]
+        if r.contains is False and r.misses is not None:
+            seen += f" ({r.misses} of {r.estimate.T} steps)" if r.estimate is not None else ""
         cells += [seen, f"{r.design_time:.3f}", f"{r.run_time:.4f}"]
         lines.append("| " + " | ".join(cells) + " |")
+    if not all(r.guaranteed for r in results):
+        lines.append(
+            "\nNOT guaranteed: a Kalman filter's mean ± 3σ, the bounded signals taken as "
+            "uniform; its misses are expected (what the guarantee costs is the difference in "
+            "width)."
+        )
     if point is not None and point.any():
         which = "every state" if point.all() else ", ".join(n for n, p in zip(names, point) if p)
         lines.append(

@@ -147,7 +147,8 @@ def results_table(results: Sequence[Any], state_names: Sequence[str] | None = No
             widths = "".join(f"<td>{w:.4g}</td>" for w in np.ravel(r.mean_width))
             seen = {True: "yes", False: "NO", None: "n/a"}[r.contains]
             cells = f"{widths}<td>{seen}</td><td>{r.design_time:.3g}</td><td>{r.run_time:.3g}</td>"
-        rows.append(f"<tr><td>{html.escape(r.method)}</td>{cells}</tr>")
+        label = r.method if getattr(r, "guaranteed", True) else f"{r.method} (NOT guaranteed)"
+        rows.append(f"<tr><td>{html.escape(label)}</td>{cells}</tr>")
     return (
         f"<table class='methods'><tr><th>method</th>{head}<th>contains truth</th>"
         f"<th>design (s)</th><th>run (s)</th></tr>{''.join(rows)}</table>"
