@@ -1,4 +1,5 @@
-"""ivobs: guaranteed interval state estimation for linear systems.
+"""ivobs: guaranteed interval state estimation for linear systems (exact or interval matrices,
+discrete or continuous time) and nonlinear systems with uncertain parameters.
 
 Given a model, bounds on disturbances and noise, the inputs and the measurements, every method
 returns at each step a box that is certain to contain the true state.

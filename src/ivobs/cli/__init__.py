@@ -17,7 +17,10 @@ __all__ = ["main"]
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ivobs",
-        description="Guaranteed interval state estimation for linear and nonlinear systems.",
+        description=(
+            "Guaranteed interval state estimation for linear systems (exact or interval "
+            "matrices, discrete or continuous time) and nonlinear systems."
+        ),
     )
     from .. import __version__
 
