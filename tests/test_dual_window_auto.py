@@ -68,12 +68,14 @@ SLOW = plant([[0.98, 0.05], [-0.05, 0.98]], [[1.0, 0.0]], 0.001, 0.1)
 def test_a_fast_system_gets_the_shortest_window_a_slow_one_a_longer_one():
     """Poles 0.2 and 0.3 measured through one output: the shortest window (20); a lightly
     damped rotation (|λ| = 0.98) with small process disturbances and a noisy sensor: the hull
-    averages the noise over many steps, 185. The choice is on the estimator, its design and
+    averages the noise over many steps, a long one. The choice is on the estimator, its design and
     its repr, with the influence of the window's first state (at most 1 %)."""
     fast = ivobs.make_estimator("dual-window", FAST, x0=X0)
     slow = ivobs.make_estimator("dual-window", SLOW, x0=X0)
     assert fast.window == fast.design.window == MIN_WINDOW
-    assert slow.window == slow.design.window == 185
+    # (185 with HiGHS 1.x today; the ℓ1 program may have other optimal multipliers, so only
+    # the order is pinned)
+    assert slow.window == slow.design.window and 3 * MIN_WINDOW <= slow.window <= 200
     for est in (fast, slow):
         assert est.design.window_rule == "auto"
         assert est.design.influence is not None and est.design.influence <= TOL
