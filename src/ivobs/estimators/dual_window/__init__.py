@@ -14,8 +14,9 @@ the γ terms of :mod:`.certificate`), so each bound holds in exact arithmetic wh
 cache holds; it is the window's exact hull whenever the optimal multiplier is cached.
 
 Layout: :mod:`.certificate` (the coefficients of a multiplier and the certified evaluation),
-:mod:`.refresh` (the HiGHS model of the window program), :mod:`.estimator` (the estimator, its
-design and its state).
+:mod:`.refresh` (the HiGHS model of the window program), :mod:`.auto` (the window chosen from
+the model: how far back the program's optimal multipliers look), :mod:`.estimator` (the
+estimator, its design and its state).
 """
 
 from __future__ import annotations

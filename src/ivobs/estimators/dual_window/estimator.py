@@ -19,6 +19,7 @@ from ...sets.lp import basis_codes
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
+from .auto import choose_window
 from .certificate import (
     Coefficients,
     Layout,
@@ -36,11 +37,15 @@ __all__ = ["DualWindow", "DualWindowDesign", "DualWindowState"]
 class DualWindowDesign(Design):
     """``window``: ``N``, the past steps of the moving window; ``cache``: multipliers kept per
     bound (``2 nx`` bounds); ``refresh``: steps between two solves of the window program once
-    the window is full (more often while it fills)."""
+    the window is full (more often while it fills); ``window_rule``: ``"auto"`` (chosen from
+    the model, :mod:`.auto`) or ``"given"``; ``influence``: for a chosen window, the relative
+    influence ``η(N)`` of its first state on the bounds (:mod:`.auto`; None when given)."""
 
     window: int = 20
     cache: int = 16
     refresh: int = 60
+    window_rule: str = "given"
+    influence: float | None = None
 
 
 @dataclass(frozen=True)
@@ -96,8 +101,12 @@ class DualWindow(Estimator):
     ----------
     sys : LinearSystem (discrete time, time-invariant, constant disturbance bounds)
     x0 : Box, the prior box on ``x[0]`` (required)
-    window : int ``N >= 1`` (default 20): the past steps whose data the bounds use (besides
-        the box proven for ``x[k-N]``)
+    window : ``"auto"`` (default) or an int ``N >= 1``: the past steps whose data the bounds
+        use (besides the box proven for ``x[k-N]``). ``"auto"`` chooses the shortest ``N``
+        whose first state's relative influence on the window program's optimal bounds is at
+        most 1 % (:mod:`ivobs.estimators.dual_window.auto`), between 20 and 200 steps and at
+        most what a program of 5,800 columns allows; the choice is ``self.window`` and
+        ``self.design.window``
     cache : int >= 1 (default 16): multipliers kept per bound
     refresh : int >= 1 (default 60): steps between two solves of the window program (more
         often while the window fills: every ``k/2`` steps); more often: tighter, slower
@@ -127,7 +136,7 @@ class DualWindow(Estimator):
         sys: LinearSystem,
         x0: Box | None = None,
         *,
-        window: int = 20,
+        window: int | str = "auto",
         cache: int = 16,
         refresh: int = 60,
         **options: Any,
@@ -139,16 +148,26 @@ class DualWindow(Estimator):
                 "sys: the dual-window method needs constant disturbance bounds d (an ivobs.Box); "
                 "this system's bounds vary with k or y. Use 'exact'"
             )
-        self.design = DualWindowDesign(
-            window=as_int("window", window, 1),
-            cache=as_int("cache", cache, 1),
-            refresh=as_int("refresh", refresh, 1),
-        )
-        check_cache_size(self.design, sys.nx, sys.ny)
-        self.lay = Layout(sys.nx, sys.nu, sys.ny, sys.nd, self.design.window)
+        cache, refresh = as_int("cache", cache, 1), as_int("refresh", refresh, 1)
         self.mats = tuple(np.asarray(m, dtype=float) for m in sys.matrices_at(0))
         d = sys.d_at(0)
         self.d_lo, self.d_hi = np.asarray(d.lo, dtype=float), np.asarray(d.hi, dtype=float)
+        if isinstance(window, str) and window == "auto":
+            assert self.x0 is not None
+            N, eta = choose_window(self.mats, self.d_lo, self.d_hi, self.x0.hi - self.x0.lo)
+            rule, influence = "auto", (eta if np.isfinite(eta) else None)
+        else:
+            if isinstance(window, str):
+                raise IvobsError(
+                    f"window: expected 'auto' or an integer number of steps >= 1, got {window!r}"
+                )
+            N, rule, influence = as_int("window", window, 1), "given", None
+        self.design = DualWindowDesign(window=N, cache=cache, refresh=refresh,
+                                       window_rule=rule, influence=influence)  # fmt: skip
+        self.window = N
+        """The window ``N`` in use (chosen from the model or given)."""
+        check_cache_size(self.design, sys.nx, sys.ny)
+        self.lay = Layout(sys.nx, sys.nu, sys.ny, sys.nd, self.design.window)
         nx, K = sys.nx, self.design.cache
         self.c = np.repeat(np.vstack([np.eye(nx), -np.eye(nx)]), K, axis=0)
         self._rows = np.arange(2 * nx)
@@ -158,6 +177,12 @@ class DualWindow(Estimator):
         # makes a new one): a cache outside the states, written out when a state is saved
         self._bases: dict[int, tuple[weakref.ref[np.ndarray], Any]] = {}
         self._coef: tuple[np.ndarray, Coefficients] | None = None
+
+    def __repr__(self) -> str:
+        return (
+            f"<{type(self).__name__} {self.name!r} nx={self.sys.nx} window={self.window} "
+            f"({self.design.window_rule}) valid_from={self.valid_from}>"
+        )
 
     # -- state ----------------------------------------------------------------------------
     def _initial_state(self) -> DualWindowState:

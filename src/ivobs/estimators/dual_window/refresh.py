@@ -88,10 +88,12 @@ class WindowLP:
         prior: tuple[np.ndarray, np.ndarray],
         centres: np.ndarray,
         start: Any,
+        count: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray, Any]:
         """Measurement multipliers for the ``2 nx`` objectives ``+x_N[i]`` then ``−x_N[i]``
-        (rows of ``(2 nx, N+1, ny)``), whether each program was solved to optimality, and the
-        basis to start the next refresh from (``start``: this one's; None: a cold start).
+        (rows of ``(2 nx, N+1, ny)``; only the first ``count`` solved, if given), whether each
+        program was solved to optimality, and the basis to start the next refresh from
+        (``start``: this one's; None: a cold start).
         ``y`` (N+1, ny) and ``u`` (N+1, nu): the window's data from position ``s`` on
         (``replaced``: the measurement components that are missing or dropped, free rows);
         ``prior``: the box of ``x_s``."""
@@ -105,7 +107,7 @@ class WindowLP:
         mu = np.zeros((2 * lay.nx, lay.N + 1, lay.ny))
         ok = np.zeros(2 * lay.nx, dtype=bool)
         last = None
-        for r in range(2 * lay.nx):
+        for r in range(2 * lay.nx if count is None else count):
             i, sense = r % lay.nx, (-1.0 if r < lay.nx else 1.0)  # min −x_i: upper bound of x_i
             col = first + i
             if last is not None:
