@@ -11,7 +11,7 @@ side by side on the same data; a member ignores nothing and gains nothing from t
 keeps its own recursion), so the result is as sound as the weakest assumption among them.
 
 **Measurement strips.** Every output row gives ``C_r x ∈ y_r - D_r u - F_r [d]``; the
-intersection is met with these strips (option ``strip``, the base class's ``strips``:
+intersection is met with these strips (option ``strips``, on by default:
 :mod:`ivobs.estimators.measured`, with its rounding proof), so a state measured directly is
 never wider than its sensor's band.
 
@@ -86,9 +86,9 @@ class Intersect(Estimator):
     methods : list of method names, ``(name, options)`` pairs, or :class:`Estimator` instances
         (built for the same system). Default: :data:`DEFAULT_METHODS` that can be designed for
         ``sys`` (skipped ones are listed in ``design.skipped``).
-    strip : also meet the box with the measurement strips of ``y[k]`` (every exact output row;
-        :mod:`ivobs.estimators.measured`)
     on_inconsistent : 'warn', 'raise' or 'ignore' (empty intersection, or a member's report)
+    strips : also meet the box with the measurement strips of ``y[k]`` (every exact output row;
+        :mod:`ivobs.estimators.measured`; on by default)
 
     Notes
     -----
@@ -117,12 +117,10 @@ class Intersect(Estimator):
         x0: Box | None = None,
         *,
         methods: Any = None,
-        strip: bool = True,
         on_inconsistent: str = "warn",
+        strips: bool | None = None,
     ):
-        if not isinstance(strip, (bool, np.bool_)):
-            raise IvobsError(f"strip: expected True or False, got {strip!r}")
-        super().__init__(sys, x0, on_inconsistent=on_inconsistent, strips=bool(strip))
+        super().__init__(sys, x0, on_inconsistent=on_inconsistent, strips=strips)
         if methods is None:
             self.members, skipped = self._default_members()
         else:
@@ -130,7 +128,7 @@ class Intersect(Estimator):
         rows = () if self._strips is None else tuple(int(r) for r in self._strips.rows)
         self.design = IntersectDesign(
             methods=tuple(m.name for m in self.members),
-            strip=bool(strip),
+            strip=self.strips,
             strip_rows=rows,
             skipped=tuple(skipped),
         )
