@@ -53,14 +53,14 @@ def test_paper_design_through_make_estimator(dinh):
 
 def test_paper_bounds_and_widths(dinh):
     sc, tr = dinh
-    _est, res = _check(sc.system, tr, s=2)
+    _est, res = _check(sc.system, tr, s=2, strips=False)  # the paper's box
     # eq. (11): constant width 2 Σ_j |H_ij| with the paper's T
     w = 2 * np.abs(np.array(sc.reference["T"]) @ sc.reference["Md"]).sum(axis=1)
     np.testing.assert_allclose(res.width[2:], np.broadcast_to(w, (58, 2)), atol=2e-4)
     np.testing.assert_allclose(res.mean_width(), [0.34737, 0.34272], atol=1e-5)
     # the paper's printed T (T Mx = I only to 1.8e-4) is projected onto T Mx = I and gives
     # the same boxes to its 4 decimals
-    est_T = ivobs.make_estimator("fixed-time", sc.system, s=2, T=sc.reference["T"])
+    est_T = ivobs.make_estimator("fixed-time", sc.system, s=2, T=sc.reference["T"], strips=False)
     np.testing.assert_allclose(est_T.design.T, sc.reference["T"], atol=1e-4)
     np.testing.assert_allclose(est_T.design.T @ est_T.design.Mx, np.eye(2), atol=1e-12)
     res_T = est_T.run(tr.u, tr.y)
@@ -87,7 +87,7 @@ def test_frobenius_norm_never_grows_with_s_but_width_criterion_is_narrower(dinh)
         norms.append(np.linalg.norm(d.T @ d.Md))
         _est, res = _check(sc.system, tr, s=s, criterion="width")
         widths.append(res.mean_width(burn_in=6))
-        fro = ivobs.make_estimator("fixed-time", sc.system, s=s).run(tr.u, tr.y)
+        fro = ivobs.make_estimator("fixed-time", sc.system, s=s, strips=False).run(tr.u, tr.y)
         assert np.all(widths[-1] <= fro.mean_width(burn_in=6) + 1e-9)
     assert np.all(np.diff(norms) <= 1e-12)
     assert np.all(np.diff(np.array(widths), axis=0) <= 1e-9)
@@ -342,7 +342,9 @@ def test_parity_check_reports_inconsistent_measurements(dinh):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         ivobs.make_estimator("fixed-time", sc.system, s=2).run(tr.u, tr.y)  # clean data: quiet
-        ivobs.make_estimator("fixed-time", sc.system, s=2, check_consistency=False).run(tr.u, y)
+        ivobs.make_estimator(
+            "fixed-time", sc.system, s=2, check_consistency=False, strips=False
+        ).run(tr.u, y)
 
 
 def test_errors_name_the_condition(dinh):
@@ -470,7 +472,7 @@ def test_reduced_windows_are_intersected_with_the_prediction():
     sc = ivobs.scenarios.get("servo-motor", horizon=80)
     sys = sc.system
     tr = adversarial_run(sys, sc.x0, 80, seed=1)
-    est = ivobs.make_estimator("fixed-time", sys)
+    est = ivobs.make_estimator("fixed-time", sys, strips=False)  # the recursion's own boxes
     both, part = tr.y.copy(), tr.y.copy()
     both[30:50] = np.nan
     part[30:50, 1] = np.nan

@@ -234,6 +234,7 @@ class OpenLoop(Estimator):
     and can return a box shifted by ``shift`` (to test the monitor, not a method)."""
 
     name = "open-loop-monitor-test"
+    data_used = "prediction"  # uses no measurement: no strips of its own
 
     def __init__(self, sys, x0=None, *, flag=(), shift=0.0, on_inconsistent="warn"):
         super().__init__(sys, x0, on_inconsistent=on_inconsistent)

@@ -242,7 +242,8 @@ class _Session:
                 inputs["--system's [disturbance] csv" + (f" {i + 1}" if i else "")] = path
             outputs = {"--state": self.state_path, "--state's lock": lock_path(self.state_path)}
             check_distinct(outputs, inputs)
-        est = self.spec.make_estimator(method)
+        # the monitor's default (Monitor): boxes met with the strips of the outputs used
+        est = self.spec.make_estimator(method, defaults={"strips": True})
         self.monitor = Monitor(
             self.spec.system,
             est,

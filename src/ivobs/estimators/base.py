@@ -48,6 +48,7 @@ from ..result import Estimate
 from ..sets import Box
 from ..sets.rounding import overflowed
 from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
+from .measured import MeasurementStrips
 from .persistence import Persistence
 from .record import VECTOR_MIN_STEPS, check_record, run_record
 from .state import OnlineState, Step, evolve
@@ -232,12 +233,25 @@ class Estimator(Persistence):
     built-in method declares it; a method of your own should earn it
     (:func:`ivobs.testing.check_estimator`)."""
 
-    def __init__(self, sys: Any, x0: Box | None = None, *, on_inconsistent: str = "warn"):
+    def __init__(
+        self,
+        sys: Any,
+        x0: Box | None = None,
+        *,
+        on_inconsistent: str = "warn",
+        strips: bool | None = None,
+    ):
         check_system(self, sys)
         if on_inconsistent not in ("warn", "raise", "ignore"):
             raise IvobsError(
                 f"on_inconsistent: expected 'warn', 'raise' or 'ignore', got {on_inconsistent!r}"
             )
+        if strips is not None and not isinstance(strips, (bool, np.bool_)):
+            raise IvobsError(f"strips: expected True, False or None (the default), got {strips!r}")
+        self.strips = self.data_used == "filter" if strips is None else bool(strips)
+        """Whether each box of ``x[k]`` is met with the measurement strips of ``y[k]``
+        (:mod:`ivobs.estimators.measured`): by default for the filter-form methods."""
+        self._strips = MeasurementStrips.of(sys) if self.strips else None
         self.sys = sys
         self.x0 = check_x0(x0, sys.nx, self.name, self.needs_x0)
         self.on_inconsistent = on_inconsistent
@@ -318,6 +332,13 @@ class Estimator(Persistence):
             new, lo, hi, _ = self._advance(state, u_k, y_k, t_k)
         finally:
             self._branching = before
+        if self._strips is not None and state.k >= self.valid_from:
+            lo = np.array(lo, dtype=float).reshape(1, -1)
+            hi = np.array(hi, dtype=float).reshape(1, -1)
+            key = state.k if t_k is None else t_k
+            if self._strips.meet(lo, hi, u_k[None], y_k[None], [key])[0] and not new.inconsistent:
+                new = evolve(new, inconsistent=True)  # the strips of y[k] miss the box
+            lo, hi = lo[0], hi[0]
         return new, self._box(state.k, lo, hi, new, finite)
 
     def _advance(

@@ -10,26 +10,19 @@ which is never wider than the best member in any component. Members are other iv
 side by side on the same data; a member ignores nothing and gains nothing from the others (each
 keeps its own recursion), so the result is as sound as the weakest assumption among them.
 
-**Measurement strip.** A row ``r`` of ``C`` with a single nonzero entry ``c`` (state ``i``
-measured directly, possibly scaled) gives ``c x_i = y_r - D_r u - F_r d`` with ``d`` in its box,
-hence by [Efimov2013, Lemma 1] (:func:`ivobs.image_bounds`, applied to ``[1, -D_r, -F_r]`` over
-the box of ``(y_r, u, d)``)::
-
-    x_i ∈ (y_r - D_r u - [F_r⁺ d_lo - F_r⁻ d_hi, F_r⁺ d_hi - F_r⁻ d_lo]) / c
-
-(the ends swapped when ``c < 0``). This box is intersected as well (option ``strip``).
+**Measurement strips.** Every output row gives ``C_r x ∈ y_r - D_r u - F_r [d]``; the
+intersection is met with these strips (option ``strips``, on by default:
+:mod:`ivobs.estimators.measured`, with its rounding proof), so a state measured directly is
+never wider than its sensor's band.
 
 **Rounding, proven** (``proven_rounding``; no margin of its own). The intersection and the hull
 are comparisons of floats: exact. Each member's box is the member's own, rounded by its own
-rules. The strip's numerator is enclosed by :func:`ivobs.image_bounds` (its evaluation bounded
-by ``γ_n`` [Higham2002] and rounded outwards) and widened by the rounding of a float64
-evaluation of the output row (a record from a float64 simulation: a sample within rounding of
-its bound is admissible), and the quotient by ``c`` is rounded outwards (one ``nextafter``).
+rules; the strips are rounded outwards (:mod:`ivobs.estimators.measured`).
 
 **Inconsistent data.** An empty intersection means two guaranteed enclosures of the same state
 do not meet: the data contradict the model and the bounds (a fault). The step is reported
-(``on_inconsistent``), and the box returned is the *hull of the members' boxes* (the strip left
-out, as it is what a faulty sample corrupts first): each member handled the fault by its own
+(``on_inconsistent``), and the box returned is the *hull of the members' boxes*: each member
+handled the fault by its own
 rules (e.g. ``exact`` predicts without the sample), so the hull contains the state as long as one
 member's enclosure does, and it is never empty or inverted. Every enclosure contains the state
 of an admissible record, so a crossing of two bounds, by however little, is a contradiction:
@@ -49,10 +42,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import DesignError, IvobsError
-from ..linalg import gamma
 from ..model import LinearSystem
-from ..sets import Box, image_bounds
-from ..sets.rounding import down, up, upper
+from ..sets import Box
 from . import get, make_estimator, methods, register
 from .base import Design, Estimator
 from .persistence import check_version
@@ -67,53 +58,14 @@ not registered, not applicable to the system, or whose design fails are skipped.
 
 @dataclass(frozen=True)
 class IntersectDesign(Design):
-    """``methods``: the members' names; ``strip_rows``: rows of ``C`` that pin a state (used when
-    ``strip`` is on; time-invariant ``C``); ``skipped``: default members left out, with why."""
+    """``methods``: the members' names; ``strip_rows``: the output rows whose strips meet the
+    box (the exactly known ones; used when ``strip`` is on); ``skipped``: default members left
+    out, with why."""
 
     methods: tuple[str, ...]
     strip: bool
     strip_rows: tuple[int, ...]
     skipped: tuple[str, ...] = ()
-
-
-def _strip_bounds(
-    lo: np.ndarray, hi: np.ndarray, y: np.ndarray, u: np.ndarray, D: np.ndarray, F: np.ndarray,
-    d: Box, rows: list[tuple[int, int, float]],
-) -> None:  # fmt: skip
-    """Intersect ``[lo, hi]`` (in place; one step or a record, ``(..., nx)``) with the bounds
-    of each pinned state ``x_i = (y_r - D_r u - F_r d) / c`` for ``d`` in its box: the
-    numerators of all ``rows`` ``(r, i, c)`` by one :func:`ivobs.image_bounds` of ``[I, -D_R,
-    -F_R]`` over the box of ``(y_R, u, d)``, widened by the rounding of a float64 evaluation of
-    the output rows (a sample within rounding of its bound is admissible: ``γ_n`` times ``|y| +
-    2 (|D_r||u| + |F_r| max(|d_lo|, |d_hi|))``, which bounds ``|c x| + |D_r u| + |F_r d|``),
-    the quotients rounded outwards. A NaN sample gives NaN bounds: ignored."""
-    r = [row[0] for row in rows]
-    c = np.array([row[2] for row in rows])
-    yR, DR, FR = y[..., r], D[r], F[r]
-    lead, n = yR.shape[:-1], u.shape[-1] + d.lo.shape[0] + 1
-    ends = [np.concatenate([yR, np.broadcast_to(u, (*lead, u.shape[-1])),
-                            np.broadcast_to(dv, (*lead, dv.shape[0]))], axis=-1)
-            for dv in (d.lo, d.hi)]  # fmt: skip
-    v_lo, v_hi = image_bounds(np.hstack([np.eye(len(rows)), -DR, -FR]), *ends)
-    mag = np.abs(u) @ np.abs(DR).T + np.abs(FR) @ np.maximum(np.abs(d.lo), np.abs(d.hi))
-    w = upper(2.0 * gamma(n) * (np.abs(yR) + 2.0 * mag), n + 2)
-    v_lo, v_hi = down(v_lo - w), up(v_hi + w)
-    neg = c < 0.0
-    b_lo = down(np.where(neg, v_hi, v_lo) / c)
-    b_hi = up(np.where(neg, v_lo, v_hi) / c)
-    for j, (_, state, _) in enumerate(rows):  # a state pinned by several rows: each counts
-        lo[..., state] = np.fmax(lo[..., state], b_lo[..., j])
-        hi[..., state] = np.fmin(hi[..., state], b_hi[..., j])
-
-
-def _pinning_rows(C: np.ndarray) -> list[tuple[int, int, float]]:
-    """``(row, state, coefficient)`` for the rows of ``C`` with exactly one nonzero entry."""
-    out = []
-    for r, row in enumerate(C):
-        nz = np.flatnonzero(row)
-        if nz.size == 1:
-            out.append((r, int(nz[0]), float(row[nz[0]])))
-    return out
 
 
 @dataclass(frozen=True)
@@ -134,8 +86,9 @@ class Intersect(Estimator):
     methods : list of method names, ``(name, options)`` pairs, or :class:`Estimator` instances
         (built for the same system). Default: :data:`DEFAULT_METHODS` that can be designed for
         ``sys`` (skipped ones are listed in ``design.skipped``).
-    strip : also intersect with the measurement strip of the rows of ``C`` that pin a state
     on_inconsistent : 'warn', 'raise' or 'ignore' (empty intersection, or a member's report)
+    strips : also meet the box with the measurement strips of ``y[k]`` (every exact output row;
+        :mod:`ivobs.estimators.measured`; on by default)
 
     Notes
     -----
@@ -164,27 +117,21 @@ class Intersect(Estimator):
         x0: Box | None = None,
         *,
         methods: Any = None,
-        strip: bool = True,
         on_inconsistent: str = "warn",
+        strips: bool | None = None,
     ):
-        super().__init__(sys, x0, on_inconsistent=on_inconsistent)
-        if not isinstance(strip, (bool, np.bool_)):
-            raise IvobsError(f"strip: expected True or False, got {strip!r}")
+        super().__init__(sys, x0, on_inconsistent=on_inconsistent, strips=strips)
         if methods is None:
             self.members, skipped = self._default_members()
         else:
             self.members, skipped = self._explicit_members(methods), []
-        rows = _pinning_rows(sys.C_at(0)) if not sys.is_time_varying else []
-        if sys.uncertainty is not None:  # interval matrices: strips of the exact rows only
-            exact = sys.uncertainty.exact_rows()
-            rows = [row for row in rows if exact[row[0]]]
+        rows = () if self._strips is None else tuple(int(r) for r in self._strips.rows)
         self.design = IntersectDesign(
             methods=tuple(m.name for m in self.members),
-            strip=bool(strip),
-            strip_rows=tuple(r for r, _, _ in rows),
+            strip=self.strips,
+            strip_rows=rows,
             skipped=tuple(skipped),
         )
-        self._strip_rows = rows
         self.valid_from = min(m.valid_from for m in self.members)
 
     # -- members --------------------------------------------------------------------------
@@ -261,53 +208,16 @@ class Intersect(Estimator):
                 "Members must estimate the same plant"
             )
 
-    # -- the strip ------------------------------------------------------------------------
-    def _strip_box(
-        self, k: int, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of the pinned states from ``y[k]`` alone (±inf elsewhere)."""
-        nx = self.sys.nx
-        lo, hi = np.full(nx, -np.inf), np.full(nx, np.inf)
-        if not self.design.strip:
-            return lo, hi
-        # matrices are functions of the time in continuous time, of the step otherwise
-        _, _, C, D, _, F = self.sys.matrices_at(t_k if self.sys.is_continuous else k)
-        rows = self._strip_rows if not self.sys.is_time_varying else _pinning_rows(C)
-        rows = [row for row in rows if not np.isnan(y_k[row[0]])]
-        if rows:
-            _strip_bounds(lo, hi, y_k, u_k, D, F, self.sys.d_at(k, y_k), rows)
-        return lo, hi
-
-    def _strip_run(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The strip over a whole record (constant system and bounds), or None."""
-        nx = self.sys.nx
-        shape = (*y.shape[:-1], nx)
-        lo, hi = np.full(shape, -np.inf), np.full(shape, np.inf)
-        if not self.design.strip:
-            return lo, hi
-        if self.sys.is_time_varying:
-            return None  # the pinning rows depend on the step: the loop (as step() does)
-        if not self._strip_rows:
-            return lo, hi
-        if not self.sys.has_constant_bounds:
-            return None
-        _, _, _, D, _, F = self.sys.matrices_at(0)
-        with np.errstate(invalid="ignore"):  # NaN (missing) stays NaN: no information
-            _strip_bounds(lo, hi, y, u, D, F, self.sys.d_at(0, None), self._strip_rows)
-        return lo, hi
-
     # -- combining ------------------------------------------------------------------------
     @staticmethod
-    def _combine(
-        los: np.ndarray, his: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Intersect the members' boxes (NaN rows = not yet valid: ignored) and the strip.
+    def _combine(los: np.ndarray, his: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Intersect the members' boxes (NaN rows = not yet valid: ignored).
 
         Returns ``(lo, hi, empty)`` over the leading axes; where ``empty`` (two bounds cross),
         the hull of the members' boxes instead (see the module docstring).
         """
-        lo = np.fmax(np.fmax.reduce(los, axis=0), s_lo)
-        hi = np.fmin(np.fmin.reduce(his, axis=0), s_hi)
+        lo = np.fmax.reduce(los, axis=0)
+        hi = np.fmin.reduce(his, axis=0)
         with np.errstate(invalid="ignore"):
             empty = np.any(lo > hi, axis=-1)
         if np.any(empty):
@@ -324,7 +234,6 @@ class Intersect(Estimator):
     def _step(
         self, state: IntersectState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[IntersectState]:
-        nx, k = self.sys.nx, state.k
         los, his, members = [], [], []
         flagged = False
         for m, ms in zip(self.members, state.members, strict=True):
@@ -334,11 +243,7 @@ class Intersect(Estimator):
             flagged |= ms.inconsistent
             los.append(box.lo)
             his.append(box.hi)
-        if k < self.valid_from:
-            lo_s = hi_s = np.full(nx, np.nan)
-        else:
-            lo_s, hi_s = self._strip_box(k, u_k, y_k, t_k)
-        lo, hi, empty = self._combine(np.array(los), np.array(his), lo_s, hi_s)
+        lo, hi, empty = self._combine(np.array(los), np.array(his))
         new = evolve(state, members=tuple(members))
         return Step(new, lo, hi, flagged or bool(empty))
 
@@ -347,11 +252,8 @@ class Intersect(Estimator):
         self, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """Members' own (vectorised where they have it) runs, intersected. Falls back to the
-        loop (returns None) when anything needs reporting: a member's inconsistency, an empty
-        intersection, or a strip that depends on the step."""
-        strip = self._strip_run(u, y)
-        if strip is None:
-            return None
+        loop (returns None) when anything needs reporting: a member's inconsistency or an empty
+        intersection."""
         los, his = [], []
         for m in self.members:
             out = _member_run(m, u, y, t)
@@ -359,7 +261,7 @@ class Intersect(Estimator):
                 return None
             los.append(out[0])
             his.append(out[1])
-        lo, hi, empty = self._combine(np.array(los), np.array(his), *strip)
+        lo, hi, empty = self._combine(np.array(los), np.array(his))
         if np.any(empty):
             return None
         return lo, hi

@@ -80,15 +80,68 @@ def _block(
             inc = np.asarray(out[2], dtype=bool).reshape(y.shape[:-1])
         if bar is not None:
             bar.update(int(np.prod(y.shape[:-1])))
-        return out[0], out[1], inc
+        return _with_strips(est, out[0], out[1], inc, u, y, t)
     if y.ndim == 2:
-        return est._loop(u, y, t, bar)
+        return _with_strips(est, *est._loop(u, y, t, bar), u, y, t)
     parts = [est._loop(u[b], y[b], t, bar) for b in range(y.shape[0])]
-    return (
+    return _with_strips(
+        est,
         np.stack([p[0] for p in parts]),
         np.stack([p[1] for p in parts]),
         np.stack([p[2] for p in parts]),
+        u,
+        y,
+        t,
     )
+
+
+def _with_strips(
+    est: Estimator,
+    lo: Any,
+    hi: Any,
+    inc: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    t: Any,
+) -> Arrays:
+    """Either path's bounds met with the measurement strips (when the method uses them), once
+    per record: the method's recursion may itself run the loop for some streams."""
+    if est._strips is None:
+        return lo, hi, inc
+    lo, hi = _owned(lo), _owned(hi)
+    return lo, hi, inc | _meet_strips(est, lo, hi, u, y, t)
+
+
+def _meet_strips(
+    est: Estimator, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, y: np.ndarray, t: Any
+) -> np.ndarray:
+    """The measurement strips on the boxes of a whole record or batch, in place, from
+    ``valid_from`` on (:mod:`ivobs.estimators.measured`); the rows they find inconsistent."""
+    strips, vf = est._strips, est.valid_from
+    assert strips is not None
+    T, nx = y.shape[-2], lo.shape[-1]
+    keys = np.arange(T) if t is None else np.asarray(t)
+    bad = np.zeros(y.shape[:-1], dtype=bool)
+    if y.ndim == 2:
+        bad[vf:] = strips.meet(lo[vf:], hi[vf:], u[vf:], y[vf:], keys[vf:])
+        return bad
+    if strips.lti:  # the streams of a batch, as one list of rows
+        n = y.shape[0] * max(T - vf, 0)
+        rows_lo, rows_hi = lo[:, vf:].reshape(n, nx), hi[:, vf:].reshape(n, nx)
+        flat = strips.meet(
+            rows_lo,
+            rows_hi,
+            u[:, vf:].reshape(n, u.shape[-1]),
+            y[:, vf:].reshape(n, y.shape[-1]),
+            keys,
+        )
+        lo[:, vf:] = rows_lo.reshape(lo[:, vf:].shape)
+        hi[:, vf:] = rows_hi.reshape(hi[:, vf:].shape)
+        bad[:, vf:] = flat.reshape(bad[:, vf:].shape)
+        return bad
+    for b in range(y.shape[0]):
+        bad[b, vf:] = strips.meet(lo[b, vf:], hi[b, vf:], u[b, vf:], y[b, vf:], keys[vf:])
+    return bad
 
 
 def finalize(est: Estimator, lo: np.ndarray, hi: np.ndarray) -> None:

@@ -31,10 +31,13 @@ class SystemFile:
     x0_step: int = 0
     """The step whose state ``x0`` bounds (``[x0] step``): a log must start there."""
 
-    def make_estimator(self, method: str | None = None, **options: Any) -> Any:
+    def make_estimator(
+        self, method: str | None = None, *, defaults: dict[str, Any] | None = None, **options: Any
+    ) -> Any:
         """The estimator of the file's method (or ``method``) with the file's prior box.
 
-        The file's options apply to the file's method only; ``options`` are added to them.
+        The file's options apply to the file's method only; ``options`` are added to them, and
+        ``defaults`` apply where neither gives the option (a command's own default).
         """
         from ..estimators import make_estimator
 
@@ -44,7 +47,8 @@ class SystemFile:
                 f"method: {self.source or 'the system file'} names no method ([method] name = "
                 "...); give one (e.g. --method interval-split)"
             )
-        opts = dict(self.options) if (self.method and same_method(name, self.method)) else {}
+        opts = dict(defaults or {})
+        opts.update(self.options if (self.method and same_method(name, self.method)) else {})
         opts.update(options)
         try:
             return make_estimator(name, self.system, x0=self.x0, **opts)

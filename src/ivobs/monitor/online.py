@@ -90,6 +90,8 @@ class Monitor:
             if x0 is None:
                 x0 = est.x0
         else:
+            # the boxes met with the strips of the outputs used (every method, filtered)
+            options.setdefault("strips", True)
             est = make_estimator(method, sys, x0=x0, **options)
         if not (isinstance(margin, (int, float)) and 0 <= margin < 1e-3):
             raise IvobsError(f"margin: expected a small relative margin in [0, 1e-3), got {margin}")

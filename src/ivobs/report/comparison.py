@@ -67,8 +67,14 @@ def compare(
     options: dict[str, dict[str, Any]] | None = None,
     trajectory: Trajectory | None = None,
     baselines: Sequence[str] = (),
+    strips: bool | None = True,
 ) -> tuple[Trajectory, list[MethodResult]]:
     """Simulate the scenario once and run every method on the same record.
+
+    ``strips``: every box of ``x[k]`` met with the measurement strips of ``y[k]``
+    (:mod:`ivobs.estimators.measured`; the prediction-form observers too, so that no measured
+    state is wider than its sensor's band); ``None``: each method's default. An option given
+    in ``options`` wins.
 
     A method that cannot be designed for the system (``DesignError``, or unsupported system
     class) is reported with its reason instead of a result. ``baselines`` (``"kalman"``:
@@ -87,6 +93,8 @@ def compare(
     for name in names:
         get_method(name)  # unknown names fail loudly, not as a table row
         opts = dict((options or {}).get(name, {}))
+        if strips is not None:
+            opts.setdefault("strips", strips)
         res = MethodResult(method=name, options=opts)
         try:
             c0, t0 = time.process_time(), time.perf_counter()

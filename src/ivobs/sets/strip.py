@@ -46,7 +46,14 @@ from .._jit import jit
 from ..linalg import gamma
 from .rounding import ETA
 
-__all__ = ["HEAVY", "contract_box", "intersect_strip", "section_hull", "weighted_quantiles"]
+__all__ = [
+    "HEAVY",
+    "contract_box",
+    "contract_boxes",
+    "intersect_strip",
+    "section_hull",
+    "weighted_quantiles",
+]
 
 _gamma = jit(gamma)
 _INF = np.inf
@@ -382,6 +389,34 @@ def section_hull(
         hi[j] = _up(z[j] + _up(f_up + err_up))
         lo[j] = _down(z[j] - _up(f_lo + err_lo))
     return lo, hi
+
+
+@jit
+def contract_boxes(
+    C: np.ndarray, t: np.ndarray, sigma: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray:
+    """Contract each box ``[lo[k], hi[k]]`` (rows, in place) with the strips ``|C_i ζ - t[k, i]|
+    <= σ[k, i]`` of every output ``i`` whose ``t[k, i]`` is not NaN, one after the other
+    (:func:`contract_box`), in two sweeps (a strip of several states gains from the states
+    the others pin). Returns, per row, False when a strip certainly misses the box: that row is
+    then left as it was. Rows with a NaN bound are skipped."""
+    T, ny = t.shape
+    ok = np.ones(T, dtype=np.bool_)
+    for k in range(T):
+        if np.isnan(lo[k, 0]) or np.isnan(hi[k, 0]):
+            continue
+        box_lo, box_hi = lo[k].copy(), hi[k].copy()
+        for i in range(2 * ny):
+            j = i % ny
+            if np.isnan(t[k, j]):
+                continue
+            if not contract_box(C[j], t[k, j], sigma[k, j], box_lo, box_hi):
+                ok[k] = False
+                break
+        if ok[k]:
+            lo[k] = box_lo
+            hi[k] = box_hi
+    return ok
 
 
 @jit

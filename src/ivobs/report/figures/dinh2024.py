@@ -37,6 +37,7 @@ def _kkl_run(sc: scenarios.Scenario, disturbed: bool, **options: Any) -> tuple[E
     else:
         d = sc.disturbance("paper") if disturbed else np.zeros((sc.horizon, system.nd))
         traj = simulate(system, sc.x_true0, sc.u, d)
+    options.setdefault("strips", False)  # the paper's observer, as published
     est = make_estimator("kkl", system, x0=sc.x0, **options)
     res = est.run(traj.u, traj.y, t=traj.t if system.is_continuous else None)
     what = "with" if disturbed else "without"
