@@ -13,7 +13,13 @@ returns at each step a box that is certain to contain the true state.
 
 from . import io, linalg, monitor, nlmath, scenarios
 from .between import between_samples
-from .errors import DesignError, DivergenceError, InconsistentDataError, IvobsError
+from .errors import (
+    DesignError,
+    DesignWarning,
+    DivergenceError,
+    InconsistentDataError,
+    IvobsError,
+)
 from .estimators import Design, Estimator, make_estimator, methods
 from .io import equal_systems, load_system, save_system
 from .model import LinearSystem, NonlinearSystem
@@ -37,6 +43,7 @@ __all__ = [
     "Box",
     "Design",
     "DesignError",
+    "DesignWarning",
     "DivergenceError",
     "Estimate",
     "Estimator",

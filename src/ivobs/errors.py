@@ -18,6 +18,13 @@ class DesignError(IvobsError):
     """
 
 
+class DesignWarning(UserWarning):
+    """A design succeeded other than asked or expected: the default gain fell back to another
+    design (``design.fallback`` says why), or an option will make the estimate needlessly wide
+    (e.g. a zonotope order too low for a slowly contracting observer). The message names what
+    was used and what to pass instead."""
+
+
 class DivergenceError(IvobsError):
     """The model could not be evaluated over the current box: a validated flow found no a
     priori enclosure (the solution may escape within the period, or the box grew too wide for

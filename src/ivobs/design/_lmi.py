@@ -2,11 +2,19 @@
 
 A design that the solver reports as infeasible, unbounded or inaccurate raises
 :class:`ivobs.DesignError`; callers must also verify the property they needed on the numbers
-they extract (e.g. that ``A - LC`` is Schur), since a solver tolerance is not a proof.
+they extract (e.g. that ``A - LC`` is Schur), since a solver tolerance is not a proof. A caller
+that can prove what it needs on the numbers (a ``certify`` callback, e.g. the bounded-real
+certificate of an H∞ gain) may accept an answer the solver reports as inaccurate.
+
+The solvers' own warnings (CVXPY's "Solution may be inaccurate ...") are caught here and not
+passed on: the status they announce is in the error message, or, for an inaccurate answer that
+was certified, in the returned description, so the user sees one ivobs message, not a solver's.
 """
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -33,8 +41,13 @@ def check_size(nx: int, what: str) -> None:
         )
 
 
-def solve(problem: Any, what: str) -> str:
-    """Solve with Clarabel, then SCS; return the solver name used or raise ``DesignError``."""
+def solve(problem: Any, what: str, certify: Callable[[], bool] | None = None) -> str:
+    """Solve with Clarabel, then SCS; return how it was solved (the solver's name, or
+    ``"<solver> (inaccurate, certified)"``) or raise ``DesignError``.
+
+    ``certify``: called when a solver answers ``optimal_inaccurate`` with finite values (they are
+    then in the problem's variables); True accepts that answer (the caller proved it). Without
+    it, or when it returns False, the next solver is tried."""
     import cvxpy as cp
 
     statuses = []
@@ -42,15 +55,25 @@ def solve(problem: Any, what: str) -> str:
         # cvxpy's installed_solvers() has no annotations
         if solver not in cp.installed_solvers():  # type: ignore[no-untyped-call]
             continue
-        try:
-            kwargs: dict[str, Any] = {"eps": 1e-9, "max_iters": 200000} if solver == "SCS" else {}
-            problem.solve(solver=solver, **kwargs)
-        except cp.error.SolverError as exc:
-            statuses.append(f"{solver}: {exc}")
-            continue
+        kwargs: dict[str, Any] = {"eps": 1e-9, "max_iters": 200000} if solver == "SCS" else {}
+        with warnings.catch_warnings():
+            # the status carries what the warning says (module docstring)
+            warnings.simplefilter("ignore")
+            try:
+                problem.solve(solver=solver, **kwargs)
+            except cp.error.SolverError as exc:
+                statuses.append(f"{solver}: {exc}")
+                continue
         statuses.append(f"{solver}: {problem.status}")
         if problem.status == cp.OPTIMAL and _finite(problem):
             return solver
+        if (
+            certify is not None
+            and problem.status == cp.OPTIMAL_INACCURATE
+            and _finite(problem)
+            and certify()
+        ):
+            return f"{solver} (inaccurate, certified)"
     raise DesignError(
         f"{what}: the LMI has no (accurate) solution ({'; '.join(statuses)}); a nearly "
         "unobservable or badly scaled (A, C) often causes this: pass an explicit gain L=... "

@@ -5,7 +5,9 @@ the LMI; and the gain of the Luenberger-type estimators (:func:`observer_gain`).
 ``γ`` with the H∞ Riccati equation, ``O(nx³)`` per ``γ``, certified by the bounded-real lemma
 (a ``P`` satisfying (16) strictly, checked). ``method="lmi"``: problem (20) as the paper states
 it, solved by CVXPY/Clarabel (below; refused above 200 states). Both reach the same ``γ`` on the
-paper's examples (docs/gains.md).
+paper's examples (docs/gains.md). An answer the solver reports as inaccurate is kept only when
+its gain passes the bounded-real certificate (:func:`ivobs.design.riccati.bounded_real_certificate`)
+at the solver's ``γ`` or a somewhat larger one, which is then the ``γ`` returned.
 
 For the Luenberger observer ``x̂+ = A x̂ + B u + L (y - C x̂ - D u)`` the estimation error
 ``e = x - x̂`` of the model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` obeys
@@ -32,7 +34,7 @@ Without a disturbance (``nd = 0``) ``γ`` plays no role; the LMI then only asks
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -42,11 +44,12 @@ from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
 from .balance import state_scaling
 
-__all__ = ["GAINS", "check_gain", "hinf_gain", "observer_gain"]
+__all__ = ["GAINS", "DesignedGain", "check_gain", "designed_gain", "hinf_gain", "observer_gain"]
 
 GAINS = ("radius", "hinf", "hinf-lmi")
-"""Designs of :func:`observer_gain`: ``"radius"`` (default; :mod:`ivobs.design.radius`), the H∞
-gain by Riccati equations, the H∞ gain by the LMI."""
+"""Designs of :func:`designed_gain`: ``"radius"`` (default; :mod:`ivobs.design.radius`), the H∞
+gain by Riccati equations, the H∞ gain by the LMI; the default tries them in this order (the
+radius gain is the tightest for the box, the LMI the most expensive)."""
 
 MARGIN = 1e-8
 """Default margin of the strict LMI (16): the block matrix is required ``≼ -MARGIN I``."""
@@ -127,14 +130,40 @@ def _hinf_lmi(
     Dm = np.concatenate([dv, np.ones(nd), dv])[:size] if nd else np.concatenate([dv, dv])
     cons = [lmi << -margin * np.diag(Dm**2)]
     objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P / dv[:, None] / dv[None, :]))  # type: ignore[attr-defined]
-    solve(cp.Problem(objective, cons), "hinf_gain: problem (20) of [Tang2019] (LMI (16))")
 
-    Pt = np.asarray(P.value, dtype=float)
-    Pt = 0.5 * (Pt + Pt.T)
-    L = dv[:, None] * np.linalg.solve(Pt, np.asarray(Y.value, dtype=float))
-    Pv = Pt / dv[:, None] / dv[None, :]
+    def extract() -> tuple[np.ndarray, float, np.ndarray]:
+        Pt = np.asarray(P.value, dtype=float)
+        Pt = 0.5 * (Pt + Pt.T)
+        L = dv[:, None] * np.linalg.solve(Pt, np.asarray(Y.value, dtype=float))
+        gamma = float(np.sqrt(max(float(np.asarray(g.value, dtype=float)), 0.0))) if nd else 0.0
+        return L, gamma, Pt / dv[:, None] / dv[None, :]
+
+    proven: list[tuple[np.ndarray, float, np.ndarray]] = []
+
+    def certify() -> bool:
+        """An inaccurate answer is kept when its gain passes the bounded-real certificate (the
+        LMI (16) proven on the numbers) at its γ or a larger one (:data:`~ivobs.design.riccati.
+        BACK_OFF`); that γ is returned."""
+        from .riccati import BACK_OFF, bounded_real_certificate
+
+        try:
+            L, gamma, _ = extract()
+        except np.linalg.LinAlgError:
+            return False
+        if not nd or not spectral_radius(A - L @ C) < 1.0:
+            return False
+        for factor in (1.0001, *BACK_OFF):
+            Pc = bounded_real_certificate(A - L @ C, E - L @ F, gamma * factor)
+            if Pc is not None:
+                proven.append((L, gamma * factor, Pc))
+                return True
+        return False
+
+    solve(cp.Problem(objective, cons), "hinf_gain: problem (20) of [Tang2019] (LMI (16))", certify)
+    if proven:
+        return proven[0]
+    L, gamma, Pv = extract()
     check_gain(A, C, L, "hinf_gain: the solver's gain L = P⁻¹Y")
-    gamma = float(np.sqrt(max(float(np.asarray(g.value, dtype=float)), 0.0))) if nd else 0.0
     return L, gamma, Pv
 
 
@@ -150,15 +179,37 @@ def check_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray, who: str) -> float:
     return rho
 
 
+class DesignedGain(NamedTuple):
+    """A gain of :func:`designed_gain`: ``L``; ``gamma`` and ``P`` (the H∞ bound and its
+    certificate, None for the other designs); ``rho``, the spectral radius of ``A - LC``;
+    ``gain``, the design that produced it (``"user"`` for ``L=``); ``fallback``: None when it is
+    the one asked for (or the default's first choice), else what failed before it."""
+
+    L: np.ndarray
+    gamma: float | None
+    P: np.ndarray | None
+    rho: float
+    gain: str
+    fallback: str | None
+
+
 def observer_gain(
     sys: Any, L: Any, who: str, gain: str | None = None
 ) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
-    """The gain of a Luenberger-type estimator: the user's ``L`` (checked) or the design
-    ``gain`` (:data:`GAINS`; default ``"radius"``), cached per system (:mod:`ivobs.design.cache`).
+    """``(L, gamma, P, rho)`` of :func:`designed_gain`."""
+    d = designed_gain(sys, L, who, gain)
+    return d.L, d.gamma, d.P, d.rho
 
-    Returns ``(L, gamma, P, spectral radius of A - LC)``; ``gamma`` and ``P`` are the H∞ bound
-    and its certificate for the H∞ designs, None otherwise. ``sys`` is a time-invariant
-    :class:`~ivobs.LinearSystem`.
+
+def designed_gain(sys: Any, L: Any, who: str, gain: str | None = None) -> DesignedGain:
+    """The gain of a Luenberger-type estimator: the user's ``L`` (checked) or the design
+    ``gain`` (:data:`GAINS`), cached per system (:mod:`ivobs.design.cache`). ``sys`` is a
+    time-invariant :class:`~ivobs.LinearSystem`.
+
+    Default (``gain=None``): the designs of :data:`GAINS` in that order, cheapest and tightest
+    first, the first that passes its certificate (``fallback`` says what failed before it).
+    An explicit ``gain`` that fails raises :class:`DesignError` naming the design that works
+    for this system, if one does (it is tried for the message only).
     """
     A, _, C, _, E, F = sys.matrices_at(0)
     if L is not None:
@@ -168,13 +219,49 @@ def observer_gain(
             )
         Lm = as_matrix("L", L, sys.nx, sys.ny)
         rho = check_gain(A, C, Lm, f"L ({who})")
-        return Lm, None, None, rho
-    gain = "radius" if gain is None else gain
-    if gain not in GAINS:
+        return DesignedGain(Lm, None, None, rho, "user", None)
+    if gain is not None and gain not in GAINS:
         raise IvobsError(f"gain: expected one of {', '.join(map(repr, GAINS))}, got {gain!r}")
+    r = sys.d_at(0).radius if sys.has_constant_bounds else None
+    failed: list[str] = []
+    for g in GAINS if gain is None else (gain,):
+        try:
+            out = _cached_design(g, A, C, E, F, r)
+        except DesignError as exc:
+            failed.append(f"gain={g!r}: {exc}")
+            continue
+        return DesignedGain(*out, gain=g, fallback="; ".join(failed) or None)
+    if gain is None:
+        raise DesignError(
+            f"{who}: no observer gain could be designed ({'; '.join(failed)}); pass an "
+            "explicit gain L=..."
+        )
+    works = _working(gain, A, C, E, F, r)
+    hint = f"; gain={works!r} designs a stabilising gain for this system" if works else ""
+    raise DesignError(f"{failed[0]}{hint}") from None
+
+
+def _working(
+    failed: str, A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, r: np.ndarray | None
+) -> str | None:
+    """The first design of :data:`GAINS` other than ``failed`` that succeeds (for a message)."""
+    for g in GAINS:
+        if g == failed:
+            continue
+        try:
+            _cached_design(g, A, C, E, F, r)
+        except DesignError:
+            continue
+        return g
+    return None
+
+
+def _cached_design(
+    gain: str, A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, r: np.ndarray | None
+) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
     from .cache import cached, fingerprint
 
-    r = sys.d_at(0).radius if gain == "radius" and sys.has_constant_bounds else None
+    r = r if gain == "radius" else None
     key = fingerprint("observer_gain", gain, A, C, E, F, r)
     return cached(key, lambda: _design(gain, A, C, E, F, r))
 

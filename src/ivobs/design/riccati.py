@@ -21,7 +21,11 @@ feedback is then ``L = (A X̃ Cᵀ + E Fᵀ)(F Fᵀ + C X̃ Cᵀ)⁻¹`` with ``
 bisects on ``γ`` with :func:`scipy.linalg.solve_discrete_are` and certifies the result by the
 bounded-real lemma (:func:`bounded_real_certificate`): a ``P`` satisfying [Tang2019, LMI (16)]
 with ``Y = P L`` strictly, checked by the eigenvalues of the assembled block matrix. Cost
-``O(nx³)`` per ``γ`` instead of the LMI's ``O(nx⁶)``-like interior-point steps.
+``O(nx³)`` per ``γ`` instead of the LMI's ``O(nx⁶)``-like interior-point steps. Near the optimal
+``γ`` the central gain attains almost ``γ`` and, when ``A - LC`` contracts slowly, its
+certificate cannot be proven; the central gains of larger ``γ`` (:data:`BACK_OFF`) are then
+tried and the first certified is returned with its ``γ`` (a sampled cart-pole: ``γ`` 4.99 fails,
+``1.1 × 4.99`` is certified).
 
 **Kalman-type gain.** :func:`kalman_gain`: the steady-state predictor gain of the model with the
 process part of ``d`` weighted by ``q`` (``Q = q E Eᵀ``, ``S = √q E Fᵀ``, ``R = F Fᵀ``). It is
@@ -48,6 +52,10 @@ RTOL = 1e-4
 RTOL_LARGE, LARGE_N = 1e-2, 60
 """Above ``LARGE_N`` states the bisection stops at ``RTOL_LARGE``: each ``γ`` costs a Riccati
 equation of ``O(nx³)``, and the box widths do not depend on the last digits of ``γ``."""
+
+BACK_OFF = (1.01, 1.03, 1.1, 1.3, 2.0, 4.0)
+"""When the bisection's gain fails its certificate: the central gains of ``γ`` these times
+larger are tried in turn (the first certified is returned, with that ``γ``)."""
 
 STRICT = 1e-6
 """Slack of the certificate, relative to the diagonal of ``P`` (:func:`bounded_real_certificate`):
@@ -222,7 +230,19 @@ def hinf_riccati_gain(
         P = bounded_real_certificate(M, G, float(gamma))
         if P is not None:
             return L, float(gamma), P
+    # near the optimum the central gain attains almost γ itself and its certificate's Riccati
+    # equation is ill-conditioned (a slowly contracting A - LC); the central gain of a larger
+    # γ leaves a margin its certificate can prove
+    for factor in BACK_OFF:
+        Lt = _hinf_central(At, Ct, Et, F, dv, hi * factor)
+        if Lt is None:
+            continue
+        L = dv[:, None] * Lt
+        P = bounded_real_certificate(A - L @ C, E - L @ F, float(hi * factor))
+        if P is not None:
+            return L, float(hi * factor), P
     raise DesignError(
         "hinf_riccati_gain: the Riccati gain failed its bounded-real certificate (LMI (16) of "
-        f"[Tang2019] at γ = {hi:.6g}); the design is refused: pass an explicit gain L=..."
+        f"[Tang2019] at γ = {hi:.6g}, and at γ up to {BACK_OFF[-1]:g} times that); the design "
+        "is refused: pass an explicit gain L=..., or another design (gain='radius')"
     )

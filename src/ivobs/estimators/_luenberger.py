@@ -51,14 +51,15 @@ own gain (:func:`pattern_gain`), designed once when the pattern first occurs.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..design.hinf import observer_gain
-from ..errors import DesignError
+from ..design.hinf import designed_gain
+from ..errors import DesignError, DesignWarning
 from ..linalg import spectral_radius
 from ..sets.rounding import enclose, mid_rad, upper
 from . import _uncertain as uncertain
@@ -82,13 +83,28 @@ class ObserverDesign(Design):
     """``L``: observer gain; ``gamma``: its H∞ bound and ``P`` the Lyapunov matrix of
     [Tang2019, Theorem 1] (None for a user gain and the ``"radius"`` gain); ``spectral_radius``
     of ``A - LC``; ``gain``: the design (``"radius"``, ``"hinf"``, ``"hinf-lmi"``; ``"user"``
-    for ``L=``)."""
+    for ``L=``); ``fallback``: None when the default's first choice designed, else which
+    designs failed and why (:func:`~ivobs.design.hinf.designed_gain`; a
+    :class:`~ivobs.DesignWarning` says it too)."""
 
     L: np.ndarray
     gamma: float | None
     P: np.ndarray | None
     spectral_radius: float
     gain: str
+    fallback: str | None
+
+
+def warn_fallback(who: str, used: str, why: str) -> None:
+    """One line saying that the default design fell back to ``used``; ``why`` (the failures,
+    ``"gain='radius': <message>; gain='hinf': ..."``) stays whole in ``design.fallback``."""
+    first = why.split(";")[0]  # the first design that failed and the start of its reason
+    warnings.warn(
+        f"{who}: the default gain design fell back to gain={used!r} ({first}; design.fallback "
+        "has every reason)",
+        DesignWarning,
+        stacklevel=5,  # warn_fallback, _design_observer, __init__, make_estimator: the caller
+    )
 
 
 class Gain(NamedTuple):
@@ -149,7 +165,8 @@ class ObserverEstimator(Estimator):
     def _design_observer(self, L: Any, gain: str | None = None) -> ObserverDesign:
         """The gain (checked: ``A - LC`` Schur), the error dynamics of every pattern of observed
         outputs (built when first needed), and the decay of ``M``'s powers (the rounding ball)."""
-        Lm, gamma_, P, rho = observer_gain(self.sys, L, self.name, gain)
+        designed = designed_gain(self.sys, L, self.name, gain)
+        Lm = designed.L
         self._mats = self.sys.matrices_at(0)
         A, B, C, D, E, F = self._mats
         self._unc = self.sys.uncertainty
@@ -172,8 +189,16 @@ class ObserverEstimator(Estimator):
         self._gain_weights = np.ones(E.shape[1]) if self._const is None else self._const[1]
         self._filter: LinearFilter | None = None  # the vectorised run's observer
         self._refiner: LinearFilter | None = None  # and its refinement
-        kind = "user" if L is not None else ("radius" if gain is None else gain)
-        return ObserverDesign(L=Lm, gamma=gamma_, P=P, spectral_radius=rho, gain=kind)
+        if designed.fallback is not None:
+            warn_fallback(self.name, designed.gain, designed.fallback)
+        return ObserverDesign(
+            L=Lm,
+            gamma=designed.gamma,
+            P=designed.P,
+            spectral_radius=designed.rho,
+            gain=designed.gain,
+            fallback=designed.fallback,
+        )
 
     def _gain_of(self, L: np.ndarray) -> Gain:
         A, _, C, _, E, F = self._mats

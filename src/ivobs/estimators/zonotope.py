@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
@@ -11,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_int, as_matrix
-from ..errors import DesignError, IvobsError
+from ..errors import DesignError, DesignWarning, IvobsError
 from ..linalg import UNIT_ROUNDOFF, spectral_radius
 from ..model import LinearSystem
 from ..sets import Box, Zonotope, box_generators
 from ..sets.rounding import enclose, mid_rad, product_error, upper
 from . import register
-from ._luenberger import DataFreeBounds, Gain, ObserverDesign, ObserverEstimator
+from ._luenberger import DataFreeBounds, Gain, ObserverDesign, ObserverEstimator, warn_fallback
 from .base import check_size
 from .state import OnlineState, Step, evolve
 
@@ -33,10 +34,57 @@ SEQUENCE_FLOATS = 1 << 21
 """Most floats kept of the data-independent generators (34b) for ``step()``."""
 
 WIDTH_STEPS = 60
-"""Steps of (34b) over which the default gain is chosen when the reduction can grow."""
+"""Steps of (34b) over which the default gain is chosen when the reduction can grow (at least;
+more for a slowly contracting ``A - LC``, see :meth:`ZonotopeEstimator._gain_by_width`)."""
+
+MAX_WIDTH_STEPS = 4000
+"""At most this many steps for that comparison."""
 
 SETTLE_WORK = 2e9
 """Budget (multiply-adds) of that iteration: larger systems are iterated for fewer steps."""
+
+DECAY_TOL = 1e-2
+"""A generator of (34b) matters while ``‖M^i g‖ >= DECAY_TOL max_j ‖g_j‖`` (see ``order``)."""
+
+SLOW_STEPS = 50
+"""``A - LC`` contracts slowly when ``ρ^k`` needs this many steps to fall below
+:data:`DECAY_TOL` (``ρ >= 0.912``): only then is an explicit order checked for tightness."""
+
+
+def generators_that_matter(M: np.ndarray, GR: np.ndarray, W: np.ndarray | None) -> int | None:
+    """How many generators of the exact zonotope (34b) (without reduction) are at least
+    :data:`DECAY_TOL` times the largest new one, ``‖M^i g_j‖_W >= DECAY_TOL max_j ‖g_j‖_W`` over
+    the ages ``i >= 0`` and the columns ``g_j`` of ``G diag r`` (``‖h‖_W² = hᵀ W h``, the norm
+    the reduction sorts by). With ``ρ(M)`` close to 1 the error decays slowly and this is large:
+    an order below ``nx +`` this count boxes generators that still matter, and the boxed part
+    propagates like ``|M|``. None when ``M`` is not Schur or the count exceeds the work budget
+    :data:`SETTLE_WORK`."""
+    rho = spectral_radius(M)
+    if not 0.0 < rho < 1.0 or not GR.size:
+        return None
+
+    def norms(X: np.ndarray) -> np.ndarray:
+        out: np.ndarray = np.sqrt(np.einsum("ij,ij->j", X, X if W is None else W @ X))
+        return out
+
+    X = GR
+    tol = DECAY_TOL * float(norms(X).max())
+    if not tol > 0.0:
+        return None
+    # the transient of a non-normal M may exceed ρ^i: the ages are counted until M^i G R is
+    # below the tolerance for good, at most a few times the decay time of ρ^i
+    steps = int(4 * np.log(DECAY_TOL) / np.log(rho)) + 10
+    if steps * M.shape[0] ** 2 * GR.shape[1] > SETTLE_WORK:
+        return None
+    count = 0
+    for _ in range(steps):
+        n = norms(X)
+        big = int((n >= tol).sum())
+        if not big:
+            return count
+        count += big
+        X = M @ X
+    return count
 
 
 def settle(
@@ -150,7 +198,8 @@ class ZonotopeEstimator(ObserverEstimator):
     L : (nx, ny) observer gain, optional (default: designed, see ``gain``)
     gain : ``"radius"``, ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not given
         (docs/gains.md). Default: the radius gain, or the H∞ gain when ``|A - LC|`` is not
-        Schur and the H∞ gain's reduced zonotope is narrower over 60 steps of (34b)
+        Schur and the H∞ gain's reduced zonotope is narrower over 60 steps of (34b) (more when
+        ``A - LC`` contracts slowly)
     order : ``q >= nx``, generators kept by the reduction (default ``10 nx``: on the paper's
         servo motor the widths are within a few per mille of much larger orders from ``q = 10 nx``
         on, while the cost per step grows with ``q``). Larger ``q`` approaches Algorithm 1
@@ -165,7 +214,12 @@ class ZonotopeEstimator(ObserverEstimator):
         last no larger than the largest of the second quarter: a sign, not a proof); otherwise
         it raises ``DesignError`` with the widths seen and the next order that settles.
         ``q = nx`` (a box at every step, propagated by ``|A - LC|``) is refused when
-        ``|A - LC|`` is not Schur
+        ``|A - LC|`` is not Schur. An explicit order that is accepted but boxes generators
+        that still matter (``A - LC`` contracts slowly, ``ρ^50 > 0.01``, and more than
+        ``q - nx`` generators of the unreduced (34b) stay above 1 % of the largest new one:
+        :func:`generators_that_matter`) gets a :class:`~ivobs.DesignWarning` naming the order
+        that keeps them; the default order is not checked (a larger default would slow every
+        system)
     weight : (nx, nx) positive definite ``W`` of the reduction (default identity)
     """
 
@@ -222,6 +276,8 @@ class ZonotopeEstimator(ObserverEstimator):
         self._free = None
         if self._const is not None:
             self._check_bounded()
+            if order is not None:
+                self._check_order_tightness()
             self._free = DataFreeBounds(
                 self._H0, self._free_step, self._p0, keep=SEQUENCE_FLOATS, same=_same
             )
@@ -284,19 +340,58 @@ class ZonotopeEstimator(ObserverEstimator):
         reduction can grow (``order``), and another gain may give the narrower zonotope. Then
         the radius gain and the H∞ gain are both run through the data-independent recursion
         (34b) for :data:`WIDTH_STEPS` steps and the one with the smaller mean radius over the
-        second half is kept (``design.gain`` says which)."""
-        T = WIDTH_STEPS
-        work = T * self.sys.nx**2 * (self.design.order + self.sys.nd)
-        if spectral_radius(self._full.absM) < 1.0 or work > SETTLE_WORK:
+        second half is kept (``design.gain`` says which). The steps are at least
+        :data:`WIDTH_STEPS` and twice the time the slower gain's error takes to decay to
+        :data:`DECAY_TOL` (``ρ^k``, at most :data:`MAX_WIDTH_STEPS`): before that the boxed
+        part is still growing, and a slow H∞ gain would look narrower than it stays (a sampled
+        cart-pole, ``ρ = 0.993``: narrower at 60 steps, 40 times wider at 600). If the H∞ gain
+        cannot be designed the radius gain stands (``design.fallback``, a warning)."""
+        per_step = self.sys.nx**2 * (self.design.order + self.sys.nd)
+        if spectral_radius(self._full.absM) < 1.0 or WIDTH_STEPS * per_step > SETTLE_WORK:
+            return  # bounded for every order; or too large to compare
+        if self.design.gain != "radius":
+            return  # the default already fell back (it warned)
+        try:
+            hinf = self._design_observer(None, "hinf")  # cached: no second design
+        except DesignError as exc:
+            # the comparison is an improvement over the radius gain, never a condition
+            note = f"gain='hinf' (compared with the radius gain over (34b)): {exc}"
+            self.design = replace(self.design, fallback=note)
+            warn_fallback(self.name, "radius", note)
             return
+        rho = max(hinf.spectral_radius, self.design.spectral_radius)
+        slow = min(int(2 * np.log(DECAY_TOL) / np.log(rho)) + 1, MAX_WIDTH_STEPS)
+        T = max(WIDTH_STEPS, min(slow, int(SETTLE_WORK // per_step)))
         widths = {}
         for gain in ("hinf", "radius"):  # the radius gain last: kept on a tie
-            observer = self._design_observer(None, gain)  # cached: no second design
+            observer = self._design_observer(None, gain)
             self.design = replace(self.design, **observer.as_dict())
             widths[gain] = float(self._free_radii(T)[T // 2 :].mean())
         if widths["hinf"] < widths["radius"]:
             observer = self._design_observer(None, "hinf")
             self.design = replace(self.design, **observer.as_dict())
+
+    def _check_order_tightness(self) -> None:
+        """Warn (:class:`~ivobs.DesignWarning`) when an explicit order boxes generators that still
+        matter (:func:`generators_that_matter`), naming the order that keeps them; the default
+        order is not changed by it (a larger order costs more per step on every system)."""
+        nx, q = self.sys.nx, self.design.order
+        rho = self.design.spectral_radius
+        if not rho**SLOW_STEPS > DECAY_TOL:
+            return  # a fast observer: the generators the reduction boxes were small already
+        M, G, r = self._full.M, self._full.G, self._const[1]  # type: ignore[index]
+        count = generators_that_matter(M, G * r, self.design.weight)
+        if count is None or q >= nx + count:
+            return
+        warnings.warn(
+            f"order: q = {q} keeps {q - nx} generators, but A - LC contracts slowly (spectral "
+            f"radius {rho:.4g}) and {count} generators of the error's zonotope stay above "
+            f"{DECAY_TOL:g} of the largest new one; the reduction boxes the others, so the "
+            f"widths can be far above Algorithm 1's: order={nx + count} keeps them (the cost "
+            "per step grows with the order)",
+            DesignWarning,
+            stacklevel=4,  # _check_order_tightness, __init__, make_estimator: the caller
+        )
 
     def _check_bounded(self) -> None:
         """Refuse an order whose reduced recursion (34b) is not shown bounded (see ``order``)."""
