@@ -211,3 +211,16 @@ def test_truth_needs_a_log_and_is_never_overwritten(plant, capsys):
         err = capsys.readouterr().err
         assert "--truth" in err and "would overwrite it" in err, err
     assert (folder / "truth.csv").read_bytes() == before
+
+
+def test_compare_lists_only_the_methods_that_accept_the_model():
+    from ivobs.cli.compare import applicable_methods, default_methods
+
+    nl = ivobs.scenarios.get("pendulum-nl")
+    names, left_out = default_methods(nl)
+    assert names == ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"] and not left_out
+    assert "reachability" in applicable_methods(nl.system)[1]
+    ct = ivobs.scenarios.get("servo-motor").system
+    ct = ivobs.LinearSystem(ct.A - np.eye(3), ct.B, ct.C, E=ct.E, F=ct.F, d=ct.d, dt=0)
+    ok, refused = applicable_methods(ct)
+    assert ok == ["kkl", "intersect"] and "strip" in refused

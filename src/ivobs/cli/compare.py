@@ -121,13 +121,45 @@ def _scenario(args: argparse.Namespace) -> Any:
 
 
 def default_methods(sc: Any) -> tuple[list[str], list[str]]:
-    """The default methods for scenario ``sc`` and those left out for its size."""
-    from ..estimators import methods as all_methods
-
-    names = [m for m in all_methods() if m != "intersect"]
+    """The default methods for scenario ``sc`` (those that accept its model) and those left out
+    for its size."""
+    names = [m for m in applicable_methods(sc.system)[0] if m != "intersect"]
     if sc.system.nx <= LARGE_NX:
         return names, []
     return [m for m in names if m not in SLOW_METHODS], [m for m in names if m in SLOW_METHODS]
+
+
+def applicable_methods(system: Any) -> tuple[list[str], list[str]]:
+    """The methods that accept ``system`` (model class, time base, time variation, interval
+    matrices: :func:`ivobs.estimators.base.check_system`) and those that do not."""
+    from ..errors import IvobsError as Refused
+    from ..estimators import get
+    from ..estimators import methods as all_methods
+    from ..estimators.base import check_system
+
+    ok, refused = [], []
+    for name in all_methods():
+        try:
+            check_system(get(name), system)
+        except Refused:
+            refused.append(name)
+            continue
+        ok.append(name)
+    return ok, refused
+
+
+def _model_kind(system: Any) -> str:
+    """A few words on what makes methods refuse ``system``."""
+    from ..model import NonlinearSystem
+
+    kinds = ["nonlinear" if isinstance(system, NonlinearSystem) else "linear"]
+    if system.is_continuous:
+        kinds.append("continuous-time")
+    if getattr(system, "is_time_varying", False):
+        kinds.append("time-varying")
+    if getattr(system, "is_uncertain", False):
+        kinds.append("interval matrices")
+    return ", ".join(kinds)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -177,6 +209,7 @@ def main(args: argparse.Namespace) -> int:
             )
     else:
         names, left_out = default_methods(sc)
+    refused = [] if args.methods else applicable_methods(sc.system)[1]
     options = _options(args, names)
     traj, results = compare(
         sc,
@@ -195,6 +228,8 @@ def main(args: argparse.Namespace) -> int:
             f"# {sc.system.nx} states: {', '.join(left_out)} left out (slow at this size); "
             f"include them with --methods {','.join(names + left_out)}"
         )
+    if refused:
+        print(f"# not for this model ({_model_kind(sc.system)}): {', '.join(refused)}")
     print()
     ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
     print(markdown_table(results, sc.state_names, reference=ref))
