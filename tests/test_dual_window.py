@@ -17,22 +17,7 @@ import pytest
 
 import ivobs
 from ivobs import Box, IvobsError, LinearSystem
-
-
-def simulate_vertex(sys, x0, u, seed):
-    """``x+ = A x + B u + E d``, ``y = C x + D u + F d`` with every ``d[k]`` at a random vertex
-    of the model's box, from a random vertex of ``x0``."""
-    rng = np.random.default_rng(seed)
-    A, B, C, D, E, F = sys.matrices_at(0)
-    d = sys.d_at(0)
-    x = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
-    xs, ys = [], []
-    for k in range(u.shape[0]):
-        dk = np.where(rng.integers(0, 2, sys.nd).astype(bool), d.hi, d.lo)
-        xs.append(x)
-        ys.append(C @ x + D @ u[k] + F @ dk)
-        x = A @ x + B @ u[k] + E @ dk
-    return np.array(xs), np.array(ys)
+from vertexsim import simulate_vertex
 
 
 def quadtank(T):

@@ -17,6 +17,7 @@ import pytest
 import ivobs
 from ivobs import Box, IvobsError, LinearSystem
 from ivobs.estimators.dual_window.auto import MIN_WINDOW, TOL
+from vertexsim import simulate_vertex
 
 
 def plant(A: list[list[float]], C: list[list[float]], q: float, r: float) -> LinearSystem:
@@ -40,24 +41,6 @@ def random_plant(seed: int) -> tuple[LinearSystem, Box]:
     sys = LinearSystem(A, rng.normal(size=(3, 1)), rng.normal(size=(1, 3)), E=E, F=F,
                        d=Box(-r, r))  # fmt: skip
     return sys, Box(-np.ones(3), np.ones(3))
-
-
-def simulate_vertex(
-    sys: LinearSystem, x0: Box, u: np.ndarray, seed: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``x+ = A x + B u + E d``, ``y = C x + D u + F d``, every ``d[k]`` on a random vertex of
-    the model's box, from a random vertex of ``x0``."""
-    rng = np.random.default_rng(seed)
-    A, B, C, D, E, F = sys.matrices_at(0)
-    d = sys.d_at(0)
-    x = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
-    xs, ys = [], []
-    for k in range(u.shape[0]):
-        dk = np.where(rng.integers(0, 2, sys.nd).astype(bool), d.hi, d.lo)
-        xs.append(x)
-        ys.append(C @ x + D @ u[k] + F @ dk)
-        x = A @ x + B @ u[k] + E @ dk
-    return np.array(xs), np.array(ys)
 
 
 X0 = Box(-np.ones(2), np.ones(2))

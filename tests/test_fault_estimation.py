@@ -15,23 +15,15 @@ import pytest
 import ivobs
 from ivobs.monitor import Monitor
 from ivobs.monitor.bias import augment_with_bias
+from vertexsim import servo_vertex
 
 ONSET = 40
 
 
 def _servo(T: int, seed: int = 0):
     """The servo with vertex disturbances and noise: ``(sys, x0 box, u, x, y)``."""
-    sc = ivobs.scenarios.get("servo-motor")
-    s = sc.system
-    A, B, C, E, F = (np.asarray(m, dtype=float) for m in (s.A, s.B, s.C, s.E, s.F))
-    rng = np.random.default_rng(seed)
-    d = np.where(rng.random((T, s.nd)) < 0.5, s.d.lo, s.d.hi)
-    u = np.full((T, 1), 2.0)
-    x = np.zeros((T, 3))
-    x[0] = sc.x_true0
-    for k in range(T - 1):
-        x[k + 1] = A @ x[k] + B @ u[k] + E @ d[k]
-    return s, sc.x0, u, x, x @ C.T + d @ F.T
+    sc, u, x, y = servo_vertex(T, seed)
+    return sc.system, sc.x0, u, x, y
 
 
 def _contains(out, x) -> bool:

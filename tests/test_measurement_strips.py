@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import ivobs
+from vertexsim import servo_vertex
 
 T = 120
 METHODS = [
@@ -28,17 +29,7 @@ METHODS = [
 
 
 def _servo(seed: int = 0):
-    sc = ivobs.scenarios.get("servo-motor")
-    s = sc.system
-    A, B, C, E, F = (np.asarray(m, dtype=float) for m in (s.A, s.B, s.C, s.E, s.F))
-    rng = np.random.default_rng(seed)
-    d = np.where(rng.random((T, s.nd)) < 0.5, s.d.lo, s.d.hi)
-    u = np.full((T, 1), 2.0)
-    x = np.zeros((T, 3))
-    x[0] = sc.x_true0
-    for k in range(T - 1):
-        x[k + 1] = A @ x[k] + B @ u[k] + E @ d[k]
-    return sc, u, x, x @ C.T + d @ F.T
+    return servo_vertex(T, seed)
 
 
 @pytest.mark.parametrize("method", METHODS)
