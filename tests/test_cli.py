@@ -1,5 +1,6 @@
 """The ivobs command."""
 
+import functools
 import subprocess
 import sys
 
@@ -72,7 +73,9 @@ def test_compare_takes_a_system_file_and_a_log(tmp_path, capsys):
     assert [m["method"] for m in doc["methods"]] == ["interval-split", "exact"]
     assert doc["horizon"] == 60 and doc["methods"][0]["contains_truth"] is None  # a log: no truth
     # the same numbers as the Python API on the log's data
-    ref = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0).run(tr.u[:60], tr.y[:60])
+    # compare's default: the measurement strips
+    ref = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, strips=True)
+    ref = ref.run(tr.u[:60], tr.y[:60])
     burn = 6
     assert doc["methods"][0]["mean_width"] == pytest.approx(ref.mean_width(burn).tolist())
 
@@ -127,8 +130,8 @@ def test_options_on_the_command_line_and_from_the_system_file(tmp_path, capsys):
 
     plant = file_scenario(path, horizon=200)
     tr = plant.simulate("vertex", seed=0)
-    api4 = ivobs.make_estimator("zonotope", sc.system, x0=sc.x0, order=8).run(tr.u, tr.y)
-    api60 = ivobs.make_estimator("zonotope", sc.system, x0=sc.x0, order=60).run(tr.u, tr.y)
+    zono = functools.partial(ivobs.make_estimator, "zonotope", sc.system, x0=sc.x0, strips=True)
+    api4, api60 = zono(order=8).run(tr.u, tr.y), zono(order=60).run(tr.u, tr.y)
     burn = 200 // 10
     widths = {}
     for extra, key in (([], 4), (["--option", "zonotope.order=60"], 60)):

@@ -59,7 +59,7 @@ def test_compare_html_has_every_method_and_state(tmp_path, capsys):
     assert "<table class='methods'>" in page and "<td>exact</td>" in page
     sc = ivobs.scenarios.get("servo-motor")
     tr = sc.simulate("paper", 0)
-    est = ivobs.make_estimator("zonotope", sc.system, x0=sc.x0).run(tr.u, tr.y)
+    est = ivobs.make_estimator("zonotope", sc.system, x0=sc.x0, strips=True).run(tr.u, tr.y)
     z = next(t for t in figs["state-2"] if t["meta"] == {"method": "zonotope", "bound": "upper",
                                                           "state": 1})  # fmt: skip
     np.testing.assert_allclose(z["y"], est.upper[:, 1] - tr.x[:, 1], atol=1e-12)

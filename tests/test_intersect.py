@@ -381,7 +381,7 @@ def test_exact_trajectories_are_contained_at_every_scale(scale, gain, noise):
     sys = LinearSystem(sys.A, sys.B, C, sys.D, E=sys.E, F=sys.F, d=sys.d)
     rec = simulate_linear(sys, x_true0, 100, rng.normal(size=(100, 1)) * scale, seed=3)
     est = intersect(sys, x0, methods=["strip", "ellipsoid"])
-    assert est.design.strip_rows == (1,)
+    assert est.design.strip_rows == (0, 1)  # every output's strip (y2's pins x2)
     res = est.run(rec.U, rec.Y)
     assert rec.misses(res.lower, res.upper).size == 0 and not res.inconsistent.any()
     for m in est.members:

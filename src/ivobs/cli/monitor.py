@@ -243,7 +243,9 @@ class _Session:
             outputs = {"--state": self.state_path, "--state's lock": lock_path(self.state_path)}
             check_distinct(outputs, inputs)
         # the monitor's default (Monitor): boxes met with the strips of the outputs used
-        est = self.spec.make_estimator(method, defaults={"strips": True})
+        from ..estimators.measured import FILTERED
+
+        est = self.spec.make_estimator(method, defaults=FILTERED)
         self.monitor = Monitor(
             self.spec.system,
             est,

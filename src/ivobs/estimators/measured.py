@@ -37,9 +37,12 @@ from ..linalg import gamma
 from ..model import LinearSystem
 from ..sets import image_bounds
 from ..sets.rounding import down, mid_rad, up, upper
-from ..sets.strip import contract_boxes
 
-__all__ = ["MeasurementStrips"]
+__all__ = ["FILTERED", "MeasurementStrips"]
+
+FILTERED: dict[str, bool] = {"strips": True}
+"""The option that the comparisons (``compare``, ``ivobs compare``, ``ivobs demo``, campaigns)
+and the monitor give every method unless told otherwise: boxes never wider than the data."""
 
 
 class MeasurementStrips:
@@ -98,6 +101,8 @@ class MeasurementStrips:
         """Contract the boxes ``lo``, ``hi`` ``(T, nx)`` in place with the strips of ``y``
         ``(T, ny)`` (NaN: missing), inputs ``u`` ``(T, nu)``; ``keys`` ``(T,)``: the steps (the
         times in continuous time). Returns the rows whose data contradict their box."""
+        from ..sets.strip import contract_boxes  # compiled on first use (numba, when there)
+
         sys, rows = self.sys, self.rows
         if self.lti:
             t, sigma = self._strips(self.C, self.D, self.F, self.d, lo, hi, u, y[:, rows])

@@ -10,6 +10,7 @@ import numpy as np
 from .._validate import as_float_array, as_signal
 from ..errors import IvobsError
 from ..estimators import Estimator, make_estimator
+from ..estimators.measured import FILTERED
 from ..io.systemwrite import equal_systems
 from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
@@ -91,7 +92,7 @@ class Monitor:
                 x0 = est.x0
         else:
             # the boxes met with the strips of the outputs used (every method, filtered)
-            options.setdefault("strips", True)
+            options = {**FILTERED, **options}
             est = make_estimator(method, sys, x0=x0, **options)
         if not (isinstance(margin, (int, float)) and 0 <= margin < 1e-3):
             raise IvobsError(f"margin: expected a small relative margin in [0, 1e-3), got {margin}")

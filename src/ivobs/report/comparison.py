@@ -94,7 +94,7 @@ def compare(
         get_method(name)  # unknown names fail loudly, not as a table row
         opts = dict((options or {}).get(name, {}))
         if strips is not None:
-            opts.setdefault("strips", strips)
+            opts = {"strips": strips, **opts}
         res = MethodResult(method=name, options=opts)
         try:
             c0, t0 = time.process_time(), time.perf_counter()
