@@ -43,6 +43,7 @@ from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from ._codec import _decode, _encode
+from .records import output_names
 
 __all__ = ["BiasEstimate", "augment_with_bias"]
 
@@ -223,9 +224,10 @@ class BiasEstimate:
         """Some bias's interval excludes 0: the data since :attr:`start` prove the fault."""
         return bool(np.any((self.lower > 0) | (self.upper < 0)))
 
-    def describe(self, names: list[str]) -> str:
+    def describe(self) -> str:
+        """The estimate in a reason: ``bias of y1 in [0.4, 0.56] (estimated since step 300)``."""
         parts = [
-            f"{names[i]} in [{lo:.4g}, {hi:.4g}]"
+            f"{output_names((i,))} in [{lo:.4g}, {hi:.4g}]"
             for i, lo, hi in zip(self.outputs, self.lower, self.upper, strict=True)
         ]
         return f"bias of {', '.join(parts)} (estimated since step {self.start})"

@@ -198,7 +198,7 @@ class Monitor:
         if alarm and not evidence:
             reasons.append(self.latch.describe())
             if self._bias is not None:
-                reasons.append(self._bias.describe(self._output_labels))
+                reasons.append(self._bias.describe())
         elif not alarm and start is not None:
             reasons.append(f"cleared: the fault of {output_names(held)} since step {start}")
             if self._trial is not None:  # verified for clear_after steps: it continues
@@ -290,10 +290,6 @@ class Monitor:
         """The open fault's bias estimate (None without an open fault, or where the model
         cannot be augmented)."""
         return self._bias
-
-    @property
-    def _output_labels(self) -> list[str]:
-        return [f"y{i + 1}" for i in range(self.sys.ny)]
 
     def _prediction(
         self,
