@@ -327,14 +327,7 @@ def _print_episodes(spec: Any, est: Any, log: Any, t: Any, k0: int) -> None:
     for f in record.faults[:10]:
         end = "open at the end of the log" if f.end is None else f"cleared at step {f.end + k0}"
         line = f"  from step {f.start + k0}, {f.duration} step(s), {end}: {f.names or '-'}"
-        if f.bias_lower is not None and f.bias_upper is not None:
-            bias = [
-                f"{f'y{i + 1}'} in [{f.bias_lower[i]:.4g}, {f.bias_upper[i]:.4g}]"
-                for i in f.outputs
-                if not np.isnan(f.bias_lower[i])
-            ]
-            line += f"; bias {', '.join(bias)}" if bias else ""
-        print(line)
+        print(line + (f"; bias {f.bias_text}" if f.bias_text else ""))
 
 
 def _estimate(est: Any, u: Any, y: Any, t: Any, args: argparse.Namespace) -> Any:

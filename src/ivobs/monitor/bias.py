@@ -43,7 +43,7 @@ from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
 from ._codec import _decode, _encode
-from .records import output_names
+from .records import bias_intervals
 
 __all__ = ["BiasEstimate", "augment_with_bias"]
 
@@ -226,11 +226,8 @@ class BiasEstimate:
 
     def describe(self) -> str:
         """The estimate in a reason: ``bias of y1 in [0.4, 0.56] (estimated since step 300)``."""
-        parts = [
-            f"{output_names((i,))} in [{lo:.4g}, {hi:.4g}]"
-            for i, lo, hi in zip(self.outputs, self.lower, self.upper, strict=True)
-        ]
-        return f"bias of {', '.join(parts)} (estimated since step {self.start})"
+        parts = bias_intervals(zip(self.outputs, self.lower, self.upper, strict=True))
+        return f"bias of {parts} (estimated since step {self.start})"
 
     # -- persistence ------------------------------------------------------------------------
     def save(self) -> dict[str, Any]:

@@ -4,6 +4,7 @@ record, and the :class:`Fault` episodes they report."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -11,12 +12,24 @@ import numpy as np
 from ..model.protocol import SystemModel
 from ..sets import Box
 
-__all__ = ["Fault", "MonitorRecord", "MonitorStep", "output_names", "stack_steps"]
+__all__ = [
+    "Fault",
+    "MonitorRecord",
+    "MonitorStep",
+    "bias_intervals",
+    "output_names",
+    "stack_steps",
+]
 
 
 def output_names(outputs: tuple[int, ...]) -> str:
     """``(0, 2)`` -> ``"y1;y3"`` (empty: the contradiction names no output)."""
     return ";".join(f"y{i + 1}" for i in outputs)
+
+
+def bias_intervals(bounds: Iterable[tuple[int, float, float]]) -> str:
+    """``[(0, 0.4, 0.56)]`` -> ``"y1 in [0.4, 0.56]"``: estimated biases, output by output."""
+    return ", ".join(f"{output_names((i,))} in [{lo:.4g}, {hi:.4g}]" for i, lo, hi in bounds)
 
 
 @dataclass(frozen=True)
@@ -48,6 +61,14 @@ class Fault:
     @property
     def names(self) -> str:
         return output_names(self.outputs)
+
+    @property
+    def bias_text(self) -> str:
+        """The estimated biases of the episode's outputs (empty without an estimate)."""
+        if self.bias_lower is None or self.bias_upper is None:
+            return ""
+        lo, hi = self.bias_lower, self.bias_upper
+        return bias_intervals((i, lo[i], hi[i]) for i in self.outputs if not np.isnan(lo[i]))
 
 
 @dataclass(frozen=True)
