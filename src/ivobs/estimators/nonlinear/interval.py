@@ -18,10 +18,8 @@ Steps 1 and 2 repeat, the step back starting from the box of ``(x[k-1], w[k-1])`
 sweep left, until a sweep narrows no state's width by :data:`FIXPOINT_GAIN` of itself (at most
 :data:`MAX_SWEEPS`): the contractor network of the last step iterated to its fixpoint (to within
 that share) [Jaulin2001, Ch. 4]. The rule is per state, not on the summed width, which a wide
-state nothing bounds well would dominate (CORA's six tanks: the sixth, ~7.7 wide, stopped the
-sweeps while the first two still narrowed by a third). On that plant (vertex disturbances,
-steps 3–19) the first two tanks' mean widths go from 0.117, 0.0254 (one sweep) to 0.0355,
-0.0082; on Hénon, the pendulum and the CSTR one sweep is already the fixpoint.
+state that nothing bounds well would dominate, stopping the sweeps while the well-measured
+states still narrow (CORA's six tanks; BENCHMARKS.md has the figures).
 
 ``[y_k]`` is the measurement interval ``[down(y_k), up(y_k)]``: the reals the recorded double
 stands for (:func:`~ivobs.estimators.nonlinear.meanvalue.measurement`), so a sample within
