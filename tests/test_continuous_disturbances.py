@@ -391,6 +391,11 @@ def test_between_samples_linear() -> None:
     assert np.all(tube.lower <= res.lower) and np.all(res.upper <= tube.upper)
     span = np.mean([np.ptp(p[:, 1]) for p in paths[10:]])
     assert np.mean(tube.width[10:, 1]) <= 2.5 * span + np.mean(res.width[10:, 1])
+    # the estimate of a sampled model carries its times k Ts: the period is read from them
+    inferred = ivobs.between_samples(plant, res, us)
+    assert inferred.info["Ts"] == pytest.approx(Ts)
+    np.testing.assert_allclose(inferred.upper, tube.upper, rtol=1e-9)
+    res.t = None
     with pytest.raises(IvobsError, match="Ts: give the sampling period"):
         ivobs.between_samples(plant, res, us)
     with pytest.raises(IvobsError, match="continuous-time plant"):

@@ -65,7 +65,7 @@ def _import(name: str, extra: str) -> Any:
 def estimate_to_pandas(est: Estimate, truth: Any = None, names: Sequence[str] | None = None) -> Any:
     """The tidy ``pandas.DataFrame`` of :meth:`ivobs.Estimate.to_pandas`."""
     pd = _import("pandas", "pandas")
-    labels = state_labels(est.nx, names)
+    labels = state_labels(est.nx, est.names if names is None else names)
     x = _truth(est, truth)
     lo, hi = est.lower.reshape(-1, est.T, est.nx), est.upper.reshape(-1, est.T, est.nx)
     B, T, n = lo.shape
@@ -88,13 +88,15 @@ def estimate_to_pandas(est: Estimate, truth: Any = None, names: Sequence[str] | 
     cols["inconsistent"] = np.repeat(np.broadcast_to(est.inconsistent, (B, T)).ravel(), n)
     frame = pd.DataFrame(cols)
     frame.attrs.update(method=est.method, valid_from=est.valid_from)
+    if est.units is not None:
+        frame.attrs["units"] = dict(zip(labels, est.units))
     return frame
 
 
 def estimate_to_xarray(est: Estimate, truth: Any = None, names: Sequence[str] | None = None) -> Any:
     """The ``xarray.Dataset`` of :meth:`ivobs.Estimate.to_xarray`."""
     xr = _import("xarray", "xarray")
-    labels = state_labels(est.nx, names)
+    labels = state_labels(est.nx, est.names if names is None else names)
     dims = (["stream"] if est.is_batch else []) + ["k", "state"]
     coords: dict[str, Any] = {"k": np.arange(est.T), "state": labels}
     if est.t is not None:
@@ -108,7 +110,10 @@ def estimate_to_xarray(est: Estimate, truth: Any = None, names: Sequence[str] | 
     data["missing"] = (flag_dims, np.broadcast_to(est.missing, est.lower.shape[:-1]))
     data["inconsistent"] = (flag_dims, np.broadcast_to(est.inconsistent, est.lower.shape[:-1]))
     attrs = {"method": est.method, "valid_from": est.valid_from}
-    return xr.Dataset(data, coords=coords, attrs=attrs)
+    ds = xr.Dataset(data, coords=coords, attrs=attrs)
+    if est.units is not None:
+        ds["state"].attrs["units"] = list(est.units)
+    return ds
 
 
 def _png(est: Estimate) -> str:
@@ -123,7 +128,7 @@ def _png(est: Estimate) -> str:
         first = est.width if not est.is_batch else est.width[0]
         time = np.arange(est.T) if est.t is None else np.asarray(est.t, dtype=float)
         for i in range(min(est.nx, 8)):
-            ax.plot(time, first[:, i], lw=1.0, label=f"x{i + 1}")
+            ax.plot(time, first[:, i], lw=1.0, label=est.state_labels[i])
         ax.set_xlabel("step k" if est.t is None else "time")
         ax.set_ylabel("width")
         ax.set_yscale("log" if np.nanmin(first, initial=np.inf) > 0 else "linear")
@@ -144,7 +149,7 @@ def estimate_html(est: Estimate, figure: bool = True) -> str:
     rows = [
         ("method", est.method or "(unnamed)"),
         ("steps", f"{est.T}" + (f" × {est.lower.shape[0]} streams" if est.is_batch else "")),
-        ("states", str(est.nx)),
+        ("states", str(est.nx) if est.names is None else ", ".join(est.state_labels)),
         ("valid from", f"step {est.valid_from}"),
         ("missing samples", str(int(np.count_nonzero(est.missing)))),
         ("inconsistent steps", str(int(np.count_nonzero(est.inconsistent)))),

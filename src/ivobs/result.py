@@ -30,11 +30,14 @@ class Estimate:
     lower, upper : (T, nx) or (B, T, nx) arrays (NaN before ``valid_from``)
     valid_from : first step with a guaranteed box
     method : name of the method that produced it
-    t : sample times (optional)
+    t : sample times (optional; filled from the model's sampling period by ``run()`` for a
+        sampled system, ``k dt``)
     missing : (T,) bool, steps where (part of) the measurement was missing (NaN) and predicted over
     inconsistent : (T,) bool, steps where the measurement contradicted the model and bounds
         (a fault under the model's assumptions); the method then predicted without it
     info : free-form extras (design time, run time, ...)
+    names : the states' names (from the model's ``names``; None: ``x1..xn``)
+    units : the states' units (``"rad"``, ``"m/s"``; None or ``""``: none)
     """
 
     lower: np.ndarray
@@ -45,6 +48,8 @@ class Estimate:
     missing: np.ndarray | None = None
     inconsistent: np.ndarray | None = None
     info: dict[str, Any] = field(default_factory=dict)
+    names: tuple[str, ...] | None = None
+    units: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         self.lower = np.asarray(self.lower, dtype=float)
@@ -59,6 +64,23 @@ class Estimate:
             self.missing = np.zeros(T, dtype=bool)
         if self.inconsistent is None:
             self.inconsistent = np.zeros(T, dtype=bool)
+        for key in ("names", "units"):
+            value = getattr(self, key)
+            if value is not None:
+                value = tuple(str(v) for v in value)
+                if len(value) != self.nx:
+                    raise IvobsError(
+                        f"Estimate: {key}: expected {self.nx} entries (one per state), got "
+                        f"{len(value)}: {list(value)!r}"
+                    )
+                setattr(self, key, value)
+
+    @property
+    def state_labels(self) -> list[str]:
+        """``"name (unit)"`` per state (``x1..xn`` for unnamed states): plots and tables."""
+        names = self.names or tuple(f"x{i + 1}" for i in range(self.nx))
+        units = self.units or ("",) * self.nx
+        return [f"{n} ({u})" if u else n for n, u in zip(names, units)]
 
     # -- shape ---------------------------------------------------------------------------
     @property
@@ -148,10 +170,12 @@ class Estimate:
         data = np.hstack([*times, self.lower, self.upper])
         assert self.missing is not None and self.inconsistent is not None  # by __post_init__
         flags = np.column_stack([self.missing, self.inconsistent]).astype(int)
-        header = (
-            f"# ivobs estimate\n# method: {self.method}\n# valid_from: {self.valid_from}\n"
-            + ",".join(cols)
-        )
+        header = f"# ivobs estimate\n# method: {self.method}\n# valid_from: {self.valid_from}\n"
+        if self.names is not None:
+            header += f"# states: {_listed(self.names)}\n"
+        if self.units is not None:
+            header += f"# units: {_listed(self.units)}\n"
+        header += ",".join(cols)
         from .io.atomic import atomic_path  # the umask's file mode, like open(path, "w")
 
         with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
@@ -192,6 +216,10 @@ class Estimate:
         lo_idx = [i for i, c in enumerate(cols) if c.startswith("lower_")]
         hi_idx = [i for i, c in enumerate(cols) if c.startswith("upper_")]
         t = data[:, cols.index("t")] if "t" in cols else None
+        names, units = (
+            tuple(v.strip() for v in meta[key].split(";")) if key in meta else None
+            for key in ("states", "units")
+        )
         return cls(
             lower=data[:, lo_idx],
             upper=data[:, hi_idx],
@@ -202,6 +230,8 @@ class Estimate:
             inconsistent=(
                 data[:, cols.index("inconsistent")].astype(bool) if "inconsistent" in cols else None
             ),
+            names=names,
+            units=units,
         )
 
     def equals(self, other: Estimate) -> bool:
@@ -252,6 +282,12 @@ class Estimate:
     def __repr__(self) -> str:
         shape = "x".join(str(s) for s in self.lower.shape)
         return f"Estimate(method={self.method!r}, shape={shape}, valid_from={self.valid_from})"
+
+
+def _listed(values: tuple[str, ...]) -> str:
+    """Names or units on one header line, ``;``-separated (a name cannot hold ``;`` or a
+    line break there: they are replaced)."""
+    return "; ".join(v.replace(";", ",").replace("\n", " ") for v in values)
 
 
 def _fmt(v: float) -> str:

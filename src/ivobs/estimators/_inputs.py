@@ -93,18 +93,40 @@ def check_t_k(sys: Any, t: Any) -> float | None:
     return float(arr.reshape(()))
 
 
-def check_t(sys: Any, t: Any, T: int) -> np.ndarray | None:
-    """The sample times of a record of ``T`` steps: needed in continuous time, refused in
-    discrete time (to label a discrete-time result with times, set its ``Estimate.t``)."""
-    if t is None:
-        if sys.is_continuous:
+def check_t(sys: Any, t: Any, T: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(times the method uses, times the result is labelled with)`` for a record of ``T``
+    steps.
+
+    Continuous time: the sample times are needed, and are both. Discrete time: the method counts
+    steps (it gets None); the labels are ``t`` when given, else ``k dt`` for a sampled system
+    (None for ``dt=True``). A given ``t`` must step by the sampling period: a record whose times
+    jump by two periods has lost a row, and its steps would be renumbered (keep a row of NaN
+    for a missing sample)."""
+    if sys.is_continuous:
+        if t is None:
             raise IvobsError("t: continuous-time estimation needs the sample times t (T,)")
-        return None
-    if not sys.is_continuous:
-        raise IvobsError(
-            str(_discrete_t(sys, "s of the record"))
-            + " (to label the result with times, set Estimate.t afterwards)"
-        )
+        t_arr = _times(t, T)
+        return t_arr, t_arr
+    dt = getattr(sys, "dt", True)
+    period = None if dt is True or not dt else float(dt)
+    if t is None:
+        return None, None if period is None else np.arange(T) * period
+    t_arr = _times(t, T)
+    if period is not None and T > 1:
+        gaps = np.diff(t_arr)
+        off = np.abs(gaps - period) > 1e-6 * period + 4 * np.spacing(np.abs(t_arr[1:]))
+        if off.any():
+            j = int(np.argmax(off))
+            a, b = float(t_arr[j]), float(t_arr[j + 1])
+            raise IvobsError(
+                f"t: the steps of this sampled system are dt = {period:g} apart, but t[{j}] = "
+                f"{a!r} and t[{j + 1}] = {b!r} are {gaps[j]:g} apart (a dropped sample? keep "
+                "its row with NaN measurements, so the steps are not renumbered)"
+            )
+    return None, t_arr
+
+
+def _times(t: Any, T: int) -> np.ndarray:
     t_arr = as_float_array("t", t).ravel()
     if t_arr.shape[0] != T or np.any(~np.isfinite(t_arr)) or np.any(np.diff(t_arr) <= 0):
         raise IvobsError(f"t: expected {T} finite, strictly increasing sample times")

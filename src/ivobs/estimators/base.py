@@ -394,10 +394,13 @@ class Estimator(Persistence):
         """Bounds for a whole record: ``u`` ``(T, nu)``, ``y`` ``(T, ny)`` (NaN = missing), or a
         batch ``(B, T, ·)``. Does not touch the online state. ``vectorize=None`` picks the
         vectorised path for long records and batches (see :data:`VECTOR_MIN_STEPS`).
-        ``progress``: draw a progress bar for the step-by-step path (``None``: on a terminal)."""
+        ``progress``: draw a progress bar for the step-by-step path (``None``: on a terminal).
+        ``t``: the sample times, needed in continuous time; for a sampled system they label the
+        result (default ``k dt``) and must step by ``dt``. The result carries the model's state
+        names and units."""
         u, y = check_record(self.sys, u, y)
         T = y.shape[-2]
-        t_arr = check_t(self.sys, t, T)
+        t_arr, t_labels = check_t(self.sys, t, T)
         start = time.perf_counter()
         if vectorize is None:
             vectorize = T >= VECTOR_MIN_STEPS or y.ndim == 3
@@ -410,6 +413,7 @@ class Estimator(Persistence):
             lo, hi, inconsistent = run_record(self, u, y, t_arr, vectorize, bar)
         if np.any(inconsistent):
             self._report_inconsistent(sorted(set(np.argwhere(inconsistent)[:, -1].tolist())))
+        names = getattr(self.sys, "names", None)  # the model's labels (SignalNames)
         info: dict[str, Any] = {}
         if self._stopped is not None:
             k, why = self._stopped
@@ -424,10 +428,12 @@ class Estimator(Persistence):
             upper=hi,
             valid_from=self.valid_from,
             method=self.name,
-            t=t_arr,
+            t=t_labels,
             missing=np.any(np.isnan(y), axis=-1),
             inconsistent=inconsistent,
             info={"run_time": time.perf_counter() - start, **info},
+            names=names.states if names is not None else None,
+            units=names.units if names is not None else None,
         )
 
     def _loop(

@@ -55,6 +55,8 @@ def plot_estimates(
     if t is None:
         t = first.t if first.t is not None else np.arange(T)
     t = np.asarray(t, dtype=float)
+    if state_names is None and first.names is not None:
+        state_names = first.state_labels  # the model's names and units
     if axes is None:
         fig, axes = plt.subplots(
             len(states), 1, figsize=(8, 2.4 * len(states) + 0.6), sharex=True, squeeze=False
