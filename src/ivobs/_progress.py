@@ -1,7 +1,8 @@
 """Progress bars for long runs, drawn by ``tqdm``.
 
-Shown only on a terminal: ``enabled=None`` draws when the stream (``sys.stderr`` by default) is a
-TTY, so logs, pipes, notebooks' captured output and test runs stay clean. This module only maps
+Shown where someone watches: ``enabled=None`` draws when the stream (``sys.stderr`` by default) is
+a TTY or the code runs in a Jupyter kernel (there as a notebook widget when ``ipywidgets`` is
+installed, through ``tqdm.auto``), so logs, pipes and test runs stay clean. This module only maps
 ivobs' ``progress=`` convention (True, False, None) and units onto ``tqdm``.
 """
 
@@ -17,10 +18,18 @@ from .errors import IvobsError
 __all__ = ["Progress"]
 
 
+def in_notebook() -> bool:
+    """Whether this process is a Jupyter kernel (IPython with a kernel attached)."""
+    shell = sys.modules.get("IPython")
+    get = getattr(shell, "get_ipython", None)
+    ip = get() if callable(get) else None
+    return ip is not None and getattr(ip, "kernel", None) is not None
+
+
 def _enabled(enabled: Any, stream: TextIO) -> bool:
     if enabled is None:
         isatty = getattr(stream, "isatty", None)
-        return bool(isatty()) if callable(isatty) else False
+        return (bool(isatty()) if callable(isatty) else False) or in_notebook()
     if not isinstance(enabled, (bool, np.bool_)):
         raise IvobsError(f"progress: expected True, False or None, got {enabled!r}")
     return bool(enabled)
@@ -55,12 +64,16 @@ class Progress:
         self.count = 0
         self._bar: Any = None
         if self.enabled:
-            from tqdm import tqdm  # imported where a bar is drawn: import ivobs stays light
+            # imported where a bar is drawn: import ivobs stays light
+            if in_notebook() and stream is None:
+                from tqdm.auto import tqdm  # a widget in the notebook
+            else:
+                from tqdm import tqdm
 
             self._bar = tqdm(
                 total=self.total,
                 desc=desc or None,
-                file=self.stream,
+                file=None if in_notebook() and stream is None else self.stream,
                 mininterval=float(interval),
                 unit=unit,
                 dynamic_ncols=True,

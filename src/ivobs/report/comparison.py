@@ -127,7 +127,8 @@ def markdown_table(
     state_names: Sequence[str] | None = None,
     reference: str | None = None,
 ) -> str:
-    """A Markdown table: mean width per state, containment, design and run time.
+    """A Markdown table: mean width per state, containment, design and run time (wall clock),
+    and the run's CPU time (the figure to compare methods by on a loaded machine).
 
     With ``reference`` (a method name among the results, e.g. ``"exact"``), a column gives the
     mean over states of each method's width ratio to it.
@@ -138,7 +139,7 @@ def markdown_table(
     names = list(state_names) if state_names else [f"x{i + 1}" for i in range(nx)]
     ref = next((r for r in ok if r.method == reference), None) if reference else None
     head = ["method"] + [f"width {n}" for n in names] + ([f"ratio to {reference}"] if ref else [])
-    head += ["contains truth", "design (s)", "run (s)"]
+    head += ["contains truth", "design (s)", "run (s)", "CPU (s)"]
     point = _point_states(ref) if ref is not None else None
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
@@ -157,7 +158,7 @@ def markdown_table(
         seen = {True: "yes", False: "**NO**", None: "n/a"}[r.contains]
         if r.contains is False and r.misses is not None:
             seen += f" ({r.misses} of {r.estimate.T} steps)" if r.estimate is not None else ""
-        cells += [seen, f"{r.design_time:.3f}", f"{r.run_time:.4f}"]
+        cells += [seen, f"{r.design_time:.3f}", f"{r.run_time:.4f}", f"{r.cpu_time:.4f}"]
         lines.append("| " + " | ".join(cells) + " |")
     if not all(r.guaranteed for r in results):
         lines.append(

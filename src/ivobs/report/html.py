@@ -142,14 +142,15 @@ def results_table(results: Sequence[Any], state_names: Sequence[str] | None = No
     rows = []
     for r in results:
         if r.estimate is None:
-            cells = f"<td colspan='{nx + 3}'>{html.escape(str(r.error))}</td>"
+            cells = f"<td colspan='{nx + 4}'>{html.escape(str(r.error))}</td>"
         else:
             widths = "".join(f"<td>{w:.4g}</td>" for w in np.ravel(r.mean_width))
             seen = {True: "yes", False: "NO", None: "n/a"}[r.contains]
-            cells = f"{widths}<td>{seen}</td><td>{r.design_time:.3g}</td><td>{r.run_time:.3g}</td>"
+            times = (r.design_time, r.run_time, getattr(r, "cpu_time", float("nan")))
+            cells = f"{widths}<td>{seen}</td>" + "".join(f"<td>{v:.3g}</td>" for v in times)
         label = r.method if getattr(r, "guaranteed", True) else f"{r.method} (NOT guaranteed)"
         rows.append(f"<tr><td>{html.escape(label)}</td>{cells}</tr>")
     return (
         f"<table class='methods'><tr><th>method</th>{head}<th>contains truth</th>"
-        f"<th>design (s)</th><th>run (s)</th></tr>{''.join(rows)}</table>"
+        f"<th>design (s)</th><th>run (s)</th><th>CPU (s)</th></tr>{''.join(rows)}</table>"
     )
