@@ -13,7 +13,7 @@ import pytest
 
 import ivobs
 from ivobs import nlmath
-from nlsystems import HENON_X0, henon, henon_record, simulate
+from nlsystems import HENON_X0, henon, henon_record, simulate, tank_record
 
 T = 4000
 
@@ -146,8 +146,8 @@ def test_linear_only_methods_refuse_a_nonlinear_system_naming_those_that_take_it
 
 
 def test_bad_options_are_refused() -> None:
-    with pytest.raises(ivobs.IvobsError, match="lag: expected 0 or 1"):
-        ivobs.make_estimator("nl-interval", henon(), x0=HENON_X0, lag=3)
+    with pytest.raises(ivobs.IvobsError, match="lag: expected 0 to 10 steps back, got 11"):
+        ivobs.make_estimator("nl-interval", henon(), x0=HENON_X0, lag=11)
     with pytest.raises(ivobs.IvobsError, match="lag: expected an integer"):
         ivobs.make_estimator("nl-interval", henon(), x0=HENON_X0, lag=0.5)
     with pytest.raises(ivobs.IvobsError, match="x0: the nl-interval method needs"):
@@ -205,3 +205,62 @@ def test_no_wrapping_warning_on_a_plant_that_stays_bounded():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         est.run(tr.u, tr.y)
+
+
+# -- a window of steps contracted back (lag >= 2) -------------------------------------------
+
+
+@pytest.mark.parametrize("lag", [2, 4])
+def test_a_window_of_steps_back_contains_the_exact_state_and_is_no_wider(lag: int) -> None:
+    # six tanks: the outputs see the first tanks only through the inflows of the later ones
+    sys, U, rec = tank_record(60, seed=3)
+    x0 = ivobs.Box(np.full(6, 15.0), np.full(6, 30.0))
+    one = ivobs.make_estimator("nl-interval", sys, x0=x0).run(U, rec.Y)
+    win = ivobs.make_estimator("nl-interval", sys, x0=x0, lag=lag).run(U, rec.Y)
+    assert rec.misses(win.lower, win.upper).tolist() == []
+    assert not win.inconsistent.any()
+    # the window only contracts more: never wider (up to the rounding of a different path)
+    w1, wl = one.upper - one.lower, win.upper - win.lower
+    assert np.all(wl <= w1 * (1 + 1e-9) + 1e-12)
+    # and much narrower on the first tank, seen only through the dynamics
+    assert wl[10:, 0].mean() < 0.85 * w1[10:, 0].mean()
+
+
+def test_the_window_on_henon_with_y_x2_is_sound_over_long_runs() -> None:
+    sys, rec = henon_record(2000, seed=2, output="x2")
+    res = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0, lag=3).run(None, rec.Y)
+    assert rec.misses(res.lower, res.upper).tolist() == []
+    one = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0).run(None, rec.Y)
+    assert (res.upper - res.lower)[100:].mean() <= (one.upper - one.lower)[100:].mean()
+
+
+def test_the_window_drops_an_inconsistent_sample_and_resumes_from_a_saved_state() -> None:
+    sys, rec = henon_record(120, seed=1, output="x2")
+    Y = rec.Y.copy()
+    Y[60, 0] = 3.0
+    est = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0, lag=3)
+    with pytest.warns(UserWarning, match=r"step\(s\) \[60\]"):
+        ref = est.run(None, Y)
+    assert ref.inconsistent[60] and ref.inconsistent.sum() == 1
+    assert rec.misses(ref.lower, ref.upper).tolist() == []
+    online = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0, lag=3, on_inconsistent="ignore")
+    boxes = [online.step(None, Y[k]) for k in range(70)]
+    saved = json.loads(json.dumps(online.state()))
+    assert saved["state"]["hist_lo"]["shape"] == [2, 2 + sys.nw]  # the two steps before k - 1
+    other = ivobs.make_estimator("nl-interval", henon("x2"), x0=HENON_X0, lag=3)
+    other.on_inconsistent = "ignore"
+    other.restore(saved)
+    boxes += [other.step(None, Y[k]) for k in range(70, 120)]
+    np.testing.assert_array_equal(np.array([b.lo for b in boxes]), ref.lower)
+    np.testing.assert_array_equal(np.array([b.hi for b in boxes]), ref.upper)
+    with pytest.raises(ivobs.IvobsError, match="fingerprint|another"):  # another window
+        ivobs.make_estimator("nl-interval", henon("x2"), x0=HENON_X0, lag=2).restore(saved)
+
+
+def test_a_sampled_continuous_plant_steps_back_one_step_only() -> None:
+    ct = ivobs.NonlinearSystem(
+        f=["x2", "-sin(x1) + w"], h=["x1 + v"], states=["x1", "x2"],
+        d={"w": (-0.01, 0.01), "v": (-0.01, 0.01)}, dt=0,
+    )  # fmt: skip
+    with pytest.raises(ivobs.IvobsError, match="steps back through its flow one step only"):
+        ivobs.make_estimator("nl-interval", ct.discretize(0.1), x0=HENON_X0, lag=2)

@@ -14,12 +14,19 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
    intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
 
-Steps 1 and 2 repeat, the step back starting from the box of ``(x[k-1], w[k-1])`` the last
-sweep left, until a sweep narrows no state's width by :data:`FIXPOINT_GAIN` of itself (at most
-:data:`MAX_SWEEPS`): the contractor network of the last step iterated to its fixpoint (to within
-that share) [Jaulin2001, Ch. 4]. The rule is per state, not on the summed width, which a wide
-state that nothing bounds well would dominate, stopping the sweeps while the well-measured
-states still narrow (CORA's six tanks; BENCHMARKS.md has the figures).
+2'. **Further back** (``lag = L >= 2``): the boxes of ``(x[j], w[j])`` for the ``L`` steps
+   ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j], w[j]) ∈ [x]_{j+1}`` and
+   with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first, then
+   ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1`` again,
+   oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4 and 6].
+   What ``y_k`` says about earlier states thus reaches ``x[k]`` through them.
+
+Steps 1, 2 and 2' repeat, the step back starting from the boxes the last sweep left, until a
+sweep narrows no state's width by :data:`FIXPOINT_GAIN` of itself (at most :data:`MAX_SWEEPS`):
+the contractor network of the last steps iterated to its fixpoint (to within that share)
+[Jaulin2001, Ch. 4]. The rule is per state, not on the summed width, which a wide state that nothing
+bounds well would dominate, stopping the sweeps while the well-measured states still narrow (CORA's
+six tanks; BENCHMARKS.md has the figures).
 
 ``[y_k]`` is the measurement interval ``[down(y_k), up(y_k)]``: the reals the recorded double
 stands for (:func:`~ivobs.estimators.nonlinear.meanvalue.measurement`), so a sample within
@@ -49,7 +56,7 @@ from __future__ import annotations
 
 import hashlib
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -60,7 +67,7 @@ from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from .. import register
 from ..base import Design, Estimator
-from ..state import OnlineState, Step
+from ..state import OnlineState, Step, evolve
 from .meanvalue import measurement
 
 __all__ = [
@@ -82,10 +89,14 @@ WRAP_GROWTH = 1e6
 as wrapping."""
 
 
+MAX_LAG = 10
+"""Most steps of the window contracted back (``lag``)."""
+
+
 @dataclass(frozen=True)
 class NonlinearIntervalDesign(Design):
-    """``lag``: steps back through the model at each correction (0 or 1); ``w_lo``, ``w_hi``:
-    the box ``[w]`` of the per-step unknowns."""
+    """``lag``: steps back through the model at each correction (0 to :data:`MAX_LAG`);
+    ``w_lo``, ``w_hi``: the box ``[w]`` of the per-step unknowns."""
 
     lag: int
     w_lo: np.ndarray
@@ -95,11 +106,17 @@ class NonlinearIntervalDesign(Design):
     restores only into an estimator of the same model)."""
 
 
+def _empty() -> np.ndarray:
+    return np.zeros(0)
+
+
 @dataclass(frozen=True)
 class NonlinearIntervalState(OnlineState):
     """``lo``, ``hi``: the predicted box ``[x]_k^-``; ``prev_lo``, ``prev_hi``: the corrected
-    box of ``(x[k-1], w[k-1])`` and ``prev_u`` = ``u[k-1]``, for the step back (``back`` says
-    whether there is one)."""
+    box of ``(x[k-1], w[k-1])``, ``prev_u`` = ``u[k-1]`` and ``prev_y`` = ``y[k-1]`` (NaN:
+    missing or not used), for the step back (``back`` says whether there is one);
+    ``hist_lo``, ``hist_hi`` (·, nx + nw), ``hist_u``, ``hist_y``: the same for the steps
+    before ``k - 1`` kept by ``lag >= 2``, oldest first."""
 
     lo: np.ndarray
     hi: np.ndarray
@@ -107,7 +124,16 @@ class NonlinearIntervalState(OnlineState):
     prev_hi: np.ndarray
     prev_u: np.ndarray
     back: bool = False
-    bounds: ClassVar[tuple[tuple[str, str], ...]] = (("lo", "hi"), ("prev_lo", "prev_hi"))
+    prev_y: np.ndarray = field(default_factory=_empty)
+    hist_lo: np.ndarray = field(default_factory=_empty)
+    hist_hi: np.ndarray = field(default_factory=_empty)
+    hist_u: np.ndarray = field(default_factory=_empty)
+    hist_y: np.ndarray = field(default_factory=_empty)
+    bounds: ClassVar[tuple[tuple[str, str], ...]] = (
+        ("lo", "hi"),
+        ("prev_lo", "prev_hi"),
+        ("hist_lo", "hist_hi"),
+    )
 
 
 @register
@@ -123,7 +149,10 @@ class NonlinearIntervalEstimator(Estimator):
     x0 : prior box of ``x[0]`` (required)
     lag : 1 (default) to contract one step back through ``h∘f``; 0 not to: when every state
         is seen by the outputs of its own step, or when ``h∘f`` is costly (a validated flow of
-        a continuous-time plant steps back through its Jacobian; docs/nonlinear.md)
+        a continuous-time plant steps back through its Jacobian; docs/nonlinear.md); ``L >= 2``
+        (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network (tighter where
+        the outputs see a state only through several steps of the dynamics, at about ``L``
+        times the cost of a step back; not for sampled continuous-time plants)
     """
 
     name = "nl-interval"
@@ -137,6 +166,7 @@ class NonlinearIntervalEstimator(Estimator):
     needs_x0 = True
     supports_nonlinear = True
     proven_rounding = True
+    design: NonlinearIntervalDesign
 
     def __init__(self, sys: Any, x0: Box | None = None, *, lag: int = 1, **options: Any):
         super().__init__(sys, x0, **options)
@@ -145,8 +175,9 @@ class NonlinearIntervalEstimator(Estimator):
             sys = NonlinearSystem.from_linear(sys, who=self.name)
         self.model: NonlinearSystem = sys
         lag = as_int("lag", lag, minimum=0)
-        if lag > 1:
-            raise IvobsError(f"lag: expected 0 or 1 (steps back through h∘f), got {lag}")
+        if lag > MAX_LAG:
+            raise IvobsError(f"lag: expected 0 to {MAX_LAG} steps back, got {lag}")
+        self._fc = sys.f_contractors() if lag > 1 else None
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
         self.design = NonlinearIntervalDesign(
@@ -198,13 +229,23 @@ class NonlinearIntervalEstimator(Estimator):
     def _initial_state(self) -> NonlinearIntervalState:
         assert self.x0 is not None
         m = self.model
-        return NonlinearIntervalState(
+        window: dict[str, np.ndarray] = {}  # kept only by lag >= 2
+        if self._fc is not None:
+            window = {
+                "prev_y": np.full(m.ny, np.nan),
+                "hist_lo": np.zeros((0, m.nx + m.nw)),
+                "hist_hi": np.zeros((0, m.nx + m.nw)),
+                "hist_u": np.zeros((0, m.nu)),
+                "hist_y": np.zeros((0, m.ny)),
+            }
+        state = NonlinearIntervalState(
             lo=self.x0.lo.copy(),
             hi=self.x0.hi.copy(),
             prev_lo=np.zeros(m.nx + m.nw),
             prev_hi=np.zeros(m.nx + m.nw),
             prev_u=np.zeros(m.nu),
         )
+        return evolve(state, **window) if window else state
 
     def _step(
         self, state: NonlinearIntervalState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -215,6 +256,7 @@ class NonlinearIntervalEstimator(Estimator):
         vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
         inconsistent = False
         ylo, yhi = measurement(y_k)
+        chain = self._chain(state)
         if any(v == v for v in ylo):
             ok, prev = True, None
             for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
@@ -222,16 +264,24 @@ class NonlinearIntervalEstimator(Estimator):
                 ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
                 if ok and self._hf is not None and state.back:
                     ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)  # 2. step back
+                    if ok and chain and prev is not None:  # 2'. further back
+                        chain[-1].lo, chain[-1].hi = prev
+                        ok = self._window(chain, vl, vh, u, ylo, yhi)
+                        prev = (chain[-1].lo, chain[-1].hi)
                 if not ok or not _gained(before, vl, vh):
                     break
             if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
                 vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
+                chain = self._chain(state)
         f = sys._f  # 3. prediction: natural ∩ mean-value form
         pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
         if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
             self._say_wrapping(state.k, pl, ph, u)
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+        hist: dict[str, np.ndarray] = {}
+        if self._fc is not None:
+            hist = self._history(chain, y_k, inconsistent)
         new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
             lo=np.array(pl, dtype=float),
             hi=np.array(ph, dtype=float),
@@ -240,7 +290,82 @@ class NonlinearIntervalEstimator(Estimator):
             prev_u=u_k.copy(),
             back=True,
         )
+        if hist:
+            new = evolve(new, **hist)
         return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
+
+    def _chain(self, st: NonlinearIntervalState) -> list[_Link]:
+        """The kept steps ``k-L..k-1`` as boxes to contract (copies), oldest first; empty
+        unless ``lag >= 2`` and there is a step back."""
+        if self._fc is None or not st.back:
+            return []
+        links = [
+            _Link(lo.tolist(), hi.tolist(), u.tolist(), y, *measurement(y))
+            for lo, hi, u, y in zip(st.hist_lo, st.hist_hi, st.hist_u, st.hist_y)
+        ]
+        y = st.prev_y
+        links.append(_Link(st.prev_lo.tolist(), st.prev_hi.tolist(), st.prev_u.tolist(), y,
+                           *measurement(y)))  # fmt: skip
+        return links
+
+    def _history(self, chain: list[_Link], y_k: np.ndarray, dropped: bool) -> dict[str, np.ndarray]:
+        """The state's window after step ``k``: the contracted boxes of the steps before ``k``
+        (the last ``L - 1``) and ``y[k]`` (NaN if it was not used)."""
+        keep = self.design.lag - 1
+        m = self.model
+        links = chain[-keep:] if chain else []
+        y = np.full(m.ny, np.nan) if dropped else np.array(y_k, dtype=float)
+        width = m.nx + m.nw
+
+        def rows(values: list[Any], n: int) -> np.ndarray:
+            return np.array(values, dtype=float).reshape(len(values), n)
+
+        return {
+            "prev_y": y,
+            "hist_lo": rows([c.lo for c in links], width),
+            "hist_hi": rows([c.hi for c in links], width),
+            "hist_u": rows([c.u for c in links], m.nu),
+            "hist_y": rows([c.y for c in links], m.ny),
+        }
+
+    def _window(
+        self,
+        chain: list[_Link],
+        vl: list[float],
+        vh: list[float],
+        u: list[float],
+        ylo: list[float],
+        yhi: list[float],
+    ) -> bool:
+        """Step 2' of the module docstring on the kept steps ``chain`` and the box ``vl, vh``
+        of ``(x[k], w[k])`` (all in place): backward through the ``f`` contractors and each
+        step's measurement, then forward through the inclusion of ``f``. False when the boxes
+        become empty (``y[k]`` contradicts the window)."""
+        sys, nx = self.model, self.model.nx
+        assert self._fc is not None
+        fc, f = self._fc, sys._f
+        for j in range(len(chain) - 1, -1, -1):  # newest first
+            c = chain[j]
+            tl, th = (vl, vh) if j == len(chain) - 1 else (chain[j + 1].lo, chain[j + 1].hi)
+            for i, (fn, sites) in enumerate(fc):
+                if not sys._call(fn, sites, c.lo, c.hi, c.u, tl[i], th[i]):
+                    return False
+            if any(v == v for v in c.ylo) and not sys.contract_lists(c.lo, c.hi, c.u, c.ylo, c.yhi):
+                return False
+        for j, c in enumerate(chain):  # oldest first
+            last = j == len(chain) - 1
+            nl, nh = (vl, vh) if last else (chain[j + 1].lo, chain[j + 1].hi)
+            fl, fh = sys._call(f.tight, f.sites, c.lo[:nx], c.hi[:nx], c.u, c.lo[nx:], c.hi[nx:])
+            for i in range(nx):
+                lo, hi = max(nl[i], fl[i]), min(nh[i], fh[i])
+                if lo > hi:
+                    return False
+                nl[i], nh[i] = lo, hi
+            ml, mh = (ylo, yhi) if last else (chain[j + 1].ylo, chain[j + 1].yhi)
+            nu = u if last else chain[j + 1].u
+            if any(v == v for v in ml) and not sys.contract_lists(nl, nh, nu, ml, mh):
+                return False
+        return True
 
     def _back(
         self,
@@ -275,6 +400,19 @@ class NonlinearIntervalEstimator(Estimator):
             vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
+
+
+@dataclass
+class _Link:
+    """One kept step of the window during a step: the box of ``(x[j], w[j])`` (lists,
+    narrowed in place), ``u[j]``, ``y[j]`` and its measurement interval."""
+
+    lo: list[float]
+    hi: list[float]
+    u: list[float]
+    y: np.ndarray
+    ylo: list[float]
+    yhi: list[float]
 
 
 def _gained(before: list[float], lo: list[float], hi: list[float]) -> bool:

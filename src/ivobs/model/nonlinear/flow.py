@@ -193,6 +193,14 @@ class FlowSystem(NonlinearSystem):
         self._back_cache: Any = None  # the step back's last linearisation (.flowback)
         self._f = _FlowForms(self)  # type: ignore[assignment]
 
+    def f_contractors(self) -> list[tuple[Any, list[str]]]:
+        """Refused: ``f_exprs`` is the vector field, not the map of a step (the flow steps back
+        one step only, through :meth:`hf_contractors`)."""
+        raise IvobsError(
+            "lag: a sampled continuous-time plant steps back through its flow one step only "
+            "(lag 0 or 1)"
+        )
+
     # -- the flow over a box ------------------------------------------------------------------
     def _enclose(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Vec, Vec]:
         """``(lo, hi)`` lists enclosing ``Φ_Ts(x, u, w)`` for every ``x ∈ [xl, xh]``,

@@ -197,6 +197,7 @@ class NonlinearSystem:
             for i, e in enumerate(self.h_exprs)
         ]
         self._hf: list[Any] | None = None
+        self._fc: list[Any] | None = None
         pairs = [self.param_bounds[n] for n in self.param_names]
         pairs += [self.signal_bounds[n] for n in self.signal_names]
         wl = [enclose_float(p[0])[0] for p in pairs]
@@ -404,6 +405,18 @@ class NonlinearSystem:
                 for i, e in enumerate(self.h_exprs)
             ]
         return self._hf
+
+    def f_contractors(self) -> list[tuple[Any, list[str]]]:
+        """Contractors of ``f_i(x, u, w) in [lo_i, hi_i]`` over the leaves ``(x, w)`` with the
+        inputs ``u``, one per state: the box of a step narrowed by the box of the next state
+        (a window of steps back; built on first use)."""
+        if self._fc is None:
+            g = self._groups()
+            self._fc = [
+                build_contractor(f"fc{i}", e, f"f[{i}]", g["x"] + g["w"], g["u"], self._consts)
+                for i, e in enumerate(self.f_exprs)
+            ]
+        return self._fc
 
     # -- conversions ---------------------------------------------------------------------
     @classmethod
