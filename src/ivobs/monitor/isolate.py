@@ -335,7 +335,10 @@ class History:
                     if pred[0].shape != (sys.nx,) or pred[1].shape != (sys.nx,):
                         raise ValueError
                 prev = check_prev(a["prev"])
-                anchors.append(Anchor(ak, check_state(a["estimator"]), prev, pred))
+                state = check_state(a["estimator"])
+                if state.k != ak:  # the monitor before step ak: its estimator at step ak
+                    raise ValueError
+                anchors.append(Anchor(ak, state, prev, pred))
             rows = []
             for rk, u, y, t in saved["rows"]:
                 uu, yy = _decode(u), _decode(y)
