@@ -139,6 +139,12 @@ def test_the_history_and_the_isolation_are_saved_and_resumed() -> None:
     bad["history"]["rows"][0][2] = [1.0]
     with pytest.raises(ivobs.IvobsError, match="state: history"):
         Monitor(s, "interval-split", x0=x0).restore(bad)
+    # a state written before isolation (no history) continues, its next windows shorter
+    old = json.loads(json.dumps(saved))
+    del old["history"], old["isolation"]
+    mon = Monitor(s, "interval-split", x0=x0)
+    mon.restore(old)
+    assert mon.run(u[47:], y[47:]).alarm.all()
     # another window is another setting: the state is refused
     with pytest.raises(ivobs.IvobsError, match="written for another model"):
         Monitor(s, "interval-split", x0=x0, window=30).restore(saved)
