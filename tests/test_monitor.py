@@ -344,7 +344,7 @@ def test_cli_monitor_reads_stdin_and_prints_one_line_per_step(files, monkeypatch
     assert lines[0] == (
         "k,lower_1,lower_2,lower_3,upper_1,upper_2,upper_3,alarm,reason,"
         "fault_start,fault_duration,fault_outputs,"
-        "bias_lower_1,bias_lower_2,bias_upper_1,bias_upper_2"
+        "bias_lower_1,bias_lower_2,bias_upper_1,bias_upper_2,fault_isolated"
     )
     assert len(lines) == 101
     rows = [ln.split(",", 8) for ln in lines[1:]]

@@ -164,16 +164,17 @@ def test_cli_monitor_reports_the_fault_start_duration_and_outputs(files, monkeyp
     head += ",".join(f"upper_{i}" for i in range(1, 5)) + ",alarm,reason"
     assert lines[0] == (
         head + ",fault_start,fault_duration,fault_outputs,"
-        "bias_lower_1,bias_lower_2,bias_upper_1,bias_upper_2"
+        "bias_lower_1,bias_lower_2,bias_upper_1,bias_upper_2,fault_isolated"
     )
     rows = list(csv.reader(lines))
-    assert rows[100][0] == "99" and rows[100][9:] == ["0", "", "", "0", "", "", "", "", ""]
+    assert rows[100][0] == "99" and rows[100][9:] == ["0", "", "", "0", "", "", "", "", "", ""]
     assert rows[101][0] == "100" and rows[101][11:14] == ["100", "1", "y1"]
     assert rows[101][9] == "1" and "outside the predicted band" in rows[101][10]
     assert rows[300][9] == "1" and rows[300][11:14] == ["100", "200", "y1"]
     # the bias of y1 estimated (the fault is a constant offset on it), none on y2
     lo, hi = float(rows[300][14]), float(rows[300][16])
     assert 0 < lo <= hi and rows[300][15] == rows[300][17] == ""
+    assert rows[101][18] == rows[300][18] == "y1"  # isolated: the window fits without y1
 
 
 def test_cli_monitor_refuses_a_bad_poll(files, capsys):

@@ -3,8 +3,8 @@
 Reads log rows (CSV with a header: ``k``/``t``, ``u1..``, ``y1..``) from standard input or from
 ``--input FILE`` (``--follow`` keeps reading a file that is being appended to, like
 ``tail -f``), and writes one CSV line per step: ``step, lower_1.., upper_1.., alarm, reason,
-fault_start, fault_duration, fault_outputs`` (the alarm is latched while a fault persists:
-:class:`ivobs.monitor.Monitor`).
+fault_start, fault_duration, fault_outputs, bias_..., fault_isolated`` (the alarm is latched
+while a fault persists: :class:`ivobs.monitor.Monitor`).
 ``--state FILE`` keeps the monitor's state on disk (written atomically after every step, or
 every ``--save-every N`` steps): a restarted monitor continues with the same boxes. The file is
 locked while the monitor runs (a second one is refused), and refused when it was written for
@@ -38,7 +38,9 @@ FAULT_COLUMNS = ("fault_start", "fault_duration", "fault_outputs")
 """After the existing columns: the open fault's first step, its duration so far (steps, this one
 included; 0 without alarm) and the outputs it found inconsistent (``y1;y3``); then
 ``bias_lower_i``, ``bias_upper_i`` per output: the estimated bias of a faulty output (empty
-elsewhere, :mod:`ivobs.monitor.bias`)."""
+elsewhere, :mod:`ivobs.monitor.bias`); last, ``fault_isolated``: which outputs the recent data
+blame (``y2``; ``y1 or y2 (cannot be told apart)``; ``not isolated: ...``;
+:mod:`ivobs.monitor.isolate`)."""
 
 
 def _or_nan(v: np.ndarray | None, n: int) -> np.ndarray:
@@ -390,7 +392,7 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
             f"upper_{i + 1}" for i in range(sys_.nx)
         ]
         bias = [f"bias_{b}_{i + 1}" for b in ("lower", "upper") for i in range(sys_.ny)]
-        out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS, *bias])
+        out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS, *bias, "fault_isolated"])
         sys.stdout.flush()
     fh: TextIO
     try:
@@ -440,6 +442,7 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
                         output_names(step.outputs),
                         *map(_bias, _or_nan(step.bias_lower, sys_.ny)),
                         *map(_bias, _or_nan(step.bias_upper, sys_.ny)),
+                        step.isolation,
                     ]
                 )
             sys.stdout.flush()

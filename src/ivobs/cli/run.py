@@ -285,8 +285,9 @@ def _run_system(args: argparse.Namespace) -> int:
         shown += " ..." if alarms.size > 10 else ""
         print(f"ALARMS: {alarms.size} step(s) inconsistent with the model: {shown}")
         print(f"first: step {int(alarms[0]) + k0}: {reasons[int(alarms[0])]}")
-        _print_episodes(spec, est, log, t, k0)
+        episodes = _print_episodes(spec, est, log, t, k0)
     else:
+        episodes = []
         print("alarms: none (every measurement is consistent with the model and bounds)")
     labels = spec.system.names.state_labels()
     _summary(args, r, name, f"{args.system} + {args.log}", 0, state_names=labels,
@@ -297,6 +298,7 @@ def _run_system(args: argparse.Namespace) -> int:
         truth=truth,
         t=log.t,
         alarms=alarms,
+        episodes=episodes,
         title=f"{est.name} on {name}",
         state_names=labels,
     )
@@ -316,18 +318,23 @@ def _design_and_run(
     return est, res, (t1 - t0, t2 - t1, time.process_time() - c0)
 
 
-def _print_episodes(spec: Any, est: Any, log: Any, t: Any, k0: int) -> None:
+def _print_episodes(spec: Any, est: Any, log: Any, t: Any, k0: int) -> list[str]:
     """The log's fault episodes as the online monitor sees them (the faulty outputs left
-    out of the estimate, the alarm latched, each sensor fault's bias estimated): a persistent
-    fault is one episode, not the few steps where it contradicts the method's estimate."""
+    out of the estimate, the alarm latched, each sensor fault isolated and its bias
+    estimated): a persistent fault is one episode, not the few steps where it contradicts the
+    method's estimate. Returns the lines (for the HTML report)."""
     from ..monitor import Monitor
 
     record = Monitor(spec.system, est, x0=spec.x0).run(log.u, log.y, t=t)
     print(f"fault episodes (ivobs monitor, the faulty outputs left out): {len(record.faults)}")
+    lines = []
     for f in record.faults[:10]:
         end = "open at the end of the log" if f.end is None else f"cleared at step {f.end + k0}"
-        line = f"  from step {f.start + k0}, {f.duration} step(s), {end}: {f.names or '-'}"
-        print(line + (f"; bias {f.bias_text}" if f.bias_text else ""))
+        line = f"from step {f.start + k0}, {f.duration} step(s), {end}: {f.names or '-'}"
+        line += f"; isolated: {f.isolation}" if f.isolation else ""
+        lines.append(line + (f"; bias {f.bias_text}" if f.bias_text else ""))
+        print(f"  {lines[-1]}")
+    return lines
 
 
 def _estimate(est: Any, u: Any, y: Any, t: Any, args: argparse.Namespace) -> Any:
@@ -345,6 +352,7 @@ def _write(
     args: argparse.Namespace,
     truth: Any = None,
     alarms: Any = None,
+    episodes: Any = (),
     **plot_kw: Any,
 ) -> None:
     if args.csv:
@@ -372,5 +380,6 @@ def _write(
             t=plot_kw.get("t"),
             state_names=plot_kw.get("state_names"),
             alarms=[int(k) for k in alarms],
+            episodes=list(episodes),
         )
         print(f"report written to {page}")

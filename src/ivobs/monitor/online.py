@@ -18,6 +18,7 @@ from ..sets import Box
 from ._codec import _vector
 from .bands import bands_for
 from .bias import BiasEstimate
+from .isolate import DEFAULT_WINDOW, History, Isolation, WindowTest, isolate
 from .latch import Latch
 from .offline import check_record, refuse_uncertain
 from .persist import monitor_state, restore_monitor
@@ -42,6 +43,8 @@ class Monitor:
     margin : relative widening of the band against floating-point rounding.
     clear_after : consecutive steps the held outputs of an open fault must be consistent again
         before the alarm clears (see :mod:`ivobs.monitor`).
+    window : steps of recent data a fault's isolation tests (at least; up to half as many
+        more), :mod:`ivobs.monitor.isolate`.
     **options : the method's design options (an explicit gain ``L``, ...).
 
     Notes
@@ -67,6 +70,7 @@ class Monitor:
         tight: bool = True,
         margin: float = 1e-9,
         clear_after: int = 10,
+        window: int = DEFAULT_WINDOW,
         **options: Any,
     ):
         if not isinstance(sys, (LinearSystem, NonlinearSystem)):
@@ -106,6 +110,11 @@ class Monitor:
         if isinstance(clear_after, bool) or not isinstance(clear_after, int) or clear_after < 1:
             raise IvobsError(f"clear_after: expected an integer >= 1 (steps), got {clear_after!r}")
         self.latch = Latch(clear_after)
+        if isinstance(window, bool) or not isinstance(window, int) or window < 2:
+            raise IvobsError(f"window: expected an integer >= 2 (steps), got {window!r}")
+        self.window = window
+        self._history = History(window)
+        self._test = WindowTest(sys)
         self._bands = bands_for(sys)
         # The estimator's inconsistency reports (in check(), through run()) become alarms, not
         # warnings.
@@ -121,6 +130,8 @@ class Monitor:
         self._k = 0
         self._prev: dict[str, Any] | None = None  # box of x[k-1], u[k-1], y[k-1]
         self._bias: BiasEstimate | None = None  # the open fault's bias, estimated (.bias)
+        self._isolation: Isolation | None = None  # the open fault's isolation (.isolation)
+        self._history.reset()
         self.alarms = 0
 
     @property
@@ -144,6 +155,7 @@ class Monitor:
         u_e = u if sys.nu else None
         reasons: list[str] = []
         pred = self._prediction(k, self._prev, st, u, t, reasons)
+        self._history.anchor(k, st, self._prev, pred)
         band_lo, band_hi = self._band(k, t, pred, u, y)
         out = (y < band_lo) | (y > band_hi)  # False where y is NaN (missing)
         for i in np.flatnonzero(out)[:3]:
@@ -173,6 +185,17 @@ class Monitor:
         if len(reasons) > n_reasons:  # disjoint boxes, not traceable: all the outputs used
             bad |= set(np.flatnonzero(~np.isnan(y_use)).tolist())
         prev = None if cur is None else {"lo": cur[0], "hi": cur[1], "u": u, "y": y}
+        # which outputs are blamed: those the isolation names when it can, else the band's
+        blame, ref = set(bad), (pred, (band_lo, band_hi))
+        if reasons and (self.latch.start is None or not bad <= set(held)):
+            iso = self._isolate(k, u, y, t, reasons)
+            if iso is not None and iso.conclusive:
+                blame = set(held) | set(iso.outputs)
+                if set(iso.outputs) - bad - set(held):
+                    # a faulty output the band did not reject at this step had entered the
+                    # estimate: recomputed over the window without the blamed outputs
+                    new, prev, ref, box = self._replay(k, tuple(sorted(blame)), u, y, t)
+                    lo, hi = box.lo, box.hi
         # an open fault: the held outputs readmitted in a trial beside the reference estimate
         # (which keeps pace when they are missing: such a step does not count)
         held_missing = bool(held) and bool(np.isnan(y[list(held)]).any())
@@ -186,15 +209,15 @@ class Monitor:
             else:
                 self._trial = (t_new, t_prev)
         evidence = bool(reasons)
-        proven = self._bias_step(k, (pred, (band_lo, band_hi)), u, u_e, y, t, reasons)
+        proven = self._bias_step(k, ref, u, u_e, y, t, reasons)
         start = self.latch.start
-        self.latch.observe(k, tuple(sorted(bad)), evidence, held_missing, proven)
+        self.latch.observe(k, tuple(sorted(blame)), evidence, held_missing, proven)
         if evidence or proven:
             self._trial = None
         alarm = self.latch.start is not None
         if alarm and (self._bias is None or self._bias.outputs != self.latch.outputs):
             # a new episode, or new outputs in it: the bias estimate starts at this step
-            self._begin_bias(k, (pred, (band_lo, band_hi)), None, u, u_e, y, t)
+            self._begin_bias(k, ref, None, u, u_e, y, t)
         if alarm and not evidence:
             reasons.append(self.latch.describe())
             if self._bias is not None:
@@ -205,9 +228,11 @@ class Monitor:
                 new, prev = self._trial
             self._trial = None
         if not alarm:
-            self._bias = None
+            self._bias = self._isolation = None
+        iso = self._isolation
         b_lo, b_hi = self._bias_bounds()
         self.alarms += alarm
+        self._history.push(k, u, y, t)
         self._est, self._prev, self._k = new, prev, k + 1
         return MonitorStep(
             k,
@@ -223,7 +248,76 @@ class Monitor:
             self.latch.outputs if alarm else (),
             b_lo,
             b_hi,
+            () if iso is None else iso.candidates,
+            "" if iso is None else iso.text,
         )
+
+    def _isolate(
+        self, k: int, u: np.ndarray, y: np.ndarray, t: float | None, reasons: list[str]
+    ) -> Isolation | None:
+        """The isolation of the window ending at step ``k`` (:mod:`ivobs.monitor.isolate`),
+        kept as the open fault's when it names outputs (or opens the episode); None where none
+        can be run: one output (nothing to tell apart), a model without a window test, a
+        window without a prior. Within an episode, an isolation of the last ``window // 4``
+        steps is reused rather than run again at every contradiction."""
+        last = self._isolation
+        if last is not None and self.latch.start is not None and k - last.end < self.window // 4:
+            return last
+        a = self._history.start(k)
+        if self._test.method is None or self.sys.ny < 2 or a is None or a.pred is None:
+            return None
+        if not (np.all(np.isfinite(a.pred[0])) and np.all(np.isfinite(a.pred[1]))):
+            return None
+        rows = [r for r in self._history.rows if r[0] >= a.k] + [(k, u, y, t)]
+        n, sys = len(rows), self.sys
+        U = np.array([r[1] for r in rows]).reshape(n, sys.nu)
+        Y = np.array([r[2] for r in rows]).reshape(n, sys.ny)
+        # discrete-time windows count steps; a time column only labels them
+        T = np.array([r[3] for r in rows], dtype=float) if sys.is_continuous else None
+        try:
+            iso = isolate(self._test, Box(a.pred[0], a.pred[1]), a.k, U, Y, T)
+        except IvobsError:
+            return None  # the window's method refused it (a prior it cannot start from)
+        reasons.append(iso.describe())
+        if iso.conclusive or self.latch.start is None or last is None:
+            self._isolation = iso
+        return iso
+
+    def _replay(
+        self, k: int, hold: tuple[int, ...], u: np.ndarray, y: np.ndarray, t: float | None
+    ) -> tuple[Any, dict[str, Any] | None, tuple[Any, tuple[np.ndarray, np.ndarray]], Box]:
+        """The reference estimate recomputed from the window's anchor to step ``k`` with the
+        outputs ``hold`` left out (and, as in :meth:`update`, the outputs outside their band;
+        every output at a step the method finds inconsistent): the estimator's state after
+        ``k``, the box of ``x[k]`` for the next prediction, ``(P_k, band)`` and the
+        estimator's box. The anchors inside the window are replaced by the recomputed ones."""
+        a = self._history.start(k)
+        assert a is not None  # _isolate ran from it
+        anchors = {b.k: b for b in self._history.anchors if b.k > a.k}
+        st, prev = a.state, a.prev
+        rows = [r for r in self._history.rows if r[0] >= a.k] + [(k, u, y, t)]
+        for j, u_j, y_j, t_j in rows:
+            why: list[str] = []  # what the replay finds is not reported again
+            pred = self._prediction(j, prev, st, u_j, t_j, why)
+            if j in anchors:
+                anchors[j].state, anchors[j].prev, anchors[j].pred = st, prev, pred
+            band = self._band(j, t_j, pred, u_j, y_j)
+            y_use = y_j.copy()
+            y_use[list(hold)] = np.nan
+            y_use[(y_j < band[0]) | (y_j > band[1])] = np.nan
+            u_e = u_j if self.sys.nu else None
+            new, box = self._use(st, u_e, y_use, y_j, t_j, why)
+            if new.inconsistent:
+                new, box = self._use(st, u_e, np.full_like(y_j, np.nan), y_j, t_j, why)
+            cur = self._current(pred, box.lo, box.hi, why)
+            prev = None if cur is None else {"lo": cur[0], "hi": cur[1], "u": u_j, "y": y_j}
+            st = new
+        return st, prev, (pred, band), box
+
+    @property
+    def isolation(self) -> Isolation | None:
+        """The open fault's isolation (None without an open fault, or where none was run)."""
+        return self._isolation
 
     def _bias_step(
         self,

@@ -3,10 +3,12 @@
 belongs to.
 
 A state holds the estimator's saved state, the box of the previous step, the counters, the
-open fault and its bias estimate (:mod:`ivobs.monitor.bias`). It continues only the monitor
-that wrote it: the estimator's state carries the fingerprint of its design (method and gains),
-and the monitor's the fingerprint of the model
-(matrices, disturbance bounds, prior box) and of its settings (:mod:`ivobs.io.fingerprint`).
+open fault, its bias estimate (:mod:`ivobs.monitor.bias`) and isolation, and the recent data
+with the monitor's state at the anchors an isolation starts from (:mod:`ivobs.monitor.isolate`;
+a state without them, written before isolation, continues with an empty history). It continues
+only the monitor that wrote it: the estimator's state carries the fingerprint of its design
+(method and gains), and the monitor's the fingerprint of the model (matrices, disturbance
+bounds, prior box) and of its settings (:mod:`ivobs.io.fingerprint`).
 Two plants with the same gains but other bounds or another prior give other boxes: a state of
 one is refused by the other, naming what differs.
 """
@@ -21,6 +23,7 @@ from ..errors import IvobsError
 from ..io.fingerprint import PARTS, model_fingerprint
 from ._codec import _decode, _encode_prev
 from .bias import BiasEstimate
+from .isolate import DEFAULT_WINDOW, Isolation
 
 if TYPE_CHECKING:
     from .online import Monitor
@@ -37,7 +40,13 @@ MAX_STEPS = 2**53
 
 def fingerprint(mon: Monitor) -> dict[str, str]:
     """The fingerprint of ``mon``'s model, prior box and settings."""
-    settings = {"tight": mon.tight, "margin": mon.margin, "clear_after": mon.latch.clear_after}
+    settings: dict[str, Any] = {
+        "tight": mon.tight,
+        "margin": mon.margin,
+        "clear_after": mon.latch.clear_after,
+    }
+    if mon.window != DEFAULT_WINDOW:  # named only when set: the states of before still match
+        settings["window"] = mon.window
     return model_fingerprint(mon.sys, mon.x0, settings)
 
 
@@ -60,6 +69,8 @@ def monitor_state(mon: Monitor) -> dict[str, Any]:
         },
         "estimator": mon.estimator.save_state(mon._est),
         "bias": None if mon._bias is None else mon._bias.save(),
+        "isolation": None if mon._isolation is None else mon._isolation.save(),
+        "history": mon._history.save(mon.estimator.save_state),
     }
 
 
@@ -142,5 +153,15 @@ def restore_monitor(mon: Monitor, state: Any) -> None:
     bias = BiasEstimate.restore(mon.sys, state.get("bias"), k)
     if bias is not None and (mon.latch.start is None or bias.state.k != k - bias.start):
         raise IvobsError("state: bias: a bias estimate needs an open fault, up to the same step")
+    isolation = Isolation.restore(state.get("isolation"), mon.sys.ny, k)
+    if isolation is not None and mon.latch.start is None:
+        raise IvobsError("state: isolation: an isolation needs an open fault")
+    mon._history.restore(
+        state.get("history"),
+        mon.estimator.check_state,
+        lambda p: _prev(p, mon, "history.prev"),
+        mon.sys,
+        k,
+    )
     mon._est, mon._prev, mon._k, mon.alarms = est, prev, k, alarms
-    mon._trial, mon._bias = trial, bias
+    mon._trial, mon._bias, mon._isolation = trial, bias, isolation

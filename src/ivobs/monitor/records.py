@@ -42,7 +42,11 @@ class Fault:
     traced to outputs: the estimate disjoint from the model's prediction); ``last``: the last
     step of the record the episode was seen in; ``bias_lower``/``bias_upper``: the bias of
     each output (NaN for the others) as estimated at the episode's last alarmed step
-    (:mod:`ivobs.monitor.bias`; None where the model cannot be augmented).
+    (:mod:`ivobs.monitor.bias`; None where the model cannot be augmented); ``isolated``: the
+    output sets whose removal makes the recent data consistent with the model
+    (:mod:`ivobs.monitor.isolate`; one set: isolated, several: the data cannot tell them
+    apart, none: not isolated), ``isolation`` the same as text (``"y2"``, ``"y1 or y2 (cannot
+    be told apart)"``, ``"not isolated: ..."``; empty where no isolation was run).
     """
 
     start: int
@@ -51,6 +55,8 @@ class Fault:
     last: int
     bias_lower: np.ndarray | None = None
     bias_upper: np.ndarray | None = None
+    isolated: tuple[tuple[int, ...], ...] = ()
+    isolation: str = ""
 
     @property
     def duration(self) -> int:
@@ -84,7 +90,8 @@ class MonitorStep:
     this very step contradict the model; ``inconsistent``: the outputs that do so at this step;
     ``fault_start``/``outputs``: the open episode's first step and inconsistent outputs;
     ``bias_lower``/``bias_upper``: the episode's estimate of a constant bias on each faulty
-    output (NaN elsewhere and without an estimate; :mod:`ivobs.monitor.bias`).
+    output (NaN elsewhere and without an estimate; :mod:`ivobs.monitor.bias`);
+    ``isolated``/``isolation``: the open episode's isolation (:class:`Fault`).
     """
 
     step: int
@@ -100,6 +107,8 @@ class MonitorStep:
     outputs: tuple[int, ...] = ()
     bias_lower: np.ndarray | None = None
     bias_upper: np.ndarray | None = None
+    isolated: tuple[tuple[int, ...], ...] = ()
+    isolation: str = ""
 
     @property
     def box(self) -> Box:
@@ -149,7 +158,16 @@ def stack_steps(steps: list[MonitorStep], sys: SystemModel) -> MonitorRecord:
     nan = np.full(sys.ny, np.nan)
     for s in steps:
         if s.alarm and s.fault_start is not None:
-            f = Fault(s.fault_start, s.outputs, None, s.step, s.bias_lower, s.bias_upper)
+            f = Fault(
+                s.fault_start,
+                s.outputs,
+                None,
+                s.step,
+                s.bias_lower,
+                s.bias_upper,
+                s.isolated,
+                s.isolation,
+            )
             if faults and faults[-1].start == s.fault_start and faults[-1].end is None:
                 faults[-1] = f
             else:

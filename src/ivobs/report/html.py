@@ -95,9 +95,12 @@ def html_report(
     table: str = "",
     alarms: Sequence[int] = (),
     notes: Sequence[str] = (),
+    episodes: Sequence[str] = (),
 ) -> Path:
     """Write the report to ``path`` (atomically) and return it. ``table``: an HTML table of the
-    methods; ``alarms``: steps flagged inconsistent; ``notes``: lines printed under the title."""
+    methods; ``alarms``: steps flagged inconsistent; ``notes``: lines printed under the title;
+    ``episodes``: one line per fault episode (its steps, the outputs blamed and isolated, the
+    estimated bias), listed under the alarms."""
     go = _plotly()
     if not estimates:
         raise IvobsError("html report: no estimate to show")
@@ -112,6 +115,9 @@ def html_report(
     if alarms:
         shown = ", ".join(str(int(k)) for k in alarms[:50]) + (" …" if len(alarms) > 50 else "")
         parts.append(f"<p class='alarms'><b>Alarms</b> ({len(alarms)} steps): {shown}</p>")
+    if episodes:
+        items = "".join(f"<li>{html.escape(e)}</li>" for e in episodes)
+        parts.append(f"<p class='faults'><b>Fault episodes</b></p><ul class='faults'>{items}</ul>")
     for n, i in enumerate(idx):
         label = state_names[i] if state_names is not None else f"x{i + 1}"
         fig = _state_figure(go, estimates, i, time, ref, ref_name, label)
