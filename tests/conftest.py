@@ -168,6 +168,7 @@ SLOW = (
     "tests/test_fault_isolation.py::test_an_angle_bias_is_isolated_to_the_angle",
     "tests/test_fault_isolation.py::test_cli_monitor_and_run_name_the_isolated_output",
     "tests/test_fault_isolation.py::test_the_history_and_the_isolation_are_saved_and_resumed",
+    "tests/test_fault_isolation.py::test_the_worked_nonlinear_example_of_the_guide_runs_as_written",
     "tests/test_figures.py::test_cli_writes_figures_and_rejects_unknown_papers",
     "tests/test_figures.py::test_generate_wang2020_writes_both_figures",
     "tests/test_figures.py::test_short_figures_render[dinh2024-fig4]",
