@@ -376,6 +376,7 @@ SLOW = (
     "tests/test_monitor_models.py::test_a_nonlinear_plant_keeps_a_persistent_bias_flagged[nl-constrained-zonotope]",
     "tests/test_monitor_models.py::test_a_nonlinear_plant_keeps_a_persistent_bias_flagged[nl-interval]",
     "tests/test_monitor_models.py::test_an_interval_matrix_plant",
+    "tests/test_monitor_models.py::test_ivobs_monitor_runs_a_nonlinear_system_file_with_a_fault_in_its_log",
     "tests/test_monitor_models.py::test_no_false_alarm_on_a_nonlinear_plant",
     "tests/test_nl_czonotope_block.py::test_block_and_chain_contain_the_exact_state_with_the_same_widths[henon]",
     "tests/test_nl_czonotope_block.py::test_block_and_chain_contain_the_exact_state_with_the_same_widths[random]",

@@ -98,3 +98,27 @@ def test_refusals_name_what_to_do() -> None:
     mon = Monitor(sc.system, "nl-interval", x0=sc.x0)
     with pytest.raises(ivobs.IvobsError, match="use run"):
         mon.check(np.zeros((3, sc.system.nu)), np.zeros((3, sc.system.ny)))
+
+
+def test_ivobs_monitor_runs_a_nonlinear_system_file_with_a_fault_in_its_log(tmp_path, capsys):
+    """``ivobs monitor --system`` on a nonlinear system file: the log's biased range is flagged
+    from its first step to the end, isolated, its bias estimated, one CSV row per step."""
+    from ivobs.cli import main
+
+    sc, tr = _unicycle_record(1)
+    T = 120
+    y = tr.y[:T].copy()
+    y[BIAS_FROM:, 1] += 0.3
+    ivobs.save_system(tmp_path / "unicycle.toml", sc)
+    ivobs.io.write_log(tmp_path / "log.csv", tr.u[:T], y)
+    argv = ["monitor", "--system", str(tmp_path / "unicycle.toml"), "--method", "nl-interval"]
+    assert main([*argv, "--input", str(tmp_path / "log.csv")]) == 1
+    import csv
+    import io
+
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))  # reasons hold commas
+    assert len(rows) == T
+    alarm = [r["alarm"] == "1" for r in rows]
+    assert not any(alarm[:BIAS_FROM]) and all(alarm[BIAS_FROM:])
+    assert rows[-1]["fault_isolated"] == "y2"
+    assert float(rows[-1]["bias_lower_2"]) <= 0.3 <= float(rows[-1]["bias_upper_2"])
