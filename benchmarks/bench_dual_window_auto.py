@@ -31,6 +31,7 @@ import numpy as np
 import ivobs
 
 CORA = ["cora-2dim", "cora-pedestrian4", "cora-vehicle6", "cora-slip4", "cora-tank30"]
+ONLY: list[str] = []  # --only: a subset of CORA
 RESULTS = Path(__file__).parent / "results"
 HULLS = RESULTS / "cora_exact_hull.npz"
 RANDOM_HULLS = RESULTS / "dual_window_auto_exact.npz"
@@ -145,7 +146,7 @@ def run_cora(window: int | str, refresh: int) -> None:
     hulls = np.load(HULLS)
     print(f"{'benchmark':18s} {'window':>6s} {'/exact':>7s} {'k>=100':>7s} {'misses':>6s} "
           f"{'CPU s':>6s}")  # fmt: skip
-    for name in CORA:
+    for name in [n for n in CORA if n in ONLY] if ONLY else CORA:
         sc = ivobs.scenarios.get(name)
         rec = sc.recorded
         t = time.process_time()
@@ -169,7 +170,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--window", type=_window, default="auto")
     p.add_argument("--refresh", type=int, default=60)
     p.add_argument("--no-exact", action="store_true", help="skip the exact hull")
+    p.add_argument("--only", default="", help="with --cora: these benchmarks only (comma list)")
     args = p.parse_args(argv)
+    ONLY[:] = [n for n in args.only.split(",") if n]
     if args.cora:
         run_cora(args.window, args.refresh)
     else:

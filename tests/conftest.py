@@ -129,6 +129,7 @@ SLOW = (
     "tests/test_design_scaling.py::test_servo_hinf_gain_is_optimal_for_problem_20_and_the_papers_l1_is_not",
     "tests/test_dual_window.py::test_every_box_contains_the_true_state[quadtank]",
     "tests/test_dual_window.py::test_every_box_contains_the_true_state[servo]",
+    "tests/test_dual_window.py::test_the_adaptive_interval_keeps_the_default_within_a_few_percent_of_the_hull",
     "tests/test_dual_window.py::test_within_a_few_percent_of_the_exact_hull_of_the_same_window",
     "tests/test_ellipsoid.py::test_exact_trajectories_are_contained_at_every_scale[1e10-thin]",
     "tests/test_ellipsoid.py::test_exact_trajectories_are_contained_at_every_scale[unit]",

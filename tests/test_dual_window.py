@@ -133,3 +133,30 @@ def test_refuses_what_it_cannot_certify():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         ivobs.make_estimator("dual-window", sys, x0=x0)
+
+
+def test_the_adaptive_interval_keeps_the_default_within_a_few_percent_of_the_hull():
+    """Disturbances on the vertices of their box change the optimal multipliers at nearly every
+    step: with the default (adaptive) interval between solves the mean width over 300 steps of
+    a rotating 2-state system is within 1.05x the full-horizon exact hull (measured: 1.02; 1.48
+    with a solve every 60 steps), every box holds the simulated state, and a saved state
+    carries the interval."""
+    A = np.array([[0.9, 0.4], [-0.4, 0.85]])
+    sys = LinearSystem(A, np.zeros((2, 1)), [[1.0, 0.0]], E=[[0.3, 0.0], [0.1, 0.0]],
+                       F=[[0.0, 1.0]], d=Box([-0.1, -0.05], [0.1, 0.05]))  # fmt: skip
+    x0 = Box([-1.0, -1.0], [1.0, 1.0])
+    u = np.zeros((300, 1))
+    x, y = simulate_vertex(sys, x0, u, 2)
+    exact = ivobs.make_estimator("exact", sys, x0=x0).run(u, y)
+    adaptive = ivobs.make_estimator("dual-window", sys, x0=x0, window=20).run(u, y)
+    fixed = ivobs.make_estimator("dual-window", sys, x0=x0, window=20, refresh_tol=None)
+    stale = fixed.run(u, y)
+    assert adaptive.contains(x).all() and stale.contains(x).all()
+    ratio = adaptive.width.mean() / exact.width.mean()
+    assert 0.999 <= ratio <= 1.05, ratio
+    assert stale.width.mean() > 1.2 * adaptive.width.mean()  # what the fixed interval costs
+    est = ivobs.make_estimator("dual-window", sys, x0=x0, window=20)
+    for k in range(150):
+        est.step(u[k], y[k])
+    saved = json.loads(json.dumps(est.state()))
+    assert 1 <= saved["state"]["period"] <= est.design.refresh

@@ -37,15 +37,18 @@ __all__ = ["DualWindow", "DualWindowDesign", "DualWindowState"]
 class DualWindowDesign(Design):
     """``window``: ``N``, the past steps of the moving window; ``cache``: multipliers kept per
     bound (``2 nx`` bounds); ``refresh``: steps between two solves of the window program once
-    the window is full (more often while it fills); ``window_rule``: ``"auto"`` (chosen from
-    the model, :mod:`.auto`) or ``"given"``; ``influence``: for a chosen window, the relative
-    influence ``η(N)`` of its first state on the bounds (:mod:`.auto`; None when given)."""
+    the window is full (more often while it fills), the longest interval when it adapts;
+    ``window_rule``: ``"auto"`` (chosen from the model, :mod:`.auto`) or ``"given"``;
+    ``influence``: for a chosen window, the relative influence ``η(N)`` of its first state on
+    the bounds (:mod:`.auto`; None when given); ``refresh_tol``: the adaptive interval's
+    tolerance (None: every ``refresh`` steps; see :class:`DualWindow`)."""
 
     window: int = 20
     cache: int = 16
     refresh: int = 60
     window_rule: str = "given"
     influence: float | None = None
+    refresh_tol: float | None = None
 
 
 @dataclass(frozen=True)
@@ -63,7 +66,8 @@ class DualWindowState(OnlineState):
     ``used`` (2 nx, cache): the step at which each gave the best bound (the least recently
     useful one is replaced); ``since``: steps since the last solve; ``basis``: the HiGHS basis
     the next solve starts from (status codes), written when the state is saved (while running
-    the estimator holds it; empty and unknown: a cold start)."""
+    the estimator holds it; empty and unknown: a cold start); ``period``: the steps between
+    solves now (adapted; 0: ``refresh``)."""
 
     data: np.ndarray
     x_lo: np.ndarray
@@ -73,9 +77,21 @@ class DualWindowState(OnlineState):
     used: np.ndarray
     since: int = 0
     basis: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
+    period: int = 0
 
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (("x_lo", "x_hi"),)
 
+
+REFRESH_TOL = 0.02
+"""Default ``refresh_tol``: the cache may lag the window's exact hull by 2 % before the
+interval between solves shrinks."""
+
+SOLVE_BUDGET = 20_000
+"""Work allowed per step for the adaptive solves, in program columns times programs (a solve is
+``2 nx`` programs of ``(N + 1)(nx + nd)`` columns): the interval never drops below the solve's
+work over this, so a large system is not solved at every step (CORA's 30-tank system: 60
+programs of 5,751 columns, every 18 steps at least; systems up to about 8 states with windows of
+tens of steps: every step)."""
 
 MAX_CACHE_VALUES = 2**26
 """Most numbers the multiplier cache ``mu`` (2 nx, cache, window + 1, ny) may hold (512 MiB)."""
@@ -108,8 +124,17 @@ class DualWindow(Estimator):
         most what a program of 5,800 columns allows; the choice is ``self.window`` and
         ``self.design.window``
     cache : int >= 1 (default 16): multipliers kept per bound
-    refresh : int >= 1 (default 60): steps between two solves of the window program (more
-        often while the window fills: every ``k/2`` steps); more often: tighter, slower
+    refresh : int >= 1 (default 60): the longest interval between two solves of the window
+        program (more often while the window fills: every ``k/2`` steps)
+    refresh_tol : float > 0 or None (default 0.02): the interval adapts to the data. At each
+        solve the cache's bounds from before it are compared with the solve's (the window's
+        exact hull): when the cache was more than ``refresh_tol`` wider (relative, on the
+        widest state) the interval is halved, down to every step; when it was within a quarter
+        of it the interval doubles, up to ``refresh``. Disturbances that sit on the vertices of
+        their box change the optimal multipliers at nearly every step, and a fixed interval
+        then leaves the bounds at those of stale multipliers (1.2-9x the hull on random
+        systems); the adaptive interval pays the solves they need. None: every ``refresh``
+        steps (the cost fixed in advance)
 
     Notes
     -----
@@ -139,6 +164,7 @@ class DualWindow(Estimator):
         window: int | str = "auto",
         cache: int = 16,
         refresh: int = 60,
+        refresh_tol: float | None = REFRESH_TOL,
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
@@ -149,6 +175,12 @@ class DualWindow(Estimator):
                 "this system's bounds vary with k or y. Use 'exact'"
             )
         cache, refresh = as_int("cache", cache, 1), as_int("refresh", refresh, 1)
+        if refresh_tol is not None and (
+            isinstance(refresh_tol, bool)
+            or not isinstance(refresh_tol, (int, float))
+            or not 0.0 < refresh_tol < np.inf
+        ):
+            raise IvobsError(f"refresh_tol: expected a number > 0 or None, got {refresh_tol!r}")
         self.mats = tuple(np.asarray(m, dtype=float) for m in sys.matrices_at(0))
         d = sys.d_at(0)
         self.d_lo, self.d_hi = np.asarray(d.lo, dtype=float), np.asarray(d.hi, dtype=float)
@@ -162,12 +194,16 @@ class DualWindow(Estimator):
                     f"window: expected 'auto' or an integer number of steps >= 1, got {window!r}"
                 )
             N, rule, influence = as_int("window", window, 1), "given", None
-        self.design = DualWindowDesign(window=N, cache=cache, refresh=refresh,
-                                       window_rule=rule, influence=influence)  # fmt: skip
+        tol = None if refresh_tol is None else float(refresh_tol)
+        self.design = DualWindowDesign(window=N, cache=cache, refresh=refresh, window_rule=rule,
+                                       influence=influence, refresh_tol=tol)  # fmt: skip
         self.window = N
         """The window ``N`` in use (chosen from the model or given)."""
         check_cache_size(self.design, sys.nx, sys.ny)
         self.lay = Layout(sys.nx, sys.nu, sys.ny, sys.nd, self.design.window)
+        work = 2 * sys.nx * (self.design.window + 1) * (sys.nx + sys.nd)
+        self._min_period = min(refresh, max(1, -(-work // SOLVE_BUDGET)))
+        """The shortest adaptive interval between solves (:data:`SOLVE_BUDGET`)."""
         nx, K = sys.nx, self.design.cache
         self.c = np.repeat(np.vstack([np.eye(nx), -np.eye(nx)]), K, axis=0)
         self._rows = np.arange(2 * nx)
@@ -195,6 +231,8 @@ class DualWindow(Estimator):
             x_hi=np.zeros((n, lay.nx)),
             mu=np.zeros((2 * lay.nx, K, n, lay.ny)),
             used=np.full((2 * lay.nx, K), -1, dtype=np.int64),
+            # an adaptive interval starts at its shortest and grows while the cache keeps up
+            period=self._min_period if self.design.refresh_tol is not None else 0,
         )
 
     def _coefficients(self, mu: np.ndarray) -> Coefficients:
@@ -256,11 +294,17 @@ class DualWindow(Estimator):
         s = max(lay.N - k, 0)
         prior = (x_lo[s], x_hi[s]) if s < lay.N else (p_lo, p_hi)
         mu, used, since, basis = state.mu, state.used, state.since + 1, state.basis
-        due = since >= (self.design.refresh if s == 0 else min(self.design.refresh, (k + 1) // 2))
+        period = state.period or self.design.refresh
+        due = since >= (period if s == 0 else min(period, (k + 1) // 2))
+        adapt = due and self.design.refresh_tol is not None and not self._branching
+        if adapt:  # what the cache gave without this solve (module docstring: refresh_tol)
+            before = self._evaluate(mu, used, data, y_rad, s, prior, k, p_lo, p_hi)[:2]
         if due and not self._branching:  # a look-ahead (predict) uses the cache as it is
             mu, used, basis = self._refresh(state, data, y_rad, s, prior, (p_lo, p_hi), x_lo, x_hi)
             since = 0
         lo, hi, used = self._evaluate(mu, used, data, y_rad, s, prior, k, p_lo, p_hi)
+        if adapt:
+            period = self._adapt(period, before[1] - before[0], hi - lo)
         if (hi - lo).min() < 0.0:  # both bounds proven: no state is consistent with y_k
             inconsistent = True
             y_k = self._replace(y_k, np.ones(lay.ny, bool), y_rad, p_lo, p_hi, u_k, p_mag, u_mag)
@@ -268,8 +312,23 @@ class DualWindow(Estimator):
             lo, hi, used = self._evaluate(mu, used, data, y_rad, s, prior, k, p_lo, p_hi)
         x_lo[-1], x_hi[-1] = lo, hi
         new = DualWindowState(data=data, y_rad=y_rad, x_lo=x_lo, x_hi=x_hi, mu=mu, used=used,
-                              since=since, basis=basis)  # fmt: skip
+                              since=since, basis=basis, period=period)  # fmt: skip
         return Step(new, lo, hi, inconsistent and not missing)
+
+    def _adapt(self, period: int, stale: np.ndarray, fresh: np.ndarray) -> int:
+        """The next interval between solves from how much wider the cache's box was than the
+        solve's (``stale``, ``fresh``: their widths): halved above ``refresh_tol``, doubled
+        below a quarter of it (between 1 and ``refresh``)."""
+        tol = self.design.refresh_tol
+        assert tol is not None
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gap = np.where(fresh > 0.0, stale / fresh - 1.0, 0.0)
+        worst = float(np.nan_to_num(gap, nan=np.inf).max(initial=0.0))
+        if worst > tol:
+            return max(self._min_period, period // 2)
+        if worst < 0.25 * tol:
+            return min(self.design.refresh, 2 * period)
+        return period
 
     def _replace(
         self,
