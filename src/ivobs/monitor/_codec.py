@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -29,3 +31,16 @@ def _encode_prev(prev: dict[str, Any] | None) -> dict[str, Any] | None:
 
 def _decode(v: list[Any]) -> np.ndarray:
     return np.array([float(x) for x in v], dtype=float)
+
+
+@contextmanager
+def saved_entry(expected: str) -> Iterator[None]:
+    """Read an entry of a saved state: a missing key, a wrong type or value (raised as
+    ``ValueError`` by the checks inside) becomes ``IvobsError("state: " + expected)``; the
+    reader's own ``IvobsError`` passes unchanged."""
+    try:
+        yield
+    except IvobsError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError):
+        raise IvobsError(f"state: {expected}") from None

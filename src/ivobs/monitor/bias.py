@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
-from ._codec import _decode, _encode
+from ._codec import _decode, _encode, saved_entry
 from .records import bias_intervals
 
 __all__ = ["BiasEstimate", "augment_with_bias"]
@@ -246,7 +246,7 @@ class BiasEstimate:
         """From :meth:`save`, every entry checked (the monitor at step ``k``)."""
         if saved is None:
             return None
-        try:
+        with saved_entry("bias: expected the bias estimate saved by the monitor"):
             outputs = tuple(saved["outputs"])
             start = saved["start"]
             if (
@@ -266,11 +266,5 @@ class BiasEstimate:
                 raise ValueError
             est = cls(aug, outputs, start, Box(lo, hi), sys.nx)
             est.state = est.estimator.check_state(saved["estimator"])
-        except IvobsError:
-            raise
-        except (KeyError, TypeError, ValueError, IndexError):
-            raise IvobsError(
-                "state: bias: expected the bias estimate saved by the monitor"
-            ) from None
         est.lower, est.upper = b_lo, b_hi
         return est

@@ -46,7 +46,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..model import LinearSystem, NonlinearSystem
 from ..sets import Box
-from ._codec import _decode, _encode
+from ._codec import _decode, _encode, saved_entry
 from .records import output_names
 
 __all__ = ["DEFAULT_WINDOW", "MAX_PAIRS", "History", "Isolation", "WindowTest", "isolate"]
@@ -323,7 +323,7 @@ class History:
         self.reset()
         if saved is None:
             return
-        try:
+        with saved_entry("history: expected the window history saved by the monitor"):
             anchors = []
             for a in saved["anchors"]:
                 ak = a["k"]
@@ -351,10 +351,4 @@ class History:
                 ):
                     raise ValueError
                 rows.append((rk, uu, yy, None if t is None else float(t)))
-        except IvobsError:
-            raise
-        except (KeyError, TypeError, ValueError, IndexError):
-            raise IvobsError(
-                "state: history: expected the window history saved by the monitor"
-            ) from None
         self.anchors, self.rows = anchors, rows
