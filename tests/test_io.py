@@ -232,9 +232,9 @@ def test_run_system_reports_alarms_of_a_faulty_log(tmp_path, capsys):
         code = main([*args, "--method", "interval-split"])
     text = capsys.readouterr().out
     assert code == 1 and "ALARMS" in text and "first: step 40:" in text
-    # one episode from step 40 to the end, its bias (+1.0 on y2) estimated
-    line = re.search(r"from step 40, 40 step\(s\), open at the end of the log: y2; bias y2 in "
-                     r"\[([-\d.e]+), ([-\d.e]+)\]", text)  # fmt: skip
+    # one episode from step 40 to the end, isolated to y2, its bias (+1.0 on y2) estimated
+    line = re.search(r"from step 40, 40 step\(s\), open at the end of the log: y2; isolated: y2; "
+                     r"bias y2 in \[([-\d.e]+), ([-\d.e]+)\]", text)  # fmt: skip
     assert line is not None, text
     assert 0 < float(line[1]) <= 1.0 <= float(line[2])
     assert not caught, "the alarms are reported once, by the command, not also as warnings"
