@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from ..linalg import UNIT_ROUNDOFF, gamma
-from ..sets.rounding import down, up, upper
+from ..sets.rounding import ETA, down, up, upper
 
 __all__ = ["MAX_LP_STATES", "MAX_WINDOW_STATES", "WindowBound", "window_bound"]
 
@@ -147,9 +147,12 @@ def window_bound(
     Ku = Pu - M @ Tu
     Kd = Pd - M @ Td
     absM = np.abs(M)
-    # every matrix above passed through at most K roundings per term (products of N + 2 factors
-    # of at most n + p terms each, then one difference): γ_K on the absolute-value expressions
-    K = (N + 3) * (n + N * (ny + nu + nd) + 2)
+    # every matrix above is a product C A^j X (j <= N − 1, X = B, E or I), possibly times M
+    # (or P), then one difference: its inner dimensions add up to at most N n (the powers,
+    # computed one factor at a time, and C, X) plus N ny (M, P), so each entry passed through at
+    # most K roundings ([Higham2002, Lemma 3.7]): γ_K on the absolute-value expressions, doubled
+    # (those are computed in floats too)
+    K = N * (n + ny + nu + nd) + n + 4
     gK = 2.0 * gamma(K)
     ex = np.abs(R).sum(axis=1) + gK * (apow[N] + absM @ aO).sum(axis=1)
     eu = gK * (aPu + absM @ aTu).sum(axis=1)
@@ -196,26 +199,31 @@ def _radius(
         ρ = kr + ex ‖x_s‖ + eu m + ed ‖d‖,      ‖x_s‖ <= (p_w m + p_d ‖d‖) / (1 − δ)
 
     (``|K_d| d_r``, then ``R x_s`` and the round-off of ``R``, ``K_u``, ``K_d``; module
-    docstring), plus the evaluation's rounding ``g (|Mw| |w| + |kc| + |fl(c)| + ρ)``
-    ([Higham2002, Lemma 3.1]: ``c`` is a sum of ``N (ny + nu) + 1`` terms, ``ρ`` a few more)
-    and the recorded outputs' ``2u |Mw| |w|`` (``Y`` is the float nearest to the true outputs,
+    docstring; ``g`` covers the rounding of ``kr``, ``ex``, ``eu``, ``ed`` as computed), plus
+    the rounding of ``c = fl(Mw w + kc)``, a sum of ``L + 1`` terms (``L = N (ny + nu)``) in any
+    order: ``γ_{L+1} (|Mw| |w| + |kc|)`` and underflow ([Higham2002, Lemma 3.1]), and the
+    recorded outputs' ``2u |Mw| |w|`` (``Y`` is the float nearest to the true outputs,
     ``|Y_true − Y| <= 2u |Y|``). The last subtraction ``fl(c − r)`` is at most
     ``c − r + u (|c| + r)`` (exact when subnormal), so it stays below ``c − ρ`` when
     ``r >= (ρ + u |c|) / (1 − u)`` (and likewise above). With ``|Mw| |w| <= s m`` (``s``: row
-    sums of ``|Mw|``) and ``|fl(c)| <= (1 + g) (s m + |kc|)`` all of it is at most
+    sums of ``|Mw|``) and ``|fl(c)| <= (1 + g_c) (s m + |kc|)`` all of it is at most
     ``(r0 + m rw) (1 + 2u)``::
 
-        r0 = (1 + g) (kr + ed ‖d‖ + ex p_d ‖d‖ / (1 − δ)) + h |kc|
-        rw = (1 + g) (eu + ex p_w / (1 − δ)) + h s,         h = (g + u) (2 + g) + 2u
+        r0 = (1 + g) (kr + ed ‖d‖ + ex p_d ‖d‖ / (1 − δ)) + h |kc| + (L + 2) η
+        rw = (1 + g) (eu + ex p_w / (1 − δ)) + h s,      h = g_c + u (1 + g_c) + 2u
 
-    each evaluated from nonnegative numbers and rounded up (:func:`upper`), then once more by
+    with ``g_c = 2γ_{L+2}`` (doubled, as :func:`~ivobs.sets.rounding.product_error`), each
+    evaluated from nonnegative numbers and rounded up (:func:`upper`), then once more by
     ``upper(·, 3)``, which pays for the factor ``1 + 2u >= 1 / (1 − u)`` and the two roundings
     of ``r0 + m rw`` in :meth:`WindowBound.bounds` (``(1 + 2γ₅)(1 − u)² >= 1 + 2u``)."""
-    s = upper(absMw.sum(axis=1), absMw.shape[1])
+    L = absMw.shape[1]
+    s = upper(absMw.sum(axis=1), L)
     inv = float(up(1.0 / down(1.0 - delta)))  # >= 1 / (1 − δ): each rounding bracketed
-    h = float(upper((g + UNIT_ROUNDOFF) * (2.0 + g) + 2.0 * UNIT_ROUNDOFF, 4))
+    gc = 2.0 * gamma(L + 2)
+    h = float(upper(gc + UNIT_ROUNDOFF * (1.0 + gc) + 2.0 * UNIT_ROUNDOFF, 4))
     k = float(up(1.0 + g))
-    r0 = upper(k * (kr + ed * d_mag + ex * (p_d * d_mag * inv)) + h * np.abs(kc), 8)
+    r0 = k * (kr + ed * d_mag + ex * (p_d * d_mag * inv)) + h * np.abs(kc)
+    r0 = upper(r0 + (L + 2) * ETA, 9)
     rw = upper(k * (eu + ex * (p_w * inv)) + h * s, 6)
     return upper(r0, 3), upper(rw, 3)
 
