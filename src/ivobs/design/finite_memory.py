@@ -59,7 +59,7 @@ class WindowBound:
 
     def box(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``x[s+N]`` from one window ``w`` (``(N (ny + nu),)``)."""
-        return self.bounds(w @ self.Mw.T, float(np.max(np.abs(w), initial=0.0)))
+        return self.bounds(self.Mw @ w, float(np.abs(w).max()))
 
     def boxes(self, y: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``x[k]`` for ``k = N, …, T − 1`` from every window of a record ``y``
@@ -87,7 +87,7 @@ class WindowBound:
         window or a stack of them): enclosures of ``x[s+N]`` with every rounding, that of the
         last subtraction and addition included, in ``r0``, ``rw`` (:func:`_radius`)."""
         c += self.kc
-        r = np.multiply.outer(mag, self.rw)
+        r = self.rw * mag if isinstance(mag, float) else np.multiply.outer(mag, self.rw)
         r += self.r0
         return c - r, c + r
 

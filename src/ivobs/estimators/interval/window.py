@@ -121,13 +121,15 @@ def remember(
     N = bound.N
     # (a state saved before ``filled`` existed counts its pending rows in ``fresh`` only)
     j = min(max(old.filled, old.fresh), N)
-    buf = old.window.copy()
-    ny = y_k.shape[0]
     if j == N:  # full: the oldest row leaves
-        buf[:-1] = buf[1:]
+        old_rows = old.window.reshape(-1)[old.window.shape[1] :]
+        buf = np.concatenate((old_rows, y_k, u_k)).reshape(old.window.shape)
         j -= 1
-    buf[j, :ny] = y_k
-    buf[j, ny:] = u_k
+    else:
+        buf = old.window.copy()
+        ny = y_k.shape[0]
+        buf[j, :ny] = y_k
+        buf[j, ny:] = u_k
     fresh = old.fresh
     if fresh < 0 or fresh + 1 < N:
         return evolve(new, window=buf, filled=j + 1, fresh=fresh if fresh < 0 else fresh + 1)
