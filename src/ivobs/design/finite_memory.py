@@ -69,9 +69,10 @@ class WindowBound:
         T, ny = y.shape[-2], y.shape[-1]
         n, m = self.Mw.shape[0], T - self.N
         Mj = self.Mw.reshape(n, self.N, -1)
-        c = np.zeros((*y.shape[:-2], m, n))
+        c = y[..., :m, :] @ Mj[:, 0, :ny].T
         for j in range(self.N):
-            c += y[..., j : m + j, :] @ Mj[:, j, :ny].T
+            if j:
+                c += y[..., j : m + j, :] @ Mj[:, j, :ny].T
             if u.shape[-1]:
                 c += u[..., j : m + j, :] @ Mj[:, j, ny:].T
         row = _rowmax(y)  # the largest |y_i|, |u_i| of each step, then of each window

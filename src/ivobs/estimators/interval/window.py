@@ -82,8 +82,8 @@ def meet(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``[lo, hi] ∩ [wlo, whi]`` (exact), for one box or a stack of them (``(..., n)``); a box
     whose intersection is empty in some component keeps ``[lo, hi]`` (faulty data: module
-    docstring)."""
-    mlo, mhi = np.fmax(lo, wlo), np.fmin(hi, whi)
+    docstring). ``wlo``, ``whi`` (the window's fresh bounds) are overwritten."""
+    mlo, mhi = np.fmax(lo, wlo, out=wlo), np.fmin(hi, whi, out=whi)
     empty = mlo > mhi
     if empty.any():
         empty = empty.any(axis=-1, keepdims=True)
