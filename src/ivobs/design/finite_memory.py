@@ -164,7 +164,9 @@ def window_bound(
         np.abs(Kd) @ np.tile(np.abs(dc), N)
     )
     ed = ed_mat.sum(axis=1)
-    g = 2.0 * gamma(N * (ny + nu + nd) + 4)
+    # γ of the evaluation of kr, ex, eu, ed above (row sums of n products of inner dimension at
+    # most N (ny + nu + nd)), doubled: _radius enlarges them by 1 + g
+    g = 2.0 * gamma(N * (ny + nu + nd) + 2 * n + 4)
     # ‖x_s‖∞ from the window itself (module docstring), P = O⁺ (any matrix would do)
     P = np.linalg.pinv(O)
     absP = np.abs(P)
