@@ -262,12 +262,18 @@ def _dot(M: np.ndarray, v: Sequence[Any]) -> list[Any]:
 
 
 def simulate_linear(
-    sys: ivobs.LinearSystem, x0: Sequence[float], T: int, u: np.ndarray, seed: int = 0
+    sys: ivobs.LinearSystem,
+    x0: Sequence[float],
+    T: int,
+    u: np.ndarray,
+    seed: int = 0,
+    vertices: np.ndarray | None = None,
 ) -> Record:
     """``T`` exact steps of a (possibly interval-matrix) discrete-time linear system: ``A``,
     ``B``, ``C``, ``D`` on vertices (:func:`vertex_matrix`), every disturbance on a vertex of
-    ``d``; each state and output is absorbed into its own disturbance column as in
-    :func:`simulate` (``E``, ``F`` must give every row one; the doubles of ``d`` are exact)."""
+    ``d`` (random, or ``vertices[k]``: True for the upper end); each state and output is
+    absorbed into its own disturbance column as in :func:`simulate` (``E``, ``F`` must give
+    every row one; the doubles of ``d`` are exact)."""
     rng = np.random.default_rng(seed)
     E, F, dlo, dhi = sys.E, sys.F, sys.d.lo, sys.d.hi
     ecol, fcol = _private(E, F), _private(F, E)
@@ -279,6 +285,8 @@ def simulate_linear(
             X[k] = [float(c.a) for c in x]  # points: every row is absorbed
             M = _matrices(sys, k, X[k], u[k], rng)
             hi_side = rng.integers(0, 2, size=dlo.shape).astype(bool)
+            if vertices is not None:
+                hi_side = np.asarray(vertices[k], dtype=bool)
             d = np.where(hi_side, dhi, dlo)
             ys = _plus(_dot(M["C"], x), _dot(M["D"], u[k]), F, d, fcol)
             Y[k] = [_absorb(g, F[j, c], dlo[c], dhi[c], hi_side[c]) for j, (g, c) in

@@ -64,9 +64,12 @@ def test_servo_default_gain_beats_the_papers_gain():
     """LMI (41) is feasible on the servo motor; ivobs' width refinement keeps A − LC >= 0 and
     gives a smaller steady-state width than the paper's L2 in every state."""
     sc = scenarios.get("servo-motor", horizon=200)
-    est = ivobs.make_estimator("interval", sc.system, x0=sc.x0)
+    # the observers' own boxes, without the finite-memory bound (which both would meet)
+    est = ivobs.make_estimator("interval", sc.system, x0=sc.x0, finite_memory=False)
     assert est.design.gain == "width" and est.design.D.min() >= -1e-9
-    _, paper = servo("interval")
+    paper = ivobs.make_estimator(
+        "interval", sc.system, x0=sc.x0, L=sc.reference["L2"], finite_memory=False
+    )
     assert np.all(est.design.steady_width < paper.design.steady_width)
     # A[3,3] = 0.9995 sits in the unmeasured column: 0.0808 / (1 − 0.9995) bounds w3 from below
     assert est.design.steady_width[2] > 0.0808 / 0.0005
@@ -112,7 +115,9 @@ def test_tang_example2_transformed_with_the_papers_design():
 def test_planar_example_split_observer_with_the_papers_gain():
     """[Efimov2013, Section IV.A]: L = (0.3, 0.6) gives λ(D) = {0, −0.5}, λ(|D|) = {0, 0.5}."""
     sc = scenarios.get("efimov-planar", horizon=150)
-    est = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, L=sc.reference["L"])
+    est = ivobs.make_estimator(  # the paper's observer (no finite-memory bound)
+        "interval-split", sc.system, x0=sc.x0, L=sc.reference["L"], finite_memory=False
+    )
     assert est.design.spectral_radius == pytest.approx(0.5, abs=1e-12)
     np.testing.assert_allclose(
         np.sort(np.linalg.eigvals(est.design.D).real), [-0.5, 0.0], atol=1e-12
@@ -363,7 +368,11 @@ def _reachability(sys, x0, L):
 
 
 def test_theorem7_reachability_inside_interval_with_the_same_gain():
-    sc, est = servo("interval")
+    """The theorem compares the paper's observer (36): without the finite-memory bound."""
+    sc, _ = servo("interval")
+    est = ivobs.make_estimator(
+        "interval", sc.system, x0=sc.x0, L=sc.reference["L2"], finite_memory=False
+    )
     reach = _reachability(sc.system, sc.x0, sc.reference["L2"])
     tr = sc.simulate("vertex", seed=6)
     a, b = est.run(tr.u, tr.y), reach.run(tr.u, tr.y)
@@ -372,6 +381,8 @@ def test_theorem7_reachability_inside_interval_with_the_same_gain():
 
 
 def test_theorem8_reachability_inside_transformed_with_the_same_gain():
+    """The theorem compares the paper's observer: without the finite-memory bound (with it the
+    transformed observer's boxes are the tighter ones here)."""
     sc = scenarios.get("tang-example2", horizon=100)
     ref = sc.reference
     est = ivobs.make_estimator(
@@ -382,6 +393,7 @@ def test_theorem8_reachability_inside_transformed_with_the_same_gain():
         R=ref["R"],
         e1=ref["e1"],
         e2=ref["e2"],
+        finite_memory=False,
     )
     reach = _reachability(sc.system, sc.x0, ref["L"])
     tr = sc.simulate("vertex", seed=7)
@@ -600,9 +612,10 @@ def test_transformed_contains_the_state_with_a_large_gain_and_ill_conditioned_S(
 def test_transformed_rounding_bound_is_negligible_on_the_paper_example():
     """On the servo motor of [Tang2019] the proven rounding terms of ``z = S x`` change
     nothing visible: the width converges to the exact steady state
-    ``|S⁻¹| (I − |R|)⁻¹ |S (E − LF)| Δ`` of the design (relative difference below 1e-8)."""
+    ``|S⁻¹| (I − |R|)⁻¹ |S (E − LF)| Δ`` of the design (relative difference below 1e-8; the
+    observer's own boxes: the finite-memory bound would cut them below it)."""
     sc = scenarios.get("servo-motor", horizon=3000)
-    est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0)
+    est = ivobs.make_estimator("interval-transformed", sc.system, x0=sc.x0, finite_memory=False)
     tr = sc.simulate("vertex", seed=0)
     for vectorize in (False, True):
         res = est.run(sc.u, tr.y, vectorize=vectorize)

@@ -126,7 +126,9 @@ def test_sparse_observer_equals_the_dense_one():
     dense_sys = ivobs.LinearSystem(s.A, s.B, s.C, E=s.E, F=s.F, d=s.d)
     for method in SPARSE:
         a = ivobs.make_estimator(method, s, x0=sc.x0, L=L).run(tr.u, tr.y, vectorize=False)
-        b = ivobs.make_estimator(method, dense_sys, x0=sc.x0, L=L).run(tr.u, tr.y)
+        # (a sparse system has no finite-memory bound: compare the observers themselves)
+        b = ivobs.make_estimator(method, dense_sys, x0=sc.x0, L=L, finite_memory=False)
+        b = b.run(tr.u, tr.y)
         np.testing.assert_allclose(a.upper, b.upper, rtol=1e-8, atol=1e-12)
         np.testing.assert_allclose(a.lower, b.lower, rtol=1e-8, atol=1e-12)
 

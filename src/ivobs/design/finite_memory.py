@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from ..linalg import UNIT_ROUNDOFF, gamma
-from ..sets.rounding import down, up, upper
+from ..sets.rounding import ETA, down, up, upper
 
 __all__ = ["MAX_LP_STATES", "MAX_WINDOW_STATES", "WindowBound", "window_bound"]
 
@@ -46,47 +46,60 @@ fast for every estimator built)."""
 
 @dataclass(frozen=True)
 class WindowBound:
-    """The finite-memory bound of ``x[s+N]`` (module docstring): ``N`` steps; ``M`` (rows act on
-    the window's outputs, step-major), ``Ku`` (on its inputs), ``kc = K_d d_c`` and
-    ``kr = |K_d| d_r`` (centre and radius of the disturbance bounds), ``ex``: per row, the
-    coefficient of ``‖x_s‖∞`` (``|R|`` and the round-off of ``R``, ``K_u``, ``K_d``);
-    ``eu``, ``ed``: per row, the coefficients of ``‖U‖∞``, ``‖d‖∞`` from the round-off of
-    ``K_u``, ``K_d``; ``g``: ``γ`` of one evaluation (doubled); ``p_y``, ``p_u``, ``p_d``
-    and ``delta`` (``‖Θ‖∞``): the bound of ``‖x_s‖∞`` (module docstring) is
-    ``(p_y ‖Y‖∞ + p_u ‖U‖∞ + p_d ‖d‖∞) / (1 − delta)``; ``d_mag``: ``‖d‖∞`` over the bounds."""
+    """The finite-memory bound of ``x[s+N]`` (module docstring): ``N`` steps; ``Mw``: ``M`` and
+    ``K_u`` together, acting on the window as recorded, ``w = [y_s, u_s, …, y_{s+N−1},
+    u_{s+N−1}]``; ``kc = fl(K_d d_c)`` (``d_c``, ``d_r``: centre and radius of the disturbance
+    bounds); the radius of the bound is ``r0 + ‖w‖∞ rw`` (:meth:`box`)."""
 
     N: int
-    M: np.ndarray
-    Ku: np.ndarray
+    Mw: np.ndarray
     kc: np.ndarray
-    kr: np.ndarray
-    ex: np.ndarray
-    eu: np.ndarray
-    ed: np.ndarray
-    absM: np.ndarray
-    absKu: np.ndarray
-    g: float
-    p_y: float
-    p_u: float
-    p_d: float
-    delta: float
-    d_mag: float
+    r0: np.ndarray
+    rw: np.ndarray
 
-    def box(self, Y: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of ``x[s+N]`` from the window's outputs ``Y`` and inputs ``U`` (flattened,
-        step-major), rounded outwards. ``Y`` is taken as recorded: the float nearest to the
-        true outputs, ``|Y_true − Y| <= 2u |Y|`` (``u = 2⁻⁵³``), which ``|M| 2u |Y|`` covers."""
-        d_mag = self.d_mag
-        c = self.M @ Y + self.Ku @ U + self.kc
-        u_mag = float(np.max(np.abs(U))) if U.size else 0.0
-        y_mag = float(np.max(np.abs(Y))) if Y.size else 0.0
-        xs_mag = (self.p_y * y_mag + self.p_u * u_mag + self.p_d * d_mag) / (1.0 - self.delta)
-        xs_mag *= 1.0 + self.g
-        r = self.kr + self.ex * xs_mag + self.eu * u_mag + self.ed * d_mag
-        ev = self.absM @ np.abs(Y) + self.absKu @ np.abs(U) + np.abs(self.kc) + np.abs(c) + r
-        r = r + self.g * ev + UNIT_ROUNDOFF * 2.0 * (self.absM @ np.abs(Y))
-        r = upper(r, 3)
-        return down(c - r), up(c + r)
+    def box(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``x[s+N]`` from one window ``w`` (``(N (ny + nu),)``)."""
+        return self.bounds(self.Mw @ w, float(np.abs(w).max()))
+
+    def boxes(self, y: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``x[k]`` for ``k = N, …, T − 1`` from every window of a record ``y``
+        ``(..., T, ny)``, ``u`` ``(T, nu)`` or ``(..., T, nu)`` (``T > N``): :meth:`box` of each,
+        the window's sum taken as ``N`` products over the shifted record (another order of the
+        same sum: the same bound)."""
+        T, ny = y.shape[-2], y.shape[-1]
+        n, m = self.Mw.shape[0], T - self.N
+        Mj = self.Mw.reshape(n, self.N, -1)
+        c = y[..., :m, :] @ Mj[:, 0, :ny].T
+        for j in range(self.N):
+            if j:
+                c += y[..., j : m + j, :] @ Mj[:, j, :ny].T
+            if u.shape[-1]:
+                c += u[..., j : m + j, :] @ Mj[:, j, ny:].T
+        row = _rowmax(y)  # the largest |y_i|, |u_i| of each step, then of each window
+        if u.shape[-1]:
+            row = np.maximum(row, _rowmax(u))
+        mag = row[..., :m].copy()
+        for j in range(1, self.N):
+            np.maximum(mag, row[..., j : m + j], out=mag)
+        return self.bounds(c, mag)
+
+    def bounds(self, c: np.ndarray, mag: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """``fl(c + kc) ∓ fl(r0 + ‖w‖∞ rw)`` from ``c = fl(Mw w)`` and ``mag = ‖w‖∞`` (one
+        window or a stack of them): enclosures of ``x[s+N]`` with every rounding, that of the
+        last subtraction and addition included, in ``r0``, ``rw`` (:func:`_radius`)."""
+        c += self.kc
+        r = self.rw * mag if isinstance(mag, float) else np.multiply.outer(mag, self.rw)
+        r += self.r0
+        return c - r, c + r
+
+
+def _rowmax(a: np.ndarray) -> np.ndarray:
+    """``max_i |a_i|`` over the last axis, column by column (NumPy's reduction along a short
+    axis is slow)."""
+    out = np.zeros(a.shape[:-1])
+    for i in range(a.shape[-1]):
+        np.maximum(out, np.abs(a[..., i]), out=out)
+    return out
 
 
 def window_bound(
@@ -135,9 +148,12 @@ def window_bound(
     Ku = Pu - M @ Tu
     Kd = Pd - M @ Td
     absM = np.abs(M)
-    # every matrix above passed through at most K roundings per term (products of N + 2 factors
-    # of at most n + p terms each, then one difference): γ_K on the absolute-value expressions
-    K = (N + 3) * (n + N * (ny + nu + nd) + 2)
+    # every matrix above is a product C A^j X (j <= N − 1, X = B, E or I), possibly times M
+    # (or P), then one difference: its inner dimensions add up to at most N n (the powers,
+    # computed one factor at a time, and C, X) plus N ny (M, P), so each entry passed through at
+    # most K roundings ([Higham2002, Lemma 3.7]): γ_K on the absolute-value expressions, doubled
+    # (those are computed in floats too)
+    K = N * (n + ny + nu + nd) + n + 4
     gK = 2.0 * gamma(K)
     ex = np.abs(R).sum(axis=1) + gK * (apow[N] + absM @ aO).sum(axis=1)
     eu = gK * (aPu + absM @ aTu).sum(axis=1)
@@ -148,7 +164,9 @@ def window_bound(
         np.abs(Kd) @ np.tile(np.abs(dc), N)
     )
     ed = ed_mat.sum(axis=1)
-    g = 2.0 * gamma(N * (ny + nu + nd) + 4)
+    # γ of the evaluation of kr, ex, eu, ed above (row sums of n products of inner dimension at
+    # most N (ny + nu + nd)), doubled: _radius enlarges them by 1 + g
+    g = 2.0 * gamma(N * (ny + nu + nd) + 2 * n + 4)
     # ‖x_s‖∞ from the window itself (module docstring), P = O⁺ (any matrix would do)
     P = np.linalg.pinv(O)
     absP = np.abs(P)
@@ -159,9 +177,58 @@ def window_bound(
     p_u = float(np.max((absP @ aTu).sum(axis=1), initial=0.0)) * (1.0 + gK)
     p_d = float(np.max((absP @ aTd).sum(axis=1), initial=0.0)) * (1.0 + gK)
     d_mag = float(max(np.max(np.abs(d_lo), initial=0.0), np.max(np.abs(d_hi), initial=0.0)))
-    return WindowBound(
-        N, M, Ku, kc, kr, ex, eu, ed, absM, np.abs(Ku), g, p_y, p_u, p_d, delta, d_mag
-    )
+    # the window as recorded: rows [y_j, u_j], step-major
+    Mw = np.concatenate((M.reshape(n, N, ny), Ku.reshape(n, N, nu)), axis=2).reshape(n, -1)
+    r0, rw = _radius(np.abs(Mw), kc, kr, ex, eu, ed, g, p_y + p_u, p_d, delta, d_mag)
+    return WindowBound(N, Mw, kc, r0, rw)
+
+
+def _radius(
+    absMw: np.ndarray,
+    kc: np.ndarray,
+    kr: np.ndarray,
+    ex: np.ndarray,
+    eu: np.ndarray,
+    ed: np.ndarray,
+    g: float,
+    p_w: float,
+    p_d: float,
+    delta: float,
+    d_mag: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(r0, rw)`` of :class:`WindowBound`: with ``m = ‖w‖∞`` (which bounds ``‖Y‖∞`` and
+    ``‖U‖∞``), the radius
+
+        ρ = kr + ex ‖x_s‖ + eu m + ed ‖d‖,      ‖x_s‖ <= (p_w m + p_d ‖d‖) / (1 − δ)
+
+    (``|K_d| d_r``, then ``R x_s`` and the round-off of ``R``, ``K_u``, ``K_d``; module
+    docstring; ``g`` covers the rounding of ``kr``, ``ex``, ``eu``, ``ed`` as computed), plus
+    the rounding of ``c = fl(Mw w + kc)``, a sum of ``L + 1`` terms (``L = N (ny + nu)``) in any
+    order: ``γ_{L+1} (|Mw| |w| + |kc|)`` and underflow ([Higham2002, Lemma 3.1]), and the
+    recorded outputs' ``2u |Mw| |w|`` (``Y`` is the float nearest to the true outputs,
+    ``|Y_true − Y| <= 2u |Y|``). The last subtraction ``fl(c − r)`` is at most
+    ``c − r + u (|c| + r)`` (exact when subnormal), so it stays below ``c − ρ`` when
+    ``r >= (ρ + u |c|) / (1 − u)`` (and likewise above). With ``|Mw| |w| <= s m`` (``s``: row
+    sums of ``|Mw|``) and ``|fl(c)| <= (1 + g_c) (s m + |kc|)`` all of it is at most
+    ``(r0 + m rw) (1 + 2u)``::
+
+        r0 = (1 + g) (kr + ed ‖d‖ + ex p_d ‖d‖ / (1 − δ)) + h |kc| + (L + 2) η
+        rw = (1 + g) (eu + ex p_w / (1 − δ)) + h s,      h = g_c + u (1 + g_c) + 2u
+
+    with ``g_c = 2γ_{L+2}`` (doubled, as :func:`~ivobs.sets.rounding.product_error`), each
+    evaluated from nonnegative numbers and rounded up (:func:`upper`), then once more by
+    ``upper(·, 3)``, which pays for the factor ``1 + 2u >= 1 / (1 − u)`` and the two roundings
+    of ``r0 + m rw`` in :meth:`WindowBound.bounds` (``(1 + 2γ₅)(1 − u)² >= 1 + 2u``)."""
+    L = absMw.shape[1]
+    s = upper(absMw.sum(axis=1), L)
+    inv = float(up(1.0 / down(1.0 - delta)))  # >= 1 / (1 − δ): each rounding bracketed
+    gc = 2.0 * gamma(L + 2)
+    h = float(upper(gc + UNIT_ROUNDOFF * (1.0 + gc) + 2.0 * UNIT_ROUNDOFF, 4))
+    k = float(up(1.0 + g))
+    r0 = k * (kr + ed * d_mag + ex * (p_d * d_mag * inv)) + h * np.abs(kc)
+    r0 = upper(r0 + (L + 2) * ETA, 9)
+    rw = upper(k * (eu + ex * (p_w * inv)) + h * s, 6)
+    return upper(r0, 3), upper(rw, 3)
 
 
 def _index(A: np.ndarray, C: np.ndarray) -> int | None:

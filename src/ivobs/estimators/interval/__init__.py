@@ -44,23 +44,33 @@ unless that leaves ``|Q_k|`` non-Schur: then the gain of that pattern is the one
 smallest ``ρ(|Q_k|)`` among it, zero and the width-optimal gain of the observed outputs
 (designed once, cached; :mod:`.operators`). **Inconsistent data**: when ``y[k]`` lies outside
 ``C[x̲_k, x̄_k] + D_u u_k + F[d]`` (rounding included) no state in the box explains it (a
-fault); it is reported and treated as missing. **After a gap** (dense, time-invariant, constant
-bounds, exact matrices, ``(A, C)`` observable) the bounds are intersected once, ``N`` complete
-steps after it, with the finite-memory bound of those steps (:mod:`.window`,
-:mod:`ivobs.design.finite_memory`; its image by ``S`` for ``interval-transformed``): the width
-is back within that bound ``N`` steps after a gap of any length (docs/operating.md, "After a
-gap"). In coordinates ``z = S x`` some patterns have no gain with ``|Q_k|`` Schur although the
-plant is stable (``|S A S⁻¹|`` is not ``|A|``): widths then grow during such gaps until the
-window bound resets them (docs/interval.md).
+fault); it is reported and treated as missing.
+
+**The finite-memory bound** (dense, time-invariant, constant bounds, exact matrices,
+``(A, C)`` observable; :mod:`.window`, :mod:`ivobs.design.finite_memory`). The ``N`` complete
+steps before ``k`` (``N``: the observability index) bound ``x[k]`` on their own, whatever
+happened before them. With ``finite_memory=True`` (the default) every box of ``x[k]`` is
+intersected with that bound: the recursion forgets its past only at the rate ``ρ(|Q|)``, 0.9995
+on the servo of [Tang2019], whose summed width falls from 254 to 1.28 with complete data.
+``finite_memory=False`` gives the papers' observers' boxes. **After a gap** (either setting)
+the observer's own bounds are intersected once, ``N`` complete steps after it, with the bound of
+those steps (its image by ``S`` for ``interval-transformed``): the width is back within that
+bound ``N`` steps after a gap of any length (docs/operating.md, "After a gap"). In coordinates
+``z = S x`` some patterns have no gain with ``|Q_k|`` Schur although the plant is stable
+(``|S A S⁻¹|`` is not ``|A|``): widths then grow during such gaps until the window bound resets
+them (docs/interval.md).
 
 **Rounding** (``proven_rounding``): every bound the step returns or keeps is on the safe side
 of the exact one, by a proven model of the floating-point error of the step (:mod:`.rounding`);
-the vectorised path has its own proof (:mod:`.vectorised`). No margin is added.
+the vectorised path has its own proof (:mod:`.vectorised`); the finite-memory bound its own
+(:meth:`ivobs.design.finite_memory.WindowBound.box`), the same on both paths. No margin is
+added.
 
 The package: :mod:`.design` (offline: gains, ``S``; no time loop), :mod:`.operators` (the step
 matrix of each missing-output pattern, built once), :mod:`.recursion` (the typed state and the
 step), :mod:`.rounding` (the proof), :mod:`.vectorised` (whole records and batches),
-:mod:`.observers` (the three registered estimators), :mod:`.window` (recovery after gaps).
+:mod:`.observers` (the three registered estimators), :mod:`.window` (the finite-memory bound:
+every box, and recovery after gaps).
 """
 
 from __future__ import annotations

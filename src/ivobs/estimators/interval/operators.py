@@ -81,11 +81,22 @@ class StepOperator:
 
 class Operators:
     """The step operators of a gain ``L`` and a transformation ``S`` (None: ``S = I``), the
-    prior bounds of ``z[0]``, the bounds of ``d[k]`` and the finite-memory bound used after
-    gaps (:mod:`.window`)."""
+    prior bounds of ``z[0]``, the bounds of ``d[k]`` and the finite-memory bound
+    (:mod:`.window`)."""
 
-    def __init__(self, sys: LinearSystem, x0: Box, L: np.ndarray, S: np.ndarray | None, who: str):
+    def __init__(
+        self,
+        sys: LinearSystem,
+        x0: Box,
+        L: np.ndarray,
+        S: np.ndarray | None,
+        who: str,
+        memory: bool = True,
+    ):
         self.sys, self.x0, self.L, self.who = sys, x0, L, who
+        self.memory = memory
+        """Whether every box is met with the finite-memory bound (:mod:`.window`; the option
+        ``finite_memory``)."""
         self.nx, self.ny, self.nu, self.nd = sys.nx, sys.ny, sys.nu, sys.nd
         self.sparse: bool = sys.is_sparse and S is None
         A = sys.sparse("A") if self.sparse else sys.A_at(0)
@@ -107,8 +118,8 @@ class Operators:
         self.full = self.pattern(np.ones(ny, dtype=bool))
         """The step with every output observed."""
         self.window: WindowBound | None = None
-        """The finite-memory bound used after missing samples (:mod:`.window`): dense,
-        time-invariant systems with exact matrices and constant bounds."""
+        """The finite-memory bound (:mod:`.window`): dense, time-invariant systems with exact
+        matrices and constant bounds, ``(A, C)`` observable."""
         if not self.sparse and self.d_const is not None and not sys.is_time_varying:
             if self.unc is None:
                 dhi, dlo = self.d_const

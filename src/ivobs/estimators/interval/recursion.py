@@ -5,7 +5,9 @@
 
 after the consistency test of ``y[k]`` (an inconsistent measurement is not used), every bound
 on the safe side of its exact value (:mod:`.rounding`): one product of the step matrix of the
-pattern of observed outputs (:class:`~.operators.StepOperator`), dense or sparse.
+pattern of observed outputs (:class:`~.operators.StepOperator`), dense or sparse. The box of
+``x[k]`` is then met with the finite-memory bound of the ``N`` steps before ``k`` when they were
+complete, and the window of the last steps kept (:mod:`.window`).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import numpy as np
 from .. import _uncertain as uncertain
 from ..state import Step, evolve
 from .operators import Operators
-from .window import CooperativeState, after_gap
+from .window import CooperativeState, memory_box, remember
 
 __all__ = [
     "CooperativeState",
@@ -82,6 +84,8 @@ def interval_step(ops: Operators, state: S, u_k: np.ndarray, y_k: np.ndarray) ->
     if ops.unc is not None:  # S (w − L_k v) enters z[k+1] as a bounded input
         zlo, zhi = uncertain.widen(zlo, zhi, uncertain.observer_term(w, v, op.Lmag, ops.S))
     new = evolve(state, lo=zlo, hi=zhi)
-    if ops.window is not None:
-        new = after_gap(ops.window, ops.S, new, state, u_k, y_k, complete and not inconsistent)
+    if ops.window is not None:  # the finite-memory bound (:mod:`.window`)
+        new = remember(ops.window, ops.S, new, state, u_k, y_k, complete and not inconsistent)
+        if ops.memory:
+            xlo, xhi = memory_box(ops.window, state, xlo, xhi)
     return Step(new, xlo, xhi, inconsistent)

@@ -27,7 +27,9 @@ rounding ([Higham2002, §3.1], norm-wise). Split ``e = a + b``: ``a+ = Q a + G (
 outwards; ``s_k`` is of the order of the rounding of the data times ``c / (1 − λ)``. The box of
 ``x`` (``S ≠ I``) and the consistency test of ``y[k]`` are evaluated from it with their rounding
 bounds, as in the loop; a measurement found inconsistent sends the record (or that stream of a
-batch) to the loop, which reports it.
+batch) to the loop, which reports it. Each box of ``x[k]``, ``k >= N``, is then met with the
+finite-memory bound of the ``N`` steps before it, as in the loop (:mod:`.window`: the bounds of
+every window of the record in one product; they do not feed back into the recursion).
 """
 
 from __future__ import annotations
@@ -41,12 +43,16 @@ from ...linalg import UNIT_ROUNDOFF
 from ...sets.rounding import ETA, DecayBound, gamma, mid_rad, up, upper
 from .._recursion import LinearFilter, SplitFilter, matrix_product, redo_streams
 from .operators import Operators
+from .window import meet
 
 __all__ = ["VectorPath"]
 
 Bounds = tuple[np.ndarray, ...]
 
 _U2 = 2.0 * np.finfo(float).eps / 2
+
+_BLOCK = 1 << 15
+"""Elements (steps x states) per block of the finite-memory bounds (:meth:`VectorPath._memory`)."""
 
 
 def _norm(M: np.ndarray) -> float:
@@ -229,9 +235,26 @@ class VectorPath:
             lo, hi = _enclose(xc, xr, extra)
             lo[..., 0, :] = ops.x0.lo  # [Tang2019, eq. (42)]: the prior box at k = 0
             hi[..., 0, :] = ops.x0.hi
+        if ops.window is not None and ops.memory:
+            self._memory(u, y, lo, hi)
         if fail is not None:
             return redo_streams(est, u, y, t, lo, hi, fail)
         return lo, hi
+
+    def _memory(self, u: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        """The boxes of ``x[k]``, ``k >= N``, met in place with the finite-memory bounds ``W_k``
+        of the windows ``[y_j, u_j]``, ``j = k − N .. k − 1`` (:mod:`.window`: the loop's
+        :func:`~.window.memory_box`, for every window at once)."""
+        bound = self.ops.window
+        assert bound is not None
+        N, T = bound.N, y.shape[-2]
+        # in blocks of steps: temporaries that stay in cache (fresh record-sized arrays cost
+        # more in page faults than the arithmetic)
+        size = max(1, _BLOCK // (int(np.prod(y.shape[:-2])) * max(lo.shape[-1], 1)))
+        for a in range(N, T, size):
+            b = min(T, a + size)
+            wlo, whi = bound.boxes(y[..., a - N : b, :], u[..., a - N : b, :])
+            lo[..., a:b, :], hi[..., a:b, :] = meet(lo[..., a:b, :], hi[..., a:b, :], wlo, whi)
 
     def _centre(
         self, u: np.ndarray, y: np.ndarray, c0: np.ndarray, gc: np.ndarray, tv: bool
