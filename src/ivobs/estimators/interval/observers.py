@@ -158,9 +158,9 @@ class IntervalObserver(_GainObserver[IntervalState]):
     :mod:`~ivobs.estimators.interval.window`): each box of ``x[k]`` is intersected with the bound
     that the ``N`` complete steps before ``k`` give alone (``N``: the observability index of
     ``(A, C)``), on every path. It matters where the gain leaves a slow mode uncorrected (the
-    servo's current: ``ρ(A − LC) = 0.9995``, summed width 254 → 1.28); it costs a product of the
-    window per step (about 40 % of a ``step()`` on the servo; ``run()`` computes every
-    window's bound at once: 5–20 %). ``finite_memory=False``:
+    servo's current: ``ρ(A − LC) = 0.9995``); it costs a product of the window per step
+    (``run()`` computes every window's bound at once; BENCHMARKS.md has the figures).
+    ``finite_memory=False``:
     the observer's own boxes, as in the papers ([Tang2019, eq. (36)]: to compare with them, or to
     save that product per ``step()`` where the window bound is never the tighter one). Only
     dense time-invariant systems with exact matrices and constant bounds have one
