@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._jit import first_use_notice, kernels_in
+from ..._jit import first_use_notice
 from ..._validate import as_int, as_matrix
 from ...errors import IvobsError
 from ...linalg import gamma
@@ -24,6 +24,7 @@ from .recursion import (
     NONE,
     PARALLELOTOPE,
     joint_set,
+    kernels,
     measure,
     predict,
     state_box,
@@ -145,12 +146,8 @@ class StripEstimator(Estimator):
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
-        from ...sets import reduction as _reduction
-        from ...sets import strip as _strip
-        from . import recursion as _recursion
-
         # the first step compiles the kernels (numba): say so before the wait
-        first_use_notice(self.name, kernels_in(_recursion, _strip, _reduction))
+        first_use_notice(self.name, kernels())
         check_size(
             self.name,
             sys.nx,

@@ -17,9 +17,12 @@ compiled by numba when it is installed (:mod:`ivobs._jit`).
 
 from __future__ import annotations
 
+import sys
+from typing import Any
+
 import numpy as np
 
-from ..._jit import jit
+from ..._jit import jit, kernels_in
 from ...linalg import gamma
 from ...sets.reduction import reduce_girard, reduce_parallelotope
 from ...sets.rounding import ETA
@@ -217,3 +220,12 @@ def step(
         return pn, reduce_girard(Hn, order), np.zeros(nx), xlo, xhi, inconsistent, True
     Hr, rho = reduce_parallelotope(Hn, order)
     return pn, Hr, rho, xlo, xhi, inconsistent, True
+
+
+def kernels() -> list[Any]:
+    """The compiled kernels a step of the strip filter calls: this module's and those of
+    :mod:`ivobs.sets.strip` and :mod:`ivobs.sets.reduction` (the first-use notice of
+    :func:`ivobs._jit.first_use_notice`)."""
+    from ...sets import reduction, strip
+
+    return kernels_in(sys.modules[__name__], strip, reduction)
