@@ -65,7 +65,7 @@ OPTIONS = [
     ("exact", {"window": 1, "progress": False}),
     ("exact", {"window": 6, "progress": False}),
     ("dual-window", {"window": 1, "cache": 1, "refresh": 1}),
-    ("dual-window", {"window": 40, "cache": 2, "refresh": 500}),
+    ("dual-window", {"window": 40, "cache": 2, "refresh": 500, "refresh_tol": None}),
 ]
 
 
