@@ -128,7 +128,8 @@ def markdown_table(
     reference: str | None = None,
 ) -> str:
     """A Markdown table: mean width per state, containment, design and run time (wall clock),
-    and the run's CPU time (the figure to compare methods by on a loaded machine).
+    and the CPU time of design and run together (the figure to compare methods by on a loaded
+    machine).
 
     With ``reference`` (a method name among the results, e.g. ``"exact"``), a column gives the
     mean over states of each method's width ratio to it.
@@ -139,7 +140,7 @@ def markdown_table(
     names = list(state_names) if state_names else [f"x{i + 1}" for i in range(nx)]
     ref = next((r for r in ok if r.method == reference), None) if reference else None
     head = ["method"] + [f"width {n}" for n in names] + ([f"ratio to {reference}"] if ref else [])
-    head += ["contains truth", "design (s)", "run (s)", "CPU (s)"]
+    head += ["contains truth", "design (s)", "run (s)", "CPU design + run (s)"]
     point = _point_states(ref) if ref is not None else None
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:

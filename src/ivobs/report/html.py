@@ -158,5 +158,6 @@ def results_table(results: Sequence[Any], state_names: Sequence[str] | None = No
         rows.append(f"<tr><td>{html.escape(label)}</td>{cells}</tr>")
     return (
         f"<table class='methods'><tr><th>method</th>{head}<th>contains truth</th>"
-        f"<th>design (s)</th><th>run (s)</th><th>CPU (s)</th></tr>{''.join(rows)}</table>"
+        "<th>design (s)</th><th>run (s)</th><th>CPU design + run (s)</th></tr>"
+        f"{''.join(rows)}</table>"
     )
