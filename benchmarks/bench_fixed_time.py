@@ -21,25 +21,15 @@ from __future__ import annotations
 import sys
 import time
 import warnings
-from collections.abc import Callable
 
 import numpy as np
 from suite import DEFAULT_SCENARIOS  # benchmarks/ is on the path of a script run from it
+from timing import cpu_best as cpu  # benchmarks/timing.py
 
 import ivobs
 from ivobs import Box, LinearSystem
 
 SUITE = DEFAULT_SCENARIOS  # the scenarios of benchmarks/suite.py
-
-
-def cpu(fn: Callable[[], object], repeat: int = 3) -> float:
-    """Best CPU time of ``repeat`` calls."""
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.process_time()
-        fn()
-        best = min(best, time.process_time() - t0)
-    return best
 
 
 def _ltv() -> LinearSystem:

@@ -13,25 +13,16 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
+from timing import cpu_best  # benchmarks/timing.py
 
 import ivobs
 
 METHODS = ("interval", "interval-split", "interval-transformed")
 BURN = 1000
-
-
-def cpu_best(fn, repeat: int = 3) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        c0 = time.process_time()
-        fn()
-        best = min(best, time.process_time() - c0)
-    return best
 
 
 def servo(T: int) -> None:

@@ -16,21 +16,11 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Callable
 
 import numpy as np
+from timing import cpu_best as _cpu  # benchmarks/timing.py
 
 import ivobs
-
-
-def _cpu(fn: Callable[[], object], repeat: int = 3) -> float:
-    """Best CPU time of ``repeat`` calls."""
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.process_time()
-        fn()
-        best = min(best, time.process_time() - t0)
-    return float(best)
 
 
 def batch_record(sc: ivobs.scenarios.Scenario, B: int, T: int, seed: int = 0):
