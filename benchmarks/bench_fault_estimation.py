@@ -24,27 +24,19 @@ Run: ``python benchmarks/bench_fault_estimation.py [--methods strip,reachability
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-import ivobs
 from ivobs.monitor import Monitor
 
+# the servo record of the tests (every disturbance on a vertex), one simulator for both
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from vertexsim import servo_vertex as servo_record
+
 METHODS = "strip,reachability,interval-split,zonotope,constrained-zonotope"
-
-
-def servo_record(T: int, seed: int):
-    sc = ivobs.scenarios.get("servo-motor")
-    s = sc.system
-    rng = np.random.default_rng(seed)
-    d = np.where(rng.random((T, s.nd)) < 0.5, s.d.lo, s.d.hi)
-    u = np.full((T, 1), 2.0)
-    x = np.zeros((T, s.nx))
-    x[0] = sc.x_true0
-    for k in range(T - 1):
-        x[k + 1] = s.A @ x[k] + s.B @ u[k] + s.E @ d[k]
-    return sc, u, x, x @ s.C.T + d @ s.F.T
 
 
 def main() -> None:
