@@ -23,12 +23,17 @@ the exact hull is the one saved in ``benchmarks/results/cora_exact_hull.npz`` (m
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 import ivobs
+
+# the tests' vertex simulator (every disturbance on a vertex): one simulator for both
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from vertexsim import simulate_vertex
 
 CORA = ["cora-2dim", "cora-pedestrian4", "cora-vehicle6", "cora-slip4", "cora-tank30"]
 ONLY: list[str] = []  # --only: a subset of CORA
@@ -68,24 +73,6 @@ def random_system(seed: int) -> tuple[ivobs.LinearSystem, ivobs.Box]:
         lo, hi = x_true - 1.0, x_true + 1.0
     sys = ivobs.LinearSystem(A, B, C, D=D, E=E, F=F, d=ivobs.Box(c - r, c + r))
     return sys, ivobs.Box(lo, hi)
-
-
-def simulate_vertex(
-    sys: ivobs.LinearSystem, x0: ivobs.Box, u: np.ndarray, seed: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``x+ = A x + B u + E d``, ``y = C x + D u + F d`` from a random vertex of ``x0``, every
-    ``d[k]`` on a random vertex of the model's box."""
-    rng = np.random.default_rng(seed)
-    A, B, C, D, E, F = sys.matrices_at(0)
-    d = sys.d_at(0)
-    x = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
-    xs, ys = [], []
-    for k in range(u.shape[0]):
-        dk = np.where(rng.integers(0, 2, sys.nd).astype(bool), d.hi, d.lo)
-        xs.append(x)
-        ys.append(C @ x + D @ u[k] + F @ dk)
-        x = A @ x + B @ u[k] + E @ dk
-    return np.array(xs), np.array(ys)
 
 
 def _window(text: str) -> int | str:
