@@ -129,7 +129,8 @@ class DualWindow(Estimator):
     refresh_tol : float > 0 or None (default 0.1): the interval adapts to the data. At each
         solve the cache's bounds from before it are compared with the solve's (the window's
         exact hull): when the cache was more than ``refresh_tol`` wider (relative, on the
-        widest state) the interval is halved, down to every step; when it was within a quarter
+        widest state) the interval is halved, down to a floor that bounds the solves' work per
+        step (:data:`SOLVE_BUDGET`; every step on small systems); when it was within a quarter
         of it the interval doubles, up to ``refresh``. Disturbances that sit on the vertices of
         their box change the optimal multipliers at nearly every step, and a fixed interval
         then leaves the bounds at those of stale multipliers (1.2-9x the hull on random
@@ -297,7 +298,7 @@ class DualWindow(Estimator):
         period = state.period or self.design.refresh
         due = since >= (period if s == 0 else min(period, (k + 1) // 2))
         adapt = due and self.design.refresh_tol is not None and not self._branching
-        if adapt:  # what the cache gave without this solve (module docstring: refresh_tol)
+        if adapt:  # what the cache gave without this solve (``refresh_tol`` in the class docstring)
             before = self._evaluate(mu, used, data, y_rad, s, prior, k, p_lo, p_hi)[:2]
         if due and not self._branching:  # a look-ahead (predict) uses the cache as it is
             mu, used, basis = self._refresh(state, data, y_rad, s, prior, (p_lo, p_hi), x_lo, x_hi)
@@ -318,7 +319,7 @@ class DualWindow(Estimator):
     def _adapt(self, period: int, stale: np.ndarray, fresh: np.ndarray) -> int:
         """The next interval between solves from how much wider the cache's box was than the
         solve's (``stale``, ``fresh``: their widths): halved above ``refresh_tol``, doubled
-        below a quarter of it (between 1 and ``refresh``)."""
+        below a quarter of it (between the floor of :data:`SOLVE_BUDGET` and ``refresh``)."""
         tol = self.design.refresh_tol
         assert tol is not None
         with np.errstate(divide="ignore", invalid="ignore"):
