@@ -11,7 +11,7 @@ returns at each step a box that is certain to contain the true state.
 >>> res = est.run(traj.u, traj.y)                                       # doctest: +SKIP
 """
 
-from . import io, linalg, monitor, nlmath, scenarios
+from . import config, io, linalg, monitor, nlmath, scenarios
 from .between import between_samples
 from .errors import (
     DesignError,
@@ -57,6 +57,7 @@ __all__ = [
     "Zonotope",
     "__version__",
     "between_samples",
+    "config",
     "disturbance",
     "equal_systems",
     "image_bounds",

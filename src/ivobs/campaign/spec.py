@@ -17,7 +17,7 @@ from ..errors import IvobsError
 from ..io.options import check_option, method_class
 from ..io.reader import TomlReader
 from .budget import BUDGET, seed_count
-from .job import Job
+from .job import Job, canonical
 from .worker import cached_scenario
 
 __all__ = [
@@ -26,6 +26,7 @@ __all__ = [
     "MethodEntry",
     "load_spec",
     "loads_spec",
+    "session_options",
 ]
 
 DISTURBANCES = ("vertex", "uniform", "sinusoidal", "zero", "center", "paper", "recorded")
@@ -62,17 +63,53 @@ class CampaignSpec:
     source: str = "<spec>"
 
     def jobs(self) -> list[Job]:
-        """The grid, scenario-major: scenario × disturbance × method × option set × seed."""
+        """The grid, scenario-major: scenario × disturbance × method × option set × seed.
+
+        Each job's options are its option set over the defaults this process changed for its
+        method (:func:`ivobs.config.set_defaults`): the worker processes do not share them, so
+        the jobs carry them (and their ids differ from those of the classes' defaults)."""
+        session = {e.name: session_options(e.name) for e in self.methods}
         out = []
         for sc, dist, entry in itertools.product(self.scenarios, self.disturbances, self.methods):
             for opts in entry.option_sets():
                 for seed in self.seeds:
                     out.append(Job(
                         scenario=sc, method=entry.name, seed=seed, disturbance=dist,
-                        options=opts, scenario_options=dict(self.scenario_options.get(sc, {})),
+                        options={**session[entry.name], **opts},
+                        scenario_options=dict(self.scenario_options.get(sc, {})),
                         burn_in=self.burn_in, imports=tuple(self.imports),
                     ))  # fmt: skip
         return out
+
+
+def session_options(method: str) -> dict[str, Any]:
+    """The defaults of ``method`` changed in this process (:mod:`ivobs.config`) as job options:
+    plain values (NumPy arrays as lists), without those the worker gives every method itself
+    (``strips``: an option passed by the command wins over a changed default)."""
+    import numpy as np
+
+    from ..config import overrides
+    from ..estimators.measured import FILTERED
+
+    out: dict[str, Any] = {}
+    for key, value in overrides(method).items():
+        if key in FILTERED:
+            continue
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        elif isinstance(value, np.generic):
+            value = value.item()
+        try:
+            canonical(value)
+        except (TypeError, ValueError):
+            raise IvobsError(
+                f"{key}: the default of {method} set by ivobs.config.set_defaults is "
+                f"{type(value).__name__} {value!r}, which a campaign job cannot carry to its "
+                "workers (numbers, strings, booleans, lists and tables only); give it in the "
+                "spec's options instead"
+            ) from None
+        out[key] = value
+    return out
 
 
 class _SpecReader(TomlReader):

@@ -103,7 +103,9 @@ def warn_fallback(who: str, used: str, why: str) -> None:
         f"{who}: the default gain design fell back to gain={used!r} ({first}; design.fallback "
         "has every reason)",
         DesignWarning,
-        stacklevel=5,  # warn_fallback, _design_observer, __init__, make_estimator: the caller
+        # warn_fallback, _design_observer, __init__, its session-defaults wrapper
+        # (estimators._overrides), make_estimator: the caller
+        stacklevel=6,
     )
 
 

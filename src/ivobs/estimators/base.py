@@ -7,7 +7,9 @@ A subclass provides
 
 * ``__init__(sys, x0=None, *, <its design options>, **options)``: validate, design offline (no
   time loop), set ``self.design`` (a :class:`Design` dataclass with the papers' symbols) and
-  ``self.valid_from``; then call nothing else.
+  ``self.valid_from``; then call nothing else. The signature's defaults are the options'
+  defaults (:mod:`ivobs.config` lists them; the base class adds the session's changes to the
+  arguments of every subclass's ``__init__``, :meth:`Estimator.__init_subclass__`).
 * ``_initial_state() -> S``: the online state at step 0, a frozen dataclass derived from
   :class:`~ivobs.estimators.state.OnlineState` (arrays named as in the paper).
 * ``_step(state, u_k, y_k, t_k) -> Step[S]``: the method's recursion, written once: from the
@@ -48,6 +50,7 @@ from ..result import Estimate
 from ..sets import Box
 from ..sets.rounding import overflowed
 from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
+from ._overrides import with_overrides
 from .measured import MeasurementStrips
 from .persistence import Persistence
 from .record import VECTOR_MIN_STEPS, check_record, run_record
@@ -232,6 +235,15 @@ class Estimator(Persistence):
     rounding; :mod:`ivobs.sets.rounding`). The base class adds no margin to any method: every
     built-in method declares it; a method of your own should earn it
     (:func:`ivobs.testing.check_estimator`)."""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Every method's ``__init__`` takes the session's defaults of its options
+        (:mod:`ivobs.config`) for the options not passed: applied here, once for all methods
+        (:func:`~ivobs.estimators._overrides.with_overrides`)."""
+        super().__init_subclass__(**kwargs)
+        init = vars(cls).get("__init__")
+        if init is not None:
+            cls.__init__ = with_overrides(init)  # type: ignore[method-assign]
 
     def __init__(
         self,
@@ -494,14 +506,23 @@ class Estimator(Persistence):
     @classmethod
     def options(cls) -> list[str]:
         """Names of the keyword options this method accepts."""
-        names: list[str] = []
+        return list(cls.option_defaults())
+
+    @classmethod
+    def option_defaults(cls) -> dict[str, Any]:
+        """The keyword options this method accepts and their defaults, as the ``__init__``
+        signatures along the class's bases declare them (the nearest declaration of each; the
+        class's own options first). ``None`` usually means "chosen by the design" (the class
+        docstring says how). The session's defaults (:func:`ivobs.config.set_defaults`) are not
+        included: :func:`ivobs.config.defaults` gives those in effect."""
+        out: dict[str, Any] = {}
         for klass in cls.__mro__:
             if "__init__" in vars(klass):
                 sig = inspect.signature(vars(klass)["__init__"])
                 for p in sig.parameters.values():
-                    if p.kind is p.KEYWORD_ONLY and p.name not in names:
-                        names.append(p.name)
-        return names
+                    if p.kind is p.KEYWORD_ONLY and p.name not in out:
+                        out[p.name] = p.default
+        return out
 
     def __repr__(self) -> str:
         return (

@@ -390,7 +390,9 @@ class ZonotopeEstimator(ObserverEstimator):
             f"widths can be far above Algorithm 1's: order={nx + count} keeps them (the cost "
             "per step grows with the order)",
             DesignWarning,
-            stacklevel=4,  # _check_order_tightness, __init__, make_estimator: the caller
+            # _check_order_tightness, __init__, its session-defaults wrapper
+            # (estimators._overrides), make_estimator: the caller
+            stacklevel=5,
         )
 
     def _check_bounded(self) -> None:
