@@ -333,12 +333,11 @@ class Estimator(Persistence):
         finally:
             self._branching = before
         if self._strips is not None and state.k >= self.valid_from:
-            lo = np.array(lo, dtype=float).reshape(1, -1)
-            hi = np.array(hi, dtype=float).reshape(1, -1)
+            lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)  # (met in place)
             key = state.k if t_k is None else t_k
-            if self._strips.meet(lo, hi, u_k[None], y_k[None], [key])[0] and not new.inconsistent:
-                new = evolve(new, inconsistent=True)  # the strips of y[k] miss the box
-            lo, hi = lo[0], hi[0]
+            if self._strips.meet(lo[None], hi[None], u_k[None], y_k[None], (key,))[0]:
+                if not new.inconsistent:  # the strips of y[k] miss the box
+                    new = evolve(new, inconsistent=True)
         return new, self._box(state.k, lo, hi, new, finite)
 
     def _advance(
@@ -370,7 +369,10 @@ class Estimator(Persistence):
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
         lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
-        if finite and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        # one product of the bounds is finite only when every bound is (NaN and infinities
+        # propagate); an overflow of finite bounds only sends it to the full test
+        dot = float(lo.dot(hi))
+        if finite and dot - dot != 0.0 and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
             what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"
             raise self._non_finite_error(k, overflowed(lo, hi, *_arrays(state)), what)
         return Box._trusted(lo, hi)
