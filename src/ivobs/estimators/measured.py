@@ -121,7 +121,8 @@ class MeasurementStrips:
         nx, nu, rows = self.sys.nx, self.sys.nu, self.rows
         ys = y if rows.shape[0] == self.sys.ny else y[:, rows]
         if self.P is not None:
-            return ~meet_strips(self.P, nx, nu, self.a, self.b, lo, hi, u, ys)
+            ok: np.ndarray = meet_strips(self.P, nx, nu, self.a, self.b, lo, hi, u, ys)
+            return ~ok
         bad = np.zeros(lo.shape[0], dtype=bool)
         for r, key in enumerate(keys):
             if not np.any(np.isfinite(ys[r])):
