@@ -78,6 +78,7 @@ class MeasurementStrips:
 
     def __init__(self, sys: LinearSystem, rows: np.ndarray):
         self.sys, self.rows = sys, rows
+        self.nx, self.nu, self.every_row = sys.nx, sys.nu, rows.shape[0] == sys.ny
         n = sys.nx + sys.nu + sys.nd + 1
         m = sys.nu + 2  # the terms of t_i = y_i - D_i u - f_i
         self.a = float(upper(2.0 * gamma(n) + gamma(m), 4))
@@ -117,9 +118,9 @@ class MeasurementStrips:
         """Contract the boxes ``lo``, ``hi`` ``(T, nx)`` in place with the strips of ``y``
         ``(T, ny)`` (NaN: missing), inputs ``u`` ``(T, nu)``; ``keys`` ``(T,)``: the steps (the
         times in continuous time). Returns the rows whose data contradict their box."""
-        meet_strips = _kernel()
-        nx, nu, rows = self.sys.nx, self.sys.nu, self.rows
-        ys = y if rows.shape[0] == self.sys.ny else y[:, rows]
+        meet_strips = _KERNEL or _kernel()
+        nx, nu = self.nx, self.nu
+        ys = y if self.every_row else y[:, self.rows]
         if self.P is not None:
             ok: np.ndarray = meet_strips(self.P, nx, nu, self.a, self.b, lo, hi, u, ys)
             return ~ok
