@@ -59,7 +59,7 @@ class WindowBound:
 
     def box(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``x[s+N]`` from one window ``w`` (``(N (ny + nu),)``)."""
-        return self.bounds(self.Mw @ w, float(np.abs(w).max()))
+        return self.bounds(self.Mw @ w, max(map(abs, w.tolist())))  # (complete data: finite)
 
     def boxes(self, y: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``x[k]`` for ``k = N, …, T − 1`` from every window of a record ``y``

@@ -261,9 +261,8 @@ class ObserverEstimator(Estimator):
         z = np.abs(np.concatenate((v, y_k, nu, _ONE)))
         err = gain.W @ z  # >= [ε; e_ν] (W rounded up for its own evaluation)
         e_nu = err[nx:]
-        # inconsistent only when proven: |ν| - e_ν > ȳ (one rounding, monotone)
-        excess = (np.abs(nu) - e_nu).tolist()
-        if any(a > b for a, b in zip(excess, ybound.tolist())):
+        # inconsistent only when proven: |ν| - e_ν > ȳ (one rounding, monotone; a few floats)
+        if any(abs(a) - e > b for a, e, b in zip(nu.tolist(), e_nu.tolist(), ybound.tolist())):
             gain = self._gain_at(np.zeros(nu.shape[0], dtype=bool))
             z[-1 - nu.shape[0] : -1] = 0.0
             return Ov[:nx], (gain.W @ z)[:nx], e_nu, True, gain

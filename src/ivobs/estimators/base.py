@@ -39,7 +39,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 
@@ -345,12 +345,12 @@ class Estimator(Persistence):
         finally:
             self._branching = before
         if self._strips is not None and state.k >= self.valid_from:
-            lo = np.array(lo, dtype=float).reshape(1, -1)
-            hi = np.array(hi, dtype=float).reshape(1, -1)
+            lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)  # (met in place)
             key = state.k if t_k is None else t_k
-            if self._strips.meet(lo, hi, u_k[None], y_k[None], [key])[0] and not new.inconsistent:
-                new = evolve(new, inconsistent=True)  # the strips of y[k] miss the box
-            lo, hi = lo[0], hi[0]
+            if self._strips.meet(lo[None], hi[None], u_k[None], y_k[None], (key,))[0]:
+                if not new.inconsistent:  # the strips of y[k] miss the box
+                    new = evolve(new, inconsistent=True)
+            return new, self._box(state.k, lo, hi, new, finite, owned=True)
         return new, self._box(state.k, lo, hi, new, finite)
 
     def _advance(
@@ -376,16 +376,23 @@ class Estimator(Persistence):
         hi: Bound,
         state: OnlineState,
         finite: bool = True,
+        owned: bool = False,
     ) -> Box:
         """The returned box of step ``k`` (``state``: the state after it), NaN before
-        ``valid_from``."""
+        ``valid_from``; ``owned``: ``lo``, ``hi`` are float arrays made for it (else copied)."""
         if k < self.valid_from:
             return Box.unknown(self.sys.nx)
-        lo, hi = np.array(lo, dtype=float), np.array(hi, dtype=float)
-        if finite and not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-            what = "NaN" if np.isnan(lo).any() or np.isnan(hi).any() else "infinite"
-            raise self._non_finite_error(k, overflowed(lo, hi, *_arrays(state)), what)
-        return Box._trusted(lo, hi)
+        if owned:
+            a, b = cast(np.ndarray, lo), cast(np.ndarray, hi)
+        else:
+            a, b = np.array(lo, dtype=float), np.array(hi, dtype=float)
+        # one product of the bounds is finite only when every bound is (NaN and infinities
+        # propagate); an overflow of finite bounds only sends it to the full test
+        dot = float(a.dot(b))
+        if finite and dot - dot != 0.0 and not (np.isfinite(a).all() and np.isfinite(b).all()):
+            what = "NaN" if np.isnan(a).any() or np.isnan(b).any() else "infinite"
+            raise self._non_finite_error(k, overflowed(a, b, *_arrays(state)), what)
+        return Box._trusted(a, b)
 
     def predict(self, u_k: Any = None, t: float | None = None) -> Box:
         """The box the next :meth:`step` would return for ``x[k]`` if ``y[k]`` were missing,

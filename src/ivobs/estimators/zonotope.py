@@ -444,10 +444,8 @@ class ZonotopeEstimator(ObserverEstimator):
         nx = p.shape[0]
         if free:  # [|H| 1; |C H| 1 + |F| r] of the data-free sequence, and the rounding so far
             stacked = self._free.at(k)[0]  # type: ignore[union-attr]
-            radH, (rad, ybound) = (
-                stacked[:nx],
-                np.split(ch.widen(stacked, state.qL, state.qx), [nx]),
-            )
+            widened = ch.widen(stacked, state.qL, state.qx)
+            radH, rad, ybound = stacked[:nx], widened[:nx], widened[nx:]
             c, r = self._const  # type: ignore[misc]
         else:
             radH = upper(np.abs(H).sum(axis=1), H.shape[1])

@@ -49,8 +49,8 @@ from .rounding import ETA
 __all__ = [
     "HEAVY",
     "contract_box",
-    "contract_boxes",
     "intersect_strip",
+    "meet_strips",
     "section_hull",
     "weighted_quantiles",
 ]
@@ -392,30 +392,55 @@ def section_hull(
 
 
 @jit
-def contract_boxes(
-    C: np.ndarray, t: np.ndarray, sigma: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> np.ndarray:
-    """Contract each box ``[lo[k], hi[k]]`` (rows, in place) with the strips ``|C_i ζ - t[k, i]|
-    <= σ[k, i]`` of every output ``i`` whose ``t[k, i]`` is not NaN, one after the other
-    (:func:`contract_box`), in two sweeps (a strip of several states gains from the states
-    the others pin). Returns, per row, False when a strip certainly misses the box: that row is
-    then left as it was. Rows with a NaN bound are skipped."""
-    T, ny = t.shape
+def meet_strips(
+    P: np.ndarray, nx: int, nu: int, a: float, b: float, lo: np.ndarray, hi: np.ndarray,
+    u: np.ndarray, y: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """Contract each box ``[lo[k], hi[k]]`` (rows, in place) with the strips of the outputs
+    ``y[k]`` whose value is not NaN, one after the other (:func:`contract_box`), in two sweeps
+    (a strip of several states gains from the states the others pin). Row ``i`` of ``P = [C,
+    D, f, κ]`` gives the strip ``|C_i ζ - t| <= σ`` of ``y_i = y[k, i]`` with inputs ``u[k]``
+    (:mod:`ivobs.estimators.measured` has the proof)::
+
+        t = y_i - D_i u[k] - f_i,    σ = a (|y_i| + |D_i| |u[k]|) + b |C_i| m + κ_i,
+
+    ``m = max(|lo[k]|, |hi[k]|)``; ``σ`` is rounded up for its own evaluation (at most ``nx + nu
+    + 4`` roundings on every path). A strip with a non-finite ``σ`` is skipped (a box with an
+    infinite end: nothing to contract). Returns, per row, False when a strip certainly misses
+    the box: that row is then left as it was. Rows with a NaN bound are skipped."""
+    T, ny = y.shape
     ok = np.ones(T, dtype=np.bool_)
+    t, sigma = np.empty(ny), np.empty(ny)
+    box_lo, box_hi = np.empty(nx), np.empty(nx)
     for k in range(T):
         if np.isnan(lo[k, 0]) or np.isnan(hi[k, 0]):
             continue
-        box_lo, box_hi = lo[k].copy(), hi[k].copy()
-        for i in range(2 * ny):
-            j = i % ny
-            if np.isnan(t[k, j]):
+        for i in range(ny):
+            yi = y[k, i]
+            t[i] = yi
+            if np.isnan(yi):
                 continue
-            if not contract_box(C[j], t[k, j], sigma[k, j], box_lo, box_hi):
+            s, mag, xm = yi, abs(yi), 0.0
+            for j in range(nu):
+                s -= P[i, nx + j] * u[k, j]
+                mag += abs(P[i, nx + j]) * abs(u[k, j])
+            for j in range(nx):
+                if P[i, j] != 0.0:
+                    xm += abs(P[i, j]) * max(abs(lo[k, j]), abs(hi[k, j]))
+            t[i] = s - P[i, nx + nu]
+            sigma[i] = _upper(a * mag + b * xm + P[i, nx + nu + 1], nx + nu + 4)
+        for j in range(nx):
+            box_lo[j], box_hi[j] = lo[k, j], hi[k, j]
+        for q in range(2 * ny):
+            i = q % ny
+            if np.isnan(t[i]) or not sigma[i] < _INF:
+                continue
+            if not contract_box(P[i, :nx], t[i], sigma[i], box_lo, box_hi):
                 ok[k] = False
                 break
         if ok[k]:
-            lo[k] = box_lo
-            hi[k] = box_hi
+            for j in range(nx):
+                lo[k, j], hi[k, j] = box_lo[j], box_hi[j]
     return ok
 
 

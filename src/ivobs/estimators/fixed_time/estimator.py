@@ -251,11 +251,15 @@ class FixedTimeEstimator(Estimator):
         (:func:`.window.combine`)."""
         k, nx, const = state.k, self.sys.nx, self._const
         c, r = const if const is not None else self._bounds(k, y_k)  # d_k ∈ [c - r, c + r]
-        miss = np.isnan(y_k)
+        total = y_k.dot(y_k)
+        if total == total and not np.count_nonzero(state.ymiss):  # none missing: the ring, y_k
+            ymiss, y_obs = state.ymiss, y_k  # (the flags of the ring, all zero, as they are)
+        else:
+            miss = np.isnan(y_k)
+            ymiss, y_obs = np.concatenate((miss[None], state.ymiss[:-1])), np.where(miss, 0.0, y_k)
         # the samples k, k-1, … (most recent first), each z = [u; y; c]
-        z = np.concatenate((u_k, np.where(miss, 0.0, y_k), c[: self._designer.nc], state.z.ravel()))
+        z = np.concatenate((u_k, y_obs, c[: self._designer.nc], state.z.ravel()))
         z = z[: state.z.size].reshape(state.z.shape)
-        ymiss = np.concatenate((miss[None], state.ymiss[:-1]))
         rr = state.r if const is not None else np.concatenate((r[None], state.r[:-1]))
         gain, missing = self._window(k, ymiss)
         bad: Any = False
@@ -282,7 +286,7 @@ class FixedTimeEstimator(Estimator):
         step 0) whose available samples determine the state (None if there is none); and
         whether it misses samples."""
         s = self.s
-        if self._complete is not None and not ymiss[: s + 1].any():
+        if self._complete is not None and not np.count_nonzero(ymiss[: s + 1]):
             return self._complete, False
         missing = ymiss > 0
         if k < s:

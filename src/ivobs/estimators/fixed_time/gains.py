@@ -78,7 +78,7 @@ class WindowGain:
 def finish(
     gain: WindowGain,
     out: np.ndarray,
-    wmax: np.ndarray,
+    wmax: np.ndarray | float,
     rhp: np.ndarray,
     dest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -139,7 +139,9 @@ def evaluate(
     (:func:`finish` has the proof)."""
     assert gain.GQ is not None
     out = W @ gain.GQ.T
-    return finish(gain, out, np.abs(W).max(axis=-1, keepdims=True), gain.radius(R))
+    # ‖w‖_∞ (one window: its few floats, NaN-free since missing outputs are zeros)
+    wmax = max(map(abs, W.tolist())) if W.ndim == 1 else np.abs(W).max(axis=-1, keepdims=True)
+    return finish(gain, out, wmax, gain.radius(R))
 
 
 class WindowGains:

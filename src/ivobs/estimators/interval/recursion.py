@@ -74,8 +74,8 @@ def interval_step(ops: Operators, state: S, u_k: np.ndarray, y_k: np.ndarray) ->
         w, v = uncertain.terms(ops.unc, xlo, xhi, u_k)
         vo = v[~np.isnan(y_k)]
         test = np.nextafter(test + np.concatenate((vo, vo)), np.inf)
-    # y[k] outside the bounds of C x + D_u u + F d: a fault, not used
-    inconsistent = bool((test < 0.0).any())
+    # y[k] outside the bounds of C x + D_u u + F d: a fault, not used (a few floats)
+    inconsistent = any(t < 0.0 for t in test.tolist())
     if inconsistent:
         op = ops.pattern(np.zeros(ny, dtype=bool))
         b = op.bounds(np.concatenate((state.hi, state.lo, u_k, np.zeros(ny), dhi, dlo)))

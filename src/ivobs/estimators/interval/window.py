@@ -85,7 +85,7 @@ def meet(
     docstring). ``wlo``, ``whi`` (the window's fresh bounds) are overwritten."""
     mlo, mhi = np.fmax(lo, wlo, out=wlo), np.fmin(hi, whi, out=whi)
     empty = mlo > mhi
-    if empty.any():
+    if np.count_nonzero(empty):
         empty = empty.any(axis=-1, keepdims=True)
         mlo, mhi = np.where(empty, lo, mlo), np.where(empty, hi, mhi)
     return mlo, mhi

@@ -105,24 +105,20 @@ class Transform:
     c_norm: float = 0.0
     c_resid: float = 0.0
     eta: float = 0.0
-    outward: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         """The constants of :func:`.observer.recover` for ``n_z`` rows of ``T``: ``c_err >=
         γ_{2 n_z}`` (the error of the Lemma-1 image ``P [z̲, z̄]``), ``c_norm >= 1 / (1 - max
         r)`` (``‖x‖∞`` from ``‖|P| |z|‖∞``) and ``c_resid >= max r c_norm``, each with a factor
         ``1 + 2 γ_{n_z + 6}`` that covers the rounding of ``|P| |z|`` and of the few operations
-        that combine them;
-        ``eta``: underflow; ``outward``: ``[-inf; +inf]`` for rounding the bounds outward."""
-        nz, nx = self.T.shape
+        that combine them; ``eta``: underflow."""
+        nz = self.T.shape[0]
         slack = 1.0 + 2.0 * gamma(nz + 6)
         rho = float(np.max(self.resid)) if self.resid.size else 0.0
         object.__setattr__(self, "c_err", 2.0 * gamma(2 * nz + 2) * slack)
         object.__setattr__(self, "c_norm", slack * slack / (1.0 - min(rho, 0.5)))
         object.__setattr__(self, "c_resid", float(up(rho * self.c_norm * slack)))
         object.__setattr__(self, "eta", (2 * nz + 8) * ETA)
-        inf = np.full(nx, np.inf)
-        object.__setattr__(self, "outward", np.concatenate((-inf, inf)))
 
 
 def left_inverse(T: np.ndarray, max_cond: float) -> Transform:

@@ -9,6 +9,7 @@ the estimator is built; the estimator hands each step to it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import inf, nan, nextafter
 from typing import ClassVar, Generic, TypeVar
 
 import numpy as np
@@ -61,15 +62,16 @@ def recover(
     if zabs is None:
         zabs = np.maximum(np.abs(zlo), np.abs(zhi))
     nx = tr.P.shape[0]
-    r = tr.W @ np.concatenate((zlo, zhi, zabs))
-    b, s = r[: 2 * nx], r[2 * nx :]
-    err = tr.c_err * s
-    err += s.max() * tr.c_resid + tr.eta  # r_i ‖x‖∞ <= max r ‖x‖∞
-    b[:nx] -= err
-    b[nx:] += err
-    assert tr.outward is not None
-    np.nextafter(b, tr.outward, out=b)
-    return b[:nx], b[nx:]
+    r = (tr.W @ np.concatenate((zlo, zhi, zabs))).tolist()
+    s = r[2 * nx :]
+    # r_i ‖x‖∞ <= max r ‖x‖∞ (NaN-propagating maximum: a NaN in s gives NaN bounds)
+    smax = max(s) if sum(s) == sum(s) else nan
+    wide = smax * tr.c_resid + tr.eta
+    lo, hi = [0.0] * nx, [0.0] * nx  # in Python floats: the same IEEE operations, cheaper
+    for i in range(nx):
+        err = tr.c_err * s[i] + wide
+        lo[i], hi[i] = nextafter(r[i] - err, -inf), nextafter(r[nx + i] + err, inf)
+    return np.array(lo), np.array(hi)
 
 
 class Observer(Generic[S]):
