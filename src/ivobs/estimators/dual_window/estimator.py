@@ -82,8 +82,8 @@ class DualWindowState(OnlineState):
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (("x_lo", "x_hi"),)
 
 
-REFRESH_TOL = 0.1
-"""Default ``refresh_tol``: the cache may lag the window's exact hull by 10 % before the
+REFRESH_TOL = 0.05
+"""Default ``refresh_tol``: the cache may lag the window's exact hull by 5 % before the
 interval between solves shrinks."""
 
 SOLVE_BUDGET = 20_000
@@ -126,7 +126,7 @@ class DualWindow(Estimator):
     cache : int >= 1 (default 16): multipliers kept per bound
     refresh : int >= 1 (default 60): the longest interval between two solves of the window
         program (more often while the window fills: every ``k/2`` steps)
-    refresh_tol : float > 0 or None (default 0.1): the interval adapts to the data. At each
+    refresh_tol : float > 0 or None (default 0.05): the interval adapts to the data. At each
         solve the cache's bounds from before it are compared with the solve's (the window's
         exact hull): when the cache was more than ``refresh_tol`` wider (relative, on the
         widest state) the interval is halved, down to a floor that bounds the solves' work per
