@@ -57,7 +57,7 @@ from __future__ import annotations
 import hashlib
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -68,9 +68,11 @@ from ...sets import Box
 from .. import register
 from ..base import Design, Estimator
 from ..state import OnlineState, Step, evolve
-from .meanvalue import measurement
+from . import window as wf
+from .meanvalue import Linearisation, measurement
 
 __all__ = [
+    "WINDOW",
     "WRAP_GROWTH",
     "NonlinearIntervalDesign",
     "NonlinearIntervalEstimator",
@@ -92,13 +94,25 @@ as wrapping."""
 MAX_LAG = 10
 """Most steps of the window contracted back (``lag``)."""
 
+WINDOW = 10
+"""Steps kept by the window-centred form (``window``; module docstring)."""
+
+MAX_WINDOW = 100
+"""Most steps of the window-centred form."""
+
+WRAP_MARGIN = 0.01
+"""How much faster than the map (``ρ(|J|)`` over ``ρ(J)``) boxes must grow under it for the
+window-centred form to be used by default (``window=None``)."""
+
 
 @dataclass(frozen=True)
 class NonlinearIntervalDesign(Design):
     """``lag``: steps back through the model at each correction (0 to :data:`MAX_LAG`);
-    ``w_lo``, ``w_hi``: the box ``[w]`` of the per-step unknowns."""
+    ``window``: steps of the window-centred form (0: none); ``w_lo``, ``w_hi``: the box
+    ``[w]`` of the per-step unknowns."""
 
     lag: int
+    window: int
     w_lo: np.ndarray
     w_hi: np.ndarray
     model: int
@@ -116,7 +130,12 @@ class NonlinearIntervalState(OnlineState):
     box of ``(x[k-1], w[k-1])``, ``prev_u`` = ``u[k-1]`` and ``prev_y`` = ``y[k-1]`` (NaN:
     missing or not used), for the step back (``back`` says whether there is one);
     ``hist_lo``, ``hist_hi`` (·, nx + nw), ``hist_u``, ``hist_y``: the same for the steps
-    before ``k - 1`` kept by ``lag >= 2``, oldest first."""
+    before ``k - 1`` kept by ``lag >= 2``, oldest first. The window-centred form
+    (``window >= 1``): ``win_lo``, ``win_hi`` the boxes of ``x[j]`` of the kept steps ``j``
+    (oldest first, the last ``k - 1``) and their transitions ``j -> j + 1`` (``win_b``,
+    ``win_F``, ``win_Fw``, ``win_n``, ``win_e``, ``win_dw``, ``win_eta``:
+    :class:`~ivobs.estimators.nonlinear.window.Transition`); ``cov``: the prior covariance of
+    the gains' Riccati recursion."""
 
     lo: np.ndarray
     hi: np.ndarray
@@ -129,10 +148,21 @@ class NonlinearIntervalState(OnlineState):
     hist_hi: np.ndarray = field(default_factory=_empty)
     hist_u: np.ndarray = field(default_factory=_empty)
     hist_y: np.ndarray = field(default_factory=_empty)
+    win_lo: np.ndarray = field(default_factory=_empty)
+    win_hi: np.ndarray = field(default_factory=_empty)
+    win_b: np.ndarray = field(default_factory=_empty)
+    win_F: np.ndarray = field(default_factory=_empty)
+    win_Fw: np.ndarray = field(default_factory=_empty)
+    win_n: np.ndarray = field(default_factory=_empty)
+    win_e: np.ndarray = field(default_factory=_empty)
+    win_dw: np.ndarray = field(default_factory=_empty)
+    win_eta: np.ndarray = field(default_factory=_empty)
+    cov: np.ndarray = field(default_factory=_empty)
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (
         ("lo", "hi"),
         ("prev_lo", "prev_hi"),
         ("hist_lo", "hist_hi"),
+        ("win_lo", "win_hi"),
     )
 
 
@@ -168,7 +198,15 @@ class NonlinearIntervalEstimator(Estimator):
     proven_rounding = True
     design: NonlinearIntervalDesign
 
-    def __init__(self, sys: Any, x0: Box | None = None, *, lag: int = 1, **options: Any):
+    def __init__(
+        self,
+        sys: Any,
+        x0: Box | None = None,
+        *,
+        lag: int = 1,
+        window: int | None = None,
+        **options: Any,
+    ):
         super().__init__(sys, x0, **options)
         # a linear model is converted; self.sys stays the model given (the monitor reads it)
         if isinstance(sys, LinearSystem):
@@ -177,12 +215,21 @@ class NonlinearIntervalEstimator(Estimator):
         lag = as_int("lag", lag, minimum=0)
         if lag > MAX_LAG:
             raise IvobsError(f"lag: expected 0 to {MAX_LAG} steps back, got {lag}")
+        window = _auto_window(sys, self.x0) if window is None else as_int("window", window, minimum=0)
+        if window > MAX_WINDOW:
+            raise IvobsError(f"window: expected 0 to {MAX_WINDOW} steps, got {window}")
         self._fc = sys.f_contractors() if lag > 1 else None
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
         self.design = NonlinearIntervalDesign(
-            lag=lag, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
+            lag=lag,
+            window=window,
+            w_lo=w.lo.copy(),
+            w_hi=w.hi.copy(),
+            model=int(digest[:12], 16),
         )
+        self._f_evals = sys.evaluators("f") if window else None
+        self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
         self._hf = sys.hf_contractors() if lag and sys.ny else None
         # growth that says the interval form wraps (module docstring, "Wrapping")
@@ -229,9 +276,9 @@ class NonlinearIntervalEstimator(Estimator):
     def _initial_state(self) -> NonlinearIntervalState:
         assert self.x0 is not None
         m = self.model
-        window: dict[str, np.ndarray] = {}  # kept only by lag >= 2
+        extra: dict[str, np.ndarray] = {}  # the window of lag >= 2, the window-centred form
         if self._fc is not None:
-            window = {
+            extra = {
                 "prev_y": np.full(m.ny, np.nan),
                 "hist_lo": np.zeros((0, m.nx + m.nw)),
                 "hist_hi": np.zeros((0, m.nx + m.nw)),
@@ -245,7 +292,22 @@ class NonlinearIntervalEstimator(Estimator):
             prev_hi=np.zeros(m.nx + m.nw),
             prev_u=np.zeros(m.nu),
         )
-        return evolve(state, **window) if window else state
+        if self.design.window:
+            nx, nw = m.nx, m.nw
+            r = 0.5 * self.x0.hi - 0.5 * self.x0.lo
+            extra.update(
+                win_lo=np.zeros((0, nx)),
+                win_hi=np.zeros((0, nx)),
+                win_b=np.zeros((0, nx)),
+                win_F=np.zeros((0, nx, nx)),
+                win_Fw=np.zeros((0, nx, nw)),
+                win_n=np.zeros((0, nx)),
+                win_e=np.zeros((0, nx)),
+                win_dw=np.zeros((0, nw)),
+                win_eta=np.zeros(0),
+                cov=np.diag(r * r),
+            )
+        return evolve(state, **extra) if extra else state
 
     def _step(
         self, state: NonlinearIntervalState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -257,8 +319,10 @@ class NonlinearIntervalEstimator(Estimator):
         inconsistent = False
         ylo, yhi = measurement(y_k)
         chain = self._chain(state)
-        if any(v == v for v in ylo):
-            ok, prev = True, None
+        seen = any(v == v for v in ylo)
+        prev = None
+        if seen:
+            ok = True
             for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
                 before = [b - a for a, b in zip(vl[:nx], vh[:nx])]
                 ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
@@ -272,8 +336,22 @@ class NonlinearIntervalEstimator(Estimator):
                     break
             if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
-                vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
-                chain = self._chain(state)
+        win: _Form | None = None
+        if self.design.window and not inconsistent:  # 4. the window-centred form
+            win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, seen, chain, prev)
+            if win is None:  # empty: y_k contradicts the model and the window
+                inconsistent = True
+            elif seen and win.narrowed and not sys.contract_lists(vl, vh, u, ylo, yhi):
+                inconsistent = True
+        if inconsistent:
+            vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
+            chain = self._chain(state)
+            win = None
+            if self.design.window:
+                win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
+        if self.design.window and win is None:  # the model itself contradicted: start again
+            rows = self._rows(state, [], None)
+            win = _Form(wf.Rows(*(a[:0] for a in rows)), None, None, state.cov, None, False)
         f = sys._f  # 3. prediction: natural ∩ mean-value form
         pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
         if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
@@ -282,6 +360,8 @@ class NonlinearIntervalEstimator(Estimator):
         hist: dict[str, np.ndarray] = {}
         if self._fc is not None:
             hist = self._history(chain, y_k, inconsistent)
+        if win is not None:
+            hist.update(self._slide(win, prev_lo, prev_hi, u_k, len(y_k)))
         new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
             lo=np.array(pl, dtype=float),
             hi=np.array(ph, dtype=float),
@@ -293,6 +373,115 @@ class NonlinearIntervalEstimator(Estimator):
         if hist:
             new = evolve(new, **hist)
         return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
+
+    def _form(
+        self,
+        st: NonlinearIntervalState,
+        vl: list[float],
+        vh: list[float],
+        u_k: np.ndarray,
+        y_k: np.ndarray,
+        ylo: list[float],
+        yhi: list[float],
+        seen: bool,
+        chain: list[_Link],
+        prev: tuple[list[float], list[float]] | None,
+    ) -> _Form | None:
+        """Step 4 of the module docstring on the box ``vl, vh`` of ``(x[k], w[k])`` (narrowed
+        in place): the filter form of ``y_k`` (when ``seen``) composed with the kept
+        transitions, intersected over the kept boxes; None when the intersection is empty."""
+        nx = self.model.nx
+        lo, hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+        lh: Linearisation | None = None
+        g: wf.Gains | None = None
+        if seen and self._h_evals is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
+            lh = wf.affine(self._h_evals, lo, hi, u_k, nx)
+            if np.isfinite(lh.J).all() and np.isfinite(lh.rho).all():
+                g = wf.filter_gain(st.cov, lh, ~np.isnan(y_k), wf.radius(lo, hi, lh.c)[nx:], nx)
+            else:
+                lh = None
+        K = np.zeros((nx, len(y_k))) if g is None else g.K
+        meas = wf.measured(y_k, ylo, yhi)
+        start = wf.filter_start(lh, K, lo, hi, lo[:nx], hi[:nx], meas, nx)
+        rows = self._rows(st, chain, prev)
+        with np.errstate(invalid="ignore", over="ignore"):
+            cl, ch = wf.hull(start, lo[:nx], hi[:nx], rows)
+            nl = np.fmax(lo[:nx], np.fmax.reduce(cl, axis=0))
+            nh = np.fmin(hi[:nx], np.fmin.reduce(ch, axis=0))
+        if (nl > nh).any():
+            return None
+        narrowed = bool((nl > lo[:nx]).any() or (nh < hi[:nx]).any())
+        vl[:nx], vh[:nx] = nl.tolist(), nh.tolist()
+        return _Form(rows, lh, g, st.cov, meas, narrowed)
+
+    def _rows(
+        self,
+        st: NonlinearIntervalState,
+        chain: list[_Link],
+        prev: tuple[list[float], list[float]] | None,
+    ) -> wf.Rows:
+        """The kept steps of the window-centred form, their boxes narrowed by what this step's
+        contraction back (``prev``, ``chain``) found."""
+        nx = self.model.nx
+        lo, hi = st.win_lo, st.win_hi
+        boxes = [(c.lo, c.hi) for c in chain] if chain else ([prev] if prev is not None else [])
+        if boxes and lo.shape[0]:
+            lo, hi = lo.copy(), hi.copy()
+            for i, (bl, bh) in enumerate(boxes[-lo.shape[0] :][::-1]):
+                j = lo.shape[0] - 1 - i
+                lo[j] = np.maximum(lo[j], bl[:nx])
+                hi[j] = np.minimum(hi[j], bh[:nx])
+        return wf.Rows(lo, hi, st.win_b, st.win_F, st.win_Fw, st.win_n, st.win_e, st.win_dw,
+                       st.win_eta)  # fmt: skip
+
+    def _slide(
+        self,
+        win: _Form,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        u_k: np.ndarray,
+        ny: int,
+    ) -> dict[str, np.ndarray]:
+        """The window-centred form's part of the next state: the box of ``x[k]`` and the
+        transition ``k -> k + 1`` appended (the oldest dropped past ``window`` steps), and the
+        next prior covariance. A transition that is not finite empties the window."""
+        nx = self.model.nx
+        assert self._f_evals is not None
+        rows, P = win.rows, None
+        tr: wf.Transition | None = None
+        if np.isfinite(lo).all() and np.isfinite(hi).all():
+            lf = wf.affine(self._f_evals, lo, hi, u_k, nx)
+            dw = wf.radius(lo, hi, lf.c)[nx:]
+            L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
+            tr = wf.transition(lf, win.lh, L, lo, hi, win.meas, nx)
+            if not all(np.isfinite(a).all() for a in tr):
+                tr = None
+        if P is None or not float(np.max(np.abs(P), initial=0.0)) < 1e150:  # (NaN: not <)
+            r = np.where(np.isfinite(hi - lo), 0.5 * hi - 0.5 * lo, 1.0)[:nx]
+            P = np.diag(np.minimum(r * r, 1e150))
+        if tr is None:  # the chain of transitions breaks: start again
+            return {
+                "win_lo": rows.lo[:0], "win_hi": rows.hi[:0], "win_b": rows.b[:0],
+                "win_F": rows.F[:0], "win_Fw": rows.Fw[:0], "win_n": rows.n[:0],
+                "win_e": rows.e[:0], "win_dw": rows.dw[:0], "win_eta": rows.eta[:0], "cov": P,
+            }  # fmt: skip
+        keep = max(rows.lo.shape[0] - (self.design.window - 1), 0)
+
+        def add(old: np.ndarray, row: Any) -> np.ndarray:
+            return np.concatenate([old[keep:], np.asarray(row, dtype=float)[None]])
+
+        return {
+            "win_lo": add(rows.lo, lo[:nx]),
+            "win_hi": add(rows.hi, hi[:nx]),
+            "win_b": add(rows.b, tr.b),
+            "win_F": add(rows.F, tr.F),
+            "win_Fw": add(rows.Fw, tr.Fw),
+            "win_n": add(rows.n, tr.n),
+            "win_e": add(rows.e, tr.e),
+            "win_dw": add(rows.dw, tr.dw),
+            "win_eta": add(rows.eta, tr.eta),
+            "cov": P,
+        }
 
     def _chain(self, st: NonlinearIntervalState) -> list[_Link]:
         """The kept steps ``k-L..k-1`` as boxes to contract (copies), oldest first; empty
@@ -400,6 +589,40 @@ class NonlinearIntervalEstimator(Estimator):
             vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
+
+
+def _auto_window(sys: NonlinearSystem, x0: Box | None) -> int:
+    """:data:`WINDOW` where boxes wrap under the model, else 0: where the Jacobian ``J`` of
+    ``f`` in ``x`` at the centre of the prior box and of the unknowns' box has
+    ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)`` (a rotation, or a coupling of mixed signs: the box of
+    ``J [x]`` is wider than the map makes the set), or cannot be evaluated there."""
+    if x0 is None:
+        return WINDOW
+    c = 0.5 * x0.lo + 0.5 * x0.hi
+    wc = 0.5 * sys.w_box.lo + 0.5 * sys.w_box.hi
+    try:
+        jl, jh = sys.f_jac_box(c, c, np.zeros(sys.nu), wc, wc)[:2]
+    except IvobsError:
+        return WINDOW
+    J = 0.5 * jl + 0.5 * jh
+    if not np.isfinite(J).all():
+        return WINDOW
+    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
+    rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
+    return WINDOW if rho_abs > (1.0 + WRAP_MARGIN) * rho else 0
+
+
+class _Form(NamedTuple):
+    """What the window-centred form of a step passes to its end: the kept steps (boxes
+    narrowed), ``h`` linearised over the step's box and the filter gain's parts (None: no
+    measurement used), the prior covariance and whether the box narrowed."""
+
+    rows: wf.Rows
+    lh: Linearisation | None
+    g: wf.Gains | None
+    P: np.ndarray
+    meas: wf.Measured | None
+    narrowed: bool
 
 
 @dataclass

@@ -1,0 +1,192 @@
+"""nl-interval's window-centred form (src/ivobs/estimators/nonlinear/window.py): every box holds
+the true state, floating-point rounding included, and boxes do not wrap on stable plants that
+rotate or couple their states (``ρ(A) < 1 < ρ(|A|)``).
+
+The linear plants are simulated here exactly: each state and output is a double, and the
+disturbance that makes it exact (``x+ - (A x + B u)``, ``y - C x`` in rational arithmetic) lies
+in its bounds, on a vertex up to the rounding of that double (:func:`_simulate`). The Hénon
+map and the pendulum use the rigorous interval simulator of tests/exactsim.py (60 digits, every
+parameter and signal on a vertex). Neither is ivobs' own simulator.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+import ivobs
+from exactsim import simulate as exact_record
+from nlsystems import HENON_X0, henon_record
+
+D = 0.1
+"""Half-width of every disturbance of the linear plants."""
+
+
+def _plant(seed: int, n: int, offset: float = 0.0) -> tuple[ivobs.LinearSystem, np.ndarray]:
+    """A stable plant whose boxes wrap: ``ρ(A) = 0.95 < 1 < ρ(|A|)``, one output, process
+    noise on every state and measurement noise, all ``±0.1``; with ``offset``, a constant
+    input ``u = 1`` holds the equilibrium at about ``offset`` in every state. Returns the
+    system and the equilibrium."""
+    rng = np.random.default_rng(seed)
+    while True:
+        A = rng.normal(size=(n, n))
+        A *= 0.95 / max(abs(np.linalg.eigvals(A)))
+        if max(abs(np.linalg.eigvals(abs(A)))) > 1.05:
+            break
+    C = rng.normal(size=(1, n))
+    B = (np.eye(n) - A) @ np.full((n, 1), offset)
+    E = np.hstack([np.eye(n), np.zeros((n, 1))])
+    F = np.hstack([np.zeros((1, n)), np.ones((1, 1))])
+    d = ivobs.Box(np.full(n + 1, -D), np.full(n + 1, D))
+    sys = ivobs.LinearSystem(A=A, B=B, C=C, E=E, F=F, d=d)
+    return sys, np.linalg.solve(np.eye(n) - A, B[:, 0])
+
+
+def _absorb(g: Fraction, up_side: bool) -> float:
+    """The double ``z`` next to ``g ± D`` with ``z - g`` in ``[-D, D]`` (the doubles ``±0.1``
+    as the exact bounds of the model)."""
+    lo, hi = Fraction(-D), Fraction(D)
+    z = float(g + (hi if up_side else lo))
+    while Fraction(z) - g > hi:
+        z = math.nextafter(z, -math.inf)
+    while Fraction(z) - g < lo:
+        z = math.nextafter(z, math.inf)
+    return z
+
+
+def _simulate(
+    sys: ivobs.LinearSystem, x0: np.ndarray, T: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``T`` exact steps of ``x+ = A x + B u + w``, ``y = C x + v`` from the doubles ``x0``,
+    ``u = 1`` when the plant has an input, every ``w``, ``v`` on a random vertex: ``(U, X, Y)``
+    with the true states and outputs as doubles."""
+    rng = np.random.default_rng(seed + 1000)
+    A = [[Fraction(a) for a in row] for row in sys.A]
+    B = [[Fraction(b) for b in row] for row in sys.B]
+    C = [Fraction(c) for c in sys.C[0]]
+    n = sys.nx
+    x = [float(v) for v in x0]
+    U = np.ones((T, sys.nu))
+    X, Y = np.empty((T, n)), np.empty((T, 1))
+    for k in range(T):
+        side = rng.integers(0, 2, n + 1).astype(bool)
+        X[k] = x
+        xf = [Fraction(v) for v in x]
+        Y[k, 0] = _absorb(sum(c * v for c, v in zip(C, xf)), bool(side[n]))
+        inputs = [sum(b for b in row) for row in B]  # B u with u = 1
+        x = [
+            _absorb(sum(a * v for a, v in zip(A[i], xf)) + inputs[i], bool(side[i]))
+            for i in range(n)
+        ]
+    return U, X, Y
+
+
+def _contained(res: ivobs.Result, X: np.ndarray) -> list[int]:
+    """The steps whose box misses the true state."""
+    bad = (res.lower > X) | (X > res.upper)
+    return np.flatnonzero(bad.any(axis=1)).tolist()
+
+
+@pytest.mark.parametrize("seed,n,offset,zono", [(0, 4, 0.0, 0.55), (2, 6, 1e6, 1.34)])
+def test_random_stable_plants_are_contained_and_stay_bounded(seed, n, offset, zono):
+    """``zono``: nl-zonotope's mean width on the same record (steps 20..80)."""
+    sys, xe = _plant(seed, n, offset)
+    U, X, Y = _simulate(sys, xe + 0.5, 80, seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no wrapping warning
+        res = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(xe - 1.0, xe + 1.0)).run(U, Y)
+    assert _contained(res, X) == []
+    assert not res.inconsistent.any()
+    # bounded, about as tight as a zonotope, where the box form alone grows without bound
+    assert (res.upper - res.lower)[20:].mean() < 1.25 * zono
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(6))
+def test_random_stable_plants_are_contained_over_long_runs(seed):
+    n = 4 + seed % 3
+    for offset in (0.0, 1e6):
+        sys, xe = _plant(seed, n, offset)
+        U, X, Y = _simulate(sys, xe - 0.7, 300, seed)
+        for lag, window in ((1, 10), (0, 3), (2, 20)):
+            res = ivobs.make_estimator(
+                "nl-interval", sys, x0=ivobs.Box(xe - 1.0, xe + 1.0), lag=lag, window=window
+            ).run(U, Y)
+            assert _contained(res, X) == [], (offset, lag, window)
+            assert np.all(np.isfinite(res.upper - res.lower))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed,n", [(0, 4), (1, 5), (3, 4)])
+def test_within_a_few_times_the_exact_hull(seed, n):
+    """The ratio of the mean widths (steps 40..150) to the exact hull's: at most 5 (measured:
+    BENCHMARKS.md, "nl-interval: the window-centred form")."""
+    sys, xe = _plant(seed, n)
+    x0 = ivobs.Box(-np.ones(n), np.ones(n))
+    U, X, Y = _simulate(sys, np.zeros(n), 150, seed)
+    exact = ivobs.make_estimator("exact", sys, x0=x0).run(U, Y)
+    res = ivobs.make_estimator("nl-interval", sys, x0=x0).run(U, Y)
+    assert _contained(res, X) == []
+    we, w = (exact.upper - exact.lower)[40:], (res.upper - res.lower)[40:]
+    assert np.all(w >= we - 1e-9)  # the exact hull is inside every sound box
+    assert w.mean() / we.mean() <= 5.0
+
+
+def test_henon_is_contained_and_no_wider_than_the_box_form():
+    sys, rec = henon_record(300, seed=4)
+    res = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0).run(None, rec.Y)
+    assert rec.misses(res.lower, res.upper).tolist() == []
+    box = ivobs.make_estimator("nl-interval", sys, x0=HENON_X0, window=0).run(None, rec.Y)
+    w, wb = res.upper - res.lower, box.upper - box.lower
+    assert np.all(w <= wb * (1 + 1e-9) + 1e-12)  # it only intersects
+
+
+def test_pendulum_is_contained_at_every_step():
+    sc = ivobs.scenarios.get("pendulum-nl", horizon=150)
+    U = sc.simulate("vertex", 0).u
+    rec = exact_record(sc.system, sc.x_true0, 150, U, seed=5)
+    res = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0).run(U, rec.Y)
+    assert rec.misses(res.lower, res.upper).tolist() == []
+    box = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0, window=0).run(U, rec.Y)
+    assert (res.upper - res.lower)[20:].mean() < (box.upper - box.lower)[20:].mean()
+
+
+def test_an_unstable_unobserved_state_still_grows_and_is_warned_about():
+    """The form does not invent what the outputs cannot see: ``x1`` grows like ``1.2^k``, the
+    warning fires once, and the box still holds the true state."""
+    sys = ivobs.NonlinearSystem(
+        states=["x1", "x2"], f=["1.2*x1 + w1", "0.5*x2 + w2"], h=["x2 + v"],
+        d={"w1": (-0.1, 0.1), "w2": (-0.1, 0.1), "v": (-0.1, 0.1)},
+    )  # fmt: skip
+    rec = exact_record(sys, [0.5, 0.5], 120, seed=1)
+    est = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box([-1, -1], [1, 1]))
+    with pytest.warns(UserWarning, match="outputs do not bound") as caught:
+        res = est.run(None, rec.Y)
+    assert sum("grew" in str(w.message) for w in caught) == 1
+    assert rec.misses(res.lower, res.upper).tolist() == []
+    assert (res.upper - res.lower)[-1, 0] > 1e6
+
+
+def test_the_window_option_is_checked_and_in_the_state():
+    sys, _ = _plant(0, 4)
+    with pytest.raises(ivobs.IvobsError, match="window: expected 0 to 100"):
+        ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=101)
+    U, X, Y = _simulate(sys, np.zeros(4), 30, 0)
+    est = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=5)
+    for k in range(12):
+        est.step(U[k], Y[k])
+    saved = est.state()
+    assert saved["state"]["win_F"]["shape"] == [5, 4, 4]
+    ref = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=5)
+    full = ref.run(U, Y)
+    other = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=5)
+    other.restore(saved)
+    boxes = [other.step(U[k], Y[k]) for k in range(12, 30)]
+    np.testing.assert_array_equal(np.array([b.lo for b in boxes]), full.lower[12:])
+    np.testing.assert_array_equal(np.array([b.hi for b in boxes]), full.upper[12:])
+    with pytest.raises(ivobs.IvobsError, match="another design"):
+        ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4))).restore(saved)
