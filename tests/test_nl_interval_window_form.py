@@ -2,18 +2,17 @@
 the true state, floating-point rounding included, and boxes do not wrap on stable plants that
 rotate or couple their states (``ρ(A) < 1 < ρ(|A|)``).
 
-The linear plants are simulated here exactly: each state and output is a double, and the
-disturbance that makes it exact (``x+ - (A x + B u)``, ``y - C x`` in rational arithmetic) lies
-in its bounds, on a vertex up to the rounding of that double (:func:`_simulate`). The Hénon
-map and the pendulum use the rigorous interval simulator of tests/exactsim.py (60 digits, every
-parameter and signal on a vertex). Neither is ivobs' own simulator.
+The linear plants are simulated exactly (tests/vertexsim.py, ``exact_linear``): each state and
+output is a double, and the disturbance that makes it exact (``x+ - (A x + B u)``, ``y - C x``
+in rational arithmetic) lies in its bounds, on a vertex up to the rounding of that double. The
+Hénon map and the pendulum use the rigorous interval simulator of tests/exactsim.py (60 digits,
+every parameter and signal on a vertex). Neither is ivobs' own simulator.
 """
 
 from __future__ import annotations
 
-import math
+import json
 import warnings
-from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -21,68 +20,8 @@ import pytest
 import ivobs
 from exactsim import simulate as exact_record
 from nlsystems import HENON_X0, henon_record
-
-D = 0.1
-"""Half-width of every disturbance of the linear plants."""
-
-
-def _plant(seed: int, n: int, offset: float = 0.0) -> tuple[ivobs.LinearSystem, np.ndarray]:
-    """A stable plant whose boxes wrap: ``ρ(A) = 0.95 < 1 < ρ(|A|)``, one output, process
-    noise on every state and measurement noise, all ``±0.1``; with ``offset``, a constant
-    input ``u = 1`` holds the equilibrium at about ``offset`` in every state. Returns the
-    system and the equilibrium."""
-    rng = np.random.default_rng(seed)
-    while True:
-        A = rng.normal(size=(n, n))
-        A *= 0.95 / max(abs(np.linalg.eigvals(A)))
-        if max(abs(np.linalg.eigvals(abs(A)))) > 1.05:
-            break
-    C = rng.normal(size=(1, n))
-    B = (np.eye(n) - A) @ np.full((n, 1), offset)
-    E = np.hstack([np.eye(n), np.zeros((n, 1))])
-    F = np.hstack([np.zeros((1, n)), np.ones((1, 1))])
-    d = ivobs.Box(np.full(n + 1, -D), np.full(n + 1, D))
-    sys = ivobs.LinearSystem(A=A, B=B, C=C, E=E, F=F, d=d)
-    return sys, np.linalg.solve(np.eye(n) - A, B[:, 0])
-
-
-def _absorb(g: Fraction, up_side: bool) -> float:
-    """The double ``z`` next to ``g ± D`` with ``z - g`` in ``[-D, D]`` (the doubles ``±0.1``
-    as the exact bounds of the model)."""
-    lo, hi = Fraction(-D), Fraction(D)
-    z = float(g + (hi if up_side else lo))
-    while Fraction(z) - g > hi:
-        z = math.nextafter(z, -math.inf)
-    while Fraction(z) - g < lo:
-        z = math.nextafter(z, math.inf)
-    return z
-
-
-def _simulate(
-    sys: ivobs.LinearSystem, x0: np.ndarray, T: int, seed: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``T`` exact steps of ``x+ = A x + B u + w``, ``y = C x + v`` from the doubles ``x0``,
-    ``u = 1`` when the plant has an input, every ``w``, ``v`` on a random vertex: ``(U, X, Y)``
-    with the true states and outputs as doubles."""
-    rng = np.random.default_rng(seed + 1000)
-    A = [[Fraction(a) for a in row] for row in sys.A]
-    B = [[Fraction(b) for b in row] for row in sys.B]
-    C = [Fraction(c) for c in sys.C[0]]
-    n = sys.nx
-    x = [float(v) for v in x0]
-    U = np.ones((T, sys.nu))
-    X, Y = np.empty((T, n)), np.empty((T, 1))
-    for k in range(T):
-        side = rng.integers(0, 2, n + 1).astype(bool)
-        X[k] = x
-        xf = [Fraction(v) for v in x]
-        Y[k, 0] = _absorb(sum(c * v for c, v in zip(C, xf)), bool(side[n]))
-        inputs = [sum(b for b in row) for row in B]  # B u with u = 1
-        x = [
-            _absorb(sum(a * v for a, v in zip(A[i], xf)) + inputs[i], bool(side[i]))
-            for i in range(n)
-        ]
-    return U, X, Y
+from vertexsim import exact_linear as _simulate
+from vertexsim import wrapping_plant as _plant
 
 
 def _contained(res: ivobs.Result, X: np.ndarray) -> list[int]:
@@ -125,7 +64,7 @@ def test_random_stable_plants_are_contained_over_long_runs(seed):
 def test_within_a_few_times_the_exact_hull(seed, n):
     """The ratio of the mean widths (steps 40..150) to the exact hull's: at most 5 (measured:
     BENCHMARKS.md, "nl-interval: the window-centred form")."""
-    sys, xe = _plant(seed, n)
+    sys, _ = _plant(seed, n)
     x0 = ivobs.Box(-np.ones(n), np.ones(n))
     U, X, Y = _simulate(sys, np.zeros(n), 150, seed)
     exact = ivobs.make_estimator("exact", sys, x0=x0).run(U, Y)
@@ -173,20 +112,26 @@ def test_an_unstable_unobserved_state_still_grows_and_is_warned_about():
 
 def test_the_window_option_is_checked_and_in_the_state():
     sys, _ = _plant(0, 4)
+    x0 = ivobs.Box(-np.ones(4), np.ones(4))
     with pytest.raises(ivobs.IvobsError, match="window: expected 0 to 100"):
-        ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=101)
-    U, X, Y = _simulate(sys, np.zeros(4), 30, 0)
-    est = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=5)
+        ivobs.make_estimator("nl-interval", sys, x0=x0, window=101)
+    kink = ivobs.NonlinearSystem(f=["-abs(x)"], h=["x"], states=["x"], dt=0).discretize(
+        0.5, order=2
+    )
+    with pytest.raises(ivobs.IvobsError, match="window: the window-centred form linearises f"):
+        ivobs.make_estimator("nl-interval", kink, x0=ivobs.Box([-1.0], [1.0]), window=3)
+    assert ivobs.make_estimator("nl-interval", kink, x0=ivobs.Box([-1.0], [1.0])).design.window == 0
+    U, _, Y = _simulate(sys, np.zeros(4), 30, 0)
+    est = ivobs.make_estimator("nl-interval", sys, x0=x0, window=5)
     for k in range(12):
         est.step(U[k], Y[k])
-    saved = est.state()
+    saved = json.loads(json.dumps(est.state()))
     assert saved["state"]["win_F"]["shape"] == [5, 4, 4]
-    ref = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=5)
-    full = ref.run(U, Y)
-    other = ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4)), window=5)
+    full = ivobs.make_estimator("nl-interval", sys, x0=x0, window=5).run(U, Y)
+    other = ivobs.make_estimator("nl-interval", sys, x0=x0, window=5)
     other.restore(saved)
     boxes = [other.step(U[k], Y[k]) for k in range(12, 30)]
     np.testing.assert_array_equal(np.array([b.lo for b in boxes]), full.lower[12:])
     np.testing.assert_array_equal(np.array([b.hi for b in boxes]), full.upper[12:])
     with pytest.raises(ivobs.IvobsError, match="another design"):
-        ivobs.make_estimator("nl-interval", sys, x0=ivobs.Box(-np.ones(4), np.ones(4))).restore(saved)
+        ivobs.make_estimator("nl-interval", sys, x0=x0).restore(saved)

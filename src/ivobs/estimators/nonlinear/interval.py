@@ -28,6 +28,23 @@ the contractor network of the last steps iterated to its fixpoint (to within tha
 bounds well would dominate, stopping the sweeps while the well-measured states still narrow (CORA's
 six tanks; BENCHMARKS.md has the figures).
 
+4. **Window-centred form** (``window = M >= 1``; :mod:`~ivobs.estimators.nonlinear.window`):
+   each of the last ``M`` steps ``j`` keeps, from the mean-value forms of ``f`` and ``h`` over
+   its corrected box of ``ζ_j = (x[j], w[j])`` and a gain ``L_j``, the affine enclosure
+   ``x[j+1] = f(ζ_j) + L_j (y_j - h(ζ_j)) ∈ b_j + F_j x[j] + Fw_j (w[j] - cw_j) ± n_j``
+   (exact for every ``L_j``: ``y_j = h(ζ_j)``). With the filter form of step ``k``,
+   ``x[k] = x[k] + K (y_k - h(ζ_k)) ∈ a + G x[k] ± r``, and the transitions substituted
+   backwards, ``x[k] ∈ m_j + Φ_j x[j] ± R_j`` with ``Φ_j = G F_{k-1} ⋯ F_j`` carried as a
+   matrix; then, after the sweeps,
+
+       [x]_k <- [x]_k ∩ ⋂_j (m_j + Φ_j [x]_j ± R_j)      (j = k-M..k, [x]_j the kept boxes)
+
+   and ``[x]_k`` is contracted with ``[y_k]`` once more. This is the centred form
+   [Moore2009, Ch. 6] composed over the window in the coordinates of an observer (a Luenberger
+   correction of the interval observer of [Jaulin2001, Ch. 6]); the gains ``K``, ``L`` come
+   from a Kalman filter on the same linearisations with the boxes' squared radii as variances
+   [Kalman1960] (any gains are sound; these make the form tight).
+
 ``[y_k]`` is the measurement interval ``[down(y_k), up(y_k)]``: the reals the recorded double
 stands for (:func:`~ivobs.estimators.nonlinear.meanvalue.measurement`), so a sample within
 rounding of its bound is consistent.
@@ -37,15 +54,29 @@ rounds each operation outward (:mod:`ivobs.model.nonlinear`: ``+ - * /`` and pow
 ulp with ``nextafter``, elementary functions by their documented libm error): each returned
 box contains the exact image of the exact boxes it was computed from, at every magnitude.
 The contractors only remove points that cannot explain ``[y_k]``, and intersections of such
-enclosures are exact operations. By induction the box of ``x[k]`` contains the true state
+enclosures are exact operations. The window-centred form's hulls enclose the exact ones,
+every rounding of its linearisations, products and sums bounded
+(:mod:`~ivobs.estimators.nonlinear.window`, [Higham2002, Lemma 3.1]) and its bounds rounded
+outward. By induction the box of ``x[k]`` contains the true state
 whenever the plant follows the model with ``w[k] ∈ [w]`` and ``y[k]`` is its output rounded
 to a double; no margin is added (``proven_rounding``).
 
 **Wrapping.** Boxes are not closed under rotation: a map that contracts (``ρ(J) < 1``) can
-still grow a box when ``ρ(|J|) > 1`` (a random stable linear plant: widths of 1e36–1e140 after
-400 steps). This form does not prevent it; when the summed width passes :data:`WRAP_GROWTH`
-times the prior's, a warning says so with the two spectral radii at the box's centre and names
-the methods that keep such plants bounded (their zonotopes rotate with the map).
+still grow a box when ``ρ(|J|) > 1``: on random stable linear plants the box form alone (steps
+1-3, ``window=0``) reaches widths of 1e12-1e126 times the exact hull after 400 steps. The
+window-centred form does not wrap: its dependence on the box ``j`` steps back is ``|Φ_j| r_j``
+with ``Φ_j`` the product of the observer's matrices, which decays like ``(A - L C)^(k-j)`` on a
+linear plant (where the box form grows like ``|A|^(k-j)``), and the remainders of the other
+steps enter through the same products. On those plants it stays within a few tenths of the
+exact hull (at most 2.7 times it; BENCHMARKS.md), about what nl-zonotope reaches. It costs
+``M`` small matrix products and two linearisations per step, so by default (``window=None``)
+it is used where the model's boxes would wrap: where the Jacobian ``J`` of ``f`` in ``x`` at
+the centre of the prior box and of the unknowns' box has ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)``
+(a rotation, or a coupling of mixed signs: the pendulum, not the Hénon map or the tanks, whose
+Jacobians there are similar to nonnegative matrices). Where the summed width still passes
+:data:`WRAP_GROWTH` times the prior's (the model expands in directions the outputs do not see,
+or ``window=0``), a warning says so once, with the two spectral radii at the box's centre, and
+names the methods whose sets rotate with the map.
 
 The box of ``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output
 component is skipped; a measurement that no point of the box can produce (an empty
@@ -169,8 +200,8 @@ class NonlinearIntervalState(OnlineState):
 @register
 class NonlinearIntervalEstimator(Estimator):
     """Interval observer for nonlinear systems: natural ∩ mean-value prediction and
-    forward-backward contraction by the measurement, one step back through ``h∘f``
-    (module docstring).
+    forward-backward contraction by the measurement, one step back through ``h∘f``, and a
+    window-centred form that keeps boxes from wrapping (module docstring).
 
     Parameters
     ----------
@@ -183,13 +214,16 @@ class NonlinearIntervalEstimator(Estimator):
         (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network (tighter where
         the outputs see a state only through several steps of the dynamics, at about ``L``
         times the cost of a step back; not for sampled continuous-time plants)
+    window : steps ``M`` of the window-centred form (0 to :data:`MAX_WINDOW`; 0: none, the box
+        form alone); None (default): :data:`WINDOW` where the model's boxes would wrap (module
+        docstring, "Wrapping"), else 0
     """
 
     name = "nl-interval"
     order = 900
     summary = (
         "nonlinear systems: natural ∩ mean-value inclusion, forward-backward contraction by "
-        "y and one step back through h∘f"
+        "y, one step back through h∘f, and a window-centred form that does not wrap"
     )
     reference = "[Jaulin2001, Ch. 4], [Moore2009, Ch. 6]"
     data_used = "filter"
@@ -215,9 +249,17 @@ class NonlinearIntervalEstimator(Estimator):
         lag = as_int("lag", lag, minimum=0)
         if lag > MAX_LAG:
             raise IvobsError(f"lag: expected 0 to {MAX_LAG} steps back, got {lag}")
-        window = _auto_window(sys, self.x0) if window is None else as_int("window", window, minimum=0)
-        if window > MAX_WINDOW:
-            raise IvobsError(f"window: expected 0 to {MAX_WINDOW} steps, got {window}")
+        if window is None:
+            window = _auto_window(sys, self.x0)
+        else:
+            window = as_int("window", window, minimum=0)
+            if window > MAX_WINDOW:
+                raise IvobsError(f"window: expected 0 to {MAX_WINDOW} steps, got {window}")
+            if window and _jacobian_at_prior(sys, self.x0) is None:
+                raise IvobsError(
+                    "window: the window-centred form linearises f, whose Jacobian this model "
+                    "does not give (a validated flow of a non-smooth f); use window=0"
+                )
         self._fc = sys.f_contractors() if lag > 1 else None
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
@@ -449,7 +491,7 @@ class NonlinearIntervalEstimator(Estimator):
         assert self._f_evals is not None
         rows, P = win.rows, None
         tr: wf.Transition | None = None
-        if np.isfinite(lo).all() and np.isfinite(hi).all():
+        if win.meas is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
             lf = wf.affine(self._f_evals, lo, hi, u_k, nx)
             dw = wf.radius(lo, hi, lf.c)[nx:]
             L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
@@ -595,21 +637,29 @@ def _auto_window(sys: NonlinearSystem, x0: Box | None) -> int:
     """:data:`WINDOW` where boxes wrap under the model, else 0: where the Jacobian ``J`` of
     ``f`` in ``x`` at the centre of the prior box and of the unknowns' box has
     ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)`` (a rotation, or a coupling of mixed signs: the box of
-    ``J [x]`` is wider than the map makes the set), or cannot be evaluated there."""
+    ``J [x]`` is wider than the map makes the set). 0 where that Jacobian does not exist (a
+    validated flow of a non-smooth ``f``) or is not finite."""
+    J = _jacobian_at_prior(sys, x0)
+    if J is None or not np.isfinite(J).all():
+        return 0
+    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
+    rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
+    return WINDOW if rho_abs > (1.0 + WRAP_MARGIN) * rho else 0
+
+
+def _jacobian_at_prior(sys: NonlinearSystem, x0: Box | None) -> np.ndarray | None:
+    """``d f / d x`` at the centre of the prior box and of the unknowns' box (inputs 0), or
+    None where it cannot be evaluated."""
     if x0 is None:
-        return WINDOW
+        return None
     c = 0.5 * x0.lo + 0.5 * x0.hi
     wc = 0.5 * sys.w_box.lo + 0.5 * sys.w_box.hi
     try:
         jl, jh = sys.f_jac_box(c, c, np.zeros(sys.nu), wc, wc)[:2]
     except IvobsError:
-        return WINDOW
-    J = 0.5 * jl + 0.5 * jh
-    if not np.isfinite(J).all():
-        return WINDOW
-    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
-    rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
-    return WINDOW if rho_abs > (1.0 + WRAP_MARGIN) * rho else 0
+        return None
+    out: np.ndarray = 0.5 * jl + 0.5 * jh
+    return out
 
 
 class _Form(NamedTuple):

@@ -1,48 +1,63 @@
 """The window-centred form of :mod:`~ivobs.estimators.nonlinear.interval`: the box of ``x[k]``
-as the hull of affine enclosures composed over the last steps, with output injection.
+as the hull of affine enclosures composed over the last steps, in the coordinates of an
+observer, so that boxes do not wrap on maps that rotate or couple their states.
 
-Every step ``j`` of the window keeps an affine enclosure of its transition, built from the
-mean-value form (:func:`~ivobs.estimators.nonlinear.meanvalue.linearise`) of ``f`` and of
-``h`` over the corrected box ``B_j`` of ``ζ_j = (x[j], w[j])`` (which holds the true ``ζ_j``)
-and any gain ``L_j``: as ``y_j = h(ζ_j)`` exactly (``y_j`` in its measurement interval),
+**The form.** For each kept step ``j``, ``ζ_j = (x[j], w[j])`` lies in the corrected box
+``B_j``; over it ``f`` and ``h`` have mean-value forms (:func:`affine`, the bounds of
+:func:`~ivobs.estimators.nonlinear.meanvalue.linearise`: ``|f(ζ) - g0 - J (ζ - c)| <= ρ`` for
+*every* ``ζ ∈ B_j``, so at the true ``ζ_j`` with no mean-value segment to follow). As the true
+output is ``y_j = h(ζ_j)`` (``y_j`` within its measurement interval), for *any* matrix ``L_j``
 
     x[j+1] = f(ζ_j) + L_j (y_j - h(ζ_j))
-           ∈ b_j + F_j x[j] + Fw_j (w[j] - cw_j) ± n_j,       F = Jx - L Hx, Fw = Jw - L Hw,
+           ∈ b_j + F_j x[j] + Fw_j (w[j] - cw_j) ± n_j,      F = Jx - L Hx,  Fw = Jw - L Hw  (T)
 
-for every gain (the gain only decides how tight it is). With the filter form of step ``k``,
-``x[k] = x[k] + K (y_k - h(ζ_k)) ∈ a + G x[k] ± r`` (``G = I - K Hx``), substituting the
-transitions backwards gives, for each kept step ``j``,
+(:func:`transition`). The current step's measurement gives the filter form
+``x[k] = x[k] + K (y_k - h(ζ_k)) ∈ a + G x[k] ± r`` with ``G = I - K Hx`` (:func:`filter_start`,
+(S)). Substituting (T) backwards, newest first, ``x[k] ∈ m_j + Φ_j x[j] ± R_j`` with
+``Φ_j = G F_{k-1} ⋯ F_j``, ``m_j = a + Σ Φ_{i+1} b_i`` and ``R_j = r + Σ (|Φ_{i+1}| n_i +
+|Φ_{i+1} Fw_i| |B_i^w - cw_i|)`` over ``i = j..k-1``, so over the box ``[c_j ± r_j]`` of ``x[j]``
 
-    x[k] ∈ m_j + Φ_j x[j] ± R_j,       Φ_j = G F_{k-1} ⋯ F_j,
+    x[k] ∈ m_j + Φ_j c_j ± (R_j + |Φ_j| r_j)                                              (H)
 
-whose hull over the box of ``x[j]`` is ``m_j + Φ_j c_j ± (R_j + |Φ_j| r_j)``: the products
-``Φ_j`` are carried as matrices, never as boxes, so a map that rotates or couples its states
-does not wrap (the form decays like ``F^(k-j)`` where a box form grows like ``|F|^(k-j)``),
-and the intersection over ``j`` keeps what every past box knew. This is the centred form of
-[Moore2009, Ch. 6] composed along the trajectory, in the coordinates of an observer with gain
-``L`` (the classical interval observer of [Jaulin2001, Ch. 6] with the correction of a
-Luenberger observer); the gains come from a Riccati recursion on the same linearisations,
-with the box radii as variances (:func:`gains`).
+for every kept ``j`` and for ``j = k`` (``Φ_k = G``): :func:`hull`. The products ``Φ_j`` are
+carried as matrices, never as boxes: the form's dependence on the box ``j`` steps back decays
+like ``F^(k-j)``, where a box form grows like ``|F|^(k-j)`` (wrapping), and intersecting over
+``j`` keeps what each past box knew. This is the centred form [Moore2009, Ch. 6] composed
+along the trajectory, in the coordinates of a Luenberger observer of gain ``L``: the interval
+observer of [Jaulin2001, Ch. 6] with an output injection. Any gains keep it sound; these are a
+Kalman filter's on the same linearisations [Kalman1960], with the squared radii of the boxes as
+variances (:func:`filter_gain`, :func:`predictor`): on stable linear plants the hull is then
+within a few tenths of the exact one (BENCHMARKS.md).
 
 **Rounding (proof).** The model of :mod:`ivobs.sets.rounding` ([Higham2002, Lemma 3.1 and
-Section 3.1]). Every interval quantity is a pair ``(mid, rad)`` of doubles with the exact
-value within ``rad`` of ``mid``: an addition or subtraction rounded to ``s`` is within
-``2u|s| + ETA`` of the exact one (``|δ| <= u`` relative, exact when subnormal); a product of
-``n`` terms is within :func:`~ivobs.sets.rounding.product_error` of the exact one; ``|A| r``
-and ``|A| |B|`` bound the spread of ``A (x ± r)`` and of interval products; a sum of
-nonnegative bounds computed in floating point is made an upper bound by
-:func:`~ivobs.sets.rounding.upper` with the number of its roundings. The transitions' ``b``,
-``F``, ``Fw`` are doubles (the exact ``Jx - L Hx`` differs from ``F`` by ``F_r``, whose effect
-``F_r |x|`` over the box is added to ``n_j``, as are the remainders ``ρ``, ``|L| ρ_h`` and
-the rounding of ``b``). In the backward substitution ``Φ`` is a double matrix; the exact
-``Φ F`` differs from the computed ``fl(Φ F)`` by at most ``γ_n |Φ| |F|`` (plus underflow),
-which acts on ``x[j]`` with ``|x[j]| <= |c| + r``; the errors of ``fl(Φ b)``, ``fl(Φ Fw)``
-and ``fl(Φ F c)`` are bounded alike, all by ``4 γ_{n+2} fl(|Φ| e_j)`` with
-``e_j >= |b| + 4 |F| (|c| + r) + |Fw| Δw`` (``fl(|Φ| e)`` is within ``γ_n`` of the exact
-product of nonnegative numbers), and the underflows by ``(n + 2) ETA`` per product times the
-magnitudes they act on. The running sums add ``2u|m| + ETA`` per addition. The hull is
-``[down(c - ρ), up(c + ρ)]`` with ``ρ = upper(...)`` of all these terms. Hence each bound
-contains the exact hull of the exact enclosures, at every magnitude.
+Section 3.1]): a floating-point expression that is a sum of products, each of whose exact terms
+passes through at most ``N`` roundings, differs from the exact one by at most ``γ_N`` times the
+same expression on absolute values, in any order of evaluation, plus at most ``η = ETA/2`` per
+product that underflows; a bound computed in floating point carries ``2 γ_N`` (which absorbs
+its own rounding), and a sum of nonnegative bounds is made an upper bound by
+:func:`~ivobs.sets.rounding.upper` with the number of its roundings. The mean-value forms prove
+their own bounds (:func:`affine`); the measurement ``y ± r`` covers the reals the double
+stands for (:func:`measured`). Then:
+
+(T) ``F`` is the double ``fl(J - fl(L H))``; the exact ``J - L H`` differs from it by at most
+``γ (|J| + |L| |H|)``, which acts on ``ζ - c`` (``|ζ - c| <= Δ``, one rounded subtraction,
+up). ``b`` is the double ``fl(g0 + L fl(y - fl(h0 + H t)) - F cx)`` with ``t = fl(c - ch)``;
+the exact ``g0 + L (y - h0 - H (c - ch)) - F cx`` is within ``γ_N`` (``N = n + ny + 6``) of
+``|g0| + |L| (|y| + |h0| + |H| |t|) + |F| |cx|``. So ``n = ρ + |L| (r + ρ_h) + 2 γ_N`` times
+those magnitudes, plus ``N η (1 + Σ|L|) (1 + Σ|t|) (1 + ΣΔ)`` for the underflows, rounded up.
+(S) Alike: ``G = fl(I - fl(K Hx))`` is within ``γ (I + |K| |Hx|)`` of ``I - K Hx`` and acts on
+``|x[k]| <= max(|xlo|, |xhi|)``; ``a = fl(K fl(fl(y - h0) + fl(Hx chx)))`` is within ``γ_N |K|
+(|y| + |h0| + |Hx| |chx|)`` of the exact; ``fl(K Hw)`` within ``γ |K| |Hw|``.
+(H) ``Φ`` is the double computed at each substitution, ``fl(Φ F)``: the exact ``Φ F`` differs
+by at most ``γ_n |Φ| |F|`` and acts on ``|x[j]| <= |c| + Δ`` of the step's linearisation box
+(which holds every later box of ``x[j]``); the products ``fl(Φ b)``, ``fl(Φ Fw)`` and the centre
+``fl(Φ fl(F c_j))`` (for ``Φ_j c_j``) err alike. All of these are at most ``4 γ_{n+2} fl(|Φ|
+e)`` with ``e = |b| + 4 |F| (|c| + Δ) + |Fw| Δw + 1e-300`` (``fl(|Φ| e)`` is within ``γ_n`` of
+the exact product of nonnegative numbers; the last term covers the underflow of ``fl(F c_j)``
+times ``|Φ|``); the other underflows add ``(n + 2) η`` per product times the magnitudes they act
+on (``eta``). The running sums add ``2u|s| + ETA`` per rounded addition of a result ``s``.
+The hull of (H) is ``[down(m - ρ), up(m + ρ)]`` with ``ρ`` all these terms rounded up: it
+contains the exact hull of the exact enclosures at every magnitude, and so the true ``x[k]``.
 """
 
 from __future__ import annotations
@@ -76,7 +91,8 @@ _TWO_U = 2.0 * UNIT_ROUNDOFF
 
 def _err(s: np.ndarray) -> np.ndarray:
     """A bound of ``|exact - s|`` for ``s``, one rounded addition or subtraction."""
-    return _TWO_U * np.abs(s) + ETA
+    out: np.ndarray = _TWO_U * np.abs(s) + ETA
+    return out
 
 
 def _g(n: int) -> float:
@@ -108,7 +124,9 @@ def measured(y: np.ndarray, ylo: list[float], yhi: list[float]) -> Measured:
     return Measured(ym, r, seen)
 
 
-def affine(evals: tuple[Any, ...], lo: np.ndarray, hi: np.ndarray, u: np.ndarray, nx: int) -> Linearisation:
+def affine(
+    evals: tuple[Any, ...], lo: np.ndarray, hi: np.ndarray, u: np.ndarray, nx: int
+) -> Linearisation:
     """The mean-value form (MV) of :mod:`~ivobs.estimators.nonlinear.meanvalue` over the finite
     box ``[lo, hi]`` at its centre, as :func:`~ivobs.estimators.nonlinear.meanvalue.linearise`
     with ``natural=False`` (the same bounds, the same proof of their rounding) but on arrays,
@@ -242,7 +260,9 @@ def filter_start(
     inner = np.abs(meas.y) + np.abs(lh.g0) + absH[:, :nx] @ (np.abs(chx) + v) + absH[:, nx:] @ dw
     absK = np.abs(K)
     R = absK @ (meas.r + lh.rho + _g(N) * inner) + _g(N) * v + np.abs(KH[:, nx:]) @ dw
-    under = N * ETA * (1.0 + float(absK.sum())) * (1.0 + float(v.sum() + dw.sum() + np.abs(chx).sum()))
+    under = (
+        N * ETA * (1.0 + float(absK.sum())) * (1.0 + float(v.sum() + dw.sum() + np.abs(chx).sum()))
+    )
     return Start(G, a, upper(R + under, N + 12), 0.0)
 
 
