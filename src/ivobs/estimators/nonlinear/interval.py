@@ -12,7 +12,10 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    [w]_{k-1})`` and contract with ``[y_k]`` again. This bounds states the output sees only
    through the dynamics (the Hénon map with ``y = x2``: ``x1[k-1] = x2[k]/b``);
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
-   intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
+   intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)`` (with the
+   window-centred form, step 4, from its own linearisation of ``f`` over the same box:
+   :func:`~ivobs.estimators.nonlinear.window.centred`, one evaluation of ``f`` and its
+   Jacobian for both).
 
 2'. **Further back** (``lag = L >= 2``): the boxes of ``(x[j], w[j])`` for the ``L`` steps
    ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j], w[j]) ∈ [x]_{j+1}`` and
@@ -95,6 +98,7 @@ import numpy as np
 from ..._validate import as_int
 from ...errors import IvobsError
 from ...model import LinearSystem, NonlinearSystem
+from ...model.nonlinear.flow import FlowSystem
 from ...sets import Box
 from .. import register
 from ..base import Design, Estimator
@@ -271,6 +275,7 @@ class NonlinearIntervalEstimator(Estimator):
             model=int(digest[:12], 16),
         )
         self._f_evals = sys.evaluators("f") if window else None
+        self._flow = isinstance(sys, FlowSystem)
         self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
         self._hf = sys.hf_contractors() if lag and sys.ny else None
@@ -394,16 +399,20 @@ class NonlinearIntervalEstimator(Estimator):
         if self.design.window and win is None:  # the model itself contradicted: start again
             rows = self._rows(state, [], None)
             win = _Form(wf.Rows(*(a[:0] for a in rows)), None, None, state.cov, None, False)
-        f = sys._f  # 3. prediction: natural ∩ mean-value form
-        pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
-        if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
-            self._say_wrapping(state.k, pl, ph, u)
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         hist: dict[str, np.ndarray] = {}
         if self._fc is not None:
             hist = self._history(chain, y_k, inconsistent)
+        pred: tuple[Any, Any] | None = None
         if win is not None:
-            hist.update(self._slide(win, prev_lo, prev_hi, u_k, len(y_k)))
+            slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
+            hist.update(slid)
+        if pred is None:  # 3. prediction: natural ∩ mean-value form
+            f = sys._f
+            pred = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
+        pl, ph = pred
+        if not self._wrapping_said and float(np.sum(ph) - np.sum(pl)) > self._wrap_limit:
+            self._say_wrapping(state.k, list(pl), list(ph), u)
         new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
             lo=np.array(pl, dtype=float),
             hi=np.array(ph, dtype=float),
@@ -483,16 +492,22 @@ class NonlinearIntervalEstimator(Estimator):
         hi: np.ndarray,
         u_k: np.ndarray,
         ny: int,
-    ) -> dict[str, np.ndarray]:
+    ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray] | None]:
         """The window-centred form's part of the next state: the box of ``x[k]`` and the
         transition ``k -> k + 1`` appended (the oldest dropped past ``window`` steps), and the
-        next prior covariance. A transition that is not finite empties the window."""
+        next prior covariance. A transition that is not finite empties the window. Also the
+        prediction (step 3) from the same linearisation of ``f``: the natural inclusion met
+        with the centred form, as ``F`` (None for a validated flow, whose own ``F`` is used,
+        or without a linearisation)."""
         nx = self.model.nx
         assert self._f_evals is not None
         rows, P = win.rows, None
         tr: wf.Transition | None = None
+        pred = None
         if win.meas is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
             lf = wf.affine(self._f_evals, lo, hi, u_k, nx)
+            if not self._flow:
+                pred = wf.centred(lf, lo, hi)
             dw = wf.radius(lo, hi, lf.c)[nx:]
             L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
             tr = wf.transition(lf, win.lh, L, lo, hi, win.meas, nx)
@@ -506,7 +521,7 @@ class NonlinearIntervalEstimator(Estimator):
                 "win_lo": rows.lo[:0], "win_hi": rows.hi[:0], "win_b": rows.b[:0],
                 "win_F": rows.F[:0], "win_Fw": rows.Fw[:0], "win_n": rows.n[:0],
                 "win_e": rows.e[:0], "win_dw": rows.dw[:0], "win_eta": rows.eta[:0], "cov": P,
-            }  # fmt: skip
+            }, pred  # fmt: skip
         keep = max(rows.lo.shape[0] - (self.design.window - 1), 0)
 
         def add(old: np.ndarray, row: Any) -> np.ndarray:
@@ -523,7 +538,7 @@ class NonlinearIntervalEstimator(Estimator):
             "win_dw": add(rows.dw, tr.dw),
             "win_eta": add(rows.eta, tr.eta),
             "cov": P,
-        }
+        }, pred
 
     def _chain(self, st: NonlinearIntervalState) -> list[_Link]:
         """The kept steps ``k-L..k-1`` as boxes to contract (copies), oldest first; empty

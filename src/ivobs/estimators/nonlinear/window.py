@@ -77,6 +77,7 @@ __all__ = [
     "Start",
     "Transition",
     "affine",
+    "centred",
     "filter_gain",
     "filter_start",
     "hull",
@@ -152,11 +153,23 @@ def affine(
         J[edges] = 0.0
         g0[edges], rho[edges] = mid_rad(np.array(nl, dtype=float)[edges],
                                         np.array(nh, dtype=float)[edges])  # fmt: skip
+    nat_lo, nat_hi = np.array(nl, dtype=float), np.array(nh, dtype=float)
     if len(evals) > 2:  # a set-valued map: widened by its spread over the box
         spread = np.array(evals[2](bl[:nx], bh[:nx], ul, bl[nx:], bh[nx:]), dtype=float)
         if spread.size:
             rho = up(rho + spread)
-    return Linearisation(g0, J, rho, c, np.array(nl, dtype=float), np.array(nh, dtype=float))
+            nat_lo, nat_hi = down(nat_lo - spread), up(nat_hi + spread)
+    return Linearisation(g0, J, rho, c, nat_lo, nat_hi)
+
+
+def centred(lin: Linearisation, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The natural inclusion met with the centred form ``g0 + J̃ ([lo, hi] - c) ± ρ`` of the
+    mean-value form ``lin`` over the box ``[lo, hi]`` it was made on [Moore2009, Ch. 6]:
+    ``|J̃ (ζ - c)| <= |J̃| Δ``, the sum ``|J̃| Δ + ρ`` rounded up (``n + 2`` roundings on a
+    path) and the two bounds outward."""
+    s = upper(np.abs(lin.J) @ radius(lo, hi, lin.c) + lin.rho, lin.c.shape[0] + 2)
+    with np.errstate(invalid="ignore"):  # inf - inf: NaN, which fmax/fmin ignore
+        return np.fmax(lin.nat_lo, down(lin.g0 - s)), np.fmin(lin.nat_hi, up(lin.g0 + s))
 
 
 class Transition(NamedTuple):
