@@ -129,7 +129,7 @@ as wrapping."""
 MAX_LAG = 10
 """Most steps of the window contracted back (``lag``)."""
 
-WINDOW = 10
+WINDOW = 20
 """Steps kept by the window-centred form (``window``; module docstring)."""
 
 MAX_WINDOW = 100
