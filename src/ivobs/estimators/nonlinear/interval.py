@@ -66,12 +66,12 @@ to a double; no margin is added (``proven_rounding``).
 
 **Wrapping.** Boxes are not closed under rotation: a map that contracts (``ρ(J) < 1``) can
 still grow a box when ``ρ(|J|) > 1``: on random stable linear plants the box form alone (steps
-1-3, ``window=0``) reaches widths of 1e12-1e126 times the exact hull after 400 steps. The
+1-3, ``window=0``) reaches 1e12-1e126 times the exact hull's width after 400 steps. The
 window-centred form does not wrap: its dependence on the box ``j`` steps back is ``|Φ_j| r_j``
 with ``Φ_j`` the product of the observer's matrices, which decays like ``(A - L C)^(k-j)`` on a
 linear plant (where the box form grows like ``|A|^(k-j)``), and the remainders of the other
-steps enter through the same products. On those plants it stays within a few tenths of the
-exact hull (at most 2.7 times it; BENCHMARKS.md), about what nl-zonotope reaches. It costs
+steps enter through the same products. On those plants it stays within 1.07-1.68 times the
+exact hull (BENCHMARKS.md), about what nl-zonotope reaches (1.05-1.35). It costs
 ``M`` small matrix products and two linearisations per step, so by default (``window=None``)
 it is used where the model's boxes would wrap: where the Jacobian ``J`` of ``f`` in ``x`` at
 the centre of the prior box and of the unknowns' box has ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)``
