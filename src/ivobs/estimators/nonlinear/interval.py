@@ -89,6 +89,7 @@ contraction) is reported inconsistent and not used: the step continues from the 
 from __future__ import annotations
 
 import hashlib
+import math
 import warnings
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, NamedTuple
@@ -403,26 +404,27 @@ class NonlinearIntervalEstimator(Estimator):
         hist: dict[str, np.ndarray] = {}
         if self._fc is not None:
             hist = self._history(chain, y_k, inconsistent)
-        pred: tuple[Any, Any] | None = None
+        pred = None
         if win is not None:
             slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
             hist.update(slid)
         if pred is None:  # 3. prediction: natural ∩ mean-value form
             f = sys._f
-            pred = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
-        pl, ph = pred
-        if not self._wrapping_said and float(np.sum(ph) - np.sum(pl)) > self._wrap_limit:
-            self._say_wrapping(state.k, list(pl), list(ph), u)
-        new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
+            pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
+        else:  # (from step 4's linearisation of f)
+            pl, ph = pred[0].tolist(), pred[1].tolist()
+        if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
+            self._say_wrapping(state.k, pl, ph, u)
+        new = evolve(  # a new object (cheaper than the constructor): the base sets k
+            state,
             lo=np.array(pl, dtype=float),
             hi=np.array(ph, dtype=float),
             prev_lo=prev_lo,
             prev_hi=prev_hi,
             prev_u=u_k.copy(),
             back=True,
+            **hist,
         )
-        if hist:
-            new = evolve(new, **hist)
         return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
 
     def _form(
@@ -511,7 +513,8 @@ class NonlinearIntervalEstimator(Estimator):
             dw = wf.radius(lo, hi, lf.c)[nx:]
             L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
             tr = wf.transition(lf, win.lh, L, lo, hi, win.meas, nx)
-            if not all(np.isfinite(a).all() for a in tr):
+            total = tr.b.sum() + tr.F.sum() + tr.Fw.sum() + tr.n.sum() + tr.e.sum() + tr.dw.sum()
+            if not math.isfinite(float(total) + tr.eta):  # (a sum that overflows counts too)
                 tr = None
         if P is None or not float(np.max(np.abs(P), initial=0.0)) < 1e150:  # (NaN: not <)
             r = np.where(np.isfinite(hi - lo), 0.5 * hi - 0.5 * lo, 1.0)[:nx]

@@ -303,10 +303,11 @@ def hull(start: Start, xlo: np.ndarray, xhi: np.ndarray, rows: Rows) -> tuple[np
     nx = len(xlo)
     M = rows.lo.shape[0]
     F = rows.F
-    phis = np.empty((M + 1, nx, nx))
-    phis[0] = phi = start.phi
-    for i in range(M):  # Φ after substituting the kept step M - 1 - i (newest first)
-        phis[i + 1] = phi = phi @ F[M - 1 - i]
+    phi, chain = start.phi, [start.phi]
+    for Fi in F[::-1]:  # Φ after substituting each kept step, newest first
+        phi = phi @ Fi
+        chain.append(phi)
+    phis = np.array(chain)
     absphis = np.abs(phis)
     c0 = 0.5 * xlo + 0.5 * xhi
     r0 = radius(xlo, xhi, c0)
