@@ -45,9 +45,11 @@ up). ``b`` is the double ``fl(g0 + L fl(y - fl(h0 + H t)) - F cx)`` with ``t = f
 the exact ``g0 + L (y - h0 - H (c - ch)) - F cx`` is within ``γ_N`` (``N = n + ny + 6``) of
 ``|g0| + |L| (|y| + |h0| + |H| |t|) + |F| |cx|``. So ``n = ρ + |L| (r + ρ_h) + 2 γ_N`` times
 those magnitudes, plus ``N η (1 + Σ|L|) (1 + Σ|t|) (1 + ΣΔ)`` for the underflows, rounded up.
+
 (S) Alike: ``G = fl(I - fl(K Hx))`` is within ``γ (I + |K| |Hx|)`` of ``I - K Hx`` and acts on
 ``|x[k]| <= max(|xlo|, |xhi|)``; ``a = fl(K fl(fl(y - h0) + fl(Hx chx)))`` is within ``γ_N |K|
 (|y| + |h0| + |Hx| |chx|)`` of the exact; ``fl(K Hw)`` within ``γ |K| |Hw|``.
+
 (H) ``Φ`` is the double computed at each substitution, ``fl(Φ F)``: the exact ``Φ F`` differs
 by at most ``γ_n |Φ| |F|`` and acts on ``|x[j]| <= |c| + Δ`` of the step's linearisation box
 (which holds every later box of ``x[j]``); the products ``fl(Φ b)``, ``fl(Φ Fw)`` and the centre
