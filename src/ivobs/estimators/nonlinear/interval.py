@@ -12,7 +12,10 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    [w]_{k-1})`` and contract with ``[y_k]`` again. This bounds states the output sees only
    through the dynamics (the Hénon map with ``y = x2``: ``x1[k-1] = x2[k]/b``);
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
-   intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)``.
+   intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)`` (with the
+   window-centred form, step 4, from its own linearisation of ``f`` over the same box:
+   :func:`~ivobs.estimators.nonlinear.window.centred`, one evaluation of ``f`` and its
+   Jacobian for both).
 
 2'. **Further back** (``lag = L >= 2``): the boxes of ``(x[j], w[j])`` for the ``L`` steps
    ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j], w[j]) ∈ [x]_{j+1}`` and
@@ -28,6 +31,23 @@ the contractor network of the last steps iterated to its fixpoint (to within tha
 bounds well would dominate, stopping the sweeps while the well-measured states still narrow (CORA's
 six tanks; BENCHMARKS.md has the figures).
 
+4. **Window-centred form** (``window = M >= 1``; :mod:`~ivobs.estimators.nonlinear.window`):
+   each of the last ``M`` steps ``j`` keeps, from the mean-value forms of ``f`` and ``h`` over
+   its corrected box of ``ζ_j = (x[j], w[j])`` and a gain ``L_j``, the affine enclosure
+   ``x[j+1] = f(ζ_j) + L_j (y_j - h(ζ_j)) ∈ b_j + F_j x[j] + Fw_j (w[j] - cw_j) ± n_j``
+   (exact for every ``L_j``: ``y_j = h(ζ_j)``). With the filter form of step ``k``,
+   ``x[k] = x[k] + K (y_k - h(ζ_k)) ∈ a + G x[k] ± r``, and the transitions substituted
+   backwards, ``x[k] ∈ m_j + Φ_j x[j] ± R_j`` with ``Φ_j = G F_{k-1} ⋯ F_j`` carried as a
+   matrix; then, after the sweeps,
+
+       [x]_k <- [x]_k ∩ ⋂_j (m_j + Φ_j [x]_j ± R_j)      (j = k-M..k, [x]_j the kept boxes)
+
+   and ``[x]_k`` is contracted with ``[y_k]`` once more. This is the centred form
+   [Moore2009, Ch. 6] composed over the window in the coordinates of an observer (a Luenberger
+   correction of the interval observer of [Jaulin2001, Ch. 6]); the gains ``K``, ``L`` come
+   from a Kalman filter on the same linearisations with the boxes' squared radii as variances
+   [Kalman1960] (any gains are sound; these make the form tight).
+
 ``[y_k]`` is the measurement interval ``[down(y_k), up(y_k)]``: the reals the recorded double
 stands for (:func:`~ivobs.estimators.nonlinear.meanvalue.measurement`), so a sample within
 rounding of its bound is consistent.
@@ -37,15 +57,29 @@ rounds each operation outward (:mod:`ivobs.model.nonlinear`: ``+ - * /`` and pow
 ulp with ``nextafter``, elementary functions by their documented libm error): each returned
 box contains the exact image of the exact boxes it was computed from, at every magnitude.
 The contractors only remove points that cannot explain ``[y_k]``, and intersections of such
-enclosures are exact operations. By induction the box of ``x[k]`` contains the true state
+enclosures are exact operations. The window-centred form's hulls enclose the exact ones,
+every rounding of its linearisations, products and sums bounded
+(:mod:`~ivobs.estimators.nonlinear.window`, [Higham2002, Lemma 3.1]) and its bounds rounded
+outward. By induction the box of ``x[k]`` contains the true state
 whenever the plant follows the model with ``w[k] ∈ [w]`` and ``y[k]`` is its output rounded
 to a double; no margin is added (``proven_rounding``).
 
 **Wrapping.** Boxes are not closed under rotation: a map that contracts (``ρ(J) < 1``) can
-still grow a box when ``ρ(|J|) > 1`` (a random stable linear plant: widths of 1e36–1e140 after
-400 steps). This form does not prevent it; when the summed width passes :data:`WRAP_GROWTH`
-times the prior's, a warning says so with the two spectral radii at the box's centre and names
-the methods that keep such plants bounded (their zonotopes rotate with the map).
+still grow a box when ``ρ(|J|) > 1``: on random stable linear plants the box form alone (steps
+1-3, ``window=0``) reaches 1e12-1e126 times the exact hull's width after 400 steps. The
+window-centred form does not wrap: its dependence on the box ``j`` steps back is ``|Φ_j| r_j``
+with ``Φ_j`` the product of the observer's matrices, which decays like ``(A - L C)^(k-j)`` on a
+linear plant (where the box form grows like ``|A|^(k-j)``), and the remainders of the other
+steps enter through the same products. On those plants it stays within 1.07-1.68 times the
+exact hull (BENCHMARKS.md), about what nl-zonotope reaches (1.05-1.35). It costs
+``M`` small matrix products and two linearisations per step, so by default (``window=None``)
+it is used where the model's boxes would wrap: where the Jacobian ``J`` of ``f`` in ``x`` at
+the centre of the prior box and of the unknowns' box has ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)``
+(a rotation, or a coupling of mixed signs: the pendulum, not the Hénon map or the tanks, whose
+Jacobians there are similar to nonnegative matrices). Where the summed width still passes
+:data:`WRAP_GROWTH` times the prior's (the model expands in directions the outputs do not see,
+or ``window=0``), a warning says so once, with the two spectral radii at the box's centre, and
+names the methods whose sets rotate with the map.
 
 The box of ``x[k]`` uses ``u[0..k]``, ``y[0..k]`` (``data_used = "filter"``). A missing output
 component is skipped; a measurement that no point of the box can produce (an empty
@@ -55,22 +89,26 @@ contraction) is reported inconsistent and not used: the step continues from the 
 from __future__ import annotations
 
 import hashlib
+import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
 from ..._validate import as_int
 from ...errors import IvobsError
 from ...model import LinearSystem, NonlinearSystem
+from ...model.nonlinear.flow import FlowSystem
 from ...sets import Box
 from .. import register
 from ..base import Design, Estimator
 from ..state import OnlineState, Step, evolve
-from .meanvalue import measurement
+from . import window as wf
+from .meanvalue import Linearisation, measurement
 
 __all__ = [
+    "WINDOW",
     "WRAP_GROWTH",
     "NonlinearIntervalDesign",
     "NonlinearIntervalEstimator",
@@ -92,13 +130,25 @@ as wrapping."""
 MAX_LAG = 10
 """Most steps of the window contracted back (``lag``)."""
 
+WINDOW = 20
+"""Steps kept by the window-centred form (``window``; module docstring)."""
+
+MAX_WINDOW = 100
+"""Most steps of the window-centred form."""
+
+WRAP_MARGIN = 0.01
+"""How much faster than the map (``ρ(|J|)`` over ``ρ(J)``) boxes must grow under it for the
+window-centred form to be used by default (``window=None``)."""
+
 
 @dataclass(frozen=True)
 class NonlinearIntervalDesign(Design):
     """``lag``: steps back through the model at each correction (0 to :data:`MAX_LAG`);
-    ``w_lo``, ``w_hi``: the box ``[w]`` of the per-step unknowns."""
+    ``window``: steps of the window-centred form (0: none); ``w_lo``, ``w_hi``: the box
+    ``[w]`` of the per-step unknowns."""
 
     lag: int
+    window: int
     w_lo: np.ndarray
     w_hi: np.ndarray
     model: int
@@ -116,7 +166,12 @@ class NonlinearIntervalState(OnlineState):
     box of ``(x[k-1], w[k-1])``, ``prev_u`` = ``u[k-1]`` and ``prev_y`` = ``y[k-1]`` (NaN:
     missing or not used), for the step back (``back`` says whether there is one);
     ``hist_lo``, ``hist_hi`` (·, nx + nw), ``hist_u``, ``hist_y``: the same for the steps
-    before ``k - 1`` kept by ``lag >= 2``, oldest first."""
+    before ``k - 1`` kept by ``lag >= 2``, oldest first. The window-centred form
+    (``window >= 1``): ``win_lo``, ``win_hi`` the boxes of ``x[j]`` of the kept steps ``j``
+    (oldest first, the last ``k - 1``) and their transitions ``j -> j + 1`` (``win_b``,
+    ``win_F``, ``win_Fw``, ``win_n``, ``win_e``, ``win_dw``, ``win_eta``:
+    :class:`~ivobs.estimators.nonlinear.window.Transition`); ``cov``: the prior covariance of
+    the gains' Riccati recursion."""
 
     lo: np.ndarray
     hi: np.ndarray
@@ -129,18 +184,29 @@ class NonlinearIntervalState(OnlineState):
     hist_hi: np.ndarray = field(default_factory=_empty)
     hist_u: np.ndarray = field(default_factory=_empty)
     hist_y: np.ndarray = field(default_factory=_empty)
+    win_lo: np.ndarray = field(default_factory=_empty)
+    win_hi: np.ndarray = field(default_factory=_empty)
+    win_b: np.ndarray = field(default_factory=_empty)
+    win_F: np.ndarray = field(default_factory=_empty)
+    win_Fw: np.ndarray = field(default_factory=_empty)
+    win_n: np.ndarray = field(default_factory=_empty)
+    win_e: np.ndarray = field(default_factory=_empty)
+    win_dw: np.ndarray = field(default_factory=_empty)
+    win_eta: np.ndarray = field(default_factory=_empty)
+    cov: np.ndarray = field(default_factory=_empty)
     bounds: ClassVar[tuple[tuple[str, str], ...]] = (
         ("lo", "hi"),
         ("prev_lo", "prev_hi"),
         ("hist_lo", "hist_hi"),
+        ("win_lo", "win_hi"),
     )
 
 
 @register
 class NonlinearIntervalEstimator(Estimator):
     """Interval observer for nonlinear systems: natural ∩ mean-value prediction and
-    forward-backward contraction by the measurement, one step back through ``h∘f``
-    (module docstring).
+    forward-backward contraction by the measurement, one step back through ``h∘f``, and a
+    window-centred form that keeps boxes from wrapping (module docstring).
 
     Parameters
     ----------
@@ -153,13 +219,16 @@ class NonlinearIntervalEstimator(Estimator):
         (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network (tighter where
         the outputs see a state only through several steps of the dynamics, at about ``L``
         times the cost of a step back; not for sampled continuous-time plants)
+    window : steps ``M`` of the window-centred form (0 to :data:`MAX_WINDOW`; 0: none, the box
+        form alone); None (default): :data:`WINDOW` where the model's boxes would wrap (module
+        docstring, "Wrapping"), else 0
     """
 
     name = "nl-interval"
     order = 900
     summary = (
         "nonlinear systems: natural ∩ mean-value inclusion, forward-backward contraction by "
-        "y and one step back through h∘f"
+        "y, one step back through h∘f, and a window-centred form that does not wrap"
     )
     reference = "[Jaulin2001, Ch. 4], [Moore2009, Ch. 6]"
     data_used = "filter"
@@ -168,7 +237,15 @@ class NonlinearIntervalEstimator(Estimator):
     proven_rounding = True
     design: NonlinearIntervalDesign
 
-    def __init__(self, sys: Any, x0: Box | None = None, *, lag: int = 1, **options: Any):
+    def __init__(
+        self,
+        sys: Any,
+        x0: Box | None = None,
+        *,
+        lag: int = 1,
+        window: int | None = None,
+        **options: Any,
+    ):
         super().__init__(sys, x0, **options)
         # a linear model is converted; self.sys stays the model given (the monitor reads it)
         if isinstance(sys, LinearSystem):
@@ -177,12 +254,30 @@ class NonlinearIntervalEstimator(Estimator):
         lag = as_int("lag", lag, minimum=0)
         if lag > MAX_LAG:
             raise IvobsError(f"lag: expected 0 to {MAX_LAG} steps back, got {lag}")
+        if window is None:
+            window = _auto_window(sys, self.x0)
+        else:
+            window = as_int("window", window, minimum=0)
+            if window > MAX_WINDOW:
+                raise IvobsError(f"window: expected 0 to {MAX_WINDOW} steps, got {window}")
+            if window and _jacobian_at_prior(sys, self.x0) is None:
+                raise IvobsError(
+                    "window: the window-centred form linearises f, whose Jacobian this model "
+                    "does not give (a validated flow of a non-smooth f); use window=0"
+                )
         self._fc = sys.f_contractors() if lag > 1 else None
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
         self.design = NonlinearIntervalDesign(
-            lag=lag, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
+            lag=lag,
+            window=window,
+            w_lo=w.lo.copy(),
+            w_hi=w.hi.copy(),
+            model=int(digest[:12], 16),
         )
+        self._f_evals = sys.evaluators("f") if window else None
+        self._flow = isinstance(sys, FlowSystem)
+        self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
         self._hf = sys.hf_contractors() if lag and sys.ny else None
         # growth that says the interval form wraps (module docstring, "Wrapping")
@@ -229,9 +324,9 @@ class NonlinearIntervalEstimator(Estimator):
     def _initial_state(self) -> NonlinearIntervalState:
         assert self.x0 is not None
         m = self.model
-        window: dict[str, np.ndarray] = {}  # kept only by lag >= 2
+        extra: dict[str, np.ndarray] = {}  # the window of lag >= 2, the window-centred form
         if self._fc is not None:
-            window = {
+            extra = {
                 "prev_y": np.full(m.ny, np.nan),
                 "hist_lo": np.zeros((0, m.nx + m.nw)),
                 "hist_hi": np.zeros((0, m.nx + m.nw)),
@@ -245,7 +340,22 @@ class NonlinearIntervalEstimator(Estimator):
             prev_hi=np.zeros(m.nx + m.nw),
             prev_u=np.zeros(m.nu),
         )
-        return evolve(state, **window) if window else state
+        if self.design.window:
+            nx, nw = m.nx, m.nw
+            r = 0.5 * self.x0.hi - 0.5 * self.x0.lo
+            extra.update(
+                win_lo=np.zeros((0, nx)),
+                win_hi=np.zeros((0, nx)),
+                win_b=np.zeros((0, nx)),
+                win_F=np.zeros((0, nx, nx)),
+                win_Fw=np.zeros((0, nx, nw)),
+                win_n=np.zeros((0, nx)),
+                win_e=np.zeros((0, nx)),
+                win_dw=np.zeros((0, nw)),
+                win_eta=np.zeros(0),
+                cov=np.diag(r * r),
+            )
+        return evolve(state, **extra) if extra else state
 
     def _step(
         self, state: NonlinearIntervalState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -257,8 +367,10 @@ class NonlinearIntervalEstimator(Estimator):
         inconsistent = False
         ylo, yhi = measurement(y_k)
         chain = self._chain(state)
-        if any(v == v for v in ylo):
-            ok, prev = True, None
+        seen = any(v == v for v in ylo)
+        prev = None
+        if seen:
+            ok = True
             for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
                 before = [b - a for a, b in zip(vl[:nx], vh[:nx])]
                 ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
@@ -272,27 +384,164 @@ class NonlinearIntervalEstimator(Estimator):
                     break
             if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
-                vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
-                chain = self._chain(state)
-        f = sys._f  # 3. prediction: natural ∩ mean-value form
-        pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
-        if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
-            self._say_wrapping(state.k, pl, ph, u)
+        win: _Form | None = None
+        if self.design.window and not inconsistent:  # 4. the window-centred form
+            win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, seen, chain, prev)
+            if win is None:  # empty: y_k contradicts the model and the window
+                inconsistent = True
+            elif seen and win.narrowed and not sys.contract_lists(vl, vh, u, ylo, yhi):
+                inconsistent = True
+        if inconsistent:
+            vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
+            chain = self._chain(state)
+            win = None
+            if self.design.window:
+                win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
+        if self.design.window and win is None:  # the model itself contradicted: start again
+            rows = self._rows(state, [], None)
+            win = _Form(wf.Rows(*(a[:0] for a in rows)), None, None, state.cov, None, False)
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         hist: dict[str, np.ndarray] = {}
         if self._fc is not None:
             hist = self._history(chain, y_k, inconsistent)
-        new = NonlinearIntervalState(  # fresh (cheaper than replace): the base sets k
+        pred = None
+        if win is not None:
+            slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
+            hist.update(slid)
+        if pred is None:  # 3. prediction: natural ∩ mean-value form
+            f = sys._f
+            pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
+        else:  # (from step 4's linearisation of f)
+            pl, ph = pred[0].tolist(), pred[1].tolist()
+        if not self._wrapping_said and sum(ph) - sum(pl) > self._wrap_limit:
+            self._say_wrapping(state.k, pl, ph, u)
+        new = evolve(  # a new object (cheaper than the constructor): the base sets k
+            state,
             lo=np.array(pl, dtype=float),
             hi=np.array(ph, dtype=float),
             prev_lo=prev_lo,
             prev_hi=prev_hi,
             prev_u=u_k.copy(),
             back=True,
+            **hist,
         )
-        if hist:
-            new = evolve(new, **hist)
         return Step(new, prev_lo[:nx], prev_hi[:nx], inconsistent)
+
+    def _form(
+        self,
+        st: NonlinearIntervalState,
+        vl: list[float],
+        vh: list[float],
+        u_k: np.ndarray,
+        y_k: np.ndarray,
+        ylo: list[float],
+        yhi: list[float],
+        seen: bool,
+        chain: list[_Link],
+        prev: tuple[list[float], list[float]] | None,
+    ) -> _Form | None:
+        """Step 4 of the module docstring on the box ``vl, vh`` of ``(x[k], w[k])`` (narrowed
+        in place): the filter form of ``y_k`` (when ``seen``) composed with the kept
+        transitions, intersected over the kept boxes; None when the intersection is empty."""
+        nx = self.model.nx
+        lo, hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+        lh: Linearisation | None = None
+        g: wf.Gains | None = None
+        if seen and self._h_evals is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
+            lh = wf.affine(self._h_evals, lo, hi, u_k, nx)
+            if np.isfinite(lh.J).all() and np.isfinite(lh.rho).all():
+                g = wf.filter_gain(st.cov, lh, ~np.isnan(y_k), wf.radius(lo, hi, lh.c)[nx:], nx)
+            else:
+                lh = None
+        K = np.zeros((nx, len(y_k))) if g is None else g.K
+        meas = wf.measured(y_k, ylo, yhi)
+        start = wf.filter_start(lh, K, lo, hi, lo[:nx], hi[:nx], meas, nx)
+        rows = self._rows(st, chain, prev)
+        with np.errstate(invalid="ignore", over="ignore"):
+            cl, ch = wf.hull(start, lo[:nx], hi[:nx], rows)
+            nl = np.fmax(lo[:nx], np.fmax.reduce(cl, axis=0))
+            nh = np.fmin(hi[:nx], np.fmin.reduce(ch, axis=0))
+        if (nl > nh).any():
+            return None
+        narrowed = bool((nl > lo[:nx]).any() or (nh < hi[:nx]).any())
+        vl[:nx], vh[:nx] = nl.tolist(), nh.tolist()
+        return _Form(rows, lh, g, st.cov, meas, narrowed)
+
+    def _rows(
+        self,
+        st: NonlinearIntervalState,
+        chain: list[_Link],
+        prev: tuple[list[float], list[float]] | None,
+    ) -> wf.Rows:
+        """The kept steps of the window-centred form, their boxes narrowed by what this step's
+        contraction back (``prev``, ``chain``) found."""
+        nx = self.model.nx
+        lo, hi = st.win_lo, st.win_hi
+        boxes = [(c.lo, c.hi) for c in chain] if chain else ([prev] if prev is not None else [])
+        if boxes and lo.shape[0]:
+            lo, hi = lo.copy(), hi.copy()
+            for i, (bl, bh) in enumerate(boxes[-lo.shape[0] :][::-1]):
+                j = lo.shape[0] - 1 - i
+                lo[j] = np.maximum(lo[j], bl[:nx])
+                hi[j] = np.minimum(hi[j], bh[:nx])
+        return wf.Rows(lo, hi, st.win_b, st.win_F, st.win_Fw, st.win_n, st.win_e, st.win_dw,
+                       st.win_eta)  # fmt: skip
+
+    def _slide(
+        self,
+        win: _Form,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        u_k: np.ndarray,
+        ny: int,
+    ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray] | None]:
+        """The window-centred form's part of the next state: the box of ``x[k]`` and the
+        transition ``k -> k + 1`` appended (the oldest dropped past ``window`` steps), and the
+        next prior covariance. A transition that is not finite empties the window. Also the
+        prediction (step 3) from the same linearisation of ``f``: the natural inclusion met
+        with the centred form, as ``F`` (None for a validated flow, whose own ``F`` is used,
+        or without a linearisation)."""
+        nx = self.model.nx
+        assert self._f_evals is not None
+        rows, P = win.rows, None
+        tr: wf.Transition | None = None
+        pred = None
+        if win.meas is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
+            lf = wf.affine(self._f_evals, lo, hi, u_k, nx)
+            if not self._flow:
+                pred = wf.centred(lf, lo, hi)
+            dw = wf.radius(lo, hi, lf.c)[nx:]
+            L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
+            tr = wf.transition(lf, win.lh, L, lo, hi, win.meas, nx)
+            total = tr.b.sum() + tr.F.sum() + tr.Fw.sum() + tr.n.sum() + tr.e.sum() + tr.dw.sum()
+            if not math.isfinite(float(total) + tr.eta):  # (a sum that overflows counts too)
+                tr = None
+        if P is None or not float(np.max(np.abs(P), initial=0.0)) < 1e150:  # (NaN: not <)
+            r = np.where(np.isfinite(hi - lo), 0.5 * hi - 0.5 * lo, 1.0)[:nx]
+            P = np.diag(np.minimum(r * r, 1e150))
+        if tr is None:  # the chain of transitions breaks: start again
+            return {
+                "win_lo": rows.lo[:0], "win_hi": rows.hi[:0], "win_b": rows.b[:0],
+                "win_F": rows.F[:0], "win_Fw": rows.Fw[:0], "win_n": rows.n[:0],
+                "win_e": rows.e[:0], "win_dw": rows.dw[:0], "win_eta": rows.eta[:0], "cov": P,
+            }, pred  # fmt: skip
+        keep = max(rows.lo.shape[0] - (self.design.window - 1), 0)
+
+        def add(old: np.ndarray, row: Any) -> np.ndarray:
+            return np.concatenate([old[keep:], np.asarray(row, dtype=float)[None]])
+
+        return {
+            "win_lo": add(rows.lo, lo[:nx]),
+            "win_hi": add(rows.hi, hi[:nx]),
+            "win_b": add(rows.b, tr.b),
+            "win_F": add(rows.F, tr.F),
+            "win_Fw": add(rows.Fw, tr.Fw),
+            "win_n": add(rows.n, tr.n),
+            "win_e": add(rows.e, tr.e),
+            "win_dw": add(rows.dw, tr.dw),
+            "win_eta": add(rows.eta, tr.eta),
+            "cov": P,
+        }, pred
 
     def _chain(self, st: NonlinearIntervalState) -> list[_Link]:
         """The kept steps ``k-L..k-1`` as boxes to contract (copies), oldest first; empty
@@ -400,6 +649,48 @@ class NonlinearIntervalEstimator(Estimator):
             vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
+
+
+def _auto_window(sys: NonlinearSystem, x0: Box | None) -> int:
+    """:data:`WINDOW` where boxes wrap under the model, else 0: where the Jacobian ``J`` of
+    ``f`` in ``x`` at the centre of the prior box and of the unknowns' box has
+    ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)`` (a rotation, or a coupling of mixed signs: the box of
+    ``J [x]`` is wider than the map makes the set). 0 where that Jacobian does not exist (a
+    validated flow of a non-smooth ``f``) or is not finite."""
+    J = _jacobian_at_prior(sys, x0)
+    if J is None or not np.isfinite(J).all():
+        return 0
+    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
+    rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
+    return WINDOW if rho_abs > (1.0 + WRAP_MARGIN) * rho else 0
+
+
+def _jacobian_at_prior(sys: NonlinearSystem, x0: Box | None) -> np.ndarray | None:
+    """``d f / d x`` at the centre of the prior box and of the unknowns' box (inputs 0), or
+    None where it cannot be evaluated."""
+    if x0 is None:
+        return None
+    c = 0.5 * x0.lo + 0.5 * x0.hi
+    wc = 0.5 * sys.w_box.lo + 0.5 * sys.w_box.hi
+    try:
+        jl, jh = sys.f_jac_box(c, c, np.zeros(sys.nu), wc, wc)[:2]
+    except IvobsError:
+        return None
+    out: np.ndarray = 0.5 * jl + 0.5 * jh
+    return out
+
+
+class _Form(NamedTuple):
+    """What the window-centred form of a step passes to its end: the kept steps (boxes
+    narrowed), ``h`` linearised over the step's box and the filter gain's parts (None: no
+    measurement used), the prior covariance and whether the box narrowed."""
+
+    rows: wf.Rows
+    lh: Linearisation | None
+    g: wf.Gains | None
+    P: np.ndarray
+    meas: wf.Measured | None
+    narrowed: bool
 
 
 @dataclass
