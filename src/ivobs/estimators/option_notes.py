@@ -397,6 +397,14 @@ NOTES: dict[str, dict[str, Note]] = {
             "(tighter, about L times a step back's cost; not for sampled continuous-time "
             "plants).",
         ),
+        "window": Note(
+            "Steps M of the window-centred form (affine enclosures of the last M transitions "
+            "composed with an output correction, met with the box); None: 20 where the model's "
+            "boxes would wrap (judged from the Jacobian at the prior's centre), else 0.",
+            "0 for the box form alone (several times faster per step) where the boxes stay "
+            "narrow; a number to force the form on a model that rotates or couples its states "
+            "away from the prior's centre.",
+        ),
     },
     "nl-zonotope": {
         "order": Note(
