@@ -127,6 +127,9 @@ WRAP_GROWTH = 1e6
 as wrapping."""
 
 
+_STEP_FIELDS = wf.Transition._fields
+"""The fields of a kept transition, each stored in the state as ``win_<field>``."""
+
 MAX_LAG = 10
 """Most steps of the window contracted back (``lag``)."""
 
@@ -398,8 +401,8 @@ class NonlinearIntervalEstimator(Estimator):
             if self.design.window:
                 win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
         if self.design.window and win is None:  # the model itself contradicted: start again
-            rows = self._rows(state, [], None)
-            win = _Form(wf.Rows(*(a[:0] for a in rows)), None, None, state.cov, None, False)
+            rows = self._rows(state, [], None).empty()
+            win = _Form(rows, None, None, state.cov, None, False)
         prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         hist: dict[str, np.ndarray] = {}
         if self._fc is not None:
@@ -484,8 +487,7 @@ class NonlinearIntervalEstimator(Estimator):
                 j = lo.shape[0] - 1 - i
                 lo[j] = np.maximum(lo[j], bl[:nx])
                 hi[j] = np.minimum(hi[j], bh[:nx])
-        return wf.Rows(lo, hi, st.win_b, st.win_F, st.win_Fw, st.win_n, st.win_e, st.win_dw,
-                       st.win_eta)  # fmt: skip
+        return wf.Rows(lo, hi, wf.Transition(*(getattr(st, f"win_{f}") for f in _STEP_FIELDS)))
 
     def _slide(
         self,
@@ -520,26 +522,20 @@ class NonlinearIntervalEstimator(Estimator):
             r = np.where(np.isfinite(hi - lo), 0.5 * hi - 0.5 * lo, 1.0)[:nx]
             P = np.diag(np.minimum(r * r, 1e150))
         if tr is None:  # the chain of transitions breaks: start again
-            return {
-                "win_lo": rows.lo[:0], "win_hi": rows.hi[:0], "win_b": rows.b[:0],
-                "win_F": rows.F[:0], "win_Fw": rows.Fw[:0], "win_n": rows.n[:0],
-                "win_e": rows.e[:0], "win_dw": rows.dw[:0], "win_eta": rows.eta[:0], "cov": P,
-            }, pred  # fmt: skip
-        keep = max(rows.lo.shape[0] - (self.design.window - 1), 0)
+            rows = rows.empty()
+            steps = dict(zip(_STEP_FIELDS, rows.steps))
+        else:
+            keep = max(rows.lo.shape[0] - (self.design.window - 1), 0)
 
-        def add(old: np.ndarray, row: Any) -> np.ndarray:
-            return np.concatenate([old[keep:], np.asarray(row, dtype=float)[None]])
+            def add(old: np.ndarray, row: Any) -> np.ndarray:
+                return np.concatenate([old[keep:], np.asarray(row, dtype=float)[None]])
 
+            rows = wf.Rows(add(rows.lo, lo[:nx]), add(rows.hi, hi[:nx]), rows.steps)
+            steps = {f: add(old, new) for f, old, new in zip(_STEP_FIELDS, rows.steps, tr)}
         return {
-            "win_lo": add(rows.lo, lo[:nx]),
-            "win_hi": add(rows.hi, hi[:nx]),
-            "win_b": add(rows.b, tr.b),
-            "win_F": add(rows.F, tr.F),
-            "win_Fw": add(rows.Fw, tr.Fw),
-            "win_n": add(rows.n, tr.n),
-            "win_e": add(rows.e, tr.e),
-            "win_dw": add(rows.dw, tr.dw),
-            "win_eta": add(rows.eta, tr.eta),
+            "win_lo": rows.lo,
+            "win_hi": rows.hi,
+            **{f"win_{f}": a for f, a in steps.items()},
             "cov": P,
         }, pred
 

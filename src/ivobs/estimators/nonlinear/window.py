@@ -186,7 +186,7 @@ class Transition(NamedTuple):
     n: np.ndarray
     e: np.ndarray
     dw: np.ndarray
-    eta: float
+    eta: Any
 
 
 def transition(
@@ -284,17 +284,16 @@ def filter_start(
 
 class Rows(NamedTuple):
     """The kept steps, oldest first: the boxes ``[lo, hi]`` of ``x[j]`` and the transitions
-    ``j -> j + 1`` (:class:`Transition`, stacked)."""
+    ``j -> j + 1`` (a :class:`Transition` whose fields are stacked along a first axis over the
+    steps, ``eta`` an array)."""
 
     lo: np.ndarray
     hi: np.ndarray
-    b: np.ndarray
-    F: np.ndarray
-    Fw: np.ndarray
-    n: np.ndarray
-    e: np.ndarray
-    dw: np.ndarray
-    eta: np.ndarray
+    steps: Transition
+
+    def empty(self) -> Rows:
+        """No kept step (the same shapes otherwise)."""
+        return Rows(self.lo[:0], self.hi[:0], Transition(*(a[:0] for a in self.steps)))
 
 
 def hull(start: Start, xlo: np.ndarray, xhi: np.ndarray, rows: Rows) -> tuple[np.ndarray, ...]:
@@ -304,7 +303,8 @@ def hull(start: Start, xlo: np.ndarray, xhi: np.ndarray, rows: Rows) -> tuple[np
     formed one after the other; all the rest is done on the stack of them."""
     nx = len(xlo)
     M = rows.lo.shape[0]
-    F = rows.F
+    steps = rows.steps
+    F = steps.F
     phi, chain = start.phi, [start.phi]
     for Fi in F[::-1]:  # Φ after substituting each kept step, newest first
         phi = phi @ Fi
@@ -321,11 +321,11 @@ def hull(start: Start, xlo: np.ndarray, xhi: np.ndarray, rows: Rows) -> tuple[np
         c = 0.5 * lo + 0.5 * hi
         r = radius(lo, hi, c)
         Fc = np.einsum("mij,mj->mi", F[::-1], c)
-        cols = np.concatenate([rows.b[::-1, :, None], Fc[:, :, None], rows.Fw[::-1]], axis=2)
+        cols = np.concatenate([steps.b[::-1, :, None], Fc[:, :, None], steps.Fw[::-1]], axis=2)
         P = phis[:-1] @ cols  # (M, nx, 2 + nw): Φ b, Φ F c, Φ Fw before each substitution
-        S = absphis[:-1] @ np.stack([rows.n[::-1], rows.e[::-1]], axis=2)  # |Φ| n, |Φ| e
+        S = absphis[:-1] @ np.stack([steps.n[::-1], steps.e[::-1]], axis=2)  # |Φ| n, |Φ| e
         cs = np.cumsum(P[:, :, 0], axis=0)  # in order: each partial sum one rounding
-        wsum = np.einsum("mij,mj->mi", np.abs(P[:, :, 2:]), rows.dw[::-1])
+        wsum = np.einsum("mij,mj->mi", np.abs(P[:, :, 2:]), steps.dw[::-1])
         R = start.R + np.cumsum(S[:, :, 0] + g * S[:, :, 1] + wsum + _err(cs), axis=0)
         m = start.m + cs
         spread = np.einsum("mij,mj->mi", absphis[1:], r)
@@ -333,8 +333,8 @@ def hull(start: Start, xlo: np.ndarray, xhi: np.ndarray, rows: Rows) -> tuple[np
         radii = np.concatenate([radius0[None], R + spread + _err(m)])
     else:
         centres, radii = centre0[None], radius0[None]
-    eta = start.eta + float(rows.eta.sum()) + (M + 1) * (nx + 2) * ETA
-    rad = upper(radii + _err(centres) + eta, 8 * (M + 2) + 2 * (nx + rows.dw.shape[1]) + 8)
+    eta = start.eta + float(np.sum(steps.eta)) + (M + 1) * (nx + 2) * ETA
+    rad = upper(radii + _err(centres) + eta, 8 * (M + 2) + 2 * (nx + steps.dw.shape[1]) + 8)
     return down(centres - rad), up(centres + rad)
 
 
