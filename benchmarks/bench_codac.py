@@ -119,7 +119,7 @@ def export_model(sys_: Any) -> dict[str, Any]:
     }
 
 
-def run_ivobs(name: str, repeats: int, lag: int = 1) -> dict[str, Any]:
+def run_ivobs(name: str, repeats: int, lag: int = 1, window: int | None = None) -> dict[str, Any]:
     import ivobs
     from ivobs.estimators.nonlinear.meanvalue import measurement
 
@@ -129,7 +129,7 @@ def run_ivobs(name: str, repeats: int, lag: int = 1) -> dict[str, Any]:
     tr = sc.simulate("vertex", seed=0)
     cpu = math.inf
     for _ in range(repeats):
-        est = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0, lag=lag)
+        est = ivobs.make_estimator("nl-interval", sc.system, x0=sc.x0, lag=lag, window=window)
         c0 = time.process_time()
         res = est.run(tr.u, tr.y)
         cpu = min(cpu, time.process_time() - c0)
@@ -185,6 +185,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--dump", help="save every step's boxes to this .npz")
     ap.add_argument("--lag", type=int, default=1, help="nl-interval's window (steps back)")
+    ap.add_argument(
+        "--window",
+        type=int,
+        default=None,
+        help="nl-interval's window-centred form (steps; default: the method's)",
+    )
     a = ap.parse_args(argv)
     if a.worker:
         worker(Path(a.worker))
@@ -196,14 +202,14 @@ def main(argv: list[str] | None = None) -> None:
     centred = "without" if a.no_centred else "with"
     print(
         f"codac {version} ({exe}), network {a.network} {centred} centred form, gain {a.gain}, "
-        f"windows {windows}, nl-interval lag {a.lag}"
+        f"windows {windows}, nl-interval lag {a.lag}, window {a.window}"
     )
     rows = []
     dump: dict[str, np.ndarray] = {}
     with tempfile.TemporaryDirectory(prefix="bench_codac_") as tmp:
         d = Path(tmp)
         for name in a.scenarios.split(","):
-            iv = run_ivobs(name, a.repeats, a.lag)
+            iv = run_ivobs(name, a.repeats, a.lag, a.window)
             np.savez(
                 d / "in.npz",
                 **{k: iv[k] for k in ("u", "ylo", "yhi", "lo", "hi")},
