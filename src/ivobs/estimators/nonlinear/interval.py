@@ -297,14 +297,9 @@ class NonlinearIntervalEstimator(Estimator):
         if all(np.isfinite(lo)) and all(np.isfinite(hi)):
             c = [0.5 * a + 0.5 * b for a, b in zip(lo, hi)]
             wc = [0.5 * a + 0.5 * b for a, b in zip(self._wl, self._wh)]
-            try:
-                jl, jh = self.model.f_jac_box(c, c, u, wc, wc)[:2]  # d f / d x
-                J = 0.5 * np.asarray(jl) + 0.5 * np.asarray(jh)
-            except IvobsError:
-                J = np.full((1, 1), np.nan)
-            if np.all(np.isfinite(J)):
-                rho = float(np.max(np.abs(np.linalg.eigvals(J))))
-                rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
+            radii = _radii(_jacobian(self.model, c, u, wc))
+            if radii is not None:
+                rho, rho_abs = radii
                 why = (
                     f"the Jacobian at the box's centre has spectral radius {rho:.3g}, its "
                     f"magnitude {rho_abs:.3g}"
@@ -653,11 +648,10 @@ def _auto_window(sys: NonlinearSystem, x0: Box | None) -> int:
     ``ρ(|J|) > (1 + WRAP_MARGIN) ρ(J)`` (a rotation, or a coupling of mixed signs: the box of
     ``J [x]`` is wider than the map makes the set). 0 where that Jacobian does not exist (a
     validated flow of a non-smooth ``f``) or is not finite."""
-    J = _jacobian_at_prior(sys, x0)
-    if J is None or not np.isfinite(J).all():
+    radii = _radii(_jacobian_at_prior(sys, x0))
+    if radii is None:
         return 0
-    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
-    rho_abs = float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
+    rho, rho_abs = radii
     return WINDOW if rho_abs > (1.0 + WRAP_MARGIN) * rho else 0
 
 
@@ -666,14 +660,27 @@ def _jacobian_at_prior(sys: NonlinearSystem, x0: Box | None) -> np.ndarray | Non
     None where it cannot be evaluated."""
     if x0 is None:
         return None
-    c = 0.5 * x0.lo + 0.5 * x0.hi
     wc = 0.5 * sys.w_box.lo + 0.5 * sys.w_box.hi
+    return _jacobian(sys, 0.5 * x0.lo + 0.5 * x0.hi, np.zeros(sys.nu), wc)
+
+
+def _jacobian(sys: NonlinearSystem, c: Any, u: Any, wc: Any) -> np.ndarray | None:
+    """``d f / d x`` at the point ``(c, u, wc)`` (the midpoint of the model's enclosure), or
+    None where it cannot be evaluated."""
     try:
-        jl, jh = sys.f_jac_box(c, c, np.zeros(sys.nu), wc, wc)[:2]
+        jl, jh = sys.f_jac_box(c, c, u, wc, wc)[:2]
     except IvobsError:
         return None
-    out: np.ndarray = 0.5 * jl + 0.5 * jh
+    out: np.ndarray = 0.5 * np.asarray(jl) + 0.5 * np.asarray(jh)
     return out
+
+
+def _radii(J: np.ndarray | None) -> tuple[float, float] | None:
+    """The spectral radii ``ρ(J)`` and ``ρ(|J|)`` (None for no or a non-finite ``J``)."""
+    if J is None or not np.isfinite(J).all():
+        return None
+    rho = float(np.max(np.abs(np.linalg.eigvals(J))))
+    return rho, float(np.max(np.abs(np.linalg.eigvals(np.abs(J)))))
 
 
 class _Form(NamedTuple):
