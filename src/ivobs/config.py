@@ -37,8 +37,7 @@ from contextlib import contextmanager
 from typing import Any, NamedTuple
 
 from .errors import IvobsError
-from .estimators import Estimator, get, methods
-from .estimators._inputs import check_option_types
+from .estimators import Estimator, checked_options, get, methods
 from .estimators._overrides import OVERRIDES
 
 __all__ = [
@@ -65,24 +64,6 @@ class OptionDoc(NamedTuple):
     common: bool
 
 
-def _method(method: Any) -> type[Estimator]:
-    """The class of ``method`` (an unknown name: the error lists the known ones)."""
-    return get(method)
-
-
-def _checked(cls: type[Estimator], options: dict[str, Any]) -> dict[str, Any]:
-    """``options`` of ``cls``: every name one of its options, one-value options not arrays
-    (NumPy scalars as Python ones); the values themselves are the method's to check."""
-    allowed = cls.options()
-    unknown = [name for name in options if name not in allowed]
-    if unknown:
-        raise IvobsError(
-            f"options: {cls.name} does not accept {', '.join(map(repr, unknown))}; "
-            f"accepted options: {', '.join(allowed) or '(none)'}"
-        )
-    return check_option_types(cls, options)
-
-
 def defaults(method: str | None = None) -> dict[str, Any]:
     """The defaults in effect: the class's signature with this process's changes.
 
@@ -95,7 +76,7 @@ def defaults(method: str | None = None) -> dict[str, Any]:
         for name in methods():
             out.update({f"{name}.{k}": v for k, v in defaults(name).items()})
         return out
-    cls = _method(method)
+    cls = get(method)
     return {**cls.option_defaults(), **OVERRIDES.get(cls.name, {})}
 
 
@@ -104,7 +85,7 @@ def overrides(method: str | None = None) -> dict[str, Any]:
     ``{method: {option: value}}`` of every method changed (``None``). Copies."""
     if method is None:
         return {name: dict(opts) for name, opts in OVERRIDES.items() if opts}
-    return dict(OVERRIDES.get(_method(method).name, {}))
+    return dict(OVERRIDES.get(get(method).name, {}))
 
 
 def set_defaults(method: str, **options: Any) -> None:
@@ -112,8 +93,8 @@ def set_defaults(method: str, **options: Any) -> None:
     :func:`reset_defaults`. Every name must be an option of the method
     (:class:`~ivobs.IvobsError` listing the accepted ones otherwise); the values are checked by
     the method when it is built, as if passed there."""
-    cls = _method(method)
-    checked = _checked(cls, options)
+    cls = get(method)
+    checked = checked_options(cls, options)
     if checked:
         OVERRIDES.setdefault(cls.name, {}).update(checked)
 
@@ -129,11 +110,11 @@ def reset_defaults(method: str | None = None, *options: str) -> None:
             )
         OVERRIDES.clear()
         return
-    cls = _method(method)
+    cls = get(method)
     if not options:
         OVERRIDES.pop(cls.name, None)
         return
-    _checked(cls, dict.fromkeys(options))
+    checked_options(cls, dict.fromkeys(options))
     current = OVERRIDES.get(cls.name, {})
     for name in options:
         current.pop(name, None)
@@ -145,8 +126,8 @@ def reset_defaults(method: str | None = None, *options: str) -> None:
 def using(method: str, **options: Any) -> Iterator[dict[str, Any]]:
     """:func:`set_defaults` for the ``with`` block only: on leaving it (an exception too) the
     method's defaults are what they were before. Yields the method's defaults in effect."""
-    cls = _method(method)
-    checked = _checked(cls, options)
+    cls = get(method)
+    checked = checked_options(cls, options)
     before = OVERRIDES.get(cls.name)
     saved = None if before is None else dict(before)
     OVERRIDES.setdefault(cls.name, {}).update(checked)
@@ -165,7 +146,7 @@ def describe(method: str | None = None) -> list[OptionDoc]:
     option of a method defined outside ivobs that no note covers)."""
     from .estimators.option_notes import note
 
-    names = methods() if method is None else [_method(method).name]
+    names = methods() if method is None else [get(method).name]
     base = Estimator.option_defaults()
     out = []
     for name in names:

@@ -102,7 +102,7 @@ def markdown_table() -> str:
     for row in rows():
         cells = [f"`{row['method']}`", row["summary"], row["reference"]]
         cells += [row[c] for c in COLUMNS[2:]]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
     return "\n".join(lines)
 
 

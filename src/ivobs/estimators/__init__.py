@@ -25,6 +25,7 @@ __all__ = [
     "Design",
     "Entry",
     "Estimator",
+    "checked_options",
     "get",
     "make_estimator",
     "methods",
@@ -122,6 +123,13 @@ def make_estimator(
         sys = LinearSystem.from_statespace(sys)
     if isinstance(sys, NonlinearSystem) and not cls.supports_nonlinear:
         raise IvobsError(nonlinear_refusal(cls.name))
+    return cls(sys, x0, **checked_options(cls, options))
+
+
+def checked_options(cls: type[Estimator], options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` of ``cls``: every name one of its options (an error listing the accepted
+    ones otherwise), one-value options not arrays (NumPy scalars as Python ones); the values
+    themselves are the method's to check when it is built."""
     allowed = cls.options()
     unknown = sorted(set(options) - set(allowed))
     if unknown:
@@ -129,7 +137,7 @@ def make_estimator(
             f"options: {cls.name} does not accept {', '.join(map(repr, unknown))}; "
             f"accepted options: {', '.join(allowed) or '(none)'}"
         )
-    return cls(sys, x0, **check_option_types(cls, options))
+    return check_option_types(cls, options)
 
 
 def _methods_with(flag: str) -> list[str]:
