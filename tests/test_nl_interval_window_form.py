@@ -62,18 +62,19 @@ def test_random_stable_plants_are_contained_over_long_runs(seed):
 @pytest.mark.slow
 @pytest.mark.parametrize("seed,n", [(0, 4), (3, 4)])
 def test_within_a_few_times_the_exact_hull(seed, n):
-    """The ratio of the mean widths (steps 40..100) to the exact hull's: at most 5 (over 400
-    steps of eight plants of 4-6 states: BENCHMARKS.md, "nl-interval: the window-centred
-    form")."""
+    """The ratio of the mean widths (steps 40..300, and the last 100 steps: no drift) to the
+    exact hull's: at most 5 (measured 1.16 and 1.34; over 400 steps of eight plants of 4-6
+    states: BENCHMARKS.md, "nl-interval: the window-centred form")."""
     sys, _ = _plant(seed, n)
     x0 = ivobs.Box(-np.ones(n), np.ones(n))
-    U, X, Y = _simulate(sys, np.zeros(n), 100, seed)
+    U, X, Y = _simulate(sys, np.zeros(n), 300, seed)
     exact = ivobs.make_estimator("exact", sys, x0=x0).run(U, Y)
     res = ivobs.make_estimator("nl-interval", sys, x0=x0).run(U, Y)
     assert _contained(res, X) == []
     we, w = (exact.upper - exact.lower)[40:], (res.upper - res.lower)[40:]
     assert np.all(w >= we - 1e-9)  # the exact hull is inside every sound box
     assert w.mean() / we.mean() <= 5.0
+    assert w[-100:].mean() / we[-100:].mean() <= 5.0
 
 
 @pytest.mark.slow
