@@ -154,7 +154,9 @@ def _multipliers(
     Small programs (``K m <=`` :data:`BLOCK_SIZE`) are solved as one block program,
     ``min Σ_i g_iᵀξ_i`` over ``K`` independent copies, whose row duals are those of the ``K``
     programs. Larger ones share one model per chain of objectives (``chains``), only the cost
-    changing along a chain, each solve warm-started from the previous optimum. A program the
+    changing along a chain, each solve warm-started from the previous optimum by the primal
+    simplex (that basis stays feasible; the dual simplex would first have to repair its dual
+    infeasibility). A program the
     shared model fails on is retried from a cold start, then by :func:`_second_opinion`."""
     K, m = Gs.shape
     nc = A.shape[0]
@@ -179,7 +181,7 @@ def _multipliers(
             lam = None
             if shared:
                 lp.set_cost(cols, Gs[i])
-                status = lp.solve()
+                status = lp.solve(primal=True)  # only the cost changed: the basis is feasible
                 if status != "optimal":
                     lp.cold()
                     status = lp.solve()
@@ -339,29 +341,45 @@ class Certificates:
     Hausdorff heuristic of [Scott2016, Section 4.2], which only breaks ties here.
     """
 
-    __slots__ = ("D", "mu", "radius", "weight")
+    __slots__ = ("D", "_rc", "mu", "radius", "weight")
 
     def __init__(self, D: np.ndarray, mu: np.ndarray, weight: np.ndarray, radius: float = 1.0):
         self.D, self.mu, self.weight, self.radius = D, mu, weight, radius
+        self._rc: np.ndarray | None = None  # D - mu A, once asked for (reduced_costs)
+
+    def reduced_costs(self, A: np.ndarray) -> np.ndarray:
+        """``D − μ A`` (K, m), kept up to date through the eliminations (each changes it by a
+        rank-one term, where recomputing it costs ``K nc m``). Coefficients that the
+        elimination moves to a slack as noise (below ``ZERO_TOL`` of their row) are not taken
+        out of it: these reduced costs only guide the choice of factor."""
+        if self._rc is None:
+            self._rc = self.D - self.mu @ A
+        return self._rc
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
         """Constraints ``rows`` and factors ``cols`` are kept (masks; the others were zero)."""
         if not rows.all():
             self.mu = self.mu[:, rows]
+            self._rc = None
         if not cols.all():
             self.D = self.D[:, cols]
+            if self._rc is not None:
+                self._rc = self._rc[:, cols]
 
     def pad(self, n_cols: int) -> None:
         """``n_cols`` new factors, in no objective."""
         self.D = np.concatenate([self.D, np.zeros((self.D.shape[0], n_cols))], axis=1)
+        self._rc = None
 
     def scale_rows(self, s: np.ndarray) -> None:
-        """Constraint ``r`` was divided by ``s_r``."""
+        """Constraint ``r`` was divided by ``s_r`` (the reduced costs do not change)."""
         self.mu = self.mu * s
 
     def scale_factors(self, rad: np.ndarray) -> None:
         """Factor ``j`` was rescaled, ``ξ_j = m_j + rad_j ξ'_j`` (offsets go to constants)."""
         self.D = self.D * rad
+        if self._rc is not None:
+            self._rc = self._rc * rad
 
     def elimination_loss(
         self, A: np.ndarray, b: np.ndarray, piv: np.ndarray, cand: np.ndarray
@@ -375,7 +393,7 @@ class Certificates:
         :data:`LOSS_CANDIDATES` candidates with the smallest upper bound
         ``Σ_k w_k |t_kj| (‖A_p‖₁ + |b_p|)`` (``|r - t a| - |r| <= |t| |a|``)."""
         m = A.shape[1]
-        Rc = self.D - self.mu @ A  # (K, m)
+        Rc = self.reduced_costs(A)
         apj = A[piv, np.arange(m)]
         t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
         bound = self.weight @ np.abs(t) * (np.abs(A).sum(axis=1)[piv] + np.abs(b[piv]))
@@ -394,8 +412,11 @@ class Certificates:
         return out
 
     def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
-        """Factor ``j`` eliminated with row ``p`` (before the row and column are removed)."""
-        Rc = self.D[:, j] - self.mu @ A[:, j]
-        self.mu = self.mu.copy()
-        self.mu[:, p] += Rc / A[p, j]
-        self.D = self.D - np.outer(self.D[:, j] / A[p, j], A[p])
+        """Factor ``j`` eliminated with row ``p``; both are removed here. The objectives
+        become ``D − D_j A_p / a_pj`` and the reduced costs ``r − (r_j / a_pj) A_p``; row ``p``
+        is zero after the elimination, so its multiplier no longer matters."""
+        rc = self.reduced_costs(A)
+        rows, cols = np.arange(A.shape[0]) != p, np.arange(A.shape[1]) != j
+        self.D = (self.D - np.outer(self.D[:, j] / A[p, j], A[p]))[:, cols]
+        self._rc = (rc - np.outer(rc[:, j] / A[p, j], A[p]))[:, cols]
+        self.mu = self.mu[:, rows]
