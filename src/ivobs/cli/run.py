@@ -20,7 +20,7 @@ from ..errors import IvobsError
 from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
 from . import add_option_argument, add_trust_option, check_disturbance, check_seed, parse_options
-from ._plant import add_truth_option, plant_inputs
+from ._plant import add_plant_options, add_truth_option, plant_inputs
 
 if TYPE_CHECKING:
     from ..report import MethodResult
@@ -34,26 +34,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
         "method, print a summary; optionally write the bounds as CSV and a figure.",
     )
     p.add_argument("scenario", nargs="?", help="scenario name (see `ivobs scenarios`)")
-    p.add_argument(
-        "--system", "-s", metavar="FILE", help="system file (TOML) instead of a scenario"
-    )
-    p.add_argument("--log", "-l", metavar="FILE", help="measurement log (CSV) for --system")
+    add_plant_options(p, horizon=False)
     add_truth_option(p)
-    p.add_argument(
-        "--discretize",
-        type=float,
-        metavar="TS",
-        default=None,
-        help="--system: discretise a continuous-time system (inputs held over each period "
-        "TS; disturbances vary between samples unless --held-disturbances); the log's time "
-        "column must then be sampled every TS",
-    )
-    p.add_argument(
-        "--held-disturbances",
-        action="store_true",
-        help="--discretize: the disturbances are held over each period (default: any signal "
-        "in their bounds between samples, which the estimates then cover)",
-    )
     p.add_argument(
         "--method",
         "-m",
