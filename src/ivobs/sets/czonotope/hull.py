@@ -320,7 +320,7 @@ def soften(
     return G, np.concatenate([A, S], axis=1), e
 
 
-LOSS_CANDIDATES = 24
+LOSS_CANDIDATES = 12
 """Candidates whose exact elimination loss :meth:`Certificates.elimination_loss` evaluates
 (those with the smallest upper bound of it). More cost ``O(K m)`` each per elimination; fewer
 may miss the factor that loosens the box least."""
