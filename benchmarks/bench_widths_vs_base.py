@@ -320,6 +320,8 @@ def verdict(base: dict[str, Any] | None, head: dict[str, Any]) -> tuple[str, flo
         return "**CRASH now**" + (" (ran at base)" if bs == "ok" else ""), None
     if hs == "refused" and bs == "refused":
         return "refused in both", None
+    if hs == "skipped" and bs == "skipped":
+        return "skipped in both: too slow", None
     if hs == "skipped":
         return "skipped now: too slow" + (" (ran at base)" if bs == "ok" else ""), None
     if hs == "refused":
@@ -359,13 +361,21 @@ def compare(args: argparse.Namespace) -> int:
     if differ:
         sys.exit(f"the two runs read different records for {', '.join(differ)}")
     lines = [
-        f"| scenario | method | mean width at {b['meta']['label']} | now | now/base | "
+        f"| scenario | method | mean width at {b['meta']['label']} | now ({h['meta']['label']}) "
+        "| now/base | "
         "misses now (base) | CPU s base → now | verdict |",
         "|---|---|---|---|---|---|---|---|",
     ]
     counts: dict[str, int] = {}
     notes: list[str] = []
-    for hr in h["rows"]:
+    scenario_order = {n: i for i, n in enumerate(h["meta"]["records"])}
+    method_order: dict[str, int] = {}
+    for r in h["rows"]:
+        method_order.setdefault(r["method"], len(method_order))
+    ordered = sorted(
+        h["rows"], key=lambda r: (scenario_order.get(r["scenario"], 999), method_order[r["method"]])
+    )
+    for hr in ordered:
         key = (hr["scenario"], hr["method"])
         br = base_rows.get(key)
         if hr["status"] == "refused" and br is not None and br["status"] == "refused":
@@ -390,19 +400,21 @@ def compare(args: argparse.Namespace) -> int:
             misses += f" ({miss_base})"
         cpu_b = br.get("cpu_s") if br else None
         cpu_h = hr.get("cpu_s")
-        cpu = f"{_fmt(None if cpu_b is None else round(cpu_b, 2))} → " + _fmt(
-            None if cpu_h is None else round(cpu_h, 2)
-        )
+        cpu = " → ".join("–" if c is None else f"{c:.2f}" for c in (cpu_b, cpu_h))
         ratio_text = "–" if ratio is None else f"{ratio:.4f}"
         lines.append(
             f"| {key[0]} | {key[1]} | {wb_text} | {wh_text} | {ratio_text} | {misses} | {cpu} "
             f"| {_cell(text)} |"
         )
-        for r, when in ((br, "base"), (hr, "now")):
-            if r is None or r["status"] == "ok" or text == "refused in both":
-                continue  # only what the table's cells cannot say: why a run has no width
-            detail = r.get("traceback") or r.get("reason", "")
-            notes.append(f"- {key[0]} / {key[1]} ({when}, {r['status']}): {_cell(detail)}")
+        # only what the table's cells cannot say: why a run has no width
+        why = {
+            when: f"{r['status']}: {_cell(r.get('traceback') or r.get('reason', ''))}"
+            for r, when in ((br, "base"), (hr, "now"))
+            if r is not None and r["status"] != "ok" and text != "refused in both"
+        }
+        if len(why) == 2 and why["base"] == why["now"]:
+            why = {"both": why["now"]}
+        notes += [f"- {key[0]} / {key[1]} ({when}) {detail}" for when, detail in why.items()]
     summary = ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
     text = "\n".join(lines) + f"\n\nRows by verdict — {summary}.\n"
     if notes:
