@@ -256,6 +256,12 @@ def _linear_only(scenario: str, method: str) -> dict[str, Any] | None:
     }
 
 
+def _dump(meta: dict[str, Any], rows: list[dict[str, Any]]) -> str:
+    """The result file: JSON, one line per row."""
+    body = ",\n".join(json.dumps(r) for r in rows)
+    return f'{{"meta": {json.dumps(meta)},\n"rows": [\n{body}\n]}}\n'
+
+
 def run_all(args: argparse.Namespace) -> int:
     from ivobs import methods, scenarios
 
@@ -294,7 +300,7 @@ def run_all(args: argparse.Namespace) -> int:
             )
             out.parent.mkdir(parents=True, exist_ok=True)
             kept = rows + list(done.values())  # an interrupted resume loses nothing
-            out.write_text(json.dumps({"meta": meta, "rows": kept}, indent=1) + "\n")
+            out.write_text(_dump(meta, kept))
     return 0
 
 
