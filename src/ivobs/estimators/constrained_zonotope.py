@@ -455,7 +455,9 @@ class ConstrainedZonotopeEstimator(Estimator):
             c_next = c_next + out.c
             G, A_c, b, e = out.G, out.A, out.b, up(out.e + UNIT_ROUNDOFF * np.abs(c_next))
         c_next, G, A_c, b = reduce_consolidated(c_next, G, A_c, b, self.design.max_generators, TOLS)
-        return c_next, G, A_c, b, e
+        # row-major, as a restored state is: BLAS sums in an order that depends on the layout,
+        # and a restored estimator must continue as the saved one would have
+        return c_next, np.ascontiguousarray(G), np.ascontiguousarray(A_c), b, e
 
     def _restart(
         self, data: _StepData, upd: _Filtered
