@@ -7,6 +7,7 @@ on thin boxes (a few ulps)."""
 from __future__ import annotations
 
 import math
+import re
 
 import mpmath as mp
 import numpy as np
@@ -266,3 +267,25 @@ def test_domain_edges_clip_or_name_the_expression() -> None:
     div = ivobs.NonlinearSystem(f=["x2", "1/x1"], h=["x1"], states=["x1", "x2"])
     with pytest.raises(ivobs.IvobsError, match=r"f\[1\] = '1/x1'.*division by a range that is "):
         div.f_box([0, 0], [0, 0], [], [], [])
+
+
+def test_constants_are_folded_where_the_code_is_written_and_still_enclose() -> None:
+    # k*sqrt(2)*sqrt(g) and sin(g) are constants (known parameters): evaluated once, when the
+    # code is written, by the runtime's own operations; the bounds still hold the exact values
+    sys = ivobs.NonlinearSystem(
+        f=["x1 - k*sqrt(2)*sqrt(g)*sqrt(x1) + sin(g)*x1"],
+        h=["2*k", "x1*sin(k)"],
+        states=["x1"],
+        params={"k": 0.3, "g": 9.81},
+    )
+    literal = re.compile(r"_(sqrt|sin|mul)\((-?[\d.e+-]+, )+-?[\d.e+-]+(, \d+)?\)")
+    assert not literal.search(sys._f.source)
+    k, g = mp.mpf(3) / 10, mp.mpf(981) / 100
+    for x in [1.0, 2.0, 17.25]:
+        lo, hi = sys.f_box([x], [x], [], [], [])
+        v = x - k * mp.sqrt(2) * mp.sqrt(g) * mp.sqrt(x) + mp.sin(g) * x
+        assert mp.mpf(lo[0]) <= v <= mp.mpf(hi[0])
+    # a constant output is intersected with its measurement like any other
+    box = sys.h_contract([1.0], [2.0], [], [], [], [0.6, 0.3], [0.6000001, 0.5])
+    assert box is not None and 1.0 < box[0][0] and box[1][0] < 2.0
+    assert sys.h_contract([1.0], [2.0], [], [], [], [0.7, 0.3], [0.8, 0.5]) is None

@@ -7,20 +7,34 @@ computed once per function (the natural form, the Jacobian and the contractor sh
 
 Numbers: an exact rational is enclosed by the floats around it (``0.1`` -> ``[fl(0.1),
 next(fl(0.1))]``), other constants (``pi``, ``sqrt(2)``) by the floats around a 60-digit value.
+An operation on constants only (a known parameter times ``sqrt(2)``) is evaluated once, when the
+code is written, by the same runtime operation the code would call (:meth:`Emitter.fold`): the
+code holds the resulting enclosure as literals (``repr`` of a double reads back exactly), so it
+computes the same bounds with fewer operations per call.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from fractions import Fraction
 from typing import Any
 
 from ...errors import IvobsError
 from ._runtime import NAMESPACE
 
-__all__ = ["Emitter", "compile_source", "enclose_constant"]
+__all__ = ["Emitter", "compile_source", "enclose_constant", "is_literal"]
 
 Pair = tuple[str, str]
+
+_VARIABLE = re.compile(r"(?<![\w.])[A-Za-z]")
+"""A name that does not start with ``_`` (a variable of the generated code; the runtime's names
+start with ``_``, and an exponent's ``e`` follows a digit)."""
+
+
+def is_literal(p: Pair) -> bool:
+    """Whether the pair is code over literals and the runtime's names only (no variable)."""
+    return not (_VARIABLE.search(p[0]) or _VARIABLE.search(p[1]))
 
 
 def _lit(v: float) -> str:
@@ -114,7 +128,29 @@ class Emitter:
         self.cache[expr] = out
         return out
 
+    def fold(self, call: str) -> Pair | None:
+        """The literals of the pair that ``call`` evaluates to when it reads no variable: the
+        runtime operation done once here instead of at every call of the generated code (the
+        same operation on the same doubles, so the same enclosure). None when ``call`` reads a
+        variable, or when its value is not a pair of numbers (a domain error, a NaN: left to
+        the generated code, which reports it where it occurs)."""
+        if _VARIABLE.search(call):
+            return None
+        try:
+            v = eval(call, {**NAMESPACE, "__builtins__": {}})  # our code, literals only
+        except Exception:  # any failure: not folded, the call stays
+            return None
+        if not isinstance(v, tuple) or len(v) != 2:
+            return None
+        lo, hi = v
+        if not (isinstance(lo, float) and isinstance(hi, float)) or lo != lo or hi != hi:
+            return None
+        return _lit(lo), _lit(hi)
+
     def assign(self, call: str) -> Pair:
+        folded = self.fold(call)
+        if folded is not None:
+            return folded
         lo, hi = self.new()
         self.line(f"{lo}, {hi} = {call}")
         return lo, hi
@@ -157,10 +193,10 @@ class Emitter:
         if fn in (sp.Min, sp.Max):
             parts = [a] + [self.emit(x) for x in e.args[1:]]
             which = "_min" if fn is sp.Min else "_max"
-            lo, hi = self.new()
-            self.line(f"{lo} = {which}({', '.join(p[0] for p in parts)})")
-            self.line(f"{hi} = {which}({', '.join(p[1] for p in parts)})")
-            return lo, hi
+            return self.assign(
+                f"{which}({', '.join(p[0] for p in parts)}), "
+                f"{which}({', '.join(p[1] for p in parts)})"
+            )
         raise IvobsError(
             f"{self.label}: {fn.__name__} is not supported by the interval code generator"
         )
@@ -168,10 +204,7 @@ class Emitter:
     def _sum(self, terms: list[Pair]) -> Pair:
         acc = terms[0]
         for t in terms[1:]:
-            lo, hi = self.new()
-            self.line(f"{lo} = _nx({acc[0]} + {t[0]}, _NI)")
-            self.line(f"{hi} = _nx({acc[1]} + {t[1]}, _PI)")
-            acc = (lo, hi)
+            acc = self.assign(f"_nx({acc[0]} + {t[0]}, _NI), _nx({acc[1]} + {t[1]}, _PI)")
         return acc
 
     def mul(self, a: Pair, b: Pair) -> Pair:
@@ -212,9 +245,7 @@ class Emitter:
                 acc = self.assign(f"_div({acc[0]}, {acc[1]}, {d[0]}, {d[1]}, {self.site()})")
         assert acc is not None
         if negate:
-            lo, hi = self.new()
-            self.line(f"{lo}, {hi} = -{acc[1]}, -{acc[0]}")
-            acc = (lo, hi)
+            acc = self.assign(f"-{acc[1]}, -{acc[0]}")
         return acc
 
     def _pow(self, base: Any, ex: Any) -> Pair:

@@ -8,7 +8,10 @@ projected onto its children through the inverse of its operation (``a + b = r`` 
 ``a in ±sqrt(r)``; ``exp``, ``log``, ``sqrt``, ``tanh``, ``sinh`` through their inverses), every
 bound rounded outward. Operations without a cheap inverse (``sin``, ``min``...) contract nothing
 below them, which is sound. An intersection that comes out empty proves that no ``v`` in the box
-satisfies the constraint: the function returns False (an inconsistent measurement).
+satisfies the constraint: the function returns False (an inconsistent measurement). A node over
+constants only is folded into literals when the code is written (:meth:`.codegen.Emitter.fold`)
+and is not narrowed (a constant's enclosure stays as it is); the function reads and writes back
+only the leaves (and reads only the inputs) the expression uses.
 
 A generated contractor ``c(vl, vh, u, ylo, yhi) -> bool`` narrows the lists ``vl``, ``vh`` in
 place (``g in [ylo, yhi]``).
@@ -19,8 +22,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ._runtime import ldn, lup
-from .codegen import Emitter, compile_source, enclose_constant
+from ._runtime import NAMESPACE, ldn, lup
+from .codegen import Emitter, compile_source, enclose_constant, is_literal
 
 __all__ = ["build_contractor"]
 
@@ -72,6 +75,11 @@ def _excludes0(lo: float, hi: float) -> bool:
     return lo > 0.0 or hi < 0.0
 
 
+def _value(literal: str) -> float:
+    """The double a literal of the generated code stands for (``_PI``, ``_NI``: infinities)."""
+    return float(eval(literal, {**NAMESPACE, "__builtins__": {}}))  # our literal
+
+
 EXTRA = {
     "_proj_sqr": _proj_sqr,
     "_proj_sqrt": _proj_sqrt,
@@ -108,6 +116,9 @@ class _Builder:
         return nd
 
     def _new(self, kind: str, call: str, args: list[_Node], n: int = 0) -> _Node:
+        folded = self.em.fold(call)
+        if folded is not None:  # over constants only: a constant
+            return _Node("const", *folded, [])
         lo, hi = self.em.assign(call)
         nd = _Node(kind, lo, hi, args, n)
         self.nodes.append(nd)
@@ -159,6 +170,8 @@ class _Builder:
             return self._new(kind, f"_{kind}({a.lo}, {a.hi}{site})", [a])
         # anything else: its enclosure from the generic emitter, no projection below it
         lo, hi = em.emit(e)
+        if is_literal((lo, hi)):
+            return _Node("const", lo, hi, [])
         nd = _Node("opaque", lo, hi, [])
         self.nodes.append(nd)
         return nd
@@ -184,6 +197,10 @@ def _backward(em: Emitter, nd: _Node) -> None:
         a, b = nd.args
         for x, o in ((a, b), (b, a)):
             if x.kind == "const":
+                continue
+            if o.kind == "const":  # its sign is known now
+                if _excludes0(_value(o.lo), _value(o.hi)):
+                    _narrow(em, x, f"_div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
                 continue
             em.line(f"if _x0({o.lo}, {o.hi}):")
             em.lines.append("    " + f"    pl, ph = _div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
@@ -222,18 +239,21 @@ def build_contractor(
     em.line("if yhi is None: yhi = ylo")  # a thin measurement (the contract's call)
     env: dict[Any, tuple[str, str]] = dict(consts)
     lv: dict[Any, tuple[str, str]] = {}
-    for i, s in enumerate(leaves):
+    used = [i for i, s in enumerate(leaves) if s in expr.free_symbols]
+    for i in used:
         em.line(f"v{i}l = vl[{i}]; v{i}h = vh[{i}]")
-        env[s] = lv[s] = (f"v{i}l", f"v{i}h")
+        env[leaves[i]] = lv[leaves[i]] = (f"v{i}l", f"v{i}h")
     cin: dict[Any, tuple[str, str]] = dict(consts)
     for i, s in enumerate(inputs):
-        em.line(f"u{i} = u[{i}]")
-        env[s] = cin[s] = (f"u{i}", f"u{i}")
+        if s in expr.free_symbols:
+            em.line(f"u{i} = u[{i}]")
+            env[s] = cin[s] = (f"u{i}", f"u{i}")
     em.scope(env)
     b = _Builder(em, lv, cin)
     root = b.node(expr)
     if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
-        lo, hi = em.assign(f"{root.lo}, {root.hi}")
+        lo, hi = em.new()  # (a variable even for a constant: it is intersected with y)
+        em.line(f"{lo}, {hi} = {root.lo}, {root.hi}")
         nd = _Node("ident", lo, hi, [root])
         b.nodes.append(nd)
         root = nd
@@ -244,7 +264,7 @@ def build_contractor(
             _narrow(em, nd.args[0], f"{nd.lo}, {nd.hi}")
         else:
             _backward(em, nd)
-    for i in range(len(leaves)):
+    for i in used:
         em.line(f"vl[{i}] = v{i}l; vh[{i}] = v{i}h")
     em.line("return True")
     source = "\n".join(em.lines) + "\n"
