@@ -196,6 +196,13 @@ class NonlinearSystem:
             build_contractor(f"hc{i}", e, self._labels("h")[i], leaves, syms["u"], self._consts)
             for i, e in enumerate(self.h_exprs)
         ]
+        # outputs that share a state or unknown pass what one narrows on to the others
+        seen: set[Any] = set()
+        self._hc_coupled = False
+        for e in self.h_exprs:
+            mine = e.free_symbols & set(leaves)
+            self._hc_coupled = self._hc_coupled or bool(mine & seen)
+            seen |= mine
         self._hf: list[Any] | None = None
         self._fc: list[Any] | None = None
         pairs = [self.param_bounds[n] for n in self.param_names]
@@ -378,8 +385,11 @@ class NonlinearSystem:
         self, vl: list[float], vh: list[float], u: list[float], ylo: list[float], yhi: list[float]
     ) -> bool:
         """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place) with
-        ``h in [ylo, yhi]``; two sweeps over the outputs when there are several."""
-        for _ in range(1 if len(self._hc) == 1 else 2):
+        ``h in [ylo, yhi]``; two sweeps over the outputs when some of them share a state or
+        unknown (the second carries what one output narrowed to the others; outputs over
+        disjoint variables have nothing to pass on, and each is contracted once, as a single
+        output is)."""
+        for _ in range(2 if self._hc_coupled else 1):
             for (fn, sites), a, b in zip(self._hc, ylo, yhi):
                 if a == a and not self._call(fn, sites, vl, vh, u, a, b):
                     return False
