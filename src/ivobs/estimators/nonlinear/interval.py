@@ -24,12 +24,15 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4 and 6].
    What ``y_k`` says about earlier states thus reaches ``x[k]`` through them.
 
-Steps 1, 2 and 2' repeat, the step back starting from the boxes the last sweep left, until a
-sweep narrows no state's width by :data:`FIXPOINT_GAIN` of itself (at most :data:`MAX_SWEEPS`):
-the contractor network of the last steps iterated to its fixpoint (to within that share)
-[Jaulin2001, Ch. 4]. The rule is per state, not on the summed width, which a wide state that nothing
-bounds well would dominate, stopping the sweeps while the well-measured states still narrow (CORA's
-six tanks; BENCHMARKS.md has the figures).
+After step 1, steps 2 and 2' (which end with the contraction by ``[y_k]``) repeat, the step
+back starting from the boxes the last sweep left, until a sweep narrows no state's width by
+:data:`FIXPOINT_GAIN` of itself (at most :data:`MAX_SWEEPS`): the contractor network of the last
+steps iterated to its fixpoint (to within that share) [Jaulin2001, Ch. 4]. Step 1 is done once,
+before the sweeps: its gain does not count (the rule measures what the steps back add, so one
+sweep that adds nothing ends the contraction). The rule is per state, not on the summed width,
+which a wide state that nothing bounds well would dominate, stopping the sweeps while the
+well-measured states still narrow (CORA's six tanks; BENCHMARKS.md has the figures). Without a
+step back (``lag=0``, or the first step) step 1 repeats under the same rule.
 
 4. **Window-centred form** (``window = M >= 1``; :mod:`~ivobs.estimators.nonlinear.window`):
    each of the last ``M`` steps ``j`` keeps, from the mean-value forms of ``f`` and ``h`` over
@@ -116,7 +119,7 @@ __all__ = [
 ]
 
 MAX_SWEEPS = 8
-"""Most correction sweeps (contraction by ``y[k]`` and the step back) of one step."""
+"""Most sweeps of the steps back (each ending with the contraction by ``y[k]``) of one step."""
 
 FIXPOINT_GAIN = 0.01
 """A sweep that narrows no state's width by this share of itself ends the step's contraction
@@ -368,11 +371,15 @@ class NonlinearIntervalEstimator(Estimator):
         seen = any(v == v for v in ylo)
         prev = None
         if seen:
-            ok = True
+            ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
+            back = self._hf is not None and state.back
             for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
+                if not ok:
+                    break
                 before = [b - a for a, b in zip(vl[:nx], vh[:nx])]
-                ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
-                if ok and self._hf is not None and state.back:
+                if not back:  # the correction again (HC4 is not idempotent)
+                    ok = sys.contract_lists(vl, vh, u, ylo, yhi)
+                else:  # each ends with the correction
                     ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)  # 2. step back
                     if ok and chain and prev is not None:  # 2'. further back
                         chain[-1].lo, chain[-1].hi = prev
