@@ -389,30 +389,31 @@ class NonlinearIntervalEstimator(Estimator):
                     break
             if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
-        win: _Form | None = None
-        if self.design.window and not inconsistent:  # 4. the window-centred form
-            win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, seen, chain, prev)
-            if win is None:  # empty: y_k contradicts the model and the window
-                inconsistent = True
-            elif seen and win.narrowed and not sys.contract_lists(vl, vh, u, ylo, yhi):
-                inconsistent = True
-        if inconsistent:
-            vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
-            chain = self._chain(state)
-            win = None
-            if self.design.window:
-                win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
-        if self.design.window and win is None:  # the model itself contradicted: start again
-            rows = self._rows(state, [], None).empty()
-            win = _Form(rows, None, None, state.cov, None, False)
-        prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         hist: dict[str, np.ndarray] = {}
-        if self._fc is not None:
-            hist = self._history(chain, y_k, inconsistent)
         pred = None
-        if win is not None:
-            slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
-            hist.update(slid)
+        with np.errstate(all="ignore"):  # the window-centred form checks what is not finite
+            win: _Form | None = None
+            if self.design.window and not inconsistent:  # 4. the window-centred form
+                win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, seen, chain, prev)
+                if win is None:  # empty: y_k contradicts the model and the window
+                    inconsistent = True
+                elif seen and win.narrowed and not sys.contract_lists(vl, vh, u, ylo, yhi):
+                    inconsistent = True
+            if inconsistent:
+                vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
+                chain = self._chain(state)
+                win = None
+                if self.design.window:
+                    win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
+            if self.design.window and win is None:  # the model contradicted: start again
+                rows = self._rows(state, [], None).empty()
+                win = _Form(rows, None, None, state.cov, None, False)
+            prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+            if self._fc is not None:
+                hist = self._history(chain, y_k, inconsistent)
+            if win is not None:
+                slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
+                hist.update(slid)
         if pred is None:  # 3. prediction: natural ∩ mean-value form
             f = sys._f
             pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
@@ -452,20 +453,21 @@ class NonlinearIntervalEstimator(Estimator):
         lo, hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         lh: Linearisation | None = None
         g: wf.Gains | None = None
+        dw = None
         if seen and self._h_evals is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
             lh = wf.affine(self._h_evals, lo, hi, u_k, nx)
             if np.isfinite(lh.J).all() and np.isfinite(lh.rho).all():
-                g = wf.filter_gain(st.cov, lh, ~np.isnan(y_k), wf.radius(lo, hi, lh.c)[nx:], nx)
+                dw = wf.radius(lo[nx:], hi[nx:], lh.c[nx:])
+                g = wf.filter_gain(st.cov, lh, ~np.isnan(y_k), dw, nx)
             else:
                 lh = None
         K = np.zeros((nx, len(y_k))) if g is None else g.K
         meas = wf.measured(y_k, ylo, yhi)
-        start = wf.filter_start(lh, K, lo, hi, lo[:nx], hi[:nx], meas, nx)
+        start = wf.filter_start(lh, K, dw, lo[:nx], hi[:nx], meas, nx)
         rows = self._rows(st, chain, prev)
-        with np.errstate(invalid="ignore", over="ignore"):
-            cl, ch = wf.hull(start, lo[:nx], hi[:nx], rows)
-            nl = np.fmax(lo[:nx], np.fmax.reduce(cl, axis=0))
-            nh = np.fmin(hi[:nx], np.fmin.reduce(ch, axis=0))
+        cl, ch = wf.hull(start, lo[:nx], hi[:nx], rows)
+        nl = np.fmax(lo[:nx], np.fmax.reduce(cl, axis=0))
+        nh = np.fmin(hi[:nx], np.fmin.reduce(ch, axis=0))
         if (nl > nh).any():
             return None
         narrowed = bool((nl > lo[:nx]).any() or (nh < hi[:nx]).any())
@@ -512,11 +514,11 @@ class NonlinearIntervalEstimator(Estimator):
         pred = None
         if win.meas is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
             lf = wf.affine(self._f_evals, lo, hi, u_k, nx)
+            delta = wf.radius(lo, hi, lf.c)
             if not self._flow:
-                pred = wf.centred(lf, lo, hi)
-            dw = wf.radius(lo, hi, lf.c)[nx:]
-            L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
-            tr = wf.transition(lf, win.lh, L, lo, hi, win.meas, nx)
+                pred = wf.centred(lf, delta)
+            L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, delta[nx:], nx, ny)
+            tr = wf.transition(lf, win.lh, L, delta, win.meas, nx)
             total = tr.b.sum() + tr.F.sum() + tr.Fw.sum() + tr.n.sum() + tr.e.sum() + tr.dw.sum()
             if not math.isfinite(float(total) + tr.eta):  # (a sum that overflows counts too)
                 tr = None
