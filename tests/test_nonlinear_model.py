@@ -68,6 +68,18 @@ def test_outputs_that_share_a_state_pass_their_contraction_on() -> None:
     assert abs(out[0][1] - 0.5) < 1e-12 and abs(out[1][1] - 0.5) < 1e-12
 
 
+def test_the_f_contractor_narrows_a_box_by_the_next_state_and_keeps_every_solution() -> None:
+    # x1 + x2 = 3 and sqrt(x1) x2 = 2 share x1, x2 (one DAG, sqrt(x1) evaluated once)
+    s = ivobs.NonlinearSystem(f=["x1 + x2", "sqrt(x1)*x2"], h=["x1"], states=["x1", "x2"])
+    fc, _ = s.f_contractor()
+    vl, vh = [0.0, 1.5], [4.0, 4.0]
+    assert fc(vl, vh, [], [3.0, 2.0], [3.0, 2.0])
+    assert vl[0] <= 1.0 <= vh[0] and vl[1] <= 2.0 <= vh[1]  # the solution (1, 2) is kept
+    assert vh[0] <= 1.5 + 1e-12 and vh[1] - vl[1] < 2.5
+    # no point of the box maps into the next state's box
+    assert not fc([0.0, 0.0], [1.0, 1.0], [], [3.0, 2.0], [3.0, 2.0])
+
+
 def test_decimal_literals_are_enclosed_exactly() -> None:
     s = ivobs.NonlinearSystem(f=["0.1*x1", "x1 + 0.3 - 0.1 - 0.2"], h=["x1"], states=["x1", "x2"])
     lo, hi = s.f_box([1.0, 0.0], [1.0, 0.0], [], [], [])

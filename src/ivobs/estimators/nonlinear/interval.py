@@ -271,7 +271,7 @@ class NonlinearIntervalEstimator(Estimator):
                     "window: the window-centred form linearises f, whose Jacobian this model "
                     "does not give (a validated flow of a non-smooth f); use window=0"
                 )
-        self._fc = sys.f_contractors() if lag > 1 else None
+        self._fc = sys.f_contractor() if lag > 1 else None
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
         self.design = NonlinearIntervalDesign(
@@ -592,13 +592,12 @@ class NonlinearIntervalEstimator(Estimator):
         become empty (``y[k]`` contradicts the window)."""
         sys, nx = self.model, self.model.nx
         assert self._fc is not None
-        fc, f = self._fc, sys._f
+        (fc, sites), f = self._fc, sys._f
         for j in range(len(chain) - 1, -1, -1):  # newest first
             c = chain[j]
             tl, th = (vl, vh) if j == len(chain) - 1 else (chain[j + 1].lo, chain[j + 1].hi)
-            for i, (fn, sites) in enumerate(fc):
-                if not sys._call(fn, sites, c.lo, c.hi, c.u, tl[i], th[i]):
-                    return False
+            if not sys._call(fc, sites, c.lo, c.hi, c.u, tl, th):  # f(x[j], ·) ∈ [x]_{j+1}
+                return False
             if any(v == v for v in c.ylo) and not sys.contract_lists(c.lo, c.hi, c.u, c.ylo, c.yhi):
                 return False
         for j, c in enumerate(chain):  # oldest first

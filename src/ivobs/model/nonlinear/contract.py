@@ -14,7 +14,8 @@ and is not narrowed (a constant's enclosure stays as it is); the function reads 
 only the leaves (and reads only the inputs) the expression uses.
 
 A generated contractor ``c(vl, vh, u, ylo, yhi) -> bool`` narrows the lists ``vl``, ``vh`` in
-place (``g in [ylo, yhi]``).
+place (``g in [ylo, yhi]``); for a vector ``g`` (:func:`build_vector_contractor`) ``ylo``,
+``yhi`` are lists and the expressions share one DAG.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from typing import Any
 from ._runtime import NAMESPACE, ldn, lup
 from .codegen import Emitter, compile_source, enclose_constant, is_literal
 
-__all__ = ["build_contractor"]
+__all__ = ["build_contractor", "build_vector_contractor"]
 
 
 def _proj_sqr(al: float, ah: float, rl: float, rh: float) -> tuple[float, float]:
@@ -232,33 +233,74 @@ def build_contractor(
     """Compile ``name(vl, vh, u, ylo, yhi=None) -> bool`` contracting the boxes of ``leaves``
     (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
     ``inputs`` read from ``u`` (thin)."""
+    head = [f"def {name}(vl, vh, u, ylo, yhi=None):", "    if yhi is None: yhi = ylo"]
+    return _compile(name, [expr], label, leaves, inputs, consts, head, lambda i: ("ylo", "yhi"))
+
+
+def build_vector_contractor(
+    name: str,
+    exprs: list[Any],
+    label: str,
+    leaves: list[Any],
+    inputs: list[Any],
+    consts: dict[Any, Any],
+) -> tuple[Any, list[str]]:
+    """Compile ``name(vl, vh, u, ylo, yhi) -> bool`` contracting the boxes of ``leaves`` with
+    ``exprs[i] in [ylo[i], yhi[i]]`` for every ``i`` (lists, read at ``i < len(exprs)``):
+    HC4-revise on the expressions' common DAG [Jaulin2001, Ch. 4], one forward pass over every
+    node (a subexpression the components share is evaluated once), every root met with its
+    bounds, then one backward pass in the reverse order, so that a shared node is narrowed by
+    all its parents before it narrows its children."""
+    head = [f"def {name}(vl, vh, u, ylo, yhi):"]
+    return _compile(
+        name, exprs, label, leaves, inputs, consts, head, lambda i: (f"ylo[{i}]", f"yhi[{i}]")
+    )
+
+
+def _compile(
+    name: str,
+    exprs: list[Any],
+    label: str,
+    leaves: list[Any],
+    inputs: list[Any],
+    consts: dict[Any, Any],
+    head: list[str],
+    bounds: Any,
+) -> tuple[Any, list[str]]:
+    """The code of a contractor: ``head`` (its signature), then HC4-revise on ``exprs`` with
+    the root ``i`` met with the pair of code ``bounds(i)``."""
     sites: list[str] = []
     em = Emitter(sites)
     em.label = label
-    em.lines.append(f"def {name}(vl, vh, u, ylo, yhi=None):")
-    em.line("if yhi is None: yhi = ylo")  # a thin measurement (the contract's call)
+    em.lines += head
+    free = set().union(*(e.free_symbols for e in exprs))
     env: dict[Any, tuple[str, str]] = dict(consts)
     lv: dict[Any, tuple[str, str]] = {}
-    used = [i for i, s in enumerate(leaves) if s in expr.free_symbols]
+    used = [i for i, s in enumerate(leaves) if s in free]
     for i in used:
         em.line(f"v{i}l = vl[{i}]; v{i}h = vh[{i}]")
         env[leaves[i]] = lv[leaves[i]] = (f"v{i}l", f"v{i}h")
     cin: dict[Any, tuple[str, str]] = dict(consts)
     for i, s in enumerate(inputs):
-        if s in expr.free_symbols:
+        if s in free:
             em.line(f"u{i} = u[{i}]")
             env[s] = cin[s] = (f"u{i}", f"u{i}")
     em.scope(env)
     b = _Builder(em, lv, cin)
-    root = b.node(expr)
-    if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
-        lo, hi = em.new()  # (a variable even for a constant: it is intersected with y)
-        em.line(f"{lo}, {hi} = {root.lo}, {root.hi}")
-        nd = _Node("ident", lo, hi, [root])
-        b.nodes.append(nd)
-        root = nd
-    em.line(f"{root.lo} = _max({root.lo}, ylo); {root.hi} = _min({root.hi}, yhi)")
-    em.line(f"if {root.lo} > {root.hi}: return False")
+    roots = []
+    for expr in exprs:
+        root = b.node(expr)
+        if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
+            lo, hi = em.new()  # (a variable even for a constant: it is intersected with y)
+            em.line(f"{lo}, {hi} = {root.lo}, {root.hi}")
+            nd = _Node("ident", lo, hi, [root])
+            b.nodes.append(nd)
+            root = nd
+        roots.append(root)
+    for i, root in enumerate(roots):
+        ylo, yhi = bounds(i)
+        em.line(f"{root.lo} = _max({root.lo}, {ylo}); {root.hi} = _min({root.hi}, {yhi})")
+        em.line(f"if {root.lo} > {root.hi}: return False")
     for nd in reversed(b.nodes):
         if nd.kind == "ident":
             _narrow(em, nd.args[0], f"{nd.lo}, {nd.hi}")

@@ -22,7 +22,7 @@ from ...sets import Box
 from ..statespace import SignalNames
 from ._runtime import DomainError
 from .codegen import enclose_float
-from .contract import build_contractor
+from .contract import build_contractor, build_vector_contractor
 from .forms import Forms, build_forms
 from .parse import RESERVED, folded_name, parse_expression
 from .trace import expression_text, trace_callable
@@ -204,7 +204,7 @@ class NonlinearSystem:
             self._hc_coupled = self._hc_coupled or bool(mine & seen)
             seen |= mine
         self._hf: list[Any] | None = None
-        self._fc: list[Any] | None = None
+        self._fc: tuple[Any, list[str]] | None = None
         pairs = [self.param_bounds[n] for n in self.param_names]
         pairs += [self.signal_bounds[n] for n in self.signal_names]
         wl = [enclose_float(p[0])[0] for p in pairs]
@@ -416,16 +416,17 @@ class NonlinearSystem:
             ]
         return self._hf
 
-    def f_contractors(self) -> list[tuple[Any, list[str]]]:
-        """Contractors of ``f_i(x, u, w) in [lo_i, hi_i]`` over the leaves ``(x, w)`` with the
-        inputs ``u``, one per state: the box of a step narrowed by the box of the next state
-        (a window of steps back; built on first use)."""
+    def f_contractor(self) -> tuple[Any, list[str]]:
+        """The contractor of ``f(x, u, w) in [lo, hi]`` over the leaves ``(x, w)`` with the
+        inputs ``u``, every state at once (:func:`.contract.build_vector_contractor`, called
+        ``(vl, vh, u, lo, hi)`` with the box of the next state in ``lo``, ``hi``): the box of a
+        step narrowed by the box of the next state (a window of steps back; built on first
+        use)."""
         if self._fc is None:
             g = self._groups()
-            self._fc = [
-                build_contractor(f"fc{i}", e, f"f[{i}]", g["x"] + g["w"], g["u"], self._consts)
-                for i, e in enumerate(self.f_exprs)
-            ]
+            self._fc = build_vector_contractor(
+                "fc", self.f_exprs, "f", g["x"] + g["w"], g["u"], self._consts
+            )
         return self._fc
 
     # -- conversions ---------------------------------------------------------------------
