@@ -260,8 +260,8 @@ class Emitter:
             return self.assign(f"_ipow({b[0]}, {b[1]}, {n}, {self.site()})")
         if ex == sp.Rational(1, 2):
             return self.assign(f"_sqrt({b[0]}, {b[1]}, {self.site()})")
-        if ex == sp.Rational(-1, 2):
-            s = self.assign(f"_sqrt({b[0]}, {b[1]}, {self.site()})")
+        if ex == sp.Rational(-1, 2):  # 1/sqrt(b): the square root the function may have already
+            s = self.emit(sp.sqrt(base))
             return self.assign(f"_recip({s[0]}, {s[1]}, {self.site()})")
         x = self.emit(ex)
         return self.assign(f"_rpow({b[0]}, {b[1]}, {x[0]}, {x[1]}, {self.site()})")
