@@ -22,7 +22,9 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first, then
    ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1`` again,
    oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4 and 6].
-   What ``y_k`` says about earlier states thus reaches ``x[k]`` through them.
+   What ``y_k`` says about earlier states thus reaches ``x[k]`` through them. Step 2 then
+   leaves its inclusion of ``f`` forward to the end of 2', which makes it over the box of
+   ``(x[k-1], w[k-1])`` 2' leaves (no wider).
 
 After step 1, steps 2 and 2' (which end with the contraction by ``[y_k]``) repeat, the step
 back starting from the boxes the last sweep left, until a sweep narrows no state's width by
@@ -380,7 +382,8 @@ class NonlinearIntervalEstimator(Estimator):
                 if not back:  # the correction again (HC4 is not idempotent)
                     ok = sys.contract_lists(vl, vh, u, ylo, yhi)
                 else:  # each ends with the correction
-                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)  # 2. step back
+                    # 2. step back (its inclusion forward: at the end of 2')
+                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev, not chain)
                     if ok and chain and prev is not None:  # 2'. further back
                         chain[-1].lo, chain[-1].hi = prev
                         ok = self._window(chain, vl, vh, u, ylo, yhi)
@@ -624,10 +627,14 @@ class NonlinearIntervalEstimator(Estimator):
         ylo: list[float],
         yhi: list[float],
         prev: tuple[list[float], list[float]] | None = None,
+        forward: bool = True,
     ) -> tuple[bool, tuple[list[float], list[float]] | None]:
         """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place), from the box
         of ``(x[k-1], w[k-1])`` (``prev``: as an earlier sweep of this step left it); False
-        when the measurement is found inconsistent, and the box of ``(x[k-1], w[k-1])``."""
+        when the measurement is found inconsistent, and the box of ``(x[k-1], w[k-1])``.
+        ``forward=False``: without the inclusion of ``f`` forward, which the window of steps
+        back that follows ends with (over the box of ``(x[k-1], w[k-1])`` it leaves, no
+        wider)."""
         sys, nx, nw = self.model, self.model.nx, self.model.nw
         # the box of (x[k-1], w[k-1], w[k])
         pl, ph = (st.prev_lo.tolist(), st.prev_hi.tolist()) if prev is None else prev
@@ -639,13 +646,14 @@ class NonlinearIntervalEstimator(Estimator):
             if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
                 return False, None
         m = nx + nw
-        f = sys._f
-        fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
-        for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
-            lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
-            if lo > hi:
-                return False, None
-            vl[i], vh[i] = lo, hi
+        if forward:
+            f = sys._f
+            fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
+            for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
+                lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
+                if lo > hi:
+                    return False, None
+                vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
 
