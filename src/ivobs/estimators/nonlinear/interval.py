@@ -17,17 +17,20 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    :func:`~ivobs.estimators.nonlinear.window.centred`, one evaluation of ``f`` and its
    Jacobian for both).
 
-2'. **Further back** (``lag = L >= 2``): the boxes of ``(x[j], w[j])`` for the ``L`` steps
-   ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j], w[j]) ∈ [x]_{j+1}`` and
-   with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first, then
-   ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1`` again,
-   oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4 and 6].
-   What ``y_k`` says about earlier states thus reaches ``x[k]`` through them. Step 2 then
-   leaves its inclusion of ``f`` forward to the end of 2', which makes it over the box of
-   ``(x[k-1], w[k-1])`` 2' leaves (no wider).
+2'. **Further back** (``lag = L >= 2``, in place of step 2): the boxes of ``(x[j], w[j])``
+   for the ``L`` steps ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j],
+   w[j]) ∈ [x]_{j+1}`` (one contractor for all the states, :meth:`~ivobs.NonlinearSystem.
+   f_contractor`) and with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first,
+   then ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1``
+   again, oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4
+   and 6]. What ``y_k`` says about earlier states thus reaches ``x[k]`` through them. Its
+   newest step does the work of step 2 (``[x]_k``, contracted by ``[y_k]``, narrows
+   ``(x[k-1], w[k-1])`` through ``f``), which is not done as well: through ``h∘f`` it
+   narrows no more on the scenarios measured (BENCHMARKS.md), for a second set of
+   contractors per sweep.
 
-After step 1, steps 2 and 2' (which end with the contraction by ``[y_k]``) repeat, the step
-back starting from the boxes the last sweep left, until a sweep narrows no state's width by
+After step 1, step 2 or 2' (each ends with the contraction by ``[y_k]``) repeats, starting
+from the boxes the last sweep left, until a sweep narrows no state's width by
 :data:`FIXPOINT_GAIN` of itself (at most :data:`MAX_SWEEPS`): the contractor network of the last
 steps iterated to its fixpoint (to within that share) [Jaulin2001, Ch. 4]. Step 1 is done once,
 before the sweeps: its gain does not count (the rule measures what the steps back add, so one
@@ -224,9 +227,10 @@ class NonlinearIntervalEstimator(Estimator):
     lag : 1 (default) to contract one step back through ``h∘f``; 0 not to: when every state
         is seen by the outputs of its own step, or when ``h∘f`` is costly (a validated flow of
         a continuous-time plant steps back through its Jacobian; docs/nonlinear.md); ``L >= 2``
-        (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network (tighter where
-        the outputs see a state only through several steps of the dynamics, at about ``L``
-        times the cost of a step back; not for sampled continuous-time plants)
+        (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network through ``f``
+        and each step's ``h``, in place of the step through ``h∘f`` (tighter where the
+        outputs see a state only through several steps of the dynamics, at about ``L`` times
+        the cost of a step back; not for sampled continuous-time plants)
     window : steps ``M`` of the window-centred form (0 to :data:`MAX_WINDOW`; 0: none, the box
         form alone); None (default): :data:`WINDOW` where the model's boxes would wrap (module
         docstring, "Wrapping"), else 0
@@ -287,7 +291,7 @@ class NonlinearIntervalEstimator(Estimator):
         self._flow = isinstance(sys, FlowSystem)
         self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
-        self._hf = sys.hf_contractors() if lag and sys.ny else None
+        self._hf = sys.hf_contractors() if lag == 1 and sys.ny else None
         # growth that says the interval form wraps (module docstring, "Wrapping")
         prior = float(np.sum(self.x0.hi - self.x0.lo)) if self.x0 is not None else 0.0
         self._wrap_limit = WRAP_GROWTH * max(prior, float(np.sum(w.hi - w.lo)), 1.0)
@@ -374,20 +378,18 @@ class NonlinearIntervalEstimator(Estimator):
         prev = None
         if seen:
             ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
-            back = self._hf is not None and state.back
+            back = (self._hf is not None or self._fc is not None) and state.back
             for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
                 if not ok:
                     break
                 before = [b - a for a, b in zip(vl[:nx], vh[:nx])]
                 if not back:  # the correction again (HC4 is not idempotent)
                     ok = sys.contract_lists(vl, vh, u, ylo, yhi)
-                else:  # each ends with the correction
-                    # 2. step back (its inclusion forward: at the end of 2')
-                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev, not chain)
-                    if ok and chain and prev is not None:  # 2'. further back
-                        chain[-1].lo, chain[-1].hi = prev
-                        ok = self._window(chain, vl, vh, u, ylo, yhi)
-                        prev = (chain[-1].lo, chain[-1].hi)
+                elif chain:  # 2'. the steps back (lag >= 2), k - 1 the newest
+                    ok = self._window(chain, vl, vh, u, ylo, yhi)
+                    prev = (chain[-1].lo, chain[-1].hi)
+                else:  # 2. the step back (each ends with the correction)
+                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)
                 if not ok or not _gained(before, vl, vh):
                     break
             if not ok:  # y_k contradicts the model: not used
@@ -627,14 +629,10 @@ class NonlinearIntervalEstimator(Estimator):
         ylo: list[float],
         yhi: list[float],
         prev: tuple[list[float], list[float]] | None = None,
-        forward: bool = True,
     ) -> tuple[bool, tuple[list[float], list[float]] | None]:
         """Step 2 of the module docstring on ``vl = xl + wl``, ``vh`` (in place), from the box
         of ``(x[k-1], w[k-1])`` (``prev``: as an earlier sweep of this step left it); False
-        when the measurement is found inconsistent, and the box of ``(x[k-1], w[k-1])``.
-        ``forward=False``: without the inclusion of ``f`` forward, which the window of steps
-        back that follows ends with (over the box of ``(x[k-1], w[k-1])`` it leaves, no
-        wider)."""
+        when the measurement is found inconsistent, and the box of ``(x[k-1], w[k-1])``."""
         sys, nx, nw = self.model, self.model.nx, self.model.nw
         # the box of (x[k-1], w[k-1], w[k])
         pl, ph = (st.prev_lo.tolist(), st.prev_hi.tolist()) if prev is None else prev
@@ -646,14 +644,13 @@ class NonlinearIntervalEstimator(Estimator):
             if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
                 return False, None
         m = nx + nw
-        if forward:
-            f = sys._f
-            fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
-            for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
-                lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
-                if lo > hi:
-                    return False, None
-                vl[i], vh[i] = lo, hi
+        f = sys._f
+        fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
+        for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
+            lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
+            if lo > hi:
+                return False, None
+            vl[i], vh[i] = lo, hi
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
 
