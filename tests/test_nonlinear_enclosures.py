@@ -222,6 +222,40 @@ def test_arithmetic_is_outward_rounded_and_never_nan() -> None:
                 assert mp.mpf(lo) <= mp.mpf(x) ** n <= mp.mpf(hi), (a, b, n)
 
 
+def test_products_and_quotients_by_a_constant_are_the_runtimes() -> None:
+    # the code written for a factor of known sign picks the products mul picks (the same
+    # bounds); the quotient is div's where the dividend is finite and encloses it elsewhere
+    from ivobs.model.nonlinear.codegen import product, quotient
+
+    ns = dict(rt.NAMESPACE)
+    vals = [*_points("wide"), math.inf, -math.inf, -0.0]
+    consts = [(0.5, 0.5), (0.03322085188552512, 0.033220851885525184), (1e-300, 3.0)]
+    consts += [(-b, -a) for a, b in consts] + [(2.5e-310, 7e-310)]
+    codes = []
+    for cl, ch in consts:
+        code = product((repr(cl), repr(ch)), ("al", "ah"))
+        assert not code.startswith("_mul")
+        div = quotient(("al", "ah"), (repr(cl), repr(ch)))
+        assert div is not None
+        codes.append((cl, ch, compile(code, "product", "eval"), compile(div, "quotient", "eval")))
+    for i in range(1000):
+        a, b = sorted(RNG.choice(vals, 2))
+        if i % 5 == 0:
+            a, b = (0.0, b) if b >= 0 else (a, 0.0)
+        a, b = float(a), float(b)
+        cl, ch, mul, div = codes[i % len(codes)]
+        ns.update(al=a, ah=b)
+        assert eval(mul, ns) == rt.mul(cl, ch, a, b) == rt.mul(a, b, cl, ch), (cl, ch, a, b)
+        lo, hi = eval(div, ns)
+        if math.isfinite(a) and math.isfinite(b):
+            assert (lo, hi) == rt.div(a, b, cl, ch, 0), (cl, ch, a, b)
+        fin = [x for x in (a, b) if math.isfinite(x)]
+        for x in fin:
+            for y in (cl, ch):
+                assert mp.mpf(lo) <= mp.mpf(x) / mp.mpf(y) <= mp.mpf(hi)
+    assert quotient(("al", "ah"), ("-1.0", "1.0")) is None  # a constant around 0: div's job
+
+
 def test_generated_code_encloses_decimals_constants_and_real_powers() -> None:
     sys = ivobs.NonlinearSystem(
         f=["0.1*x1 + pi", "x1**2.5 + x2**(1/3)", "x1/x2 - e*x2**-2", "sqrt(x1)*log(x2)"],

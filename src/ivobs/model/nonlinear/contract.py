@@ -24,7 +24,16 @@ import math
 from typing import Any
 
 from ._runtime import NAMESPACE, ldn, lup
-from .codegen import Emitter, compile_source, enclose_constant, is_literal
+from .codegen import (
+    Emitter,
+    compile_source,
+    enclose_constant,
+    is_literal,
+    lower_of,
+    product,
+    quotient,
+    upper_of,
+)
 
 __all__ = ["build_contractor", "build_vector_contractor"]
 
@@ -131,7 +140,7 @@ class _Builder:
             if kind == "add":
                 call = f"_nx({acc.lo} + {p.lo}, _NI), _nx({acc.hi} + {p.hi}, _PI)"
             else:
-                call = f"_mul({acc.lo}, {acc.hi}, {p.lo}, {p.hi})"
+                call = product((acc.lo, acc.hi), (p.lo, p.hi))
             acc = self._new(kind, call, [acc, p])
         return acc
 
@@ -183,8 +192,13 @@ def _narrow(em: Emitter, a: _Node, call: str) -> None:
     if a.kind == "const":
         return
     em.line(f"pl, ph = {call}")
-    em.line(f"{a.lo} = _max({a.lo}, pl); {a.hi} = _min({a.hi}, ph)")
+    em.line(_meet(a))
     em.line(f"if {a.lo} > {a.hi}: return False")
+
+
+def _meet(a: _Node) -> str:
+    """Code of ``a <- a ∩ [pl, ph]``."""
+    return f"{a.lo} = {lower_of(a.lo, 'pl')}; {a.hi} = {upper_of(a.hi, 'ph')}"
 
 
 def _backward(em: Emitter, nd: _Node) -> None:
@@ -200,12 +214,15 @@ def _backward(em: Emitter, nd: _Node) -> None:
             if x.kind == "const":
                 continue
             if o.kind == "const":  # its sign is known now
-                if _excludes0(_value(o.lo), _value(o.hi)):
+                inline = quotient((r.lo, r.hi), (o.lo, o.hi))
+                if inline is not None:
+                    _narrow(em, x, inline)
+                elif _excludes0(_value(o.lo), _value(o.hi)):
                     _narrow(em, x, f"_div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
                 continue
             em.line(f"if _x0({o.lo}, {o.hi}):")
             em.lines.append("    " + f"    pl, ph = _div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
-            em.lines.append("    " + f"    {x.lo} = _max({x.lo}, pl); {x.hi} = _min({x.hi}, ph)")
+            em.lines.append("        " + _meet(x))
             em.lines.append("    " + f"    if {x.lo} > {x.hi}: return False")
     elif k == "neg":
         _narrow(em, nd.args[0], f"-{r.hi}, -{r.lo}")
@@ -214,7 +231,7 @@ def _backward(em: Emitter, nd: _Node) -> None:
         a = nd.args[0]
         if a.kind != "const":
             em.lines.append("    " + f"    pl, ph = _recip({r.lo}, {r.hi}, -1)")
-            em.lines.append("    " + f"    {a.lo} = _max({a.lo}, pl); {a.hi} = _min({a.hi}, ph)")
+            em.lines.append("        " + _meet(a))
             em.lines.append("    " + f"    if {a.lo} > {a.hi}: return False")
         else:
             em.lines.append("    " + "    pass")
@@ -299,7 +316,7 @@ def _compile(
         roots.append(root)
     for i, root in enumerate(roots):
         ylo, yhi = bounds(i)
-        em.line(f"{root.lo} = _max({root.lo}, {ylo}); {root.hi} = _min({root.hi}, {yhi})")
+        em.line(f"{root.lo} = {lower_of(root.lo, ylo)}; {root.hi} = {upper_of(root.hi, yhi)}")
         em.line(f"if {root.lo} > {root.hi}: return False")
     for nd in reversed(b.nodes):
         if nd.kind == "ident":

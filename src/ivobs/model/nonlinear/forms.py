@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .codegen import Emitter, Pair, compile_source
+from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
 
 __all__ = ["Forms", "build_forms", "emit_centre", "emit_meet"]
 
@@ -93,7 +93,8 @@ def emit_centre(
     em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")  # an infinite bound: natural only
     cenv: dict[Any, Pair] = dict(consts)
     for s, n in zip(z, zname):
-        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
+        em.line(f"c{n} = 0.5 * {n}l + 0.5 * {n}h")  # the midpoint, clipped into the box
+        em.line(f"c{n} = {lower_of(f'c{n}', f'{n}l')}; c{n} = {upper_of(f'c{n}', f'{n}h')}")
         em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
         em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
         cenv[s] = (f"c{n}", f"c{n}")
@@ -144,7 +145,7 @@ def emit_meet(em: Emitter, nat: Pair, terms: list[Pair]) -> Pair:
     inclusion ``nat`` of the same row (each encloses the range, so their meet does)."""
     m = em._sum(terms)
     r = em.new()
-    em.line(f"{r[0]} = _max({nat[0]}, {m[0]}); {r[1]} = _min({nat[1]}, {m[1]})")
+    em.line(f"{r[0]} = {lower_of(nat[0], m[0])}; {r[1]} = {upper_of(nat[1], m[1])}")
     return r
 
 
