@@ -79,14 +79,22 @@ def _ret(em: Emitter, pairs: list[Pair]) -> None:
 
 
 def emit_centre(
-    em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair], nat: list[Pair]
+    em: Emitter,
+    syms: dict[str, list[Any]],
+    consts: dict[Any, Pair],
+    nat: list[Pair],
+    used: set[Any] | None = None,
 ) -> dict[Any, Pair]:
     """Code of the centred forms' common start: return ``nat`` when a bound of the box
     ``z = (x, w)`` is infinite, else the centre ``c`` (midpoint clipped into the box) and the
     outward-rounded offsets ``[z] - c`` (``d{name}l``, ``d{name}h``); the emitter's scope is
-    set to the centre (and the inputs), which is returned."""
-    z = syms["x"] + syms["w"]
-    zname = [f"x{i}" for i in range(len(syms["x"]))] + [f"w{i}" for i in range(len(syms["w"]))]
+    set to the centre (and the inputs), which is returned. ``used``: the only variables of
+    ``z`` the forms read (None: all), the others neither checked nor centred."""
+    pairs = [(s, f"x{i}") for i, s in enumerate(syms["x"])]
+    pairs += [(s, f"w{i}") for i, s in enumerate(syms["w"])]
+    if used is not None:
+        pairs = [(s, n) for s, n in pairs if s in used]
+    z, zname = [s for s, _ in pairs], [n for _, n in pairs]
     box = [f"{n}l" for n in zname] + [f"{n}h" for n in zname]
     em.line(f"s = {' + '.join(box) if box else '0.0'}")
     lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
@@ -124,7 +132,8 @@ def _mean_value(
             if d != 0 and repeated[i]:
                 em.label = f"d {labels[i]} / d {z[j]}"
                 entries[i, j] = em.emit(d)
-    emit_centre(em, syms, consts, nat)
+    rows = [e for e, r in zip(exprs, repeated) if r]
+    emit_centre(em, syms, consts, nat, set().union(*(e.free_symbols for e in rows)))
     out: list[Pair] = []
     for i, nv in enumerate(nat):
         if not repeated[i]:  # single-use: the natural extension is already the exact range
