@@ -25,9 +25,8 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    again, oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4
    and 6]. What ``y_k`` says about earlier states thus reaches ``x[k]`` through them. Its
    newest step does the work of step 2 (``[x]_k``, contracted by ``[y_k]``, narrows
-   ``(x[k-1], w[k-1])`` through ``f``), which is not done as well: through ``h∘f`` it
-   narrows no more on the scenarios measured (BENCHMARKS.md), for a second set of
-   contractors per sweep.
+   ``(x[k-1], w[k-1])`` through ``f``), so step 2 is skipped: through ``h∘f`` it narrowed no
+   more on the scenarios measured (BENCHMARKS.md), for a second set of contractors per sweep.
 
 After step 1, step 2 or 2' (each ends with the contraction by ``[y_k]``) repeats, starting
 from the boxes the last sweep left, until a sweep narrows no state's width by

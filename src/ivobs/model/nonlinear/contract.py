@@ -251,33 +251,34 @@ def build_contractor(
     (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
     ``inputs`` read from ``u`` (thin)."""
     head = [f"def {name}(vl, vh, u, ylo, yhi=None):", "    if yhi is None: yhi = ylo"]
-    return _compile(name, [expr], label, leaves, inputs, consts, head, lambda i: ("ylo", "yhi"))
+    return _compile(name, [expr], [label], leaves, inputs, consts, head, lambda i: ("ylo", "yhi"))
 
 
 def build_vector_contractor(
     name: str,
     exprs: list[Any],
-    label: str,
+    labels: list[str],
     leaves: list[Any],
     inputs: list[Any],
     consts: dict[Any, Any],
 ) -> tuple[Any, list[str]]:
     """Compile ``name(vl, vh, u, ylo, yhi) -> bool`` contracting the boxes of ``leaves`` with
-    ``exprs[i] in [ylo[i], yhi[i]]`` for every ``i`` (lists, read at ``i < len(exprs)``):
+    ``exprs[i] in [ylo[i], yhi[i]]`` for every ``i`` (lists, read at ``i < len(exprs)``;
+    ``labels[i]`` names ``exprs[i]`` in a domain error):
     HC4-revise on the expressions' common DAG [Jaulin2001, Ch. 4], one forward pass over every
     node (a subexpression the components share is evaluated once), every root met with its
     bounds, then one backward pass in the reverse order, so that a shared node is narrowed by
     all its parents before it narrows its children."""
     head = [f"def {name}(vl, vh, u, ylo, yhi):"]
     return _compile(
-        name, exprs, label, leaves, inputs, consts, head, lambda i: (f"ylo[{i}]", f"yhi[{i}]")
+        name, exprs, labels, leaves, inputs, consts, head, lambda i: (f"ylo[{i}]", f"yhi[{i}]")
     )
 
 
 def _compile(
     name: str,
     exprs: list[Any],
-    label: str,
+    labels: list[str],
     leaves: list[Any],
     inputs: list[Any],
     consts: dict[Any, Any],
@@ -288,7 +289,6 @@ def _compile(
     the root ``i`` met with the pair of code ``bounds(i)``."""
     sites: list[str] = []
     em = Emitter(sites)
-    em.label = label
     em.lines += head
     free = set().union(*(e.free_symbols for e in exprs))
     env: dict[Any, tuple[str, str]] = dict(consts)
@@ -305,7 +305,8 @@ def _compile(
     em.scope(env)
     b = _Builder(em, lv, cin)
     roots = []
-    for expr in exprs:
+    for expr, label in zip(exprs, labels, strict=True):
+        em.label = label
         root = b.node(expr)
         if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
             lo, hi = em.new()  # (a variable even for a constant: it is intersected with y)

@@ -425,7 +425,7 @@ class NonlinearSystem:
         if self._fc is None:
             g = self._groups()
             self._fc = build_vector_contractor(
-                "fc", self.f_exprs, "f", g["x"] + g["w"], g["u"], self._consts
+                "fc", self.f_exprs, self._labels("f"), g["x"] + g["w"], g["u"], self._consts
             )
         return self._fc
 
