@@ -7,6 +7,7 @@ on thin boxes (a few ulps)."""
 from __future__ import annotations
 
 import math
+import re
 
 import mpmath as mp
 import numpy as np
@@ -221,6 +222,40 @@ def test_arithmetic_is_outward_rounded_and_never_nan() -> None:
                 assert mp.mpf(lo) <= mp.mpf(x) ** n <= mp.mpf(hi), (a, b, n)
 
 
+def test_products_and_quotients_by_a_constant_are_the_runtimes() -> None:
+    # the code written for a factor of known sign picks the products mul picks (the same
+    # bounds); the quotient is div's where the dividend is finite and encloses it elsewhere
+    from ivobs.model.nonlinear.codegen import product, quotient
+
+    ns = dict(rt.NAMESPACE)
+    vals = [*_points("wide"), math.inf, -math.inf, -0.0]
+    consts = [(0.5, 0.5), (0.03322085188552512, 0.033220851885525184), (1e-300, 3.0)]
+    consts += [(-b, -a) for a, b in consts] + [(2.5e-310, 7e-310)]
+    codes = []
+    for cl, ch in consts:
+        code = product((repr(cl), repr(ch)), ("al", "ah"))
+        assert not code.startswith("_mul")
+        div = quotient(("al", "ah"), (repr(cl), repr(ch)))
+        assert div is not None
+        codes.append((cl, ch, compile(code, "product", "eval"), compile(div, "quotient", "eval")))
+    for i in range(1000):
+        a, b = sorted(RNG.choice(vals, 2))
+        if i % 5 == 0:
+            a, b = (0.0, b) if b >= 0 else (a, 0.0)
+        a, b = float(a), float(b)
+        cl, ch, mul, div = codes[i % len(codes)]
+        ns.update(al=a, ah=b)
+        assert eval(mul, ns) == rt.mul(cl, ch, a, b) == rt.mul(a, b, cl, ch), (cl, ch, a, b)
+        lo, hi = eval(div, ns)
+        if math.isfinite(a) and math.isfinite(b):
+            assert (lo, hi) == rt.div(a, b, cl, ch, 0), (cl, ch, a, b)
+        fin = [x for x in (a, b) if math.isfinite(x)]
+        for x in fin:
+            for y in (cl, ch):
+                assert mp.mpf(lo) <= mp.mpf(x) / mp.mpf(y) <= mp.mpf(hi)
+    assert quotient(("al", "ah"), ("-1.0", "1.0")) is None  # a constant around 0: div's job
+
+
 def test_generated_code_encloses_decimals_constants_and_real_powers() -> None:
     sys = ivobs.NonlinearSystem(
         f=["0.1*x1 + pi", "x1**2.5 + x2**(1/3)", "x1/x2 - e*x2**-2", "sqrt(x1)*log(x2)"],
@@ -266,3 +301,25 @@ def test_domain_edges_clip_or_name_the_expression() -> None:
     div = ivobs.NonlinearSystem(f=["x2", "1/x1"], h=["x1"], states=["x1", "x2"])
     with pytest.raises(ivobs.IvobsError, match=r"f\[1\] = '1/x1'.*division by a range that is "):
         div.f_box([0, 0], [0, 0], [], [], [])
+
+
+def test_constants_are_folded_where_the_code_is_written_and_still_enclose() -> None:
+    # k*sqrt(2)*sqrt(g) and sin(g) are constants (known parameters): evaluated once, when the
+    # code is written, by the runtime's own operations; the bounds still hold the exact values
+    sys = ivobs.NonlinearSystem(
+        f=["x1 - k*sqrt(2)*sqrt(g)*sqrt(x1) + sin(g)*x1"],
+        h=["2*k", "x1*sin(k)"],
+        states=["x1"],
+        params={"k": 0.3, "g": 9.81},
+    )
+    literal = re.compile(r"_(sqrt|sin|mul)\((-?[\d.e+-]+, )+-?[\d.e+-]+(, \d+)?\)")
+    assert not literal.search(sys._f.source)
+    k, g = mp.mpf(3) / 10, mp.mpf(981) / 100
+    for x in [1.0, 2.0, 17.25]:
+        lo, hi = sys.f_box([x], [x], [], [], [])
+        v = x - k * mp.sqrt(2) * mp.sqrt(g) * mp.sqrt(x) + mp.sin(g) * x
+        assert mp.mpf(lo[0]) <= v <= mp.mpf(hi[0])
+    # a constant output is intersected with its measurement like any other
+    box = sys.h_contract([1.0], [2.0], [], [], [], [0.6, 0.3], [0.6000001, 0.5])
+    assert box is not None and 1.0 < box[0][0] and box[1][0] < 2.0
+    assert sys.h_contract([1.0], [2.0], [], [], [], [0.7, 0.3], [0.8, 0.5]) is None

@@ -54,6 +54,32 @@ def test_the_contract_members() -> None:
     assert s.h_contract([0.2, 0.0], [0.4, 0.2], [], s.w_box.lo, s.w_box.hi, [np.nan]) is not None
 
 
+def test_outputs_that_share_a_state_pass_their_contraction_on() -> None:
+    # y1 = x1 + x2 narrows x2 only once y2 = x1 has narrowed x1: a second pass over the outputs
+    s = ivobs.NonlinearSystem(f=["x1", "x2"], h=["x1 + x2", "x1"], states=["x1", "x2"])
+    out = s.h_contract([0.0, 0.0], [1.0, 1.0], [], [], [], [1.0, 0.5], [1.0, 0.5])
+    assert out is not None and out[1][0] - out[0][0] < 1e-12
+    assert abs(out[0][1] - 0.5) < 1e-12 and abs(out[1][1] - 0.5) < 1e-12
+    # outputs over disjoint states: one pass contracts each as far as it goes
+    d = ivobs.NonlinearSystem(f=["x1", "x2"], h=["2*x1", "x2**2"], states=["x1", "x2"])
+    out = d.h_contract([0.0, 0.0], [1.0, 1.0], [], [], [], [1.0, 0.25], [1.0, 0.25])
+    assert out is not None
+    assert abs(out[0][0] - 0.5) < 1e-12 and abs(out[1][0] - 0.5) < 1e-12
+    assert abs(out[0][1] - 0.5) < 1e-12 and abs(out[1][1] - 0.5) < 1e-12
+
+
+def test_the_f_contractor_narrows_a_box_by_the_next_state_and_keeps_every_solution() -> None:
+    # x1 + x2 = 3 and sqrt(x1) x2 = 2 share x1, x2 (one DAG, sqrt(x1) evaluated once)
+    s = ivobs.NonlinearSystem(f=["x1 + x2", "sqrt(x1)*x2"], h=["x1"], states=["x1", "x2"])
+    fc, _ = s.f_contractor()
+    vl, vh = [0.0, 1.5], [4.0, 4.0]
+    assert fc(vl, vh, [], [3.0, 2.0], [3.0, 2.0])
+    assert vl[0] <= 1.0 <= vh[0] and vl[1] <= 2.0 <= vh[1]  # the solution (1, 2) is kept
+    assert vh[0] <= 1.5 + 1e-12 and vh[1] - vl[1] < 2.5
+    # no point of the box maps into the next state's box
+    assert not fc([0.0, 0.0], [1.0, 1.0], [], [3.0, 2.0], [3.0, 2.0])
+
+
 def test_decimal_literals_are_enclosed_exactly() -> None:
     s = ivobs.NonlinearSystem(f=["0.1*x1", "x1 + 0.3 - 0.1 - 0.2"], h=["x1"], states=["x1", "x2"])
     lo, hi = s.f_box([1.0, 0.0], [1.0, 0.0], [], [], [])

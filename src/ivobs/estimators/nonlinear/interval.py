@@ -17,19 +17,26 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
    :func:`~ivobs.estimators.nonlinear.window.centred`, one evaluation of ``f`` and its
    Jacobian for both).
 
-2'. **Further back** (``lag = L >= 2``): the boxes of ``(x[j], w[j])`` for the ``L`` steps
-   ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j], w[j]) ∈ [x]_{j+1}`` and
-   with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first, then
-   ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1`` again,
-   oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4 and 6].
-   What ``y_k`` says about earlier states thus reaches ``x[k]`` through them.
+2'. **Further back** (``lag = L >= 2``, in place of step 2): the boxes of ``(x[j], w[j])``
+   for the ``L`` steps ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j],
+   w[j]) ∈ [x]_{j+1}`` (one contractor for all the states, :meth:`~ivobs.NonlinearSystem.
+   f_contractor`) and with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first,
+   then ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1``
+   again, oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4
+   and 6]. What ``y_k`` says about earlier states thus reaches ``x[k]`` through them. Its
+   newest step does the work of step 2 (``[x]_k``, contracted by ``[y_k]``, narrows
+   ``(x[k-1], w[k-1])`` through ``f``), so step 2 is skipped: through ``h∘f`` it narrowed no
+   more on the scenarios measured (BENCHMARKS.md), for a second set of contractors per sweep.
 
-Steps 1, 2 and 2' repeat, the step back starting from the boxes the last sweep left, until a
-sweep narrows no state's width by :data:`FIXPOINT_GAIN` of itself (at most :data:`MAX_SWEEPS`):
-the contractor network of the last steps iterated to its fixpoint (to within that share)
-[Jaulin2001, Ch. 4]. The rule is per state, not on the summed width, which a wide state that nothing
-bounds well would dominate, stopping the sweeps while the well-measured states still narrow (CORA's
-six tanks; BENCHMARKS.md has the figures).
+After step 1, step 2 or 2' (each ends with the contraction by ``[y_k]``) repeats, starting
+from the boxes the last sweep left, until a sweep narrows no state's width by
+:data:`FIXPOINT_GAIN` of itself (at most :data:`MAX_SWEEPS`): the contractor network of the last
+steps iterated to its fixpoint (to within that share) [Jaulin2001, Ch. 4]. Step 1 is done once,
+before the sweeps: its gain does not count (the rule measures what the steps back add, so one
+sweep that adds nothing ends the contraction). The rule is per state, not on the summed width,
+which a wide state that nothing bounds well would dominate, stopping the sweeps while the
+well-measured states still narrow (CORA's six tanks; BENCHMARKS.md has the figures). Without a
+step back (``lag=0``, or the first step) step 1 repeats under the same rule.
 
 4. **Window-centred form** (``window = M >= 1``; :mod:`~ivobs.estimators.nonlinear.window`):
    each of the last ``M`` steps ``j`` keeps, from the mean-value forms of ``f`` and ``h`` over
@@ -116,7 +123,7 @@ __all__ = [
 ]
 
 MAX_SWEEPS = 8
-"""Most correction sweeps (contraction by ``y[k]`` and the step back) of one step."""
+"""Most sweeps of the steps back (each ending with the contraction by ``y[k]``) of one step."""
 
 FIXPOINT_GAIN = 0.01
 """A sweep that narrows no state's width by this share of itself ends the step's contraction
@@ -219,9 +226,10 @@ class NonlinearIntervalEstimator(Estimator):
     lag : 1 (default) to contract one step back through ``h∘f``; 0 not to: when every state
         is seen by the outputs of its own step, or when ``h∘f`` is costly (a validated flow of
         a continuous-time plant steps back through its Jacobian; docs/nonlinear.md); ``L >= 2``
-        (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network (tighter where
-        the outputs see a state only through several steps of the dynamics, at about ``L``
-        times the cost of a step back; not for sampled continuous-time plants)
+        (up to :data:`MAX_LAG`) to contract the last ``L`` steps as one network through ``f``
+        and each step's ``h``, in place of the step through ``h∘f`` (tighter where the
+        outputs see a state only through several steps of the dynamics, at about ``L`` times
+        the cost of a step back; not for sampled continuous-time plants)
     window : steps ``M`` of the window-centred form (0 to :data:`MAX_WINDOW`; 0: none, the box
         form alone); None (default): :data:`WINDOW` where the model's boxes would wrap (module
         docstring, "Wrapping"), else 0
@@ -268,7 +276,7 @@ class NonlinearIntervalEstimator(Estimator):
                     "window: the window-centred form linearises f, whose Jacobian this model "
                     "does not give (a validated flow of a non-smooth f); use window=0"
                 )
-        self._fc = sys.f_contractors() if lag > 1 else None
+        self._fc = sys.f_contractor() if lag > 1 else None
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
         self.design = NonlinearIntervalDesign(
@@ -282,7 +290,7 @@ class NonlinearIntervalEstimator(Estimator):
         self._flow = isinstance(sys, FlowSystem)
         self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
-        self._hf = sys.hf_contractors() if lag and sys.ny else None
+        self._hf = sys.hf_contractors() if lag == 1 and sys.ny else None
         # growth that says the interval form wraps (module docstring, "Wrapping")
         prior = float(np.sum(self.x0.hi - self.x0.lo)) if self.x0 is not None else 0.0
         self._wrap_limit = WRAP_GROWTH * max(prior, float(np.sum(w.hi - w.lo)), 1.0)
@@ -368,44 +376,48 @@ class NonlinearIntervalEstimator(Estimator):
         seen = any(v == v for v in ylo)
         prev = None
         if seen:
-            ok = True
+            ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
+            back = (self._hf is not None or self._fc is not None) and state.back
             for _ in range(MAX_SWEEPS):  # to a fixpoint: until a sweep gains < FIXPOINT_GAIN
+                if not ok:
+                    break
                 before = [b - a for a, b in zip(vl[:nx], vh[:nx])]
-                ok = sys.contract_lists(vl, vh, u, ylo, yhi)  # 1. correction
-                if ok and self._hf is not None and state.back:
-                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)  # 2. step back
-                    if ok and chain and prev is not None:  # 2'. further back
-                        chain[-1].lo, chain[-1].hi = prev
-                        ok = self._window(chain, vl, vh, u, ylo, yhi)
-                        prev = (chain[-1].lo, chain[-1].hi)
+                if not back:  # the correction again (HC4 is not idempotent)
+                    ok = sys.contract_lists(vl, vh, u, ylo, yhi)
+                elif chain:  # 2'. the steps back (lag >= 2), k - 1 the newest
+                    ok = self._window(chain, vl, vh, u, ylo, yhi)
+                    prev = (chain[-1].lo, chain[-1].hi)
+                else:  # 2. the step back (each ends with the correction)
+                    ok, prev = self._back(state, vl, vh, u, ylo, yhi, prev)
                 if not ok or not _gained(before, vl, vh):
                     break
             if not ok:  # y_k contradicts the model: not used
                 inconsistent = True
-        win: _Form | None = None
-        if self.design.window and not inconsistent:  # 4. the window-centred form
-            win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, seen, chain, prev)
-            if win is None:  # empty: y_k contradicts the model and the window
-                inconsistent = True
-            elif seen and win.narrowed and not sys.contract_lists(vl, vh, u, ylo, yhi):
-                inconsistent = True
-        if inconsistent:
-            vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
-            chain = self._chain(state)
-            win = None
-            if self.design.window:
-                win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
-        if self.design.window and win is None:  # the model itself contradicted: start again
-            rows = self._rows(state, [], None).empty()
-            win = _Form(rows, None, None, state.cov, None, False)
-        prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         hist: dict[str, np.ndarray] = {}
-        if self._fc is not None:
-            hist = self._history(chain, y_k, inconsistent)
         pred = None
-        if win is not None:
-            slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
-            hist.update(slid)
+        with np.errstate(all="ignore"):  # the window-centred form checks what is not finite
+            win: _Form | None = None
+            if self.design.window and not inconsistent:  # 4. the window-centred form
+                win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, seen, chain, prev)
+                if win is None:  # empty: y_k contradicts the model and the window
+                    inconsistent = True
+                elif seen and win.narrowed and not sys.contract_lists(vl, vh, u, ylo, yhi):
+                    inconsistent = True
+            if inconsistent:
+                vl, vh = state.lo.tolist() + self._wl, state.hi.tolist() + self._wh
+                chain = self._chain(state)
+                win = None
+                if self.design.window:
+                    win = self._form(state, vl, vh, u_k, y_k, ylo, yhi, False, chain, None)
+            if self.design.window and win is None:  # the model contradicted: start again
+                rows = self._rows(state, [], None).empty()
+                win = _Form(rows, None, None, state.cov, None, False)
+            prev_lo, prev_hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
+            if self._fc is not None:
+                hist = self._history(chain, y_k, inconsistent)
+            if win is not None:
+                slid, pred = self._slide(win, prev_lo, prev_hi, u_k, len(y_k))
+                hist.update(slid)
         if pred is None:  # 3. prediction: natural ∩ mean-value form
             f = sys._f
             pl, ph = sys._call(f.tight, f.sites, vl[:nx], vh[:nx], u, vl[nx:], vh[nx:])
@@ -445,20 +457,21 @@ class NonlinearIntervalEstimator(Estimator):
         lo, hi = np.array(vl, dtype=float), np.array(vh, dtype=float)
         lh: Linearisation | None = None
         g: wf.Gains | None = None
+        dw = None
         if seen and self._h_evals is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
             lh = wf.affine(self._h_evals, lo, hi, u_k, nx)
             if np.isfinite(lh.J).all() and np.isfinite(lh.rho).all():
-                g = wf.filter_gain(st.cov, lh, ~np.isnan(y_k), wf.radius(lo, hi, lh.c)[nx:], nx)
+                dw = wf.radius(lo[nx:], hi[nx:], lh.c[nx:])
+                g = wf.filter_gain(st.cov, lh, ~np.isnan(y_k), dw, nx)
             else:
                 lh = None
         K = np.zeros((nx, len(y_k))) if g is None else g.K
         meas = wf.measured(y_k, ylo, yhi)
-        start = wf.filter_start(lh, K, lo, hi, lo[:nx], hi[:nx], meas, nx)
+        start = wf.filter_start(lh, K, dw, lo[:nx], hi[:nx], meas, nx)
         rows = self._rows(st, chain, prev)
-        with np.errstate(invalid="ignore", over="ignore"):
-            cl, ch = wf.hull(start, lo[:nx], hi[:nx], rows)
-            nl = np.fmax(lo[:nx], np.fmax.reduce(cl, axis=0))
-            nh = np.fmin(hi[:nx], np.fmin.reduce(ch, axis=0))
+        cl, ch = wf.hull(start, lo[:nx], hi[:nx], rows)
+        nl = np.fmax(lo[:nx], np.fmax.reduce(cl, axis=0))
+        nh = np.fmin(hi[:nx], np.fmin.reduce(ch, axis=0))
         if (nl > nh).any():
             return None
         narrowed = bool((nl > lo[:nx]).any() or (nh < hi[:nx]).any())
@@ -505,11 +518,11 @@ class NonlinearIntervalEstimator(Estimator):
         pred = None
         if win.meas is not None and np.isfinite(lo).all() and np.isfinite(hi).all():
             lf = wf.affine(self._f_evals, lo, hi, u_k, nx)
+            delta = wf.radius(lo, hi, lf.c)
             if not self._flow:
-                pred = wf.centred(lf, lo, hi)
-            dw = wf.radius(lo, hi, lf.c)[nx:]
-            L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, dw, nx, ny)
-            tr = wf.transition(lf, win.lh, L, lo, hi, win.meas, nx)
+                pred = wf.centred(lf, delta)
+            L, P = wf.predictor(win.P, win.g, lf.J, lf.rho, delta[nx:], nx, ny)
+            tr = wf.transition(lf, win.lh, L, delta, win.meas, nx)
             total = tr.b.sum() + tr.F.sum() + tr.Fw.sum() + tr.n.sum() + tr.e.sum() + tr.dw.sum()
             if not math.isfinite(float(total) + tr.eta):  # (a sum that overflows counts too)
                 tr = None
@@ -583,13 +596,12 @@ class NonlinearIntervalEstimator(Estimator):
         become empty (``y[k]`` contradicts the window)."""
         sys, nx = self.model, self.model.nx
         assert self._fc is not None
-        fc, f = self._fc, sys._f
+        (fc, sites), f = self._fc, sys._f
         for j in range(len(chain) - 1, -1, -1):  # newest first
             c = chain[j]
             tl, th = (vl, vh) if j == len(chain) - 1 else (chain[j + 1].lo, chain[j + 1].hi)
-            for i, (fn, sites) in enumerate(fc):
-                if not sys._call(fn, sites, c.lo, c.hi, c.u, tl[i], th[i]):
-                    return False
+            if not sys._call(fc, sites, c.lo, c.hi, c.u, tl, th):  # f(x[j], ·) ∈ [x]_{j+1}
+                return False
             if any(v == v for v in c.ylo) and not sys.contract_lists(c.lo, c.hi, c.u, c.ylo, c.yhi):
                 return False
         for j, c in enumerate(chain):  # oldest first

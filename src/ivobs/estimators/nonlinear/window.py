@@ -136,7 +136,8 @@ def affine(
     for the larger joint vectors of this form: ``g0 = gl``, ``J̃ = mid [J]``,
     ``ρ = upper(up(gh - gl) + D Δ, n + 1)``; a row whose bounds are not finite takes the
     natural inclusion (``J̃_i = 0``); a set-valued map widens ``ρ`` and the natural inclusion
-    by its spread."""
+    by its spread. Floating-point exceptions are the caller's to silence (an infinite bound is
+    expected here)."""
     value, natjac = evals[0], evals[1]
     c = np.minimum(np.maximum(0.5 * lo + 0.5 * hi, lo), hi)
     cl, bl, bh, ul = c.tolist(), lo.tolist(), hi.tolist(), u.tolist()
@@ -144,19 +145,15 @@ def affine(
     nl, nh, jl, jh = natjac(bl[:nx], bh[:nx], ul, bl[nx:], bh[nx:])  # g(B) and [J] over B
     n = len(cl)
     m = len(gl)
-    Jl = np.array(jl, dtype=float).reshape(m, n)
-    Jh = np.array(jh, dtype=float).reshape(m, n)
-    g0, ghi = np.array(gl, dtype=float), np.array(gh, dtype=float)
-    with np.errstate(invalid="ignore", over="ignore"):
-        J = 0.5 * Jl + 0.5 * Jh  # J̃ = mid [J] (halves: no overflow)
-        D = up(np.maximum(Jh - J, J - Jl))
-        rho = upper(up(ghi - g0) + D @ radius(lo, hi, c), n + 1)
-        edges = ~np.isfinite(rho + g0 + J.sum(axis=1))
+    g0, ghi, nat_lo, nat_hi = np.array((gl, gh, nl, nh), dtype=float).reshape(4, m)
+    Jl, Jh = np.array((jl, jh), dtype=float).reshape(2, m, n)
+    J = 0.5 * Jl + 0.5 * Jh  # J̃ = mid [J] (halves: no overflow)
+    D = up(np.maximum(Jh - J, J - Jl))
+    rho = upper(up(ghi - g0) + D @ radius(lo, hi, c), n + 1)
+    edges = ~np.isfinite(rho + g0 + J.sum(axis=1))
     if edges.any():  # a domain edge: the natural inclusion
         J[edges] = 0.0
-        g0[edges], rho[edges] = mid_rad(np.array(nl, dtype=float)[edges],
-                                        np.array(nh, dtype=float)[edges])  # fmt: skip
-    nat_lo, nat_hi = np.array(nl, dtype=float), np.array(nh, dtype=float)
+        g0[edges], rho[edges] = mid_rad(nat_lo[edges], nat_hi[edges])
     if len(evals) > 2:  # a set-valued map: widened by its spread over the box
         spread = np.array(evals[2](bl[:nx], bh[:nx], ul, bl[nx:], bh[nx:]), dtype=float)
         if spread.size:
@@ -165,14 +162,14 @@ def affine(
     return Linearisation(g0, J, rho, c, nat_lo, nat_hi)
 
 
-def centred(lin: Linearisation, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def centred(lin: Linearisation, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The natural inclusion met with the centred form ``g0 + J̃ ([lo, hi] - c) ± ρ`` of the
-    mean-value form ``lin`` over the box ``[lo, hi]`` it was made on [Moore2009, Ch. 6]:
-    ``|J̃ (ζ - c)| <= |J̃| Δ``, the sum ``|J̃| Δ + ρ`` rounded up (``n + 2`` roundings on a
-    path) and the two bounds outward."""
-    s = upper(np.abs(lin.J) @ radius(lo, hi, lin.c) + lin.rho, lin.c.shape[0] + 2)
-    with np.errstate(invalid="ignore"):  # inf - inf: NaN, which fmax/fmin ignore
-        return np.fmax(lin.nat_lo, down(lin.g0 - s)), np.fmin(lin.nat_hi, up(lin.g0 + s))
+    mean-value form ``lin`` over the box ``[lo, hi]`` it was made on [Moore2009, Ch. 6], with
+    ``delta = radius(lo, hi, lin.c)``: ``|J̃ (ζ - c)| <= |J̃| Δ``, the sum ``|J̃| Δ + ρ``
+    rounded up (``n + 2`` roundings on a path) and the two bounds outward (an infinite bound
+    gives NaN, which fmax/fmin ignore)."""
+    s = upper(np.abs(lin.J) @ delta + lin.rho, lin.c.shape[0] + 2)
+    return np.fmax(lin.nat_lo, down(lin.g0 - s)), np.fmin(lin.nat_hi, up(lin.g0 + s))
 
 
 class Transition(NamedTuple):
@@ -193,18 +190,16 @@ def transition(
     lf: Linearisation,
     lh: Linearisation | None,
     L: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    delta: np.ndarray,
     meas: Measured,
     nx: int,
 ) -> Transition:
-    """The transition of the step whose joint box is ``[lo, hi]``: ``f`` linearised over it
-    as ``lf``, ``h`` over a box containing it as ``lh`` (None, or ``L`` zero: no output
-    injection); ``L`` has zero columns where the measurement is missing or not used. Rounding:
-    module docstring, (T)."""
+    """The transition of the step whose joint box ``[lo, hi]`` has the radius ``delta =
+    radius(lo, hi, lf.c)``: ``f`` linearised over it as ``lf``, ``h`` over a box containing it
+    as ``lh`` (None, or ``L`` zero: no output injection); ``L`` has zero columns where the
+    measurement is missing or not used. Rounding: module docstring, (T)."""
     c = lf.c
     n = c.shape[0]
-    delta = radius(lo, hi, c)
     J, cx = lf.J, c[:nx]
     absJ = np.abs(J)
     ny = L.shape[1]
@@ -221,13 +216,14 @@ def transition(
         z = meas.y - (lh.g0 + H @ t)
         b = (lf.g0 + L @ z) - F[:, :nx] @ cx
         absL = np.abs(L)
-        inner = np.abs(meas.y) + np.abs(lh.g0) + np.abs(H) @ (np.abs(t) + delta)
+        abst = np.abs(t)
+        inner = np.abs(meas.y) + np.abs(lh.g0) + np.abs(H) @ (abst + delta)
         noise = (
             lf.rho
             + absL @ (meas.r + lh.rho + _g(N) * inner)
             + _g(N) * (np.abs(lf.g0) + np.abs(F[:, :nx]) @ np.abs(cx) + absJ @ delta)
         )
-        under = N * ETA * (1.0 + float(absL.sum())) * (1.0 + float(np.sum(np.abs(t))))
+        under = N * ETA * (1.0 + float(absL.sum())) * (1.0 + float(abst.sum()))
     under *= 1.0 + float(delta.sum())
     noise = upper(noise + under, n + ny + 16)
     Fx, Fw = F[:, :nx], F[:, nx:]
@@ -250,35 +246,32 @@ class Start(NamedTuple):
 def filter_start(
     lh: Linearisation | None,
     K: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    dw: np.ndarray | None,
     xlo: np.ndarray,
     xhi: np.ndarray,
     meas: Measured,
     nx: int,
 ) -> Start:
     """``x[k] = x[k] + K (y_k - h(ζ_k))`` as ``m + Φ x[k] ± R``: ``h`` linearised as ``lh`` over
-    the joint box ``[lo, hi]``, ``[xlo, xhi]`` the current box of ``x[k]`` (inside it);
-    ``Φ = I`` and ``m = R = 0`` without a measurement. Rounding: module docstring, (S)."""
-    if lh is None or not K.any():
+    a joint box whose ``w`` part has the radius ``dw`` about ``lh.c`` (:func:`radius`),
+    ``[xlo, xhi]`` the current box of ``x[k]`` (inside it); ``Φ = I`` and ``m = R = 0``
+    without a measurement. Rounding: module docstring, (S)."""
+    if lh is None or dw is None or not K.any():
         return Start(np.eye(nx), np.zeros(nx), np.zeros(nx), 0.0)
     ch = lh.c
     n, ny = ch.shape[0], K.shape[1]
     H = lh.J
     Hx, chx = H[:, :nx], ch[:nx]
-    dw = radius(lo, hi, ch)[nx:]
     a = K @ ((meas.y - lh.g0) + Hx @ chx)
     KH = K @ H
     G = np.eye(nx) - KH[:, :nx]
     v = np.maximum(np.abs(xlo), np.abs(xhi))  # >= |x[k]|
     N = n + ny + 4
-    absH = np.abs(H)
-    inner = np.abs(meas.y) + np.abs(lh.g0) + absH[:, :nx] @ (np.abs(chx) + v) + absH[:, nx:] @ dw
+    mag = np.concatenate([np.abs(chx) + v, dw])  # (|ch| + v, Δw): what |H| acts on
+    inner = np.abs(meas.y) + np.abs(lh.g0) + np.abs(H) @ mag
     absK = np.abs(K)
     R = absK @ (meas.r + lh.rho + _g(N) * inner) + _g(N) * v + np.abs(KH[:, nx:]) @ dw
-    under = (
-        N * ETA * (1.0 + float(absK.sum())) * (1.0 + float(v.sum() + dw.sum() + np.abs(chx).sum()))
-    )
+    under = N * ETA * (1.0 + float(absK.sum())) * (1.0 + float(mag.sum()))
     return Start(G, a, upper(R + under, N + 12), 0.0)
 
 
@@ -300,41 +293,46 @@ def hull(start: Start, xlo: np.ndarray, xhi: np.ndarray, rows: Rows) -> tuple[np
     """``(lo, hi)``, one row per box (the current box ``[xlo, xhi]`` first, then the kept boxes
     newest first): the hulls of the module docstring, each outward rounded (NaN or infinite
     where a bound is not finite). Rounding: module docstring, (H). The products ``Φ`` are
-    formed one after the other; all the rest is done on the stack of them."""
+    formed one after the other; all the rest is done on the stack of them, the products of
+    ``|Φ|`` in one batch."""
     nx = len(xlo)
     M = rows.lo.shape[0]
     steps = rows.steps
-    F = steps.F
-    phi, chain = start.phi, [start.phi]
-    for Fi in F[::-1]:  # Φ after substituting each kept step, newest first
-        phi = phi @ Fi
-        chain.append(phi)
-    phis = np.array(chain)
-    absphis = np.abs(phis)
-    c0 = 0.5 * xlo + 0.5 * xhi
-    r0 = radius(xlo, xhi, c0)
+    nw = steps.dw.shape[1]
+    F = steps.F[::-1]  # newest first
+    phis = np.empty((M + 1, nx, nx))  # Φ after substituting each kept step, newest first
+    phis[0] = start.phi
+    for i in range(M):
+        np.matmul(phis[i], F[i], out=phis[i + 1])
+    lo = np.concatenate([xlo[None], rows.lo[::-1]])
+    hi = np.concatenate([xhi[None], rows.hi[::-1]])
+    c = 0.5 * lo + 0.5 * hi
     g = 4.0 * gamma(nx + 2)
-    centre0 = start.m + phis[0] @ c0
-    radius0 = start.R + absphis[0] @ r0 + g * (absphis[0] @ np.abs(c0))
+    # |Φ_i| times: n and e of the step substituted next, the radius of box i, |c_0| (row 0)
+    Y = np.zeros((M + 1, nx, 4))
+    Y[:M, :, 0] = steps.n[::-1]
+    Y[:M, :, 1] = steps.e[::-1]
+    Y[:, :, 2] = radius(lo, hi, c)
+    Y[0, :, 3] = np.abs(c[0])
+    Z = np.abs(phis) @ Y
+    centres = np.empty((M + 1, nx))
+    radii = np.empty((M + 1, nx))
+    centres[0] = start.m + phis[0] @ c[0]
+    radii[0] = start.R + Z[0, :, 2] + g * Z[0, :, 3]
     if M:
-        lo, hi = rows.lo[::-1], rows.hi[::-1]
-        c = 0.5 * lo + 0.5 * hi
-        r = radius(lo, hi, c)
-        Fc = np.einsum("mij,mj->mi", F[::-1], c)
-        cols = np.concatenate([steps.b[::-1, :, None], Fc[:, :, None], steps.Fw[::-1]], axis=2)
-        P = phis[:-1] @ cols  # (M, nx, 2 + nw): Φ b, Φ F c, Φ Fw before each substitution
-        S = absphis[:-1] @ np.stack([steps.n[::-1], steps.e[::-1]], axis=2)  # |Φ| n, |Φ| e
+        cols = np.empty((M, nx, 2 + nw))  # b, F c, Fw of each kept step, newest first
+        cols[:, :, 0] = steps.b[::-1]
+        cols[:, :, 1] = (F @ c[1:, :, None])[:, :, 0]
+        cols[:, :, 2:] = steps.Fw[::-1]
+        P = phis[:-1] @ cols  # Φ b, Φ F c, Φ Fw before each substitution
         cs = np.cumsum(P[:, :, 0], axis=0)  # in order: each partial sum one rounding
-        wsum = np.einsum("mij,mj->mi", np.abs(P[:, :, 2:]), steps.dw[::-1])
-        R = start.R + np.cumsum(S[:, :, 0] + g * S[:, :, 1] + wsum + _err(cs), axis=0)
+        wsum = (np.abs(P[:, :, 2:]) @ steps.dw[::-1, :, None])[:, :, 0]
+        R = start.R + np.cumsum(Z[:-1, :, 0] + g * Z[:-1, :, 1] + wsum + _err(cs), axis=0)
         m = start.m + cs
-        spread = np.einsum("mij,mj->mi", absphis[1:], r)
-        centres = np.concatenate([centre0[None], m + P[:, :, 1]])
-        radii = np.concatenate([radius0[None], R + spread + _err(m)])
-    else:
-        centres, radii = centre0[None], radius0[None]
+        centres[1:] = m + P[:, :, 1]
+        radii[1:] = R + Z[1:, :, 2] + _err(m)
     eta = start.eta + float(np.sum(steps.eta)) + (M + 1) * (nx + 2) * ETA
-    rad = upper(radii + _err(centres) + eta, 8 * (M + 2) + 2 * (nx + steps.dw.shape[1]) + 8)
+    rad = upper(radii + _err(centres) + eta, 8 * (M + 2) + 2 * (nx + nw) + 8)
     return down(centres - rad), up(centres + rad)
 
 
@@ -359,22 +357,21 @@ def filter_gain(
     """The gain of a Kalman filter on ``h`` linearised as ``lh`` (components ``seen``) with the
     prior ``P`` and the squares of the radii as variances (``dw`` of ``w``, ``ρ_h`` of the
     remainders): any gain keeps the form sound, this one makes it tight. Zero where ``S`` is
-    singular or not finite."""
+    singular or not finite (floating-point exceptions are the caller's to silence)."""
     K = np.zeros((nx, lh.J.shape[0]))
     H = lh.J[seen]
     Hx, Hw = H[:, :nx], H[:, nx:]
     sw = dw * dw
-    with np.errstate(all="ignore"):
-        PHt = P @ Hx.T
-        S = Hx @ PHt + (Hw * sw) @ Hw.T + np.diag(lh.rho[seen] ** 2)
-        if S.shape[0] == 1:
-            Si = 1.0 / S if S[0, 0] > 0.0 else np.full_like(S, np.nan)
-        else:
-            try:
-                Si = np.linalg.inv(S)
-            except np.linalg.LinAlgError:
-                Si = np.full_like(S, np.nan)
-        Ks = PHt @ Si
+    PHt = P @ Hx.T
+    S = Hx @ PHt + (Hw * sw) @ Hw.T + np.diag(lh.rho[seen] ** 2)
+    if S.shape[0] == 1:
+        Si = 1.0 / S if S[0, 0] > 0.0 else np.full_like(S, np.nan)
+    else:
+        try:
+            Si = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            Si = np.full_like(S, np.nan)
+    Ks = PHt @ Si
     if np.isfinite(Ks).all():
         K[:, seen] = Ks
     return Gains(K, seen, Hx, Hw, PHt, S, Si, sw)
@@ -392,16 +389,16 @@ def predictor(
     """``(L, P+)``: the gain of the transition (the predictor form of the same Kalman filter,
     ``w`` shared by ``f`` and ``h``) and the next prior covariance, from ``f`` linearised as
     ``J``, ``ρ`` over a box whose ``w`` part has the radii ``dw``; ``L`` zero without a
-    measurement. ``P+`` not finite when the recursion is not."""
+    measurement. ``P+`` not finite when the recursion is not (floating-point exceptions are
+    the caller's to silence)."""
     Jx, Jw = J[:, :nx], J[:, nx:]
     L = np.zeros((nx, ny))
     sw = dw * dw
-    with np.errstate(all="ignore"):
-        Pn = Jx @ P @ Jx.T + (Jw * sw) @ Jw.T + np.diag(rho * rho)
-        if g is not None and g.K.any():
-            Ls = (Jx @ g.PHt + (Jw * g.sw) @ g.Hw.T) @ g.Si
-            if np.isfinite(Ls).all():
-                L[:, g.seen] = Ls
-                Pn = Pn - Ls @ g.S @ Ls.T
-        Pn = 0.5 * Pn + 0.5 * Pn.T
+    Pn = Jx @ P @ Jx.T + (Jw * sw) @ Jw.T + np.diag(rho * rho)
+    if g is not None and g.K.any():
+        Ls = (Jx @ g.PHt + (Jw * g.sw) @ g.Hw.T) @ g.Si
+        if np.isfinite(Ls).all():
+            L[:, g.seen] = Ls
+            Pn = Pn - Ls @ g.S @ Ls.T
+    Pn = 0.5 * Pn + 0.5 * Pn.T
     return L, Pn

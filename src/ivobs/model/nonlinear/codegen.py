@@ -7,20 +7,114 @@ computed once per function (the natural form, the Jacobian and the contractor sh
 
 Numbers: an exact rational is enclosed by the floats around it (``0.1`` -> ``[fl(0.1),
 next(fl(0.1))]``), other constants (``pi``, ``sqrt(2)``) by the floats around a 60-digit value.
+An operation on constants only (a known parameter times ``sqrt(2)``) is evaluated once, when the
+code is written, by the same runtime operation the code would call (:meth:`Emitter.fold`): the
+code holds the resulting enclosure as literals (``repr`` of a double reads back exactly), so it
+computes the same bounds with fewer operations per call.
 """
 
 from __future__ import annotations
 
+import keyword
 import math
+import re
 from fractions import Fraction
 from typing import Any
 
 from ...errors import IvobsError
 from ._runtime import NAMESPACE
 
-__all__ = ["Emitter", "compile_source", "enclose_constant"]
+__all__ = [
+    "Emitter",
+    "compile_source",
+    "enclose_constant",
+    "is_literal",
+    "lower_of",
+    "product",
+    "quotient",
+    "upper_of",
+]
 
 Pair = tuple[str, str]
+
+_NAME = re.compile(r"(?<![\w.])[A-Za-z_]\w*")
+"""A name in code (an exponent's ``e`` follows a digit: not one)."""
+
+
+def _reads_variable(code: str) -> bool:
+    """Whether ``code`` reads a variable of the generated code: a name that is neither the
+    runtime's (they start with ``_``) nor a keyword (``if``, ``else``)."""
+    return any(not (n.startswith("_") or keyword.iskeyword(n)) for n in _NAME.findall(code))
+
+
+def is_literal(p: Pair) -> bool:
+    """Whether the pair is code over literals and the runtime's names only (no variable)."""
+    return not (_reads_variable(p[0]) or _reads_variable(p[1]))
+
+
+def lower_of(a: str, b: str) -> str:
+    """Code of ``max(a, b)`` for names or literals (each read twice) with the builtin's result,
+    ``a`` unless ``b > a`` (so a NaN ``b`` leaves ``a``), without its call."""
+    return f"{b} if {b} > {a} else {a}"
+
+
+def upper_of(a: str, b: str) -> str:
+    """Code of ``min(a, b)`` likewise: ``a`` unless ``b < a``."""
+    return f"{b} if {b} < {a} else {a}"
+
+
+def _sign(p: Pair) -> int:
+    """1 or -1 for a literal pair of finite bounds above or below 0, else 0."""
+    if not is_literal(p):
+        return 0
+    try:
+        lo, hi = float(p[0]), float(p[1])
+    except ValueError:  # _PI, _NI
+        return 0
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return 0
+    return 1 if lo > 0.0 else -1 if hi < 0.0 else 0
+
+
+def product(a: Pair, b: Pair) -> str:
+    """Code of the pair ``a * b``, outward rounded. Where one factor is a constant of known sign
+    ``[cl, ch]`` the sign of the other's bound picks each product inline (``c > 0``: ``lo =
+    cl o_lo`` if ``o_lo >= 0`` else ``ch o_lo``, and so on): the products
+    :func:`._runtime.mul` picks in the same cases, the same two bounds, without its call and
+    tests; otherwise :func:`._runtime.mul`."""
+    for c, o in ((a, b), (b, a)):
+        sign = _sign(c)
+        if sign > 0:
+            return (
+                f"_nx(({c[0]} * {o[0]}) if {o[0]} >= 0.0 else ({c[1]} * {o[0]}), _NI), "
+                f"_nx(({c[1]} * {o[1]}) if {o[1]} >= 0.0 else ({c[0]} * {o[1]}), _PI)"
+            )
+        if sign < 0:
+            return (
+                f"_nx(({c[0]} * {o[1]}) if {o[1]} >= 0.0 else ({c[1]} * {o[1]}), _NI), "
+                f"_nx(({c[0]} * {o[0]}) if {o[0]} <= 0.0 else ({c[1]} * {o[0]}), _PI)"
+            )
+    return f"_mul({a[0]}, {a[1]}, {b[0]}, {b[1]})"
+
+
+def quotient(r: Pair, c: Pair) -> str | None:
+    """Code of the pair ``r / c`` for a constant ``c`` of known sign, outward rounded: the
+    extreme quotients picked by the signs of ``r``'s bounds (``c > 0``: ``lo = r_lo / ch`` if
+    ``r_lo >= 0`` else ``r_lo / cl``, and so on), as :func:`._runtime.div` finds them among
+    the four where ``r`` is finite (an infinite bound of ``r`` gives the exact quotient's
+    correctly rounded neighbour, no wider than ``div``'s). None for any other ``c``."""
+    sign = _sign(c)
+    if sign > 0:
+        return (
+            f"_nx(({r[0]} / {c[1]}) if {r[0]} >= 0.0 else ({r[0]} / {c[0]}), _NI), "
+            f"_nx(({r[1]} / {c[0]}) if {r[1]} >= 0.0 else ({r[1]} / {c[1]}), _PI)"
+        )
+    if sign < 0:
+        return (
+            f"_nx(({r[1]} / {c[1]}) if {r[1]} >= 0.0 else ({r[1]} / {c[0]}), _NI), "
+            f"_nx(({r[0]} / {c[0]}) if {r[0]} >= 0.0 else ({r[0]} / {c[1]}), _PI)"
+        )
+    return None
 
 
 def _lit(v: float) -> str:
@@ -114,7 +208,29 @@ class Emitter:
         self.cache[expr] = out
         return out
 
+    def fold(self, call: str) -> Pair | None:
+        """The literals of the pair that ``call`` evaluates to when it reads no variable: the
+        runtime operation done once here instead of at every call of the generated code (the
+        same operation on the same doubles, so the same enclosure). None when ``call`` reads a
+        variable, or when its value is not a pair of numbers (a domain error, a NaN: left to
+        the generated code, which reports it where it occurs)."""
+        if _reads_variable(call):
+            return None
+        try:
+            v = eval(call, {**NAMESPACE, "__builtins__": {}})  # our code, literals only
+        except Exception:  # any failure: not folded, the call stays
+            return None
+        if not isinstance(v, tuple) or len(v) != 2:
+            return None
+        lo, hi = v
+        if not (isinstance(lo, float) and isinstance(hi, float)) or lo != lo or hi != hi:
+            return None
+        return _lit(lo), _lit(hi)
+
     def assign(self, call: str) -> Pair:
+        folded = self.fold(call)
+        if folded is not None:
+            return folded
         lo, hi = self.new()
         self.line(f"{lo}, {hi} = {call}")
         return lo, hi
@@ -157,10 +273,10 @@ class Emitter:
         if fn in (sp.Min, sp.Max):
             parts = [a] + [self.emit(x) for x in e.args[1:]]
             which = "_min" if fn is sp.Min else "_max"
-            lo, hi = self.new()
-            self.line(f"{lo} = {which}({', '.join(p[0] for p in parts)})")
-            self.line(f"{hi} = {which}({', '.join(p[1] for p in parts)})")
-            return lo, hi
+            return self.assign(
+                f"{which}({', '.join(p[0] for p in parts)}), "
+                f"{which}({', '.join(p[1] for p in parts)})"
+            )
         raise IvobsError(
             f"{self.label}: {fn.__name__} is not supported by the interval code generator"
         )
@@ -168,10 +284,7 @@ class Emitter:
     def _sum(self, terms: list[Pair]) -> Pair:
         acc = terms[0]
         for t in terms[1:]:
-            lo, hi = self.new()
-            self.line(f"{lo} = _nx({acc[0]} + {t[0]}, _NI)")
-            self.line(f"{hi} = _nx({acc[1]} + {t[1]}, _PI)")
-            acc = (lo, hi)
+            acc = self.assign(f"_nx({acc[0]} + {t[0]}, _NI), _nx({acc[1]} + {t[1]}, _PI)")
         return acc
 
     def mul(self, a: Pair, b: Pair) -> Pair:
@@ -187,7 +300,7 @@ class Emitter:
             v = float(c[0])
             lo, hi = (o[0], o[1]) if v > 0 else (o[1], o[0])
             return self.assign(f"_nx({v!r} * {lo}, _NI), _nx({v!r} * {hi}, _PI)")
-        return self.assign(f"_mul({a[0]}, {a[1]}, {b[0]}, {b[1]})")
+        return self.assign(product(a, b))
 
     def _product(self, e: Any) -> Pair:
         sp = self.sp
@@ -212,9 +325,7 @@ class Emitter:
                 acc = self.assign(f"_div({acc[0]}, {acc[1]}, {d[0]}, {d[1]}, {self.site()})")
         assert acc is not None
         if negate:
-            lo, hi = self.new()
-            self.line(f"{lo}, {hi} = -{acc[1]}, -{acc[0]}")
-            acc = (lo, hi)
+            acc = self.assign(f"-{acc[1]}, -{acc[0]}")
         return acc
 
     def _pow(self, base: Any, ex: Any) -> Pair:
@@ -229,8 +340,8 @@ class Emitter:
             return self.assign(f"_ipow({b[0]}, {b[1]}, {n}, {self.site()})")
         if ex == sp.Rational(1, 2):
             return self.assign(f"_sqrt({b[0]}, {b[1]}, {self.site()})")
-        if ex == sp.Rational(-1, 2):
-            s = self.assign(f"_sqrt({b[0]}, {b[1]}, {self.site()})")
+        if ex == sp.Rational(-1, 2):  # 1/sqrt(b): the square root the function may have already
+            s = self.emit(sp.sqrt(base))
             return self.assign(f"_recip({s[0]}, {s[1]}, {self.site()})")
         x = self.emit(ex)
         return self.assign(f"_rpow({b[0]}, {b[1]}, {x[0]}, {x[1]}, {self.site()})")

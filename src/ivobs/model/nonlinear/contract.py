@@ -8,10 +8,14 @@ projected onto its children through the inverse of its operation (``a + b = r`` 
 ``a in ±sqrt(r)``; ``exp``, ``log``, ``sqrt``, ``tanh``, ``sinh`` through their inverses), every
 bound rounded outward. Operations without a cheap inverse (``sin``, ``min``...) contract nothing
 below them, which is sound. An intersection that comes out empty proves that no ``v`` in the box
-satisfies the constraint: the function returns False (an inconsistent measurement).
+satisfies the constraint: the function returns False (an inconsistent measurement). A node over
+constants only is folded into literals when the code is written (:meth:`.codegen.Emitter.fold`)
+and is not narrowed (a constant's enclosure stays as it is); the function reads and writes back
+only the leaves (and reads only the inputs) the expression uses.
 
 A generated contractor ``c(vl, vh, u, ylo, yhi) -> bool`` narrows the lists ``vl``, ``vh`` in
-place (``g in [ylo, yhi]``).
+place (``g in [ylo, yhi]``); for a vector ``g`` (:func:`build_vector_contractor`) ``ylo``,
+``yhi`` are lists and the expressions share one DAG.
 """
 
 from __future__ import annotations
@@ -19,10 +23,19 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ._runtime import ldn, lup
-from .codegen import Emitter, compile_source, enclose_constant
+from ._runtime import NAMESPACE, ldn, lup
+from .codegen import (
+    Emitter,
+    compile_source,
+    enclose_constant,
+    is_literal,
+    lower_of,
+    product,
+    quotient,
+    upper_of,
+)
 
-__all__ = ["build_contractor"]
+__all__ = ["build_contractor", "build_vector_contractor"]
 
 
 def _proj_sqr(al: float, ah: float, rl: float, rh: float) -> tuple[float, float]:
@@ -72,6 +85,11 @@ def _excludes0(lo: float, hi: float) -> bool:
     return lo > 0.0 or hi < 0.0
 
 
+def _value(literal: str) -> float:
+    """The double a literal of the generated code stands for (``_PI``, ``_NI``: infinities)."""
+    return float(eval(literal, {**NAMESPACE, "__builtins__": {}}))  # our literal
+
+
 EXTRA = {
     "_proj_sqr": _proj_sqr,
     "_proj_sqrt": _proj_sqrt,
@@ -108,6 +126,9 @@ class _Builder:
         return nd
 
     def _new(self, kind: str, call: str, args: list[_Node], n: int = 0) -> _Node:
+        folded = self.em.fold(call)
+        if folded is not None:  # over constants only: a constant
+            return _Node("const", *folded, [])
         lo, hi = self.em.assign(call)
         nd = _Node(kind, lo, hi, args, n)
         self.nodes.append(nd)
@@ -119,7 +140,7 @@ class _Builder:
             if kind == "add":
                 call = f"_nx({acc.lo} + {p.lo}, _NI), _nx({acc.hi} + {p.hi}, _PI)"
             else:
-                call = f"_mul({acc.lo}, {acc.hi}, {p.lo}, {p.hi})"
+                call = product((acc.lo, acc.hi), (p.lo, p.hi))
             acc = self._new(kind, call, [acc, p])
         return acc
 
@@ -159,6 +180,8 @@ class _Builder:
             return self._new(kind, f"_{kind}({a.lo}, {a.hi}{site})", [a])
         # anything else: its enclosure from the generic emitter, no projection below it
         lo, hi = em.emit(e)
+        if is_literal((lo, hi)):
+            return _Node("const", lo, hi, [])
         nd = _Node("opaque", lo, hi, [])
         self.nodes.append(nd)
         return nd
@@ -169,8 +192,13 @@ def _narrow(em: Emitter, a: _Node, call: str) -> None:
     if a.kind == "const":
         return
     em.line(f"pl, ph = {call}")
-    em.line(f"{a.lo} = _max({a.lo}, pl); {a.hi} = _min({a.hi}, ph)")
+    em.line(_meet(a))
     em.line(f"if {a.lo} > {a.hi}: return False")
+
+
+def _meet(a: _Node) -> str:
+    """Code of ``a <- a ∩ [pl, ph]``."""
+    return f"{a.lo} = {lower_of(a.lo, 'pl')}; {a.hi} = {upper_of(a.hi, 'ph')}"
 
 
 def _backward(em: Emitter, nd: _Node) -> None:
@@ -185,9 +213,16 @@ def _backward(em: Emitter, nd: _Node) -> None:
         for x, o in ((a, b), (b, a)):
             if x.kind == "const":
                 continue
+            if o.kind == "const":  # its sign is known now
+                inline = quotient((r.lo, r.hi), (o.lo, o.hi))
+                if inline is not None:
+                    _narrow(em, x, inline)
+                elif _excludes0(_value(o.lo), _value(o.hi)):
+                    _narrow(em, x, f"_div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
+                continue
             em.line(f"if _x0({o.lo}, {o.hi}):")
             em.lines.append("    " + f"    pl, ph = _div({r.lo}, {r.hi}, {o.lo}, {o.hi}, -1)")
-            em.lines.append("    " + f"    {x.lo} = _max({x.lo}, pl); {x.hi} = _min({x.hi}, ph)")
+            em.lines.append("        " + _meet(x))
             em.lines.append("    " + f"    if {x.lo} > {x.hi}: return False")
     elif k == "neg":
         _narrow(em, nd.args[0], f"-{r.hi}, -{r.lo}")
@@ -196,7 +231,7 @@ def _backward(em: Emitter, nd: _Node) -> None:
         a = nd.args[0]
         if a.kind != "const":
             em.lines.append("    " + f"    pl, ph = _recip({r.lo}, {r.hi}, -1)")
-            em.lines.append("    " + f"    {a.lo} = _max({a.lo}, pl); {a.hi} = _min({a.hi}, ph)")
+            em.lines.append("        " + _meet(a))
             em.lines.append("    " + f"    if {a.lo} > {a.hi}: return False")
         else:
             em.lines.append("    " + "    pass")
@@ -215,36 +250,81 @@ def build_contractor(
     """Compile ``name(vl, vh, u, ylo, yhi=None) -> bool`` contracting the boxes of ``leaves``
     (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
     ``inputs`` read from ``u`` (thin)."""
+    head = [f"def {name}(vl, vh, u, ylo, yhi=None):", "    if yhi is None: yhi = ylo"]
+    return _compile(name, [expr], [label], leaves, inputs, consts, head, lambda i: ("ylo", "yhi"))
+
+
+def build_vector_contractor(
+    name: str,
+    exprs: list[Any],
+    labels: list[str],
+    leaves: list[Any],
+    inputs: list[Any],
+    consts: dict[Any, Any],
+) -> tuple[Any, list[str]]:
+    """Compile ``name(vl, vh, u, ylo, yhi) -> bool`` contracting the boxes of ``leaves`` with
+    ``exprs[i] in [ylo[i], yhi[i]]`` for every ``i`` (lists, read at ``i < len(exprs)``;
+    ``labels[i]`` names ``exprs[i]`` in a domain error):
+    HC4-revise on the expressions' common DAG [Jaulin2001, Ch. 4], one forward pass over every
+    node (a subexpression the components share is evaluated once), every root met with its
+    bounds, then one backward pass in the reverse order, so that a shared node is narrowed by
+    all its parents before it narrows its children."""
+    head = [f"def {name}(vl, vh, u, ylo, yhi):"]
+    return _compile(
+        name, exprs, labels, leaves, inputs, consts, head, lambda i: (f"ylo[{i}]", f"yhi[{i}]")
+    )
+
+
+def _compile(
+    name: str,
+    exprs: list[Any],
+    labels: list[str],
+    leaves: list[Any],
+    inputs: list[Any],
+    consts: dict[Any, Any],
+    head: list[str],
+    bounds: Any,
+) -> tuple[Any, list[str]]:
+    """The code of a contractor: ``head`` (its signature), then HC4-revise on ``exprs`` with
+    the root ``i`` met with the pair of code ``bounds(i)``."""
     sites: list[str] = []
     em = Emitter(sites)
-    em.label = label
-    em.lines.append(f"def {name}(vl, vh, u, ylo, yhi=None):")
-    em.line("if yhi is None: yhi = ylo")  # a thin measurement (the contract's call)
+    em.lines += head
+    free = set().union(*(e.free_symbols for e in exprs))
     env: dict[Any, tuple[str, str]] = dict(consts)
     lv: dict[Any, tuple[str, str]] = {}
-    for i, s in enumerate(leaves):
+    used = [i for i, s in enumerate(leaves) if s in free]
+    for i in used:
         em.line(f"v{i}l = vl[{i}]; v{i}h = vh[{i}]")
-        env[s] = lv[s] = (f"v{i}l", f"v{i}h")
+        env[leaves[i]] = lv[leaves[i]] = (f"v{i}l", f"v{i}h")
     cin: dict[Any, tuple[str, str]] = dict(consts)
     for i, s in enumerate(inputs):
-        em.line(f"u{i} = u[{i}]")
-        env[s] = cin[s] = (f"u{i}", f"u{i}")
+        if s in free:
+            em.line(f"u{i} = u[{i}]")
+            env[s] = cin[s] = (f"u{i}", f"u{i}")
     em.scope(env)
     b = _Builder(em, lv, cin)
-    root = b.node(expr)
-    if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
-        lo, hi = em.assign(f"{root.lo}, {root.hi}")
-        nd = _Node("ident", lo, hi, [root])
-        b.nodes.append(nd)
-        root = nd
-    em.line(f"{root.lo} = _max({root.lo}, ylo); {root.hi} = _min({root.hi}, yhi)")
-    em.line(f"if {root.lo} > {root.hi}: return False")
+    roots = []
+    for expr, label in zip(exprs, labels, strict=True):
+        em.label = label
+        root = b.node(expr)
+        if root.kind in ("leaf", "const"):  # g is one variable: a node to intersect with y
+            lo, hi = em.new()  # (a variable even for a constant: it is intersected with y)
+            em.line(f"{lo}, {hi} = {root.lo}, {root.hi}")
+            nd = _Node("ident", lo, hi, [root])
+            b.nodes.append(nd)
+            root = nd
+        roots.append(root)
+    for i, root in enumerate(roots):
+        ylo, yhi = bounds(i)
+        em.line(f"{root.lo} = {lower_of(root.lo, ylo)}; {root.hi} = {upper_of(root.hi, yhi)}")
+        em.line(f"if {root.lo} > {root.hi}: return False")
     for nd in reversed(b.nodes):
         if nd.kind == "ident":
             _narrow(em, nd.args[0], f"{nd.lo}, {nd.hi}")
         else:
             _backward(em, nd)
-    for i in range(len(leaves)):
+    for i in used:
         em.line(f"vl[{i}] = v{i}l; vh[{i}] = v{i}h")
     em.line("return True")
     source = "\n".join(em.lines) + "\n"

@@ -193,7 +193,7 @@ class FlowSystem(NonlinearSystem):
         self._back_cache: Any = None  # the step back's last linearisation (.flowback)
         self._f = _FlowForms(self)  # type: ignore[assignment]
 
-    def f_contractors(self) -> list[tuple[Any, list[str]]]:
+    def f_contractor(self) -> tuple[Any, list[str]]:
         """Refused: ``f_exprs`` is the vector field, not the map of a step (the flow steps back
         one step only, through :meth:`hf_contractors`)."""
         raise IvobsError(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .codegen import Emitter, Pair, compile_source
+from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
 
 __all__ = ["Forms", "build_forms", "emit_centre", "emit_meet"]
 
@@ -79,21 +79,30 @@ def _ret(em: Emitter, pairs: list[Pair]) -> None:
 
 
 def emit_centre(
-    em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair], nat: list[Pair]
+    em: Emitter,
+    syms: dict[str, list[Any]],
+    consts: dict[Any, Pair],
+    nat: list[Pair],
+    used: set[Any] | None = None,
 ) -> dict[Any, Pair]:
     """Code of the centred forms' common start: return ``nat`` when a bound of the box
     ``z = (x, w)`` is infinite, else the centre ``c`` (midpoint clipped into the box) and the
     outward-rounded offsets ``[z] - c`` (``d{name}l``, ``d{name}h``); the emitter's scope is
-    set to the centre (and the inputs), which is returned."""
-    z = syms["x"] + syms["w"]
-    zname = [f"x{i}" for i in range(len(syms["x"]))] + [f"w{i}" for i in range(len(syms["w"]))]
+    set to the centre (and the inputs), which is returned. ``used``: the only variables of
+    ``z`` the forms read (None: all), the others neither checked nor centred."""
+    pairs = [(s, f"x{i}") for i, s in enumerate(syms["x"])]
+    pairs += [(s, f"w{i}") for i, s in enumerate(syms["w"])]
+    if used is not None:
+        pairs = [(s, n) for s, n in pairs if s in used]
+    z, zname = [s for s, _ in pairs], [n for _, n in pairs]
     box = [f"{n}l" for n in zname] + [f"{n}h" for n in zname]
     em.line(f"s = {' + '.join(box) if box else '0.0'}")
     lows, highs = ", ".join(p[0] for p in nat), ", ".join(p[1] for p in nat)
     em.line(f"if s - s != 0.0: return [{lows}], [{highs}]")  # an infinite bound: natural only
     cenv: dict[Any, Pair] = dict(consts)
     for s, n in zip(z, zname):
-        em.line(f"c{n} = _min(_max(0.5 * {n}l + 0.5 * {n}h, {n}l), {n}h)")
+        em.line(f"c{n} = 0.5 * {n}l + 0.5 * {n}h")  # the midpoint, clipped into the box
+        em.line(f"c{n} = {lower_of(f'c{n}', f'{n}l')}; c{n} = {upper_of(f'c{n}', f'{n}h')}")
         em.line(f"d{n}l = _nx({n}l - c{n}, _NI) if {n}l != c{n} else 0.0")
         em.line(f"d{n}h = _nx({n}h - c{n}, _PI) if {n}h != c{n} else 0.0")
         cenv[s] = (f"c{n}", f"c{n}")
@@ -123,7 +132,8 @@ def _mean_value(
             if d != 0 and repeated[i]:
                 em.label = f"d {labels[i]} / d {z[j]}"
                 entries[i, j] = em.emit(d)
-    emit_centre(em, syms, consts, nat)
+    rows = [e for e, r in zip(exprs, repeated) if r]
+    emit_centre(em, syms, consts, nat, set().union(*(e.free_symbols for e in rows)))
     out: list[Pair] = []
     for i, nv in enumerate(nat):
         if not repeated[i]:  # single-use: the natural extension is already the exact range
@@ -144,7 +154,7 @@ def emit_meet(em: Emitter, nat: Pair, terms: list[Pair]) -> Pair:
     inclusion ``nat`` of the same row (each encloses the range, so their meet does)."""
     m = em._sum(terms)
     r = em.new()
-    em.line(f"{r[0]} = _max({nat[0]}, {m[0]}); {r[1]} = _min({nat[1]}, {m[1]})")
+    em.line(f"{r[0]} = {lower_of(nat[0], m[0])}; {r[1]} = {upper_of(nat[1], m[1])}")
     return r
 
 

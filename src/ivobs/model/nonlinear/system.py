@@ -22,7 +22,7 @@ from ...sets import Box
 from ..statespace import SignalNames
 from ._runtime import DomainError
 from .codegen import enclose_float
-from .contract import build_contractor
+from .contract import build_contractor, build_vector_contractor
 from .forms import Forms, build_forms
 from .parse import RESERVED, folded_name, parse_expression
 from .trace import expression_text, trace_callable
@@ -196,8 +196,15 @@ class NonlinearSystem:
             build_contractor(f"hc{i}", e, self._labels("h")[i], leaves, syms["u"], self._consts)
             for i, e in enumerate(self.h_exprs)
         ]
+        # outputs that share a state or unknown pass what one narrows on to the others
+        seen: set[Any] = set()
+        self._hc_coupled = False
+        for e in self.h_exprs:
+            mine = e.free_symbols & set(leaves)
+            self._hc_coupled = self._hc_coupled or bool(mine & seen)
+            seen |= mine
         self._hf: list[Any] | None = None
-        self._fc: list[Any] | None = None
+        self._fc: tuple[Any, list[str]] | None = None
         pairs = [self.param_bounds[n] for n in self.param_names]
         pairs += [self.signal_bounds[n] for n in self.signal_names]
         wl = [enclose_float(p[0])[0] for p in pairs]
@@ -378,8 +385,11 @@ class NonlinearSystem:
         self, vl: list[float], vh: list[float], u: list[float], ylo: list[float], yhi: list[float]
     ) -> bool:
         """:meth:`h_contract` on the lists ``vl = xl + wl``, ``vh`` (narrowed in place) with
-        ``h in [ylo, yhi]``; two sweeps over the outputs when there are several."""
-        for _ in range(1 if len(self._hc) == 1 else 2):
+        ``h in [ylo, yhi]``; two sweeps over the outputs when some of them share a state or
+        unknown (the second carries what one output narrowed to the others; outputs over
+        disjoint variables have nothing to pass on, and each is contracted once, as a single
+        output is)."""
+        for _ in range(2 if self._hc_coupled else 1):
             for (fn, sites), a, b in zip(self._hc, ylo, yhi):
                 if a == a and not self._call(fn, sites, vl, vh, u, a, b):
                     return False
@@ -406,16 +416,17 @@ class NonlinearSystem:
             ]
         return self._hf
 
-    def f_contractors(self) -> list[tuple[Any, list[str]]]:
-        """Contractors of ``f_i(x, u, w) in [lo_i, hi_i]`` over the leaves ``(x, w)`` with the
-        inputs ``u``, one per state: the box of a step narrowed by the box of the next state
-        (a window of steps back; built on first use)."""
+    def f_contractor(self) -> tuple[Any, list[str]]:
+        """The contractor of ``f(x, u, w) in [lo, hi]`` over the leaves ``(x, w)`` with the
+        inputs ``u``, every state at once (:func:`.contract.build_vector_contractor`, called
+        ``(vl, vh, u, lo, hi)`` with the box of the next state in ``lo``, ``hi``): the box of a
+        step narrowed by the box of the next state (a window of steps back; built on first
+        use)."""
         if self._fc is None:
             g = self._groups()
-            self._fc = [
-                build_contractor(f"fc{i}", e, f"f[{i}]", g["x"] + g["w"], g["u"], self._consts)
-                for i, e in enumerate(self.f_exprs)
-            ]
+            self._fc = build_vector_contractor(
+                "fc", self.f_exprs, self._labels("f"), g["x"] + g["w"], g["u"], self._consts
+            )
         return self._fc
 
     # -- conversions ---------------------------------------------------------------------

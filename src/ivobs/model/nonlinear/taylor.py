@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .codegen import Emitter, Pair, compile_source
+from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
 from .forms import emit_centre, emit_meet
 
 __all__ = ["MAX_ORDER", "TaylorCode", "build_taylor", "lie_coefficients"]
@@ -160,7 +160,7 @@ def _build_step(
                     jac[j, m] = ("1.0", "1.0")
         out = _mean_value(em, coefs, syms, consts, rem, nat, jac)
     for j, p in enumerate(out):
-        em.line(f"r{j}l = _max({p[0]}, b{j}l); r{j}h = _min({p[1]}, b{j}h)")
+        em.line(f"r{j}l = {lower_of(p[0], f'b{j}l')}; r{j}h = {upper_of(p[1], f'b{j}h')}")
     lows, highs = (", ".join(f"r{j}{e}" for j in range(len(x))) for e in "lh")
     em.line(f"return [{lows}], [{highs}]")
     source = "\n".join(em.lines) + "\n"
