@@ -207,7 +207,6 @@ SLOW = (
     "tests/test_fixed_time_missing_samples.py::test_widths_stay_bounded_and_boxes_contain_the_state[randsys-2]",
     "tests/test_fixed_time_missing_samples.py::test_widths_stay_bounded_and_boxes_contain_the_state[randsys-3]",
     "tests/test_frames.py::test_xarray_dataset",
-    "tests/test_gains.py::test_cora_benchmarks_contain_vertex_trajectories_with_the_default_gain[cora-pedestrian4]",
     "tests/test_gains.py::test_cora_benchmarks_contain_vertex_trajectories_with_the_default_gain[cora-slip4]",
     "tests/test_gains.py::test_cora_benchmarks_contain_vertex_trajectories_with_the_default_gain[cora-vehicle6]",
     "tests/test_gains.py::test_designs_are_cached_and_handed_out_as_copies",

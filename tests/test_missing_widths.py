@@ -5,6 +5,7 @@ disturbances on the vertices of their bounds, exact trajectories)."""
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 
 import ivobs
 from ivobs import Box, DesignError, IvobsError, LinearSystem
-from ivobs.testing import exact_misses, exact_run
+from ivobs.testing import ExactStates, exact_misses, exact_run
 
 pytestmark = pytest.mark.slow
 
@@ -42,16 +43,24 @@ def _plant(seed: int) -> tuple[LinearSystem, Box]:
     return sys, Box.symmetric(np.ones(nx))
 
 
+@functools.cache
+def _record(seed: int, T: int) -> tuple[np.ndarray, np.ndarray, ExactStates, np.ndarray]:
+    """``T`` steps of plant ``seed`` (the methods with the same record length share it): the
+    inputs, the measurements, the exact states and the measurements with 10 % missing."""
+    sys, _ = _plant(seed)
+    rng = np.random.default_rng(seed + 100)
+    U = rng.uniform(-1, 1, size=(T, 1))
+    D = np.where(rng.integers(0, 2, size=(T, sys.nd)).astype(bool), sys.d.hi, sys.d.lo)
+    Y, X = exact_run(sys, np.where(rng.integers(0, 2, 4).astype(bool), 1.0, -1.0), U, D)
+    return U, Y, X, np.where(rng.uniform(size=Y.shape) < 0.1, np.nan, Y)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("method", [m for m in ivobs.methods() if not m.startswith("nl-")])
 def test_ten_percent_missing_keeps_widths_within_20x_of_complete_data(method, seed):
     sys, x0 = _plant(seed)
     T = STEPS.get(method, 1500)
-    rng = np.random.default_rng(seed + 100)
-    U = rng.uniform(-1, 1, size=(T, 1))
-    D = np.where(rng.integers(0, 2, size=(T, sys.nd)).astype(bool), sys.d.hi, sys.d.lo)
-    Y, X = exact_run(sys, np.where(rng.integers(0, 2, 4).astype(bool), 1.0, -1.0), U, D)
-    Ym = np.where(rng.uniform(size=Y.shape) < 0.1, np.nan, Y)
+    U, Y, X, Ym = _record(seed, T)
     try:
         est = ivobs.make_estimator(method, sys, x0=x0)
     except (DesignError, IvobsError) as exc:

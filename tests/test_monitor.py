@@ -31,6 +31,7 @@ LONG_STEPS = {
     "constrained-zonotope": 60,
     "nl-constrained-zonotope": 1000,
     "nl-zonotope": 3000,
+    "nl-interval": 3000,
     "ellipsoid": 3000,
 }
 VBAR = 0.0564  # servo motor: bound of the measurement noise

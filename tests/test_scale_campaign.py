@@ -9,23 +9,28 @@ batches, ``step()`` with ``state()``/``restore()`` round trips through JSON. The
 0 boxes missing the exact state and 0 admissible samples flagged inconsistent.
 
 The budget per method is :data:`CI_STEPS` (20,000 steps for the recursive methods), or
-``IVOBS_CAMPAIGN_STEPS`` for every method; the plants are shared by all methods (one exact
-simulation each).
+``IVOBS_CAMPAIGN_STEPS`` for every method; the plants are shared by all methods: one exact
+simulation each, made when a method first accepts the plant and shared by the processes of a
+``pytest -n`` run (:func:`_record`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
+import time
 import warnings
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import ivobs
 from ivobs import Box, DesignError, IvobsError, LinearSystem
-from ivobs.testing import exact_misses, exact_run
+from ivobs.testing import ExactStates, exact_misses, exact_run
 
 pytestmark = pytest.mark.slow
 
@@ -114,11 +119,58 @@ def _plant(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, np.nda
 
 
 @functools.cache
-def _record(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, list, np.ndarray]:
-    sys, x0, x_true0, U, Dv, _ = _plant(seed)
+def _case(seed: int) -> tuple[LinearSystem, Box, np.ndarray, np.ndarray, np.ndarray, int]:
+    return _plant(seed)
+
+
+@pytest.fixture(scope="session")
+def store(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A directory shared by the processes of this run (``pytest -n``: the workers' common
+    base directory)."""
+    root = tmp_path_factory.getbasetemp()
+    if hasattr(request.config, "workerinput"):
+        root = root.parent
+    path = root / "scale-campaign-records"
+    path.mkdir(exist_ok=True)
+    return path
+
+
+@functools.cache
+def _record(seed: int, store: Path) -> tuple[np.ndarray, ExactStates, np.ndarray]:
+    """The exact record of plant ``seed`` (measurements, exact states) and its missing samples:
+    the first process to need it simulates it and saves it in ``store``, the others load it."""
+    path = store / f"{seed}.npz"
+    if not path.exists():
+        with _exclusive(store / f"{seed}.lock"):
+            if not path.exists():
+                _save(path, seed)
+    with np.load(path) as data:
+        Y, X = data["Y"], ExactStates(data["lo"], data["hi"])
+    return Y, X, np.random.default_rng(seed + 1).uniform(size=Y.shape) < 0.1
+
+
+@contextlib.contextmanager
+def _exclusive(lock: Path) -> Iterator[None]:
+    """Held by one process at a time: a file created exclusively (after 10 minutes of waiting,
+    taken as left behind by a process that died)."""
+    for _ in range(6000):
+        try:
+            os.close(os.open(lock, os.O_CREAT | os.O_EXCL))
+            break
+        except FileExistsError:
+            time.sleep(0.1)
+    try:
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def _save(path: Path, seed: int) -> None:
+    sys, _, x_true0, U, Dv, _ = _case(seed)
     Y, X = exact_run(sys, x_true0, U, Dv)
-    miss = np.random.default_rng(seed + 1).uniform(size=Y.shape) < 0.1
-    return sys, x0, U, Y, X, miss
+    part = path.with_suffix(f".{os.getpid()}.npz")
+    np.savez(part, Y=Y, lo=X.lo, hi=X.hi)
+    os.replace(part, path)
 
 
 def _methods() -> list[str]:
@@ -132,7 +184,7 @@ def _quiet(fn, *a, **k):
 
 
 @pytest.mark.parametrize("method", _methods())
-def test_no_box_misses_the_exact_state_at_any_scale(method):
+def test_no_box_misses_the_exact_state_at_any_scale(method, store):
     if method in STALLS_WHEN_BADLY_SCALED and not _ENV:
         pytest.skip(f"{method}: HiGHS stalls on the badly scaled programs (IVOBS_CAMPAIGN_STEPS)")
     STEPS = _steps(method)
@@ -140,15 +192,16 @@ def test_no_box_misses_the_exact_state_at_any_scale(method):
     failures: list[str] = []
     errors: list[str] = []  # refusals at run time (an overflow): not a miss, but reported
     while done < STEPS and seed < 400:
-        sys, x0, U, Y, X, miss = _record(seed)
-        n_rec = SHORT_RECORD.get(method, RECORD)
-        U, Y, X, miss = U[:n_rec], Y[:n_rec], X[:n_rec], miss[:n_rec]
+        sys, x0, _, U, _, _ = _case(seed)
         seed += 1
         try:
             est = ivobs.make_estimator(method, sys, x0=x0)
         except (DesignError, IvobsError) as exc:
             refused[seed - 1] = str(exc)[:80]
             continue
+        Y, X, miss = _record(seed - 1, store)
+        n_rec = SHORT_RECORD.get(method, RECORD)
+        U, Y, X, miss = U[:n_rec], Y[:n_rec], X[:n_rec], miss[:n_rec]
         runs += 1
         Ym = np.where(miss, np.nan, Y) if seed % 2 else Y
         try:

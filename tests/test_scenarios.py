@@ -68,11 +68,11 @@ def test_henon_bounds_are_sound_for_every_measurement():
     for x in x1:
         for a in (a_lo, a_hi, rng.uniform(a_lo, a_hi)):
             for v in (-V, V, rng.uniform(-V, V), -x if abs(x) <= V else 0.0):
+                box = sc.system.d_at(0, np.array([x + v]))
+                assert box.lo[1] == -V and box.hi[1] == V
                 for dist in (-delta, delta):
                     b = 1 - a * x**2 + dist
-                    box = sc.system.d_at(0, np.array([x + v]))
                     assert box.lo[0] - 1e-12 <= b <= box.hi[0] + 1e-12
-                    assert box.lo[1] == -V and box.hi[1] == V
     # the paper's printed upper bound 1 - a(|y| - V)^2 + δ misses b when |y| < V:
     x, v, dist = 0.0, 0.05, delta
     y = x + v

@@ -298,13 +298,13 @@ class ZonotopeEstimator(ObserverEstimator):
         reduced = Zonotope._trusted(np.zeros(H.shape[0]), H).reduce(
             self.design.order, self.design.weight
         )
-        image = gain.M @ reduced  # M ↓H and the box of its rounding
+        image = reduced._map(gain.M, gain.absM)  # M ↓H and the box of its rounding
         GR = gain.G * r
         n = H.shape[0] + r.shape[0]
         if rounding is not None:
-            GR = np.hstack([GR, rounding])
+            GR = np.concatenate([GR, rounding], axis=1)
         box = gain.dM @ rad + gain.dG @ r + product_error(np.abs(GR).sum(axis=1), GR.shape[1])
-        return np.hstack([image.G, box_generators(upper(box, n + 3)), GR])
+        return np.concatenate([image.G, box_generators(upper(box, n + 3)), GR], axis=1)
 
     def _output_radius(self, H: np.ndarray, rad: np.ndarray, r: np.ndarray) -> np.ndarray:
         """``>= |C H| 1 + |F| r``: the radius of ``y - C p - D u - F c`` (rounding included)."""
@@ -314,12 +314,17 @@ class ZonotopeEstimator(ObserverEstimator):
         out: np.ndarray = upper(s + self._absF @ r, CH.shape[1] + r.shape[0] + 2)
         return out
 
-    def _free_step(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, Any]:
-        """One step of (34b) without data (constant bounds, the full gain): the radius
-        ``|H| 1``, its image in ``y``, and ``H[k+1]`` (None at a fixed point)."""
-        r = self._const[1]  # type: ignore[index]
+    def _free_next(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(34b) without data (constant bounds, the full gain): the radius ``|H| 1`` and
+        ``H[k+1]``."""
         rad = upper(np.abs(H).sum(axis=1), H.shape[1])
-        H_next = self._predict(H, self._full, r, rad)
+        return rad, self._predict(H, self._full, self._const[1], rad)  # type: ignore[index]
+
+    def _free_step(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, Any]:
+        """One step of (34b) without data: the radius ``|H| 1``, its image in ``y``, and
+        ``H[k+1]`` (None at a fixed point)."""
+        rad, H_next = self._free_next(H)
+        r = self._const[1]  # type: ignore[index]
         return rad, self._output_radius(H, rad, r), 0.0, None if _same(H_next, H) else H_next
 
     def _free_radii(self, T: int) -> np.ndarray:
@@ -464,15 +469,15 @@ class ZonotopeEstimator(ObserverEstimator):
             new = evolve(state, p=p_next, H=H_next, qL=qL, qx=ch.x.next(state.qx, sigma))
             return Step(new, lo, hi, inconsistent)
         # another gain: the rounding so far becomes a box of generators, this step's too
-        Hq = np.hstack([H, box_generators(ch.widen(np.zeros(nx), state.qL, state.qx))])
-        H_next = self._predict(Hq, gain, r, rad, np.hstack([gain.L * e_nu, np.diag(eps)]))
+        Hq = np.concatenate([H, box_generators(ch.widen(np.zeros(nx), state.qL, state.qx))], 1)
+        H_next = self._predict(Hq, gain, r, rad, np.concatenate([gain.L * e_nu, np.diag(eps)], 1))
         new = evolve(state, p=p_next, H=H_next, qL=0.0, qx=0.0)
         return Step(new, lo, hi, inconsistent)
 
     def _advance_free(self, H: np.ndarray) -> np.ndarray:
         """(34b) without data, for :func:`settle` (a fixed point maps to itself)."""
-        H_next = self._free_step(H)[3]
-        return H if H_next is None else H_next
+        H_next = self._free_next(H)[1]
+        return H if _same(H_next, H) else H_next
 
 
 def _same(H1: np.ndarray, H2: np.ndarray) -> bool:

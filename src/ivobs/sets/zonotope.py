@@ -185,10 +185,15 @@ class Zonotope:
         Σ_j |fl(M G)_j − M G_j|`` (:func:`~ivobs.sets.rounding.product_error` of
         ``|M| (|c| + |G| 1)``), so the result contains the exact image."""
         M = as_matrix("M", M, cols=self.dim, vector="row")
-        absM = np.abs(M)
+        return self._map(M, np.abs(M))
+
+    def _map(self, M: np.ndarray, absM: np.ndarray) -> Zonotope:
+        """:meth:`linear_map` by a finite float matrix ``M`` of the right width, ``absM = |M|``
+        (the estimators' maps at every step: checked and taken once)."""
         n, m = self.G.shape
         e = product_error(absM @ (np.abs(self.c) + np.abs(self.G).sum(axis=1)), n + m + 1)
-        return Zonotope._trusted(M @ self.c, np.hstack([M @ self.G, box_generators(e)]))
+        G = np.concatenate([M @ self.G, box_generators(e)], axis=1)
+        return Zonotope._trusted(M @ self.c, G)
 
     def __rmatmul__(self, M: Any) -> Zonotope:
         return self.linear_map(M)
@@ -240,7 +245,7 @@ class Zonotope:
         keep = G[:, order_idx[: q - n]]
         rest = G[:, order_idx[q - n :]]
         box = upper(np.abs(rest).sum(axis=1), rest.shape[1])  # rounded up: contains the exact
-        return Zonotope._trusted(self.c, np.hstack([keep, np.diag(box)]))
+        return Zonotope._trusted(self.c, np.concatenate([keep, np.diag(box)], axis=1))
 
     def contains(self, x: Any, tol: float = 1e-9) -> bool:
         """Whether ``x`` lies in the zonotope (one LP with HiGHS; for checks, not hot loops)."""

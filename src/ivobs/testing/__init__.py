@@ -12,11 +12,12 @@
 from __future__ import annotations
 
 from .conformance import check_estimator, conformance_plants
-from .exact import ExactLinear, exact_misses, exact_run
+from .exact import ExactLinear, ExactStates, exact_misses, exact_run
 from .systems import adversarial_run, assert_contains, random_system
 
 __all__ = [
     "ExactLinear",
+    "ExactStates",
     "adversarial_run",
     "assert_contains",
     "check_estimator",

@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box
-from .exact import exact_misses, exact_run
+from .exact import ExactStates, exact_misses, exact_run
 
 __all__ = ["CheckReport", "check_estimator", "conformance_plants"]
 
@@ -188,7 +188,7 @@ def _check_metadata(method: Any, name: str) -> None:
 
 
 def _check_record(
-    est: Any, make: Any, plant: str, U: np.ndarray, Y: np.ndarray, X: list[Any]
+    est: Any, make: Any, plant: str, U: np.ndarray, Y: np.ndarray, X: ExactStates
 ) -> None:
     name = est.name
     res = est.run(U, Y)
@@ -227,7 +227,7 @@ def _check_record(
 
 
 def _check_missing(
-    est: Any, plant: str, U: np.ndarray, Y: np.ndarray, X: list[Any], rng: np.random.Generator
+    est: Any, plant: str, U: np.ndarray, Y: np.ndarray, X: ExactStates, rng: np.random.Generator
 ) -> None:
     Ym = Y.copy()
     Ym[rng.uniform(size=Y.shape) < 0.1] = np.nan

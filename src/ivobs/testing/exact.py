@@ -5,7 +5,10 @@ exact value, and a sound estimator may rightly exclude the float state. :class:`
 keeps every state *exactly*, as integers over a power of two (a double is ``m 2^e``; sums and
 products of such numbers stay such numbers), with the disturbances and the inputs given as
 doubles. Each measurement is then the double nearest to the exact ``C x + D u + F d``, as a data
-logger records it; a box is checked against the exact state by exact comparison.
+logger records it. A record keeps each exact state as the two adjacent doubles around it
+(:class:`ExactStates`): for a double ``a``, ``a <= x`` exactly when ``a`` is at most the lower
+one, and ``a >= x`` when it is at least the upper one, so a box is checked against the exact
+state by exact comparison, on arrays of doubles.
 
 The integers grow by the mantissa length of the matrices at every step, so runs of a few
 thousand steps are cheap, not millions: long campaigns use many runs.
@@ -15,11 +18,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["ExactLinear", "exact_misses", "exact_run"]
+__all__ = ["ExactLinear", "ExactStates", "exact_misses", "exact_run"]
 
 Dyadic = tuple[list[int], int]
 """A vector ``N 2^s``: integers ``N`` over one power of two."""
@@ -63,6 +67,38 @@ def _add(*terms: Dyadic) -> Dyadic:
 def _nearest(N: int, s: int) -> float:
     """The double nearest to ``N 2^s`` (Python's integer division rounds correctly)."""
     return float(N << s) if s >= 0 else N / (1 << -s)
+
+
+_MAX = float(np.finfo(np.float64).max)
+
+
+def _around(N: int, s: int) -> tuple[float, float]:
+    """The doubles ``a <= N 2^s <= b`` next to it (``a = b`` when it is a double; beyond the
+    largest double, that one and an infinity)."""
+    try:
+        q = _nearest(N, s)
+    except OverflowError:
+        return (_MAX, math.inf) if N > 0 else (-math.inf, -_MAX)
+    if not _leq(q, N, s):
+        return math.nextafter(q, -math.inf), q
+    return (q, q) if _geq(q, N, s) else (q, math.nextafter(q, math.inf))
+
+
+@dataclass(frozen=True)
+class ExactStates:
+    """The exact states ``x[0..T-1]`` of a record, each component between two adjacent doubles:
+    ``lo <= x <= hi`` (``lo = hi`` where ``x`` is a double), arrays ``(T, nx)``. For a double
+    ``a``, ``a <= x`` exactly when ``a <= lo`` (``lo`` is the largest double not above ``x``)
+    and ``a >= x`` when ``a >= hi``. Slicing takes steps (``X[:n]``)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.lo.shape[0])
+
+    def __getitem__(self, steps: slice) -> ExactStates:
+        return ExactStates(self.lo[steps], self.hi[steps])
 
 
 def _leq(a: float, N: int, s: int) -> bool:
@@ -123,6 +159,13 @@ class ExactLinear:
         N, s = self.x
         return np.array([_nearest(v, s) for v in N], dtype=float)
 
+    def around(self) -> tuple[list[float], list[float]]:
+        """The doubles next to each component of the current state, below and above
+        (:class:`ExactStates`)."""
+        N, s = self.x
+        pairs = [_around(v, s) for v in N]
+        return [a for a, _ in pairs], [b for _, b in pairs]
+
     def contains(self, lo: Any, hi: Any) -> np.ndarray:
         """Per component, whether ``lo <= x <= hi`` holds exactly for the current state."""
         N, s = self.x
@@ -148,33 +191,28 @@ def exact_run(
     u: np.ndarray,
     d: np.ndarray,
     matrices: Sequence[Sequence[np.ndarray]] | None = None,
-) -> tuple[np.ndarray, list[Dyadic]]:
+) -> tuple[np.ndarray, ExactStates]:
     """A whole record: the measurements ``y`` ``(T, ny)`` (nearest doubles) and the exact
     states ``x[0..T-1]`` (for :func:`exact_misses`)."""
     sim = ExactLinear(sys, x0)
     T = d.shape[0] if d is not None and np.ndim(d) == 2 else len(u)
     Y = np.empty((T, sys.ny))
-    X: list[Dyadic] = []
+    lo, hi = np.empty((T, sys.nx)), np.empty((T, sys.nx))
     for k in range(T):
-        X.append(sim.x)
+        lo[k], hi[k] = sim.around()
         Y[k] = sim.step(
             None if u is None else u[k],
             None if d is None else d[k],
             None if matrices is None else matrices[k],
         )
-    return Y, X
+    return Y, ExactStates(lo, hi)
 
 
-def exact_misses(lower: np.ndarray, upper: np.ndarray, X: list[Dyadic]) -> np.ndarray:
+def exact_misses(lower: np.ndarray, upper: np.ndarray, X: ExactStates) -> np.ndarray:
     """Steps ``k`` whose box ``[lower[k], upper[k]]`` misses the exact state ``X[k]`` (rows
     with NaN bounds, before a method's ``valid_from``, are skipped)."""
-    bad = []
-    for k, (N, s) in enumerate(X):
-        lo, hi = lower[k], upper[k]
-        if np.isnan(lo).any() or np.isnan(hi).any():
-            continue
-        for a, b, v in zip(lo.tolist(), hi.tolist(), N):
-            if not (_leq(a, v, s) and _geq(b, v, s)):
-                bad.append(k)
-                break
-    return np.array(bad, dtype=int)
+    T = len(X)
+    lo, hi = np.asarray(lower, dtype=float)[:T], np.asarray(upper, dtype=float)[:T]
+    skip = np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1)
+    bad = ((lo > X.lo) | (hi < X.hi)).any(axis=1) & ~skip
+    return np.flatnonzero(bad)

@@ -62,7 +62,7 @@ def recover(
     if zabs is None:
         zabs = np.maximum(np.abs(zlo), np.abs(zhi))
     nx = tr.P.shape[0]
-    r = (tr.W @ np.concatenate((zlo, zhi, zabs))).tolist()
+    r = tr.W.dot(np.concatenate((zlo, zhi, zabs))).tolist()
     s = r[2 * nx :]
     # r_i ‖x‖∞ <= max r ‖x‖∞ (NaN-propagating maximum: a NaN in s gives NaN bounds)
     smax = max(s) if sum(s) == sum(s) else nan

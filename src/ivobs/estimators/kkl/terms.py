@@ -124,9 +124,9 @@ class Consistency:
         ``slack``: the exact output is known to lie within ``y_o ± slack``."""
         no = y_o.shape[0]
         if self.const:
-            r = self.M @ np.concatenate((lo, hi, u, xabs, uabs, _ONE))
+            r = self.M.dot(np.concatenate((lo, hi, u, xabs, uabs, _ONE)))
         else:
-            r = self.M @ np.concatenate((lo, hi, u, xabs, uabs))
+            r = self.M.dot(np.concatenate((lo, hi, u, xabs, uabs)))
             flo, fhi = image_bounds(self.F, dlo, dhi)
             r[:no] += flo
             r[no : 2 * no] += fhi
@@ -223,7 +223,7 @@ class Terms:
             parts.append(xabs)
         if self.const:
             parts.append(_ONE)
-        r = self.M @ np.concatenate(parts)
+        r = self.M.dot(np.concatenate(parts))
         out, eps = r[: 2 * nz], r[2 * nz :]
         if not self.const:  # bounds of d that vary: G [d̲, d̄] at this step
             glo, ghi = g_image(self.G, self.Gerr, dlo, dhi)
