@@ -13,6 +13,7 @@ settings.register_profile("ivobs", derandomize=True)
 settings.load_profile("ivobs")
 
 SLOW = (
+    "tests/test_czonotope.py::test_a_set_pinned_to_a_point_keeps_its_width_when_the_solver_balks",
     "tests/test_adversarial.py::test_adversarial_containment_all_methods[0-2-1-opts0]",
     "tests/test_adversarial.py::test_adversarial_containment_all_methods[1-3-2-opts1]",
     "tests/test_adversarial.py::test_adversarial_containment_all_methods[2-3-1-opts2]",

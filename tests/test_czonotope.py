@@ -264,3 +264,56 @@ def test_reduced_costs_follow_each_elimination(seed: int) -> None:
         A = A / s[:, None]
         cert.scale_rows(s)
         np.testing.assert_allclose(cert.reduced_costs(A), cert.D - cert.mu @ A, atol=1e-9)
+
+
+def test_a_set_the_solver_calls_infeasible_is_relaxed_row_by_row(monkeypatch) -> None:
+    """When HiGHS calls a nonempty set infeasible (thin sets near its tolerances do), the hull
+    is that of the set with each constraint relaxed by a tiny slack factor: a superset within
+    about the slack of the exact hull, and the caller keeps that set (``soften``). Widening
+    the factors' box instead (the last resort) can multiply the widths."""
+    from ivobs.sets.czonotope import hull, hull_certificates, soften
+
+    rng = np.random.default_rng(7)
+    z = random_cz(rng, n=2, m=6, nc=2)
+    exact_lo, exact_hi = vertices(z).min(axis=0), vertices(z).max(axis=0)
+    real = hull._certified_mins
+    calls = []
+
+    def refuses_the_set_as_given(Gs, A, b, radius, chains):
+        calls.append(A.shape)
+        if A.shape == z.A.shape:  # the solver's false "infeasible" on the set itself
+            return np.full(Gs.shape[0], np.nan), np.zeros((Gs.shape[0], A.shape[0])), False
+        return real(Gs, A, b, radius, chains)
+
+    monkeypatch.setattr(hull, "_certified_mins", refuses_the_set_as_given)
+    monkeypatch.setattr(hull, "radius_certificate", lambda A, b: (2.0, 0.5))
+    lo, hi, cert = hull_certificates(z.c, z.G, z.A, z.b)
+    assert calls == [(2, 6), (2, 8)]  # the set, then its relaxation by the first tolerance
+    assert cert.softened and cert.radius == 1.0 and cert.slack is not None
+    assert np.all(lo <= exact_lo) and np.all(hi >= exact_hi)
+    scale = 1.0 + np.abs(z.b).max() + np.abs(z.A).sum(axis=1).max()
+    np.testing.assert_allclose(lo, exact_lo, atol=1e-6 * scale)
+    np.testing.assert_allclose(hi, exact_hi, atol=1e-6 * scale)
+    G, A, e = soften(z.G, z.A, cert.radius, cert.slack)
+    assert G.shape == (2, 8) and A.shape == (2, 8) and not e.any()  # no rounding at radius 1
+    kept = ConstrainedZonotope(z.c, G, A, z.b)
+    monkeypatch.setattr(hull, "_certified_mins", real)
+    assert np.all(vertices(kept).min(axis=0) <= exact_lo)
+    assert np.all(vertices(kept).max(axis=0) >= exact_hi)
+
+
+def test_a_set_pinned_to_a_point_keeps_its_width_when_the_solver_balks() -> None:
+    """Dinh's random 8-state plant pins the state down to widths of 1e-10 within a step; at
+    some steps HiGHS then calls the thin filtered set infeasible. Widening the factors' box to
+    the solver's inaccurate smallest radius (2.1 where it is at most 1) made the box 5 units
+    wide at such steps (a mean 9x that of the exact filter over the record); the rows'
+    relaxation keeps every step within 1e-6."""
+    sc = ivobs.scenarios.get("kkl-random8", horizon=30)
+    traj = sc.simulate("vertex", seed=0)
+    est = ivobs.make_estimator("constrained-zonotope", sc.system, x0=sc.x0)
+    res = est.run(traj.u, traj.y)
+    width = res.upper - res.lower
+    x = np.asarray(traj.x)
+    assert np.all(res.lower <= x) and np.all(x <= res.upper)
+    assert width[0].max() > 1.0  # the prior's step
+    assert width[1:].max() < 1e-6

@@ -410,9 +410,11 @@ class ConstrainedZonotopeEstimator(Estimator):
             lo, hi = down(c - r), up(c + r)
         else:
             lo, hi, cert = hull
-            if cert.radius != 1.0:  # softened (see hull_certificates): keep the larger set
+            if cert.softened:  # see hull_certificates: keep the larger set
                 pad = np.concatenate([np.zeros((nx, m)), ER], axis=1)  # E R on the new factors
-                GE, A_new, err = soften(np.concatenate([G_aug, pad]), A_new, cert.radius)
+                GE, A_new, err = soften(
+                    np.concatenate([G_aug, pad]), A_new, cert.radius, cert.slack
+                )
                 G_aug, ER, e, er_err = GE[:nx], GE[nx:, m:], up(e + err[:nx]), err[nx:]
                 cert = None  # certificates of the softened set: not worth rescaling
         lo, hi = down(lo - e), up(hi + e)

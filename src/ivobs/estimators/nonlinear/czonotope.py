@@ -338,8 +338,8 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         if hull is None:  # pragma: no cover - the predicted set is never certainly empty
             return not inconsistent
         lo, hi, cert = hull
-        if cert.radius != 1.0:  # softened (see hull_certificates): keep the larger set
-            joint.Gz, joint.A, err = soften(joint.Gz, joint.A, cert.radius)
+        if cert.softened:  # see hull_certificates: keep the larger set
+            joint.Gz, joint.A, err = soften(joint.Gz, joint.A, cert.radius, cert.slack)
             joint.acc = up(joint.acc + err)
         acc = joint.acc[:nx]
         new_lo = np.maximum(joint.lo[:nx], down(lo - acc))

@@ -271,10 +271,11 @@ def hull_certificates(
     ``P ξ``); the filter passes the hull of its prediction, ``[A G, E R]``.
 
     When HiGHS calls the set infeasible without a certificate of it (a set that is thin, or
-    empty only by rounding), the bounds are those of the *softened* set with the box
-    ``‖ξ‖∞ <= ρ``, ``ρ = max(1, r*) (1 + EMPTY_TOL)`` (``r*`` the smallest feasible radius
-    found): a superset, so still sound. ``cert.radius`` is then ``ρ``: the caller keeps that
-    larger set (:meth:`Certificates.radius`).
+    empty only by rounding), the bounds are those of a *softened* superset, so still sound:
+    first each constraint relaxed by a slack factor (:data:`RELAXATIONS`; ``cert.slack``), else
+    the box ``‖ξ‖∞ <= ρ``, ``ρ = max(1, r*) (1 + EMPTY_TOL)`` (``r*`` the smallest feasible
+    radius found; ``cert.radius``). The caller keeps that larger set (:func:`soften`,
+    :attr:`Certificates.softened`).
     """
     n = G.shape[0]
     P = np.zeros((0, G.shape[1])) if extra is None else extra
@@ -282,11 +283,20 @@ def hull_certificates(
     Gs = np.concatenate([G, -G, P, -P])
     chains = _hull_chains(n, k)
     vals, mu, ok = _certified_mins(Gs, A, b, 1.0, chains)
-    radius = 1.0
+    radius, slack = 1.0, None
     if not ok:
         r, r_low = radius_certificate(A, b)
         if r_low > 1.0 + EMPTY_TOL:
             return None
+        for tol in RELAXATIONS:  # each row relaxed by a slack factor: a superset, still thin
+            slack = up(tol * (np.abs(b) + np.abs(A).sum(axis=1)))
+            Gs_r = np.concatenate([Gs, np.zeros((Gs.shape[0], A.shape[0]))], axis=1)
+            vals, mu, ok = _certified_mins(Gs_r, relaxed(A, slack), b, 1.0, chains)
+            if ok:
+                Gs = Gs_r
+                break
+    if not ok:  # the box of the factors widened until HiGHS finds the set feasible
+        slack = None
         radius = float(up((max(1.0, r) if np.isfinite(r) else 1.0) * (1.0 + EMPTY_TOL)))
         vals, mu, ok = _certified_mins(Gs, A, b, radius, chains)
         if not ok:  # HiGHS contradicting itself: the bound of the zonotope (μ = 0 is valid)
@@ -300,19 +310,39 @@ def hull_certificates(
         p_width = -(vals[2 * n : 2 * n + k] + vals[2 * n + k :])
         p_width = np.maximum(p_width, 1e-12 * (1.0 + np.abs(P).sum(axis=1)))
         weight += [1.0 / p_width, 1.0 / p_width]
-    return lo, hi, Certificates(Gs, mu, np.concatenate(weight), radius)
+    return lo, hi, Certificates(Gs, mu, np.concatenate(weight), radius, slack)
+
+
+RELAXATIONS = (1e-10, 1e-8)
+"""Relative slacks tried in turn when HiGHS calls a set infeasible that it cannot prove empty
+(:func:`hull_certificates`): each constraint ``i`` gets a slack factor of size
+``tol (|b_i| + ‖A_i‖₁)``. A set pinned down by its constraints to widths near the solver's
+tolerances is then feasible for it, and its hull widens by about the slack; the fallback,
+widening the factors' box to the solver's smallest feasible radius, can multiply the widths
+when that radius is found inaccurately on such ill-conditioned programs."""
+
+
+def relaxed(A: np.ndarray, slack: np.ndarray) -> np.ndarray:
+    """``[A diag(slack)]``: the constraints ``A ξ + diag(slack) η = b``, ``‖η‖∞ <= 1``."""
+    return np.concatenate([A, np.diag(slack)], axis=1)
 
 
 def soften(
-    G: np.ndarray, A: np.ndarray, radius: float
+    G: np.ndarray, A: np.ndarray, radius: float = 1.0, slack: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The set ``{c + G ξ : ‖ξ‖∞ <= radius, A ξ = b}`` (:func:`hull_certificates`' softened
-    set) with the unit box: ``G radius``, ``A radius``, plus the rounding of the products:
-    ``e = product_error(|G'| 1, 1)`` per row of ``G`` (the returned box, at ``|ξ| <= 1``) and
-    a slack factor per constraint (``[G' 0]``, ``[A' diag(s)]``)."""
-    G, A = G * radius, A * radius
-    e = product_error(np.abs(G).sum(axis=1), 1)
-    s = product_error(np.abs(A).sum(axis=1), 1)
+    """The softened set of :func:`hull_certificates` (``cert.radius``, ``cert.slack``) with the
+    unit box of factors: ``{c + G ξ : ‖ξ‖∞ <= radius, A ξ + diag(slack) η = b, ‖η‖∞ <= 1}`` as
+    ``G radius``, ``A radius`` plus the rounding of these products: ``e = product_error(|G'| 1,
+    1)`` per row of ``G`` (the returned box, at ``|ξ| <= 1``) and a slack factor per
+    constraint, which also carries ``slack`` (``[G' 0]``, ``[A' diag(s)]``)."""
+    if radius != 1.0:
+        G, A = G * radius, A * radius
+        e = product_error(np.abs(G).sum(axis=1), 1)
+        s = product_error(np.abs(A).sum(axis=1), 1)
+    else:
+        e, s = np.zeros(G.shape[0]), np.zeros(A.shape[0])
+    if slack is not None:
+        s = up(s + slack)
     live = np.flatnonzero(s > 0)
     S = np.zeros((A.shape[0], live.size))
     S[live, np.arange(live.size)] = s[live]
@@ -341,11 +371,25 @@ class Certificates:
     Hausdorff heuristic of [Scott2016, Section 4.2], which only breaks ties here.
     """
 
-    __slots__ = ("D", "_rc", "mu", "radius", "weight")
+    __slots__ = ("D", "_rc", "mu", "radius", "slack", "weight")
 
-    def __init__(self, D: np.ndarray, mu: np.ndarray, weight: np.ndarray, radius: float = 1.0):
+    def __init__(
+        self,
+        D: np.ndarray,
+        mu: np.ndarray,
+        weight: np.ndarray,
+        radius: float = 1.0,
+        slack: np.ndarray | None = None,
+    ):
         self.D, self.mu, self.weight, self.radius = D, mu, weight, radius
+        self.slack = slack  # the rows' slack factors of a relaxed set (hull_certificates)
         self._rc: np.ndarray | None = None  # D - mu A, once asked for (reduced_costs)
+
+    @property
+    def softened(self) -> bool:
+        """Whether the certificates are those of a softened superset of the set asked about
+        (:func:`hull_certificates`), which the caller must then keep (:func:`soften`)."""
+        return self.radius != 1.0 or self.slack is not None
 
     def reduced_costs(self, A: np.ndarray) -> np.ndarray:
         """``D − μ A`` (K, m), kept up to date through the eliminations (each changes it by a
