@@ -172,6 +172,10 @@ class LinearProgram:
         self.h.run()
         return self._status.get(self.h.getModelStatus(), "failed")
 
+    def iterations(self) -> int:
+        """Simplex iterations of the last solve."""
+        return int(self.h.getInfo().simplex_iteration_count)
+
     def restart(self) -> None:
         """Forget the solver's work (factorisation, pricing weights) but keep the basis: the
         next solve starts as a program rebuilt from that basis would."""
