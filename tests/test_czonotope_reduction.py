@@ -139,24 +139,3 @@ def test_every_limit_stays_bounded_on_every_cora_benchmark(name, steps, limits) 
     if name == "cora-pedestrian4":
         known[217] = False  # CORA's record leaves its own noise bound there (by 3e-3)
     assert res.contains(x)[known].all()
-
-
-def test_the_certified_bounds_choose_what_the_parallelotope_absorbs() -> None:
-    """Basis ``(1, 1)``, ``(1, -1)``; of ``a = (0, 0.1)`` and ``b = (0.12, 0)`` one must go.
-    The shape rule absorbs ``a`` (``‖α‖₁`` 0.1 < 0.12), which widens ``x_1`` by 0.1; with the
-    duals of the bounds of ``x_1`` the reduction absorbs ``b``, which costs ``x_1`` nothing
-    (``b`` lies along ``p_1 + p_2``). Both results contain the original: every support
-    function is at least the original's."""
-    G = np.array([[1.0, 1.0, 0.0, 0.12], [1.0, -1.0, 0.1, 0.0]])
-    none = (np.zeros(2), G, np.zeros((0, 4)), np.zeros(0), 3)
-    lam = np.array([[1.0, 0.0], [-1.0, 0.0]])  # min x_1 and min -x_1, no constraints
-    _, G_shape, _, _ = reduce_generators(*none)
-    _, G_dual, _, _ = reduce_generators(*none, duals=(lam, np.ones(2)))
-    np.testing.assert_allclose(np.abs(G_shape[0]).sum(), 2.22, rtol=1e-12)
-    np.testing.assert_allclose(np.abs(G_dual[0]).sum(), 2.12, rtol=1e-12)
-    angles = np.linspace(0.0, 2.0 * np.pi, 721)
-    V = np.stack([np.cos(angles), np.sin(angles)])
-    support = np.abs(V.T @ G).sum(axis=1)
-    for R in (G_shape, G_dual):
-        assert R.shape == (2, 3)
-        assert np.all(np.abs(V.T @ R).sum(axis=1) >= support)

@@ -19,8 +19,7 @@ with ``X_k = <c, G, A_c, b>`` the set of ``x[k]`` predicted from ``y[0..k-1]`` a
   ``X_{k+1} = <A c + B u_k + E c_d, [A G, E R], ..., ...>``;
 * reduction [Scott2016, Section 4]: at most ``max_constraints`` constraints (rescaling +
   elimination, Section 4.2), then at most ``max_generators`` generators (lifted zonotope,
-  Section 4.3, with the parallelotope enclosure of [Chisci1998]; the generators it absorbs
-  chosen by the prediction's certificates too, :func:`ivobs.czonotope.reduce_generators`).
+  Section 4.3, with the parallelotope enclosure of [Chisci1998]).
 
 Which factor to eliminate is not chosen by the paper's shape heuristic (an estimate of the
 Hausdorff distance) but by what the box needs: the LPs of the box give dual certificates of its
@@ -457,17 +456,7 @@ class ConstrainedZonotopeEstimator(Estimator):
         else:
             c_next = c_next + out.c
             G, A_c, b, e = out.G, out.A, out.b, up(out.e + UNIT_ROUNDOFF * np.abs(c_next))
-        duals = None
-        if cert is not None and out is not None:
-            # the prediction's certified bounds min ±x_i[k+1] >= μᵀb - ‖±e_iᵀG - μᵀA‖₁ (the
-            # last 2 nx certificates, mapped through the eliminations): λ = (±e_i, -μ) on the
-            # lifted generators [G; A]
-            nx = c.shape[0]
-            S = np.concatenate([np.eye(nx), -np.eye(nx)])
-            duals = (np.concatenate([S, -cert.mu[2 * nx :]], axis=1), cert.weight[2 * nx :])
-        c_next, G, A_c, b = reduce_consolidated(
-            c_next, G, A_c, b, self.design.max_generators, TOLS, duals
-        )
+        c_next, G, A_c, b = reduce_consolidated(c_next, G, A_c, b, self.design.max_generators, TOLS)
         # row-major, as a restored state is: BLAS sums in an order that depends on the layout,
         # and a restored estimator must continue as the saved one would have
         return c_next, np.ascontiguousarray(G), np.ascontiguousarray(A_c), b, e

@@ -59,7 +59,6 @@ def reduce_generators(
     b: np.ndarray,
     max_generators: int,
     residual: bool = False,
-    duals: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Any:
     """At most ``max_generators`` generators, by reducing the lifted zonotope
     ``<[c; -b], [G; A]>`` ([Scott2016, Section 4.3]; its ``x`` part and constraint part
@@ -79,18 +78,6 @@ def reduce_generators(
 
     At least ``N`` generators are kept, whatever ``max_generators``.
 
-    Which generators the parallelotope absorbs: by default those with the smallest
-    coordinates in the basis (``‖α‖₁``, [Chisci1998]). With ``duals = (Λ, w)`` — rows
-    ``λ_k = (s_k, −μ_k)`` (N,) of bounds ``min s_kᵀx`` certified by the multipliers ``μ_k``
-    of the constraints (:class:`~ivobs.sets.czonotope.Certificates`), weights ``w`` (K,) —
-    those that loosen the certified bounds least: generator ``l_j`` contributes
-    ``|λ_kᵀ l_j|`` to bound ``k`` ((W) in :mod:`~ivobs.sets.czonotope.hull`), and absorbing
-    it scales basis column ``p_i`` by ``1 + |α_ij|``, so the loss is
-    ``Σ_k w_k (Σ_i |α_ij| |λ_kᵀ p_i| − |λ_kᵀ l_j|) >= 0``, additive over the removed
-    generators; the shape rule can absorb a generator that is small in the basis's
-    coordinates but aligned with a direction the box needs. The two are combined
-    (:data:`SHAPE_WEIGHT`).
-
     With ``residual=True`` ``(c, G, A, b, box)`` is returned, ``box`` the zero radii of the
     box aside (the form of ``nl-zonotope``'s reduction)."""
     n, m = G.shape
@@ -102,10 +89,7 @@ def reduce_generators(
     L = G if not A.shape[0] and G.flags.c_contiguous else np.vstack([G, A])
     d = _pow2_scaling(L)
     Ls = L * d[:, None] if d is not None else L
-    lam = None
-    if duals is not None:
-        lam = (duals[0] / d if d is not None else duals[0], duals[1])
-    L2 = _absorb_in_basis(Ls, order, duals=lam)
+    L2 = _absorb_in_basis(Ls, order)
     if L2 is None:
         L2 = reduce_girard(Ls, order)
     if d is not None:
@@ -113,7 +97,7 @@ def reduce_generators(
         if _exactly_scaled(back, L2):
             L2 = back
         else:  # an entry would leave the normal range: reduce the unscaled matrix instead
-            L2 = _absorb_in_basis(L, order, duals=duals)
+            L2 = _absorb_in_basis(L, order)
             L2 = reduce_girard(L, order) if L2 is None else L2
     return (c, L2[:n], L2[n:], b, np.zeros(N)) if residual else (c, L2[:n], L2[n:], b)
 
@@ -156,10 +140,7 @@ def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
 
 
 def _absorb_in_basis(
-    L: np.ndarray,
-    order: int,
-    max_condition: float = MAX_BASIS_CONDITION,
-    duals: tuple[np.ndarray, np.ndarray] | None = None,
+    L: np.ndarray, order: int, max_condition: float = MAX_BASIS_CONDITION
 ) -> np.ndarray | None:
     """``order >= N`` generators ``L'`` with ``<0, L> ⊆ <0, L'>`` in exact arithmetic, by a
     parallelotope enclosure ([Chisci1998]), or ``None`` when the basis is ill-conditioned.
@@ -189,14 +170,7 @@ def _absorb_in_basis(
     alpha = scipy.linalg.solve_triangular(R[:N, :N], R[:N, N:], check_finite=False)
     if not np.isfinite(alpha).all():
         return None
-    shape = np.abs(alpha).sum(axis=0)
-    score = shape
-    if duals is not None:
-        lam, w = duals
-        cost = np.abs(lam @ L)  # (K, m): |λ_kᵀ l_j|, column j's share of bound k
-        loss = w @ (cost[:, basis] @ np.abs(alpha) - cost[:, others])
-        score = _relative(loss) + SHAPE_WEIGHT * _relative(shape)
-    srt = score.argsort(kind="stable")
+    srt = np.abs(alpha).sum(axis=0).argsort(kind="stable")
     n_rm = m - order
     rm, kept = srt[:n_rm], others[srt[n_rm:]]
     P, a_rm, L_rm = L[:, basis], alpha[:, rm], L[:, others[rm]]
@@ -213,20 +187,6 @@ def _absorb_in_basis(
     z = upper(upper(1.0 + a1, n_rm + 1) + tau, 1)
     t = upper(z + mu / (1.0 - mu) * float(z.max()), 4)
     return np.concatenate([P * t, L[:, kept]], axis=1)
-
-
-SHAPE_WEIGHT = 0.1
-"""Weight of the shape rule (``‖α‖₁``) beside the loss of the certified bounds when both choose
-the generators a parallelotope absorbs (:func:`reduce_generators`), each relative to its median
-over the candidates. The bounds see only the next box; the shape term keeps the directions it
-does not see from being inflated freely (CORA's pedestrian, a double integrator, loses 3 %
-over its record with the bounds alone, and the quadruple tank 6 % with the shape alone)."""
-
-
-def _relative(v: np.ndarray) -> np.ndarray:
-    """``v`` over its median (``v`` itself when that is not positive)."""
-    med = float(np.median(v))
-    return v / med if med > 0.0 else v
 
 
 def _box_in_basis(P: np.ndarray, rho: np.ndarray) -> tuple[np.ndarray, float] | None:
@@ -270,7 +230,6 @@ def reduce_consolidated(
     b: np.ndarray,
     max_generators: int,
     tols: tuple[float, float],
-    duals: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`consolidate_small` with tolerances relative to the set (``tols = (tx, tc)``:
     ``tx (1 + max |c|)`` for generators, ``tc max |A|`` for constraint entries), then
@@ -280,6 +239,6 @@ def reduce_consolidated(
     tol_c = tols[1] * float(np.abs(A).max(initial=0.0))
     c, G, A, b = consolidate_small(c, G, A, b, tol_x, tol_c)
     out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = reduce_generators(
-        c, G, A, b, max_generators, duals=duals
+        c, G, A, b, max_generators
     )
     return out
