@@ -28,7 +28,7 @@ import numpy as np
 import scipy.linalg
 
 from ..rounding import ETA, UNIT_ROUNDOFF, down, mid_rad, product_error, up, upper
-from .hull import Certificates
+from .hull import Certificates, with_slacks
 from .tolerances import PIVOT_TOL, ROW_TOL, ZERO_TOL
 
 __all__ = ["Reduced", "eliminate_constraints", "independent_constraints", "rescale_factors"]
@@ -54,13 +54,10 @@ class _Set:
 
     def finish(self, cert: Certificates | None) -> Reduced:
         """The slacks as factors: ``[G 0], [A diag(s)]`` (rows with ``s > 0`` only)."""
-        rows = np.flatnonzero(self.s > 0)
+        G, A = with_slacks(self.G, self.A, self.s)
         if cert is not None:
-            cert.pad(rows.size)
-        G = np.concatenate([self.G, np.zeros((self.G.shape[0], rows.size))], axis=1)
-        S = np.zeros((self.A.shape[0], rows.size))
-        S[rows, np.arange(rows.size)] = self.s[rows]
-        return Reduced(self.c, G, np.concatenate([self.A, S], axis=1), self.b, self.e)
+            cert.pad(G.shape[1] - self.G.shape[1])
+        return Reduced(self.c, G, A, self.b, self.e)
 
 
 def _drop_zero(z: _Set, cert: Certificates | None) -> bool:

@@ -296,10 +296,11 @@ def hull_certificates(
         r, r_low = radius_certificate(A, b)
         if r_low > 1.0 + EMPTY_TOL:
             return None
+        row_size = np.abs(b) + np.abs(A).sum(axis=1)
         for tol in RELAXATIONS:  # each row relaxed by a slack factor: a superset, still thin
-            slack = up(tol * (np.abs(b) + np.abs(A).sum(axis=1)))
-            Gs_r = np.concatenate([Gs, np.zeros((Gs.shape[0], A.shape[0]))], axis=1)
-            vals, mu, ok = _certified_mins(Gs_r, relaxed(A, slack), b, 1.0, chains)
+            slack = up(tol * row_size)
+            Gs_r, A_r = with_slacks(Gs, A, slack)
+            vals, mu, ok = _certified_mins(Gs_r, A_r, b, 1.0, chains)
             if ok:
                 Gs = Gs_r
                 break
@@ -330,9 +331,14 @@ widening the factors' box to the solver's smallest feasible radius, can multiply
 when that radius is found inaccurately on such ill-conditioned programs."""
 
 
-def relaxed(A: np.ndarray, slack: np.ndarray) -> np.ndarray:
-    """``[A diag(slack)]``: the constraints ``A ξ + diag(slack) η = b``, ``‖η‖∞ <= 1``."""
-    return np.concatenate([A, np.diag(slack)], axis=1)
+def with_slacks(G: np.ndarray, A: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[G 0]``, ``[A diag(s)]`` on the rows with ``s > 0``: the constraints
+    ``A ξ + diag(s) η = b``, ``‖η‖∞ <= 1`` (a slack factor per such row, in no generator)."""
+    live = np.flatnonzero(s > 0)
+    S = np.zeros((A.shape[0], live.size))
+    S[live, np.arange(live.size)] = s[live]
+    G = np.concatenate([G, np.zeros((G.shape[0], live.size))], axis=1)
+    return G, np.concatenate([A, S], axis=1)
 
 
 def soften(
@@ -351,11 +357,7 @@ def soften(
         e, s = np.zeros(G.shape[0]), np.zeros(A.shape[0])
     if slack is not None:
         s = up(s + slack)
-    live = np.flatnonzero(s > 0)
-    S = np.zeros((A.shape[0], live.size))
-    S[live, np.arange(live.size)] = s[live]
-    G = np.concatenate([G, np.zeros((G.shape[0], live.size))], axis=1)
-    return G, np.concatenate([A, S], axis=1), e
+    return (*with_slacks(G, A, s), e)
 
 
 LOSS_CANDIDATES = 12
