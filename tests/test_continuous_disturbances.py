@@ -2,10 +2,10 @@
 default, :mod:`ivobs.model.sampling` and the differential inclusion of
 :class:`~ivobs.model.nonlinear.flow.FlowSystem`).
 
-The plants are simulated here, not by ivobs: linear ones with exact matrix exponentials (SciPy's
-``expm``) per constant piece of ``d``, nonlinear ones with ``solve_ivp`` (DOP853, ``rtol =
-1e-12``) per piece; ``d`` switches sign many times inside each sampling period, its sign chosen
-to push the state outward (the held model's blind spot).
+The plants are simulated in the tests (``tests/ctsim.py``), not by ivobs: linear ones with
+exact matrix exponentials (SciPy's ``expm``) per constant piece of ``d``, nonlinear ones with
+``solve_ivp`` (DOP853, ``rtol = 1e-12``) per piece; ``d`` switches sign many times inside each
+sampling period, its sign chosen to push the state outward (the held model's blind spot).
 """
 
 from __future__ import annotations
@@ -17,47 +17,22 @@ from scipy.linalg import expm
 from scipy.optimize import linprog
 
 import ivobs
+from ctsim import (
+    A_OSC,
+    SWITCHES,
+    T_OSC,
+    TS_OSC,
+    X0_BOX,
+    misses,
+    nl_oscillator,
+    nl_vdp,
+    osc_rhs,
+    oscillator,
+    simulate_nl,
+    simulate_oscillator,
+    vdp_rhs,
+)
 from ivobs.errors import IvobsError
-
-# a lightly damped oscillator sampled every quarter period, its position measured
-A_OSC = np.array([[0.0, 1.0], [-1.0, -0.04]])
-TS_OSC = np.pi / 2
-SWITCHES = 8  # sign changes of d per sample (32 per period of the oscillator)
-T_OSC = 60
-X0_BOX = ivobs.Box([0.0, -1.0], [1.0, 1.0])
-
-
-def oscillator() -> ivobs.LinearSystem:
-    """``x' = A x + [0; 1] d1``, ``y = x1 + d2``; ``|d1| <= 1``, ``|d2| <= 0.01``."""
-    E = np.array([[0.0, 0.0], [1.0, 0.0]])
-    F = np.array([[0.0, 1.0]])
-    return ivobs.LinearSystem(
-        A_OSC, None, [[1.0, 0.0]], E=E, F=F, d=ivobs.Box([-1.0, -0.01], [1.0, 0.01]), dt=0
-    )
-
-
-def simulate_oscillator(seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """``(x, y)`` sampled every ``TS_OSC``; ``d1 = sign(velocity)`` on each of the
-    ``SWITCHES`` pieces of a period (energy pumped in), noise on its vertices."""
-    rng = np.random.default_rng(seed)
-    h = TS_OSC / SWITCHES
-    Ph = expm(A_OSC * h)
-    gh = np.linalg.solve(A_OSC, Ph - np.eye(2)) @ np.array([0.0, 1.0])  # ∫_0^h e^{As} ds E
-    x = np.array([0.5, -0.3])
-    xs, ys = [], []
-    for _ in range(T_OSC):
-        xs.append(x.copy())
-        ys.append([x[0] + 0.01 * rng.choice([-1.0, 1.0])])
-        for _ in range(SWITCHES):
-            x = Ph @ x + gh * (1.0 if x[1] >= 0 else -1.0)
-    return np.array(xs), np.array(ys)
-
-
-def misses(res: ivobs.Estimate, xs: np.ndarray, tol: float = 0.0) -> int:
-    ok = np.all(np.isfinite(res.lower), axis=1)
-    out = (xs < res.lower - tol) | (xs > res.upper + tol)
-    return int(np.sum(ok & np.any(out, axis=1)))
-
 
 LINEAR = [
     "fixed-time",
@@ -225,52 +200,6 @@ def test_a_disturbance_in_both_equations_gets_its_own_means() -> None:
 
 
 # -- nonlinear -------------------------------------------------------------------------------
-
-
-def second_order(velocity: str) -> ivobs.NonlinearSystem:
-    """``p' = v``, ``v' = velocity`` (an expression of ``p``, ``v``, ``d``), position measured;
-    ``|d| <= 1``, noise ``|n| <= 0.01``."""
-    return ivobs.NonlinearSystem(
-        states=["p", "v"],
-        outputs=["y"],
-        f=["v", velocity],
-        h=["p + n"],
-        d={"d": (-1.0, 1.0), "n": (-0.01, 0.01)},
-        dt=0,
-    )
-
-
-def nl_oscillator() -> ivobs.NonlinearSystem:
-    return second_order("-p - 0.04*v + d")
-
-
-def nl_vdp() -> ivobs.NonlinearSystem:
-    return second_order("(1 - p**2)*v - p + 0.3*d")
-
-
-def simulate_nl(rhs, x0, Ts: float, T: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    x = np.array(x0, dtype=float)
-    xs, ys = [], []
-    for _ in range(T):
-        xs.append(x.copy())
-        ys.append([x[0] + 0.01 * rng.choice([-1.0, 1.0])])
-        for _ in range(SWITCHES):
-            d = 1.0 if x[1] >= 0 else -1.0
-            sol = solve_ivp(
-                lambda t, z, d=d: rhs(z, d), (0.0, Ts / SWITCHES), x, method="DOP853",
-                rtol=1e-12, atol=1e-13,
-            )  # fmt: skip
-            x = sol.y[:, -1]
-    return np.array(xs), np.array(ys)
-
-
-def osc_rhs(z, d):
-    return np.array([z[1], -z[0] - 0.04 * z[1] + d])
-
-
-def vdp_rhs(z, d):
-    return np.array([z[1], (1 - z[0] ** 2) * z[1] - z[0] + 0.3 * d])
 
 
 NL = ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"]
