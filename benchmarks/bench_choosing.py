@@ -27,20 +27,7 @@ import numpy as np
 import ivobs
 from ivobs.testing import adversarial_run, random_system
 
-LINEAR = [
-    "fixed-time",
-    "reachability",
-    "zonotope",
-    "interval",
-    "interval-transformed",
-    "interval-split",
-    "kkl",
-    "strip",
-    "ellipsoid",
-    "constrained-zonotope",
-    "dual-window",
-    "intersect",
-]
+LINEAR = [m for m in ivobs.methods() if not m.startswith("nl-") and m != "exact"]
 
 
 def _one(method, sys, x0, u, y, x, late, options=None):
