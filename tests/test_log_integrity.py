@@ -7,7 +7,6 @@ sample, other scripts' digits are no number, a byte-order mark is skipped in log
 files alike, and a bounds file a system file names is never quoted in an error."""
 
 import json
-from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -17,45 +16,13 @@ from ivobs import IvobsError
 from ivobs.cli import main
 from ivobs.io import load_system, read_log, save_system, write_log
 from ivobs.monitor import Monitor
+from signplant import contains, plant, simulate
 
 T = 60
 
 
-def _plant(seed):
-    """A random stable plant without inputs (2 states, 1 output) whose state changes sign at
-    every step (``A`` close to ``-0.9 I``): a box shifted by one step misses it."""
-    rng = np.random.default_rng(seed)
-    A = -0.9 * np.eye(2) + rng.uniform(-0.05, 0.05, (2, 2))
-    C = np.array([[1.0, rng.uniform(-0.5, 0.5)]])
-    E = np.hstack([np.eye(2), np.zeros((2, 1))])
-    F = np.array([[0.0, 0.0, 1.0]])
-    d = ivobs.Box(np.full(3, -0.05), np.full(3, 0.05))
-    return ivobs.LinearSystem(A, None, C, E=E, F=F, d=d), ivobs.Box([3.0, -3.0], [4.0, -2.0])
-
-
 def _simulate(sys, x_true0, seed):
-    """The true states (exact rationals) and the measurements (floats: the exact ``y``
-    rounded; the disturbances stay inside their bounds by more than that rounding)."""
-    rng = np.random.default_rng(seed + 100)
-    A = [[Fraction(v) for v in row] for row in sys.A]
-    C = [[Fraction(v) for v in row] for row in sys.C]
-    x = [Fraction(v) for v in x_true0]
-    xs, ys = [], []
-    for _ in range(T):
-        w = [Fraction(float(v)) for v in rng.choice([-0.049, 0.049], 3)]  # vertices, inside
-        xs.append(x)
-        ys.append([float(sum(c * xi for c, xi in zip(row, x)) + w[2]) for row in C])
-        x = [sum(a * xi for a, xi in zip(row, x)) + w[i] for i, row in enumerate(A)]
-    return xs, np.array(ys)
-
-
-def _contains(lo, hi, xs, steps):
-    """Whether the box of every row (the log's step ``steps[i]``) holds the true state there."""
-    return all(
-        Fraction(float(lo[i, j])) <= xs[k][j] <= Fraction(float(hi[i, j]))
-        for i, k in enumerate(steps)
-        for j in range(len(xs[0]))
-    )
+    return simulate(sys, seed, T, x_true0)
 
 
 def _bounds(path):
@@ -78,7 +45,7 @@ def _log(path, y, keep, start=0):
 @pytest.fixture
 def dropped(tmp_path):
     """A plant, its truth, and a log whose rows 20..24 and 41 were dropped by the logger."""
-    sys, x0 = _plant(1)
+    sys, x0 = plant(1)
     xs, y = _simulate(sys, [3.5, -2.5], 1)
     save_system(tmp_path / "p.toml", sys, x0=x0, method="interval-split")
     keep = [k for k in range(T) if not (20 <= k < 25 or k == 41)]
@@ -87,7 +54,7 @@ def dropped(tmp_path):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_a_gap_is_missing_samples_and_every_box_holds_the_truth(tmp_path, seed):
-    sys, x0 = _plant(seed)
+    sys, x0 = plant(seed)
     xs, y = _simulate(sys, [3.5, -2.5], seed)
     keep = [k for k in range(T) if k != 30 + seed]  # one dropped row
     log = read_log(_log(tmp_path / "l.csv", y, keep), sys)
@@ -96,12 +63,12 @@ def test_a_gap_is_missing_samples_and_every_box_holds_the_truth(tmp_path, seed):
     for method in ("interval-split", "zonotope", "fixed-time"):
         res = ivobs.make_estimator(method, sys, x0=x0).run(log.u, log.y)
         valid = range(res.valid_from, T)
-        assert _contains(res.lower[valid.start :], res.upper[valid.start :], xs, valid), method
+        assert contains(res.lower[valid.start :], res.upper[valid.start :], xs, valid), method
         record = Monitor(sys, method, x0=x0).check(log.u, log.y, estimate=res)
         assert not record.alarm.any(), method  # no false alarm after the gap
     record = Monitor(sys, "interval-split", x0=x0).check(log)  # the Log itself
     assert record.alarm.shape == (T,) and not record.alarm.any()
-    assert _contains(record.lower, record.upper, xs, range(T))
+    assert contains(record.lower, record.upper, xs, range(T))
 
 
 def test_run_and_monitor_label_boxes_with_the_log_steps(dropped, capsys):
@@ -110,13 +77,13 @@ def test_run_and_monitor_label_boxes_with_the_log_steps(dropped, capsys):
     assert main(["run", "-s", str(folder / "p.toml"), "-l", str(log), "--out", str(out)]) == 0
     assert "5 skipped by the log" not in capsys.readouterr().out  # 6 were: 20..24 and 41
     steps, lo, hi = _bounds(out)
-    assert steps == list(range(T)) and _contains(lo, hi, xs, steps)
+    assert steps == list(range(T)) and contains(lo, hi, xs, steps)
     assert main(["monitor", "-s", str(folder / "p.toml"), "-i", str(log)]) == 0
     rows = [line.split(",") for line in capsys.readouterr().out.splitlines()[1:]]
     assert [int(r[0]) for r in rows] == list(range(T))  # one line per step, gap included
     lo = np.array([[float(r[1]), float(r[2])] for r in rows])
     hi = np.array([[float(r[3]), float(r[4])] for r in rows])
-    assert _contains(lo, hi, xs, range(T)) and all(r[5] == "0" for r in rows)
+    assert contains(lo, hi, xs, range(T)) and all(r[5] == "0" for r in rows)
 
 
 def test_compare_reads_the_same_steps(dropped, capsys):
@@ -129,7 +96,7 @@ def test_compare_reads_the_same_steps(dropped, capsys):
 
 
 def test_an_offset_start_needs_the_prior_of_that_step(tmp_path, capsys):
-    sys, x0 = _plant(2)
+    sys, x0 = plant(2)
     xs, y = _simulate(sys, [3.5, -2.5], 2)
     late = list(range(10, T))  # the logger started at step 10 of the plant (its 1000)
     log = tmp_path / "late.csv"
@@ -151,7 +118,7 @@ def test_an_offset_start_needs_the_prior_of_that_step(tmp_path, capsys):
     out = tmp_path / "b.csv"
     assert main(["run", "-s", str(tmp_path / "p.toml"), "-l", str(log), "-o", str(out)]) == 0
     steps, lo, hi = _bounds(out)
-    assert steps == list(range(1000, 1000 + T - 10)) and _contains(lo, hi, xs, late)
+    assert steps == list(range(1000, 1000 + T - 10)) and contains(lo, hi, xs, late)
     capsys.readouterr()
     assert main(["monitor", "-s", str(tmp_path / "p.toml"), "-i", str(log)]) == 0
     assert capsys.readouterr().out.splitlines()[1].startswith("1000,")
