@@ -24,6 +24,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 from suite import DEFAULT_SCENARIOS  # benchmarks/ is on the path of a script run from it
@@ -164,19 +165,14 @@ def ct_widths() -> None:
 
 def missing() -> None:
     """Mean width with 10 % of the output components missing / with complete data."""
-    from ivobs.testing import adversarial_run, random_system
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_kkl_missing_samples import missing_run
 
     for ny in (1, 2):
         for seed in range(6):
-            sys_ = random_system(seed, nx=4, ny=ny, nu=1, rho=0.8)
-            x0 = ivobs.Box(-np.ones(4), np.ones(4))
-            tr = adversarial_run(sys_, x0, 3000, seed=seed)
-            y = tr.y.copy()
-            y[np.random.default_rng(100 + seed).random(y.shape) < 0.1] = np.nan
-            est = ivobs.make_estimator("kkl", sys_, x0=x0)
-            full, miss = est.run(tr.u, tr.y), est.run(tr.u, y)
+            full, miss, x = missing_run(seed, ny)
             ratio = miss.width[100:].sum(1).mean() / full.width[100:].sum(1).mean()
-            print(f"ny={ny} seed={seed} ratio={ratio:.3g} contains={miss.contains(tr.x).all()}")
+            print(f"ny={ny} seed={seed} ratio={ratio:.3g} contains={miss.contains(x).all()}")
 
 
 if __name__ == "__main__":
