@@ -239,11 +239,10 @@ class _Session:
             from ..io.statefile import lock_path
 
             self.state_path = check_output_path(args.state, "--state")
-            inputs = {"--system": args.system, "--input": args.input}
-            for i, path in enumerate(self.spec.files):
-                inputs["--system's [disturbance] csv" + (f" {i + 1}" if i else "")] = path
+            from ._plant import plant_inputs
+
             outputs = {"--state": self.state_path, "--state's lock": lock_path(self.state_path)}
-            check_distinct(outputs, inputs)
+            check_distinct(outputs, plant_inputs(args, self.spec))
         # the monitor's default (Monitor): boxes met with the strips of the outputs used
         from ..estimators.measured import FILTERED
 

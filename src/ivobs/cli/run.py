@@ -19,7 +19,14 @@ import numpy as np
 from ..errors import IvobsError
 from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
-from . import add_option_argument, add_trust_option, check_disturbance, check_seed, parse_options
+from . import (
+    add_option_argument,
+    add_trust_option,
+    check_disturbance,
+    check_outputs,
+    check_seed,
+    parse_options,
+)
 from ._plant import add_plant_options, add_truth_option, plant_inputs
 
 if TYPE_CHECKING:
@@ -83,7 +90,10 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    _check_outputs(args)
+    from ..io.atomic import check_distinct
+
+    outputs = check_outputs(args, ("csv", "plot", "html", "json"))
+    check_distinct(outputs, plant_inputs(args))
     if args.system:
         if args.scenario:
             raise IvobsError(f"give either a scenario ({args.scenario!r}) or --system, not both")
@@ -91,7 +101,7 @@ def main(args: argparse.Namespace) -> int:
             raise IvobsError(
                 "--disturbance/--seed: only with a scenario (a log gives the measurements)"
             )
-        return _run_system(args)
+        return _run_system(args, outputs)
     if args.log or args.truth or args.discretize is not None or args.held_disturbances:
         raise IvobsError(
             "--log/--truth/--discretize: need --system FILE (the model of the logged plant; a "
@@ -117,28 +127,6 @@ def _check_time_base(system: Any, method: str, where: str) -> None:
             f"(dt = 0): give --discretize TS (the log's sampling period) or a continuous-time "
             f"method ({', '.join(continuous)})"
         )
-
-
-def _check_outputs(args: argparse.Namespace) -> None:
-    """Check every output path before any work: an error in one never leaves another written."""
-    from ..io.atomic import check_distinct, check_output_path
-
-    if args.csv:
-        args.csv = str(check_output_path(args.csv, "--csv"))
-    for opt in ("html", "json"):
-        value = getattr(args, opt)
-        if value and value != "-":
-            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
-    if args.plot:
-        from ..report.plot import figure_path
-
-        args.plot = str(figure_path(args.plot, "--plot"))
-    check_distinct(_outputs(args), plant_inputs(args))
-
-
-def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
-    json = None if args.json == "-" else args.json  # "-": standard output
-    return {"--csv": args.csv, "--plot": args.plot, "--html": args.html, "--json": json}
 
 
 def _measured(
@@ -197,7 +185,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
     return 1 if r.contains is False else 0
 
 
-def _run_system(args: argparse.Namespace) -> int:
+def _run_system(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     from ..io.atomic import check_distinct
     from ..io.logs import read_log
     from ..io.systemfile import load_system
@@ -210,7 +198,7 @@ def _run_system(args: argparse.Namespace) -> int:
     spec.system = discretized(
         spec.system, args.discretize, args.system, held=args.held_disturbances
     )
-    check_distinct(_outputs(args), plant_inputs(args, spec))
+    check_distinct(outputs, plant_inputs(args, spec))
     log = read_log(args.log, spec.system, start=spec.x0_step)
     if args.discretize is not None:
         check_log_times(log.t, args.discretize, args.log)
