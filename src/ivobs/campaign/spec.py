@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._validate import as_bool
 from ..errors import IvobsError
 from ..io.options import check_option, method_class
 from ..io.reader import TomlReader
@@ -163,9 +164,9 @@ class _SpecReader(TomlReader):
         self, text: str, source: str, allow_code: bool, allow_outside: bool, allow_large: bool
     ):
         super().__init__(text, source)
-        self.allow_code = _flag("allow_code", allow_code)
-        self.allow_outside = _flag("allow_outside", allow_outside)
-        self.budget = None if _flag("allow_large", allow_large) else BUDGET
+        self.allow_code = as_bool("allow_code", allow_code)
+        self.allow_outside = as_bool("allow_outside", allow_outside)
+        self.budget = None if as_bool("allow_large", allow_large) else BUDGET
 
     def within(self, key: tuple[str, ...], what: str, value: int, unit: str) -> None:
         """Refuse ``value`` beyond the budget's limit of ``unit`` (:mod:`.budget`)."""
@@ -459,12 +460,6 @@ def _builder_params(name: str) -> list[str]:
     if name.endswith(".toml"):
         return ["horizon"]
     return scenarios.options(name)
-
-
-def _flag(name: str, v: Any) -> bool:
-    if not isinstance(v, bool):
-        raise IvobsError(f"{name}: expected True or False, got {v!r}")
-    return v
 
 
 def _inside(path: Path, folder: Path) -> bool:
