@@ -148,8 +148,7 @@ class Estimate:
         if reference.lower.shape != self.lower.shape:
             raise IvobsError("tightness_ratio: the two estimates have different shapes")
         start = max(self.valid_from, reference.valid_from, int(burn_in))
-        w = self.width[..., start:, :].reshape(-1, self.nx).mean(axis=0)
-        wr = reference.width[..., start:, :].reshape(-1, self.nx).mean(axis=0)
+        w, wr = self.mean_width(start), reference.mean_width(start)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(wr > 0, w / wr, np.where(w > 0, np.inf, 1.0))
 

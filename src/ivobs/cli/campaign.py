@@ -78,7 +78,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     from .. import campaign
-    from ..campaign.run import check_outputs
+    from ..campaign.run import spec_inputs
+    from ..io.atomic import check_distinct
 
     spec = campaign.load_spec(
         args.spec,
@@ -89,12 +90,12 @@ def main(args: argparse.Namespace) -> int:
     if args.summary:
         spec.summary = Path(args.summary)
     output = Path(args.output) if args.output else spec.output
-    check_outputs(
-        spec,
+    check_distinct(
         {
             "--output" if args.output else "output": output,
             "--summary" if args.summary else "summary": spec.summary,
         },
+        spec_inputs(spec),
     )
     jobs = spec.jobs()
     title = f"campaign {spec.name!r}" if spec.name else f"campaign {args.spec}"
