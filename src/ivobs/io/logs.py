@@ -39,18 +39,17 @@ __all__ = [
 _STEP_COLS = ("k", "step")
 _TIME_COLS = ("t", "time")
 _SIGNAL = re.compile(r"^(?P<kind>[uy])(?:\d+|[_\[(.].*)?$", re.IGNORECASE | re.ASCII)
-_NUMBERED = re.compile(
-    r"^[uy](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$", re.IGNORECASE | re.ASCII
-)
 _INTEGER = re.compile(r"^[+-]?[0-9]+$")
 
 MAX_STEP = 2**53
 """Largest step number a log may give (beyond it a float cannot count steps one by one)."""
 
 
-def _signal_number(column: str) -> int | None:
-    """The number of a signal column (``y2``, ``y_2``, ``y[2]``, ``y(2)``), else None."""
-    m = _NUMBERED.match(column)
+def column_number(column: str, letters: str = "uy") -> int | None:
+    """The number of a column ``y2``, ``y_2``, ``y[2]``, ``y(2)``, ``y.2`` whose letter is one
+    of ``letters`` (any case), else None."""
+    pattern = rf"^[{letters}](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$"
+    m = re.match(pattern, column, re.IGNORECASE | re.ASCII)
     return None if m is None else int(next(g for g in m.groups() if g is not None))
 
 
@@ -167,7 +166,7 @@ class LogParser:
 
     def _by_number(self, kind: str, idx: list[int], line: int) -> None:
         """Order the ``kind`` columns ``idx`` (in place) by their number when all have one."""
-        nums = [_signal_number(self.columns[i]) for i in idx]
+        nums = [column_number(self.columns[i]) for i in idx]
         if not idx or any(n is None for n in nums):
             return
         n = len(idx)
