@@ -7,6 +7,7 @@ from typing import Any
 
 from ..errors import IvobsError
 from ..report.baseline import BASELINES
+from ..report.comparison import applicable_methods
 from ..scenarios import DISTURBANCES
 from . import (
     add_option_argument,
@@ -128,25 +129,6 @@ def default_methods(sc: Any) -> tuple[list[str], list[str]]:
     if sc.system.nx <= LARGE_NX:
         return names, []
     return [m for m in names if m not in SLOW_METHODS], [m for m in names if m in SLOW_METHODS]
-
-
-def applicable_methods(system: Any) -> tuple[list[str], list[str]]:
-    """The methods that accept ``system`` (model class, time base, time variation, interval
-    matrices: :func:`ivobs.estimators.base.check_system`) and those that do not."""
-    from ..errors import IvobsError as Refused
-    from ..estimators import get
-    from ..estimators import methods as all_methods
-    from ..estimators.base import check_system
-
-    ok, refused = [], []
-    for name in all_methods():
-        try:
-            check_system(get(name), system)
-        except Refused:
-            refused.append(name)
-            continue
-        ok.append(name)
-    return ok, refused
 
 
 def _model_kind(system: Any) -> str:

@@ -21,7 +21,7 @@ from ..result import Estimate
 from ..scenarios import Scenario
 from ..simulate import Trajectory
 
-__all__ = ["POINT_TOL", "MethodResult", "compare", "markdown_table"]
+__all__ = ["POINT_TOL", "MethodResult", "applicable_methods", "compare", "markdown_table"]
 
 
 @dataclass
@@ -55,6 +55,22 @@ class MethodResult:
             self.contains = self.misses == 0
         if max(burn_in, self.estimate.valid_from) < self.estimate.T:
             self.mean_width = self.estimate.mean_width(burn_in)
+
+
+def applicable_methods(system: Any) -> tuple[list[str], list[str]]:
+    """The methods that accept ``system`` (model class, time base, time variation, interval
+    matrices: :func:`ivobs.estimators.base.check_system`) and those that do not."""
+    from ..estimators.base import check_system
+
+    ok, refused = [], []
+    for name in all_methods():
+        try:
+            check_system(get_method(name), system)
+        except IvobsError:
+            refused.append(name)
+            continue
+        ok.append(name)
+    return ok, refused
 
 
 def compare(
