@@ -176,12 +176,13 @@ class Estimate:
             header += f"# units: {_listed(self.units)}\n"
         header += ",".join(cols)
         from .io.atomic import atomic_path  # the umask's file mode, like open(path, "w")
+        from .io.logs import csv_cell
 
         with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
             fh.write(header + "\n")
             first = int(self.info.get("first_step", 0))
             for k, (row, flag) in enumerate(zip(data, flags), start=first):
-                cells = [str(k), *(_fmt(v) for v in row), *(str(int(f)) for f in flag)]
+                cells = [str(k), *(csv_cell(v, "nan") for v in row), *(str(int(f)) for f in flag)]
                 fh.write(",".join(cells) + "\n")
 
     @classmethod
@@ -287,9 +288,3 @@ def _listed(values: tuple[str, ...]) -> str:
     """Names or units on one header line, ``;``-separated (a name cannot hold ``;`` or a
     line break there: they are replaced)."""
     return "; ".join(v.replace(";", ",").replace("\n", " ") for v in values)
-
-
-def _fmt(v: float) -> str:
-    if np.isnan(v):
-        return "nan"
-    return repr(float(v))

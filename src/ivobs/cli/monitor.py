@@ -47,11 +47,6 @@ def _or_nan(v: np.ndarray | None, n: int) -> np.ndarray:
     return np.full(n, np.nan) if v is None else v
 
 
-def _bias(v: float) -> str:
-    """A bias bound, empty where none is estimated."""
-    return "" if np.isnan(v) else repr(float(v))
-
-
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     p: argparse.ArgumentParser = sub.add_parser(
         "monitor",
@@ -112,10 +107,6 @@ def _lines(fh: TextIO, follow: bool, poll: float) -> Iterator[str]:
         if pending.endswith("\n"):
             yield pending
             pending = ""
-
-
-def _fmt(v: float) -> str:
-    return "nan" if np.isnan(v) else repr(float(v))
 
 
 def _row_digest(row: Any) -> str:
@@ -376,7 +367,7 @@ def main(args: argparse.Namespace) -> int:
 def _stream(args: argparse.Namespace, session: _Session) -> int:
     """Read the rows, print one line per step, save the state; the exit status says whether an
     alarm was raised on the whole stream (its resumed parts included)."""
-    from ..io.logs import LogParser
+    from ..io.logs import LogParser, csv_cell
     from ..monitor.records import output_names
 
     mon = session.monitor
@@ -432,15 +423,15 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
                 out.writerow(
                     [
                         k0 + step.step,
-                        *map(_fmt, step.lower),
-                        *map(_fmt, step.upper),
+                        *(csv_cell(v, "nan") for v in step.lower),
+                        *(csv_cell(v, "nan") for v in step.upper),
                         int(step.alarm),
                         step.reason,
                         start,
                         step.fault_duration,
                         output_names(step.outputs),
-                        *map(_bias, _or_nan(step.bias_lower, sys_.ny)),
-                        *map(_bias, _or_nan(step.bias_upper, sys_.ny)),
+                        *map(csv_cell, _or_nan(step.bias_lower, sys_.ny)),  # empty: none
+                        *map(csv_cell, _or_nan(step.bias_upper, sys_.ny)),
                         step.isolation,
                     ]
                 )

@@ -29,6 +29,7 @@ __all__ = [
     "Log",
     "LogParser",
     "LogRow",
+    "csv_cell",
     "log_from_frame",
     "not_utf8",
     "read_log",
@@ -56,6 +57,12 @@ def column_number(column: str, letters: str = "uy") -> int | None:
 def _shown(text: str) -> str:
     """A cell quoted in an error, cut short (a field may be 128 KiB long)."""
     return repr(text) if len(text) <= 40 else repr(text[:37] + "...")
+
+
+def csv_cell(v: float, nan: str = "") -> str:
+    """A number as a CSV cell, with full precision (``repr``); NaN as ``nan`` (a missing
+    sample: an empty cell)."""
+    return nan if np.isnan(v) else repr(float(v))
 
 
 def read_number(cell: str) -> float:
@@ -403,12 +410,9 @@ def write_log(
     cols += [f"u{i + 1}" for i in range(u.shape[1])] + [f"y{i + 1}" for i in range(y.shape[1])]
     tt = None if t is None else np.asarray(t, dtype=float).ravel()
 
-    def cell(v: float) -> str:
-        return "" if np.isnan(v) else repr(float(v))
-
     lines = [",".join(cols)]
     for k in range(T):
         parts = ([str(k)] if steps else []) + ([repr(float(tt[k]))] if tt is not None else [])
-        parts += [cell(v) for v in u[k]] + [cell(v) for v in y[k]]
+        parts += [csv_cell(v) for v in u[k]] + [csv_cell(v) for v in y[k]]
         lines.append(",".join(parts))
     write_text_atomic(path, "\n".join(lines) + "\n")
