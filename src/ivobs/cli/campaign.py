@@ -105,10 +105,11 @@ def main(args: argparse.Namespace) -> int:
             done = {r["job_id"] for r in campaign.read_results(output)}
         n_done = sum(j.id in done for j in jobs)
         declined = campaign.check_designs(spec)
+        settings = sum(len(e.option_sets()) for e in spec.methods)
         print(
             f"{title}: {len(jobs)} jobs = {len(spec.scenarios)} scenarios x "
-            f"{len(spec.disturbances)} disturbances x {len(jobs) // _per_cell(spec)} method "
-            f"settings x {len(spec.seeds)} seeds; {n_done} already in {output}, "
+            f"{len(spec.disturbances)} disturbances x {settings} method settings x "
+            f"{len(spec.seeds)} seeds; {n_done} already in {output}, "
             f"{len(jobs) - n_done} to run"
         )
         for line in declined:
@@ -155,8 +156,3 @@ def main(args: argparse.Namespace) -> int:
               f"of {res.output}", file=sys.stderr)  # fmt: skip
         return 1
     return 1 if res.violations or errors else 0
-
-
-def _per_cell(spec: Any) -> int:
-    """Jobs per scenario × disturbance × method setting: the seeds."""
-    return len(spec.scenarios) * len(spec.disturbances) * len(spec.seeds)
