@@ -161,9 +161,7 @@ class Estimate:
             raise IvobsError("to_csv: batch estimates are not written as CSV; save lower/upper")
         path = Path(path)
         cols = ["k"] + (["t"] if self.t is not None else [])
-        cols += [f"lower_{i + 1}" for i in range(self.nx)] + [
-            f"upper_{i + 1}" for i in range(self.nx)
-        ]
+        cols += [f"{b}_{i + 1}" for b in ("lower", "upper") for i in range(self.nx)]
         cols += ["missing", "inconsistent"]
         times = [np.asarray(self.t, dtype=float)[:, None]] if self.t is not None else []
         data = np.hstack([*times, self.lower, self.upper])

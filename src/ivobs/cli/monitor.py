@@ -378,9 +378,7 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
     session.load(clock)
     out = csv.writer(sys.stdout, lineterminator="\n")
     if not session.resumed:
-        cols = [f"lower_{i + 1}" for i in range(sys_.nx)] + [
-            f"upper_{i + 1}" for i in range(sys_.nx)
-        ]
+        cols = [f"{b}_{i + 1}" for b in ("lower", "upper") for i in range(sys_.nx)]
         bias = [f"bias_{b}_{i + 1}" for b in ("lower", "upper") for i in range(sys_.ny)]
         out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS, *bias, "fault_isolated"])
         sys.stdout.flush()
