@@ -116,11 +116,6 @@ def _row_digest(row: Any) -> str:
     return hashlib.sha256(canonical_json(values).encode()).hexdigest()[:32]
 
 
-def _chain(digest: str, row: str) -> str:
-    """The digest of the rows so far, extended by one row's."""
-    return hashlib.sha256((digest + row).encode()).hexdigest()[:32]
-
-
 class _Stream:
     """Where the stream stands: the step of its first row, the rows consumed, the last step and
     time, the columns, and the digests of all rows and of the last one (what a restarted
@@ -136,7 +131,8 @@ class _Stream:
     def consume(self, row: Any) -> None:
         d = _row_digest(row)
         self.rows, self.step, self.t = self.rows + 1, row.step, row.t
-        self.digest, self.last = _chain(self.digest, d), d
+        self.digest = hashlib.sha256((self.digest + d).encode()).hexdigest()[:32]  # all so far
+        self.last = d
 
     def entries(self) -> dict[str, Any]:
         keys = ("start", "rows", "step", "t", "columns", "digest", "last")
@@ -158,7 +154,8 @@ class _Replay:
 
     def __init__(self, saved: _Stream, name: str):
         self.saved, self.name = saved, name
-        self.count, self.digest, self.last_seen = 0, "", False
+        self.seen = _Stream(saved.start)  # the rows seen again: their count and digests
+        self.last_seen = False
 
     def done(self, row: Any, index: int, from_file: bool) -> bool:
         s = self.saved
@@ -169,28 +166,27 @@ class _Replay:
         return from_file and index < s.rows
 
     def see(self, row: Any) -> None:
-        d = _row_digest(row)
-        self.count += 1
-        self.digest = _chain(self.digest, d)
+        self.seen.consume(row)
         s = self.saved
         last = (
             row.step == s.step
             if s.step is not None
             else row.t == s.t
             if s.t is not None
-            else self.count == s.rows
+            else self.seen.rows == s.rows
         )
         if last:
-            if d != s.last:
+            if self.seen.last != s.last:
                 raise self._other(f"its row of the last step processed ({self._where()}) differs")
             self.last_seen = True
 
     def finish(self) -> None:
         """At the first new row (or the end): the rows seen again were the stream's."""
-        if self.count == 0:
+        n = self.seen.rows
+        if n == 0:
             return
-        if self.count == self.saved.rows and self.digest != self.saved.digest:
-            raise self._other(f"its first {self.count} rows differ from those processed")
+        if n == self.saved.rows and self.seen.digest != self.saved.digest:
+            raise self._other(f"its first {n} rows differ from those processed")
         if not self.last_seen:
             raise self._other(f"it does not give the last step processed ({self._where()})")
 
