@@ -158,7 +158,6 @@ def main(args: argparse.Namespace) -> int:
             f"--burn-in: expected a number of steps in 0..{sc.horizon - 1} "
             f"({sc.name} has {sc.horizon} steps), got {args.burn_in}"
         )
-    plot_path = args.plot
     left_out: list[str] = []
     if args.methods:
         names = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -200,7 +199,7 @@ def main(args: argparse.Namespace) -> int:
         write_json(args.json, doc)
     if args.html:
         _write_html(args.html, sc, traj, results)
-    if plot_path is not None:
+    if args.plot is not None:
         from . import use_agg
 
         use_agg()
@@ -219,7 +218,7 @@ def main(args: argparse.Namespace) -> int:
             state_names=sc.state_names,
             title=f"{sc.name}",
         )
-        print(f"\nfigure: {save_figure(fig, plot_path)}")
+        print(f"\nfigure: {save_figure(fig, args.plot)}")
     return 1 if any(r.ok and r.guaranteed and r.contains is False for r in results) else 0
 
 
