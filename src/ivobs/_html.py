@@ -19,10 +19,10 @@ def vector(v: Any, limit: int = 8) -> str:
     return f"[{text}{', …' if a.size > limit else ''}]"
 
 
-def summary_html(title: str, rows: Iterable[tuple[str, str]]) -> str:
-    """``<b>title</b>`` and a two-column table of ``rows``."""
+def summary_html(title: str, rows: Iterable[tuple[str, str]], extra: str = "") -> str:
+    """``<b>title</b>`` and a two-column table of ``rows``, then the HTML ``extra`` (a figure)."""
     body = "".join(
         f"<tr><th style='text-align:left'>{html.escape(a)}</th><td>{html.escape(b)}</td></tr>"
         for a, b in rows
     )
-    return f"<div><b>{html.escape(title)}</b><table>{body}</table></div>"
+    return f"<div><b>{html.escape(title)}</b><table>{body}</table>{extra}</div>"

@@ -15,13 +15,13 @@ stream  k     t     state   lower   upper   width   missing      inconsistent
 from __future__ import annotations
 
 import base64
-import html
 import io
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._html import summary_html
 from .errors import IvobsError
 
 if TYPE_CHECKING:  # annotations only: result.py imports this module lazily
@@ -157,11 +157,7 @@ def estimate_html(est: Estimate, figure: bool = True) -> str:
     if mean is not None:
         shown = ", ".join(f"{w:.4g}" for w in np.ravel(mean)[:8])
         rows.append(("mean width", shown + (" …" if est.nx > 8 else "")))
-    body = "".join(
-        f"<tr><th style='text-align:left'>{html.escape(a)}</th><td>{html.escape(b)}</td></tr>"
-        for a, b in rows
-    )
     img = ""
     if figure and est.T > est.valid_from:
         img = f"<img alt='widths over time' src='data:image/png;base64,{_png(est)}'/>"
-    return f"<div><b>ivobs Estimate</b><table>{body}</table>{img}</div>"
+    return summary_html("ivobs Estimate", rows, img)

@@ -148,8 +148,7 @@ class Estimate:
         if reference.lower.shape != self.lower.shape:
             raise IvobsError("tightness_ratio: the two estimates have different shapes")
         start = max(self.valid_from, reference.valid_from, int(burn_in))
-        w = self.width[..., start:, :].reshape(-1, self.nx).mean(axis=0)
-        wr = reference.width[..., start:, :].reshape(-1, self.nx).mean(axis=0)
+        w, wr = self.mean_width(start), reference.mean_width(start)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(wr > 0, w / wr, np.where(w > 0, np.inf, 1.0))
 
@@ -162,9 +161,7 @@ class Estimate:
             raise IvobsError("to_csv: batch estimates are not written as CSV; save lower/upper")
         path = Path(path)
         cols = ["k"] + (["t"] if self.t is not None else [])
-        cols += [f"lower_{i + 1}" for i in range(self.nx)] + [
-            f"upper_{i + 1}" for i in range(self.nx)
-        ]
+        cols += [f"{b}_{i + 1}" for b in ("lower", "upper") for i in range(self.nx)]
         cols += ["missing", "inconsistent"]
         times = [np.asarray(self.t, dtype=float)[:, None]] if self.t is not None else []
         data = np.hstack([*times, self.lower, self.upper])
@@ -177,12 +174,13 @@ class Estimate:
             header += f"# units: {_listed(self.units)}\n"
         header += ",".join(cols)
         from .io.atomic import atomic_path  # the umask's file mode, like open(path, "w")
+        from .io.logs import csv_cell
 
         with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
             fh.write(header + "\n")
             first = int(self.info.get("first_step", 0))
             for k, (row, flag) in enumerate(zip(data, flags), start=first):
-                cells = [str(k), *(_fmt(v) for v in row), *(str(int(f)) for f in flag)]
+                cells = [str(k), *(csv_cell(v, "nan") for v in row), *(str(int(f)) for f in flag)]
                 fh.write(",".join(cells) + "\n")
 
     @classmethod
@@ -288,9 +286,3 @@ def _listed(values: tuple[str, ...]) -> str:
     """Names or units on one header line, ``;``-separated (a name cannot hold ``;`` or a
     line break there: they are replaced)."""
     return "; ".join(v.replace(";", ",").replace("\n", " ") for v in values)
-
-
-def _fmt(v: float) -> str:
-    if np.isnan(v):
-        return "nan"
-    return repr(float(v))

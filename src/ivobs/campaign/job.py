@@ -3,17 +3,13 @@
 from __future__ import annotations
 
 import hashlib
-import json
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
+from ..io.fingerprint import canonical_json as canonical  # the stable text a job id hashes
+
 __all__ = ["Job", "canonical"]
-
-
-def canonical(value: Any) -> str:
-    """JSON with sorted keys and no spaces: the stable text a job id hashes."""
-    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
 
 @dataclass(frozen=True)

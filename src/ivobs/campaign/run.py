@@ -91,7 +91,9 @@ def run_campaign(
             spec, allow_code=allow_code, allow_outside=allow_outside, allow_large=allow_large
         )
     out = Path(output) if output is not None else spec.output
-    check_outputs(spec, {"output": out, "summary": spec.summary})
+    from ..io.atomic import check_distinct
+
+    check_distinct({"output": out, "summary": spec.summary}, spec_inputs(spec))
     _check_engine(scheduler, workers, limit)
     jobs = spec.jobs()
     t0 = time.perf_counter()
@@ -137,17 +139,10 @@ def run_campaign(
     return result
 
 
-def check_outputs(spec: CampaignSpec, outputs: dict[str, Any]) -> None:
-    """Refuse outputs that are one of the campaign's inputs (the spec, a system file among its
-    scenarios, a bounds file one of those reads) or one file twice (links included)."""
-    from ..io.atomic import check_distinct
-
-    check_distinct(outputs, spec_inputs(spec))
-
-
 def spec_inputs(spec: CampaignSpec) -> dict[str, Any]:
     """The files a campaign reads, by what they are: the spec, its system files (scenarios
-    ending in ``.toml``) and the bounds files those name."""
+    ending in ``.toml``) and the bounds files those name (its outputs must be none of them,
+    :func:`~ivobs.io.atomic.check_distinct`)."""
     from ..io.systemfile import load_system
 
     source = Path(spec.source)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._validate import as_bool
 from ..errors import IvobsError
 from ..io.options import check_option, method_class
 from ..io.reader import TomlReader
@@ -141,11 +142,14 @@ class _SpecReader(TomlReader):
             v = [v]
         if not isinstance(v, list) or not v:
             raise self.fail(key, f"expected a non-empty list of strings, got {v!r}")
-        out = [self.string(key, s) for s in v]
-        dup = sorted(s for s, n in Counter(out).items() if n > 1)
+        return self.once(key, [self.string(key, s) for s in v])
+
+    def once(self, key: tuple[str, ...], values: list[Any]) -> list[Any]:
+        """``values``, refused when one is listed twice."""
+        dup = sorted(s for s, n in Counter(values).items() if n > 1)
         if dup:
-            raise self.fail(key, f"listed twice: {', '.join(dup)}")
-        return out
+            raise self.fail(key, f"listed twice: {', '.join(map(str, dup))}")
+        return values
 
     def plain(self, key: tuple[str, ...], v: Any) -> Any:
         """TOML values a job id can hash (no dates and times)."""
@@ -163,9 +167,9 @@ class _SpecReader(TomlReader):
         self, text: str, source: str, allow_code: bool, allow_outside: bool, allow_large: bool
     ):
         super().__init__(text, source)
-        self.allow_code = _flag("allow_code", allow_code)
-        self.allow_outside = _flag("allow_outside", allow_outside)
-        self.budget = None if _flag("allow_large", allow_large) else BUDGET
+        self.allow_code = as_bool("allow_code", allow_code)
+        self.allow_outside = as_bool("allow_outside", allow_outside)
+        self.budget = None if as_bool("allow_large", allow_large) else BUDGET
 
     def within(self, key: tuple[str, ...], what: str, value: int, unit: str) -> None:
         """Refuse ``value`` beyond the budget's limit of ``unit`` (:mod:`.budget`)."""
@@ -213,13 +217,10 @@ class _SpecReader(TomlReader):
         jobs = len(scen) * len(dists) * settings * len(seeds)
         self.within(("seeds",), "scenarios x disturbances x method settings x seeds", jobs, "jobs")
         sopts = self.scenario_options(scen, doc.get("scenario_options", {}), doc.get("horizon"))
-        self.check_steps(scen, sopts, jobs // len(scen))
+        burn_in = self.integer(("burn_in",), doc["burn_in"]) if "burn_in" in doc else None
+        self.check_steps(scen, sopts, jobs // len(scen), burn_in)
         if "recorded" in dists:
             self.check_recorded(scen, sopts)
-        burn_in = None
-        if "burn_in" in doc:
-            burn_in = self.integer(("burn_in",), doc["burn_in"])
-            self.check_burn_in(scen, sopts, burn_in)
         output = self.output(("output",), doc.get("output", f"{stem}.csv"), base_dir)
         summary = doc.get("summary")
         spec = CampaignSpec(
@@ -349,11 +350,7 @@ class _SpecReader(TomlReader):
         if not isinstance(v, list) or not v:
             raise self.fail(key, f"expected a list of integers or {{ start = 0, stop = 10 }}, "
                                  f"got {v!r}")  # fmt: skip
-        seeds = [self.integer(key, s) for s in v]
-        dup = sorted(s for s, n in Counter(seeds).items() if n > 1)
-        if dup:
-            raise self.fail(key, f"listed twice: {dup}")
-        return seeds
+        return self.once(key, [self.integer(key, s) for s in v])
 
     def scenario_options(
         self, scen: list[str], table: Any, horizon: Any
@@ -408,25 +405,21 @@ class _SpecReader(TomlReader):
                                      "[scenario_options])")  # fmt: skip
             out[name]["horizon"] = h
 
-    def check_burn_in(
-        self, scen: list[str], sopts: dict[str, dict[str, Any]], burn_in: int
+    def check_steps(
+        self, scen: list[str], sopts: dict[str, dict[str, Any]], jobs: int, burn_in: int | None
     ) -> None:
-        for name in scen:
-            sc = cached_scenario(name, sopts[name])
-            T = int(sc.t.size) if sc.t is not None else int(sc.horizon)
-            if burn_in >= T:
-                raise self.fail(("burn_in",), f"{burn_in} leaves no step of scenario {name!r} "
-                                              f"({T} steps); lower it")  # fmt: skip
-
-    def check_steps(self, scen: list[str], sopts: dict[str, dict[str, Any]], jobs: int) -> None:
         """The records' sizes (steps × states) and the steps of all ``jobs`` per scenario,
-        within the budget (the scenarios are built: their lengths are known)."""
+        within the budget, and ``burn_in`` shorter than every record (the scenarios are built:
+        their lengths are known)."""
         total = 0
         for name in scen:
             sc = cached_scenario(name, sopts[name])
             T = int(sc.t.size) if sc.t is not None else int(sc.horizon)
             key = ("scenario_options", name) if sopts[name] else ("scenarios",)
             self.within(key, f"scenario {name!r}: steps x states", T * sc.system.nx, "numbers")
+            if burn_in is not None and burn_in >= T:
+                raise self.fail(("burn_in",), f"{burn_in} leaves no step of scenario {name!r} "
+                                              f"({T} steps); lower it")  # fmt: skip
             total += T * jobs
         self.within(("horizon",), "steps over all jobs", total, "steps")
 
@@ -459,12 +452,6 @@ def _builder_params(name: str) -> list[str]:
     if name.endswith(".toml"):
         return ["horizon"]
     return scenarios.options(name)
-
-
-def _flag(name: str, v: Any) -> bool:
-    if not isinstance(v, bool):
-        raise IvobsError(f"{name}: expected True or False, got {v!r}")
-    return v
 
 
 def _inside(path: Path, folder: Path) -> bool:

@@ -79,6 +79,22 @@ def check_out_dir(path: str, what: str) -> None:
         raise IvobsError(f"{what}: cannot create {path!r}: the folder {parent!r} does not exist")
 
 
+def check_outputs(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str, Any]:
+    """The output options ``names`` (``csv``, ``plot``, ``html``, ``json``) checked before any
+    work, a bad path failing fast (``--plot``: a figure's, ``.png`` added without extension);
+    returns the files written by option, for :func:`~ivobs.io.atomic.check_distinct`
+    (``--json -``, ``--html -``: standard output, not a file)."""
+    from ..io.atomic import check_output_path
+    from ..report.plot import figure_path
+
+    for opt in names:
+        value = getattr(args, opt)
+        if value and not (value == "-" and opt in ("html", "json")):
+            check = figure_path if opt == "plot" else check_output_path
+            setattr(args, opt, str(check(value, f"--{opt}")))
+    return {f"--{o}": None if o == "json" and args.json == "-" else getattr(args, o) for o in names}
+
+
 def add_trust_option(p: argparse.ArgumentParser) -> None:
     """``--allow-code``: let a system file or a campaign spec run Python code (callables
     ``{ python = "module:function" }`` outside ``ivobs.scenarios``, ``imports = [...]``)."""

@@ -59,10 +59,12 @@ def add_truth_option(p: argparse.ArgumentParser) -> None:
 
 
 def plant_inputs(args: argparse.Namespace, spec: Any = None) -> dict[str, Any]:
-    """The files a command on ``--system`` reads, by option: the system file, the log, its true
-    state and the bounds file the system file names (``spec``: the loaded system file)."""
+    """The files a command on ``--system`` reads, by option: the system file, the log (or the
+    monitor's ``--input``), its true state and the bounds files the system file names
+    (``spec``: the loaded system file)."""
     inputs = {
         "--system": args.system,
+        "--input": getattr(args, "input", None),
         "--log": getattr(args, "log", None),
         "--truth": getattr(args, "truth", None),
     }

@@ -31,9 +31,7 @@ def _plain(v: Any) -> Any:
 
 def _row(r: Any, names: Sequence[str], first_step: int, inconsistent: Any) -> dict[str, Any]:
     est = r.estimate
-    flags: Any = None
-    if est is not None:
-        flags = np.flatnonzero(est.inconsistent) if est.inconsistent is not None else []
+    flags = None if est is None else np.flatnonzero(est.inconsistent)  # set by Estimate
     if inconsistent is not None:
         flags = np.asarray(inconsistent, dtype=int)
     widths = None if r.mean_width is None else [_num(w) for w in r.mean_width]

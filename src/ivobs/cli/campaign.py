@@ -78,7 +78,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     from .. import campaign
-    from ..campaign.run import check_outputs
+    from ..campaign.run import spec_inputs
+    from ..io.atomic import check_distinct
 
     spec = campaign.load_spec(
         args.spec,
@@ -89,12 +90,12 @@ def main(args: argparse.Namespace) -> int:
     if args.summary:
         spec.summary = Path(args.summary)
     output = Path(args.output) if args.output else spec.output
-    check_outputs(
-        spec,
+    check_distinct(
         {
             "--output" if args.output else "output": output,
             "--summary" if args.summary else "summary": spec.summary,
         },
+        spec_inputs(spec),
     )
     jobs = spec.jobs()
     title = f"campaign {spec.name!r}" if spec.name else f"campaign {args.spec}"
@@ -104,10 +105,11 @@ def main(args: argparse.Namespace) -> int:
             done = {r["job_id"] for r in campaign.read_results(output)}
         n_done = sum(j.id in done for j in jobs)
         declined = campaign.check_designs(spec)
+        settings = sum(len(e.option_sets()) for e in spec.methods)
         print(
             f"{title}: {len(jobs)} jobs = {len(spec.scenarios)} scenarios x "
-            f"{len(spec.disturbances)} disturbances x {len(jobs) // _per_cell(spec)} method "
-            f"settings x {len(spec.seeds)} seeds; {n_done} already in {output}, "
+            f"{len(spec.disturbances)} disturbances x {settings} method settings x "
+            f"{len(spec.seeds)} seeds; {n_done} already in {output}, "
             f"{len(jobs) - n_done} to run"
         )
         for line in declined:
@@ -154,8 +156,3 @@ def main(args: argparse.Namespace) -> int:
               f"of {res.output}", file=sys.stderr)  # fmt: skip
         return 1
     return 1 if res.violations or errors else 0
-
-
-def _per_cell(spec: Any) -> int:
-    """Jobs per scenario × disturbance × method setting: the seeds."""
-    return len(spec.scenarios) * len(spec.disturbances) * len(spec.seeds)

@@ -7,11 +7,13 @@ from typing import Any
 
 from ..errors import IvobsError
 from ..report.baseline import BASELINES
+from ..report.comparison import applicable_methods
 from ..scenarios import DISTURBANCES
 from . import (
     add_option_argument,
     add_trust_option,
     check_disturbance,
+    check_outputs,
     check_seed,
     parse_options,
     parse_states,
@@ -85,7 +87,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     return p
 
 
-def _scenario(args: argparse.Namespace) -> Any:
+def _scenario(args: argparse.Namespace, outputs: dict[str, Any]) -> Any:
     """The scenario, or the plant of ``--system`` (its log as the recorded trajectory); the
     outputs are checked against every file read first."""
     from .. import scenarios
@@ -102,9 +104,9 @@ def _scenario(args: argparse.Namespace) -> Any:
         check_disturbance(args.disturbance)
         spec = load_system(args.system, allow_code=args.allow_code)
         args._spec = spec
-        check_distinct(_outputs(args), plant_inputs(args, spec))
+        check_distinct(outputs, plant_inputs(args, spec))
         return plant_scenario(args, spec)
-    check_distinct(_outputs(args))
+    check_distinct(outputs)
     if args.truth:
         raise IvobsError(
             "--truth: the true state of a measurement log; give --system FILE --log FILE (a "
@@ -129,25 +131,6 @@ def default_methods(sc: Any) -> tuple[list[str], list[str]]:
     return [m for m in names if m not in SLOW_METHODS], [m for m in names if m in SLOW_METHODS]
 
 
-def applicable_methods(system: Any) -> tuple[list[str], list[str]]:
-    """The methods that accept ``system`` (model class, time base, time variation, interval
-    matrices: :func:`ivobs.estimators.base.check_system`) and those that do not."""
-    from ..errors import IvobsError as Refused
-    from ..estimators import get
-    from ..estimators import methods as all_methods
-    from ..estimators.base import check_system
-
-    ok, refused = [], []
-    for name in all_methods():
-        try:
-            check_system(get(name), system)
-        except Refused:
-            refused.append(name)
-            continue
-        ok.append(name)
-    return ok, refused
-
-
 def _model_kind(system: Any) -> str:
     """A few words on what makes methods refuse ``system``."""
     from ..model import NonlinearSystem
@@ -162,35 +145,11 @@ def _model_kind(system: Any) -> str:
     return ", ".join(kinds)
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
-    """Every output path, checked before any work: a bad path fails fast."""
-    from ..io.atomic import check_output_path
-
-    if args.plot:
-        from ..report.plot import figure_path
-
-        args.plot = str(figure_path(args.plot, "--plot"))
-    for opt in ("html", "json"):
-        value = getattr(args, opt)
-        if value and value != "-":
-            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
-
-
-def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
-    """The files the command writes, by option (``--json -``: standard output)."""
-    return {
-        "--json": None if args.json == "-" else args.json,
-        "--html": args.html,
-        "--plot": args.plot,
-    }
-
-
 def main(args: argparse.Namespace) -> int:
-    from ..report import compare, markdown_table
+    from ..report import compare
 
     check_seed(args.seed)
-    _check_outputs(args)
-    sc = _scenario(args)
+    sc = _scenario(args, check_outputs(args, ("json", "html", "plot")))
     states = parse_states(args.states, sc.system.nx) if args.states else None
     if args.states and not args.plot:
         raise IvobsError("--states: selects the states of the figure; give --plot FILE too")
@@ -199,7 +158,6 @@ def main(args: argparse.Namespace) -> int:
             f"--burn-in: expected a number of steps in 0..{sc.horizon - 1} "
             f"({sc.name} has {sc.horizon} steps), got {args.burn_in}"
         )
-    plot_path = args.plot
     left_out: list[str] = []
     if args.methods:
         names = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -230,10 +188,7 @@ def main(args: argparse.Namespace) -> int:
         )
     if refused:
         print(f"# not for this model ({_model_kind(sc.system)}): {', '.join(refused)}")
-    print()
-    ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
-    print(markdown_table(results, sc.state_names, reference=ref))
-    print_reasons(results)
+    print_table(results, sc.state_names)
     if args.json:
         from ._summary import summary_document, write_json
 
@@ -244,7 +199,7 @@ def main(args: argparse.Namespace) -> int:
         write_json(args.json, doc)
     if args.html:
         _write_html(args.html, sc, traj, results)
-    if plot_path is not None:
+    if args.plot is not None:
         from . import use_agg
 
         use_agg()
@@ -263,7 +218,7 @@ def main(args: argparse.Namespace) -> int:
             state_names=sc.state_names,
             title=f"{sc.name}",
         )
-        print(f"\nfigure: {save_figure(fig, plot_path)}")
+        print(f"\nfigure: {save_figure(fig, args.plot)}")
     return 1 if any(r.ok and r.guaranteed and r.contains is False for r in results) else 0
 
 
@@ -311,8 +266,14 @@ def _write_html(path: str, sc: Any, traj: Any, results: Any) -> None:
     print(f"\nreport: {page}")
 
 
-def print_reasons(results: Any) -> None:
-    """The full reason of every method without a result (the table's cell is cut short)."""
+def print_table(results: Any, state_names: Any) -> None:
+    """The methods' table (ratios to ``exact`` when it gave a result), after a blank line, and
+    the full reason of every method without a result (the table's cell is cut short)."""
+    from ..report import markdown_table
+
+    print()
+    ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
+    print(markdown_table(results, state_names, reference=ref))
     failed = [r for r in results if not r.ok and r.error]
     if failed:
         print()

@@ -8,7 +8,7 @@ from typing import Any
 
 from ..scenarios import DISTURBANCES
 from . import check_disturbance, check_out_dir, check_seed
-from .compare import default_methods, print_reasons
+from .compare import default_methods, print_table
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -34,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
 
     use_agg()
     from .. import scenarios
-    from ..report import compare, markdown_table
+    from ..report import compare
     from ..report.plot import plot_estimates, save_figure
 
     check_disturbance(args.disturbance)
@@ -50,10 +50,7 @@ def main(args: argparse.Namespace) -> int:
     )
     if left_out:
         print(f"# {sc.system.nx} states: {', '.join(left_out)} left out (slow at this size)")
-    print()
-    ref = "exact" if any(r.method == "exact" and r.ok for r in results) else None
-    print(markdown_table(results, sc.state_names, reference=ref))
-    print_reasons(results)
+    print_table(results, sc.state_names)
     os.makedirs(args.out, exist_ok=True)
     good = {r.method: r.estimate for r in results if r.estimate is not None}
     has_truth = traj.has_truth

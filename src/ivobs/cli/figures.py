@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 from typing import Any
 
 from . import check_out_dir
@@ -43,15 +44,6 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     return p
 
 
-def _check_figure_paths(out: str, specs: Any) -> None:
-    """The figures' files through the one output guard: no two of them one file (links)."""
-    from pathlib import Path
-
-    from ..io.atomic import check_distinct
-
-    check_distinct({f"--out's {s.stem}.png": Path(out) / f"{s.stem}.png" for s in specs})
-
-
 def main(args: argparse.Namespace) -> int:
     from ..errors import IvobsError
 
@@ -69,10 +61,12 @@ def main(args: argparse.Namespace) -> int:
     from . import use_agg
 
     use_agg()
+    from ..io.atomic import check_distinct
     from ..report.figures import generate
 
     check_out_dir(args.out, "--out")
-    _check_figure_paths(args.out, specs)
+    # the figures' files through the one output guard: no two of them one file (links)
+    check_distinct({f"--out's {s.stem}.png": Path(args.out) / f"{s.stem}.png" for s in specs})
     t0 = time.perf_counter()
     try:
         paths = generate(args.out, papers, scenarios=chosen, verbose=True)

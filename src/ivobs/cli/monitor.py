@@ -47,11 +47,6 @@ def _or_nan(v: np.ndarray | None, n: int) -> np.ndarray:
     return np.full(n, np.nan) if v is None else v
 
 
-def _bias(v: float) -> str:
-    """A bias bound, empty where none is estimated."""
-    return "" if np.isnan(v) else repr(float(v))
-
-
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     p: argparse.ArgumentParser = sub.add_parser(
         "monitor",
@@ -114,20 +109,11 @@ def _lines(fh: TextIO, follow: bool, poll: float) -> Iterator[str]:
             pending = ""
 
 
-def _fmt(v: float) -> str:
-    return "nan" if np.isnan(v) else repr(float(v))
-
-
 def _row_digest(row: Any) -> str:
     """The digest of one row's values (step, time, inputs, measurements)."""
     y = [None if np.isnan(v) else float(v) for v in row.y]
     values = [row.step, row.t, [float(v) for v in row.u], y]
     return hashlib.sha256(canonical_json(values).encode()).hexdigest()[:32]
-
-
-def _chain(digest: str, row: str) -> str:
-    """The digest of the rows so far, extended by one row's."""
-    return hashlib.sha256((digest + row).encode()).hexdigest()[:32]
 
 
 class _Stream:
@@ -145,7 +131,8 @@ class _Stream:
     def consume(self, row: Any) -> None:
         d = _row_digest(row)
         self.rows, self.step, self.t = self.rows + 1, row.step, row.t
-        self.digest, self.last = _chain(self.digest, d), d
+        self.digest = hashlib.sha256((self.digest + d).encode()).hexdigest()[:32]  # all so far
+        self.last = d
 
     def entries(self) -> dict[str, Any]:
         keys = ("start", "rows", "step", "t", "columns", "digest", "last")
@@ -167,7 +154,8 @@ class _Replay:
 
     def __init__(self, saved: _Stream, name: str):
         self.saved, self.name = saved, name
-        self.count, self.digest, self.last_seen = 0, "", False
+        self.seen = _Stream(saved.start)  # the rows seen again: their count and digests
+        self.last_seen = False
 
     def done(self, row: Any, index: int, from_file: bool) -> bool:
         s = self.saved
@@ -178,28 +166,27 @@ class _Replay:
         return from_file and index < s.rows
 
     def see(self, row: Any) -> None:
-        d = _row_digest(row)
-        self.count += 1
-        self.digest = _chain(self.digest, d)
+        self.seen.consume(row)
         s = self.saved
         last = (
             row.step == s.step
             if s.step is not None
             else row.t == s.t
             if s.t is not None
-            else self.count == s.rows
+            else self.seen.rows == s.rows
         )
         if last:
-            if d != s.last:
+            if self.seen.last != s.last:
                 raise self._other(f"its row of the last step processed ({self._where()}) differs")
             self.last_seen = True
 
     def finish(self) -> None:
         """At the first new row (or the end): the rows seen again were the stream's."""
-        if self.count == 0:
+        n = self.seen.rows
+        if n == 0:
             return
-        if self.count == self.saved.rows and self.digest != self.saved.digest:
-            raise self._other(f"its first {self.count} rows differ from those processed")
+        if n == self.saved.rows and self.seen.digest != self.saved.digest:
+            raise self._other(f"its first {n} rows differ from those processed")
         if not self.last_seen:
             raise self._other(f"it does not give the last step processed ({self._where()})")
 
@@ -239,11 +226,10 @@ class _Session:
             from ..io.statefile import lock_path
 
             self.state_path = check_output_path(args.state, "--state")
-            inputs = {"--system": args.system, "--input": args.input}
-            for i, path in enumerate(self.spec.files):
-                inputs["--system's [disturbance] csv" + (f" {i + 1}" if i else "")] = path
+            from ._plant import plant_inputs
+
             outputs = {"--state": self.state_path, "--state's lock": lock_path(self.state_path)}
-            check_distinct(outputs, inputs)
+            check_distinct(outputs, plant_inputs(args, self.spec))
         # the monitor's default (Monitor): boxes met with the strips of the outputs used
         from ..estimators.measured import FILTERED
 
@@ -377,7 +363,7 @@ def main(args: argparse.Namespace) -> int:
 def _stream(args: argparse.Namespace, session: _Session) -> int:
     """Read the rows, print one line per step, save the state; the exit status says whether an
     alarm was raised on the whole stream (its resumed parts included)."""
-    from ..io.logs import LogParser
+    from ..io.logs import LogParser, csv_cell
     from ..monitor.records import output_names
 
     mon = session.monitor
@@ -388,9 +374,7 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
     session.load(clock)
     out = csv.writer(sys.stdout, lineterminator="\n")
     if not session.resumed:
-        cols = [f"lower_{i + 1}" for i in range(sys_.nx)] + [
-            f"upper_{i + 1}" for i in range(sys_.nx)
-        ]
+        cols = [f"{b}_{i + 1}" for b in ("lower", "upper") for i in range(sys_.nx)]
         bias = [f"bias_{b}_{i + 1}" for b in ("lower", "upper") for i in range(sys_.ny)]
         out.writerow(["k", *cols, "alarm", "reason", *FAULT_COLUMNS, *bias, "fault_isolated"])
         sys.stdout.flush()
@@ -433,15 +417,15 @@ def _stream(args: argparse.Namespace, session: _Session) -> int:
                 out.writerow(
                     [
                         k0 + step.step,
-                        *map(_fmt, step.lower),
-                        *map(_fmt, step.upper),
+                        *(csv_cell(v, "nan") for v in step.lower),
+                        *(csv_cell(v, "nan") for v in step.upper),
                         int(step.alarm),
                         step.reason,
                         start,
                         step.fault_duration,
                         output_names(step.outputs),
-                        *map(_bias, _or_nan(step.bias_lower, sys_.ny)),
-                        *map(_bias, _or_nan(step.bias_upper, sys_.ny)),
+                        *map(csv_cell, _or_nan(step.bias_lower, sys_.ny)),  # empty: none
+                        *map(csv_cell, _or_nan(step.bias_upper, sys_.ny)),
                         step.isolation,
                     ]
                 )

@@ -11,7 +11,6 @@ file behind.
 from __future__ import annotations
 
 import argparse
-import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,11 +18,18 @@ import numpy as np
 from ..errors import IvobsError
 from ..io.plant import check_log_times, discretized
 from ..scenarios import DISTURBANCES
-from . import add_option_argument, add_trust_option, check_disturbance, check_seed, parse_options
+from . import (
+    add_option_argument,
+    add_trust_option,
+    check_disturbance,
+    check_outputs,
+    check_seed,
+    parse_options,
+)
 from ._plant import add_plant_options, add_truth_option, plant_inputs
 
 if TYPE_CHECKING:
-    from ..report import MethodResult
+    pass
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -83,7 +89,10 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    _check_outputs(args)
+    from ..io.atomic import check_distinct
+
+    outputs = check_outputs(args, ("csv", "plot", "html", "json"))
+    check_distinct(outputs, plant_inputs(args))
     if args.system:
         if args.scenario:
             raise IvobsError(f"give either a scenario ({args.scenario!r}) or --system, not both")
@@ -91,7 +100,7 @@ def main(args: argparse.Namespace) -> int:
             raise IvobsError(
                 "--disturbance/--seed: only with a scenario (a log gives the measurements)"
             )
-        return _run_system(args)
+        return _run_system(args, outputs)
     if args.log or args.truth or args.discretize is not None or args.held_disturbances:
         raise IvobsError(
             "--log/--truth/--discretize: need --system FILE (the model of the logged plant; a "
@@ -119,39 +128,15 @@ def _check_time_base(system: Any, method: str, where: str) -> None:
         )
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
-    """Check every output path before any work: an error in one never leaves another written."""
-    from ..io.atomic import check_distinct, check_output_path
-
-    if args.csv:
-        args.csv = str(check_output_path(args.csv, "--csv"))
-    for opt in ("html", "json"):
-        value = getattr(args, opt)
-        if value and value != "-":
-            setattr(args, opt, str(check_output_path(value, f"--{opt}")))
-    if args.plot:
-        from ..report.plot import figure_path
-
-        args.plot = str(figure_path(args.plot, "--plot"))
-    check_distinct(_outputs(args), plant_inputs(args))
-
-
-def _outputs(args: argparse.Namespace) -> dict[str, str | None]:
-    json = None if args.json == "-" else args.json  # "-": standard output
-    return {"--csv": args.csv, "--plot": args.plot, "--html": args.html, "--json": json}
-
-
-def _measured(
-    est: Any, res: Any, times: tuple[float, float, float], truth: Any, burn: int, opts: Any
-) -> MethodResult:
-    """The run as a row of ``ivobs compare``'s table: ``times`` from :func:`_design_and_run`,
-    containment of ``truth`` (None: unknown), mean widths from step ``burn``."""
+def _run(design: Any, u: Any, y: Any, t: Any, args: argparse.Namespace, opts: Any) -> Any:
+    """The estimator ``design()`` and its run (:func:`_estimate`) as a row of ``ivobs
+    compare``'s table: the estimate, the times and the options."""
     from ..report import MethodResult
 
-    design, run, cpu = times
-    r = MethodResult(est.name, res, options=opts, design_time=design, run_time=run, cpu_time=cpu)
-    r.measure(truth, burn)
-    return r
+    r = MethodResult("", options=opts)
+    est = r.timed(design, lambda est: _estimate(est, u, y, t, args))
+    r.method = est.name
+    return est, r
 
 
 def _summary(
@@ -179,13 +164,12 @@ def _run_scenario(args: argparse.Namespace) -> int:
     sc = scenarios.get(args.scenario)
     traj = sc.simulate(args.disturbance, args.seed)
     opts = parse_options(args.option, [args.method]).get(args.method, {})
-    est, res, times = _design_and_run(
+    _, r = _run(
         lambda: make_estimator(args.method, sc.system, x0=sc.x0, **opts),
-        traj.u, traj.y, traj.t if sc.system.is_continuous else None, args,
+        traj.u, traj.y, traj.t if sc.system.is_continuous else None, args, opts,
     )  # fmt: skip
-    truth = traj.x if traj.has_truth else None
-    burn = sc.horizon // 10
-    r = _measured(est, res, times, truth, burn, opts)
+    res, truth, burn = r.estimate, traj.x if traj.has_truth else None, sc.horizon // 10
+    r.measure(truth, burn)
     print(f"{args.method} on {sc.name} ({sc.source})")
     print(f"steps: {res.T}, valid from step {res.valid_from}")
     if r.mean_width is not None:
@@ -197,7 +181,7 @@ def _run_scenario(args: argparse.Namespace) -> int:
     return 1 if r.contains is False else 0
 
 
-def _run_system(args: argparse.Namespace) -> int:
+def _run_system(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     from ..io.atomic import check_distinct
     from ..io.logs import read_log
     from ..io.systemfile import load_system
@@ -210,7 +194,7 @@ def _run_system(args: argparse.Namespace) -> int:
     spec.system = discretized(
         spec.system, args.discretize, args.system, held=args.held_disturbances
     )
-    check_distinct(_outputs(args), plant_inputs(args, spec))
+    check_distinct(outputs, plant_inputs(args, spec))
     log = read_log(args.log, spec.system, start=spec.x0_step)
     if args.discretize is not None:
         check_log_times(log.t, args.discretize, args.log)
@@ -238,7 +222,8 @@ def _run_system(args: argparse.Namespace) -> int:
 
     # a discrete-time system counts steps: a time column only labels the rows of the output
     t = log.t if spec.system.is_continuous else None
-    est, res, times = _design_and_run(design, log.u, log.y, t, args)
+    est, r = _run(design, log.u, log.y, t, args, opts)
+    res = r.estimate
     if isinstance(spec.system, NonlinearSystem) or spec.system.is_uncertain:
         # the monitor's bands need a linear model with exact matrices: the method's own
         # inconsistency reports are the alarms
@@ -256,7 +241,7 @@ def _run_system(args: argparse.Namespace) -> int:
     skipped = 0 if log.filled is None else int(np.sum(log.filled))
     gaps = f" ({skipped} skipped by the log)" if skipped else ""
     print(f"missing samples: {int(np.sum(log.missing))} step(s) with a missing measurement{gaps}")
-    r = _measured(est, res, times, truth, 0, opts)
+    r.measure(truth, 0)
     if r.mean_width is not None:
         print("mean width per state: " + ", ".join(f"{w:.4g}" for w in r.mean_width))
     if truth is not None:
@@ -285,19 +270,6 @@ def _run_system(args: argparse.Namespace) -> int:
         state_names=labels,
     )
     return 1 if alarms.size or r.contains is False else 0
-
-
-def _design_and_run(
-    design: Any, u: Any, y: Any, t: Any, args: argparse.Namespace
-) -> tuple[Any, Any, tuple[float, float, float]]:
-    """The estimator ``design()`` and its run, with the design and run times (wall-clock) and
-    their processor time."""
-    c0, t0 = time.process_time(), time.perf_counter()
-    est = design()
-    t1 = time.perf_counter()
-    res = _estimate(est, u, y, t, args)
-    t2 = time.perf_counter()
-    return est, res, (t1 - t0, t2 - t1, time.process_time() - c0)
 
 
 def _print_episodes(spec: Any, est: Any, log: Any, t: Any, k0: int) -> list[str]:

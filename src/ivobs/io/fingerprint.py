@@ -84,16 +84,8 @@ def model_fingerprint(sys: Any, x0: Any, settings: dict[str, Any]) -> dict[str, 
     one digest per part of :data:`PARTS` (a nonlinear model: its specification for the
     matrices' part, its unknowns' box for the bounds')."""
     if hasattr(sys, "spec") and not hasattr(sys, "interval_matrices"):  # NonlinearSystem
-        return {
-            "matrices": digest(canonical_json(sys.spec()), sys.dt),
-            "bounds": digest(sys.w_box),
-            "prior": digest(x0),
-            "settings": digest(settings),
-        }
-    matrices = [getattr(sys, m) for m in ("A", "B", "C", "D", "E", "F")]
-    return {
-        "matrices": digest(matrices, sys.dt, sys.interval_matrices()),
-        "bounds": digest(sys.d),
-        "prior": digest(x0),
-        "settings": digest(settings),
-    }
+        model = digest(canonical_json(sys.spec()), sys.dt), digest(sys.w_box)
+    else:
+        matrices = [getattr(sys, m) for m in ("A", "B", "C", "D", "E", "F")]
+        model = digest(matrices, sys.dt, sys.interval_matrices()), digest(sys.d)
+    return dict(zip(PARTS, (*model, digest(x0), digest(settings)), strict=True))

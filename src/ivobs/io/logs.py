@@ -29,6 +29,7 @@ __all__ = [
     "Log",
     "LogParser",
     "LogRow",
+    "csv_cell",
     "log_from_frame",
     "not_utf8",
     "read_log",
@@ -39,24 +40,29 @@ __all__ = [
 _STEP_COLS = ("k", "step")
 _TIME_COLS = ("t", "time")
 _SIGNAL = re.compile(r"^(?P<kind>[uy])(?:\d+|[_\[(.].*)?$", re.IGNORECASE | re.ASCII)
-_NUMBERED = re.compile(
-    r"^[uy](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$", re.IGNORECASE | re.ASCII
-)
 _INTEGER = re.compile(r"^[+-]?[0-9]+$")
 
 MAX_STEP = 2**53
 """Largest step number a log may give (beyond it a float cannot count steps one by one)."""
 
 
-def _signal_number(column: str) -> int | None:
-    """The number of a signal column (``y2``, ``y_2``, ``y[2]``, ``y(2)``), else None."""
-    m = _NUMBERED.match(column)
+def column_number(column: str, letters: str = "uy") -> int | None:
+    """The number of a column ``y2``, ``y_2``, ``y[2]``, ``y(2)``, ``y.2`` whose letter is one
+    of ``letters`` (any case), else None."""
+    pattern = rf"^[{letters}](?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$"
+    m = re.match(pattern, column, re.IGNORECASE | re.ASCII)
     return None if m is None else int(next(g for g in m.groups() if g is not None))
 
 
 def _shown(text: str) -> str:
     """A cell quoted in an error, cut short (a field may be 128 KiB long)."""
     return repr(text) if len(text) <= 40 else repr(text[:37] + "...")
+
+
+def csv_cell(v: float, nan: str = "") -> str:
+    """A number as a CSV cell, with full precision (``repr``); NaN as ``nan`` (a missing
+    sample: an empty cell)."""
+    return nan if np.isnan(v) else repr(float(v))
 
 
 def read_number(cell: str) -> float:
@@ -167,7 +173,7 @@ class LogParser:
 
     def _by_number(self, kind: str, idx: list[int], line: int) -> None:
         """Order the ``kind`` columns ``idx`` (in place) by their number when all have one."""
-        nums = [_signal_number(self.columns[i]) for i in idx]
+        nums = [column_number(self.columns[i]) for i in idx]
         if not idx or any(n is None for n in nums):
             return
         n = len(idx)
@@ -404,12 +410,9 @@ def write_log(
     cols += [f"u{i + 1}" for i in range(u.shape[1])] + [f"y{i + 1}" for i in range(y.shape[1])]
     tt = None if t is None else np.asarray(t, dtype=float).ravel()
 
-    def cell(v: float) -> str:
-        return "" if np.isnan(v) else repr(float(v))
-
     lines = [",".join(cols)]
     for k in range(T):
         parts = ([str(k)] if steps else []) + ([repr(float(tt[k]))] if tt is not None else [])
-        parts += [cell(v) for v in u[k]] + [cell(v) for v in y[k]]
+        parts += [csv_cell(v) for v in u[k]] + [csv_cell(v) for v in y[k]]
         lines.append(",".join(parts))
     write_text_atomic(path, "\n".join(lines) + "\n")

@@ -81,8 +81,6 @@ def read_option(reader: TomlReader, key: tuple[str, ...], v: Any) -> Any:
 
 def plain_option(v: Any) -> Any:
     """An option value as a file writes it (NumPy scalars as Python numbers)."""
-    if isinstance(v, Box) or isinstance(v, np.ndarray):
-        return v
     if isinstance(v, np.generic):
         return v.item()
     return v

@@ -27,8 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import as_bool
 from ..errors import IvobsError
 from ..model import LinearSystem
+from ..model.statespace import SignalNames
 from ..model.uncertain import INTERVAL_MATRICES
 from ..sets import Box
 from .boundsfile import read_bounds_csv
@@ -36,7 +38,7 @@ from .callables import make_callable
 from .loaded import SystemFile
 from .nlsystemfile import read_nonlinear
 from .options import read_method
-from .sections import PlantSections
+from .reader import TomlReader
 
 __all__ = ["FORMAT", "MATRICES", "SystemFile", "load_system", "loads_system"]
 
@@ -53,7 +55,7 @@ _KEYS: dict[tuple[str, ...], tuple[str, ...]] = {
 }
 
 
-class _SystemReader(PlantSections):
+class _SystemReader(TomlReader):
     """Validate a parsed system file, raising errors that name the file, the line and the key."""
 
     def __init__(self, text: str, source: str, base_dir: Path, allow_code: bool):
@@ -82,6 +84,60 @@ class _SystemReader(PlantSections):
             raise self.fail(key, f"expected a table [{key[0]}], got {type(val).__name__}")
         self.check_keys(val, key)
         return val
+
+    def names(self, system: Any) -> SignalNames:
+        """``[names]``: labels of the states (and their ``units``), inputs, outputs and
+        disturbance components, for plots and tables."""
+        tab = self.table(("names",))
+        if tab is None:
+            return SignalNames()
+        sizes = {"states": system.nx, "units": system.nx, "inputs": system.nu,
+                 "outputs": system.ny, "disturbances": system.nd}  # fmt: skip
+        out: dict[str, tuple[str, ...]] = {}
+        for k, n in sizes.items():
+            if k not in tab:
+                continue
+            v = tab[k]
+            if not isinstance(v, list) or not all(isinstance(e, str) for e in v):
+                raise self.fail(("names", k), f"expected a list of strings, got {v!r}")
+            if len(v) != n:
+                raise self.fail(("names", k), f"expected {n} names (the system's), got {len(v)}")
+            out[k] = tuple(v)
+        return SignalNames(**out)
+
+    def x0_step(self) -> int:
+        """``[x0] step``: the step whose state the prior box bounds (default 0); a log must
+        start there (:mod:`ivobs.io.steps`)."""
+        tab = self.table(("x0",)) or {}
+        step = tab.get("step", 0)
+        if isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= 2**53:
+            raise self.fail(("x0", "step"), f"expected a step in 0..2**53, got {step!r}")
+        return step
+
+    def x0(self, nx: int) -> Box | None:
+        tab = self.table(("x0",))
+        if tab is None:
+            return None
+        vec = {}
+        for k in ("lower", "upper"):
+            if k not in tab:
+                raise self.fail(("x0",), f"missing {k} (the prior box is [lower, upper])")
+            v = self.numbers(("x0", k), tab[k], (1,))
+            if v.shape[0] != nx:
+                raise self.fail(
+                    ("x0", k), f"expected {nx} values (one per state), got {v.shape[0]}"
+                )
+            if not np.all(np.isfinite(v)):
+                raise self.fail(("x0", k), "the prior box must be finite")
+            vec[k] = v
+        bad = vec["lower"] > vec["upper"]
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise self.fail(
+                ("x0", "lower"),
+                f"lower > upper in component {i}: {vec['lower'][i]} > {vec['upper'][i]}",
+            )
+        return Box(vec["lower"], vec["upper"])
 
     # -- values ---------------------------------------------------------------------------
 
@@ -426,13 +482,7 @@ def loads_system(
 ) -> SystemFile:
     """Read a system file from its text (``base_dir``: where relative CSV paths point;
     ``allow_code``: as in :func:`load_system`)."""
-    return _SystemReader(text, source, Path(base_dir), _flag(allow_code)).read()
-
-
-def _flag(allow_code: Any) -> bool:
-    if not isinstance(allow_code, bool):
-        raise IvobsError(f"allow_code: expected True or False, got {allow_code!r}")
-    return allow_code
+    return _SystemReader(text, source, Path(base_dir), as_bool("allow_code", allow_code)).read()
 
 
 def load_system(path: str | os.PathLike[str], *, allow_code: bool = False) -> SystemFile:
@@ -444,7 +494,7 @@ def load_system(path: str | os.PathLike[str], *, allow_code: bool = False) -> Sy
     only when it is one of ivobs' scenario functions (``ivobs.scenarios``); any other is
     refused unless ``allow_code=True`` (resolving it imports its module and the estimator
     calls it: pass it for files you trust only)."""
-    allow_code = _flag(allow_code)
+    allow_code = as_bool("allow_code", allow_code)
     path = Path(path)
     if path.is_dir():
         raise IvobsError(f"system file {str(path)!r} is a directory; expected a TOML file")

@@ -137,15 +137,22 @@ def _value(v: Any, indent: str = "") -> str:
     return _scalar(v)
 
 
+def _named(what: str, fn: Any, form: str = "") -> tuple[str, dict[str, Any]]:
+    """The import path and parameters of the callable ``fn`` (``what`` in the error when a file
+    cannot name it; ``form``: the signature it should have)."""
+    ref = callable_ref(fn)
+    if ref is None:
+        raise IvobsError(
+            f"save_system: {what} a callable ivobs cannot name in a file ({fn!r}); use a "
+            f"module-level function{form}, or functools.partial of one with keyword parameters"
+        )
+    return ref
+
+
 def _matrix_value(name: str, m: Any) -> str:
     if callable(m):
-        ref = callable_ref(m)
-        if ref is None:
-            raise IvobsError(
-                f"save_system: {name} is a callable ivobs cannot name in a file ({m!r}); use a "
-                "module-level function, or functools.partial of one with keyword parameters"
-            )
-        return _value({"python": ref[0], "params": ref[1]})
+        path, params = _named(f"{name} is", m)
+        return _value({"python": path, "params": params})
     return _value(np.asarray(m, dtype=float))
 
 
@@ -228,14 +235,8 @@ def dumps_system(
         if isinstance(d, Box):
             out += [f"lower = {_value(d.lo)}", f"upper = {_value(d.hi)}"]
         else:
-            ref = callable_ref(d)
-            if ref is None:
-                raise IvobsError(
-                    f"save_system: the disturbance bounds are a callable ivobs cannot name in a "
-                    f"file ({d!r}); use a module-level function (k, y) -> Box, or "
-                    "functools.partial of one with keyword parameters"
-                )
-            out += [f"python = {_scalar(ref[0])}", f"params = {_value(ref[1])}"]
+            path, params = _named("the disturbance bounds are", d, " (k, y) -> Box")
+            out += [f"python = {_scalar(path)}", f"params = {_value(params)}"]
     names = getattr(system, "names", None)
     labelled = {k: getattr(names, k) for k in ("states", "units", "inputs", "outputs",
                 "disturbances") if getattr(names, k, None)}  # fmt: skip
@@ -268,13 +269,9 @@ def _unpack(
     from ..scenarios import Scenario
 
     if isinstance(system, SystemFile):
-        x0 = system.x0 if x0 is None else x0
         method = system.method if method is None else method
         options = system.options if options is None else options
-        name = name or system.name
-        description = description or system.description
-        system = system.system
-    elif isinstance(system, Scenario):
+    if isinstance(system, (SystemFile, Scenario)):
         x0 = system.x0 if x0 is None else x0
         name = name or system.name
         description = description or system.description

@@ -11,24 +11,16 @@ skips or adds a step would be compared with the boxes of other steps.
 from __future__ import annotations
 
 import os
-import re
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import IvobsError
 from ..model import SystemModel
-from .logs import Log, LogParser, LogRow, read_rows
+from .logs import Log, LogParser, LogRow, column_number, read_rows
 from .steps import StepClock
 
 __all__ = ["read_truth"]
-
-_NUMBERED = re.compile(r"^x(?:(\d+)|_(\d+)|\[(\d+)\]|\((\d+)\)|\.(\d+))$", re.IGNORECASE | re.ASCII)
-
-
-def _state_number(column: str) -> int | None:
-    m = _NUMBERED.match(column)
-    return None if m is None else int(next(g for g in m.groups() if g is not None))
 
 
 class _TruthParser(LogParser):
@@ -46,7 +38,7 @@ class _TruthParser(LogParser):
         named by a state."""
         cols = [self.columns[i] for i in self._y]
         n = self.ny
-        nums = [_state_number(c) for c in cols]
+        nums = [column_number(c, "x") for c in cols]
         schemes = [[None if k is None else k - base for k in nums] for base in (1, 0)]
         if self.names is not None:
             where = {name.lower(): j for j, name in enumerate(self.names)}

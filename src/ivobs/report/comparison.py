@@ -9,6 +9,7 @@ import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -21,7 +22,7 @@ from ..result import Estimate
 from ..scenarios import Scenario
 from ..simulate import Trajectory
 
-__all__ = ["POINT_TOL", "MethodResult", "compare", "markdown_table"]
+__all__ = ["POINT_TOL", "MethodResult", "applicable_methods", "compare", "markdown_table"]
 
 
 @dataclass
@@ -47,6 +48,18 @@ class MethodResult:
     def ok(self) -> bool:
         return self.estimate is not None
 
+    def timed(self, design: Any, run: Any) -> Any:
+        """``design()`` and ``run(design())``, whose result is the :attr:`estimate`, with their
+        wall-clock times and their processor time together; returns the design."""
+        c0, t0 = time.process_time(), time.perf_counter()
+        est = design()
+        self.design_time = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.estimate = run(est)
+        self.run_time = time.perf_counter() - t0
+        self.cpu_time = time.process_time() - c0
+        return est
+
     def measure(self, truth: np.ndarray | None, burn_in: int) -> None:
         """Containment of ``truth`` (None: unknown) and the mean widths from ``burn_in``."""
         assert self.estimate is not None
@@ -55,6 +68,22 @@ class MethodResult:
             self.contains = self.misses == 0
         if max(burn_in, self.estimate.valid_from) < self.estimate.T:
             self.mean_width = self.estimate.mean_width(burn_in)
+
+
+def applicable_methods(system: Any) -> tuple[list[str], list[str]]:
+    """The methods that accept ``system`` (model class, time base, time variation, interval
+    matrices: :func:`ivobs.estimators.base.check_system`) and those that do not."""
+    from ..estimators.base import check_system
+
+    ok, refused = [], []
+    for name in all_methods():
+        try:
+            check_system(get_method(name), system)
+        except IvobsError:
+            refused.append(name)
+            continue
+        ok.append(name)
+    return ok, refused
 
 
 def compare(
@@ -89,6 +118,7 @@ def compare(
     names = list(all_methods() if methods is None else methods)
     burn = scenario.horizon // 10 if burn_in is None else int(burn_in)
     truth = traj.x if traj.has_truth else None
+    t = traj.t if scenario.system.is_continuous else None
     out: list[MethodResult] = []
     for name in names:
         get_method(name)  # unknown names fail loudly, not as a table row
@@ -97,15 +127,8 @@ def compare(
             opts = {"strips": strips, **opts}
         res = MethodResult(method=name, options=opts)
         try:
-            c0, t0 = time.process_time(), time.perf_counter()
-            est = make_estimator(name, scenario.system, x0=scenario.x0, **opts)
-            res.design_time = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            res.estimate = est.run(
-                traj.u, traj.y, t=traj.t if scenario.system.is_continuous else None
-            )
-            res.run_time = time.perf_counter() - t0
-            res.cpu_time = time.process_time() - c0
+            res.timed(partial(make_estimator, name, scenario.system, x0=scenario.x0, **opts),
+                      lambda est: est.run(traj.u, traj.y, t=t))  # fmt: skip
         except IvobsError as exc:
             res.error = f"{type(exc).__name__}: {exc}"
             out.append(res)

@@ -20,14 +20,13 @@ k = 217 for V; by at most 3.2e-3), so a guaranteed method may legitimately miss 
 from __future__ import annotations
 
 from importlib import resources
-from typing import Any
 
 import numpy as np
 
 from ..model import LinearSystem
 from ..sets import Box
-from ..simulate import Trajectory, disturbance
-from .registry import Scenario, bounds_box, register_scenario
+from ..simulate import Trajectory
+from .registry import Scenario, paper_signal, register_scenario
 
 _FILES = {
     "cora-2dim": ("cora_2dim.npz", "CORA/Alamo 2005 2-D example: 2 states, 1 output, 20 steps"),
@@ -71,11 +70,6 @@ def _build(name: str) -> Scenario:
         x=x_rec, y=y, u=u, d=np.full((T, mw + mv), np.nan), t=np.arange(T) * float(z["dt"])
     )
 
-    def factory(kind: str, seed: Any, T_: int) -> Any:
-        if kind == "paper":
-            return disturbance("uniform", bounds_box(sys), T_, 0 if seed is None else seed)
-        return None
-
     return Scenario(
         name=name,
         system=sys,
@@ -86,7 +80,7 @@ def _build(name: str) -> Scenario:
         source=f"CORA v2026.0.1 benchmark data ({fname}); see ivobs/data/CORA_README.md",
         description=summary,
         recorded=recorded,
-        _disturbance=factory,
+        _disturbance=paper_signal("uniform", sys),
         reference={"W_G": WG, "V_G": VG, "R0_G": z["R0_G"]},
         notes="x_true0 for simulations is CORA's recorded x[0] (R0's center when none is stored)",
     )

@@ -54,42 +54,36 @@ def _kkl_random8(
                 return d_ct
             return disturbance(kind, bounds, t.size, seed_)
 
-        return Scenario(
-            name="kkl-random8",
-            system=sys,
-            x0=Box(x_true0 - 1.0, x_true0 + 1.0),
-            x_true0=x_true0,
+        fields: dict[str, Any] = dict(
             u=np.ones((t.size, 8)),
             horizon=int(t.size),
             source="[Dinh2024, Example 1] (continuous time)",
             description="random observable CT system, 8 states, 6 outputs, u = 1, "
             "d = 0.5(sin 2t, cos t), w = 0.3 sin t",
-            reference=ref,
             t=t,
             _disturbance=factory,
             _u_fn=lambda tt: np.ones(8),
             notes=f"random integer matrices (seed {seed}) shifted to be Hurwitz by ivobs",
         )
-    T = check_horizon(horizon)
-    Fd = 0.8 * Fm / np.max(np.abs(np.linalg.eigvals(Fm)))  # spectral radius 0.8
-    sys = LinearSystem(Fd, np.eye(8), Hm, E=E, F=F, d=bounds)
-    ref["F"] = Fd
-    k = np.arange(T)
-    d_paper = np.column_stack([0.5 * np.sin(2 * k), 0.5 * np.cos(k), 0.3 * np.sin(k)])
-    return Scenario(
-        name="kkl-random8",
-        system=sys,
-        x0=Box(x_true0 - 1.0, x_true0 + 1.0),
-        x_true0=x_true0,
-        u=np.ones((T, 8)),
-        horizon=T,
-        source="[Dinh2024, Example 1], discrete-time version",
-        description="random observable DT system, 8 states, 6 outputs, u = 1, "
-        "d = 0.5(sin 2k, cos k), w = 0.3 sin k",
-        reference=ref,
-        _disturbance=lambda kind, seed_, T: d_paper if kind == "paper" else None,
-        notes=f"random integer matrices (seed {seed}), A scaled to spectral radius 0.8 by ivobs",
-    )
+    else:
+        T = check_horizon(horizon)
+        Fd = 0.8 * Fm / np.max(np.abs(np.linalg.eigvals(Fm)))  # spectral radius 0.8
+        sys = LinearSystem(Fd, np.eye(8), Hm, E=E, F=F, d=bounds)
+        ref["F"] = Fd
+        k = np.arange(T)
+        d_paper = np.column_stack([0.5 * np.sin(2 * k), 0.5 * np.cos(k), 0.3 * np.sin(k)])
+        fields = dict(
+            u=np.ones((T, 8)),
+            horizon=T,
+            source="[Dinh2024, Example 1], discrete-time version",
+            description="random observable DT system, 8 states, 6 outputs, u = 1, "
+            "d = 0.5(sin 2k, cos k), w = 0.3 sin k",
+            _disturbance=lambda kind, seed_, T: d_paper if kind == "paper" else None,
+            notes=f"random integer matrices (seed {seed}), A scaled to spectral radius 0.8 by "
+            "ivobs",
+        )
+    x0 = Box(x_true0 - 1.0, x_true0 + 1.0)
+    return Scenario(name="kkl-random8", system=sys, x0=x0, x_true0=x_true0, reference=ref, **fields)
 
 
 def pendulum_A(t: Any, *, L0: float, L1: float, omega: float) -> np.ndarray:

@@ -7,8 +7,7 @@ import numpy as np
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box
-from ..simulate import disturbance
-from .registry import Scenario, bounds_box, check_horizon, register_scenario
+from .registry import Scenario, check_horizon, paper_signal, register_scenario
 
 
 def heat_gain(system: LinearSystem, share: float = 0.5) -> np.ndarray:
@@ -89,9 +88,7 @@ def _heat_1d(
         f"middle, {ny} point sensors at nodes {where.tolist()}, boundary temperatures in "
         "[0, 0.2], |q| <= 0.005, |v| <= 0.02",
         reference={"L": heat_gain(sys), "sensors": where},
-        _disturbance=lambda kind, seed, T: (
-            disturbance("sinusoidal", bounds_box(sys), T) if kind == "paper" else None
-        ),
+        _disturbance=paper_signal("sinusoidal", sys),
         notes="reference['L'] = heat_gain(system): each sensor feeds back into its own node with "
         "half the diagonal of A, so A - LC >= 0 and Schur for any nx (interval, interval-split "
         "with L=...; docs/scale.md lists which methods suit which nx); 'paper' uses sinusoids",

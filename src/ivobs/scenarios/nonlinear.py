@@ -28,17 +28,8 @@ import numpy as np
 
 from ..model.nonlinear import NonlinearSystem
 from ..sets import Box
-from ..simulate import Trajectory, disturbance
-from .registry import Scenario, check_horizon, constant_input, register_scenario
-
-
-def _paper_uniform(sys: NonlinearSystem) -> Any:
-    def factory(kind: str, seed: Any, T: int) -> Any:
-        if kind == "paper":
-            return disturbance("uniform", sys.d, T, 0 if seed is None else seed)
-        return None
-
-    return factory
+from ..simulate import Trajectory
+from .registry import Scenario, check_horizon, constant_input, paper_signal, register_scenario
 
 
 def henon_nl_system(
@@ -71,7 +62,7 @@ def _henon_nl(horizon: int = 200) -> Scenario:
         source="[Efimov2013, Section IV.B] (the Hénon map), as a full nonlinear model",
         description="x1+ = 1 - a x1^2 + x2 + w, x2+ = 0.3 x1, y = x1 + v; a(t) in [1.39, 1.41] "
         "unknown at every step, |w| <= 0.005, |v| <= 0.02",
-        _disturbance=_paper_uniform(sys),
+        _disturbance=paper_signal("uniform", sys),
         notes="bounds, x0 box and true x0 chosen by ivobs (a narrower a-range than [Efimov2013]'s "
         "[1, 1.4] keeps vertex-switched orbits bounded)",
     )
@@ -105,7 +96,7 @@ def _pendulum_nl(horizon: int = 200) -> Scenario:
         source="textbook pendulum (m = 1 kg, g = 9.81, damping 1/s), explicit Euler step 0.05 s",
         description="th+ = th + h om, om+ = om + h(-g/L sin th - om + u/L^2) + w, "
         "y = th + v; L in [0.95, 1.05] m unknown, |w| <= 0.01, |v| <= 0.01 rad",
-        _disturbance=_paper_uniform(sys),
+        _disturbance=paper_signal("uniform", sys),
         notes="the model is the Euler map with h = 0.05 s (not the ODE); torque u = 2 sin(0.05k); "
         "the damping (1/s) exceeds the energy explicit Euler adds (1 + h^2 g/L per step), so "
         "the map oscillates instead of spinning up",
@@ -170,7 +161,7 @@ def _tank6(horizon: int = 20) -> Scenario:
             "saved_lo": z["saved_lo"],
             "saved_hi": z["saved_hi"],
         },
-        _disturbance=_paper_uniform(sys),
+        _disturbance=paper_signal("uniform", sys),
         notes="'recorded' is CORA's 20-step record (no true state stored); x_true0 for "
         "simulations is R0's centre; beyond 20 steps the last input is held",
     )
@@ -208,7 +199,7 @@ def _cstr(horizon: int = 300) -> Scenario:
         description="C+ = C + h((1 - C) - k0 e^(-8750/T) C) + w1, T+ = T + h((350 - T) + "
         "209.2 k0 e^(-8750/T) C + 2.092 (Tc - T)) + w2, y = T + v; k0 = 7.2e10 kr, kr in "
         "[0.98, 1.02]",
-        _disturbance=_paper_uniform(sys),
+        _disturbance=paper_signal("uniform", sys),
         notes="the model is the Euler map with h = 0.02 min (not the ODE); coolant Tc = 300 K "
         "held; start below the steady state so that the reactor heats up. The uncertain rate is "
         "the scaled factor kr (order 1); k0 in [7.056e10, 7.344e10] as the parameter gives the "
@@ -254,7 +245,7 @@ def _unicycle(horizon: int = 200) -> Scenario:
         source="kinematic unicycle, explicit Euler step 0.1 s; beacons at (0,0), (10,0), (0,10)",
         description="p+ = p + h s (cos th, sin th) + w, th+ = th + h om + w3; y = three ranges "
         "|p - b_i| + v_i (|v_i| <= 0.05) and a compass th + v4 (|v4| <= 0.05)",
-        _disturbance=_paper_uniform(sys),
+        _disturbance=paper_signal("uniform", sys),
         notes="speed 1 m/s, turn rate 0.2 + 0.05 sin(0.007k) rad/s (it circles around the beacon "
         "at (0, 10)); the model is the Euler map",
     )
@@ -293,5 +284,5 @@ def _chain10(horizon: int = 100) -> Scenario:
         source="ivobs (a scale test, not from a paper)",
         description="x_i+ = 0.8 x_i + c tanh(x_(i-1)) + 0.05 sin(x_(i+1)) + w_i, c in "
         "[0.18, 0.22]; y = (x1, x4, x7, x10) + v, |w| <= 0.01, |v| <= 0.05",
-        _disturbance=_paper_uniform(sys),
+        _disturbance=paper_signal("uniform", sys),
     )

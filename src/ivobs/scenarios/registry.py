@@ -38,6 +38,7 @@ __all__ = [
     "get",
     "names",
     "options",
+    "paper_signal",
     "register_scenario",
     "summaries",
 ]
@@ -192,6 +193,20 @@ def bounds_box(system: LinearSystem | NonlinearSystem) -> Box:
     if not isinstance(box, Box):
         raise IvobsError("scenario: the disturbance bounds are not a constant box")
     return box
+
+
+def paper_signal(kind: str, system: LinearSystem | NonlinearSystem) -> DisturbanceFactory:
+    """The ``"paper"`` disturbance of a scenario whose paper gives no signal: the generic
+    ``kind`` signal (``"sinusoidal"`` or ``"uniform"``, seed 0 unless one is given) filling the
+    system's bounds (:func:`bounds_box`); other kinds are left to :meth:`Scenario.disturbance`."""
+
+    def factory(name: str, seed: Any, T: int) -> Any:
+        if name != "paper":
+            return None
+        seed = 0 if seed is None else seed
+        return disturbance(kind, bounds_box(system), T, seed if kind == "uniform" else None)
+
+    return factory
 
 
 def check_horizon(horizon: Any) -> int:

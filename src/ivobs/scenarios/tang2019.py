@@ -6,19 +6,23 @@ import numpy as np
 
 from ..model import LinearSystem
 from ..sets import Box
-from ..simulate import disturbance
-from .registry import Scenario, bounds_box, check_horizon, constant_input, register_scenario
+from .registry import Scenario, check_horizon, constant_input, paper_signal, register_scenario
 
 
-@register_scenario("servo-motor", "[Tang2019] §VII Ex. 1: DC servo motor, 3 states, 2 outputs")
-def _servo(horizon: int = 100) -> Scenario:
-    T = check_horizon(horizon)
+def servo_system() -> LinearSystem:
+    """The DC servo motor of [Tang2019, Section VII, Example 1] (``servo-motor``'s model)."""
     A = np.array([[1, 0.1, 0], [0, 0.8495, 0.4977], [0, -0.0357, 0.9995]])
     B = np.array([[0.0], [0.0], [0.0729]])
     C = np.array([[1.0, 0, 0], [0, 1.0, 0]])
     w_bar = np.array([0.0225, 0.0225, 0.0404])
     v_bar = np.array([0.0564, 0.0564])
-    sys = LinearSystem.from_process_measurement(A, B, C, np.eye(3), np.eye(2), w_bar, v_bar)
+    return LinearSystem.from_process_measurement(A, B, C, np.eye(3), np.eye(2), w_bar, v_bar)
+
+
+@register_scenario("servo-motor", "[Tang2019] §VII Ex. 1: DC servo motor, 3 states, 2 outputs")
+def _servo(horizon: int = 100) -> Scenario:
+    T = check_horizon(horizon)
+    sys = servo_system()
     ref = {
         "L1": np.array([[0.9998, 0.1000], [0.0157, 1.5371], [0.0315, 1.3453]]),
         "L2": np.array([[0.7582, 0.0784], [-2.5012, 0.6764], [-0.0040, -0.0360]]),
@@ -37,9 +41,7 @@ def _servo(horizon: int = 100) -> Scenario:
         "|w| <= (0.0225, 0.0225, 0.0404), |v| <= 0.0564, u = 2 V",
         reference=ref,
         state_names=("θ (rad)", "n (rad/s)", "i (A)"),
-        _disturbance=lambda kind, seed, T: (
-            disturbance("sinusoidal", bounds_box(sys), T) if kind == "paper" else None
-        ),
+        _disturbance=paper_signal("sinusoidal", sys),
         notes="the paper does not give its disturbance signals: 'paper' uses sinusoids filling "
         "the bounds (ivobs.sinusoidal_disturbance); horizon 100 steps chosen by ivobs",
     )
@@ -73,9 +75,7 @@ def _tang2(horizon: int = 50) -> Scenario:
         source="[Tang2019, Section VII, Example 2]",
         description="A = [[1, .5], [-.5, 1]], C = [0 1], |w| <= 0.1, |v| <= 0.1",
         reference=ref,
-        _disturbance=lambda kind, seed, T: (
-            disturbance("sinusoidal", bounds_box(sys), T) if kind == "paper" else None
-        ),
+        _disturbance=paper_signal("sinusoidal", sys),
         notes="the paper prints F = I2, which does not fit its scalar output y = x2 + F v; "
         "ivobs uses one noise channel F = 1 (this reproduces the paper's H∞ gain "
         "L = (-0.8479, 1.6739) to 5e-4); u = 0 and sinusoidal disturbances chosen by ivobs",

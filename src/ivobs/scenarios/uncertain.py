@@ -16,8 +16,8 @@ import numpy as np
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box
-from ..simulate import disturbance
-from .registry import Scenario, bounds_box, check_horizon, constant_input, register_scenario
+from .registry import Scenario, check_horizon, constant_input, paper_signal, register_scenario
+from .tang2019 import servo_system
 
 FRICTION = 0.1505
 """``Ts b / J`` of the servo motor's speed equation ([Tang2019]'s ``A22 = 1 − 0.1505``)."""
@@ -33,16 +33,11 @@ _KINDS = {"paper": "sinusoidal", "sinusoidal": "sinusoidal", "vertex": "vertex",
 def servo_uncertain_system() -> LinearSystem:
     """The servo motor of [Tang2019, Section VII, Example 1] with ``A22`` the interval
     ``1 − 0.1505 [0.95, 1.05]`` (module docstring)."""
-    A = np.array([[1, 0.1, 0], [0, 1 - FRICTION, 0.4977], [0, -0.0357, 0.9995]])
-    lo, hi = A.copy(), A.copy()
+    exact = servo_system()  # A22 = 1 - FRICTION
+    lo, hi = np.array(exact.A), np.array(exact.A)
     lo[1, 1] = 1 - (1 + SPREAD) * FRICTION
     hi[1, 1] = 1 - (1 - SPREAD) * FRICTION
-    B = np.array([[0.0], [0.0], [0.0729]])
-    C = np.array([[1.0, 0, 0], [0, 1.0, 0]])
-    w_bar = np.array([0.0225, 0.0225, 0.0404])
-    v_bar = np.array([0.0564, 0.0564])
-    exact = LinearSystem.from_process_measurement(A, B, C, np.eye(3), np.eye(2), w_bar, v_bar)
-    return LinearSystem(Box(lo, hi), B, C, E=exact.E, F=exact.F, d=exact.d)
+    return LinearSystem(Box(lo, hi), exact.B, exact.C, E=exact.E, F=exact.F, d=exact.d)
 
 
 @register_scenario(
@@ -75,9 +70,7 @@ def _servo_uncertain(horizon: int = 200) -> Scenario:
         "|v| <= 0.0564, u = 2 V",
         reference={"A22": (1 - (1 + SPREAD) * FRICTION, 1 - (1 - SPREAD) * FRICTION)},
         state_names=("θ (rad)", "n (rad/s)", "i (A)"),
-        _disturbance=lambda kind, seed, T: (
-            disturbance("sinusoidal", bounds_box(sys), T) if kind == "paper" else None
-        ),
+        _disturbance=paper_signal("sinusoidal", sys),
         _matrices=matrices,
         notes="'paper' moves A22 as a sinusoid across its interval and the disturbances as "
         "sinusoids filling their bounds; 'vertex' puts A22 and every disturbance on a bound, "

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from ..model import LinearSystem
@@ -25,9 +23,6 @@ def _dinh2019(horizon: int = 50) -> Scenario:
     k = np.arange(T)
     d_paper = np.column_stack([np.sin(k), np.sin(k.astype(float) ** 2)])
     x_true0 = np.array([2.3, 1.0])
-
-    def dist(kind: str, seed: Any, T: int) -> Any:
-        return d_paper if kind == "paper" else None
 
     ref = {
         "s": 2,
@@ -66,7 +61,7 @@ def _dinh2019(horizon: int = 50) -> Scenario:
         description="x+ = Ax + Bu + D1 d, y = Cx + D2 d, |d| <= 1, u = (1, 1), "
         "d = (sin k, sin k^2)",
         reference=ref,
-        _disturbance=dist,
+        _disturbance=lambda kind, seed, T: d_paper if kind == "paper" else None,
         notes="prior box x0 = x_true0 ± 1 chosen by ivobs (the fixed-time method does not use it); "
         "the paper's Mu prints a 5-entry first row, read as 6 zeros",
     )

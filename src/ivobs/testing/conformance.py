@@ -192,11 +192,7 @@ def _check_record(
 ) -> None:
     name = est.name
     res = est.run(U, Y)
-    bad = exact_misses(res.lower, res.upper, X)
-    if bad.size:
-        raise _fail(
-            name, plant, f"run(): {bad.size} boxes miss the exact state, first at step {bad[0]}"
-        )
+    _check_contains(name, plant, "run(): {} boxes miss the exact state", res.lower, res.upper, X)
     if np.any(res.inconsistent):
         k = int(np.flatnonzero(res.inconsistent)[0])
         raise _fail(
@@ -214,13 +210,7 @@ def _check_record(
             est, fresh = fresh, est
         box = est.step(U[k], Y[k])
         lo[k], hi[k] = box.lo, box.hi
-    bad = exact_misses(lo, hi, X)
-    if bad.size:
-        raise _fail(
-            name,
-            plant,
-            f"step() with state round trips: {bad.size} boxes miss, first at step {bad[0]}",
-        )
+    _check_contains(name, plant, "step() with state round trips: {} boxes miss", lo, hi, X)
     if not (_close(lo, res.lower) and _close(hi, res.upper)):
         k = int(np.argmax(np.any(~np.isclose(lo, res.lower, equal_nan=True), axis=1)))
         raise _fail(name, plant, f"step() and run() disagree beyond rounding, first at step {k}")
@@ -232,14 +222,20 @@ def _check_missing(
     Ym = Y.copy()
     Ym[rng.uniform(size=Y.shape) < 0.1] = np.nan
     res = est.run(U, Ym)
-    bad = exact_misses(res.lower, res.upper, X)
-    if bad.size:
-        raise _fail(
-            est.name, plant, f"missing samples: {bad.size} boxes miss, first at step {bad[0]}"
-        )
+    _check_contains(est.name, plant, "missing samples: {} boxes miss", res.lower, res.upper, X)
     vf = est.valid_from
     if not np.all(np.isfinite(res.lower[vf:])) or not np.all(np.isfinite(res.upper[vf:])):
         raise _fail(est.name, plant, "missing samples: non-finite bounds after valid_from")
+
+
+def _check_contains(
+    name: str, plant: str, what: str, lo: np.ndarray, hi: np.ndarray, X: ExactStates
+) -> None:
+    """Every box ``[lo, hi]`` contains the exact state; else ``what`` (its ``{}``: the number
+    of boxes that miss) and the first step."""
+    bad = exact_misses(lo, hi, X)
+    if bad.size:
+        raise _fail(name, plant, f"{what.format(bad.size)}, first at step {bad[0]}")
 
 
 def _check_bad_input(est: Any, plant: str, sys: LinearSystem) -> None:

@@ -79,9 +79,10 @@ def _around(N: int, s: int) -> tuple[float, float]:
         q = _nearest(N, s)
     except OverflowError:
         return (_MAX, math.inf) if N > 0 else (-math.inf, -_MAX)
-    if not _leq(q, N, s):
+    c = _sign(q, N, s)
+    if c > 0:
         return math.nextafter(q, -math.inf), q
-    return (q, q) if _geq(q, N, s) else (q, math.nextafter(q, math.inf))
+    return (q, q) if c == 0 else (q, math.nextafter(q, math.inf))
 
 
 @dataclass(frozen=True)
@@ -101,13 +102,14 @@ class ExactStates:
         return ExactStates(self.lo[steps], self.hi[steps])
 
 
-def _leq(a: float, N: int, s: int) -> bool:
-    """``a <= N 2^s`` exactly (``a`` a double, possibly infinite)."""
+def _sign(a: float, N: int, s: int) -> int:
+    """The sign of ``a − N 2^s``, exactly (``a`` a double, possibly infinite)."""
     if math.isinf(a):
-        return a < 0
+        return 1 if a > 0 else -1
     m, e = _split(a)
     t = min(e, s)
-    return m << (e - t) <= N << (s - t)
+    diff = (m << (e - t)) - (N << (s - t))
+    return (diff > 0) - (diff < 0)
 
 
 class ExactLinear:
@@ -170,19 +172,10 @@ class ExactLinear:
         """Per component, whether ``lo <= x <= hi`` holds exactly for the current state."""
         N, s = self.x
         out = [
-            _leq(float(a), v, s) and _geq(float(b), v, s)
+            _sign(float(a), v, s) <= 0 <= _sign(float(b), v, s)
             for a, b, v in zip(np.ravel(lo), np.ravel(hi), N)
         ]
         return np.array(out, dtype=bool)
-
-
-def _geq(b: float, N: int, s: int) -> bool:
-    """``b >= N 2^s`` exactly (the upper end of a box)."""
-    if math.isinf(b):
-        return b > 0
-    m, e = _split(b)
-    t = min(e, s)
-    return m << (e - t) >= N << (s - t)
 
 
 def exact_run(

@@ -17,10 +17,8 @@ from typing import Any
 
 from ... import scenarios
 from ...errors import IvobsError
-from ...estimators import get as get_method
-from ...estimators import methods as all_methods
-from ...model import NonlinearSystem
 from ...result import Estimate
+from ..comparison import applicable_methods
 from ..plot import plot_estimates
 from .common import legend_below, pyplot, run_checked
 
@@ -47,17 +45,13 @@ Hénon comparison) take about 13 s of CPU time together (measured: docs/figures.
 
 
 def capable_methods(sys: Any) -> list[str]:
-    """The methods whose class accepts a system of ``sys``'s kind, in
-    :func:`ivobs.estimators.methods` order, without ``intersect`` (it combines other methods):
+    """The methods that accept ``sys`` (:func:`~ivobs.report.comparison.applicable_methods`:
     ``supports_nonlinear`` for a nonlinear system, ``supports_uncertain`` for one with interval
-    matrices, every method otherwise (a method may still refuse a particular system at
-    :func:`~ivobs.make_estimator`, e.g. the ``nl-*`` methods bounds that vary with ``y``)."""
-    names = [m for m in all_methods() if m != "intersect"]
-    if isinstance(sys, NonlinearSystem):
-        return [m for m in names if get_method(m).supports_nonlinear]
-    if getattr(sys, "is_uncertain", False):
-        return [m for m in names if get_method(m).supports_uncertain]
-    return names
+    matrices, and the time base and time variation), in :func:`ivobs.estimators.methods` order,
+    without ``intersect`` (it combines other methods); a method may still refuse a particular
+    system at :func:`~ivobs.make_estimator` (e.g. the ``nl-*`` methods bounds that vary with
+    ``y``)."""
+    return [m for m in applicable_methods(sys)[0] if m != "intersect"]
 
 
 def _check_name(name: str) -> str:
