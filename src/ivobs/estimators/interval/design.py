@@ -203,7 +203,7 @@ def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalD
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
             _lp_size(sys, who)
-            L, _ = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
+            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
         else:
             check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
             L = nonnegative_gain(A, C, who)
@@ -226,7 +226,7 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
             _lp_size(sys, who)
-            L, _ = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
+            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
             return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
         what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
         check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
