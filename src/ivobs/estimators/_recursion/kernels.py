@@ -9,9 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from ...sets.rounding import upper
+
 __all__ = [
+    "abs_max",
     "is_shared",
     "matrix_product",
+    "norm_inf",
     "redo_streams",
     "scratch",
     "within_band",
@@ -94,6 +98,24 @@ def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.
     else:
         out.reshape(rows, p)[...] = X.reshape(rows, m) @ Mt
     return out
+
+
+def abs_max(a: np.ndarray) -> np.ndarray:
+    """``max_i |a_i|`` over the last axis (0 when it is empty): exact. Short rows (the states of
+    a small system) column by column: NumPy's reduction along a short last axis is slow."""
+    n = a.shape[-1]
+    if n > 16:
+        big: np.ndarray = np.abs(a).max(axis=-1)
+        return big
+    out = np.zeros(a.shape[:-1])
+    for j in range(n):
+        np.maximum(out, np.abs(a[..., j]), out=out)
+    return out
+
+
+def norm_inf(M: np.ndarray) -> float:
+    """``‖M‖∞`` (the largest row sum of ``|M|``) rounded up (0 for an empty matrix)."""
+    return float(upper(np.max(np.abs(M).sum(axis=1), initial=0.0), max(M.shape[-1], 1)))
 
 
 def within_band(x: np.ndarray, offset: np.ndarray | None, radius: np.ndarray) -> bool:
