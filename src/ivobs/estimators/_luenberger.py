@@ -324,9 +324,7 @@ class ObserverEstimator(Estimator):
         A, B, C, D, E, F = self._mats
         nx, nu_, nd, ny = A.shape[0], B.shape[1], E.shape[1], C.shape[0]
         if self._filter is None:
-            self._filter = LinearFilter(
-                g.M, [g.L, B - g.L @ D], [np.eye(nx)], g=E @ c - g.L @ (F @ c)
-            )
+            self._filter = LinearFilter(g.M, [g.L, B - g.L @ D], E @ c - g.L @ (F @ c))
         xh = self._filter.run([y, u], x0=self._free.x0)[0]
         Oc = self._O[:, nx + nu_ :] @ c  # [E c; F c]
         W = g.W
@@ -349,7 +347,7 @@ class ObserverEstimator(Estimator):
             if not refine:
                 return None
             if self._refiner is None:
-                self._refiner = LinearFilter(g.M, [np.eye(nx)], [np.eye(nx)])
+                self._refiner = LinearFilter(g.M, [np.eye(nx)])
             xh = xh - self._refiner.run([res])[0]  # d[k+1] = M d[k] + residual[k], d[0] = 0
         return xh, nu, res, err
 

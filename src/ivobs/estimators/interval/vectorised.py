@@ -251,11 +251,11 @@ class VectorPath:
         """The centres ``ĉ`` ``(..., T, n)`` of the record or batch (one filter pass)."""
         m, n = self.ops.full, self.ops.nx
         if tv:
-            filt = SplitFilter(m.Q, [m.Lz, m.Bz, np.eye(n)], [np.eye(n)])
+            filt = SplitFilter(m.Q, [m.Lz, m.Bz, np.eye(n)])
             sig = [y, u, gc]
         else:
             if self._filter is None:
-                self._filter = SplitFilter(m.Q, [m.Lz, m.Bz], [np.eye(n)], g=gc)
+                self._filter = SplitFilter(m.Q, [m.Lz, m.Bz], gc)
             filt, sig = self._filter, [y, u]
         (c,), shared = filt.run(sig, x0=c0)
         if shared is not None:
@@ -272,9 +272,9 @@ class VectorPath:
         m, n = self.ops.full, self.ops.nx
         aQ = np.abs(m.Q)
         if tv:
-            rad = LinearFilter(aQ, [np.eye(n)], [np.eye(n)]).run([gr], x0=r0)[0]
+            rad = LinearFilter(aQ, [np.eye(n)]).run([gr], x0=r0)[0]
         else:
-            rad = LinearFilter(aQ, [], [np.eye(n)], g=gr).run([], T=T, x0=r0)[0]
+            rad = LinearFilter(aQ, [], gr).run([], T=T, x0=r0)[0]
         rad[0] = r0
         nxt = matrix_product(rad[:-1], aQ.T)
         nxt += gr[:-1] if tv else gr

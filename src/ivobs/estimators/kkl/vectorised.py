@@ -78,10 +78,10 @@ class VectorisedLTI:
         c0, r0 = mid_rad(zlo0, zhi0)
         # (3.a): the centre (data) and the radius (data-free), by the filter
         if const:
-            cf = LinearFilter(Az, [Bz, Lu], [np.eye(Az.shape[0])], g=gc)
+            cf = LinearFilter(Az, [Bz, Lu], gc)
             chat = cf.run([y, u], x0=c0)[0]
         else:
-            cf = LinearFilter(Az, [Bz, Lu, np.eye(Az.shape[0])], [np.eye(Az.shape[0])])
+            cf = LinearFilter(Az, [Bz, Lu, np.eye(Az.shape[0])])
             chat = cf.run([y, u, np.broadcast_to(gc, (*y.shape[:-1], gc.shape[-1]))], x0=c0)[0]
         rhat, rdef = self.radius(Tn, r0, gr, const)
         cabs = np.abs(chat)
@@ -115,9 +115,9 @@ class VectorisedLTI:
         Az = self.ob.design.A_z
         nz = Az.shape[0]
         if const:
-            rhat = LinearFilter(Az, [], [np.eye(nz)], g=gr).run([], T=Tn, x0=r0)[0]
+            rhat = LinearFilter(Az, [], gr).run([], T=Tn, x0=r0)[0]
         else:
-            rhat = LinearFilter(Az, [np.eye(nz)], [np.eye(nz)]).run([gr], x0=r0)[0]
+            rhat = LinearFilter(Az, [np.eye(nz)]).run([gr], x0=r0)[0]
         nxt = rhat[1:]
         prev = rhat[:-1] @ Az.T
         g = gr if const else gr[:-1]
