@@ -91,13 +91,16 @@ _SCALES = (
 )
 
 
-def check_design_size(sys: LinearSystem, who: str, step: str) -> None:
-    """:class:`DesignError` when a dense design step would run on more than
-    :data:`MAX_DENSE_DESIGN` states, pointing to what scales."""
-    if sys.nx > MAX_DENSE_DESIGN:
+def check_design_size(
+    sys: LinearSystem, who: str, step: str, limit: int = MAX_DENSE_DESIGN
+) -> None:
+    """:class:`DesignError` when a design step with ``O(nx²)`` variables or ``O(nx³)`` work would
+    run on more than ``limit`` states (:data:`MAX_DENSE_DESIGN`; the sparse width LP:
+    :data:`~ivobs.design.width_lp.MAX_LP_STATES`), pointing to what scales."""
+    if sys.nx > limit:
         raise DesignError(
-            f"{who}: {step} is a dense design step (O(nx^2) variables or O(nx^3) work) and does "
-            f"not scale to nx = {sys.nx} > {MAX_DENSE_DESIGN} states; {_SCALES}"
+            f"{who}: {step} has O(nx^2) variables or O(nx^3) work and does not scale to "
+            f"nx = {sys.nx} > {limit} states; {_SCALES}"
         )
 
 
@@ -202,7 +205,7 @@ def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalD
             raise IvobsError(f"gain: expected 'width', 'lmi+width' or 'lmi', got {gain!r}")
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
-            _lp_size(sys, who)
+            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
             L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
         else:
             check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
@@ -225,7 +228,7 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
             )
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
-            _lp_size(sys, who)
+            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
             L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
             return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
         what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
@@ -252,16 +255,6 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
     else:
         gain = "given"
     return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
-
-
-def _lp_size(sys: LinearSystem, who: str) -> None:
-    """The width LP is sparse but has ``O(nx²)`` variables: refused above
-    :data:`~ivobs.design.width_lp.MAX_LP_STATES` states."""
-    if sys.nx > MAX_LP_STATES:
-        raise DesignError(
-            f"{who}: the width linear program has O(nx^2) variables and does not scale to "
-            f"nx = {sys.nx} > {MAX_LP_STATES} states; {_SCALES}"
-        )
 
 
 D = TypeVar("D", IntervalDesign, SplitDesign)
