@@ -62,7 +62,7 @@ from ...sets.rounding import ETA, UNIT_ROUNDOFF, down, mid_rad, product_error, u
 from ..state import Step
 from .design import KKLDesign, Transform, finite, left_inverse
 from .flow import K, Passage, ltv_passage, minus, target_exponential
-from .observer import Observer, ZState, recover
+from .observer import Observer, ZState, prior_box, recover
 from .periods import mismatch, period_key
 from .terms import Consistency, consistency
 from .traced import TimeFunction, trace
@@ -447,7 +447,7 @@ class ContinuousObserver(Observer[ContinuousState]):
             )
         lo, hi = box
         if k == 0:
-            lo, hi = self.first_box(lo, hi)
+            lo, hi = prior_box(self.x0, lo, hi)
         new = ContinuousState(
             T=T, zlo=zlo, zhi=zhi, t_prev=float(t_k), u_prev=u_k.copy(), dlo_prev=d.lo.copy(),
             dhi_prev=d.hi.copy(), xlo=lo.copy(), xhi=hi.copy(), k=k,

@@ -53,7 +53,7 @@ from ...sets import Box, image_bounds
 from ...sets.rounding import down, product_error, up, upper
 from ..state import Step, evolve
 from .design import KKLDesign, Transform, TransformSequence, finite, left_inverse
-from .observer import Observer, ZState, recover
+from .observer import Observer, ZState, prior_box, recover
 from .terms import Consistency, Terms, combination, consistency, make_terms
 
 __all__ = ["Discrete", "DiscreteState"]
@@ -181,7 +181,7 @@ class Discrete(Observer[DiscreteState]):
         else:  # T[k] not left-invertible (time-varying): the prediction alone
             lo, hi = self._none
         if k == 0:
-            lo, hi = self.first_box(lo, hi)
+            lo, hi = prior_box(self.x0, lo, hi)
         plo, phi = state.xlo, state.xhi
         cut = state.carried and bool(np.count_nonzero(plo > lo) or np.count_nonzero(phi < hi))
         if cut:

@@ -106,9 +106,6 @@ class Observer(Generic[S]):
         nx = self.sys.nx
         return np.full(nx, -np.inf), np.full(nx, np.inf)
 
-    def first_box(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return prior_box(self.x0, lo, hi)
-
     def bounds_d(self, k: int, y_k: np.ndarray) -> Box:
         """The bounds of ``d[k]`` (constant ones kept)."""
         return self._dfix if self._dfix is not None else self.sys.d_at(k, y_k)
