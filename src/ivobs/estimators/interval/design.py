@@ -47,13 +47,8 @@ __all__ = [
 
 
 @dataclass(frozen=True)
-class IntervalDesign(Design):
-    """``L``: gain; ``D = A − LC`` ([Efimov2013]'s notation; nonnegative); ``spectral_radius``
-    of ``D``; ``gain``: how ``L`` was obtained (``'lmi'``, ``'lmi+width'``, ``'given'``);
-    ``steady_width``: ``(I − D)⁻¹ |E − LF| Δ``, the limit of the bounds' width for constant
-    bounds (None for callable bounds); ``missing_radius``: ``ρ(|A − L_(j) C|)`` for each output
-    ``j`` missing alone (``L_(j)``: column ``j`` of ``L`` zeroed, the gain used then), the growth
-    rate of the width during a gap of that output (None for sparse systems)."""
+class _GainDesign(Design):
+    """The fields of :class:`IntervalDesign` and :class:`SplitDesign`."""
 
     L: np.ndarray
     D: np.ndarray
@@ -64,18 +59,21 @@ class IntervalDesign(Design):
 
 
 @dataclass(frozen=True)
-class SplitDesign(Design):
+class IntervalDesign(_GainDesign):
+    """``L``: gain; ``D = A − LC`` ([Efimov2013]'s notation; nonnegative); ``spectral_radius``
+    of ``D``; ``gain``: how ``L`` was obtained (``'lmi'``, ``'lmi+width'``, ``'given'``);
+    ``steady_width``: ``(I − D)⁻¹ |E − LF| Δ``, the limit of the bounds' width for constant
+    bounds (None for callable bounds); ``missing_radius``: ``ρ(|A − L_(j) C|)`` for each output
+    ``j`` missing alone (``L_(j)``: column ``j`` of ``L`` zeroed, the gain used then), the growth
+    rate of the width during a gap of that output (None for sparse systems)."""
+
+
+@dataclass(frozen=True)
+class SplitDesign(_GainDesign):
     """``L``: gain; ``D = A − LC`` (any sign); ``spectral_radius`` of ``|D| = D⁺ + D⁻``;
     ``gain``: ``'width'``, ``'margin'``, ``'lmi'`` or ``'given'``; ``steady_width``:
     ``(I − |D|)⁻¹ |E − LF| Δ`` (None for callable bounds); ``missing_radius``: as for
     :class:`IntervalDesign`."""
-
-    L: np.ndarray
-    D: np.ndarray
-    spectral_radius: float
-    gain: str
-    steady_width: np.ndarray | None
-    missing_radius: np.ndarray | None = None
 
 
 MAX_DENSE_DESIGN = MAX_LMI_STATES
