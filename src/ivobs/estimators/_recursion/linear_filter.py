@@ -97,7 +97,7 @@ class LinearFilter:
         elif self.blocks:
             xT = self._run_blocks(vs, T, b, x0b, X)
         else:
-            xT = self._run_loop(vs, T, b, x0b, X)
+            xT = self._run_loop(vs, T, x0b, X)
         res = [X.reshape(*lead, T, self.n)]
         if final:
             res.append(xT.reshape(*lead, self.n))
@@ -213,9 +213,7 @@ class LinearFilter:
         S[...] = states
         return last
 
-    def _run_loop(
-        self, vs: list[np.ndarray], T: int, b: int, x0: np.ndarray, X: np.ndarray
-    ) -> np.ndarray:
+    def _run_loop(self, vs: list[np.ndarray], T: int, x0: np.ndarray, X: np.ndarray) -> np.ndarray:
         """Large or sparse state: the states ``X`` and ``x[T]``, one (sparse) product per step;
         the input terms are precomputed in the state buffer (``X[:, k+1] = Σ W v[k] + g``
         first, then ``X[:, k+1] += M X[:, k]``)."""

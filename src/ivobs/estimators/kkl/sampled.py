@@ -127,7 +127,7 @@ class ContinuousLTI(ContinuousObserver):
             return super().matrices(ps, T, Tp, tag)
         fm: FlowMatrices | None = ps.kept.get("anchored")
         if fm is None:  # T' = T_h − h B_z C every interval: kept with the period
-            fm = ps.kept["anchored"] = flow_matrices(ps, Tp, tag.Xmag, forcing(ps, Tp, self.hold))
+            fm = ps.kept["anchored"] = flow_matrices(ps, tag.Xmag, forcing(ps, Tp, self.hold))
         return fm
 
     def transform_at(self, T: np.ndarray, tag: Any) -> Transform:
