@@ -131,9 +131,7 @@ class ContinuousLTI(ContinuousObserver):
         return fm
 
     def transform_at(self, T: np.ndarray, tag: Any) -> Transform:
-        if isinstance(tag, Anchor):
-            return tag.trm
-        return left_inverse(T, self.max_cond)
+        return tag.trm if isinstance(tag, Anchor) else super().transform_at(T, tag)
 
     def after_jump(
         self,
