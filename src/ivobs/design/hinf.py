@@ -228,24 +228,15 @@ def designed_gain(sys: Any, L: Any, who: str, gain: str | None = None) -> Design
             f"{who}: no observer gain could be designed ({'; '.join(failed)}); pass an "
             "explicit gain L=..."
         )
-    works = _working(gain, A, C, E, F, r)
-    hint = f"; gain={works!r} designs a stabilising gain for this system" if works else ""
-    raise DesignError(f"{failed[0]}{hint}") from None
-
-
-def _working(
-    failed: str, A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, r: np.ndarray | None
-) -> str | None:
-    """The first design of :data:`GAINS` other than ``failed`` that succeeds (for a message)."""
-    for g in GAINS:
-        if g == failed:
-            continue
-        try:
-            _cached_design(g, A, C, E, F, r)
-        except DesignError:
-            continue
-        return g
-    return None
+    for g in GAINS:  # the first other design that succeeds, named in the message
+        if g != gain:
+            try:
+                _cached_design(g, A, C, E, F, r)
+            except DesignError:
+                continue
+            hint = f"; gain={g!r} designs a stabilising gain for this system"
+            raise DesignError(f"{failed[0]}{hint}") from None
+    raise DesignError(failed[0]) from None
 
 
 def _cached_design(
