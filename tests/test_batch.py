@@ -14,42 +14,27 @@ import pytest
 from scipy.sparse import csr_matrix
 
 import ivobs
-from ivobs.estimators._recursion import (
-    LinearFilter,
-    SplitFilter,
-    affine_recursion,
-    matrix_product,
-    scratch,
-    within_band,
-)
+from ivobs.estimators._recursion import LinearFilter, SplitFilter, matrix_product, scratch
 from ivobs.testing import adversarial_run, random_system
 
 FAST = ("reachability", "interval", "interval-split", "interval-transformed", "fixed-time", "kkl")
 
 
-def _reference(M, W, H, J, g, h, v, x0):
-    """The filter's definition, step by step, for one stream."""
+def _reference(M, W, g, v, x0):
+    """The filter's definition, step by step, for one stream: the states and ``x[T]``."""
     T = v[0].shape[0]
-    outs = [np.empty((T, Hj.shape[0])) for Hj in H]
+    X = np.empty((T, M.shape[0]))
     x = np.array(x0, dtype=float)
     for k in range(T):
-        for j, Hj in enumerate(H):
-            o = Hj @ x + (0.0 if h[j] is None else h[j])
-            for s, a in enumerate(v):
-                if J[j][s] is not None:
-                    o = o + J[j][s] @ a[k]
-            outs[j][k] = o
+        X[k] = x
         x = M @ x + sum(Ws @ a[k] for Ws, a in zip(W, v)) + (0.0 if g is None else g)
-    return outs, x
+    return X, x
 
 
 def _random_filter(rng, n, stable=0.95):
     M = rng.normal(size=(n, n))
     M *= stable / np.max(np.abs(np.linalg.eigvals(M)))
-    W = [rng.normal(size=(n, 2)), rng.normal(size=(n, 1))]
-    H = [np.eye(n), rng.normal(size=(2, n))]
-    J = [[None, None], [rng.normal(size=(2, 2)), rng.normal(size=(2, 1))]]
-    return M, W, H, J, rng.normal(size=n), [None, rng.normal(size=2)]
+    return M, [rng.normal(size=(n, 2)), rng.normal(size=(n, 1))], rng.normal(size=n)
 
 
 @pytest.mark.parametrize(
@@ -60,23 +45,49 @@ def test_linear_filter_matches_its_definition(n, T, B):
     # blocks (small n) with tails, batches (block-start loop) and one long record (block starts
     # by the same method, recursively), the loop form for n = 30
     rng = np.random.default_rng(n * T)
-    M, W, H, J, g, h = _random_filter(rng, n)
+    M, W, g = _random_filter(rng, n)
     shape = (T,) if B is None else (B, T)
     v = [rng.normal(size=(*shape, 2)), rng.normal(size=(*shape, 1))]
     x0 = rng.normal(size=n)
-    filt = LinearFilter(M, W, H, J, g, h)
+    filt = LinearFilter(M, W, g)
     assert filt.blocks == (n <= 24)
-    *got, xT = filt.run(v, x0=x0, final=True)
+    got, xT = filt.run(v, x0=x0, final=True)
     for b in (0,) if B is None else (0, B - 1):
         vb = v if B is None else [a[b] for a in v]
-        want, x_end = _reference(M, W, H, J, g, h, vb, x0)
-        for o, w in zip(got, want):
-            ob = o if B is None else o[b]
-            np.testing.assert_allclose(ob, w, rtol=1e-9, atol=1e-9 * (1 + np.abs(w).max()))
+        want, x_end = _reference(M, W, g, vb, x0)
+        gb = got if B is None else got[b]
+        np.testing.assert_allclose(gb, want, rtol=1e-9, atol=1e-9 * (1 + np.abs(want).max()))
         np.testing.assert_allclose(xT if B is None else xT[b], x_end, rtol=1e-9, atol=1e-9)
 
 
-def test_sparse_filter_and_states_match_the_dense_loop():
+@pytest.mark.parametrize("T", [1, 5, 33, 1000, 4097])
+def test_block_scan_matches_the_loop(T):
+    rng = np.random.default_rng(T)
+    M = rng.normal(size=(3, 3))
+    M *= 0.95 / np.max(np.abs(np.linalg.eigvals(M)))
+    v = rng.normal(size=(T, 3))
+    x0 = rng.normal(size=3)
+    X, xT = LinearFilter(M, [np.eye(3)]).run([v], x0=x0, final=True)
+    want, x_end = _reference(M, [np.eye(3)], None, [v], x0)
+    np.testing.assert_allclose(np.vstack([X, xT]), np.vstack([want, x_end]), rtol=1e-10,
+                               atol=1e-12)  # fmt: skip
+
+
+def test_batches_and_unstable_matrices():
+    rng = np.random.default_rng(0)
+    M = np.array([[1.1, 0.2], [0.0, 0.9]])  # unstable
+    v = rng.normal(size=(4, 50, 2))
+    X = LinearFilter(M, [np.eye(2)]).run([v])[0]
+    for b in range(4):
+        np.testing.assert_allclose(X[b], _reference(M, [np.eye(2)], None, [v[b]], np.zeros(2))[0],
+                                   rtol=1e-12)  # fmt: skip
+    Ms = 0.5 * M
+    Xs = LinearFilter(Ms, [np.eye(2)]).run([v[:2]], x0=np.ones((2, 2)))[0]
+    want = _reference(Ms, [np.eye(2)], None, [v[1]], np.ones(2))[0]
+    np.testing.assert_allclose(Xs[1], want, rtol=1e-10, atol=1e-12)
+
+
+def test_sparse_filter_matches_the_dense_loop():
     rng = np.random.default_rng(3)
     n, T = 40, 300
     M = (
@@ -87,32 +98,30 @@ def test_sparse_filter_and_states_match_the_dense_loop():
     W = [rng.normal(size=(n, 2))]
     g = rng.normal(size=n)
     v = [rng.normal(size=(T, 2))]
-    dense = LinearFilter(M, W, [np.eye(n)], g=g)
-    sparse = LinearFilter(csr_matrix(M), W, [np.eye(n)], g=g)
+    dense = LinearFilter(M, W, g)
+    sparse = LinearFilter(csr_matrix(M), W, g)
     assert sparse.sparse and not sparse.blocks
     want = dense.run(v, x0=np.ones(n))[0]
-    np.testing.assert_allclose(sparse.states(v, x0=np.ones(n)), want, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(sparse.run(v, x0=np.ones(n))[0], want, rtol=1e-12, atol=1e-12)
     vb = [np.stack([v[0], 2 * v[0]])]  # a batch, sparse: one product per step for all streams
-    Xb = sparse.states(vb, x0=np.ones(n))
+    Xb = sparse.run(vb, x0=np.ones(n))[0]
     np.testing.assert_allclose(Xb[0], want, rtol=1e-12, atol=1e-12)
 
 
 def test_split_filter_shared_plus_data_is_the_whole_response():
     rng = np.random.default_rng(5)
-    M, W, H, J, g, h = _random_filter(rng, 3)
+    M, W, g = _random_filter(rng, 3)
     y = rng.normal(size=(4, 200, 2))
     u = np.broadcast_to(rng.normal(size=(200, 1)), (4, 200, 1))  # one input for the batch
     x0 = rng.normal(size=3)
-    split = SplitFilter(M, W, H, J, g, h)
-    data, shared = split.run([y, u], x0=x0)
+    split = SplitFilter(M, W, g)
+    (data,), shared = split.run([y, u], x0=x0)
     assert shared is not None and shared[0].shape == (200, 3)
-    whole = LinearFilter(M, W, H, J, g, h).run([y, np.ascontiguousarray(u)], x0=x0)
-    for d, s, w in zip(data, shared, whole):
-        np.testing.assert_allclose(d + s, w, rtol=1e-10, atol=1e-12)
+    whole = LinearFilter(M, W, g).run([y, np.ascontiguousarray(u)], x0=x0)[0]
+    np.testing.assert_allclose(data + shared[0], whole, rtol=1e-10, atol=1e-12)
     single, none = split.run([y[1], u[1]], x0=x0)  # one record: nothing to share
     assert none is None
-    np.testing.assert_allclose(single[1], whole[1][1], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(single[0], whole[1], rtol=1e-10, atol=1e-12)
 
 
 def test_helpers():
@@ -120,16 +129,9 @@ def test_helpers():
     Mt = np.array([[1.0, 2.0], [0.5, 0.0], [-1.0, 3.0]])
     np.testing.assert_allclose(matrix_product(X, Mt), X @ Mt)  # narrow: kron(I_8, Mt) path
     np.testing.assert_allclose(matrix_product(X[:5], csr_matrix(Mt)), X[:5] @ Mt)
-    x = np.array([[0.5, -1.0], [2.0, 0.0]])
-    assert within_band(x, None, np.array([[0.5, 1.0], [2.0, 0.0]]))
-    assert not within_band(x, np.array([0.0, 0.1]), np.array([[0.5, 1.0], [2.0, 0.0]]))
     a = scratch(test_helpers, "t", (3, 4))
     assert scratch(test_helpers, "t", (3, 4)) is a  # reused between calls
     assert scratch(test_helpers, "t", (3, 5)) is not a
-    M = np.array([[0.5, 0.1], [0.0, 0.9]])
-    X = affine_recursion(M, np.ones((3, 50, 2)), np.zeros(2))
-    assert X.shape == (3, 51, 2)
-    np.testing.assert_allclose(X[0, 2], M @ np.ones(2) + np.ones(2))
 
 
 def _streams(sc, B, T, seed=0):

@@ -5,7 +5,7 @@ import pytest
 
 import ivobs
 from ivobs import DesignError, IvobsError
-from ivobs.design.hinf import check_gain, hinf_gain, observer_gain
+from ivobs.design.hinf import check_gain, designed_gain, hinf_gain
 
 
 def hinf_norm(M, G, n=2001):
@@ -88,14 +88,14 @@ def test_bad_shapes_and_sizes():
 def test_user_gain_is_checked():
     sc = ivobs.scenarios.get("servo-motor")
     s = sc.system
-    _, gamma, P, rho = observer_gain(s, sc.reference["L1"], "test")
-    assert gamma is None and P is None
-    assert rho == pytest.approx(0.31168, abs=1e-4)
+    d = designed_gain(s, sc.reference["L1"], "test")
+    assert d.gamma is None and d.P is None
+    assert d.rho == pytest.approx(0.31168, abs=1e-4)
     with pytest.raises(DesignError, match=r"spectral radius 1 >= 1") as info:
-        observer_gain(s, np.zeros((3, 2)), "test")  # A itself has eigenvalue 1
+        designed_gain(s, np.zeros((3, 2)), "test")  # A itself has eigenvalue 1
     assert "A - LC is not Schur" in str(info.value)
     with pytest.raises(IvobsError, match=r"L: expected shape \(3, 2\)"):
-        observer_gain(s, np.zeros((2, 3)), "test")
+        designed_gain(s, np.zeros((2, 3)), "test")
     assert check_gain(s.A, s.C, sc.reference["L2"], "x") == pytest.approx(0.99977, abs=1e-4)
 
 

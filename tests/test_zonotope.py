@@ -183,7 +183,7 @@ def test_inconsistency_state_and_bad_inputs():
 # --- orders whose reduced recursion is not bounded are refused ------------------------------
 def _summed_widths(est, T):
     """Summed widths ``2 Σ |H[k]| 1`` of the data-independent recursion (34b), k < T."""
-    return 2.0 * est._free_radii(T).sum(axis=1)
+    return 2.0 * est._free_bounds().arrays(T)[0].sum(axis=1)
 
 
 @pytest.mark.parametrize("gain", ["L1", "default"])

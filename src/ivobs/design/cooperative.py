@@ -307,7 +307,7 @@ def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     """min s s.t. T v <= s v, T >= ±(A − LC): ``ρ(|A − LC|) <= s``."""
     n, p = A.shape[0], C.shape[0]
     lp = LP(n, p, {"T": n * n, "s": 1})
-    A1, b1 = abs_bound_rows(lp.lin_D(A, C), lp.aux("T", n * n))
+    A1, b1 = abs_bound_rows(lp.lin(A, C), lp.aux("T", n * n))
     # (T v)_i − s v_i <= 0
     A2 = np.zeros((n, lp.size))
     for i in range(n):
@@ -404,8 +404,8 @@ def refine_width(
     if m == 0 or not np.all(np.isfinite(w)) or not np.any(delta > 0):
         return L
     lp = LP(n, p, {"T": n * n, "TG": n * m})
-    D_lin = lp.lin_D(A, C)
-    G_rows, G_b = abs_bound_rows(lp.lin_G(E, F), lp.aux("TG", n * m))
+    D_lin = lp.lin(A, C)
+    G_rows, G_b = abs_bound_rows(lp.lin(E, F), lp.aux("TG", n * m))
     if nonnegative:  # D >= 0 and T = D: T − D = 0 expressed as two inequalities
         coef, const = D_lin
         aux = lp.aux("T", n * n)

@@ -43,24 +43,16 @@ class LP:
             size += cols
         self.size = size
 
-    def lin_D(self, A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``D_ij = A_ij − Σ_l L_il C_lj`` as rows ``(coef, const)`` for ``vec(D)`` row-major."""
+    def lin(self, A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``A_ij − Σ_l L_il C_lj`` as rows ``(coef, const)``, row-major in ``(i, j)``: ``D = A −
+        LC`` for ``(A, C)``, ``G = E − LF`` for ``(E, F)``."""
         n, p = self.n, self.p
-        coef = np.zeros((n * n, self.size))
-        for i in range(n):
-            for j in range(n):
-                coef[i * n + j, i * p : (i + 1) * p] = -C[:, j]
-        return coef, A.ravel().copy()
-
-    def lin_G(self, E: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``G_ij = E_ij − Σ_l L_il F_lj`` (``vec(G)`` row-major)."""
-        n, p = self.n, self.p
-        m = E.shape[1]
+        m = A.shape[1]
         coef = np.zeros((n * m, self.size))
         for i in range(n):
             for j in range(m):
-                coef[i * m + j, i * p : (i + 1) * p] = -F[:, j]
-        return coef, E.ravel().copy()
+                coef[i * m + j, i * p : (i + 1) * p] = -C[:, j]
+        return coef, A.ravel().copy()
 
     def aux(self, name: str, rows: int) -> np.ndarray:
         coef = np.zeros((rows, self.size))

@@ -1,5 +1,5 @@
 """H∞ observer gain [Tang2019, Theorem 1, problem (20)]: by Riccati equations (default) or by
-the LMI; and the gain of the Luenberger-type estimators (:func:`observer_gain`).
+the LMI; and the gain of the Luenberger-type estimators (:func:`designed_gain`).
 
 ``method="riccati"`` (default, :func:`ivobs.design.riccati.hinf_riccati_gain`): bisection on
 ``γ`` with the H∞ Riccati equation, ``O(nx³)`` per ``γ``, certified by the bounded-real lemma
@@ -44,7 +44,7 @@ from ..linalg import spectral_radius
 from ._lmi import check_size, solve, sym
 from .balance import state_scaling
 
-__all__ = ["GAINS", "DesignedGain", "check_gain", "designed_gain", "hinf_gain", "observer_gain"]
+__all__ = ["GAINS", "DesignedGain", "check_gain", "designed_gain", "hinf_gain"]
 
 GAINS = ("radius", "hinf", "hinf-lmi")
 """Designs of :func:`designed_gain`: ``"radius"`` (default; :mod:`ivobs.design.radius`), the H∞
@@ -193,14 +193,6 @@ class DesignedGain(NamedTuple):
     fallback: str | None
 
 
-def observer_gain(
-    sys: Any, L: Any, who: str, gain: str | None = None
-) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
-    """``(L, gamma, P, rho)`` of :func:`designed_gain`."""
-    d = designed_gain(sys, L, who, gain)
-    return d.L, d.gamma, d.P, d.rho
-
-
 def designed_gain(sys: Any, L: Any, who: str, gain: str | None = None) -> DesignedGain:
     """The gain of a Luenberger-type estimator: the user's ``L`` (checked) or the design
     ``gain`` (:data:`GAINS`), cached per system (:mod:`ivobs.design.cache`). ``sys`` is a
@@ -236,24 +228,15 @@ def designed_gain(sys: Any, L: Any, who: str, gain: str | None = None) -> Design
             f"{who}: no observer gain could be designed ({'; '.join(failed)}); pass an "
             "explicit gain L=..."
         )
-    works = _working(gain, A, C, E, F, r)
-    hint = f"; gain={works!r} designs a stabilising gain for this system" if works else ""
-    raise DesignError(f"{failed[0]}{hint}") from None
-
-
-def _working(
-    failed: str, A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, r: np.ndarray | None
-) -> str | None:
-    """The first design of :data:`GAINS` other than ``failed`` that succeeds (for a message)."""
-    for g in GAINS:
-        if g == failed:
-            continue
-        try:
-            _cached_design(g, A, C, E, F, r)
-        except DesignError:
-            continue
-        return g
-    return None
+    for g in GAINS:  # the first other design that succeeds, named in the message
+        if g != gain:
+            try:
+                _cached_design(g, A, C, E, F, r)
+            except DesignError:
+                continue
+            hint = f"; gain={g!r} designs a stabilising gain for this system"
+            raise DesignError(f"{failed[0]}{hint}") from None
+    raise DesignError(failed[0]) from None
 
 
 def _cached_design(
@@ -269,7 +252,7 @@ def _cached_design(
 def _design(
     gain: str, A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, r: np.ndarray | None
 ) -> tuple[np.ndarray, float | None, np.ndarray | None, float]:
-    """One design of :func:`observer_gain`, its certificate checked."""
+    """One design of :func:`designed_gain`, its certificate checked."""
     if gain == "radius":
         from .radius import radius_gain
 

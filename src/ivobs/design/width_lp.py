@@ -229,7 +229,8 @@ def _solve(
 
 # -- the design: existence decided, gain checked ---------------------------------------------
 MAX_LP_STATES = 2000
-"""Above this many states the width LP (``O(n²)`` variables) is refused: pass a gain."""
+"""Above this many states the designs that call :func:`width_gain` refuse the width LP (``O(n²)``
+variables): pass a gain."""
 
 
 def _row_obstruction(A: np.ndarray, C: np.ndarray) -> str:
@@ -297,10 +298,10 @@ def width_gain(
     *,
     nonnegative: bool,
     who: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(L, q)``: the width-optimal gain of :func:`width_lp` with its copositive certificate
-    ``q``, checked on the original matrices: ``A − LC >= 0`` up to ``NONNEG_TOL`` (``interval``)
-    and ``ρ(|A − LC|) < 1`` by the eigenvalues (:mod:`ivobs.design.cooperative`'s checks).
+) -> np.ndarray:
+    """The width-optimal gain of :func:`width_lp`, checked on the original matrices:
+    ``A − LC >= 0`` up to ``NONNEG_TOL`` (``interval``) and ``ρ(|A − LC|) < 1`` by the
+    eigenvalues (:mod:`ivobs.design.cooperative`'s checks).
 
     :class:`~ivobs.DesignError` says which of three things happened: no gain exists (a row that
     cannot be made nonnegative, or the LP infeasible: proved by HiGHS), HiGHS failed or ran out
@@ -308,17 +309,11 @@ def width_gain(
     from ..errors import DesignError
     from .cooperative import check_abs_schur, check_nonnegative_schur, fixed_radius
 
-    n = A.shape[0]
     cond = "A − LC nonnegative and Schur" if nonnegative else "|A − LC| Schur"
     ref = "[Tang2019, Theorem 4] / [Efimov2013, Theorem 1]" if nonnegative else (
         "[Efimov2013, Theorem 3]")  # fmt: skip
     other = "'interval-split' or 'interval-transformed'" if nonnegative else (
         "'interval-transformed' (needs only A − LC Schur)")  # fmt: skip
-    if n > MAX_LP_STATES:
-        raise DesignError(
-            f"{who}: the width linear program has O(nx²) variables and is refused above "
-            f"{MAX_LP_STATES} states (nx = {n}); pass a gain L=..."
-        )
     low = fixed_radius(A, C)
     if low >= 1.0:
         other += (f"; no gain can do better than {low:.6g}: the unmeasured states (zero columns "
@@ -348,10 +343,9 @@ def width_gain(
             f"{cond} ({res.message}); this is a solver failure, not a proof that no gain exists: "
             f"rescale the states, pass a gain L=..., or use {other}"
         )
-    assert res.L is not None and res.q is not None
-    L = res.L
+    assert res.L is not None
     if nonnegative:
-        check_nonnegative_schur(A, C, L, who)
+        check_nonnegative_schur(A, C, res.L, who)
     else:
-        check_abs_schur(A, C, L, who)
-    return L, res.q
+        check_abs_schur(A, C, res.L, who)
+    return res.L

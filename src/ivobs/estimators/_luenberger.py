@@ -9,7 +9,7 @@ With ``y = C x + D u + F d`` and the bounds of ``d`` re-centred (``d = c + δ``,
 whose error ``e = x - x̂`` obeys, in exact arithmetic, ``e+ = (A - LC) e + (E - LF) δ``
 [Tang2019, eq. (15)]. The two methods differ only in the set they propagate for ``e``: the
 exact interval hull of its reachable set (``reachability``) or a reduced zonotope
-(``zonotope``). What they share is here: the gain (:func:`ivobs.design.hinf.observer_gain`) and
+(``zonotope``). What they share is here: the gain (:func:`ivobs.design.hinf.designed_gain`) and
 the gain of each pattern of missing outputs, the observer step with its rounding bound and the
 consistency test of a measurement, the data-independent part of the bounds
 (:class:`DataFreeBounds`), and the vectorised run over a record.
@@ -64,7 +64,7 @@ from ..linalg import spectral_radius
 from ..sets.rounding import enclose, mid_rad, upper
 from . import _uncertain as uncertain
 from ._observer_rounding import Channels, difference, rounding_matrix
-from ._recursion import LinearFilter, redo_streams
+from ._recursion import LinearFilter, abs_max, redo_streams
 from .base import Design, Estimator
 
 __all__ = [
@@ -290,8 +290,8 @@ class ObserverEstimator(Estimator):
         # |x̃[k+1] - x̃+_exact| <= |fl(x̃[k+1] - ...)| (one rounding) + ε: the state's channel
         np.abs(res, out=res)
         res[..., :-1, :] += err[..., :-1, :nx]
-        sigma = upper(_rowmax(res[..., :-1, :]) + e_free[:-1], 3)
-        mu = _rowmax(err[..., :-1, nx:])
+        sigma = upper(abs_max(res[..., :-1, :]) + e_free[:-1], 3)
+        mu = abs_max(err[..., :-1, nx:])
         qL = np.zeros((*sigma.shape[:-1], T))
         qx = np.zeros_like(qL)
         for idx in np.ndindex(*sigma.shape[:-1]):
@@ -324,9 +324,7 @@ class ObserverEstimator(Estimator):
         A, B, C, D, E, F = self._mats
         nx, nu_, nd, ny = A.shape[0], B.shape[1], E.shape[1], C.shape[0]
         if self._filter is None:
-            self._filter = LinearFilter(
-                g.M, [g.L, B - g.L @ D], [np.eye(nx)], g=E @ c - g.L @ (F @ c)
-            )
+            self._filter = LinearFilter(g.M, [g.L, B - g.L @ D], E @ c - g.L @ (F @ c))
         xh = self._filter.run([y, u], x0=self._free.x0)[0]
         Oc = self._O[:, nx + nu_ :] @ c  # [E c; F c]
         W = g.W
@@ -349,17 +347,9 @@ class ObserverEstimator(Estimator):
             if not refine:
                 return None
             if self._refiner is None:
-                self._refiner = LinearFilter(g.M, [np.eye(nx)], [np.eye(nx)])
+                self._refiner = LinearFilter(g.M, [np.eye(nx)])
             xh = xh - self._refiner.run([res])[0]  # d[k+1] = M d[k] + residual[k], d[0] = 0
         return xh, nu, res, err
-
-
-def _rowmax(a: np.ndarray) -> np.ndarray:
-    """``a.max(axis=-1)`` for a few columns (NumPy's reduction over a short last axis is slow)."""
-    out = a[..., 0].copy()
-    for j in range(1, a.shape[-1]):
-        np.maximum(out, a[..., j], out=out)
-    return out
 
 
 class DataFreeBounds:

@@ -225,15 +225,11 @@ class EllipsoidEstimator(Estimator):
         self._abs = tuple(np.abs(M) for M in self._mats)
         Q_w, self._d = None, None
         if sys.has_constant_bounds and sys.nd:
-            self._d = mid_rad(*self._d_box(0, None))
+            self._d = mid_rad(sys.d_at(0).lo, sys.d_at(0).hi)
             Q_w = box_ellipsoid(self._mats[4], self._d[1])
         self.design = EllipsoidDesign(Q_w=Q_w)
         # a float64 evaluation of either equation: dot products of nx + nu + nd terms
         self._g_plant = gamma(sys.nx + sys.nu + sys.nd + 1)
-
-    def _d_box(self, k: int, y_k: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        box = self.sys.d_at(k, y_k)
-        return box.lo, box.hi
 
     # -- online ----------------------------------------------------------------------------
     def _initial_state(self) -> EllipsoidState:
@@ -250,7 +246,8 @@ class EllipsoidEstimator(Estimator):
             return z, z, np.zeros((self.sys.nx, self.sys.nx))
         if self._d is not None and self.design.Q_w is not None:
             return self._d[0], self._d[1], self.design.Q_w
-        cd, rd = mid_rad(*self._d_box(k, y_k))
+        box = self.sys.d_at(k, y_k)
+        cd, rd = mid_rad(box.lo, box.hi)
         return cd, rd, box_ellipsoid(self._mats[4], rd)
 
     def _step(

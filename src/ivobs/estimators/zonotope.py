@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -85,28 +84,6 @@ def generators_that_matter(M: np.ndarray, GR: np.ndarray, W: np.ndarray | None) 
         count += big
         X = M @ X
     return count
-
-
-def settle(
-    H0: np.ndarray, advance: Callable[[np.ndarray], np.ndarray], steps: int
-) -> tuple[int | None, np.ndarray]:
-    """Iterate ``H[k+1] = advance(H[k])`` (the data-independent recursion (34b) exactly as the
-    estimator computes it) for at most ``steps`` steps. Returns the step at which ``H`` repeats
-    an earlier value bitwise (a fixed point or a cycle, found by Brent's method: from then on
-    the recursion repeats itself, so its widths are bounded by those seen) or ``None``, and the
-    summed widths ``2 Σ |H[k]| 1`` of the steps iterated."""
-    H, mark, power, lam = H0, H0, 1, 0
-    sums = np.empty(steps + 1)
-    sums[0] = 2.0 * np.abs(H0).sum()
-    for k in range(1, steps + 1):
-        H = advance(H)
-        sums[k] = 2.0 * np.abs(H).sum()
-        lam += 1
-        if H.shape == mark.shape and np.array_equal(H, mark):
-            return k, sums[: k + 1]
-        if lam == power:  # Brent: move the mark every power of two
-            mark, power, lam = H, 2 * power, 0
-    return None, sums
 
 
 @dataclass(frozen=True)
@@ -278,9 +255,7 @@ class ZonotopeEstimator(ObserverEstimator):
             self._check_bounded()
             if order is not None:
                 self._check_order_tightness()
-            self._free = DataFreeBounds(
-                self._H0, self._free_step, self._p0, keep=SEQUENCE_FLOATS, same=_same
-            )
+            self._free = self._free_bounds(SEQUENCE_FLOATS)
 
     # -- (34b) --------------------------------------------------------------------------------
     def _predict(
@@ -314,29 +289,27 @@ class ZonotopeEstimator(ObserverEstimator):
         out: np.ndarray = upper(s + self._absF @ r, CH.shape[1] + r.shape[0] + 2)
         return out
 
-    def _free_next(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(34b) without data (constant bounds, the full gain): the radius ``|H| 1`` and
-        ``H[k+1]``."""
-        rad = upper(np.abs(H).sum(axis=1), H.shape[1])
-        return rad, self._predict(H, self._full, self._const[1], rad)  # type: ignore[index]
-
     def _free_step(self, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, Any]:
-        """One step of (34b) without data: the radius ``|H| 1``, its image in ``y``, and
-        ``H[k+1]`` (None at a fixed point)."""
-        rad, H_next = self._free_next(H)
+        """One step of (34b) without data (constant bounds, the full gain): the radius ``|H| 1``,
+        its image in ``y``, and ``H[k+1]`` (None at a fixed point)."""
         r = self._const[1]  # type: ignore[index]
+        rad = upper(np.abs(H).sum(axis=1), H.shape[1])
+        H_next = self._predict(H, self._full, r, rad)
         return rad, self._output_radius(H, rad, r), 0.0, None if _same(H_next, H) else H_next
 
-    def _free_radii(self, T: int) -> np.ndarray:
-        """``|H[k]| 1`` of (34b) without data for ``k < T`` (design checks)."""
-        H, out = self._H0, np.empty((T, self.sys.nx))
-        for k in range(T):
-            out[k], _, _, H_next = self._free_step(H)
-            if H_next is None:
-                out[k:] = out[k]
-                break
-            H = H_next
-        return out
+    def _free_bounds(self, keep: int = 0) -> DataFreeBounds:
+        """(34b) without data from ``H[0]``, iterated as far as asked until it repeats an earlier
+        value (a fixed point or a cycle: then it repeats itself forever)."""
+        return DataFreeBounds(self._H0, self._free_step, self._p0, keep=keep, same=_same)
+
+    def _settled(self, steps: int) -> tuple[int | None, np.ndarray]:
+        """The step at which (34b) without data repeats an earlier value within ``steps`` steps
+        (None if it does not), and its summed widths ``2 Σ |H[k]| 1`` (rounded up), ``k <=
+        steps``."""
+        free = self._free_bounds()
+        rad = free.arrays(steps + 1)[0]
+        at = None if free.settled is None else free.settled + free.period
+        return at, 2.0 * rad.sum(axis=1)
 
     # -- design checks --------------------------------------------------------------------------
     def _gain_by_width(self) -> None:
@@ -371,7 +344,7 @@ class ZonotopeEstimator(ObserverEstimator):
         for gain in ("hinf", "radius"):  # the radius gain last: kept on a tie
             observer = self._design_observer(None, gain)
             self.design = replace(self.design, **observer.as_dict())
-            widths[gain] = float(self._free_radii(T)[T // 2 :].mean())
+            widths[gain] = float(self._free_bounds().arrays(T)[0][T // 2 :].mean())
         if widths["hinf"] < widths["radius"]:
             observer = self._design_observer(None, "hinf")
             self.design = replace(self.design, **observer.as_dict())
@@ -410,7 +383,7 @@ class ZonotopeEstimator(ObserverEstimator):
         absM = self._full.absM
         if spectral_radius(absM) < 1.0 or steps * nx * nx * (q + r.shape[0]) > SETTLE_WORK:
             return  # |A - LC| Schur: bounded for every order (docs); too large: not checked
-        at, sums = settle(self._H0, self._advance_free, steps)
+        at, sums = self._settled(steps)
         if at is not None or sums[-1] <= sums[steps // 4 : steps // 2 + 1].max() * (1.0 + 1e-9):
             return
         hint = ""
@@ -418,7 +391,7 @@ class ZonotopeEstimator(ObserverEstimator):
         try:
             for q2 in range(q + 1, min(q + 8, ORDER_PER_STATE * nx) + 1):
                 self.design = replace(design, order=q2)
-                at2, _ = settle(self._H0, self._advance_free, steps)
+                at2, _ = self._settled(steps)
                 if at2 is not None:
                     hint = f" (order = {q2} settles at k = {at2})"
                     break
@@ -473,11 +446,6 @@ class ZonotopeEstimator(ObserverEstimator):
         H_next = self._predict(Hq, gain, r, rad, np.concatenate([gain.L * e_nu, np.diag(eps)], 1))
         new = evolve(state, p=p_next, H=H_next, qL=0.0, qx=0.0)
         return Step(new, lo, hi, inconsistent)
-
-    def _advance_free(self, H: np.ndarray) -> np.ndarray:
-        """(34b) without data, for :func:`settle` (a fixed point maps to itself)."""
-        H_next = self._free_next(H)[1]
-        return H if _same(H_next, H) else H_next
 
 
 def _same(H1: np.ndarray, H2: np.ndarray) -> bool:

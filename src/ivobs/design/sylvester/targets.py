@@ -128,7 +128,7 @@ def _b_patterns(C: np.ndarray, F: np.ndarray, delta: np.ndarray, n: int) -> list
     return pats
 
 
-def _spreads(n: int, continuous: bool, scale: float, cap: float = 0.0) -> list[np.ndarray]:
+def _spreads(n: int, continuous: bool, scale: float, cap: float) -> list[np.ndarray]:
     """Candidate eigenvalues; in CT shifted left so that the slowest is at most ``cap``."""
     grids = (
         [(0.25, 0.75), (0.5, 1.5), (1.0, 3.0), (2.0, 6.0), (4.0, 12.0)]
@@ -278,7 +278,7 @@ def default_target(
 # Block targets for time-varying systems ([Dinh2024, Propositions 3-4, eqs. (11.a), (16.a)])
 # ------------------------------------------------------------------------------------------
 def block_target(
-    A_0: Any, C_0: Any, *, continuous: bool, indices: Any = None
+    A_0: Any, C_0: Any, *, continuous: bool
 ) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """``(Ã, B̃)`` of (16.a) (DT) or (11.a) (CT), before the factor ``gamma`` or ``ell``.
 
@@ -293,12 +293,9 @@ def block_target(
     A_0 = as_matrix("A(0)", A_0)
     C_0 = as_matrix("C(0)", C_0, cols=A_0.shape[0], vector="row")
     n, p = A_0.shape[0], C_0.shape[0]
-    if indices is None:
-        m = observability_indices(A_0, C_0)
-        if sum(m) < n:
-            m = [n] * p
-    else:
-        m = [int(v) for v in np.ravel(indices)]
+    m = observability_indices(A_0, C_0)
+    if sum(m) < n:
+        m = [n] * p
     nz = sum(m)
     At = np.zeros((nz, nz))
     Bt = np.zeros((nz, p))

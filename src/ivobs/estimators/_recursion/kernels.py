@@ -9,12 +9,15 @@ from typing import Any
 
 import numpy as np
 
+from ...sets.rounding import upper
+
 __all__ = [
+    "abs_max",
     "is_shared",
     "matrix_product",
+    "norm_inf",
     "redo_streams",
     "scratch",
-    "within_band",
 ]
 
 SCRATCH_MAX = 1 << 22
@@ -67,7 +70,7 @@ def is_shared(a: np.ndarray, lead: int) -> bool:
     return all(a.strides[i] == 0 or a.shape[i] == 1 for i in range(a.ndim - 2))
 
 
-def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.ndarray:
+def matrix_product(X: np.ndarray, Mt: Any) -> np.ndarray:
     """``X @ Mt`` over the last axis of a ``(..., m)`` array (``Mt`` dense or sparse ``(m, p)``).
 
     Narrow products (``m, p <= 8``: e.g. the 3 states of a batch of streams) run as one product
@@ -75,15 +78,10 @@ def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.
     lead = X.shape[:-1]
     m, p = Mt.shape
     if _issparse(Mt):
-        res = np.asarray((Mt.T @ X.reshape(-1, m).T).T).reshape(*lead, p)
-        if out is None:
-            return res
-        out[...] = res
-        return out
+        return np.asarray((Mt.T @ X.reshape(-1, m).T).T).reshape(*lead, p)
     rows = int(np.prod(lead)) if lead else 1
-    if out is None:
-        out = np.empty((*lead, p))
-    if m <= 8 and p <= 8 and rows >= 4096 and out.flags.c_contiguous:
+    out = np.empty((*lead, p))
+    if m <= 8 and p <= 8 and rows >= 4096:
         X2 = np.ascontiguousarray(X).reshape(rows, m)
         O2 = out.reshape(rows, p)
         main = rows - rows % 8
@@ -96,12 +94,22 @@ def matrix_product(X: np.ndarray, Mt: Any, out: np.ndarray | None = None) -> np.
     return out
 
 
-def within_band(x: np.ndarray, offset: np.ndarray | None, radius: np.ndarray) -> bool:
-    """``|x + offset| <= radius`` everywhere (``offset``, ``radius`` broadcast against ``x``),
-    without forming ``x + offset``: two comparisons with data-free thresholds."""
-    up = radius if offset is None else radius - offset
-    dn = -radius if offset is None else -radius - offset
-    return not (np.greater(x, up).any() or np.less(x, dn).any())
+def abs_max(a: np.ndarray) -> np.ndarray:
+    """``max_i |a_i|`` over the last axis (0 when it is empty): exact. Short rows (the states of
+    a small system) column by column: NumPy's reduction along a short last axis is slow."""
+    n = a.shape[-1]
+    if n > 16:
+        big: np.ndarray = np.abs(a).max(axis=-1)
+        return big
+    out = np.zeros(a.shape[:-1])
+    for j in range(n):
+        np.maximum(out, np.abs(a[..., j]), out=out)
+    return out
+
+
+def norm_inf(M: np.ndarray) -> float:
+    """``‖M‖∞`` (the largest row sum of ``|M|``) rounded up (0 for an empty matrix)."""
+    return float(upper(np.max(np.abs(M).sum(axis=1), initial=0.0), max(M.shape[-1], 1)))
 
 
 def redo_streams(
@@ -120,19 +128,3 @@ def redo_streams(
     for b in np.flatnonzero(bad):
         lo[b], hi[b], inc[b] = est._loop(u[b], y[b], t)
     return lo, hi, inc
-
-
-def centre_band(
-    xc: np.ndarray, rad: np.ndarray, shift: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(xc + shift - rad, xc + shift + rad)``, the upper bound written over ``xc``: the bounds
-    of a vectorised run from its centres, a batch's shared offset ``shift`` (a common input,
-    folded here) and the radii. One operation order for every method that uses it."""
-    lo = np.empty_like(xc)
-    if shift is None:
-        np.subtract(xc, rad, out=lo)
-        xc += rad
-    else:
-        np.add(xc, shift - rad, out=lo)
-        xc += shift + rad
-    return lo, xc

@@ -1,6 +1,6 @@
-"""The linear filter ``x[k+1] = M x[k] + Σ W v[k] + g``, ``o = H x + J v + h`` over whole records
-and batches (the package docstring: block evaluation for small states, a loop of one (sparse)
-product per step for large ones)."""
+"""The linear filter ``x[k+1] = M x[k] + Σ W v[k] + g`` over whole records and batches (the
+package docstring: block evaluation for small states, a loop of one (sparse) product per step for
+large ones)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 
 from .kernels import _issparse, _matrix, matrix_product, scratch
 
-__all__ = ["BLOCK_MAX_STATES", "LinearFilter", "affine_recursion"]
+__all__ = ["BLOCK_MAX_STATES", "LinearFilter"]
 
 BLOCK_MAX_STATES = 24
 """Largest state dimension for which the block (Toeplitz) evaluation is used."""
@@ -21,60 +21,35 @@ _SCAN_LOOP = 256
 
 
 class LinearFilter:
-    """``x[k+1] = M x[k] + Σ_s W_s v_s[k] + g``, ``o_j[k] = H_j x[k] + Σ_s J_js v_s[k] + h_j``.
+    """``x[k+1] = M x[k] + Σ_s W_s v_s[k] + g``.
 
     Parameters
     ----------
     M : (n, n) state matrix (dense; ``scipy.sparse`` for large systems)
     W : the input matrices ``W_s`` (n, m_s), one per signal
-    H : the output matrices ``H_j`` (p_j, n)
-    J : ``J[j][s]`` (p_j, m_s) feedthrough or None (zero); default all zero
     g : (n,) constant input of the state, or None
-    h : ``h[j]`` (p_j,) constant of output ``j`` (or None)
-    block : force the block evaluation with blocks of this many steps (e.g. a moving window
-        written as a shift register, whose state is larger than :data:`BLOCK_MAX_STATES`)
 
-    :meth:`run` evaluates the outputs over a record ``(T, m_s)`` or a batch ``(B, T, m_s)``.
+    :meth:`run` evaluates the states over a record ``(T, m_s)`` or a batch ``(B, T, m_s)``.
     """
 
-    def __init__(
-        self,
-        M: Any,
-        W: Sequence[np.ndarray],
-        H: Sequence[np.ndarray],
-        J: Sequence[Sequence[np.ndarray | None]] | None = None,
-        g: np.ndarray | None = None,
-        h: Sequence[np.ndarray | None] | None = None,
-        block: int | None = None,
-    ):
+    def __init__(self, M: Any, W: Sequence[np.ndarray], g: np.ndarray | None = None):
         self.sparse = _issparse(M)
         self.M = M.tocsr() if self.sparse else np.asarray(M, dtype=float)
         n: int = self.M.shape[0]
         self.n = n
         self.W = [_matrix(w, n, None) for w in W]
         self.m: list[int] = [w.shape[1] for w in self.W]
-        self.H = [h_ if _issparse(h_) else _matrix(h_, None, n) for h_ in H]
-        self.p = [h_.shape[0] for h_ in self.H]
-        nj, ns = len(self.H), len(self.W)
-        J = J if J is not None else [[None] * ns for _ in range(nj)]
-        self.J = [
-            [None if J[j][s] is None else _matrix(J[j][s], self.p[j], self.m[s]) for s in range(ns)]
-            for j in range(nj)
-        ]
         self.g = None if g is None or not np.any(g) else np.asarray(g, dtype=float).reshape(n)
-        hh = h if h is not None else [None] * nj
-        self.h = [None if v is None or not np.any(v) else np.asarray(v, float) for v in hh]
-        self.const = self.g is not None or any(v is not None for v in self.h)
-        self.blocks = not self.sparse and (n <= BLOCK_MAX_STATES or block is not None)
-        self.block = block
-        self._ops: dict[int, tuple[list[np.ndarray], np.ndarray, np.ndarray]] = {}
+        self.const = self.g is not None
+        self.blocks = not self.sparse and n <= BLOCK_MAX_STATES
+        self._ops: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._inner: dict[int, LinearFilter] = {}
 
     # -- block operators ------------------------------------------------------------------
-    def _operators(self, K: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
-        """``(Op_j, End, M^K)`` for blocks of ``K`` steps (cached). Rows of ``Op_j`` and ``End``
+    def _operators(self, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(Op, End, M^K)`` for blocks of ``K`` steps (cached). Rows of ``Op`` and ``End``
         follow the columns of the block input ``[v_0 (K m_0), v_1, ..., 1, s_q (n)]``
-        (time-major inside each signal); columns of ``Op_j`` are ``K p_j`` (time-major)."""
+        (time-major inside each signal); columns of ``Op`` are ``K n`` (time-major)."""
         hit = self._ops.get(K)
         if hit is not None:
             return hit
@@ -85,8 +60,6 @@ class LinearFilter:
     def _block_size(self, b: int, T: int) -> int:
         """Steps per block: small for batches (the block-start loop is cheap there), larger for
         one long record (fewer block starts); a divisor of ``T`` when one is close."""
-        if self.block is not None:
-            return max(1, min(self.block, T))
         width = max(sum(self.m), self.n, 1)
         K = 8 if b >= 32 else 32
         K = max(2, min(K, 256 // width, T))
@@ -101,15 +74,12 @@ class LinearFilter:
         v: Sequence[np.ndarray],
         T: int | None = None,
         x0: np.ndarray | None = None,
-        out: Sequence[np.ndarray | None] | None = None,
         final: bool = False,
-        temp: Sequence[int] = (),
     ) -> list[np.ndarray]:
-        """The outputs ``o_j`` ``(..., T, p_j)`` for signals ``v_s`` ``(..., T, m_s)`` (all with
-        the same leading shape; a batch is one leading axis) from ``x[0] = x0`` (``(n,)`` or
-        ``(..., n)``; default 0). ``out``: arrays to write into (or None). Outputs listed in
-        ``temp`` go to reusable buffers (:func:`scratch`: valid until the next call). With
-        ``final=True`` the state ``x[T]`` is appended to the returned list."""
+        """``[x]``: the states ``x[0 .. T-1]`` ``(..., T, n)`` for signals ``v_s`` ``(..., T,
+        m_s)`` (all with the same leading shape; a batch is one leading axis) from ``x[0] = x0``
+        (``(n,)`` or ``(..., n)``; default 0). With ``final=True`` the state ``x[T]`` is
+        appended to the returned list."""
         if len(v) != len(self.W):
             raise ValueError(f"expected {len(self.W)} signals, got {len(v)}")
         lead = v[0].shape[:-2] if v else ()
@@ -121,31 +91,22 @@ class LinearFilter:
         vs = [np.reshape(a, (b, T, a.shape[-1])) for a in v]
         x0b = np.zeros((b, self.n)) if x0 is None else np.broadcast_to(x0, (*lead, self.n))
         x0b = np.reshape(x0b, (b, self.n))
-        outs = []
-        for j, p in enumerate(self.p):
-            o = None if out is None else out[j]
-            if o is None:
-                o = scratch(self, f"out{j}", (b, T, p)) if j in temp else np.empty((b, T, p))
-            outs.append(o.reshape(b, T, p))
+        X = np.empty((b, T, self.n))
         if T == 0:
             xT = x0b.copy()
         elif self.blocks:
-            xT = self._run_blocks(vs, T, b, x0b, outs)
+            xT = self._run_blocks(vs, T, b, x0b, X)
         else:
-            xT = self._run_loop(vs, T, b, x0b, outs)
-        res = [o.reshape(*lead, T, p) for o, p in zip(outs, self.p)]
-        if out is not None:
-            for j, o in enumerate(out):
-                if o is not None and not np.shares_memory(o, res[j]):
-                    o[...] = res[j].reshape(o.shape)
-                    res[j] = o
+            xT = self._run_loop(vs, T, x0b, X)
+        res = [X.reshape(*lead, T, self.n)]
         if final:
             res.append(xT.reshape(*lead, self.n))
         return res
 
     def _fill(self, aug: np.ndarray, vs: list[np.ndarray], K: int) -> int:
         """Copy the first ``nb K`` steps of the signals into the block input ``aug``
-        ``(b, nb, cols)``; returns the column of the block start."""
+        ``(b, nb, cols)`` (the last, shorter block: ``nb = 1`` on the signals from its first
+        step); returns the column of the block start."""
         b, nb = aug.shape[:2]
         off = 0
         for a, m in zip(vs, self.m):
@@ -158,13 +119,13 @@ class LinearFilter:
         return off
 
     def _run_blocks(
-        self, vs: list[np.ndarray], T: int, b: int, x0: np.ndarray, outs: list[np.ndarray]
+        self, vs: list[np.ndarray], T: int, b: int, x0: np.ndarray, X: np.ndarray
     ) -> np.ndarray:
         """Blocks of ``K`` steps (module docstring), in the stream-major layout of the data:
-        every output is one product per stream (one product for contiguous batches)."""
+        the states are one product per stream (one product for contiguous batches)."""
         n = self.n
         K = self._block_size(b, T)
-        ops, End, MK = self._operators(K)
+        Op, End, MK = self._operators(K)
         nb, tail = divmod(T, K)
         s_end = x0
         if nb:
@@ -173,33 +134,20 @@ class LinearFilter:
             E = scratch(self, "ends", (b, nb, n))
             np.matmul(aug[:, :, :c], End, out=E)
             s_end = self._scan(MK, E, x0, aug[:, :, c:], K)
-            for Op, o, p in zip(ops, outs, self.p):
-                main = o[:, : nb * K].reshape(b, nb, K * p)  # a view: o is row-contiguous
-                if main.flags.c_contiguous:
-                    np.matmul(aug.reshape(b * nb, -1), Op, out=main.reshape(b * nb, K * p))
-                else:
-                    np.matmul(aug, Op, out=main)
+            main = X[:, : nb * K].reshape(b, nb, K * n)  # a view: X is row-contiguous
+            if main.flags.c_contiguous:
+                np.matmul(aug.reshape(b * nb, -1), Op, out=main.reshape(b * nb, K * n))
+            else:
+                np.matmul(aug, Op, out=main)
         if tail:
-            self._tail(vs, T, b, K, tail, s_end, outs, ops)
+            self._tail(vs, T, b, K, tail, s_end, X, Op)
             if self.n:
                 # the state after the tail, for callers that continue the recursion
                 ext = self._operators(tail)
-                row = np.empty((b, ext[1].shape[0]))
-                self._fill_tail(row, vs, T - tail, tail)
-                s_end = row @ ext[1] + s_end @ ext[2].T
+                row = np.empty((b, 1, ext[1].shape[0]))
+                self._fill(row, [a[:, T - tail :] for a in vs], tail)
+                s_end = row[:, 0] @ ext[1] + s_end @ ext[2].T
         return s_end
-
-    def _fill_tail(self, row: np.ndarray, vs: list[np.ndarray], k0: int, L: int) -> int:
-        b = row.shape[0]
-        off = 0
-        for a, m in zip(vs, self.m):
-            if m:
-                row[:, off : off + L * m] = a[:, k0 : k0 + L].reshape(b, L * m)
-            off += L * m
-        if self.const:
-            row[:, off] = 1.0
-            off += 1
-        return off
 
     def _tail(
         self,
@@ -209,8 +157,8 @@ class LinearFilter:
         K: int,
         L: int,
         s: np.ndarray,
-        outs: list[np.ndarray],
-        ops: list[np.ndarray],
+        X: np.ndarray,
+        Op: np.ndarray,
     ) -> None:
         """The last ``L < K`` steps: the leading rows/columns of the ``K``-block operators."""
         n = self.n
@@ -223,12 +171,10 @@ class LinearFilter:
             rows.append(off)
             off += 1
         rows.extend(range(off, off + n))
-        row = np.empty((b, len(rows)))
-        c = self._fill_tail(row, vs, T - L, L)
-        row[:, c:] = s
-        idx = np.asarray(rows)
-        for Op, o, p in zip(ops, outs, self.p):
-            o[:, T - L :] = (row @ Op[idx, : L * p]).reshape(b, L, p)
+        row = np.empty((b, 1, len(rows)))
+        c = self._fill(row, [a[:, T - L :] for a in vs], L)
+        row[:, 0, c:] = s
+        X[:, T - L :] = (row[:, 0] @ Op[np.asarray(rows), : L * n]).reshape(b, L, n)
 
     def _scan(
         self, MK: np.ndarray, E: np.ndarray, x0: np.ndarray, S: np.ndarray, K: int
@@ -261,31 +207,17 @@ class LinearFilter:
             return last
         inner = self._inner.get(K)
         if inner is None:
-            inner = LinearFilter(MK, [np.eye(n)], [np.eye(n)])
+            inner = LinearFilter(MK, [np.eye(n)])
             self._inner[K] = inner
         states, last = inner.run([E], x0=x0, final=True)
         S[...] = states
         return last
 
-    def states(
-        self, v: Sequence[np.ndarray], T: int | None = None, x0: np.ndarray | None = None
-    ) -> np.ndarray:
-        """The state trajectory ``x[0 .. T-1]`` ``(..., T, n)`` (signals as in :meth:`run`)."""
-        lead = v[0].shape[:-2] if v else ()
-        T = v[0].shape[-2] if T is None else T
-        b = int(np.prod(lead)) if lead else 1
-        vs = [np.reshape(a, (b, T, a.shape[-1])) for a in v]
-        x0b = np.zeros((b, self.n)) if x0 is None else np.broadcast_to(x0, (*lead, self.n))
-        X, _ = self._loop_states(vs, T, b, np.reshape(x0b, (b, self.n)))
-        return X.reshape(*lead, T, self.n)
-
-    def _loop_states(
-        self, vs: list[np.ndarray], T: int, b: int, x0: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``(X, x[T])``: one (sparse) product per step; the input terms are precomputed in the
-        state buffer (``X[:, k+1] = Σ W v[k] + g`` first, then ``X[:, k+1] += M X[:, k]``)."""
+    def _run_loop(self, vs: list[np.ndarray], T: int, x0: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Large or sparse state: the states ``X`` and ``x[T]``, one (sparse) product per step;
+        the input terms are precomputed in the state buffer (``X[:, k+1] = Σ W v[k] + g``
+        first, then ``X[:, k+1] += M X[:, k]``)."""
         n = self.n
-        X = np.empty((b, T, n))
         X[:, 0] = x0
         if T > 1:
             Xn = X[:, 1:]
@@ -307,87 +239,38 @@ class LinearFilter:
             for k in range(1, T):
                 X[:, k] += X[:, k - 1] @ Mt
         last = X[:, T - 1]
-        xT = (M @ last.T).T if self.sparse else last @ M.T
+        xT: np.ndarray = (M @ last.T).T if self.sparse else last @ M.T
         for a, W in zip(vs, self.W):
             xT = xT + a[:, T - 1] @ W.T
         if self.g is not None:
             xT = xT + self.g
-        return X, xT
-
-    def _run_loop(
-        self, vs: list[np.ndarray], T: int, b: int, x0: np.ndarray, outs: list[np.ndarray]
-    ) -> np.ndarray:
-        """Large or sparse state: the trajectory by :meth:`_loop_states`, then the outputs."""
-        X, xT = self._loop_states(vs, T, b, x0)
-        for j, (H, o) in enumerate(zip(self.H, outs)):
-            matrix_product(X, H.T, out=o)
-            for a, Js in zip(vs, self.J[j]):
-                if Js is not None and np.any(Js):
-                    o += matrix_product(a, Js.T)
-            if self.h[j] is not None:
-                o += self.h[j]
         return xT
 
 
-def _block_operators(f: LinearFilter, K: int) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+def _block_operators(f: LinearFilter, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`LinearFilter._operators` (uncached): the block-Toeplitz operators of ``f``."""
     n, M = f.n, f.M
     P = [np.eye(n)]
     for _ in range(K):
         P.append(M @ P[-1])
     cols_in = K * sum(f.m) + int(f.const)
-    ops = []
-    for j, H in enumerate(f.H):
-        p = f.p[j]
-        HP = [H @ Pt for Pt in P[:K]]
-        Op = np.zeros((cols_in + n, K * p))
-        off = 0
-        for s, W in enumerate(f.W):
-            m = f.m[s]
-            HPW = [Hp @ W for Hp in HP[: K - 1]]
-            Js = f.J[j][s]
-            for jj in range(K):
-                oc = slice(jj * p, (jj + 1) * p)
-                for i in range(jj):
-                    Op[off + i * m : off + (i + 1) * m, oc] = HPW[jj - 1 - i].T
-                if Js is not None:
-                    Op[off + jj * m : off + (jj + 1) * m, oc] = Js.T
-            off += K * m
-        if f.const:
-            hj = f.h[j]
-            acc = np.zeros(p) if hj is None else hj.copy()
-            for jj in range(K):
-                Op[off, jj * p : (jj + 1) * p] = acc
-                if f.g is not None:
-                    acc = acc + HP[jj] @ f.g
-            off += 1
-        for jj in range(K):
-            Op[off : off + n, jj * p : (jj + 1) * p] = HP[jj].T
-        ops.append(Op)
+    Op = np.zeros((cols_in + n, K * n))
     End = np.zeros((cols_in, n))
     off = 0
-    for s, W in enumerate(f.W):
-        m = f.m[s]
-        for i in range(K):
-            End[off + i * m : off + (i + 1) * m] = (P[K - 1 - i] @ W).T
+    for W, m in zip(f.W, f.m):
+        PW = [Pt @ W for Pt in P[:K]]
+        for jj in range(K):
+            for i in range(jj):
+                Op[off + i * m : off + (i + 1) * m, jj * n : (jj + 1) * n] = PW[jj - 1 - i].T
+            End[off + jj * m : off + (jj + 1) * m] = PW[K - 1 - jj].T
         off += K * m
-    if f.const and f.g is not None:
+    if f.g is not None:
+        acc = np.zeros(n)
+        for jj in range(K):
+            Op[off, jj * n : (jj + 1) * n] = acc
+            acc = acc + P[jj] @ f.g
         End[off] = sum(Pt @ f.g for Pt in P[:K])
-    return ops, End, P[K]
-
-
-def affine_recursion(M: np.ndarray, v: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """Return ``x`` of shape ``(..., T+1, n)`` with ``x[0] = x0``, ``x[k+1] = M x[k] + v[k]``.
-
-    ``v`` has shape ``(..., T, n)`` (leading batch axes allowed); ``x0`` shape ``(..., n)`` or
-    ``(n,)``.
-    """
-    M = np.asarray(M, dtype=float)
-    v = np.asarray(v, dtype=float)
-    T, n = v.shape[-2], v.shape[-1]
-    lead = v.shape[:-2]
-    X = np.empty((*lead, T + 1, n))
-    f = LinearFilter(M, [np.eye(n)], [np.eye(n)])
-    _, xT = f.run([v], T=T, x0=np.asarray(x0, dtype=float), out=[X[..., :T, :]], final=True)
-    X[..., T, :] = xT
-    return X
+        off += 1
+    for jj in range(K):
+        Op[off : off + n, jj * n : (jj + 1) * n] = P[jj].T
+    return Op, End, P[K]

@@ -332,7 +332,7 @@ class WindowDesigner:
         sys, s = self.sys, self.s
         nx, ny, nu, nz, nc = sys.nx, sys.ny, sys.nu, self.nz, self.nc
         Mx, Mv, Md = self.stack(k)
-        _, _, _, rank = pinv_perp(Mx)
+        Mx_pinv, Mx_perp, _, rank = pinv_perp(Mx)
         if rank < nx:
             where = "the window k = 0..s" if not self.tv else f"the window ending at k = {k}"
             raise DesignError(
@@ -341,18 +341,10 @@ class WindowDesigner:
                 f"{rank_advice(sys, s)}"
             )
         T, opt = self.T_full(Mx, Md)
-        if opt is None:
-            Mx_pinv, Mx_perp, _, _ = pinv_perp(Mx)
-            U1, S1, V1, r = np.zeros((Mx.shape[0], 0)), np.zeros((0, 0)), np.zeros((0, 0)), 0
-        else:
-            Mx_pinv, Mx_perp, U1, S1, V1, r = (
-                opt.Mx_pinv,
-                opt.Mx_perp,
-                opt.U1,
-                opt.S1,
-                opt.V1,
-                opt.rank,
-            )
+        U1, S1, V1, r = np.zeros((Mx.shape[0], 0)), np.zeros((0, 0)), np.zeros((0, 0)), 0
+        if opt is not None:  # Theorem 1's quantities
+            Mx_pinv, Mx_perp, r = opt.Mx_pinv, opt.Mx_perp, opt.rank
+            U1, S1, V1 = opt.U1, opt.S1, opt.V1
         cols = np.arange((s + 1) * nz).reshape(s + 1, nz)
         H = None
         if self.const_bounds and sys.nd:

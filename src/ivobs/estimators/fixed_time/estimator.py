@@ -250,7 +250,11 @@ class FixedTimeEstimator(Estimator):
         missing, or the window contradicts the model, with the prediction from the previous box
         (:func:`.window.combine`)."""
         k, nx, const = state.k, self.sys.nx, self._const
-        c, r = const if const is not None else self._bounds(k, y_k)  # d_k ∈ [c - r, c + r]
+        if const is not None:
+            c, r = const
+        else:  # d_k ∈ [c - r, c + r]
+            box = self.sys.d_at(k, y_k)
+            c, r = centre_radius(box.lo, box.hi)
         total = y_k.dot(y_k)
         if total == total and not np.count_nonzero(state.ymiss):  # none missing: the ring, y_k
             ymiss, y_obs = state.ymiss, y_k  # (the flags of the ring, all zero, as they are)
@@ -297,12 +301,6 @@ class FixedTimeEstimator(Estimator):
                 return gain, bool(missing[:lags].any())
         return None, True
 
-    def _bounds(self, k: int, y_k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(c, r)``: the bounds of ``d_k`` as centre and radius
-        (:func:`.window.centre_radius`)."""
-        box = self.sys.d_at(k, y_k)
-        return centre_radius(box.lo, box.hi)
-
     def _prediction(self, state: FixedTimeState, k: int) -> tuple[np.ndarray, np.ndarray]:
         """The box of ``x_k`` predicted from the previous one (:func:`.window.predict`); ``x0``
         itself at ``k = 0``; NaN when there is neither."""
@@ -315,12 +313,8 @@ class FixedTimeEstimator(Estimator):
         z, r = state.z[0], state.r[0]  # the sample of step k - 1
         c = z[nu + ny :] if nc else np.zeros_like(r)
         dlo, dhi = enclose(c, r)
-        return predict(self._model(k - 1), state.lo, state.hi, z[:nu], dlo, dhi)
-
-    def _model(self, j: int) -> np.ndarray:
-        """``[A B E]`` at step ``j``."""
-        A, B, _, _, E, _ = self.sys.matrices_at(j)
-        return np.hstack((A, B, E))
+        A, B, _, _, E, _ = self.sys.matrices_at(k - 1)
+        return predict(np.hstack((A, B, E)), state.lo, state.hi, z[:nu], dlo, dhi)
 
     # -- offline ------------------------------------------------------------------------------
     def _run(

@@ -47,13 +47,8 @@ __all__ = [
 
 
 @dataclass(frozen=True)
-class IntervalDesign(Design):
-    """``L``: gain; ``D = A − LC`` ([Efimov2013]'s notation; nonnegative); ``spectral_radius``
-    of ``D``; ``gain``: how ``L`` was obtained (``'lmi'``, ``'lmi+width'``, ``'given'``);
-    ``steady_width``: ``(I − D)⁻¹ |E − LF| Δ``, the limit of the bounds' width for constant
-    bounds (None for callable bounds); ``missing_radius``: ``ρ(|A − L_(j) C|)`` for each output
-    ``j`` missing alone (``L_(j)``: column ``j`` of ``L`` zeroed, the gain used then), the growth
-    rate of the width during a gap of that output (None for sparse systems)."""
+class _GainDesign(Design):
+    """The fields of :class:`IntervalDesign` and :class:`SplitDesign`."""
 
     L: np.ndarray
     D: np.ndarray
@@ -64,18 +59,21 @@ class IntervalDesign(Design):
 
 
 @dataclass(frozen=True)
-class SplitDesign(Design):
+class IntervalDesign(_GainDesign):
+    """``L``: gain; ``D = A − LC`` ([Efimov2013]'s notation; nonnegative); ``spectral_radius``
+    of ``D``; ``gain``: how ``L`` was obtained (``'lmi'``, ``'lmi+width'``, ``'given'``);
+    ``steady_width``: ``(I − D)⁻¹ |E − LF| Δ``, the limit of the bounds' width for constant
+    bounds (None for callable bounds); ``missing_radius``: ``ρ(|A − L_(j) C|)`` for each output
+    ``j`` missing alone (``L_(j)``: column ``j`` of ``L`` zeroed, the gain used then), the growth
+    rate of the width during a gap of that output (None for sparse systems)."""
+
+
+@dataclass(frozen=True)
+class SplitDesign(_GainDesign):
     """``L``: gain; ``D = A − LC`` (any sign); ``spectral_radius`` of ``|D| = D⁺ + D⁻``;
     ``gain``: ``'width'``, ``'margin'``, ``'lmi'`` or ``'given'``; ``steady_width``:
     ``(I − |D|)⁻¹ |E − LF| Δ`` (None for callable bounds); ``missing_radius``: as for
     :class:`IntervalDesign`."""
-
-    L: np.ndarray
-    D: np.ndarray
-    spectral_radius: float
-    gain: str
-    steady_width: np.ndarray | None
-    missing_radius: np.ndarray | None = None
 
 
 MAX_DENSE_DESIGN = MAX_LMI_STATES
@@ -91,13 +89,16 @@ _SCALES = (
 )
 
 
-def check_design_size(sys: LinearSystem, who: str, step: str) -> None:
-    """:class:`DesignError` when a dense design step would run on more than
-    :data:`MAX_DENSE_DESIGN` states, pointing to what scales."""
-    if sys.nx > MAX_DENSE_DESIGN:
+def check_design_size(
+    sys: LinearSystem, who: str, step: str, limit: int = MAX_DENSE_DESIGN
+) -> None:
+    """:class:`DesignError` when a design step with ``O(nx²)`` variables or ``O(nx³)`` work would
+    run on more than ``limit`` states (:data:`MAX_DENSE_DESIGN`; the sparse width LP:
+    :data:`~ivobs.design.width_lp.MAX_LP_STATES`), pointing to what scales."""
+    if sys.nx > limit:
         raise DesignError(
-            f"{who}: {step} is a dense design step (O(nx^2) variables or O(nx^3) work) and does "
-            f"not scale to nx = {sys.nx} > {MAX_DENSE_DESIGN} states; {_SCALES}"
+            f"{who}: {step} has O(nx^2) variables or O(nx^3) work and does not scale to "
+            f"nx = {sys.nx} > {limit} states; {_SCALES}"
         )
 
 
@@ -202,8 +203,8 @@ def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalD
             raise IvobsError(f"gain: expected 'width', 'lmi+width' or 'lmi', got {gain!r}")
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
-            _lp_size(sys, who)
-            L, _ = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
+            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
+            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
         else:
             check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
             L = nonnegative_gain(A, C, who)
@@ -225,8 +226,8 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
             )
         A, _, C, _, E, F = sys.matrices_at(0)
         if gain == "width":
-            _lp_size(sys, who)
-            L, _ = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
+            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
+            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
             return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
         what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
         check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
@@ -252,16 +253,6 @@ def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
     else:
         gain = "given"
     return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
-
-
-def _lp_size(sys: LinearSystem, who: str) -> None:
-    """The width LP is sparse but has ``O(nx²)`` variables: refused above
-    :data:`~ivobs.design.width_lp.MAX_LP_STATES` states."""
-    if sys.nx > MAX_LP_STATES:
-        raise DesignError(
-            f"{who}: the width linear program has O(nx^2) variables and does not scale to "
-            f"nx = {sys.nx} > {MAX_LP_STATES} states; {_SCALES}"
-        )
 
 
 D = TypeVar("D", IntervalDesign, SplitDesign)

@@ -155,8 +155,8 @@ class Operators:
         A, _, C, _, E, F = self.mats
         S, Si = (np.eye(self.nx), np.eye(self.nx)) if self.tr is None else (self.tr.S, self.tr.Si)
         try:
-            Lz, _ = width_gain(S @ A @ Si, C[obs] @ Si, S @ E, F[obs], self.sys.d_widths(),
-                               nonnegative=False, who=self.who)  # fmt: skip
+            Lz = width_gain(S @ A @ Si, C[obs] @ Si, S @ E, F[obs], self.sys.d_widths(),
+                            nonnegative=False, who=self.who)  # fmt: skip
         except DesignError:
             return [zero]
         Lk = np.zeros_like(self.L)

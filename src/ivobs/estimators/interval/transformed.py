@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..._validate import as_matrix, as_vector
-from ...design.cooperative import NONNEG_TOL, steady_width
+from ...design.cooperative import NONNEG_TOL
 from ...design.schur_transform import schur_design
 from ...design.similarity import (
     check_transform,
@@ -120,21 +120,7 @@ def transformed_design(
     else:
         S, e1_, e2_ = _transform(M, G, delta, R_given, e1, e2, e1_search, who)
         R_given = None  # S was built from R: check_transform checks nonnegativity only
-    Rs = check_transform(M, S, who, R_given)
-    steady = None
-    if not sys.bounds_depend_on_y:
-        steady = transformed_width(M, G, delta, S)
-    return TransformedDesign(
-        L=L,
-        R=Rs,
-        S=S,
-        e1=e1_,
-        e2=e2_,
-        poles=np.linalg.eigvals(M),
-        spectral_radius=spectral_radius(np.abs(Rs)),
-        gain=gain,
-        steady_width=steady,
-    )
+    return _made(sys, L, S, check_transform(M, S, who, R_given), gain, e1_, e2_)
 
 
 SEARCH_MAX_STATES = 8
@@ -153,55 +139,48 @@ def _schur(sys: LinearSystem, who: str, L: Any, poles: Any) -> TransformedDesign
         # Schur ([Tang2019, Theorem 5] with S = I, R = A − LC): the width-optimal one, which
         # no orthogonal S beats on the box (|S⁻¹| spreads every radius over all states)
         try:
-            L, _ = width_gain(A, C, E, F, delta, nonnegative=True, who=who)
+            L = width_gain(A, C, E, F, delta, nonnegative=True, who=who)
         except DesignError:
             L = None
         else:
-            return _identity(sys, L, delta)
+            return _made(sys, L, np.eye(sys.nx), A - L @ C, "identity")
     if L is not None:
         L, gain = check_gain(sys, L), "given"
         M = A - L @ C
         if M.min() >= -NONNEG_TOL * max(1.0, float(np.abs(A).max())) and spectral_radius(M) < 1:
-            return _identity(sys, L, delta, gain)  # a cooperative gain: S = I
+            return _made(sys, L, np.eye(sys.nx), M, gain)  # a cooperative gain: S = I
     elif poles is not None:
         poles = as_vector("poles", poles, sys.nx)
         L, gain = place_real_poles(A, C, poles, who), "given-poles"
     L, S, _ = schur_design(A, C, E, F, delta, who, L)
-    M = A - L @ C
-    Rs = check_transform(M, S, who, None, nonnegative=False)
-    steady = None
-    if not sys.bounds_depend_on_y:
-        steady = transformed_width(M, E - L @ F, delta, S)
-    return TransformedDesign(
-        L=L,
-        R=Rs,
-        S=S,
-        e1=None,
-        e2=None,
-        poles=np.linalg.eigvals(M),
-        spectral_radius=spectral_radius(np.abs(Rs)),
-        gain=gain,
-        steady_width=steady,
-    )
+    return _made(sys, L, S, check_transform(A - L @ C, S, who, None, nonnegative=False), gain)
 
 
-def _identity(
-    sys: LinearSystem, L: np.ndarray, delta: np.ndarray, gain: str = "identity"
+def _made(
+    sys: LinearSystem,
+    L: np.ndarray,
+    S: np.ndarray,
+    R: np.ndarray,
+    gain: str,
+    e1: np.ndarray | None = None,
+    e2: np.ndarray | None = None,
 ) -> TransformedDesign:
-    """The design with ``S = I``, ``R = A − LC >= 0`` (checked by the caller's gain check)."""
+    """The design of the gain ``L`` and the transformation ``S`` with ``R = S (A − LC) S⁻¹``
+    (checked by the caller), its steady-state width (:func:`transformed_width`; None for
+    callable bounds)."""
     A, _, C, _, E, F = sys.matrices_at(0)
     M = A - L @ C
     steady = None
     if not sys.bounds_depend_on_y:
-        steady = steady_width(M, E - L @ F, delta)
+        steady = transformed_width(M, E - L @ F, sys.d_widths(), S)
     return TransformedDesign(
         L=L,
-        R=M,
-        S=np.eye(sys.nx),
-        e1=None,
-        e2=None,
+        R=R,
+        S=S,
+        e1=e1,
+        e2=e2,
         poles=np.linalg.eigvals(M),
-        spectral_radius=spectral_radius(np.abs(M)),
+        spectral_radius=spectral_radius(np.abs(R)),
         gain=gain,
         steady_width=steady,
     )

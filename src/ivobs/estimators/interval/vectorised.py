@@ -41,7 +41,14 @@ import numpy as np
 from ...errors import DesignError, IvobsError
 from ...linalg import UNIT_ROUNDOFF
 from ...sets.rounding import ETA, DecayBound, gamma, mid_rad, up, upper
-from .._recursion import LinearFilter, SplitFilter, matrix_product, redo_streams
+from .._recursion import (
+    LinearFilter,
+    SplitFilter,
+    abs_max,
+    matrix_product,
+    norm_inf,
+    redo_streams,
+)
 from .operators import Operators
 from .window import meet
 
@@ -53,11 +60,6 @@ _U2 = 2.0 * np.finfo(float).eps / 2
 
 _BLOCK = 1 << 15
 """Elements (steps x states) per block of the finite-memory bounds (:meth:`VectorPath._memory`)."""
-
-
-def _norm(M: np.ndarray) -> float:
-    """``‖M‖∞`` rounded up (0 for an empty matrix)."""
-    return float(upper(np.max(np.abs(M).sum(axis=1), initial=0.0), max(M.shape[-1], 1)))
 
 
 def _enclose(c: np.ndarray, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -73,19 +75,6 @@ def _enclose(c: np.ndarray, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, n
     r2 += r * k + ETA
     r2 += (s * k)[..., None]
     return c - r2, c + r2
-
-
-def _rowmax(a: np.ndarray) -> np.ndarray:
-    """``max_i |a_i|`` over the last axis (0 when it is empty): exact. Short rows (the states
-    of a small system) column by column: NumPy's reduction along a short last axis is slow."""
-    n = a.shape[-1]
-    if n > 16:
-        big: np.ndarray = np.abs(a).max(axis=-1)
-        return big
-    out = np.zeros(a.shape[:-1])
-    for j in range(n):
-        np.maximum(out, np.abs(a[..., j]), out=out)
-    return out
 
 
 class VectorPath:
@@ -153,12 +142,12 @@ class VectorPath:
         dc, dr = mid_rad(dlo, dhi)
         aG, aF = np.abs(m.G), np.abs(ops.mats[5])
         gc = dc @ m.G.T  # (1 or T, n)
-        g_err = _rowmax(upper(aG @ np.abs(dc).T, nd).T) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
+        g_err = abs_max(upper(aG @ np.abs(dc).T, nd).T) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
         gr = upper(dr @ aG.T, nd)
         fc = dc @ ops.mats[5].T
-        f_err = _rowmax(upper(np.abs(dc) @ aF.T, nd)) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
+        f_err = abs_max(upper(np.abs(dc) @ aF.T, nd)) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
         fr = upper(dr @ aF.T, nd)
-        d_mag = _rowmax(np.maximum(np.abs(dlo), np.abs(dhi)))  # (1 or T,)
+        d_mag = abs_max(np.maximum(np.abs(dlo), np.abs(dhi)))  # (1 or T,)
         lo0, hi0 = ops.initial_bounds()
         c0, r0 = mid_rad(lo0, hi0)
 
@@ -167,10 +156,10 @@ class VectorPath:
         c[..., 0, :] = c0
         # -- the radius (data-free) and its deficit --------------------------------------------
         rad, tau = self._radius_of(T, r0, gr if tv else gr[0])
-        rmax = _rowmax(rad)  # (T,)
+        rmax = abs_max(rad)  # (T,)
         # -- the defect of the centres: whole (contiguous) arrays, then the rows k < T − 1 -------
-        cmax, ymax = _rowmax(c), _rowmax(y)
-        umax: Any = _rowmax(u) if nu else 0.0
+        cmax, ymax = abs_max(c), abs_max(y)
+        umax: Any = abs_max(u) if nu else 0.0
         pred = matrix_product(c, m.Q.T)
         pred += matrix_product(y, m.Lz.T)
         if nu and m.Bz.any():
@@ -178,14 +167,14 @@ class VectorPath:
         pred += gc if tv else gc[0]
         defect = pred[..., :-1, :]
         defect -= c[..., 1:, :]
-        nQ, nL, nB, nG = _norm(m.Q), _norm(m.Lz), _norm(m.Bz), float(np.max(_rowmax(gc)))
+        nQ, nL, nB, nG = norm_inf(m.Q), norm_inf(m.Lz), norm_inf(m.Bz), float(np.max(abs_max(gc)))
         ge = 2.0 * gamma(n + ny + nu + 4)
         e = ops.tr.kx if ops.tr is not None else 1.0
         ex, eu = e * float(np.max(m.err.ex, initial=0.0)), float(np.max(m.err.eu, initial=0.0))
         ey, ed = float(np.max(m.err.ey, initial=0.0)), float(np.max(m.err.ed, initial=0.0))
         cm0, ym = cmax[..., :-1], ymax[..., :-1]
         um = umax[..., :-1] if nu else 0.0
-        beta = (1.0 + _U2) * _rowmax(defect)
+        beta = (1.0 + _U2) * abs_max(defect)
         del pred, defect
         beta += (ge * nQ + ex) * cm0 + ge * cmax[..., 1:] + (ge * nL + ey) * ym
         beta += (ge * nB + eu) * um
@@ -208,9 +197,9 @@ class VectorPath:
         np.abs(yc, out=yc)
         aC = np.abs(m.Cz)
         yr = upper(matrix_product(rad, aC.T), n) + fr  # (T, ny): data-free
-        nC, nD = _norm(m.Cz), _norm(Du)
+        nC, nD = norm_inf(m.Cz), norm_inf(Du)
         pz = float(np.max(m.err.pz, initial=0.0)) + e * float(np.max(m.err.px, initial=0.0))
-        nf = float(np.max(_rowmax(fc)))
+        nf = float(np.max(abs_max(fc)))
         slack = 2.0 * gamma(n + nu + 3) * (nC * cmax + nD * umax + nf) + f_err
         slack += pz * zmax + _U2 * ymax + (n + nu + 3) * ETA
         slack = upper(slack, 8)[..., None] + upper(s[..., None] * aC.sum(axis=1), n)
@@ -230,7 +219,7 @@ class VectorPath:
             aSi = np.abs(Si)
             xc = matrix_product(c, Si.T)
             xr = upper(matrix_product(rad, aSi.T), n)  # (T, n): data-free
-            extra = 2.0 * gamma(n + 2) * _norm(Si) * cmax + float(np.max(ops.tr.rs)) * e * zmax
+            extra = 2.0 * gamma(n + 2) * norm_inf(Si) * cmax + float(np.max(ops.tr.rs)) * e * zmax
             extra = upper(extra, 3) + upper(s * float(np.max(aSi.sum(axis=1))), 2)
             lo, hi = _enclose(xc, xr, extra)
             lo[..., 0, :] = ops.x0.lo  # [Tang2019, eq. (42)]: the prior box at k = 0
@@ -262,11 +251,11 @@ class VectorPath:
         """The centres ``ĉ`` ``(..., T, n)`` of the record or batch (one filter pass)."""
         m, n = self.ops.full, self.ops.nx
         if tv:
-            filt = SplitFilter(m.Q, [m.Lz, m.Bz, np.eye(n)], [np.eye(n)])
+            filt = SplitFilter(m.Q, [m.Lz, m.Bz, np.eye(n)])
             sig = [y, u, gc]
         else:
             if self._filter is None:
-                self._filter = SplitFilter(m.Q, [m.Lz, m.Bz], [np.eye(n)], g=gc)
+                self._filter = SplitFilter(m.Q, [m.Lz, m.Bz], gc)
             filt, sig = self._filter, [y, u]
         (c,), shared = filt.run(sig, x0=c0)
         if shared is not None:
@@ -283,15 +272,15 @@ class VectorPath:
         m, n = self.ops.full, self.ops.nx
         aQ = np.abs(m.Q)
         if tv:
-            rad = LinearFilter(aQ, [np.eye(n)], [np.eye(n)]).run([gr], x0=r0)[0]
+            rad = LinearFilter(aQ, [np.eye(n)]).run([gr], x0=r0)[0]
         else:
-            rad = LinearFilter(aQ, [], [np.eye(n)], g=gr).run([], T=T, x0=r0)[0]
+            rad = LinearFilter(aQ, [], gr).run([], T=T, x0=r0)[0]
         rad[0] = r0
         nxt = matrix_product(rad[:-1], aQ.T)
         nxt += gr[:-1] if tv else gr
-        ev = 2.0 * gamma(n + 3) * _rowmax(nxt) + (n + 3) * ETA
+        ev = 2.0 * gamma(n + 3) * abs_max(nxt) + (n + 3) * ETA
         nxt -= rad[1:]
-        tau = upper((1.0 + _U2) * _rowmax(np.maximum(nxt, 0.0)) + ev, 3)
+        tau = upper((1.0 + _U2) * abs_max(np.maximum(nxt, 0.0)) + ev, 3)
         if not tv:
             self._radius = (T, rad, tau)
         return rad, tau

@@ -62,9 +62,8 @@ from ...sets.rounding import ETA, UNIT_ROUNDOFF, down, mid_rad, product_error, u
 from ..state import Step
 from .design import KKLDesign, Transform, finite, left_inverse
 from .flow import K, Passage, ltv_passage, minus, target_exponential
-from .observer import Observer, ZState, recover
+from .observer import Observer, ZState, prior_box, recover
 from .periods import mismatch, period_key
-from .terms import Consistency, consistency
 from .traced import TimeFunction, trace
 
 __all__ = ["ContinuousLTV", "ContinuousObserver", "ContinuousState", "Forcing", "InputHold"]
@@ -166,7 +165,7 @@ class FlowMatrices:
     Me: np.ndarray | None = None
 
 
-def flow_matrices(ps: Passage, Tp: np.ndarray, Xmag: np.ndarray, f: Forcing) -> FlowMatrices:
+def flow_matrices(ps: Passage, Xmag: np.ndarray, f: Forcing) -> FlowMatrices:
     """:class:`FlowMatrices` of ``T'`` (forcing ``f``, ``Xmag >= |T' Φ − e^{A_z h} T|``)."""
     P, RP = ps.Phiz
     nz, nv = P.shape[0], f.L.shape[1]
@@ -258,8 +257,6 @@ class ContinuousObserver(Observer[ContinuousState]):
         self.u_fn: TimeFunction | None = (
             trace("input_hold", hold, (sys.nu,), 0) if callable(hold) else None
         )
-        # constant (C, D, F): the consistency test of each pattern of observed outputs, kept
-        self._checks: dict[bytes, Consistency] | None = None if sys.is_time_varying else {}
         self._Phiz: dict[float, tuple[tuple[float, float], IntervalMatrix]] = {}
         self._dmr = mid_rad(self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
 
@@ -286,7 +283,7 @@ class ContinuousObserver(Observer[ContinuousState]):
     def matrices(self, ps: Passage, T: np.ndarray, Tp: np.ndarray, tag: Any) -> FlowMatrices:
         """The :class:`FlowMatrices` of ``T'``."""
         f = forcing(ps, Tp, self.hold)
-        return flow_matrices(ps, Tp, mismatch(Tp, ps, T), f)
+        return flow_matrices(ps, mismatch(Tp, ps, T), f)
 
     def model(self, ps: Passage) -> FlowMatrices:
         """The model's prediction matrices of ``ps`` (kept with it)."""
@@ -324,21 +321,6 @@ class ContinuousObserver(Observer[ContinuousState]):
                 self._Phiz.clear()
             got = self._Phiz[key] = (H, target_exponential(self.design.A_z, H))
         return got
-
-    def check(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Consistency:
-        """The consistency test of the observed outputs ``obs`` (kept per pattern)."""
-        d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
-        if self._checks is None:
-            C, D, F = (M[obs] for M in CDF)
-            return consistency(C, D, F, d)
-        key = obs.tobytes()
-        c = self._checks.get(key)
-        if c is None:
-            if len(self._checks) >= 256:
-                self._checks.clear()
-            C, D, F = (M[obs] for M in CDF)
-            c = self._checks[key] = consistency(C, D, F, d)
-        return c
 
     def inputs(self, ps: Passage, span: Span) -> tuple[np.ndarray, np.ndarray]:
         """``(v, u_r)`` of :class:`Forcing` for the input hold: for a callable input the ranges
@@ -447,7 +429,7 @@ class ContinuousObserver(Observer[ContinuousState]):
             )
         lo, hi = box
         if k == 0:
-            lo, hi = self.first_box(lo, hi)
+            lo, hi = prior_box(self.x0, lo, hi)
         new = ContinuousState(
             T=T, zlo=zlo, zhi=zhi, t_prev=float(t_k), u_prev=u_k.copy(), dlo_prev=d.lo.copy(),
             dhi_prev=d.hi.copy(), xlo=lo.copy(), xhi=hi.copy(), k=k,

@@ -415,7 +415,8 @@ class TransformSequence:
         determine ``T[0..N]``, and all of them are checked; a :class:`DesignError` says so when
         none is left-invertible (the observer would never give a box within the horizon
         given)."""
-        stacks = [M.shape[0] for M in (self.sys.A, self.sys.C) if _is_stack(M)]
+        # stacked matrices (N, rows, cols): a time-varying matrix given for N steps
+        stacks = [M.shape[0] for M in (self.sys.A, self.sys.C) if np.ndim(M) == 3]
         horizon = min(stacks) if stacks else None
         limit = horizon + 1 if horizon is not None else 100 + 20 * self._seq[0].T.shape[0]
         best = float("inf")
@@ -459,8 +460,3 @@ def _inverse_bound(A: np.ndarray) -> np.ndarray:
     norm = float(upper(np.max(np.abs(X).sum(axis=1)), n)) / (1.0 - beta) * (1.0 + 1e-15)
     out: np.ndarray = up(np.abs(X) + up(norm * F.max(axis=0))[None, :])
     return out
-
-
-def _is_stack(M: Any) -> bool:
-    """Stacked matrices ``(N, rows, cols)`` (a time-varying matrix given for ``N`` steps)."""
-    return isinstance(M, np.ndarray) and M.ndim == 3

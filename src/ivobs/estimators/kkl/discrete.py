@@ -53,13 +53,10 @@ from ...sets import Box, image_bounds
 from ...sets.rounding import down, product_error, up, upper
 from ..state import Step, evolve
 from .design import KKLDesign, Transform, TransformSequence, finite, left_inverse
-from .observer import Observer, ZState, recover
-from .terms import Consistency, Terms, combination, consistency, make_terms
+from .observer import PATTERNS, Observer, ZState, prior_box, recover
+from .terms import Terms, combination, make_terms
 
 __all__ = ["Discrete", "DiscreteState"]
-
-PATTERNS = 256
-"""Patterns of observed outputs whose matrices a time-invariant observer keeps."""
 
 
 @dataclass(frozen=True)
@@ -90,8 +87,6 @@ class Discrete(Observer[DiscreteState]):
         self.seq = seq
         self._tr = left_inverse(design.T, max_cond) if seq is None else None
         self._patterns: dict[bytes, tuple[Terms, Terms | None]] = {}
-        # time-varying: the consistency test of a pattern, kept while (C, D, F) do not change
-        self._checks: dict[bytes, tuple[tuple[np.ndarray, ...], Consistency]] = {}
         nx = sys.nx
         self._none = (np.full(nx, -np.inf), np.full(nx, np.inf))
         self._zero = np.zeros(nx)
@@ -136,31 +131,13 @@ class Discrete(Observer[DiscreteState]):
             X = combination((Bm, Cm))
         L = (LG[0][:, :nu], LG[1][:, :nu])
         G = (LG[0][:, nu:], LG[1][:, nu:])
-        check = self._check((C, D, F), obs, d)
+        check = self.check((C, D, F), obs)
         terms = make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, check=check)
         tr = self.transform(k)
         if terms.full or not tr.ok:
             return terms, None
         through = (tr.P, tr.resid, tr.T)
         return terms, make_terms(obs, Az, Bz, L, G, X, (C, D, F), d, through, check)
-
-    def _check(
-        self,
-        CDF: tuple[np.ndarray, ...],
-        obs: np.ndarray,
-        d: tuple[np.ndarray, np.ndarray] | None,
-    ) -> Consistency:
-        """The consistency test of the pattern ``obs`` (kept while ``C, D, F`` are the same)."""
-        key = obs.tobytes()
-        hit = self._checks.get(key)
-        if hit is not None and all(np.array_equal(a, b) for a, b in zip(hit[0], CDF)):
-            return hit[1]
-        if len(self._checks) >= PATTERNS:
-            self._checks.clear()
-        C, D, F = (M[obs] for M in CDF)
-        check = consistency(C, D, F, d)
-        self._checks[key] = (CDF, check)
-        return check
 
     # -- the step -------------------------------------------------------------------------
     def initial_state(self) -> DiscreteState:
@@ -181,7 +158,7 @@ class Discrete(Observer[DiscreteState]):
         else:  # T[k] not left-invertible (time-varying): the prediction alone
             lo, hi = self._none
         if k == 0:
-            lo, hi = self.first_box(lo, hi)
+            lo, hi = prior_box(self.x0, lo, hi)
         plo, phi = state.xlo, state.xhi
         cut = state.carried and bool(np.count_nonzero(plo > lo) or np.count_nonzero(phi < hi))
         if cut:

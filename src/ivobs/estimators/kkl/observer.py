@@ -18,8 +18,12 @@ from ...model import LinearSystem
 from ...sets import Box, image_bounds
 from ..state import OnlineState, Step
 from .design import KKLDesign, Transform
+from .terms import Consistency, consistency
 
-__all__ = ["Observer", "ZState", "prior_box", "recover"]
+__all__ = ["PATTERNS", "Observer", "ZState", "prior_box", "recover"]
+
+PATTERNS = 256
+"""Patterns of observed outputs whose matrices an observer keeps."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +88,8 @@ class Observer(Generic[S]):
         self.max_cond = max_cond
         # constant bounds of d (or none): the same box at every step
         self._dfix = sys.d_at(0) if sys.has_constant_bounds else None
+        # the consistency test of each pattern of observed outputs, kept while (C, D, F) are
+        self._checks: dict[bytes, tuple[tuple[np.ndarray, ...], Consistency]] = {}
 
     def initial_state(self) -> S:
         raise NotImplementedError
@@ -106,8 +112,20 @@ class Observer(Generic[S]):
         nx = self.sys.nx
         return np.full(nx, -np.inf), np.full(nx, np.inf)
 
-    def first_box(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return prior_box(self.x0, lo, hi)
+    def check(self, CDF: tuple[np.ndarray, ...], obs: np.ndarray) -> Consistency:
+        """The consistency test of the observed outputs ``obs`` (kept while ``C, D, F`` are the
+        same)."""
+        key = obs.tobytes()
+        hit = self._checks.get(key)
+        if hit is not None and all(np.array_equal(a, b) for a, b in zip(hit[0], CDF)):
+            return hit[1]
+        if len(self._checks) >= PATTERNS:
+            self._checks.clear()
+        C, D, F = (M[obs] for M in CDF)
+        d = (self._dfix.lo, self._dfix.hi) if self._dfix is not None else None
+        check = consistency(C, D, F, d)
+        self._checks[key] = (CDF, check)
+        return check
 
     def bounds_d(self, k: int, y_k: np.ndarray) -> Box:
         """The bounds of ``d[k]`` (constant ones kept)."""

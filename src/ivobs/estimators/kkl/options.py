@@ -9,41 +9,24 @@ from typing import Any
 
 import numpy as np
 
+from ..._validate import as_bool
 from ...errors import IvobsError
 from ...model import LinearSystem
 
 __all__ = ["check_options", "number"]
 
 
-def number(
-    name: str,
-    val: Any,
-    *,
-    above: float | None = None,
-    at_least: float | None = None,
-    below: float | None = None,
-    why: str = "",
-) -> float:
-    """A real, finite scalar option within its range, else :class:`IvobsError` naming it."""
+def number(name: str, val: Any, low: float, *, strict: bool, why: str = "") -> float:
+    """A real, finite scalar option ``> low`` (``strict``) or ``>= low``, else
+    :class:`IvobsError` naming it."""
     if isinstance(val, np.ndarray) and val.ndim == 0 and val.dtype.kind in "fiu":
         val = val.item()
     if isinstance(val, (bool, np.bool_)) or not isinstance(val, numbers.Real):
         raise IvobsError(f"{name}: expected a real number, got {val!r} ({type(val).__name__})")
     v = float(val)
-    rng = []
-    if above is not None:
-        rng.append(f"> {above:g}")
-    if at_least is not None:
-        rng.append(f">= {at_least:g}")
-    if below is not None:
-        rng.append(f"< {below:g}")
-    if (
-        not np.isfinite(v)
-        or (above is not None and not v > above)
-        or (at_least is not None and not v >= at_least)
-        or (below is not None and not v < below)
-    ):
-        raise IvobsError(f"{name}: expected a finite number {' and '.join(rng)}{why}, got {val!r}")
+    if not (np.isfinite(v) and (v > low if strict else v >= low)):
+        rng = f"{'>' if strict else '>='} {low:g}"
+        raise IvobsError(f"{name}: expected a finite number {rng}{why}, got {val!r}")
     return v
 
 
@@ -84,10 +67,9 @@ def check_options(
         )
     for nm, val in (("gamma", gamma), ("ell", ell)):
         if val is not None:
-            number(nm, val, above=0.0)
-    number("max_cond", max_cond, at_least=1.0, why="; cond(T) >= 1 for every T")
-    if not isinstance(tune, (bool, np.bool_)):
-        raise IvobsError(f"tune: expected True or False, got {tune!r}")
+            number(nm, val, 0.0, strict=True)
+    number("max_cond", max_cond, 1.0, strict=False, why="; cond(T) >= 1 for every T")
+    as_bool("tune", tune)
     hold_ok = isinstance(input_hold, str) and input_hold in ("linear", "zero")
     if not (callable(input_hold) or hold_ok):
         raise IvobsError(

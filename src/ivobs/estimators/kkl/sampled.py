@@ -127,13 +127,11 @@ class ContinuousLTI(ContinuousObserver):
             return super().matrices(ps, T, Tp, tag)
         fm: FlowMatrices | None = ps.kept.get("anchored")
         if fm is None:  # T' = T_h − h B_z C every interval: kept with the period
-            fm = ps.kept["anchored"] = flow_matrices(ps, Tp, tag.Xmag, forcing(ps, Tp, self.hold))
+            fm = ps.kept["anchored"] = flow_matrices(ps, tag.Xmag, forcing(ps, Tp, self.hold))
         return fm
 
     def transform_at(self, T: np.ndarray, tag: Any) -> Transform:
-        if isinstance(tag, Anchor):
-            return tag.trm
-        return left_inverse(T, self.max_cond)
+        return tag.trm if isinstance(tag, Anchor) else super().transform_at(T, tag)
 
     def after_jump(
         self,

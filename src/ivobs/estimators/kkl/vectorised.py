@@ -31,7 +31,7 @@ import numpy as np
 
 from ...sets import image_bounds
 from ...sets.rounding import ETA, UNIT_ROUNDOFF, DecayBound, gamma, mid_rad, up, upper
-from .._recursion import LinearFilter, redo_streams
+from .._recursion import LinearFilter, abs_max, norm_inf, redo_streams
 from .discrete import Discrete
 from .observer import prior_box
 from .terms import g_image
@@ -78,14 +78,14 @@ class VectorisedLTI:
         c0, r0 = mid_rad(zlo0, zhi0)
         # (3.a): the centre (data) and the radius (data-free), by the filter
         if const:
-            cf = LinearFilter(Az, [Bz, Lu], [np.eye(Az.shape[0])], g=gc)
+            cf = LinearFilter(Az, [Bz, Lu], gc)
             chat = cf.run([y, u], x0=c0)[0]
         else:
-            cf = LinearFilter(Az, [Bz, Lu, np.eye(Az.shape[0])], [np.eye(Az.shape[0])])
+            cf = LinearFilter(Az, [Bz, Lu, np.eye(Az.shape[0])])
             chat = cf.run([y, u, np.broadcast_to(gc, (*y.shape[:-1], gc.shape[-1]))], x0=c0)[0]
         rhat, rdef = self.radius(Tn, r0, gr, const)
         cabs = np.abs(chat)
-        cP = _rowmax(cabs @ tr.absP.T)  # ‖|P| |ĉ[k]|‖∞
+        cP = abs_max(cabs @ tr.absP.T)  # ‖|P| |ĉ[k]|‖∞
         q = self.slack(chat, cabs, rhat, rdef, y, u, gc, c0, cP, tr, terms)
         del cabs
         if q is None:
@@ -115,9 +115,9 @@ class VectorisedLTI:
         Az = self.ob.design.A_z
         nz = Az.shape[0]
         if const:
-            rhat = LinearFilter(Az, [], [np.eye(nz)], g=gr).run([], T=Tn, x0=r0)[0]
+            rhat = LinearFilter(Az, [], gr).run([], T=Tn, x0=r0)[0]
         else:
-            rhat = LinearFilter(Az, [np.eye(nz)], [np.eye(nz)]).run([gr], x0=r0)[0]
+            rhat = LinearFilter(Az, [np.eye(nz)]).run([gr], x0=r0)[0]
         nxt = rhat[1:]
         prev = rhat[:-1] @ Az.T
         g = gr if const else gr[:-1]
@@ -162,22 +162,22 @@ class VectorisedLTI:
             step += u @ Lu.T
         dfct = np.subtract(chat[..., 1:, :], step[..., :-1, :], out=step[..., :-1, :])
         dfct -= g
-        eta = _rowmax(np.abs(dfct, out=dfct))  # (..., T-1)
+        eta = abs_max(np.abs(dfct, out=dfct))  # (..., T-1)
         del step, dfct
-        c_abs = _rowmax(cabs)
-        mag = c_abs[..., 1:] + _norm(Az) * c_abs[..., :-1]
-        mag += _norm(np.abs(Bz)) * _rowmax(np.abs(y[..., :-1, :]))
+        c_abs = abs_max(cabs)
+        mag = c_abs[..., 1:] + norm_inf(Az) * c_abs[..., :-1]
+        mag += norm_inf(np.abs(Bz)) * abs_max(np.abs(y[..., :-1, :]))
         gmax = float(np.max(np.abs(gc)))
-        ue = _norm(up(_factor(nz + ny + nu + 2) * np.abs(Lu) + terms.Lerr)) if nu else 0.0
+        ue = norm_inf(up(_factor(nz + ny + nu + 2) * np.abs(Lu) + terms.Lerr)) if nu else 0.0
         mag *= _factor(nz + ny + nu + 2) * (1.0 + 8.0 * gamma(8))
         eta += mag
         if nu:
-            eta += ue * (1.0 + 4.0 * gamma(4)) * _rowmax(np.abs(u[..., :-1, :]))
+            eta += ue * (1.0 + 4.0 * gamma(4)) * abs_max(np.abs(u[..., :-1, :]))
         eta += _factor(nz + ny + nu + 2) * gmax + (nz + ny + nu + 8) * ETA
         # |X| |x|: ‖x[k]‖∞ <= c_norm ‖|P| (|ĉ| + r̂ + q)‖∞ (recover); η = a + b q
         xr = float(upper(np.max(terms.xmag.sum(axis=1)), ob.sys.nx)) if terms.x_used else 0.0
         if xr:
-            s = cP[..., :-1] + _rowmax(rhat[:-1] @ tr.absP.T)
+            s = cP[..., :-1] + abs_max(rhat[:-1] @ tr.absP.T)
             eta += (xr * tr.c_norm) * s
         if lead:
             eta = eta.reshape(-1, eta.shape[-1]).max(axis=0)
@@ -203,7 +203,7 @@ class VectorisedLTI:
         Rp = (rhat + q[:, None]) @ tr.absP.T  # (T, nx), shared by the streams of a batch
         xc = chat @ tr.P.T
         extra = up(tr.c_err + tr.c_resid) * (1.0 + 4.0 * gamma(4))
-        rad = (extra * (cP + _rowmax(Rp)) + tr.eta)[..., None] + Rp
+        rad = (extra * (cP + abs_max(Rp)) + tr.eta)[..., None] + Rp
         return xc, rad
 
     def first_contradicted(
@@ -252,17 +252,3 @@ class VectorisedLTI:
         band += _factor(nx + nu + nx + 2) * mag + (2 * (nx + nu) + 8) * ETA
         out: np.ndarray = np.any(e > np.nextafter(band, np.inf, out=band), axis=-1)
         return out
-
-
-def _rowmax(a: np.ndarray) -> np.ndarray:
-    """``max`` over the last (short) axis, one column at a time (a reduction over an axis of
-    two or three entries is slow in NumPy)."""
-    out = a[..., 0].copy()
-    for j in range(1, a.shape[-1]):
-        np.maximum(out, a[..., j], out=out)
-    return out
-
-
-def _norm(M: np.ndarray) -> float:
-    """``‖M‖∞`` rounded up (row sums of ``|M|``)."""
-    return float(upper(np.max(np.abs(M).sum(axis=1)), M.shape[1])) if M.size else 0.0
