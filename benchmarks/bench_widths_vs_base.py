@@ -116,8 +116,10 @@ def measure(lower: np.ndarray, upper: np.ndarray, x: np.ndarray) -> dict[str, An
     return out
 
 
-def run_one(scenario: str, method: str, records: Path) -> dict[str, Any]:
-    """Run ``method`` with default options on ``scenario``'s saved record."""
+def run_one(scenario: str, method: str, records: Path, warm: bool = False) -> dict[str, Any]:
+    """Run ``method`` with default options on ``scenario``'s saved record. ``warm``: also the
+    CPU time of the design alone and of a second run of the same estimator (its first-use costs
+    — imports, compiling, caches — paid by the first run)."""
     import ivobs
     from ivobs import scenarios
 
@@ -131,8 +133,14 @@ def run_one(scenario: str, method: str, records: Path) -> dict[str, Any]:
         stage = "design"
         try:
             est = ivobs.make_estimator(method, sc.system, x0=sc.x0)
+            row["design_cpu_s"] = time.process_time() - c0
             stage = "run"
-            estimate = est.run(u, y, t=t if sc.system.is_continuous else None)
+            tt = t if sc.system.is_continuous else None
+            estimate = est.run(u, y, t=tt)
+            if warm:
+                c1 = time.process_time()
+                est.run(u, y, t=tt)
+                row["warm_run_cpu_s"] = time.process_time() - c1
         except ivobs.IvobsError as exc:
             row["status"] = "refused"
             row["reason"] = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
@@ -150,7 +158,7 @@ def run_one(scenario: str, method: str, records: Path) -> dict[str, Any]:
 
 def _child(args: argparse.Namespace) -> int:
     try:
-        row = run_one(args.scenario, args.method, Path(args.records))
+        row = run_one(args.scenario, args.method, Path(args.records), args.warm)
     except Exception as exc:
         row = {
             "scenario": args.scenario,
@@ -202,9 +210,12 @@ def _limit_cpu(cap: int) -> None:
     resource.setrlimit(resource.RLIMIT_CPU, (cap, cap + 5))
 
 
-def spawn(scenario: str, method: str, records: Path, cap: int) -> dict[str, Any]:
+def spawn(
+    scenario: str, method: str, records: Path, cap: int, warm: bool = False
+) -> dict[str, Any]:
     """``run_one`` in a subprocess limited to ``cap`` CPU seconds."""
     cmd = [sys.executable, str(SCRIPT), "one", scenario, method, "--records", str(records)]
+    cmd += ["--warm"] if warm else []
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     base = {"scenario": scenario, "method": method}
     t0 = time.perf_counter()
@@ -287,7 +298,7 @@ def run_all(args: argparse.Namespace) -> int:
         for method in meths:
             row = done.get((name, method)) or _linear_only(name, method)
             if row is None:
-                row = spawn(name, method, records, args.cap)
+                row = spawn(name, method, records, args.cap, args.warm)
             rows.append(row)
             done.pop((name, method), None)
             shown = row.get("mean_width", row.get("reason", ""))
@@ -431,6 +442,49 @@ def compare(args: argparse.Namespace) -> int:
     return 0
 
 
+SPEED_TOL = 1.25  # issue 29: every speed figure within 25 % of 2cc24ba's, or faster
+
+
+def speed(args: argparse.Namespace) -> int:
+    """The Markdown table of the warm runs' speeds (``run --warm``) of two result files: steps
+    per CPU-second of the second run, and the design's CPU time."""
+    base = {
+        (r["scenario"], r["method"]): r for r in json.loads(Path(args.base).read_text())["rows"]
+    }
+    head = json.loads(Path(args.head).read_text())["rows"]
+    lines = [
+        "| scenario | method | steps | run steps/s before | now | ratio | design s before | now "
+        "| verdict |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    counts: dict[str, int] = {}
+    for h in head:
+        b = base.get((h["scenario"], h["method"]))
+        if b is None or "warm_run_cpu_s" not in h or "warm_run_cpu_s" not in b:
+            continue
+        n = h["steps"]
+        rb = n / max(b["warm_run_cpu_s"], 1e-9)
+        rh = n / max(h["warm_run_cpu_s"], 1e-9)
+        # a slowdown counts when the whole (design + warm run) costs more than SPEED_TOL times
+        # as much and by more than 10 ms (below that, timer resolution and noise)
+        tb = b["design_cpu_s"] + b["warm_run_cpu_s"]
+        th = h["design_cpu_s"] + h["warm_run_cpu_s"]
+        if th <= tb * SPEED_TOL or th - tb < 0.01:
+            verdict = "faster" if th < tb / SPEED_TOL else "within 25 %"
+        else:
+            verdict = "**SLOWER**"
+        counts[verdict] = counts.get(verdict, 0) + 1
+        lines.append(
+            f"| {h['scenario']} | {h['method']} | {n} | {rb:,.0f} | {rh:,.0f} | {rb / rh:.2f} | "
+            f"{b['design_cpu_s']:.3f} | {h['design_cpu_s']:.3f} | {verdict} |"
+        )
+    text = "\n".join(lines) + "\n\n" + ", ".join(f"{k}: {v}" for k, v in counts.items()) + "\n"
+    if args.out:
+        Path(args.out).write_text(text)
+    print(text)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="mode", required=True)
@@ -446,16 +500,24 @@ def main(argv: list[str] | None = None) -> int:
     a.add_argument("--cap", type=int, default=CAP_CPU_S, help="CPU seconds per run")
     a.add_argument("--resume", action="store_true", help="keep the rows of --out but crashes")
     a.add_argument("--rerun-skipped", action="store_true", help="with --resume: rerun skips")
+    a.add_argument("--warm", action="store_true", help="also time a second run (speed mode)")
     o = sub.add_parser("one", help="one run, printed as a RESULT line (used by 'run')")
     o.add_argument("scenario")
     o.add_argument("method")
     o.add_argument("--records", default="/tmp/widths_records")
+    o.add_argument("--warm", action="store_true")
     c = sub.add_parser("compare", help="the Markdown table of two result files")
     c.add_argument("base")
     c.add_argument("head")
     c.add_argument("--out", default=None)
     c.add_argument("--all", action="store_true", help="also the rows refused in both")
+    v = sub.add_parser("speed", help="the speed table of two 'run --warm' result files")
+    v.add_argument("base")
+    v.add_argument("head")
+    v.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    if args.mode == "speed":
+        return speed(args)
     if args.mode == "records":
         from ivobs import scenarios
 
