@@ -21,12 +21,9 @@ import numpy as np
 from .._jit import jit
 from ..linalg import gamma
 from .rounding import ETA
+from .zonotope import MAX_BASIS_CONDITION
 
 __all__ = ["MAX_BASIS_CONDITION", "reduce_girard", "reduce_parallelotope"]
-
-MAX_BASIS_CONDITION = 1e3
-"""Largest ``|R_11| / |R_nn|`` of the basis' pivoted QR for which :func:`reduce_parallelotope`
-absorbs into it (above it, Girard's box)."""
 
 _gamma = jit(gamma)
 
