@@ -23,10 +23,9 @@ from typing import Any
 import numpy as np
 
 from ..._jit import jit, kernels_in
-from ...linalg import gamma
 from ...sets.reduction import reduce_girard, reduce_parallelotope
 from ...sets.rounding import ETA
-from ...sets.strip import intersect_strip
+from ...sets.strip import _gamma, _upper, intersect_strip
 
 __all__ = ["GIRARD", "NONE", "PARALLELOTOPE", "joint_set", "measure", "predict", "state_box",
            "step"]  # fmt: skip
@@ -34,15 +33,8 @@ __all__ = ["GIRARD", "NONE", "PARALLELOTOPE", "joint_set", "measure", "predict",
 PARALLELOTOPE, GIRARD, NONE = 0, 1, 2
 """The order reductions :func:`step` applies (``NONE``: the caller reduces)."""
 
-_gamma = jit(gamma)
 _INF = np.inf
 Arr = np.ndarray
-
-
-@jit
-def _upper(s: float, n: int) -> float:
-    """:func:`ivobs.sets.rounding.upper`: ``s (1 + 2 γ_{n+2}) + (n + 2) η``."""
-    return s * (1.0 + 2.0 * _gamma(n + 2)) + (n + 2) * ETA
 
 
 @jit
