@@ -141,15 +141,10 @@ class Intersect(Estimator):
         for name in DEFAULT_METHODS:
             if name not in methods():
                 continue
-            cls = get(name)
-            reason = self._not_applicable(cls)
-            if reason is None:
-                try:
-                    members.append(make_estimator(name, self.sys, self.x0))
-                    continue
-                except IvobsError as exc:  # DesignError, or a structural condition not met
-                    reason = str(exc)
-            skipped.append(f"{name}: {reason}")
+            try:  # the method refuses a system or prior it cannot take, with the reason
+                members.append(make_estimator(name, self.sys, self.x0))
+            except IvobsError as exc:  # DesignError, or a structural condition not met
+                skipped.append(f"{name}: {exc}")
         if not members:
             raise DesignError(
                 "methods: none of the default members could be designed for this system ("
@@ -157,15 +152,6 @@ class Intersect(Estimator):
                 + "); pass methods=[...] explicitly, e.g. methods=['exact']"
             )
         return members, skipped
-
-    def _not_applicable(self, cls: type[Estimator]) -> str | None:
-        if self.sys.is_continuous and not cls.supports_continuous:
-            return "discrete-time systems only"
-        if self.sys.is_time_varying and not cls.supports_time_varying:
-            return "time-invariant systems only"
-        if cls.needs_x0 and self.x0 is None:
-            return "needs a prior box x0"
-        return None
 
     def _explicit_members(self, methods: Any) -> list[Estimator]:
         if isinstance(methods, (str, Estimator)) or not isinstance(methods, (list, tuple)):

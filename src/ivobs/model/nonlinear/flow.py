@@ -688,14 +688,6 @@ def _key(*vectors: Any) -> tuple[float, ...]:
     return tuple(float(v) for vec in vectors for v in vec)
 
 
-def _ulp(X: np.ndarray) -> np.ndarray:
-    """A bound of the rounding of the one operation that gave ``X`` (elementwise)."""
-    from ...sets.rounding import ETA
-
-    out: np.ndarray = np.abs(X) * 2.0**-52 + ETA
-    return out
-
-
 def _product_bound(X: np.ndarray, G: np.ndarray, RX: np.ndarray) -> np.ndarray:
     """``>= |Y G|`` (elementwise) for every ``|Y − X| <= RX``: ``|fl(X G)|`` plus its rounding
     ([Higham2002, Lemma 3.1]) plus ``RX |G|``, rounded up."""
