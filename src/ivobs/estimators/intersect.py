@@ -46,8 +46,7 @@ from ..model import LinearSystem
 from ..sets import Box
 from . import get, make_estimator, methods, register
 from .base import Design, Estimator
-from .persistence import check_version
-from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step, check_counters, evolve
+from .state import OnlineState, Step, check_counters, evolve
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -257,36 +256,16 @@ class Intersect(Estimator):
         parts = [self.name, str(self.design.strip)] + [m.fingerprint() for m in self.members]
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
-    def save_state(self, st: Any) -> dict[str, Any]:
-        """The online state (JSON-serialisable): the members' saved states, each in its own
-        envelope (method, design fingerprint), nested in the intersection's."""
-        return {
-            "format": STATE_FORMAT,
-            "version": STATE_VERSION,
-            "method": self.name,
-            "fingerprint": self.fingerprint(),
-            "state": {
-                "k": st.k,
-                "inconsistent": st.inconsistent,
-                "members": [
-                    m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)
-                ],
-            },
-        }
+    def _dump(self, st: Any) -> dict[str, Any]:
+        """The members' saved states, each in its own envelope (method, design fingerprint)."""
+        members = [m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)]
+        return {"k": st.k, "inconsistent": st.inconsistent, "members": members}
 
-    def check_state(self, state: Any) -> IntersectState:
-        """The state saved by :meth:`state`, checked: the same members with the same designs,
-        the counters, and each member's state by the member."""
-        if not isinstance(state, dict) or not isinstance(state.get("state"), dict):
+    def _load(self, saved: Any) -> IntersectState:
+        """The counters, and each member's state checked by the member."""
+        if not isinstance(saved, dict):
             raise IvobsError("state: expected the dict returned by Estimator.state()")
-        if state.get("method") != self.name or state.get("fingerprint") != self.fingerprint():
-            raise IvobsError(
-                f"state: saved by method {state.get('method')!r} with other members or "
-                f"designs; it can only be restored into the same {self.name!r} estimator"
-            )
-        check_version(state)
-        saved = state["state"]
-        counters = {"k": saved.get("k")}
+        counters: dict[str, Any] = {"k": saved.get("k")}
         check_counters(counters)
         members = saved.get("members")
         if not isinstance(members, list) or len(members) != len(self.members):
