@@ -82,7 +82,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_int
+from .._validate import as_bool, as_int
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box
@@ -315,8 +315,7 @@ class ConstrainedZonotopeEstimator(Estimator):
             sys.nx,
             "reduces a dense constrained zonotope and solves LPs over its generators",
         )
-        if not isinstance(reduce, bool):
-            raise IvobsError(f"reduce: expected True or False, got {reduce!r}")
+        reduce = as_bool("reduce", reduce)
         if elimination not in ("certificates", "hausdorff"):
             raise IvobsError(
                 f"elimination: expected 'certificates' or 'hausdorff', got {elimination!r}"

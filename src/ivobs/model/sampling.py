@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import as_bool
 from ..errors import IvobsError
 from ..sets import Box
 from ..sets.expm import expm, expm_integral, interval_product, scaled
@@ -104,8 +105,7 @@ def check_options(Ts: Any, disturbances: Any, pieces: Any, interval_matrices: An
             f"disturbances: expected 'varying' (any signal in the box between samples) or "
             f"'held' (constant over each period), got {disturbances!r}"
         )
-    if not isinstance(interval_matrices, bool):
-        raise IvobsError(f"interval_matrices: expected True or False, got {interval_matrices!r}")
+    as_bool("interval_matrices", interval_matrices)
     if pieces is not None and (
         isinstance(pieces, bool)
         or not isinstance(pieces, (int, np.integer))

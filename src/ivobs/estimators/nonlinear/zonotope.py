@@ -74,7 +74,7 @@ from typing import Any
 
 import numpy as np
 
-from ..._validate import as_int
+from ..._validate import as_bool, as_int
 from ...errors import IvobsError
 from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
@@ -239,8 +239,7 @@ class NonlinearZonotopeEstimator(Estimator):
             raise IvobsError(
                 f"order: the reduction keeps at least nx = {sys.nx} generators, got {q}"
             )
-        if not isinstance(box_strips, bool):
-            raise IvobsError(f"box_strips: expected True or False, got {box_strips!r}")
+        box_strips = as_bool("box_strips", box_strips)
         self.design = NonlinearZonotopeDesign(order=q, box_strips=box_strips)
         w = sys.w_box
         self._cw, rw = mid_rad(w.lo, w.hi)  # W ⊆ <c_w, diag(R_w)>
