@@ -66,10 +66,11 @@ def _header(name: str, em: Emitter, syms: dict[str, list[Any]], consts: dict[Any
     em.scope(env)
 
 
-def _rows(em: Emitter, exprs: list[Any], labels: list[str]) -> list[Pair]:
+def emit_rows(em: Emitter, exprs: list[Any], labels: list[str] | str) -> list[Pair]:
+    """The code of each of ``exprs``, labelled ``labels[j]`` (a string: ``labels[j]``)."""
     out = []
-    for e, lab in zip(exprs, labels):
-        em.label = lab
+    for j, e in enumerate(exprs):
+        em.label = labels[j] if isinstance(labels, list) else f"{labels}[{j}]"
         out.append(em.emit(e))
     return out
 
@@ -177,30 +178,30 @@ def build_forms(
 
     em = Emitter(sites)
     _header(f"{name}_natural", em, syms, consts)
-    _ret(em, _rows(em, exprs, labels))
+    _ret(em, emit_rows(em, exprs, labels))
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
     _header(f"{name}_jacobian", em, syms, consts)
     flat: list[Pair] = []
     for i, row in enumerate(jac):
-        flat += _rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
+        flat += emit_rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
     _ret(em, flat)
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
     _header(f"{name}_natjac", em, syms, consts)
-    both = _rows(em, exprs, labels)
+    both = emit_rows(em, exprs, labels)
     flat = []
     for i, row in enumerate(jac):
-        flat += _rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
+        flat += emit_rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
     em.line(f"return [{', '.join(p[0] for p in both)}], [{', '.join(p[1] for p in both)}], ")
     em.lines[-1] += f"[{', '.join(p[0] for p in flat)}], [{', '.join(p[1] for p in flat)}]"
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
     _header(f"{name}_tight", em, syms, consts)
-    nat = _rows(em, exprs, labels)
+    nat = emit_rows(em, exprs, labels)
     repeated = [_repeats(e, z) for e in exprs]
     out = _mean_value(em, exprs, nat, jac, repeated, syms, consts, labels) if any(repeated) else nat
     _ret(em, out)
