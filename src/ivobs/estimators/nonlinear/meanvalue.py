@@ -54,6 +54,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ...linalg import gamma
+from ...model.nonlinear._runtime import dn as _down
+from ...model.nonlinear._runtime import up as _up
 from ...sets.rounding import ETA, down, mid_rad, up, upper
 
 __all__ = ["Linearisation", "contract_back", "linearise", "measurement"]
@@ -64,22 +66,12 @@ its spread (:meth:`~ivobs.NonlinearSystem.evaluators`, module docstring)."""
 
 Vector = np.ndarray | Sequence[float]
 
-_INF = math.inf
-
-
-def _up(v: float) -> float:
-    return math.nextafter(v, _INF)
-
-
-def _down(v: float) -> float:
-    return math.nextafter(v, -_INF)
-
 
 def measurement(y: np.ndarray) -> tuple[list[float], list[float]]:
     """``(ylo, yhi)``: the reals each double ``y_i`` stands for, ``[down(y_i), up(y_i)]``
     (module docstring); NaN (a missing component) stays NaN."""
     values = y.tolist()
-    return [math.nextafter(v, -_INF) for v in values], [math.nextafter(v, _INF) for v in values]
+    return [_down(v) for v in values], [_up(v) for v in values]
 
 
 class Linearisation(NamedTuple):

@@ -223,7 +223,6 @@ def _monotone(f, al: float, ah: float, lo_cap: float, hi_cap: float) -> tuple[fl
     return max(ldn(f(al)), lo_cap), min(lup(f(ah)), hi_cap)
 
 
-PI_LO = math.pi
 PI_HI = math.nextafter(math.pi, INF)
 HALF_PI_HI = math.nextafter(math.pi / 2, INF)  # fl(pi/2) < pi/2 < next
 

@@ -80,6 +80,8 @@ import numpy as np
 
 from ...errors import DivergenceError, IvobsError
 from ._runtime import DomainError
+from ._runtime import dn as _dn
+from ._runtime import up as _up
 from .codegen import _enclose_fraction
 from .flowback import FlowBackContractor
 from .system import NonlinearSystem
@@ -100,14 +102,6 @@ MEAN_PIECES = 16
 """Pieces of a substep over which the magnitude of ``e^{J_c s}`` is integrated (the spread)."""
 
 Vec = list[float]
-
-
-def _dn(v: float) -> float:
-    return math.nextafter(v, -math.inf)
-
-
-def _up(v: float) -> float:
-    return math.nextafter(v, math.inf)
 
 
 _ND, _NU = np.float64(-np.inf), np.float64(np.inf)
