@@ -13,7 +13,6 @@ from ...errors import IvobsError
 from ...linalg import gamma
 from ...model import LinearSystem
 from ...sets import Box, Zonotope
-from ...sets.reduction import reduce_girard, reduce_parallelotope
 from ...sets.rounding import mid_rad
 from .. import _uncertain as uncertain
 from .. import register
@@ -27,6 +26,7 @@ from .recursion import (
     kernels,
     measure,
     predict,
+    reduce_step,
     state_box,
     step,
 )
@@ -246,12 +246,5 @@ class StripEstimator(Estimator):
         xlo, xhi, crossed = state_box(z, rows, acc, m, lo, hi, nx)
         w = uncertain.terms(unc, xlo, xhi, u)[0]
         pn, Hn = predict(z, Hz, m, rows, acc, u, cd, rd, w, M, mc, Ep, pc, B, self._n_plant)
-        inconsistent = inconsistent or crossed
-        if not (np.isfinite(pn).all() and np.isfinite(Hn).all()):
-            return pn, Hn, np.zeros(nx), xlo, xhi, inconsistent, False
-        e_next = np.zeros(nx)
-        if self.design.reduction == "parallelotope":
-            Hn, e_next = reduce_parallelotope(Hn, order)
-        elif self.design.reduction == "girard":
-            Hn = reduce_girard(Hn, order)
-        return pn, Hn, e_next, xlo, xhi, inconsistent, True
+        code = _CODE[self.design.reduction]
+        return reduce_step(pn, Hn, xlo, xhi, inconsistent or crossed, order, code)
