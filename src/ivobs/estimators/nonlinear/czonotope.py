@@ -66,12 +66,12 @@ from ...sets.czonotope import (
     reduce_consolidated,
     soften,
 )
-from ...sets.rounding import UNIT_ROUNDOFF, down, up, upper
+from ...sets.rounding import UNIT_ROUNDOFF, down, up
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..constrained_zonotope import TOLS, default_limits
 from ..state import OnlineState, Step
-from .meanvalue import Linearisation, contract_back, linearise, measurement
+from .meanvalue import Linearisation, contract_back, joint_box, linearise, measurement
 
 __all__ = [
     "NonlinearConstrainedZonotopeDesign",
@@ -139,20 +139,6 @@ def _pad(M: np.ndarray, rows: int, cols: int) -> np.ndarray:
     out = np.zeros((rows, cols))
     out[: M.shape[0], : M.shape[1]] = M
     return out
-
-
-def _joint_box(
-    c: np.ndarray, G: np.ndarray, e: np.ndarray, xlo: np.ndarray, xhi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The box of ``x_k`` for the joint set: the zonotope's bounds ``c ± (|G| 1 + e)``, rounded
-    outward, intersected with ``[xlo, xhi]`` (both hold the state; if they part, only by
-    rounding, the zonotope's bounds are kept)."""
-    rad = upper(np.abs(G).sum(axis=1) + e, G.shape[1] + 1)
-    lo_z, hi_z = down(c - rad), up(c + rad)
-    lo, hi = np.maximum(xlo, lo_z), np.minimum(xhi, hi_z)
-    if (lo > hi).any():
-        return lo_z, hi_z
-    return lo, hi
 
 
 @register
@@ -289,7 +275,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         Gz[:nx, :m] = G
         Gz[nx + cols, m + np.arange(cols.size)] = self._rw[cols]
         Az = _pad(A, A.shape[0], m + cols.size)  # [A 0]
-        lo, hi = _joint_box(c, G, e, xlo, xhi)
+        lo, hi = joint_box(c, G, e, xlo, xhi)
         wlo = self.model.w_box.lo if wlo is None else wlo
         whi = self.model.w_box.hi if whi is None else whi
         return _Joint(

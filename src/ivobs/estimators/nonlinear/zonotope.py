@@ -79,13 +79,13 @@ from ...errors import IvobsError
 from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from ...sets.czonotope import reduce_generators
-from ...sets.rounding import ETA, down, mid_rad, product_error, up, upper
+from ...sets.rounding import ETA, mid_rad, product_error, up, upper
 from ...sets.zonotope import box_generators
 from .. import register
 from .._strip_hull import propagate_lists, section_hull
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from .meanvalue import contract_back, linearise, measurement
+from .meanvalue import contract_back, joint_box, linearise, measurement
 
 __all__ = ["NonlinearZonotopeDesign", "NonlinearZonotopeEstimator", "NonlinearZonotopeState"]
 
@@ -351,10 +351,7 @@ class NonlinearZonotopeEstimator(Estimator):
         Hz = np.zeros((nx + self._cw.shape[0], m + self._Rw.shape[1]))
         Hz[:nx, :m] = H
         Hz[nx:, m:] = self._Rw
-        rad = upper(_add(np.abs(H), axis=1) + e, m + 1)
-        lo, hi = np.fmax(xlo, down(p - rad)), np.fmin(xhi, up(p + rad))
-        if (lo > hi).any():  # never in exact arithmetic: both hold the state
-            lo, hi = down(p - rad), up(p + rad)
+        lo, hi = joint_box(p, H, e, xlo, xhi)
         return _Joint(
             z=np.concatenate([p, self._cw]),
             Hz=Hz,
