@@ -119,25 +119,10 @@ def _meet_strips(
     ``valid_from`` on (:mod:`ivobs.estimators.measured`); the rows they find inconsistent."""
     strips, vf = est._strips, est.valid_from
     assert strips is not None
-    T, nx = y.shape[-2], lo.shape[-1]
-    keys = np.arange(T) if t is None else np.asarray(t)
+    keys = np.arange(y.shape[-2]) if t is None else np.asarray(t)
     bad = np.zeros(y.shape[:-1], dtype=bool)
     if y.ndim == 2:
         bad[vf:] = strips.meet(lo[vf:], hi[vf:], u[vf:], y[vf:], keys[vf:])
-        return bad
-    if strips.lti:  # the streams of a batch, as one list of rows
-        n = y.shape[0] * max(T - vf, 0)
-        rows_lo, rows_hi = lo[:, vf:].reshape(n, nx), hi[:, vf:].reshape(n, nx)
-        flat = strips.meet(
-            rows_lo,
-            rows_hi,
-            u[:, vf:].reshape(n, u.shape[-1]),
-            y[:, vf:].reshape(n, y.shape[-1]),
-            keys,
-        )
-        lo[:, vf:] = rows_lo.reshape(lo[:, vf:].shape)
-        hi[:, vf:] = rows_hi.reshape(hi[:, vf:].shape)
-        bad[:, vf:] = flat.reshape(bad[:, vf:].shape)
         return bad
     for b in range(y.shape[0]):
         bad[b, vf:] = strips.meet(lo[b, vf:], hi[b, vf:], u[b, vf:], y[b, vf:], keys[vf:])
