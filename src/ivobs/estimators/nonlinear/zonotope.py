@@ -75,7 +75,6 @@ from typing import Any
 import numpy as np
 
 from ..._validate import as_bool, as_int
-from ...errors import IvobsError
 from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from ...sets.czonotope import reduce_generators
@@ -234,11 +233,7 @@ class NonlinearZonotopeEstimator(Estimator):
             sys = NonlinearSystem.from_linear(sys, who=self.name)
         self.model: NonlinearSystem = sys
         check_size(self.name, sys.nx, "multiplies and reduces a dense nx x q generator matrix")
-        q = 10 * sys.nx if order is None else as_int("order", order, 1)
-        if q < sys.nx:
-            raise IvobsError(
-                f"order: the reduction keeps at least nx = {sys.nx} generators, got {q}"
-            )
+        q = 10 * sys.nx if order is None else as_int("order", order, sys.nx)  # nx at least
         box_strips = as_bool("box_strips", box_strips)
         self.design = NonlinearZonotopeDesign(order=q, box_strips=box_strips)
         w = sys.w_box

@@ -158,11 +158,7 @@ class StripEstimator(Estimator):
             raise IvobsError(
                 f"reduction: expected one of {', '.join(map(repr, REDUCTIONS))}, got {reduction!r}"
             )
-        q = 10 * sys.nx if order is None else as_int("order", order, 1)
-        if q < sys.nx:
-            raise IvobsError(
-                f"order: the reduction keeps at least nx = {sys.nx} generators, got {q}"
-            )
+        q = 10 * sys.nx if order is None else as_int("order", order, sys.nx)  # nx at least
         if reduction != "parallelotope" and q < 2 * sys.nx:
             raise IvobsError(
                 f"order: the {reduction!r} reduction needs order >= 2 nx = {2 * sys.nx}, got "
