@@ -189,7 +189,6 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         self.design = NonlinearConstrainedZonotopeDesign(max_constraints=nc, max_generators=ng)
         self._cw, self._rw = mid_rad(sys.w_box.lo, sys.w_box.hi)
         self._wcols = np.flatnonzero(self._rw > 0)
-        self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
 
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearConstrainedZonotopeState:
@@ -223,12 +222,10 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         )
         if state.back:
             wlo, whi = self.model.w_box.lo, self.model.w_box.hi
-            if self._hf and not np.isnan(y_k).all():
-                back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
-                if back is None:
-                    inconsistent = True
-                else:
-                    prev.lo, prev.hi, wlo, whi = back
+            back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
+            inconsistent = back is None
+            if back is not None:
+                prev.lo, prev.hi, wlo, whi = back
             lin = linearise(self.model.evaluators("f"), prev.lo, prev.hi, prev.z, state.u, nx)
             c, G, A, b, e = self._predict(state.k, prev, lin)
             joint = self._joint(c, G, A, b, e, lin.nat_lo, lin.nat_hi, wlo, whi)

@@ -240,7 +240,6 @@ class NonlinearZonotopeEstimator(Estimator):
         self._cw, rw = mid_rad(w.lo, w.hi)  # W ⊆ <c_w, diag(R_w)>
         self._Rw = box_generators(rw)
         self._wlo, self._whi = w.lo.tolist(), w.hi.tolist()
-        self._back = bool(sys.ny)
 
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearZonotopeState:
@@ -267,14 +266,11 @@ class NonlinearZonotopeEstimator(Estimator):
         prev = _Joint(state.z, state.Hz, state.acc, state.lo.tolist(), state.hi.tolist())
         if state.back:
             wlo, whi = self._wlo, self._whi
-            if self._back and measured:  # 0. one step back through h∘f
-                back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
-                if back is None:
-                    inconsistent = True
-                else:
-                    lo, hi, wl, wh = (v.tolist() for v in back)
-                    prev = _Joint(prev.z, prev.Hz, prev.acc, lo, hi)
-                    wlo, whi = wl, wh
+            back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
+            inconsistent = back is None  # 0. one step back through h∘f
+            if back is not None:
+                lo, hi, wlo, whi = (v.tolist() for v in back)
+                prev = _Joint(prev.z, prev.Hz, prev.acc, lo, hi)
             joint = self._predict(state.k, prev, state.u, wlo, whi)  # 1.-2.
         else:
             joint = prev
