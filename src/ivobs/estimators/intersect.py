@@ -44,7 +44,7 @@ import numpy as np
 from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box
-from . import get, make_estimator, methods, register
+from . import make_estimator, methods, register
 from .base import Design, Estimator
 from .state import OnlineState, Step, check_counters, evolve
 
@@ -175,7 +175,6 @@ class Intersect(Estimator):
             ):
                 options = dict(spec[1])
                 x0 = options.pop("x0", self.x0)
-                get(spec[0])  # a clear error for an unknown name
                 members.append(make_estimator(spec[0], self.sys, x0, **options))
             else:
                 raise IvobsError(
