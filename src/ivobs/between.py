@@ -115,10 +115,7 @@ def _linear(
     from .model.sampling import period_hull
 
     system._require_lti("between_samples")
-    A, B, E = (
-        np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float)
-        for M in (system.A, system.B, system.E)
-    )
+    A, B, _, _, E, _ = system.matrices_at(0)  # dense (a sparse matrix densified)
     d = system.d if system.nd else None
     if d is not None and not isinstance(d, Box):
         raise IvobsError("system: between samples, the disturbance bounds must be a Box")

@@ -496,10 +496,7 @@ class LinearSystem(IntervalMatrices):
             raise IvobsError("discretize: the system is already discrete-time")
         self._require_lti("discretize")
         Ts = check_options(Ts, disturbances, pieces, interval_matrices)
-        A, B, C, D, E, F = (
-            np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float)
-            for M in (self.A, self.B, self.C, self.D, self.E, self.F)
-        )
+        A, B, C, D, E, F = self.matrices_at(0)  # dense (a sparse matrix densified)
         m = sample(A, B, E, F, self._d, Ts, disturbances, pieces, interval_matrices, self.names)
         out = LinearSystem(m.A, m.B, C, D=D, E=m.E, F=m.F, d=m.d, dt=Ts)
         out.names = self.names
