@@ -14,7 +14,7 @@ import numpy as np
 import scipy.linalg
 
 from ..rounding import ETA, UNIT_ROUNDOFF, gamma, upper
-from ..zonotope import MAX_BASIS_CONDITION
+from ..zonotope import MAX_BASIS_CONDITION, reduce_girard
 
 __all__ = ["consolidate_small", "reduce_generators"]
 
@@ -69,7 +69,7 @@ def reduce_generators(
     enclosure ([Chisci1998]; :func:`_absorb_in_basis`), or, when the ``N`` pivots of the QR
     with column pivoting are ill-conditioned (estimate above
     :data:`~ivobs.sets.zonotope.MAX_BASIS_CONDITION`) or do not span the lifted space,
-    [Girard2005]'s box (:func:`~ivobs.sets.reduction.reduce_girard`, the strip method's).
+    [Girard2005]'s box (:func:`~ivobs.sets.zonotope.reduce_girard`, as the strip method).
     An ill-conditioned basis is what lets the scale factors grow step after step without
     bound. Either way the result contains the original in exact arithmetic, whatever the
     rounding, and no box is left aside.
@@ -86,24 +86,15 @@ def reduce_generators(
     Ls = L * d[:, None] if d is not None else L
     L2 = _absorb_in_basis(Ls, order)
     if L2 is None:
-        L2 = _girard(Ls, order)
+        L2 = reduce_girard(Ls, order)
     if d is not None:
         back = L2 / d[:, None]
         if _exactly_scaled(back, L2):
             L2 = back
         else:  # an entry would leave the normal range: reduce the unscaled matrix instead
             L2 = _absorb_in_basis(L, order)
-            L2 = _girard(L, order) if L2 is None else L2
+            L2 = reduce_girard(L, order) if L2 is None else L2
     return c, L2[:n], L2[n:], b
-
-
-def _girard(L: np.ndarray, order: int) -> np.ndarray:
-    """[Girard2005]'s box: :func:`ivobs.sets.reduction.reduce_girard`, the strip method's
-    (imported when first needed: numba compiles it)."""
-    from ..reduction import reduce_girard
-
-    out: np.ndarray = reduce_girard(L, order)
-    return out
 
 
 _TINY = float(np.finfo(float).tiny)
