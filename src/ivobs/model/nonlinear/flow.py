@@ -433,11 +433,11 @@ class FlowSystem(NonlinearSystem):
             return None
         return [float(v) for v in out]
 
-    def _jacobian(self, B: tuple[Vec, Vec], u: Vec, fl: Vec, fh: Vec) -> tuple[Any, Any]:
-        """The Jacobian of the vector field over ``B × [fl, fh]``: ``(lo, hi)``, each
+    def _jacobian(self, B: tuple[Vec, Vec], u: Vec, wl: Vec, wh: Vec) -> tuple[Any, Any]:
+        """The Jacobian of the vector field over ``B × [wl, wh]``: ``(lo, hi)``, each
         ``(nx, nx + nw)``."""
         f, nx = self.continuous._f, self.nx
-        jl, jh = self.continuous._call(f.jacobian, f.sites, B[0], B[1], u, fl, fh)
+        jl, jh = self.continuous._call(f.jacobian, f.sites, B[0], B[1], u, wl, wh)
         return _arr(jl, nx, nx + self.nw), _arr(jh, nx, nx + self.nw)
 
     def _mean_spread(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> Vec:
@@ -539,15 +539,12 @@ class FlowSystem(NonlinearSystem):
                 "reached it); the Taylor coefficients are undefined over the box"
             ) from None
 
-    def _fnat(self, bl: Vec, bh: Vec, u: Vec, wl: Vec, wh: Vec) -> Any:
-        f = self.continuous._f
-        return self.continuous._call(f.natural, f.sites, bl, bh, u, wl, wh)
-
     def _picard(
         self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec, bl: Vec, bh: Vec, hh: float
     ) -> tuple[Vec, Vec]:
         """``[x0] + [0, hh] f(B)``, outward rounded."""
-        fl, fh = self._fnat(bl, bh, u, wl, wh)
+        f = self.continuous._f
+        fl, fh = self.continuous._call(f.natural, f.sites, bl, bh, u, wl, wh)
         lo = [_dn(a + min(0.0, _dn(hh * f))) for a, f in zip(xl, fl)]
         hi = [_up(a + max(0.0, _up(hh * f))) for a, f in zip(xh, fh)]
         return lo, hi
@@ -589,11 +586,10 @@ class FlowSystem(NonlinearSystem):
         """An enclosure ``M_B`` (augmented, ``(nz, nz)``) of the sensitivity over ``[0, hh]``:
         ``[I 0] + [0, hh] ∂f/∂z(B, [w]) M_B ⊆ M_B``, or None."""
         nx, nz = self.nx, self.nx + self.nw
-        f = self.continuous._f
-        jl, jh = self.continuous._call(f.jacobian, f.sites, bl, bh, u, wl, wh)
+        jl, jh = self._jacobian((bl, bh), u, wl, wh)
         with np.errstate(invalid="ignore", over="ignore"):
-            El = np.minimum(0.0, np.nextafter(hh * _arr(jl, nx, nz), _ND))
-            Eh = np.maximum(0.0, np.nextafter(hh * _arr(jh, nx, nz), _NU))
+            El = np.minimum(0.0, np.nextafter(hh * jl, _ND))
+            Eh = np.maximum(0.0, np.nextafter(hh * jh, _NU))
         I0 = np.eye(nz)[:nx]
         # candidate radius around I (not itself rigorous, the test below is): the image of
         # I ± R is within I ± |E| (I + R), strictly inside I ± R when R - |E| R = |E| + D, D > 0
