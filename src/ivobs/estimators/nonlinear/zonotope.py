@@ -183,6 +183,12 @@ class _Joint:
         )
 
 
+def _state(j: _Joint, u: np.ndarray, back: bool) -> NonlinearZonotopeState:
+    """The state holding the joint set ``j`` (fresh: cheaper than replace; the base sets k)."""
+    Hz, lo, hi = np.ascontiguousarray(j.Hz), np.array(j.lo), np.array(j.hi)
+    return NonlinearZonotopeState(z=j.z, Hz=Hz, acc=j.acc, lo=lo, hi=hi, u=u, back=back)
+
+
 @register
 class NonlinearZonotopeEstimator(Estimator):
     """Zonotopic filter for nonlinear systems: mean-value linearisation with the remainder as
@@ -247,15 +253,7 @@ class NonlinearZonotopeEstimator(Estimator):
         p, r = mid_rad(self.x0.lo, self.x0.hi)  # x0 ⊆ <p, diag(r)>
         nx = self.model.nx
         j = self._joint(p, box_generators(r), np.zeros(nx), self.x0.lo, self.x0.hi)
-        return NonlinearZonotopeState(
-            z=j.z,
-            Hz=j.Hz,
-            acc=j.acc,
-            lo=np.array(j.lo),
-            hi=np.array(j.hi),
-            u=np.zeros(self.model.nu),
-            back=False,
-        )
+        return _state(j, np.zeros(self.model.nu), back=False)
 
     def _step(
         self, state: NonlinearZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -280,15 +278,7 @@ class NonlinearZonotopeEstimator(Estimator):
                 inconsistent = True
             else:
                 joint = updated
-        new = NonlinearZonotopeState(  # fresh (cheaper than replace): the base sets k
-            z=joint.z,
-            Hz=np.ascontiguousarray(joint.Hz),
-            acc=joint.acc,
-            lo=np.array(joint.lo),
-            hi=np.array(joint.hi),
-            u=u_k.copy(),
-            back=True,
-        )
+        new = _state(joint, u_k.copy(), back=True)
         return Step(new, new.lo[:nx].copy(), new.hi[:nx].copy(), inconsistent)  # 4.
 
     def _predict(
