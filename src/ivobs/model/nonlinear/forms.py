@@ -51,19 +51,25 @@ def _repeats(e: Any, z: list[Any]) -> bool:
     return any(c > 1 for c in counts.values())
 
 
-def _header(name: str, em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]) -> None:
-    em.lines.append(f"def {name}(xl, xh, u, wl, wh):")
+def emit_arguments(
+    em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]
+) -> dict[Any, Pair]:
+    """Code reading the arguments ``u``, ``wl``, ``wh``, ``xl``, ``xh`` into variables; the
+    environment of the symbols (and of the known parameters ``consts``)."""
     env: dict[Any, Pair] = dict(consts)
-    for i, s in enumerate(syms["x"]):
-        em.line(f"x{i}l = xl[{i}]; x{i}h = xh[{i}]")
-        env[s] = (f"x{i}l", f"x{i}h")
     for i, s in enumerate(syms["u"]):
         em.line(f"u{i} = u[{i}]")
         env[s] = (f"u{i}", f"u{i}")
-    for i, s in enumerate(syms["w"]):
-        em.line(f"w{i}l = wl[{i}]; w{i}h = wh[{i}]")
-        env[s] = (f"w{i}l", f"w{i}h")
-    em.scope(env)
+    for g in ("w", "x"):
+        for i, s in enumerate(syms[g]):
+            em.line(f"{g}{i}l = {g}l[{i}]; {g}{i}h = {g}h[{i}]")
+            env[s] = (f"{g}{i}l", f"{g}{i}h")
+    return env
+
+
+def _header(name: str, em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]) -> None:
+    em.lines.append(f"def {name}(xl, xh, u, wl, wh):")
+    em.scope(emit_arguments(em, syms, consts))
 
 
 def emit_rows(em: Emitter, exprs: list[Any], labels: list[str] | str) -> list[Pair]:

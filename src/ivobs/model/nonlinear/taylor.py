@@ -32,7 +32,7 @@ from __future__ import annotations
 from typing import Any
 
 from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
-from .forms import emit_centre, emit_meet, emit_rows
+from .forms import emit_arguments, emit_centre, emit_meet, emit_rows
 
 __all__ = ["MAX_ORDER", "TaylorCode", "build_taylor", "lie_coefficients"]
 
@@ -94,17 +94,10 @@ def _envs(
     em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]
 ) -> tuple[dict[Any, Pair], dict[Any, Pair]]:
     """Header lines; the environments over ``([x], [w])`` and over ``(B, [w])``."""
-    common: dict[Any, Pair] = dict(consts)
-    for i, s in enumerate(syms["u"]):
-        em.line(f"u{i} = u[{i}]")
-        common[s] = (f"u{i}", f"u{i}")
-    for i, s in enumerate(syms["w"]):
-        em.line(f"w{i}l = wl[{i}]; w{i}h = wh[{i}]")
-        common[s] = (f"w{i}l", f"w{i}h")
-    ex, eb = dict(common), dict(common)
+    ex = emit_arguments(em, syms, consts)
+    eb = dict(ex)
     for i, s in enumerate(syms["x"]):
-        em.line(f"x{i}l = xl[{i}]; x{i}h = xh[{i}]; b{i}l = bl[{i}]; b{i}h = bh[{i}]")
-        ex[s] = (f"x{i}l", f"x{i}h")
+        em.line(f"b{i}l = bl[{i}]; b{i}h = bh[{i}]")
         eb[s] = (f"b{i}l", f"b{i}h")
     return ex, eb
 
