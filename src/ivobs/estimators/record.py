@@ -121,11 +121,8 @@ def _meet_strips(
     assert strips is not None
     keys = np.arange(y.shape[-2]) if t is None else np.asarray(t)
     bad = np.zeros(y.shape[:-1], dtype=bool)
-    if y.ndim == 2:
-        bad[vf:] = strips.meet(lo[vf:], hi[vf:], u[vf:], y[vf:], keys[vf:])
-        return bad
-    for b in range(y.shape[0]):
-        bad[b, vf:] = strips.meet(lo[b, vf:], hi[b, vf:], u[b, vf:], y[b, vf:], keys[vf:])
+    for b in np.ndindex(y.shape[:-2]):  # every stream (the record itself: b = ())
+        bad[b][vf:] = strips.meet(lo[b][vf:], hi[b][vf:], u[b][vf:], y[b][vf:], keys[vf:])
     return bad
 
 
