@@ -83,16 +83,9 @@ def _block(
         return _with_strips(est, out[0], out[1], inc, u, y, t)
     if y.ndim == 2:
         return _with_strips(est, *est._loop(u, y, t, bar), u, y, t)
-    parts = [est._loop(u[b], y[b], t, bar) for b in range(y.shape[0])]
-    return _with_strips(
-        est,
-        np.stack([p[0] for p in parts]),
-        np.stack([p[1] for p in parts]),
-        np.stack([p[2] for p in parts]),
-        u,
-        y,
-        t,
-    )
+    parts = zip(*(est._loop(u[b], y[b], t, bar) for b in range(y.shape[0])), strict=True)
+    lo, hi, inc = (np.stack(p) for p in parts)
+    return _with_strips(est, lo, hi, inc, u, y, t)
 
 
 def _with_strips(
