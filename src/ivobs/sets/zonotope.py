@@ -195,31 +195,11 @@ class Zonotope:
         return Zonotope._trusted(self.c, np.concatenate([keep, np.diag(box)], axis=1))
 
     def contains(self, x: Any, tol: float = 1e-9) -> bool:
-        """Whether ``x`` lies in the zonotope (one LP with HiGHS; for checks, not hot loops)."""
-        from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
+        """Whether ``x`` lies in the zonotope (one LP with HiGHS, the constrained zonotope's
+        test with no constraint; for checks, not hot loops)."""
+        from .czonotope import ConstrainedZonotope  # (which imports this module)
 
-        x = as_vector("x", x, self.dim)
-        m = self.num_generators
-        if m == 0:
-            return bool(np.all(np.abs(x - self.c) <= tol))
-        # min s  s.t.  G b = x - c, -1 - s <= b <= 1 + s  ->  inside iff s <= tol
-        A_eq = np.hstack([self.G, np.zeros((self.dim, 1))])
-        A_ub = np.vstack(
-            [np.hstack([np.eye(m), -np.ones((m, 1))]), np.hstack([-np.eye(m), -np.ones((m, 1))])]
-        )
-        b_ub = np.ones(2 * m)
-        cost = np.zeros(m + 1)
-        cost[-1] = 1.0
-        res = linprog(
-            cost,
-            A_ub=A_ub,
-            b_ub=b_ub,
-            A_eq=A_eq,
-            b_eq=x - self.c,
-            bounds=[(None, None)] * m + [(0, None)],
-            method="highs",
-        )
-        return bool(res.status == 0 and res.x[-1] <= tol)
+        return ConstrainedZonotope.from_zonotope(self).contains(x, tol)
 
     def sample(self, size: int, rng: Any = None, *, vertices: bool = False) -> np.ndarray:
         """Points ``c + G b`` with ``b`` uniform in the cube (or on its vertices)."""
