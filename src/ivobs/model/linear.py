@@ -71,6 +71,24 @@ def _radius_box(name: str, value: Any, n: int, matrix: str) -> Box:
     return Box._trusted(0.0 - arr, 0.0 + arr)  # as Box.symmetric: no -0.0
 
 
+def check_dt(dt: Any) -> bool | float:
+    """The time base of a model (``LinearSystem``, ``NonlinearSystem``): ``True``, a sampling
+    period ``> 0``, or ``0`` (continuous time)."""
+    if dt is True:
+        return True
+    if dt is None or isinstance(dt, (str, bool)):
+        raise IvobsError(
+            f"dt: expected True or a period > 0 (discrete time) or 0 (continuous), got {dt!r}"
+        )
+    try:
+        val = float(dt)
+    except (TypeError, ValueError):
+        raise IvobsError(f"dt: expected a number or True, got {dt!r}") from None
+    if not np.isfinite(val) or val < 0:
+        raise IvobsError(f"dt: expected True, a period > 0, or 0; got {dt!r}")
+    return val
+
+
 class LinearSystem(IntervalMatrices):
     """``x+ = A x + B u + E d``, ``y = C x + D u + F d``, ``d ∈ d``.
 
@@ -128,7 +146,7 @@ class LinearSystem(IntervalMatrices):
                 "A: got a control.StateSpace; use ivobs.LinearSystem.from_statespace(ss, "
                 "disturbances=[...], d=ivobs.Box(...)) (make_estimator also accepts it directly)"
             )
-        self.dt = self._check_dt(dt)
+        self.dt = check_dt(dt)
         self._boxes: dict[str, tuple[Box, np.ndarray]] = {}
         self._A = Matrix("A", self._interval("A", A, None, None, "col"), None, None, "col")
         nx = int(self._A.shape[0])
@@ -165,22 +183,6 @@ class LinearSystem(IntervalMatrices):
         self._uncertainty = self._check_uncertain()
 
     # -- validation helpers ---------------------------------------------------------------
-    @staticmethod
-    def _check_dt(dt: Any) -> bool | float:
-        if dt is True:
-            return True
-        if dt is None or isinstance(dt, (str, bool)):
-            raise IvobsError(
-                f"dt: expected True or a period > 0 (discrete time) or 0 (continuous), got {dt!r}"
-            )
-        try:
-            val = float(dt)
-        except (TypeError, ValueError):
-            raise IvobsError(f"dt: expected a number or True, got {dt!r}") from None
-        if not np.isfinite(val) or val < 0:
-            raise IvobsError(f"dt: expected True, a period > 0, or 0; got {dt!r}")
-        return val
-
     @staticmethod
     def _check_bounds(d: Any, E: Any, F: Any) -> tuple[BoundsLike, int]:
         if d is None:

@@ -19,6 +19,7 @@ import numpy as np
 
 from ...errors import IvobsError
 from ...sets import Box
+from ..linear import check_dt
 from ..statespace import SignalNames
 from ._runtime import DomainError
 from .codegen import enclose_float
@@ -77,16 +78,6 @@ def _bounds(what: str, v: Any) -> Pair:
     return lo, hi
 
 
-def _dt(dt: Any) -> bool | float:
-    if dt is True:
-        return True
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt < 0:
-        raise IvobsError(
-            f"dt: expected True, a sampling period > 0 or 0 (continuous time), got {dt!r}"
-        )
-    return float(dt)
-
-
 class NonlinearSystem:
     """A discrete-time nonlinear model with bounded unknowns (see the module docstring).
 
@@ -122,7 +113,7 @@ class NonlinearSystem:
     ) -> None:
         import sympy as sp
 
-        self.dt = _dt(dt)
+        self.dt = check_dt(dt)
         self.state_names = _names("states", states)
         if not self.state_names:
             raise IvobsError("states: expected at least one state name")
