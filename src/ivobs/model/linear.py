@@ -89,7 +89,27 @@ def check_dt(dt: Any) -> bool | float:
     return val
 
 
-class LinearSystem(IntervalMatrices):
+class TimeBase:
+    """What the time base ``dt`` of a model says (:class:`LinearSystem`, ``NonlinearSystem``)."""
+
+    dt: bool | float
+
+    @property
+    def is_continuous(self) -> bool:
+        """``dt == 0``."""
+        return self.dt is not True and self.dt == 0
+
+    @property
+    def is_discrete(self) -> bool:
+        return not self.is_continuous
+
+    @property
+    def sampling_period(self) -> float:
+        """The sampling period (1 for ``dt=True``, 0 in continuous time)."""
+        return 1.0 if self.dt is True else float(self.dt)
+
+
+class LinearSystem(IntervalMatrices, TimeBase):
     """``x+ = A x + B u + E d``, ``y = C x + D u + F d``, ``d ∈ d``.
 
     Parameters
@@ -251,20 +271,6 @@ class LinearSystem(IntervalMatrices):
     def d(self) -> BoundsLike:
         """The disturbance bounds as given (Box, time-varying Box, callable, or None)."""
         return self._d
-
-    @property
-    def is_continuous(self) -> bool:
-        """``dt == 0``."""
-        return self.dt is not True and self.dt == 0
-
-    @property
-    def is_discrete(self) -> bool:
-        return not self.is_continuous
-
-    @property
-    def sampling_period(self) -> float:
-        """The sampling period (1 for ``dt=True``, 0 in continuous time)."""
-        return 1.0 if self.dt is True else float(self.dt)
 
     @property
     def is_time_varying(self) -> bool:
