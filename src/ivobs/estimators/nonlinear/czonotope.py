@@ -127,12 +127,6 @@ class _Joint:
     hi: np.ndarray
 
 
-def _pow2(v: np.ndarray) -> np.ndarray:
-    """A power of two near ``v > 0`` (a division by it is exact)."""
-    out: np.ndarray = np.exp2(np.round(np.log2(v)))
-    return out
-
-
 def _pad(M: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """``[[M, 0], [0, 0]]`` of shape ``(rows, cols)``, C-ordered (what ``np.hstack`` /
     ``np.vstack`` with zero blocks give, filled in place: cheaper than the stacks here)."""
@@ -345,7 +339,8 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         p, mg = coeff.shape
         rows = _pad(coeff, p, mg + p)  # [coeff, diag(sigma)]
         rows[np.arange(p), mg + np.arange(p)] = sigma
-        scale = _pow2(np.maximum(np.abs(rows).max(axis=1), np.finfo(float).tiny))
+        top = np.maximum(np.abs(rows).max(axis=1), np.finfo(float).tiny)
+        scale = np.exp2(np.round(np.log2(top)))  # a power of two: dividing by it is exact
         return rows / scale[:, None], rhs / scale
 
     def _predict(
