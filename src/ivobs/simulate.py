@@ -262,8 +262,9 @@ def _d_signal(sys: LinearSystem, d: Any, T: int) -> tuple[Any, np.ndarray]:
     return None, as_signal("d", d, sys.nd, T, allow_batch=False)
 
 
-def _infer_T(T: Any, u: Any, d: Any) -> int:
-    for sig in (u, d):
+def _infer_T(T: Any, *signals: Any) -> int:
+    """The number of steps: the rows of the first array among ``signals``, else ``T``."""
+    for sig in signals:
         if sig is not None and not callable(sig):
             arr = np.asarray(sig)
             if arr.ndim >= 1:

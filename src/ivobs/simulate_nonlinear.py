@@ -111,8 +111,7 @@ def simulate_nonlinear(
     if not isinstance(sys, NonlinearSystem):
         raise IvobsError(f"sys: expected an ivobs.NonlinearSystem, got {type(sys).__name__}")
     x0 = as_vector("x0", x0, sys.nx)
-    arrays = [s for s in (u, d, p) if s is not None and not isinstance(s, str)]
-    T = _infer_T(T, arrays[0] if arrays else None, arrays[1] if len(arrays) > 1 else None)
+    T = _infer_T(T, *(s for s in (u, d, p) if not isinstance(s, str)))
     u_arr = as_signal("u", u, sys.nu, T, allow_batch=False)
     pseed = seed + 1 if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) else seed
     d_arr = _signal("d", d, sys.d, T, seed)
