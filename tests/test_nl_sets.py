@@ -183,7 +183,7 @@ def test_needs_x0(method):
 
 def test_order_checked():
     sys = henon_record(1, 0)[0]
-    with pytest.raises(ivobs.IvobsError, match="order: the reduction keeps at least nx = 2"):
+    with pytest.raises(ivobs.IvobsError, match="order: expected an integer >= 2"):
         ivobs.make_estimator("nl-zonotope", sys, x0=HENON_X0, order=1)
     with pytest.raises(ivobs.IvobsError, match="order: expected an integer"):
         ivobs.make_estimator("nl-zonotope", sys, x0=HENON_X0, order=2.5)

@@ -137,8 +137,8 @@ def test_malformed_expressions_name_the_expression_position_and_symbol(
         ({"d": {"w1": (0.1, -0.1), "v1": (-1, 1)}}, r"d\['w1'\]: lower bound 0.1 > upper"),
         ({"d": [("w1", 1)]}, r"d: expected a dict"),
         ({"params": {"x1": 1.0, "a": (1, 2), "b": 0.3}}, r"'x1' used twice"),
-        ({"dt": -1.0}, r"dt: expected True, a sampling period > 0 or 0 \(continuous time\)"),
-        ({"dt": math.inf}, r"dt: expected True, a sampling period > 0 or 0"),
+        ({"dt": -1.0}, r"dt: expected True, a period > 0, or 0"),
+        ({"dt": math.inf}, r"dt: expected True, a period > 0, or 0"),
         ({"outputs": ["y1", "y2"]}, r"outputs: expected 1 names, got 2"),
     ],
 )

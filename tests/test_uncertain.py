@@ -132,7 +132,7 @@ def test_model_members():
          r"C \(lower bound of the interval matrix\): expected shape \(any, 3\).*interval matrix"),
         (lambda: ivobs.LinearSystem(A0, ivobs.Box(np.zeros((2, 1)), np.ones((2, 1))), C0),
          r"B \(lower bound.*expected shape \(3, any\)"),
-        (lambda: ivobs.LinearSystem(ivobs.Box(A0 - np.inf, A0), None, C0), "finite bounds"),
+        (lambda: ivobs.LinearSystem(ivobs.Box(A0 - np.inf, A0), None, C0), "expected finite"),
         (lambda: ivobs.LinearSystem(A0, None, C0, E=ivobs.Box(np.eye(3), np.eye(3)),
                                     d=ivobs.Box.symmetric(np.ones(3))), "A, B, C and D only"),
         (lambda: ivobs.LinearSystem(ivobs.Box(A0, A0 + 0.1), None, C0, dt=0), "discrete time"),

@@ -85,5 +85,6 @@ def first_use_notice(who: str, kernels: Iterable[Any]) -> None:
 
 
 def kernels_in(*modules: Any) -> list[Any]:
-    """The compiled kernels defined in ``modules`` (numba dispatchers: they keep ``py_func``)."""
-    return [v for m in modules for v in vars(m).values() if hasattr(v, "py_func")]
+    """The compiled kernels in ``modules`` (numba dispatchers: they keep ``py_func``)."""
+    found = [v for m in modules for v in vars(m).values() if hasattr(v, "py_func")]
+    return list({id(v): v for v in found}.values())  # each once (a module imports some)

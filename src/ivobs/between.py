@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_float_array
+from ._validate import as_signal
 from .errors import IvobsError
 from .result import Estimate
 from .sets import Box
@@ -60,7 +60,11 @@ def between_samples(
     if nx != system.nx:
         raise IvobsError(f"estimate: {nx} states, the system has {system.nx}")
     period = _period(system if flow else None, estimate, Ts)
-    U = _inputs(u, T, system.nu)
+    U = (
+        np.zeros((T, system.nu))
+        if u is None
+        else as_signal("u", u, system.nu, T, allow_batch=False)
+    )
     lo, hi = estimate.lower, estimate.upper
     valid = np.all(np.isfinite(lo), axis=1) & np.all(np.isfinite(hi), axis=1)
     out_lo = np.full((T, nx), np.nan)
@@ -103,17 +107,6 @@ def _period(sampled: Any, estimate: Estimate, Ts: Any) -> float:
     return float(Ts)
 
 
-def _inputs(u: Any, T: int, nu: int) -> np.ndarray:
-    if u is None:
-        return np.zeros((T, nu))
-    U = as_float_array("u", u)
-    if U.ndim == 1 and nu == 1:
-        U = U[:, None]
-    if U.shape != (T, nu) or not np.all(np.isfinite(U)):
-        raise IvobsError(f"u: expected finite inputs of shape ({T}, {nu}), got {U.shape}")
-    return U
-
-
 def _linear(
     system: Any, Ts: float, lo: np.ndarray, hi: np.ndarray, U: np.ndarray, valid: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -122,10 +115,7 @@ def _linear(
     from .model.sampling import period_hull
 
     system._require_lti("between_samples")
-    A, B, E = (
-        np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float)
-        for M in (system.A, system.B, system.E)
-    )
+    A, B, _, _, E, _ = system.matrices_at(0)  # dense (a sparse matrix densified)
     d = system.d if system.nd else None
     if d is not None and not isinstance(d, Box):
         raise IvobsError("system: between samples, the disturbance bounds must be a Box")

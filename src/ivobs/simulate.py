@@ -209,12 +209,7 @@ def simulate(
         return _simulate_ct(sys, x0, u, d, t, check_bounds)
     T = _infer_T(T, u, d)
     u_arr = as_signal("u", u, sys.nu, T, allow_batch=False)
-    d_fn = d if callable(d) else None
-    d_arr = np.empty((0, sys.nd))  # unused when d is a callable
-    if d_fn is None:
-        d_arr = (
-            np.zeros((T, sys.nd)) if d is None else as_signal("d", d, sys.nd, T, allow_batch=False)
-        )
+    d_fn, d_arr = _d_signal(sys, d, T)
     x = np.empty((T, sys.nx))
     y = np.empty((T, sys.ny))
     dd = np.empty((T, sys.nd))
@@ -260,8 +255,16 @@ def _realised(sys: LinearSystem, matrices: Any, T: int, check: bool) -> dict[str
     return out
 
 
-def _infer_T(T: Any, u: Any, d: Any) -> int:
-    for sig in (u, d):
+def _d_signal(sys: LinearSystem, d: Any, T: int) -> tuple[Any, np.ndarray]:
+    """``d`` as ``(callable or None, (T, nd) samples)`` (the samples unused with a callable)."""
+    if callable(d) or d is None:
+        return (d if callable(d) else None), np.zeros((T, sys.nd))
+    return None, as_signal("d", d, sys.nd, T, allow_batch=False)
+
+
+def _infer_T(T: Any, *signals: Any) -> int:
+    """The number of steps: the rows of the first array among ``signals``, else ``T``."""
+    for sig in signals:
         if sig is not None and not callable(sig):
             arr = np.asarray(sig)
             if arr.ndim >= 1:
@@ -274,7 +277,7 @@ def _infer_T(T: Any, u: Any, d: Any) -> int:
     return as_int("T", T, 1)
 
 
-def _check_d(sys: LinearSystem, d: np.ndarray, y: np.ndarray, tol: float = 1e-12) -> None:
+def _check_d(sys: LinearSystem, d: np.ndarray, y: np.ndarray) -> None:
     if sys.nd == 0:
         return
     T = d.shape[0]
@@ -284,14 +287,23 @@ def _check_d(sys: LinearSystem, d: np.ndarray, y: np.ndarray, tol: float = 1e-12
         boxes = [sys.d_at(k, y[k]) for k in range(T)]
         lo = np.array([b.lo for b in boxes])
         hi = np.array([b.hi for b in boxes])
-    slack = tol * (1.0 + np.abs(d))
-    bad = (d < lo - slack) | (d > hi + slack)
+    hint = "; pass check_bounds=False to simulate outside the model on purpose (faults)"
+    _check_within("d", d, lo, hi, hint)
+
+
+def _check_within(
+    what: str, arr: np.ndarray, lo: np.ndarray, hi: np.ndarray, hint: str = "", tol: float = 1e-12
+) -> None:
+    """Raise :class:`IvobsError` naming the first step and component of ``arr`` (T, n) outside
+    ``[lo, hi]`` (broadcast to it) by more than ``tol`` relative."""
+    slack = tol * (1.0 + np.abs(arr))
+    lo, hi = np.broadcast_to(lo, arr.shape), np.broadcast_to(hi, arr.shape)
+    bad = (arr < lo - slack) | (arr > hi + slack)
     if np.any(bad):
         k, i = (int(v) for v in np.argwhere(bad)[0])
         raise IvobsError(
-            f"d: the disturbance at step {k} leaves its bounds in component {i}: "
-            f"{d[k, i]} not in [{lo[k, i]}, {hi[k, i]}]; pass check_bounds=False to "
-            "simulate outside the model on purpose (faults)"
+            f"{what}: the value at step {k} leaves its bounds in component {i}: "
+            f"{arr[k, i]} not in [{lo[k, i]}, {hi[k, i]}]{hint}"
         )
 
 
@@ -313,12 +325,7 @@ def _simulate_ct(
         u_arr = np.array([as_vector(f"u({tk})", u(tk), sys.nu) for tk in t]).reshape(T, sys.nu)
     else:
         u_arr = as_signal("u", u, sys.nu, T, allow_batch=False)
-    d_fn = d if callable(d) else None
-    d_arr = np.empty((0, sys.nd))  # unused when d is a callable
-    if not d_fn:
-        d_arr = (
-            np.zeros((T, sys.nd)) if d is None else as_signal("d", d, sys.nd, T, allow_batch=False)
-        )
+    d_fn, d_arr = _d_signal(sys, d, T)
     x = np.empty((T, sys.nx))
     dd = np.empty((T, sys.nd))
     x[0] = x0

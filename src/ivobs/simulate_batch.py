@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_float_array
+from ._validate import as_float_array, as_signal
 from .errors import IvobsError
 from .model import LinearSystem
 from .simulate import Trajectory, _check_d
@@ -23,20 +23,10 @@ from .simulate import Trajectory, _check_d
 __all__ = ["simulate_batch"]
 
 
-def _batch(name: str, value: Any, n: int, B: int | None, T: int | None) -> np.ndarray:
+def _batch(name: str, value: Any, n: int, T: int | None) -> np.ndarray:
     """``value`` as ``(B, T, n)``: a ``(T, n)`` signal is shared by every record."""
-    arr = as_float_array(name, value)
-    if arr.ndim == 2:
-        arr = arr[None]
-    if arr.ndim != 3 or arr.shape[2] != n:
-        raise IvobsError(f"{name}: expected shape (B, T, {n}) or (T, {n}), got {arr.shape}")
-    if B is not None and arr.shape[0] not in (1, B):
-        raise IvobsError(f"{name}: {arr.shape[0]} records, expected {B}")
-    if T is not None and arr.shape[1] != T:
-        raise IvobsError(f"{name}: {arr.shape[1]} steps, expected {T}")
-    if not np.all(np.isfinite(arr)):
-        raise IvobsError(f"{name}: expected finite values")
-    return arr
+    arr = as_signal(name, value, n, T)
+    return arr if arr.ndim == 3 else arr[None]
 
 
 def simulate_batch(
@@ -71,8 +61,8 @@ def simulate_batch(
     if X0.ndim != 2 or X0.shape[1] != sys.nx or not np.all(np.isfinite(X0)):
         raise IvobsError(f"x0: expected finite (B, {sys.nx}) or ({sys.nx},) states, got {X0.shape}")
     B = X0.shape[0]
-    U = None if u is None else _batch("u", u, sys.nu, None, T)
-    D = None if d is None else _batch("d", d, sys.nd, None, T)
+    U = None if u is None else _batch("u", u, sys.nu, T)
+    D = None if d is None else _batch("d", d, sys.nd, T)
     sizes = {a.shape[0] for a in (X0, U, D) if a is not None} - {1}
     if len(sizes) > 1:
         raise IvobsError(f"x0, u, d: disagree on the number of records {sorted(sizes)}")

@@ -29,7 +29,7 @@ from ._validate import as_signal, as_vector
 from .errors import IvobsError
 from .model.nonlinear import NonlinearSystem
 from .sets import Box
-from .simulate import Trajectory, _infer_T, disturbance
+from .simulate import Trajectory, _check_within, _infer_T, disturbance
 
 __all__ = ["point_functions", "simulate_nonlinear"]
 
@@ -111,8 +111,7 @@ def simulate_nonlinear(
     if not isinstance(sys, NonlinearSystem):
         raise IvobsError(f"sys: expected an ivobs.NonlinearSystem, got {type(sys).__name__}")
     x0 = as_vector("x0", x0, sys.nx)
-    arrays = [s for s in (u, d, p) if s is not None and not isinstance(s, str)]
-    T = _infer_T(T, arrays[0] if arrays else None, arrays[1] if len(arrays) > 1 else None)
+    T = _infer_T(T, *(s for s in (u, d, p) if not isinstance(s, str)))
     u_arr = as_signal("u", u, sys.nu, T, allow_batch=False)
     pseed = seed + 1 if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) else seed
     d_arr = _signal("d", d, sys.d, T, seed)
@@ -120,7 +119,7 @@ def simulate_nonlinear(
     p_arr = _signal("p", p, pbox, T, pseed)
     if check_bounds:
         for what, arr, box in (("d", d_arr, sys.d), ("p", p_arr, pbox)):
-            _check(what, arr, box)
+            _check_within(what, arr, box.lo, box.hi)
     f, h = point_functions(sys)
     x = np.empty((T, sys.nx))
     y = np.empty((T, sys.ny))
@@ -140,16 +139,3 @@ def simulate_nonlinear(
     traj = Trajectory(x=x, y=y, u=u_arr, d=d_arr, t=np.arange(T) * sys.sampling_period)
     traj.p = p_arr
     return traj
-
-
-def _check(what: str, arr: np.ndarray, box: Box, tol: float = 1e-12) -> None:
-    if arr.shape[1] == 0:
-        return
-    slack = tol * (1.0 + np.abs(arr))
-    bad = (arr < box.lo - slack) | (arr > box.hi + slack)
-    if np.any(bad):
-        k, i = (int(v) for v in np.argwhere(bad)[0])
-        raise IvobsError(
-            f"{what}: the value at step {k} leaves its bounds in component {i}: "
-            f"{arr[k, i]} not in [{box.lo[i]}, {box.hi[i]}]"
-        )

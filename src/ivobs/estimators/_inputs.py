@@ -15,6 +15,7 @@ __all__ = [
     "check_t_k",
     "check_u_k",
     "check_y_k",
+    "keyword_options",
     "lean_u_y",
 ]
 
@@ -133,19 +134,18 @@ def _times(t: Any, T: int) -> np.ndarray:
     return t_arr
 
 
-def _option_kinds(cls: Any) -> dict[str, str]:
-    """The declared type of each keyword option of the method ``cls`` (its annotation)."""
+def keyword_options(cls: Any) -> dict[str, Any]:
+    """The keyword options of the method ``cls``: each name's ``inspect.Parameter`` from the
+    nearest ``__init__`` along its bases that declares it (the class's own first)."""
     import inspect
 
-    kinds: dict[str, str] = {}
-    for klass in reversed(cls.__mro__):
+    out: dict[str, Any] = {}
+    for klass in cls.__mro__:
         init = vars(klass).get("__init__")
-        if init is None:
-            continue
-        for p in inspect.signature(init).parameters.values():
-            if p.kind is p.KEYWORD_ONLY:
-                kinds[p.name] = str(p.annotation)
-    return kinds
+        for p in inspect.signature(init).parameters.values() if init is not None else ():
+            if p.kind is p.KEYWORD_ONLY and p.name not in out:
+                out[p.name] = p
+    return out
 
 
 _SCALARS = {"str": "a string", "bool": "True or False", "int": "an integer", "float": "a number"}
@@ -158,7 +158,7 @@ def check_option_types(cls: Any, options: dict[str, Any]) -> dict[str, Any]:
     method's ``if order < 1`` would raise NumPy's "truth value of an array is ambiguous"
     instead of saying so); NumPy scalars become Python ones. Other values are left to the
     method's own checks, and options declared ``Any`` (matrices, boxes) to the method."""
-    kinds = _option_kinds(cls)
+    kinds = {n: str(p.annotation) for n, p in keyword_options(cls).items()}
     out = dict(options)
     for name, value in options.items():
         parts = [p.strip() for p in kinds.get(name, "Any").split("|")]

@@ -34,7 +34,6 @@ declares it, and :func:`ivobs.testing.check_estimator` checks it against exact t
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import time
 import warnings
 from collections.abc import Callable
@@ -49,7 +48,7 @@ from ..model import LinearSystem, NonlinearSystem
 from ..result import Estimate
 from ..sets import Box
 from ..sets.rounding import overflowed
-from ._inputs import check_t, check_t_k, check_u_k, check_y_k, lean_u_y
+from ._inputs import check_t, check_t_k, check_u_k, check_y_k, keyword_options, lean_u_y
 from ._overrides import with_overrides
 from .measured import MeasurementStrips
 from .persistence import Persistence
@@ -522,14 +521,7 @@ class Estimator(Persistence):
         class's own options first). ``None`` usually means "chosen by the design" (the class
         docstring says how). The session's defaults (:func:`ivobs.config.set_defaults`) are not
         included: :func:`ivobs.config.defaults` gives those in effect."""
-        out: dict[str, Any] = {}
-        for klass in cls.__mro__:
-            if "__init__" in vars(klass):
-                sig = inspect.signature(vars(klass)["__init__"])
-                for p in sig.parameters.values():
-                    if p.kind is p.KEYWORD_ONLY and p.name not in out:
-                        out[p.name] = p.default
-        return out
+        return {name: p.default for name, p in keyword_options(cls).items()}
 
     def __repr__(self) -> str:
         return (

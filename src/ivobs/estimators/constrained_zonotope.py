@@ -82,7 +82,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_int
+from .._validate import as_bool, as_int
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..sets import Box
@@ -121,15 +121,6 @@ TOLS = (CONSOLIDATE_X, CONSOLIDATE_C)
 """Both, for :func:`~ivobs.sets.czonotope.reduce_consolidated`."""
 
 
-def _pow2_rows(rows: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each row (and its right-hand side) scaled by a power of two so that its largest
-    coefficient is in ``[1, 2)``: the same constraints, exactly (the rows are far from the
-    underflow range: their largest entry is at least ``1e-9 (1 + |rhs|)``)."""
-    top = np.abs(rows).max(axis=1)
-    d = np.ldexp(1.0, 1 - np.frexp(top)[1])
-    return rows * d[:, None], rhs * d
-
-
 def _measurement_update(
     Ac: np.ndarray, b: np.ndarray, CG: np.ndarray, FR: np.ndarray, rhs: np.ndarray,
     rho: np.ndarray,
@@ -154,7 +145,10 @@ def _measurement_update(
     zero = absr.max(axis=1, initial=0.0) <= 1e-9 * (1.0 + np.abs(rhs))
     reach = upper(absr[zero].sum(axis=1) * (1.0 + EMPTY_TOL), rows.shape[1] + 1)
     consistent = bool(np.all(np.abs(rhs[zero]) <= reach))
-    rows, rhs = _pow2_rows(rows[~zero], rhs[~zero])
+    # each kept row (and its right-hand side) scaled by a power of two, its largest coefficient
+    # in [1, 2): the same constraints, exactly (the kept rows are far from the underflow range)
+    d = np.ldexp(1.0, 1 - np.frexp(absr[~zero].max(axis=1))[1])
+    rows, rhs = rows[~zero] * d[:, None], rhs[~zero] * d
     p = FR.shape[1] + live.size
     A_all = np.concatenate([np.concatenate([Ac, np.zeros((Ac.shape[0], p))], axis=1), rows])
     b_all = np.concatenate([b, rhs])
@@ -315,8 +309,7 @@ class ConstrainedZonotopeEstimator(Estimator):
             sys.nx,
             "reduces a dense constrained zonotope and solves LPs over its generators",
         )
-        if not isinstance(reduce, bool):
-            raise IvobsError(f"reduce: expected True or False, got {reduce!r}")
+        reduce = as_bool("reduce", reduce)
         if elimination not in ("certificates", "hausdorff"):
             raise IvobsError(
                 f"elimination: expected 'certificates' or 'hausdorff', got {elimination!r}"

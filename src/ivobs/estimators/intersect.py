@@ -44,10 +44,9 @@ import numpy as np
 from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box
-from . import get, make_estimator, methods, register
+from . import make_estimator, methods, register
 from .base import Design, Estimator
-from .persistence import check_version
-from .state import STATE_FORMAT, STATE_VERSION, OnlineState, Step, check_counters, evolve
+from .state import OnlineState, Step, check_counters, evolve
 
 __all__ = ["DEFAULT_METHODS", "Intersect", "IntersectDesign"]
 
@@ -141,15 +140,10 @@ class Intersect(Estimator):
         for name in DEFAULT_METHODS:
             if name not in methods():
                 continue
-            cls = get(name)
-            reason = self._not_applicable(cls)
-            if reason is None:
-                try:
-                    members.append(make_estimator(name, self.sys, self.x0))
-                    continue
-                except IvobsError as exc:  # DesignError, or a structural condition not met
-                    reason = str(exc)
-            skipped.append(f"{name}: {reason}")
+            try:  # the method refuses a system or prior it cannot take, with the reason
+                members.append(make_estimator(name, self.sys, self.x0))
+            except IvobsError as exc:  # DesignError, or a structural condition not met
+                skipped.append(f"{name}: {exc}")
         if not members:
             raise DesignError(
                 "methods: none of the default members could be designed for this system ("
@@ -157,15 +151,6 @@ class Intersect(Estimator):
                 + "); pass methods=[...] explicitly, e.g. methods=['exact']"
             )
         return members, skipped
-
-    def _not_applicable(self, cls: type[Estimator]) -> str | None:
-        if self.sys.is_continuous and not cls.supports_continuous:
-            return "discrete-time systems only"
-        if self.sys.is_time_varying and not cls.supports_time_varying:
-            return "time-invariant systems only"
-        if cls.needs_x0 and self.x0 is None:
-            return "needs a prior box x0"
-        return None
 
     def _explicit_members(self, methods: Any) -> list[Estimator]:
         if isinstance(methods, (str, Estimator)) or not isinstance(methods, (list, tuple)):
@@ -190,7 +175,6 @@ class Intersect(Estimator):
             ):
                 options = dict(spec[1])
                 x0 = options.pop("x0", self.x0)
-                get(spec[0])  # a clear error for an unknown name
                 members.append(make_estimator(spec[0], self.sys, x0, **options))
             else:
                 raise IvobsError(
@@ -271,36 +255,16 @@ class Intersect(Estimator):
         parts = [self.name, str(self.design.strip)] + [m.fingerprint() for m in self.members]
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
 
-    def save_state(self, st: Any) -> dict[str, Any]:
-        """The online state (JSON-serialisable): the members' saved states, each in its own
-        envelope (method, design fingerprint), nested in the intersection's."""
-        return {
-            "format": STATE_FORMAT,
-            "version": STATE_VERSION,
-            "method": self.name,
-            "fingerprint": self.fingerprint(),
-            "state": {
-                "k": st.k,
-                "inconsistent": st.inconsistent,
-                "members": [
-                    m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)
-                ],
-            },
-        }
+    def _dump(self, st: Any) -> dict[str, Any]:
+        """The members' saved states, each in its own envelope (method, design fingerprint)."""
+        members = [m.save_state(ms) for m, ms in zip(self.members, st.members, strict=True)]
+        return {"k": st.k, "inconsistent": st.inconsistent, "members": members}
 
-    def check_state(self, state: Any) -> IntersectState:
-        """The state saved by :meth:`state`, checked: the same members with the same designs,
-        the counters, and each member's state by the member."""
-        if not isinstance(state, dict) or not isinstance(state.get("state"), dict):
+    def _load(self, saved: Any) -> IntersectState:
+        """The counters, and each member's state checked by the member."""
+        if not isinstance(saved, dict):
             raise IvobsError("state: expected the dict returned by Estimator.state()")
-        if state.get("method") != self.name or state.get("fingerprint") != self.fingerprint():
-            raise IvobsError(
-                f"state: saved by method {state.get('method')!r} with other members or "
-                f"designs; it can only be restored into the same {self.name!r} estimator"
-            )
-        check_version(state)
-        saved = state["state"]
-        counters = {"k": saved.get("k")}
+        counters: dict[str, Any] = {"k": saved.get("k")}
         check_counters(counters)
         members = saved.get("members")
         if not isinstance(members, list) or len(members) != len(self.members):

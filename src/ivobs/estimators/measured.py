@@ -84,10 +84,8 @@ class MeasurementStrips:
         self.a = float(upper(2.0 * gamma(n) + gamma(m), 4))
         self.b = float(upper(2.0 * gamma(n), 4))
         self._g = (2.0 * gamma(n), gamma(m))
-        self.lti = not sys.is_time_varying and sys.has_constant_bounds
-        self.P: np.ndarray | None = None
-        if self.lti:
-            self.P = self.coefficients(0, None)
+        lti = not sys.is_time_varying and sys.has_constant_bounds
+        self.P: np.ndarray | None = self.coefficients(0, None) if lti else None
 
     @classmethod
     def of(cls, sys: Any) -> MeasurementStrips | None:

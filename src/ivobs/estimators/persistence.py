@@ -54,8 +54,16 @@ class Persistence:
             "version": STATE_VERSION,
             "method": self.name,
             "fingerprint": self.fingerprint(),
-            "state": dump_state(st),
+            "state": self._dump(st),
         }
+
+    def _dump(self, st: Any) -> Any:
+        """The ``"state"`` entry of :meth:`save_state` (the state's fields)."""
+        return dump_state(st)
+
+    def _load(self, saved: Any) -> OnlineState:
+        """The online state from the ``"state"`` entry, checked against a fresh one."""
+        return load_state(saved, self.initial_state())
 
     def restore(self, state: dict[str, Any]) -> None:
         """Continue from a state saved by :meth:`state` (same method and design); the saved
@@ -70,11 +78,12 @@ class Persistence:
             raise IvobsError("state: expected the dict returned by Estimator.state()")
         if state.get("method") != self.name or state.get("fingerprint") != self.fingerprint():
             raise IvobsError(
-                f"state: saved by method {state.get('method')!r} with another design; it can only "
-                f"be restored into the same method ({self.name!r}) with the same design"
+                f"state: saved by method {state.get('method')!r} with another design (or other "
+                f"members); it can only be restored into the same method ({self.name!r}) with "
+                "the same design"
             )
         check_version(state)
-        return load_state(state["state"], self.initial_state())
+        return self._load(state["state"])
 
 
 def check_version(state: dict[str, Any]) -> None:

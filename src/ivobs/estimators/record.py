@@ -83,16 +83,9 @@ def _block(
         return _with_strips(est, out[0], out[1], inc, u, y, t)
     if y.ndim == 2:
         return _with_strips(est, *est._loop(u, y, t, bar), u, y, t)
-    parts = [est._loop(u[b], y[b], t, bar) for b in range(y.shape[0])]
-    return _with_strips(
-        est,
-        np.stack([p[0] for p in parts]),
-        np.stack([p[1] for p in parts]),
-        np.stack([p[2] for p in parts]),
-        u,
-        y,
-        t,
-    )
+    parts = zip(*(est._loop(u[b], y[b], t, bar) for b in range(y.shape[0])), strict=True)
+    lo, hi, inc = (np.stack(p) for p in parts)
+    return _with_strips(est, lo, hi, inc, u, y, t)
 
 
 def _with_strips(
@@ -119,28 +112,10 @@ def _meet_strips(
     ``valid_from`` on (:mod:`ivobs.estimators.measured`); the rows they find inconsistent."""
     strips, vf = est._strips, est.valid_from
     assert strips is not None
-    T, nx = y.shape[-2], lo.shape[-1]
-    keys = np.arange(T) if t is None else np.asarray(t)
+    keys = np.arange(y.shape[-2]) if t is None else np.asarray(t)
     bad = np.zeros(y.shape[:-1], dtype=bool)
-    if y.ndim == 2:
-        bad[vf:] = strips.meet(lo[vf:], hi[vf:], u[vf:], y[vf:], keys[vf:])
-        return bad
-    if strips.lti:  # the streams of a batch, as one list of rows
-        n = y.shape[0] * max(T - vf, 0)
-        rows_lo, rows_hi = lo[:, vf:].reshape(n, nx), hi[:, vf:].reshape(n, nx)
-        flat = strips.meet(
-            rows_lo,
-            rows_hi,
-            u[:, vf:].reshape(n, u.shape[-1]),
-            y[:, vf:].reshape(n, y.shape[-1]),
-            keys,
-        )
-        lo[:, vf:] = rows_lo.reshape(lo[:, vf:].shape)
-        hi[:, vf:] = rows_hi.reshape(hi[:, vf:].shape)
-        bad[:, vf:] = flat.reshape(bad[:, vf:].shape)
-        return bad
-    for b in range(y.shape[0]):
-        bad[b, vf:] = strips.meet(lo[b, vf:], hi[b, vf:], u[b, vf:], y[b, vf:], keys[vf:])
+    for b in np.ndindex(y.shape[:-2]):  # every stream (the record itself: b = ())
+        bad[b][vf:] = strips.meet(lo[b][vf:], hi[b][vf:], u[b][vf:], y[b][vf:], keys[vf:])
     return bad
 
 

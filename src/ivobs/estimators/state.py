@@ -95,15 +95,11 @@ _TAMPERED = "; the state was altered or is not from Estimator.state() of this es
 # -- dump --------------------------------------------------------------------------------------
 def dump_state(state: OnlineState) -> dict[str, Any]:
     """The fields of ``state`` as JSON-ready values (arrays as ``{"array", "shape"}`` with NaN
-    saved as ``null``; nested states as dicts; tuples of states as lists)."""
+    saved as ``null``)."""
     return {f.name: _dump_value(getattr(state, f.name)) for f in dataclasses.fields(state)}
 
 
 def _dump_value(val: Any) -> Any:
-    if isinstance(val, OnlineState):
-        return dump_state(val)
-    if isinstance(val, tuple) and val and all(isinstance(v, OnlineState) for v in val):
-        return [dump_state(v) for v in val]
     if isinstance(val, np.ndarray):
         out: dict[str, Any] = {"shape": list(val.shape)}
         if val.dtype.kind == "f" and np.isnan(val).any():
@@ -142,15 +138,6 @@ def load_state(saved: Any, fresh: S) -> S:
 
 
 def _load_value(key: str, val: Any, fresh: Any) -> Any:
-    if isinstance(fresh, OnlineState):
-        return load_state(val, fresh)
-    if isinstance(fresh, tuple) and fresh and all(isinstance(v, OnlineState) for v in fresh):
-        if not isinstance(val, list) or len(val) != len(fresh):
-            raise IvobsError(
-                f"state: entry {key!r}: expected a list of {len(fresh)} saved states, got "
-                f"{type(val).__name__}" + _TAMPERED
-            )
-        return tuple(load_state(v, f) for v, f in zip(val, fresh, strict=True))
     if isinstance(fresh, np.ndarray):
         return _load_array(key, val, fresh)
     if key == "k":
@@ -223,8 +210,7 @@ def _load_array(key: str, val: Any, fresh: np.ndarray) -> np.ndarray:
 
 
 def check_counters(values: dict[str, Any]) -> None:
-    """The step counter ``k`` of a saved state, checked and converted in place (every state
-    has it, nested or not)."""
+    """The step counter ``k`` of a saved state, checked and converted in place."""
     k = values["k"]
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k <= MAX_STEPS:
         beyond = " (more than 2**53 steps)" if isinstance(k, int) and k > MAX_STEPS else ""

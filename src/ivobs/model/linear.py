@@ -71,7 +71,45 @@ def _radius_box(name: str, value: Any, n: int, matrix: str) -> Box:
     return Box._trusted(0.0 - arr, 0.0 + arr)  # as Box.symmetric: no -0.0
 
 
-class LinearSystem(IntervalMatrices):
+def check_dt(dt: Any) -> bool | float:
+    """The time base of a model (``LinearSystem``, ``NonlinearSystem``): ``True``, a sampling
+    period ``> 0``, or ``0`` (continuous time)."""
+    if dt is True:
+        return True
+    if dt is None or isinstance(dt, (str, bool)):
+        raise IvobsError(
+            f"dt: expected True or a period > 0 (discrete time) or 0 (continuous), got {dt!r}"
+        )
+    try:
+        val = float(dt)
+    except (TypeError, ValueError):
+        raise IvobsError(f"dt: expected a number or True, got {dt!r}") from None
+    if not np.isfinite(val) or val < 0:
+        raise IvobsError(f"dt: expected True, a period > 0, or 0; got {dt!r}")
+    return val
+
+
+class TimeBase:
+    """What the time base ``dt`` of a model says (:class:`LinearSystem`, ``NonlinearSystem``)."""
+
+    dt: bool | float
+
+    @property
+    def is_continuous(self) -> bool:
+        """``dt == 0``."""
+        return self.dt is not True and self.dt == 0
+
+    @property
+    def is_discrete(self) -> bool:
+        return not self.is_continuous
+
+    @property
+    def sampling_period(self) -> float:
+        """The sampling period (1 for ``dt=True``, 0 in continuous time)."""
+        return 1.0 if self.dt is True else float(self.dt)
+
+
+class LinearSystem(IntervalMatrices, TimeBase):
     """``x+ = A x + B u + E d``, ``y = C x + D u + F d``, ``d ∈ d``.
 
     Parameters
@@ -128,7 +166,7 @@ class LinearSystem(IntervalMatrices):
                 "A: got a control.StateSpace; use ivobs.LinearSystem.from_statespace(ss, "
                 "disturbances=[...], d=ivobs.Box(...)) (make_estimator also accepts it directly)"
             )
-        self.dt = self._check_dt(dt)
+        self.dt = check_dt(dt)
         self._boxes: dict[str, tuple[Box, np.ndarray]] = {}
         self._A = Matrix("A", self._interval("A", A, None, None, "col"), None, None, "col")
         nx = int(self._A.shape[0])
@@ -165,22 +203,6 @@ class LinearSystem(IntervalMatrices):
         self._uncertainty = self._check_uncertain()
 
     # -- validation helpers ---------------------------------------------------------------
-    @staticmethod
-    def _check_dt(dt: Any) -> bool | float:
-        if dt is True:
-            return True
-        if dt is None or isinstance(dt, (str, bool)):
-            raise IvobsError(
-                f"dt: expected True or a period > 0 (discrete time) or 0 (continuous), got {dt!r}"
-            )
-        try:
-            val = float(dt)
-        except (TypeError, ValueError):
-            raise IvobsError(f"dt: expected a number or True, got {dt!r}") from None
-        if not np.isfinite(val) or val < 0:
-            raise IvobsError(f"dt: expected True, a period > 0, or 0; got {dt!r}")
-        return val
-
     @staticmethod
     def _check_bounds(d: Any, E: Any, F: Any) -> tuple[BoundsLike, int]:
         if d is None:
@@ -249,20 +271,6 @@ class LinearSystem(IntervalMatrices):
     def d(self) -> BoundsLike:
         """The disturbance bounds as given (Box, time-varying Box, callable, or None)."""
         return self._d
-
-    @property
-    def is_continuous(self) -> bool:
-        """``dt == 0``."""
-        return self.dt is not True and self.dt == 0
-
-    @property
-    def is_discrete(self) -> bool:
-        return not self.is_continuous
-
-    @property
-    def sampling_period(self) -> float:
-        """The sampling period (1 for ``dt=True``, 0 in continuous time)."""
-        return 1.0 if self.dt is True else float(self.dt)
 
     @property
     def is_time_varying(self) -> bool:
@@ -496,10 +504,7 @@ class LinearSystem(IntervalMatrices):
             raise IvobsError("discretize: the system is already discrete-time")
         self._require_lti("discretize")
         Ts = check_options(Ts, disturbances, pieces, interval_matrices)
-        A, B, C, D, E, F = (
-            np.asarray(M.toarray() if hasattr(M, "toarray") else M, dtype=float)
-            for M in (self.A, self.B, self.C, self.D, self.E, self.F)
-        )
+        A, B, C, D, E, F = self.matrices_at(0)  # dense (a sparse matrix densified)
         m = sample(A, B, E, F, self._d, Ts, disturbances, pieces, interval_matrices, self.names)
         out = LinearSystem(m.A, m.B, C, D=D, E=m.E, F=m.F, d=m.d, dt=Ts)
         out.names = self.names

@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import as_bool
 from ..errors import IvobsError
 from ..sets import Box
 from ..sets.expm import expm, expm_integral, interval_product, scaled
@@ -104,8 +105,7 @@ def check_options(Ts: Any, disturbances: Any, pieces: Any, interval_matrices: An
             f"disturbances: expected 'varying' (any signal in the box between samples) or "
             f"'held' (constant over each period), got {disturbances!r}"
         )
-    if not isinstance(interval_matrices, bool):
-        raise IvobsError(f"interval_matrices: expected True or False, got {interval_matrices!r}")
+    as_bool("interval_matrices", interval_matrices)
     if pieces is not None and (
         isinstance(pieces, bool)
         or not isinstance(pieces, (int, np.integer))
@@ -158,33 +158,30 @@ def sample(
     pos = {j: i for i, j in enumerate(process)}
     c = 0.5 * lo[..., process] + 0.5 * hi[..., process]
     r = up(np.maximum(hi[..., process] - c, c - lo[..., process]))
+
+    def add(col: np.ndarray, low: Any, high: Any, name: str) -> None:
+        """A new disturbance of the sampled model: its column of ``E``, bounds and name."""
+        cols_E.append(col)
+        cols_F.append(np.zeros(F.shape[0]))
+        los.append(low)
+        his.append(high)
+        dnames.append(name)
+
     for j in own:
         cols_E[j] = gens[0][0][:, pos[j]]
     for k in range(n_pieces):
         for j in process:
-            if k == 0 and j in own:
-                continue
-            cols_E.append(gens[k][0][:, pos[j]])
-            cols_F.append(np.zeros(F.shape[0]))
-            los.append(lo[..., j])
-            his.append(hi[..., j])
-            dnames.append(f"{dnames[j]} (mean over piece {k + 1})")
+            if not (k == 0 and j in own):
+                add(gens[k][0][:, pos[j]], lo[..., j], hi[..., j],
+                    f"{dnames[j]} (mean over piece {k + 1})")  # fmt: skip
         for j in process if moments else ():  # the first moment of d over the piece: ±r/2
             half = up(0.5 * r[..., pos[j]])
-            cols_E.append(gens[k][1][:, pos[j]])
-            cols_F.append(np.zeros(F.shape[0]))
-            los.append(-half)
-            his.append(half)
-            dnames.append(f"{dnames[j]} (moment over piece {k + 1})")
+            add(gens[k][1][:, pos[j]], -half, half, f"{dnames[j]} (moment over piece {k + 1})")
     rho = upper(r @ K.T + np.abs(c) @ RG.T, 2 * len(process) + 2)
     keep = np.flatnonzero(np.any(rho > 0.0, axis=0) if rho.ndim == 2 else rho > 0.0)
     for i in keep:
-        cols_E.append(np.eye(nx)[:, i])
-        cols_F.append(np.zeros(F.shape[0]))
-        los.append(-rho[..., i])
-        his.append(rho[..., i])
         state = f"x{i + 1}" if names.states is None else names.states[i]
-        dnames.append(f"remainder {state}")
+        add(np.eye(nx)[:, i], -rho[..., i], rho[..., i], f"remainder {state}")
     box = Box(np.stack(los, axis=-1), np.stack(his, axis=-1))
     A_m, B_m = _matrices(Ad, RA, GB, RB, interval_matrices)
     info = {"Ts": Ts, "disturbances": "varying", "pieces": n_pieces, "moments": moments}

@@ -74,16 +74,7 @@ def interval_matrix(
             f"an uncertain {name} is a wider box of the disturbance d"
         )
     shape = tuple(int(s) for s in box.lo.shape)
-    if box.lo.ndim not in (1, 2):  # pragma: no cover - Box allows 1-D and 2-D bounds only
-        raise IvobsError(f"{name}: expected a Box of matrices, got bounds of shape {shape}")
-    for part, arr in (("lower", box.lo), ("upper", box.hi)):
-        if not np.all(np.isfinite(arr)):
-            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-            raise IvobsError(
-                f"{name}: the {part} bound of the interval matrix has {arr[idx]} at index {idx}; "
-                "an interval matrix needs finite bounds"
-            )
-    try:
+    try:  # (as_matrix also refuses a bound that is not finite)
         lo = as_matrix(f"{name} (lower bound of the interval matrix)", box.lo, rows, cols,
                        vector=vector)  # fmt: skip
         hi = as_matrix(f"{name} (upper bound of the interval matrix)", box.hi, rows, cols,

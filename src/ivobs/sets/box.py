@@ -131,10 +131,7 @@ class Box:
     @classmethod
     def unknown(cls, n: int) -> Box:
         """A box with NaN bounds: "no estimate yet" (steps before an estimator's ``valid_from``)."""
-        box = object.__new__(cls)
-        box.lo = np.full(n, np.nan)
-        box.hi = np.full(n, np.nan)
-        return box
+        return cls._trusted(np.full(n, np.nan), np.full(n, np.nan))
 
     @classmethod
     def _trusted(cls, lo: np.ndarray, hi: np.ndarray) -> Box:

@@ -19,22 +19,11 @@ import math
 import numpy as np
 
 from .._jit import jit
-from ..linalg import gamma
 from .rounding import ETA
+from .strip import _gamma, _upper
+from .zonotope import MAX_BASIS_CONDITION
 
 __all__ = ["MAX_BASIS_CONDITION", "reduce_girard", "reduce_parallelotope"]
-
-MAX_BASIS_CONDITION = 1e3
-"""Largest ``|R_11| / |R_nn|`` of the basis' pivoted QR for which :func:`reduce_parallelotope`
-absorbs into it (above it, Girard's box)."""
-
-_gamma = jit(gamma)
-
-
-@jit
-def _upper(s: float, n: int) -> float:
-    """:func:`ivobs.sets.rounding.upper`: ``s (1 + 2 γ_{n+2}) + (n + 2) η``."""
-    return s * (1.0 + 2.0 * _gamma(n + 2)) + (n + 2) * ETA
 
 
 @jit

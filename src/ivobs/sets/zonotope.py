@@ -19,13 +19,7 @@ from ..linalg import UNIT_ROUNDOFF, gamma
 from .box import Box
 from .rounding import enclose, product_error, up, upper
 
-__all__ = [
-    "MAX_BASIS_CONDITION",
-    "Zonotope",
-    "box_generators",
-    "reduce_girard",
-    "reduce_parallelotope",
-]
+__all__ = ["MAX_BASIS_CONDITION", "Zonotope", "box_generators", "reduce_girard"]
 
 
 def _sum_error(c: np.ndarray) -> np.ndarray:
@@ -44,8 +38,9 @@ def box_generators(r: np.ndarray) -> np.ndarray:
 
 
 MAX_BASIS_CONDITION = 1e3
-"""Largest condition estimate ``|R_11| / |R_nn|`` of the pivoted QR of the generators for which
-:func:`reduce_parallelotope` absorbs into a basis of generators (above it, Girard's box)."""
+"""Largest condition estimate ``|R_11| / |R_nn|`` of a basis of generators into which the
+parallelotope reductions absorb the others (:func:`ivobs.sets.reduction.reduce_parallelotope`,
+:func:`ivobs.sets.czonotope.reduce_generators`; above it, Girard's box)."""
 
 
 def reduce_girard(G: np.ndarray, order: int) -> np.ndarray:
@@ -62,54 +57,6 @@ def reduce_girard(G: np.ndarray, order: int) -> np.ndarray:
     idx = np.argsort(aG.sum(axis=0) - aG.max(axis=0), kind="stable")
     box = aG[:, idx[:n_rm]].sum(axis=1) * (1.0 + gamma(n_rm + 1))
     return np.hstack([G[:, np.sort(idx[n_rm:])], np.diag(box)])
-
-
-def reduce_parallelotope(
-    G: np.ndarray, order: int, max_condition: float = MAX_BASIS_CONDITION
-) -> tuple[np.ndarray, np.ndarray]:
-    """At most ``order`` generators (``order >= n``), absorbed into a basis of ``n`` large,
-    independent generators ([Chisci1998]'s parallelotope rule), the basis' conditioning
-    checked. Returns ``(G', ρ)`` with ``<0, G> ⊆ <0, G'> ⊕ box(ρ)`` in exact arithmetic.
-
-    The basis ``P`` is chosen by QR with column pivoting; each generator ``l`` to remove has
-    coordinates ``α = P⁻¹ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``, so the removed ones
-    (smallest ``‖α‖₁``) rescale the basis, ``P diag(1 + Σ|α|)``. The basis is picked among
-    the generators, and the strip updates and the prediction can make it nearly dependent: the
-    factors ``|α|`` then grow step after step without bound (on CORA's tank30 at
-    ``order = 2 nx`` the boxes reached 10⁷). So when the condition estimate
-    ``|R_11| / |R_nn|`` of the pivoted QR exceeds ``max_condition`` (or the generators do not
-    span the space), the step uses :func:`reduce_girard` instead: its basis, the axes, is
-    perfectly conditioned. ``ρ`` bounds what the basis misses of the removed generators,
-    ``Σ |l - P α|`` evaluated with the bound ``γ_{n+2} (|l| + |P| |α|)`` of its rounding; the
-    scale factors are rounded up, and the rounding of ``P diag(scale)`` is added to ``ρ``."""
-    n, m = G.shape
-    if m <= order:
-        return G, np.zeros(n)
-    # LAPACK's pivoted QR and triangular solve called directly: scipy.linalg.qr's checks cost
-    # 8x the factorisation of a 3 x 35 matrix (imported here: SciPy is slow to import)
-    from scipy.linalg.lapack import dgeqp3, dtrtrs
-
-    R, jpvt, _, _, info = dgeqp3(G)
-    d = np.abs(np.diag(R[:n, :n]))
-    if info != 0 or not d[n - 1] * max_condition >= d[0] > 0.0:
-        return reduce_girard(G, order), np.zeros(n)
-    piv = jpvt - 1
-    basis, others = piv[:n], piv[n:]
-    alpha, info = dtrtrs(R[:n, :n], R[:n, n:])
-    if info != 0:
-        return reduce_girard(G, order), np.zeros(n)
-    srt = np.argsort(np.abs(alpha).sum(axis=0), kind="stable")
-    n_rm = m - order
-    rm, kept = srt[:n_rm], others[srt[n_rm:]]
-    P, a_rm, L_rm = G[:, basis], alpha[:, rm], G[:, others[rm]]
-    a1 = np.abs(a_rm).sum(axis=1)
-    rho = np.abs(L_rm - P @ a_rm).sum(axis=1) + gamma(n + 2) * (
-        np.abs(L_rm).sum(axis=1) + np.abs(P) @ a1
-    )
-    scale = (1.0 + a1) * (1.0 + gamma(n_rm + 3))
-    # P diag(scale) is rounded entry by entry: its columns' directions move by u |P| scale
-    rho = (rho + gamma(1) * (np.abs(P) @ scale)) * (1.0 + gamma(n_rm + n + 3))
-    return np.hstack([P * scale, G[:, kept]]), rho
 
 
 def center_and_generators(who: str, center: Any, generators: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -248,31 +195,11 @@ class Zonotope:
         return Zonotope._trusted(self.c, np.concatenate([keep, np.diag(box)], axis=1))
 
     def contains(self, x: Any, tol: float = 1e-9) -> bool:
-        """Whether ``x`` lies in the zonotope (one LP with HiGHS; for checks, not hot loops)."""
-        from scipy.optimize import linprog  # imported here: SciPy's optimize is slow to import
+        """Whether ``x`` lies in the zonotope (one LP with HiGHS, the constrained zonotope's
+        test with no constraint; for checks, not hot loops)."""
+        from .czonotope import ConstrainedZonotope  # (which imports this module)
 
-        x = as_vector("x", x, self.dim)
-        m = self.num_generators
-        if m == 0:
-            return bool(np.all(np.abs(x - self.c) <= tol))
-        # min s  s.t.  G b = x - c, -1 - s <= b <= 1 + s  ->  inside iff s <= tol
-        A_eq = np.hstack([self.G, np.zeros((self.dim, 1))])
-        A_ub = np.vstack(
-            [np.hstack([np.eye(m), -np.ones((m, 1))]), np.hstack([-np.eye(m), -np.ones((m, 1))])]
-        )
-        b_ub = np.ones(2 * m)
-        cost = np.zeros(m + 1)
-        cost[-1] = 1.0
-        res = linprog(
-            cost,
-            A_ub=A_ub,
-            b_ub=b_ub,
-            A_eq=A_eq,
-            b_eq=x - self.c,
-            bounds=[(None, None)] * m + [(0, None)],
-            method="highs",
-        )
-        return bool(res.status == 0 and res.x[-1] <= tol)
+        return ConstrainedZonotope.from_zonotope(self).contains(x, tol)
 
     def sample(self, size: int, rng: Any = None, *, vertices: bool = False) -> np.ndarray:
         """Points ``c + G b`` with ``b`` uniform in the cube (or on its vertices)."""

@@ -189,11 +189,7 @@ class DualWindow(Estimator):
             assert self.x0 is not None
             N, eta = choose_window(self.mats, self.d_lo, self.d_hi, self.x0.hi - self.x0.lo)
             rule, influence = "auto", (eta if np.isfinite(eta) else None)
-        else:
-            if isinstance(window, str):
-                raise IvobsError(
-                    f"window: expected 'auto' or an integer number of steps >= 1, got {window!r}"
-                )
+        else:  # (as_int refuses any other string)
             N, rule, influence = as_int("window", window, 1), "given", None
         tol = None if refresh_tol is None else float(refresh_tol)
         self.design = DualWindowDesign(window=N, cache=cache, refresh=refresh, window_rule=rule,

@@ -11,6 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..._progress import Progress
+from ..._validate import as_int
 from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box
@@ -127,15 +128,9 @@ class Exact(Estimator):
     ):
         super().__init__(sys, x0, **options)
         check_size(self.name, sys.nx, "solves 2 nx linear programs over the whole trajectory")
-        if window is not None and (
-            isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1
-        ):
-            raise IvobsError(
-                f"window: expected None (full horizon) or a number of steps >= 1, got {window!r}"
-            )
         if progress is not None and not isinstance(progress, bool):
             raise IvobsError(f"progress: expected None, True or False, got {progress!r}")
-        self.design = ExactDesign(window=None if window is None else int(window))
+        self.design = ExactDesign(window=None if window is None else as_int("window", window, 1))
         self.progress = progress
         self.valid_from = 0
         self._warm = WarmStarts()

@@ -182,10 +182,6 @@ class WarmStarts:
         if entry is not None and entry[0][0] is ref:
             del self._entries[key]
 
-    def __len__(self) -> int:
-        """The programs held (states whose program was taken do not count)."""
-        return sum(e[2] is not None for e in self._entries.values())
-
 
 class Chain:
     """One HiGHS model solving ``min sense * x_last[i]`` for every ``i`` of the newest block.

@@ -66,12 +66,12 @@ from ...sets.czonotope import (
     reduce_consolidated,
     soften,
 )
-from ...sets.rounding import UNIT_ROUNDOFF, down, up, upper
+from ...sets.rounding import UNIT_ROUNDOFF, down, up
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..constrained_zonotope import TOLS, default_limits
 from ..state import OnlineState, Step
-from .meanvalue import Linearisation, contract_back, linearise, measurement
+from .meanvalue import Linearisation, contract_back, joint_box, linearise, measurement
 
 __all__ = [
     "NonlinearConstrainedZonotopeDesign",
@@ -127,32 +127,12 @@ class _Joint:
     hi: np.ndarray
 
 
-def _pow2(v: np.ndarray) -> np.ndarray:
-    """A power of two near ``v > 0`` (a division by it is exact)."""
-    out: np.ndarray = np.exp2(np.round(np.log2(v)))
-    return out
-
-
 def _pad(M: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """``[[M, 0], [0, 0]]`` of shape ``(rows, cols)``, C-ordered (what ``np.hstack`` /
     ``np.vstack`` with zero blocks give, filled in place: cheaper than the stacks here)."""
     out = np.zeros((rows, cols))
     out[: M.shape[0], : M.shape[1]] = M
     return out
-
-
-def _joint_box(
-    c: np.ndarray, G: np.ndarray, e: np.ndarray, xlo: np.ndarray, xhi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The box of ``x_k`` for the joint set: the zonotope's bounds ``c ± (|G| 1 + e)``, rounded
-    outward, intersected with ``[xlo, xhi]`` (both hold the state; if they part, only by
-    rounding, the zonotope's bounds are kept)."""
-    rad = upper(np.abs(G).sum(axis=1) + e, G.shape[1] + 1)
-    lo_z, hi_z = down(c - rad), up(c + rad)
-    lo, hi = np.maximum(xlo, lo_z), np.minimum(xhi, hi_z)
-    if (lo > hi).any():
-        return lo_z, hi_z
-    return lo, hi
 
 
 @register
@@ -203,7 +183,6 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         self.design = NonlinearConstrainedZonotopeDesign(max_constraints=nc, max_generators=ng)
         self._cw, self._rw = mid_rad(sys.w_box.lo, sys.w_box.hi)
         self._wcols = np.flatnonzero(self._rw > 0)
-        self._hf = bool(sys.ny) and hasattr(sys, "hf_contractors")
 
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearConstrainedZonotopeState:
@@ -219,9 +198,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
             self.x0.lo,
             self.x0.hi,
         )
-        return NonlinearConstrainedZonotopeState(
-            z=j.z, Gz=j.Gz, A=j.A, b=j.b, acc=j.acc, lo=j.lo, hi=j.hi, u=np.zeros(self.model.nu)
-        )
+        return NonlinearConstrainedZonotopeState(u=np.zeros(self.model.nu), **vars(j))
 
     def _step(
         self,
@@ -237,12 +214,10 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         )
         if state.back:
             wlo, whi = self.model.w_box.lo, self.model.w_box.hi
-            if self._hf and not np.isnan(y_k).all():
-                back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
-                if back is None:
-                    inconsistent = True
-                else:
-                    prev.lo, prev.hi, wlo, whi = back
+            back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
+            inconsistent = back is None
+            if back is not None:
+                prev.lo, prev.hi, wlo, whi = back
             lin = linearise(self.model.evaluators("f"), prev.lo, prev.hi, prev.z, state.u, nx)
             c, G, A, b, e = self._predict(state.k, prev, lin)
             joint = self._joint(c, G, A, b, e, lin.nat_lo, lin.nat_hi, wlo, whi)
@@ -253,19 +228,9 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         else:
             self._update(joint, u_k, np.full_like(y_k, np.nan))
         lo, hi = joint.lo[:nx].copy(), joint.hi[:nx].copy()
-        new = NonlinearConstrainedZonotopeState(  # not dataclasses.replace: 10x cheaper
-            k=state.k,
-            inconsistent=state.inconsistent,
-            z=joint.z,
-            Gz=np.ascontiguousarray(joint.Gz),
-            A=np.ascontiguousarray(joint.A),
-            b=joint.b,
-            acc=joint.acc,
-            lo=joint.lo,
-            hi=joint.hi,
-            u=u_k.copy(),
-            back=True,
-        )
+        joint.Gz, joint.A = np.ascontiguousarray(joint.Gz), np.ascontiguousarray(joint.A)
+        # not dataclasses.replace (10x cheaper); the base sets the counters
+        new = NonlinearConstrainedZonotopeState(u=u_k.copy(), back=True, **vars(joint))
         return Step(new, lo, hi, inconsistent)
 
     def _joint(
@@ -289,7 +254,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         Gz[:nx, :m] = G
         Gz[nx + cols, m + np.arange(cols.size)] = self._rw[cols]
         Az = _pad(A, A.shape[0], m + cols.size)  # [A 0]
-        lo, hi = _joint_box(c, G, e, xlo, xhi)
+        lo, hi = joint_box(c, G, e, xlo, xhi)
         wlo = self.model.w_box.lo if wlo is None else wlo
         whi = self.model.w_box.hi if whi is None else whi
         return _Joint(
@@ -374,7 +339,8 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         p, mg = coeff.shape
         rows = _pad(coeff, p, mg + p)  # [coeff, diag(sigma)]
         rows[np.arange(p), mg + np.arange(p)] = sigma
-        scale = _pow2(np.maximum(np.abs(rows).max(axis=1), np.finfo(float).tiny))
+        top = np.maximum(np.abs(rows).max(axis=1), np.finfo(float).tiny)
+        scale = np.exp2(np.round(np.log2(top)))  # a power of two: dividing by it is exact
         return rows / scale[:, None], rhs / scale
 
     def _predict(

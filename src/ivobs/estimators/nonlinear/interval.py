@@ -608,11 +608,8 @@ class NonlinearIntervalEstimator(Estimator):
             last = j == len(chain) - 1
             nl, nh = (vl, vh) if last else (chain[j + 1].lo, chain[j + 1].hi)
             fl, fh = sys._call(f.tight, f.sites, c.lo[:nx], c.hi[:nx], c.u, c.lo[nx:], c.hi[nx:])
-            for i in range(nx):
-                lo, hi = max(nl[i], fl[i]), min(nh[i], fh[i])
-                if lo > hi:
-                    return False
-                nl[i], nh[i] = lo, hi
+            if not _meet(nl, nh, fl, fh):
+                return False
             ml, mh = (ylo, yhi) if last else (chain[j + 1].ylo, chain[j + 1].yhi)
             nu = u if last else chain[j + 1].u
             if any(v == v for v in ml) and not sys.contract_lists(nl, nh, nu, ml, mh):
@@ -645,11 +642,8 @@ class NonlinearIntervalEstimator(Estimator):
         m = nx + nw
         f = sys._f
         fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
-        for i in range(nx):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
-            lo, hi = max(vl[i], fl[i]), min(vh[i], fh[i])
-            if lo > hi:
-                return False, None
-            vl[i], vh[i] = lo, hi
+        if not _meet(vl, vh, fl, fh):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})
+            return False, None
         vl[nx:], vh[nx:] = bl[m:], bh[m:]
         return bool(sys.contract_lists(vl, vh, u, ylo, yhi)), (bl[:m], bh[:m])
 
@@ -719,6 +713,15 @@ class _Link:
     y: np.ndarray
     ylo: list[float]
     yhi: list[float]
+
+
+def _meet(lo: list[float], hi: list[float], fl: list[float], fh: list[float]) -> bool:
+    """``[lo, hi] ∩ [fl, fh]`` in place on the first ``len(fl)`` entries; False if empty."""
+    for i, (a, b) in enumerate(zip(fl, fh)):
+        lo[i], hi[i] = max(lo[i], a), min(hi[i], b)
+        if lo[i] > hi[i]:
+            return False
+    return True
 
 
 def _gained(before: list[float], lo: list[float], hi: list[float]) -> bool:

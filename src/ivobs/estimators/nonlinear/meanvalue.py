@@ -54,9 +54,11 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ...linalg import gamma
+from ...model.nonlinear._runtime import dn as _down
+from ...model.nonlinear._runtime import up as _up
 from ...sets.rounding import ETA, down, mid_rad, up, upper
 
-__all__ = ["Linearisation", "contract_back", "linearise", "measurement"]
+__all__ = ["Linearisation", "contract_back", "joint_box", "linearise", "measurement"]
 
 Evals = tuple[Callable[..., Any], ...]
 """``(natural, natjac)`` of the model's ``f`` or ``h`` on lists, and for a set-valued ``f``
@@ -64,22 +66,12 @@ its spread (:meth:`~ivobs.NonlinearSystem.evaluators`, module docstring)."""
 
 Vector = np.ndarray | Sequence[float]
 
-_INF = math.inf
-
-
-def _up(v: float) -> float:
-    return math.nextafter(v, _INF)
-
-
-def _down(v: float) -> float:
-    return math.nextafter(v, -_INF)
-
 
 def measurement(y: np.ndarray) -> tuple[list[float], list[float]]:
     """``(ylo, yhi)``: the reals each double ``y_i`` stands for, ``[down(y_i), up(y_i)]``
     (module docstring); NaN (a missing component) stays NaN."""
     values = y.tolist()
-    return [math.nextafter(v, -_INF) for v in values], [math.nextafter(v, _INF) for v in values]
+    return [_down(v) for v in values], [_up(v) for v in values]
 
 
 class Linearisation(NamedTuple):
@@ -213,6 +205,20 @@ def _monotone(
     high = value(b_lo[:nx], b_hi[:nx], u, b_lo[nx:], b_hi[nx:])[1]
     for i in rows:
         nl[i], nh[i] = max(nl[i], low[i]), min(nh[i], high[i])
+
+
+def joint_box(
+    c: np.ndarray, G: np.ndarray, e: np.ndarray, xlo: np.ndarray, xhi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The box of ``x_k`` for a joint set: the bounds ``c ± (|G| 1 + e)`` of ``<c, G> ⊕ box(e)``,
+    rounded outward, intersected with ``[xlo, xhi]`` (both hold the state; if they part, only
+    by rounding, the zonotope's bounds are kept)."""
+    rad = upper(np.abs(G).sum(axis=1) + e, G.shape[1] + 1)
+    lo_z, hi_z = down(c - rad), up(c + rad)
+    lo, hi = np.fmax(xlo, lo_z), np.fmin(xhi, hi_z)
+    if (lo > hi).any():
+        return lo_z, hi_z
+    return lo, hi
 
 
 def contract_back(

@@ -74,18 +74,17 @@ from typing import Any
 
 import numpy as np
 
-from ..._validate import as_int
-from ...errors import IvobsError
+from ..._validate import as_bool, as_int
 from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from ...sets.czonotope import reduce_generators
-from ...sets.rounding import ETA, down, mid_rad, product_error, up, upper
+from ...sets.rounding import ETA, mid_rad, product_error, up, upper
 from ...sets.zonotope import box_generators
 from .. import register
 from .._strip_hull import propagate_lists, section_hull
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from .meanvalue import contract_back, linearise, measurement
+from .meanvalue import contract_back, joint_box, linearise, measurement
 
 __all__ = ["NonlinearZonotopeDesign", "NonlinearZonotopeEstimator", "NonlinearZonotopeState"]
 
@@ -184,6 +183,12 @@ class _Joint:
         )
 
 
+def _state(j: _Joint, u: np.ndarray, back: bool) -> NonlinearZonotopeState:
+    """The state holding the joint set ``j`` (fresh: cheaper than replace; the base sets k)."""
+    Hz, lo, hi = np.ascontiguousarray(j.Hz), np.array(j.lo), np.array(j.hi)
+    return NonlinearZonotopeState(z=j.z, Hz=Hz, acc=j.acc, lo=lo, hi=hi, u=u, back=back)
+
+
 @register
 class NonlinearZonotopeEstimator(Estimator):
     """Zonotopic filter for nonlinear systems: mean-value linearisation with the remainder as
@@ -234,19 +239,13 @@ class NonlinearZonotopeEstimator(Estimator):
             sys = NonlinearSystem.from_linear(sys, who=self.name)
         self.model: NonlinearSystem = sys
         check_size(self.name, sys.nx, "multiplies and reduces a dense nx x q generator matrix")
-        q = 10 * sys.nx if order is None else as_int("order", order, 1)
-        if q < sys.nx:
-            raise IvobsError(
-                f"order: the reduction keeps at least nx = {sys.nx} generators, got {q}"
-            )
-        if not isinstance(box_strips, bool):
-            raise IvobsError(f"box_strips: expected True or False, got {box_strips!r}")
+        q = 10 * sys.nx if order is None else as_int("order", order, sys.nx)  # nx at least
+        box_strips = as_bool("box_strips", box_strips)
         self.design = NonlinearZonotopeDesign(order=q, box_strips=box_strips)
         w = sys.w_box
         self._cw, rw = mid_rad(w.lo, w.hi)  # W ⊆ <c_w, diag(R_w)>
         self._Rw = box_generators(rw)
         self._wlo, self._whi = w.lo.tolist(), w.hi.tolist()
-        self._back = bool(sys.ny)
 
     # -- online ---------------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearZonotopeState:
@@ -254,15 +253,7 @@ class NonlinearZonotopeEstimator(Estimator):
         p, r = mid_rad(self.x0.lo, self.x0.hi)  # x0 ⊆ <p, diag(r)>
         nx = self.model.nx
         j = self._joint(p, box_generators(r), np.zeros(nx), self.x0.lo, self.x0.hi)
-        return NonlinearZonotopeState(
-            z=j.z,
-            Hz=j.Hz,
-            acc=j.acc,
-            lo=np.array(j.lo),
-            hi=np.array(j.hi),
-            u=np.zeros(self.model.nu),
-            back=False,
-        )
+        return _state(j, np.zeros(self.model.nu), back=False)
 
     def _step(
         self, state: NonlinearZonotopeState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
@@ -273,14 +264,11 @@ class NonlinearZonotopeEstimator(Estimator):
         prev = _Joint(state.z, state.Hz, state.acc, state.lo.tolist(), state.hi.tolist())
         if state.back:
             wlo, whi = self._wlo, self._whi
-            if self._back and measured:  # 0. one step back through h∘f
-                back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
-                if back is None:
-                    inconsistent = True
-                else:
-                    lo, hi, wl, wh = (v.tolist() for v in back)
-                    prev = _Joint(prev.z, prev.Hz, prev.acc, lo, hi)
-                    wlo, whi = wl, wh
+            back = contract_back(self.model, prev.lo, prev.hi, state.u, u_k, wlo, whi, y_k)
+            inconsistent = back is None  # 0. one step back through h∘f
+            if back is not None:
+                lo, hi, wlo, whi = (v.tolist() for v in back)
+                prev = _Joint(prev.z, prev.Hz, prev.acc, lo, hi)
             joint = self._predict(state.k, prev, state.u, wlo, whi)  # 1.-2.
         else:
             joint = prev
@@ -290,15 +278,7 @@ class NonlinearZonotopeEstimator(Estimator):
                 inconsistent = True
             else:
                 joint = updated
-        new = NonlinearZonotopeState(  # fresh (cheaper than replace): the base sets k
-            z=joint.z,
-            Hz=np.ascontiguousarray(joint.Hz),
-            acc=joint.acc,
-            lo=np.array(joint.lo),
-            hi=np.array(joint.hi),
-            u=u_k.copy(),
-            back=True,
-        )
+        new = _state(joint, u_k.copy(), back=True)
         return Step(new, new.lo[:nx].copy(), new.hi[:nx].copy(), inconsistent)  # 4.
 
     def _predict(
@@ -352,10 +332,7 @@ class NonlinearZonotopeEstimator(Estimator):
         Hz = np.zeros((nx + self._cw.shape[0], m + self._Rw.shape[1]))
         Hz[:nx, :m] = H
         Hz[nx:, m:] = self._Rw
-        rad = upper(_add(np.abs(H), axis=1) + e, m + 1)
-        lo, hi = np.fmax(xlo, down(p - rad)), np.fmin(xhi, up(p + rad))
-        if (lo > hi).any():  # never in exact arithmetic: both hold the state
-            lo, hi = down(p - rad), up(p + rad)
+        lo, hi = joint_box(p, H, e, xlo, xhi)
         return _Joint(
             z=np.concatenate([p, self._cw]),
             Hz=Hz,

@@ -13,7 +13,6 @@ from ...errors import IvobsError
 from ...linalg import gamma
 from ...model import LinearSystem
 from ...sets import Box, Zonotope
-from ...sets.reduction import reduce_girard, reduce_parallelotope
 from ...sets.rounding import mid_rad
 from .. import _uncertain as uncertain
 from .. import register
@@ -27,6 +26,7 @@ from .recursion import (
     kernels,
     measure,
     predict,
+    reduce_step,
     state_box,
     step,
 )
@@ -158,11 +158,7 @@ class StripEstimator(Estimator):
             raise IvobsError(
                 f"reduction: expected one of {', '.join(map(repr, REDUCTIONS))}, got {reduction!r}"
             )
-        q = 10 * sys.nx if order is None else as_int("order", order, 1)
-        if q < sys.nx:
-            raise IvobsError(
-                f"order: the reduction keeps at least nx = {sys.nx} generators, got {q}"
-            )
+        q = 10 * sys.nx if order is None else as_int("order", order, sys.nx)  # nx at least
         if reduction != "parallelotope" and q < 2 * sys.nx:
             raise IvobsError(
                 f"order: the {reduction!r} reduction needs order >= 2 nx = {2 * sys.nx}, got "
@@ -246,12 +242,5 @@ class StripEstimator(Estimator):
         xlo, xhi, crossed = state_box(z, rows, acc, m, lo, hi, nx)
         w = uncertain.terms(unc, xlo, xhi, u)[0]
         pn, Hn = predict(z, Hz, m, rows, acc, u, cd, rd, w, M, mc, Ep, pc, B, self._n_plant)
-        inconsistent = inconsistent or crossed
-        if not (np.isfinite(pn).all() and np.isfinite(Hn).all()):
-            return pn, Hn, np.zeros(nx), xlo, xhi, inconsistent, False
-        e_next = np.zeros(nx)
-        if self.design.reduction == "parallelotope":
-            Hn, e_next = reduce_parallelotope(Hn, order)
-        elif self.design.reduction == "girard":
-            Hn = reduce_girard(Hn, order)
-        return pn, Hn, e_next, xlo, xhi, inconsistent, True
+        code = _CODE[self.design.reduction]
+        return reduce_step(pn, Hn, xlo, xhi, inconsistent or crossed, order, code)

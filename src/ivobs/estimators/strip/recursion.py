@@ -23,26 +23,18 @@ from typing import Any
 import numpy as np
 
 from ..._jit import jit, kernels_in
-from ...linalg import gamma
 from ...sets.reduction import reduce_girard, reduce_parallelotope
 from ...sets.rounding import ETA
-from ...sets.strip import intersect_strip
+from ...sets.strip import _gamma, _upper, intersect_strip
 
-__all__ = ["GIRARD", "NONE", "PARALLELOTOPE", "joint_set", "measure", "predict", "state_box",
-           "step"]  # fmt: skip
+__all__ = ["GIRARD", "NONE", "PARALLELOTOPE", "joint_set", "measure", "predict", "reduce_step",
+           "state_box", "step"]  # fmt: skip
 
 PARALLELOTOPE, GIRARD, NONE = 0, 1, 2
 """The order reductions :func:`step` applies (``NONE``: the caller reduces)."""
 
-_gamma = jit(gamma)
 _INF = np.inf
 Arr = np.ndarray
-
-
-@jit
-def _upper(s: float, n: int) -> float:
-    """:func:`ivobs.sets.rounding.upper`: ``s (1 + 2 γ_{n+2}) + (n + 2) η``."""
-    return s * (1.0 + 2.0 * _gamma(n + 2)) + (n + 2) * ETA
 
 
 @jit
@@ -212,7 +204,16 @@ def step(
     m, inconsistent = measure(z, Hz, m, acc, rows, lo, hi, y, u, np.zeros(ny), D, h, nx, g_meas)
     xlo, xhi, crossed = state_box(z, rows, acc, m, lo, hi, nx)
     pn, Hn = predict(z, Hz, m, rows, acc, u, cd, rd, np.zeros(nx), M, mc, Ep, pc, B, n_plant)
-    inconsistent = inconsistent or crossed
+    return reduce_step(pn, Hn, xlo, xhi, inconsistent or crossed, order, reduction)
+
+
+@jit
+def reduce_step(
+    pn: np.ndarray, Hn: np.ndarray, xlo: np.ndarray, xhi: np.ndarray, inconsistent: bool,
+    order: int, reduction: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool, bool]:  # fmt: skip
+    """The end of :func:`step`: the predicted generators reduced by ``reduction``."""
+    nx = pn.shape[0]
     finite = np.isfinite(pn).all() and np.isfinite(Hn).all()
     if not finite or reduction == NONE:
         return pn, Hn, np.zeros(nx), xlo, xhi, inconsistent, finite

@@ -27,6 +27,7 @@ thin and wide, adversarial arguments.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 INF = math.inf
 NINF = -math.inf
@@ -176,16 +177,17 @@ def sqrt(al: float, ah: float, site: int) -> tuple[float, float]:
     return lo, _nx(math.sqrt(ah), INF)
 
 
-def _exp(v: float) -> float:
+def _big(f: Callable[[float], float], v: float) -> float:
+    """``f(v)`` for ``f`` = exp, sinh or cosh, an overflow as the infinity of its sign."""
     try:
-        return math.exp(v)
+        return f(v)
     except OverflowError:
-        return INF
+        return NINF if v < 0.0 and f is math.sinh else INF
 
 
 def exp(al: float, ah: float) -> tuple[float, float]:
     """``exp([a])`` (increasing, positive)."""
-    return max(ldn(_exp(al)), 0.0), lup(_exp(ah))
+    return max(ldn(_big(math.exp, al)), 0.0), lup(_big(math.exp, ah))
 
 
 def log(al: float, ah: float, site: int) -> tuple[float, float]:
@@ -223,7 +225,6 @@ def _monotone(f, al: float, ah: float, lo_cap: float, hi_cap: float) -> tuple[fl
     return max(ldn(f(al)), lo_cap), min(lup(f(ah)), hi_cap)
 
 
-PI_LO = math.pi
 PI_HI = math.nextafter(math.pi, INF)
 HALF_PI_HI = math.nextafter(math.pi / 2, INF)  # fl(pi/2) < pi/2 < next
 
@@ -236,28 +237,14 @@ def tanh(al: float, ah: float) -> tuple[float, float]:
     return _monotone(math.tanh, al, ah, -1.0, 1.0)
 
 
-def _sinh(v: float) -> float:
-    try:
-        return math.sinh(v)
-    except OverflowError:
-        return INF if v > 0 else NINF
-
-
-def _cosh(v: float) -> float:
-    try:
-        return math.cosh(v)
-    except OverflowError:
-        return INF
-
-
 def sinh(al: float, ah: float) -> tuple[float, float]:
-    return _monotone(_sinh, al, ah, NINF, INF)
+    return ldn(_big(math.sinh, al)), lup(_big(math.sinh, ah))
 
 
 def cosh(al: float, ah: float) -> tuple[float, float]:
     """``cosh([a])``: even, minimum 1 at 0."""
-    lo_c = 1.0 if al <= 0.0 <= ah else max(ldn(_cosh(min(abs(al), abs(ah)))), 1.0)
-    return lo_c, lup(_cosh(max(abs(al), abs(ah))))
+    lo_c = 1.0 if al <= 0.0 <= ah else max(ldn(_big(math.cosh, min(abs(al), abs(ah)))), 1.0)
+    return lo_c, lup(_big(math.cosh, max(abs(al), abs(ah))))
 
 
 def asin(al: float, ah: float, site: int) -> tuple[float, float]:

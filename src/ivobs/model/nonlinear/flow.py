@@ -80,6 +80,8 @@ import numpy as np
 
 from ...errors import DivergenceError, IvobsError
 from ._runtime import DomainError
+from ._runtime import dn as _dn
+from ._runtime import up as _up
 from .codegen import _enclose_fraction
 from .flowback import FlowBackContractor
 from .system import NonlinearSystem
@@ -100,14 +102,6 @@ MEAN_PIECES = 16
 """Pieces of a substep over which the magnitude of ``e^{J_c s}`` is integrated (the spread)."""
 
 Vec = list[float]
-
-
-def _dn(v: float) -> float:
-    return math.nextafter(v, -math.inf)
-
-
-def _up(v: float) -> float:
-    return math.nextafter(v, math.inf)
 
 
 _ND, _NU = np.float64(-np.inf), np.float64(np.inf)
@@ -206,10 +200,7 @@ class FlowSystem(NonlinearSystem):
         """``(lo, hi)`` lists enclosing ``Φ_Ts(x, u, w)`` for every ``x ∈ [xl, xh]``,
         ``w ∈ [wl, wh]`` (every signal path in its box, when the signals vary)."""
         lo, hi, _, z = self._run(xl, xh, u, wl, wh, False, True)
-        if z is not None:
-            lo = [_dn(a - e) for a, e in zip(lo, z)]
-            hi = [_up(b + e) for b, e in zip(hi, z)]
-        return lo, hi
+        return _widen(lo, hi, z)
 
     def _enclose_jacobian(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> tuple[Any, Any]:
         """``∂Φ_Ts/∂(x, w)`` enclosed over the box, flattened ``(nx, nx + nw)`` (of the flow
@@ -232,9 +223,7 @@ class FlowSystem(NonlinearSystem):
             self._enclose_jacobian(xl, xh, u, wl, wh)  # the refusal, with its message
         lo, hi, A, z = self._run(xl, xh, u, wl, wh, True, True)
         assert A is not None
-        if z is not None:  # the box of the set-valued flow, as _enclose gives it
-            lo = [_dn(a - e) for a, e in zip(lo, z)]
-            hi = [_up(b + e) for b, e in zip(hi, z)]
+        lo, hi = _widen(lo, hi, z)  # the box of the set-valued flow, as _enclose gives it
         return lo, hi, A[0][: self.nx].ravel().tolist(), A[1][: self.nx].ravel().tolist()
 
     def period_box(self, xl: Any, xh: Any, u: Any, wl: Any, wh: Any) -> tuple[Vec, Vec]:
@@ -398,23 +387,17 @@ class FlowSystem(NonlinearSystem):
 
         nx = self.nx
         fl, fh, _, r = vary
-        bl = [_dn(a - e) for a, e in zip(xl, z)]
-        bh = [_up(b + e) for b, e in zip(xh, z)]
-        B = self._apriori(bl, bh, u, fl, fh, h[1])
+        B = self._apriori(*_widen(xl, xh, z), u, fl, fh, h[1])
         if B is None:
             return None
         if self._collect is not None:
             self._collect.append(B)  # x(t) over the substep, whatever d(t) does
         if not self.smooth:  # first order: x(h) ∈ B, x̃(h) ∈ [xl, xh] ⊆ B
             return [_up(b - a) for a, b in zip(B[0], B[1])]
-        f = self.continuous._f
-        jl, jh = self.continuous._call(f.jacobian, f.sites, B[0], B[1], u, fl, fh)
-        nz = nx + self.nw
-        Jl, Jh = _arr(jl, nx, nz), _arr(jh, nx, nz)
+        Jl, Jh = self._jacobian(B, u, fl, fh)
         if not (np.all(np.isfinite(Jl)) and np.all(np.isfinite(Jh))):
             return None
-        Jc = 0.5 * Jl[:, :nx] + 0.5 * Jh[:, :nx]
-        R = up(np.maximum(Jh[:, :nx] - Jc, Jc - Jl[:, :nx]))  # |[J] − J_c| <= R
+        Jc, R = _mid_rad(Jl[:, :nx], Jh[:, :nx])  # |[J] − J_c| <= R
         cols = [nx + j for j in self._varying]
         mag = np.maximum(np.abs(Jl[:, cols]), np.abs(Jh[:, cols]))
         delta = upper(mag @ np.array([r[j] for j in self._varying]), len(cols) + 1)
@@ -450,6 +433,13 @@ class FlowSystem(NonlinearSystem):
             return None
         return [float(v) for v in out]
 
+    def _jacobian(self, B: tuple[Vec, Vec], u: Vec, wl: Vec, wh: Vec) -> tuple[Any, Any]:
+        """The Jacobian of the vector field over ``B × [wl, wh]``: ``(lo, hi)``, each
+        ``(nx, nx + nw)``."""
+        f, nx = self.continuous._f, self.nx
+        jl, jh = self.continuous._call(f.jacobian, f.sites, B[0], B[1], u, wl, wh)
+        return _arr(jl, nx, nx + self.nw), _arr(jh, nx, nx + self.nw)
+
     def _mean_spread(self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec) -> Vec:
         """The spread of the mean form over the whole period (module docstring, "The mean
         form"): ``|x(Ts) − x̄(Ts)|`` for ``x̄`` held at the mean ``d̄`` of ``d`` over the
@@ -457,22 +447,18 @@ class FlowSystem(NonlinearSystem):
         from ...sets.expm import expm, interval_product, scaled
         from ...sets.rounding import up, upper
 
-        nx, nz = self.nx, self.nx + self.nw
+        nx = self.nx
         fl, fh, _, r = self._inclusion(wl, wh)
         B = self._period_apriori(xl, xh, u, fl, fh)
-        f = self.continuous._f
-        jl, jh = self.continuous._call(f.jacobian, f.sites, B[0], B[1], u, fl, fh)
-        Jl, Jh = _arr(jl, nx, nz), _arr(jh, nx, nz)
+        Jl, Jh = self._jacobian(B, u, fl, fh)
         if not (np.all(np.isfinite(Jl)) and np.all(np.isfinite(Jh))):
             raise IvobsError(
                 "discretize: the Jacobian of f is not bounded over the period's enclosure "
                 f"[{B[0]}, {B[1]}]; use a smaller Ts"
             )
-        Jc = 0.5 * Jl[:, :nx] + 0.5 * Jh[:, :nx]
-        R = up(np.maximum(Jh[:, :nx] - Jc, Jc - Jl[:, :nx]))
+        Jc, R = _mid_rad(Jl[:, :nx], Jh[:, :nx])
         cols = [nx + j for j in self._varying]
-        Gc = 0.5 * Jl[:, cols] + 0.5 * Jh[:, cols]
-        RG = up(np.maximum(Jh[:, cols] - Gc, Gc - Jl[:, cols]))
+        Gc, RG = _mid_rad(Jl[:, cols], Jh[:, cols])
         r2 = np.array([up(2.0 * r[j]) for j in self._varying])  # >= |d(s) − d̄|
         Ts = float(self._h_step[1]) * self.substeps  # >= the period (h rounded up, times n)
         Ts = float(up(Ts))
@@ -553,15 +539,12 @@ class FlowSystem(NonlinearSystem):
                 "reached it); the Taylor coefficients are undefined over the box"
             ) from None
 
-    def _fnat(self, bl: Vec, bh: Vec, u: Vec, wl: Vec, wh: Vec) -> Any:
-        f = self.continuous._f
-        return self.continuous._call(f.natural, f.sites, bl, bh, u, wl, wh)
-
     def _picard(
         self, xl: Vec, xh: Vec, u: Vec, wl: Vec, wh: Vec, bl: Vec, bh: Vec, hh: float
     ) -> tuple[Vec, Vec]:
         """``[x0] + [0, hh] f(B)``, outward rounded."""
-        fl, fh = self._fnat(bl, bh, u, wl, wh)
+        f = self.continuous._f
+        fl, fh = self.continuous._call(f.natural, f.sites, bl, bh, u, wl, wh)
         lo = [_dn(a + min(0.0, _dn(hh * f))) for a, f in zip(xl, fl)]
         hi = [_up(a + max(0.0, _up(hh * f))) for a, f in zip(xh, fh)]
         return lo, hi
@@ -603,11 +586,10 @@ class FlowSystem(NonlinearSystem):
         """An enclosure ``M_B`` (augmented, ``(nz, nz)``) of the sensitivity over ``[0, hh]``:
         ``[I 0] + [0, hh] ∂f/∂z(B, [w]) M_B ⊆ M_B``, or None."""
         nx, nz = self.nx, self.nx + self.nw
-        f = self.continuous._f
-        jl, jh = self.continuous._call(f.jacobian, f.sites, bl, bh, u, wl, wh)
+        jl, jh = self._jacobian((bl, bh), u, wl, wh)
         with np.errstate(invalid="ignore", over="ignore"):
-            El = np.minimum(0.0, np.nextafter(hh * _arr(jl, nx, nz), _ND))
-            Eh = np.maximum(0.0, np.nextafter(hh * _arr(jh, nx, nz), _NU))
+            El = np.minimum(0.0, np.nextafter(hh * jl, _ND))
+            Eh = np.maximum(0.0, np.nextafter(hh * jh, _NU))
         I0 = np.eye(nz)[:nx]
         # candidate radius around I (not itself rigorous, the test below is): the image of
         # I ± R is within I ± |E| (I + R), strictly inside I ± R when R - |E| R = |E| + D, D > 0
@@ -688,14 +670,6 @@ def _key(*vectors: Any) -> tuple[float, ...]:
     return tuple(float(v) for vec in vectors for v in vec)
 
 
-def _ulp(X: np.ndarray) -> np.ndarray:
-    """A bound of the rounding of the one operation that gave ``X`` (elementwise)."""
-    from ...sets.rounding import ETA
-
-    out: np.ndarray = np.abs(X) * 2.0**-52 + ETA
-    return out
-
-
 def _product_bound(X: np.ndarray, G: np.ndarray, RX: np.ndarray) -> np.ndarray:
     """``>= |Y G|`` (elementwise) for every ``|Y − X| <= RX``: ``|fl(X G)|`` plus its rounding
     ([Higham2002, Lemma 3.1]) plus ``RX |G|``, rounded up."""
@@ -735,6 +709,14 @@ def _rebuild_flow(
     return FlowSystem(NonlinearSystem(**spec), Ts, order, substeps, disturbances)
 
 
+def _mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The centre ``c`` of ``[lo, hi]`` and a radius ``>= max(hi - c, c - lo)``."""
+    from ...sets.rounding import up
+
+    c = 0.5 * lo + 0.5 * hi
+    return c, up(np.maximum(hi - c, c - lo))
+
+
 def _arr(v: Any, n: int, m: int) -> np.ndarray:
     return np.asarray(v, dtype=float).reshape(n, m)
 
@@ -743,6 +725,13 @@ def _aug(top: np.ndarray, nz: int) -> np.ndarray:
     """``[[top], [0 I]]``: the rows of the constant ``w`` below the state rows."""
     nx = top.shape[0]
     return np.vstack([top, np.eye(nz)[nx:]])
+
+
+def _widen(lo: Vec, hi: Vec, z: Vec | None) -> tuple[Vec, Vec]:
+    """``[lo - z, hi + z]`` rounded outward (``[lo, hi]`` for no ``z``)."""
+    if z is None:
+        return lo, hi
+    return [_dn(a - e) for a, e in zip(lo, z)], [_up(b + e) for b, e in zip(hi, z)]
 
 
 def _inflate(lo: list[float], hi: list[float]) -> tuple[list[float], list[float]]:

@@ -51,25 +51,32 @@ def _repeats(e: Any, z: list[Any]) -> bool:
     return any(c > 1 for c in counts.values())
 
 
-def _header(name: str, em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]) -> None:
-    em.lines.append(f"def {name}(xl, xh, u, wl, wh):")
+def emit_arguments(
+    em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]
+) -> dict[Any, Pair]:
+    """Code reading the arguments ``u``, ``wl``, ``wh``, ``xl``, ``xh`` into variables; the
+    environment of the symbols (and of the known parameters ``consts``)."""
     env: dict[Any, Pair] = dict(consts)
-    for i, s in enumerate(syms["x"]):
-        em.line(f"x{i}l = xl[{i}]; x{i}h = xh[{i}]")
-        env[s] = (f"x{i}l", f"x{i}h")
     for i, s in enumerate(syms["u"]):
         em.line(f"u{i} = u[{i}]")
         env[s] = (f"u{i}", f"u{i}")
-    for i, s in enumerate(syms["w"]):
-        em.line(f"w{i}l = wl[{i}]; w{i}h = wh[{i}]")
-        env[s] = (f"w{i}l", f"w{i}h")
-    em.scope(env)
+    for g in ("w", "x"):
+        for i, s in enumerate(syms[g]):
+            em.line(f"{g}{i}l = {g}l[{i}]; {g}{i}h = {g}h[{i}]")
+            env[s] = (f"{g}{i}l", f"{g}{i}h")
+    return env
 
 
-def _rows(em: Emitter, exprs: list[Any], labels: list[str]) -> list[Pair]:
+def _header(name: str, em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]) -> None:
+    em.lines.append(f"def {name}(xl, xh, u, wl, wh):")
+    em.scope(emit_arguments(em, syms, consts))
+
+
+def emit_rows(em: Emitter, exprs: list[Any], labels: list[str] | str) -> list[Pair]:
+    """The code of each of ``exprs``, labelled ``labels[j]`` (a string: ``labels[j]``)."""
     out = []
-    for e, lab in zip(exprs, labels):
-        em.label = lab
+    for j, e in enumerate(exprs):
+        em.label = labels[j] if isinstance(labels, list) else f"{labels}[{j}]"
         out.append(em.emit(e))
     return out
 
@@ -177,30 +184,30 @@ def build_forms(
 
     em = Emitter(sites)
     _header(f"{name}_natural", em, syms, consts)
-    _ret(em, _rows(em, exprs, labels))
+    _ret(em, emit_rows(em, exprs, labels))
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
     _header(f"{name}_jacobian", em, syms, consts)
     flat: list[Pair] = []
     for i, row in enumerate(jac):
-        flat += _rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
+        flat += emit_rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
     _ret(em, flat)
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
     _header(f"{name}_natjac", em, syms, consts)
-    both = _rows(em, exprs, labels)
+    both = emit_rows(em, exprs, labels)
     flat = []
     for i, row in enumerate(jac):
-        flat += _rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
+        flat += emit_rows(em, row, [f"d {labels[i]} / d {s}" for s in z])
     em.line(f"return [{', '.join(p[0] for p in both)}], [{', '.join(p[1] for p in both)}], ")
     em.lines[-1] += f"[{', '.join(p[0] for p in flat)}], [{', '.join(p[1] for p in flat)}]"
     chunks.append("\n".join(em.lines))
 
     em = Emitter(sites)
     _header(f"{name}_tight", em, syms, consts)
-    nat = _rows(em, exprs, labels)
+    nat = emit_rows(em, exprs, labels)
     repeated = [_repeats(e, z) for e in exprs]
     out = _mean_value(em, exprs, nat, jac, repeated, syms, consts, labels) if any(repeated) else nat
     _ret(em, out)

@@ -260,20 +260,6 @@ def _op_text(op: ast.AST) -> str:
     }.get(type(op), type(op).__name__)
 
 
-_SYMPY_NAMES = {"Abs": "abs", "Min": "min", "Max": "max", "E": "e"}
-
-
-def _sympy_text(expr: Any) -> str:
-    """A SymPy expression as the text this parser reads (the same whitelist applies: nothing
-    SymPy can express beyond it is accepted); numbers keep their exact value."""
-    import re
-
-    import sympy
-
-    text = sympy.sstr(expr, full_prec=True)
-    return re.sub(r"\b(Abs|Min|Max|E)\b", lambda m: _SYMPY_NAMES[m.group(1)], text)
-
-
 def parse_expression(text: Any, names: dict[str, Any], where: str) -> Any:
     """The SymPy expression of ``text`` (a string, a number or a SymPy expression) over the
     symbols ``names`` (name -> Symbol); errors name ``where`` (e.g. ``"f[1]"``), the text and
@@ -281,7 +267,9 @@ def parse_expression(text: Any, names: dict[str, Any], where: str) -> Any:
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         text = repr(text)
     if type(text).__module__.startswith("sympy"):  # a SymPy expression: read as its text
-        text = _sympy_text(text)
+        from .trace import expression_text
+
+        text = expression_text(text)
     if not isinstance(text, str):
         raise IvobsError(f"{where}: expected an expression (str), got {type(text).__name__}")
     if len(text) > MAX_LENGTH:

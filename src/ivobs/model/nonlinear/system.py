@@ -19,6 +19,7 @@ import numpy as np
 
 from ...errors import IvobsError
 from ...sets import Box
+from ..linear import TimeBase, check_dt
 from ..statespace import SignalNames
 from ._runtime import DomainError
 from .codegen import enclose_float
@@ -77,17 +78,7 @@ def _bounds(what: str, v: Any) -> Pair:
     return lo, hi
 
 
-def _dt(dt: Any) -> bool | float:
-    if dt is True:
-        return True
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt < 0:
-        raise IvobsError(
-            f"dt: expected True, a sampling period > 0 or 0 (continuous time), got {dt!r}"
-        )
-    return float(dt)
-
-
-class NonlinearSystem:
+class NonlinearSystem(TimeBase):
     """A discrete-time nonlinear model with bounded unknowns (see the module docstring).
 
     Parameters
@@ -122,7 +113,7 @@ class NonlinearSystem:
     ) -> None:
         import sympy as sp
 
-        self.dt = _dt(dt)
+        self.dt = check_dt(dt)
         self.state_names = _names("states", states)
         if not self.state_names:
             raise IvobsError("states: expected at least one state name")
@@ -247,14 +238,6 @@ class NonlinearSystem:
         """Length of the per-step unknown vector ``w = (unknown params, d signals)``."""
         return len(self.param_names) + len(self.signal_names)
 
-    @property
-    def is_continuous(self) -> bool:
-        return self.dt is not True and self.dt == 0.0
-
-    @property
-    def is_discrete(self) -> bool:
-        return not self.is_continuous
-
     def discretize(
         self, Ts: float, *, order: int = 4, substeps: int = 1, disturbances: str = "varying"
     ) -> NonlinearSystem:
@@ -274,10 +257,6 @@ class NonlinearSystem:
             self, Ts, order=order, substeps=substeps, disturbances=disturbances
         )
         return result
-
-    @property
-    def sampling_period(self) -> float:
-        return 1.0 if self.dt is True else float(self.dt)
 
     @property
     def d(self) -> Box:

@@ -32,7 +32,7 @@ from __future__ import annotations
 from typing import Any
 
 from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
-from .forms import emit_centre, emit_meet
+from .forms import emit_arguments, emit_centre, emit_meet, emit_rows
 
 __all__ = ["MAX_ORDER", "TaylorCode", "build_taylor", "lie_coefficients"]
 
@@ -94,17 +94,10 @@ def _envs(
     em: Emitter, syms: dict[str, list[Any]], consts: dict[Any, Pair]
 ) -> tuple[dict[Any, Pair], dict[Any, Pair]]:
     """Header lines; the environments over ``([x], [w])`` and over ``(B, [w])``."""
-    common: dict[Any, Pair] = dict(consts)
-    for i, s in enumerate(syms["u"]):
-        em.line(f"u{i} = u[{i}]")
-        common[s] = (f"u{i}", f"u{i}")
-    for i, s in enumerate(syms["w"]):
-        em.line(f"w{i}l = wl[{i}]; w{i}h = wh[{i}]")
-        common[s] = (f"w{i}l", f"w{i}h")
-    ex, eb = dict(common), dict(common)
+    ex = emit_arguments(em, syms, consts)
+    eb = dict(ex)
     for i, s in enumerate(syms["x"]):
-        em.line(f"x{i}l = xl[{i}]; x{i}h = xh[{i}]; b{i}l = bl[{i}]; b{i}h = bh[{i}]")
-        ex[s] = (f"x{i}l", f"x{i}h")
+        em.line(f"b{i}l = bl[{i}]; b{i}h = bh[{i}]")
         eb[s] = (f"b{i}l", f"b{i}h")
     return ex, eb
 
@@ -119,46 +112,25 @@ def _horner(em: Emitter, first: Pair | None, rows: list[Pair], last: Pair) -> Pa
     return acc if first is None else em._sum([first, acc])
 
 
-def _emit_all(em: Emitter, exprs: list[Any], label: str) -> list[Pair]:
-    out = []
-    for j, e in enumerate(exprs):
-        em.label = f"{label}[{j}]"
-        out.append(em.emit(e))
-    return out
-
-
 def _build_step(
     coefs: list[list[Any]], syms: dict[str, list[Any]], consts: dict[Any, Pair], sites: list[str]
 ) -> tuple[Any, str]:
     """Code of ``(natural Horner ∩ mean-value ∩ B)`` (module docstring)."""
-    import sympy as sp
-
     k, x, w = len(coefs), syms["x"], syms["w"]
     z = x + w
     em = Emitter(sites)
     em.lines.append(f"def taylor_step({_ARGS}):")
     ex, eb = _envs(em, syms, consts)
     em.scope(eb)
-    rem = _emit_all(em, coefs[k - 1], f"f^[{k}] over the a priori enclosure")
+    rem = emit_rows(em, coefs[k - 1], f"f^[{k}] over the a priori enclosure")
     em.scope(ex)
-    lower = [_emit_all(em, coefs[i], f"f^[{i + 1}]") for i in range(k - 1)]
+    lower = [emit_rows(em, coefs[i], f"f^[{i + 1}]") for i in range(k - 1)]
     nat = [
         _horner(em, ex[x[j]], [lower[i][j] for i in range(k - 1)], rem[j]) for j in range(len(x))
     ]
     out = nat
     if k > 1:
-        jac: dict[tuple[int, int], Pair] = {}
-        for j in range(len(x)):
-            for m, s in enumerate(z):
-                ds = [sp.diff(coefs[i][j], s) for i in range(k - 1)]
-                if any(d != 0 for d in ds):
-                    em.label = f"d f^[i][{j}] / d {s}"
-                    one = ("1.0", "1.0") if m == j else ("0.0", "0.0")
-                    rows = [em.emit(d) for d in ds]
-                    jac[j, m] = _horner(em, one, rows[:-1], rows[-1])
-                elif m == j:
-                    jac[j, m] = ("1.0", "1.0")
-        out = _mean_value(em, coefs, syms, consts, rem, nat, jac)
+        out = _mean_value(em, coefs, syms, consts, rem, nat, _jacobian(em, coefs, x, z))
     for j, p in enumerate(out):
         em.line(f"r{j}l = {lower_of(p[0], f'b{j}l')}; r{j}h = {upper_of(p[1], f'b{j}h')}")
     lows, highs = (", ".join(f"r{j}{e}" for j in range(len(x))) for e in "lh")
@@ -181,7 +153,7 @@ def _mean_value(
     z = x + w
     zn = [f"x{i}" for i in range(len(x))] + [f"w{i}" for i in range(len(w))]
     cenv = emit_centre(em, syms, consts, nat)
-    centre = [_emit_all(em, coefs[i], f"f^[{i + 1}] (at the centre)") for i in range(k - 1)]
+    centre = [emit_rows(em, coefs[i], f"f^[{i + 1}] (at the centre)") for i in range(k - 1)]
     out: list[Pair] = []
     for j, nv in enumerate(nat):
         tc = _horner(em, cenv[x[j]], [centre[i][j] for i in range(k - 1)], rem[j])
@@ -190,6 +162,27 @@ def _mean_value(
         ]
         out.append(emit_meet(em, nv, terms))
     return out
+
+
+def _jacobian(
+    em: Emitter, coefs: list[list[Any]], x: list[Any], z: list[Any]
+) -> dict[tuple[int, int], Pair]:
+    """The entries ``(j, m)`` of ``∂(x_j + Σ_i h^i f^[i]_j) / ∂z_m`` (``i < k``) over the
+    emitter's scope by Horner's rule, but for the zero ones (the diagonal's are 1)."""
+    import sympy as sp
+
+    jac: dict[tuple[int, int], Pair] = {}
+    for j in range(len(x)):
+        for m, s in enumerate(z):
+            ds = [sp.diff(coefs[i][j], s) for i in range(len(coefs) - 1)]
+            if any(d != 0 for d in ds):
+                em.label = f"d f^[i][{j}] / d {s}"
+                one = ("1.0", "1.0") if m == j else ("0.0", "0.0")
+                rows = [em.emit(d) for d in ds]
+                jac[j, m] = _horner(em, one, rows[:-1], rows[-1])
+            elif m == j:
+                jac[j, m] = ("1.0", "1.0")
+    return jac
 
 
 def _build_jac(
@@ -204,19 +197,10 @@ def _build_jac(
     em.lines.append(f"def taylor_jac({_ARGS}):")
     ex, eb = _envs(em, syms, consts)
     h = ("hl", "hh")
-    P: list[Pair] = []
     Q: list[Pair] = []
     em.scope(ex)  # all of P over ([x], [w]), then all of Q over (B, [w]): shared subexpressions
-    for j in range(len(x)):
-        for m, s in enumerate(z):
-            one = ("1.0", "1.0") if m == j else ("0.0", "0.0")
-            ds = [sp.diff(coefs[i][j], s) for i in range(k - 1)]
-            if any(d != 0 for d in ds):
-                em.label = f"d f^[i][{j}] / d {s}"
-                rows = [em.emit(d) for d in ds]
-                P.append(_horner(em, one, rows[:-1], rows[-1]))
-            else:
-                P.append(one)
+    jac = _jacobian(em, coefs, x, z)
+    P = [jac.get((j, m), ("0.0", "0.0")) for j in range(len(x)) for m in range(len(z))]
     em.scope(eb)
     for j in range(len(x)):
         for s in z:

@@ -97,7 +97,9 @@ def trace_callable(what: str, fn: Any, sys: NonlinearSystem) -> list[Any]:
 
 def expression_text(e: Any) -> str:
     """``e`` as an expression string that :func:`~.parse.parse_expression` reads back to the
-    same expression (exact rationals as ``p/q``, ``abs``, ``min``, ``max``, ``e``)."""
+    same expression (exact rationals as ``p/q``, floats with all their digits, ``abs``,
+    ``min``, ``max``, ``e``; the same whitelist applies to it: nothing SymPy can express beyond
+    it is accepted)."""
     from sympy.printing.str import StrPrinter
 
     class _Printer(StrPrinter):  # type: ignore[misc]
@@ -116,4 +118,4 @@ def expression_text(e: Any) -> str:
         def _print_Rational(self, expr: Any) -> str:
             return f"({expr.p}/{expr.q})"
 
-    return str(_Printer({"order": "none"}).doprint(e))
+    return str(_Printer({"order": "none", "full_prec": True}).doprint(e))

@@ -108,11 +108,7 @@ class ConstrainedZonotope:
         M = as_matrix("M", M, cols=self.dim, vector="row")
         n, m = self.G.shape
         e = product_error(np.abs(M) @ (np.abs(self.c) + np.abs(self.G).sum(axis=1)), n + m + 1)
-        box = box_generators(e)
-        A = np.concatenate([self.A, np.zeros((self.num_constraints, box.shape[1]))], axis=1)
-        return ConstrainedZonotope._trusted(
-            M @ self.c, np.concatenate([M @ self.G, box], axis=1), A, self.b
-        )
+        return ConstrainedZonotope._of(Reduced(M @ self.c, M @ self.G, self.A, self.b, e))
 
     def __rmatmul__(self, M: Any) -> ConstrainedZonotope:
         return self.linear_map(M)
@@ -120,10 +116,7 @@ class ConstrainedZonotope:
     def __add__(self, other: Any) -> ConstrainedZonotope:
         """Minkowski sum ([Scott2016, Proposition 1]) with a constrained zonotope, zonotope or
         box; a vector translates."""
-        if isinstance(other, Box):
-            other = ConstrainedZonotope.from_box(other)
-        elif isinstance(other, Zonotope):
-            other = ConstrainedZonotope.from_zonotope(other)
+        other = _lift(other)
         if isinstance(other, ConstrainedZonotope):
             if other.dim != self.dim:
                 raise IvobsError(f"Minkowski sum: dimensions differ ({self.dim}, {other.dim})")
@@ -141,27 +134,20 @@ class ConstrainedZonotope:
 
     def _with_sum_error(self) -> ConstrainedZonotope:
         """The set with the box of the rounding of its centre, a sum: ``u |c|``."""
-        box = box_generators(up(UNIT_ROUNDOFF * np.abs(self.c)))
-        A = np.concatenate([self.A, np.zeros((self.num_constraints, box.shape[1]))], axis=1)
-        return ConstrainedZonotope._trusted(self.c, np.hstack([self.G, box]), A, self.b)
+        e = up(UNIT_ROUNDOFF * np.abs(self.c))
+        return ConstrainedZonotope._of(Reduced(self.c, self.G, self.A, self.b, e))
 
     def __radd__(self, other: Any) -> ConstrainedZonotope:
         """``other + Z`` for a box, zonotope or vector: the left operand's generators first, as
         in ``Box + Zonotope``."""
-        if isinstance(other, Box):
-            return ConstrainedZonotope.from_box(other) + self
-        if isinstance(other, Zonotope):
-            return ConstrainedZonotope.from_zonotope(other) + self
-        return self.__add__(other)
+        other = _lift(other)
+        return other + self if isinstance(other, ConstrainedZonotope) else self.__add__(other)
 
     def intersect(self, other: Any, R: Any = None) -> ConstrainedZonotope:
         """Generalised intersection ``Z ∩_R Y = {z ∈ Z : R z ∈ Y}`` ([Scott2016, Proposition
         1]); ``R = I`` (plain intersection) by default. ``Y`` may be a constrained zonotope,
         zonotope or box."""
-        if isinstance(other, Box):
-            other = ConstrainedZonotope.from_box(other)
-        elif isinstance(other, Zonotope):
-            other = ConstrainedZonotope.from_zonotope(other)
+        other = _lift(other)
         if not isinstance(other, ConstrainedZonotope):
             raise IvobsError(
                 f"intersect: expected a ConstrainedZonotope, Zonotope or Box, "
@@ -295,3 +281,12 @@ class ConstrainedZonotope:
             f"ConstrainedZonotope(n={self.dim}, generators={self.num_generators}, "
             f"constraints={self.num_constraints})"
         )
+
+
+def _lift(other: Any) -> Any:
+    """A box or zonotope as a constrained zonotope (anything else as it is)."""
+    if isinstance(other, Box):
+        return ConstrainedZonotope.from_box(other)
+    if isinstance(other, Zonotope):
+        return ConstrainedZonotope.from_zonotope(other)
+    return other

@@ -9,7 +9,6 @@ step, go to a box ([Higham2002, Lemma 3.1] bounds).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -58,8 +57,7 @@ def reduce_generators(
     A: np.ndarray,
     b: np.ndarray,
     max_generators: int,
-    residual: bool = False,
-) -> Any:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """At most ``max_generators`` generators, by reducing the lifted zonotope
     ``<[c; -b], [G; A]>`` ([Scott2016, Section 4.3]; its ``x`` part and constraint part
     shrink together, so the constrained zonotope it represents contains the original).
@@ -76,15 +74,12 @@ def reduce_generators(
     bound. Either way the result contains the original in exact arithmetic, whatever the
     rounding, and no box is left aside.
 
-    At least ``N`` generators are kept, whatever ``max_generators``.
-
-    With ``residual=True`` ``(c, G, A, b, box)`` is returned, ``box`` the zero radii of the
-    box aside (the form of ``nl-zonotope``'s reduction)."""
+    At least ``N`` generators are kept, whatever ``max_generators``."""
     n, m = G.shape
     N = n + A.shape[0]
     order = max(int(max_generators), N)
     if m <= order:
-        return (c, G, A, b, np.zeros(N)) if residual else (c, G, A, b)
+        return c, G, A, b
     # the same array as the vstack when there are no constraints (the nonlinear zonotope)
     L = G if not A.shape[0] and G.flags.c_contiguous else np.vstack([G, A])
     d = _pow2_scaling(L)
@@ -99,7 +94,7 @@ def reduce_generators(
         else:  # an entry would leave the normal range: reduce the unscaled matrix instead
             L2 = _absorb_in_basis(L, order)
             L2 = reduce_girard(L, order) if L2 is None else L2
-    return (c, L2[:n], L2[n:], b, np.zeros(N)) if residual else (c, L2[:n], L2[n:], b)
+    return c, L2[:n], L2[n:], b
 
 
 _TINY = float(np.finfo(float).tiny)
@@ -238,7 +233,4 @@ def reduce_consolidated(
     tol_x = tols[0] * (1.0 + float(np.abs(c).max(initial=0.0)))
     tol_c = tols[1] * float(np.abs(A).max(initial=0.0))
     c, G, A, b = consolidate_small(c, G, A, b, tol_x, tol_c)
-    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = reduce_generators(
-        c, G, A, b, max_generators
-    )
-    return out
+    return reduce_generators(c, G, A, b, max_generators)
