@@ -47,7 +47,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import DesignError
-from ..linalg import observability_matrix
+from ..linalg import is_observable, observability_matrix, spectral_radius
 
 __all__ = [
     "circulant_block",
@@ -114,7 +114,7 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
     n = lams.size
     scale = max(1.0, float(np.max(np.abs(lams), initial=0.0)))
     tol = tol * scale
-    head = _Head(lams)
+    head = f"no nonnegative R with the spectrum {_fmt(lams)}"
     reason = _necessary(lams, tol)
     if reason:
         raise DesignError(f"{head} exists: {reason}")
@@ -184,18 +184,6 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
     return np.maximum(R, 0.0), np.concatenate(starts)
 
 
-class _Head:
-    """The start of the error messages (formatted only when an error is raised)."""
-
-    def __init__(self, lams: np.ndarray):
-        self.lams = lams
-
-    def __str__(self) -> str:
-        return f"no nonnegative R with the spectrum {_fmt(self.lams)}"
-
-    __format__ = lambda self, spec: str(self)  # noqa: E731
-
-
 def _merge(values: list[float], tol: float) -> tuple[np.ndarray, np.ndarray]:
     """Distinct values (within ``tol``) and their multiplicities."""
     out: list[list[float]] = []
@@ -245,7 +233,7 @@ def transformed_width(M: np.ndarray, G: np.ndarray, delta: np.ndarray, S: np.nda
     n = M.shape[0]
     Si = np.linalg.inv(S)
     Rabs = np.abs(S @ M @ Si)
-    if n and np.max(np.abs(np.linalg.eigvals(Rabs))) >= 1.0:
+    if spectral_radius(Rabs) >= 1.0:
         return np.full(n, np.inf)
     wz = np.linalg.solve(np.eye(n) - Rabs, np.abs(S @ G) @ delta)
     return np.abs(Si) @ wz
@@ -294,13 +282,6 @@ def modal_width(
     return float(np.sum(w if weights is None else w * weights))
 
 
-def _obs_rows(M: np.ndarray, e: np.ndarray) -> np.ndarray:
-    rows = [e]
-    for _ in range(M.shape[0] - 1):
-        rows.append(rows[-1] @ M)
-    return np.array(rows)
-
-
 def design_width(
     A: np.ndarray,
     C: np.ndarray,
@@ -320,7 +301,7 @@ def design_width(
         return np.inf
     try:
         R, e2 = nonnegative_realization(lam)
-        S = np.linalg.solve(_obs_rows(R, e2), _obs_rows(M, e1))
+        S = np.linalg.solve(observability_matrix(R, e2[None]), observability_matrix(M, e1[None]))
         Si = np.linalg.inv(S)
     except (DesignError, np.linalg.LinAlgError):
         return np.inf
@@ -328,7 +309,7 @@ def design_width(
     if np.any(Rs < -1e-9 * max(1.0, float(np.max(np.abs(Rs))))):
         return np.inf
     Rabs = np.abs(Rs)
-    if np.max(np.abs(np.linalg.eigvals(Rabs))) >= 0.995:
+    if spectral_radius(Rabs) >= 0.995:
         return np.inf
     wz = np.linalg.solve(np.eye(M.shape[0]) - Rabs, np.abs(S @ G) @ delta)
     w = np.abs(Si) @ wz
@@ -377,11 +358,10 @@ def default_design(
         if val < best_val:
             best_L, best_val = L, val
     if best_L is None:
-        obs = np.vstack([C @ np.linalg.matrix_power(A, i) for i in range(n)])
         why = (
-            "(A, C) is not observable"
-            if np.linalg.matrix_rank(obs) < n
-            else f"(A, C) is observable; the last attempt said: {last_error}"
+            f"(A, C) is observable; the last attempt said: {last_error}"
+            if is_observable(A, C)
+            else "(A, C) is not observable"
         )
         raise DesignError(
             f"{who}: could not place distinct real poles in (0, 1) for A − LC: {why}; "
@@ -485,7 +465,7 @@ def check_transform(
             f"{who}: S does not transform A − LC into R: max |S (A − LC) S⁻¹ − R| = "
             f"{np.max(np.abs(Rs - R)):.3g}"
         )
-    rho = float(np.max(np.abs(np.linalg.eigvals(np.abs(Rs))))) if Rs.size else 0.0
+    rho = spectral_radius(np.abs(Rs))
     if rho >= 1.0:
         raise DesignError(
             f"{who}: R = S (A − LC) S⁻¹ is not Schur: spectral radius of |R| is {rho:.6g} >= 1"
