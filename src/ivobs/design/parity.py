@@ -50,7 +50,6 @@ __all__ = [
     "invertible_injection",
     "optimal_T",
     "pinv_perp",
-    "stack_matrices",
     "stack_window",
     "width_optimal_T",
     "window_bound",
@@ -103,30 +102,6 @@ def stack_window(
         Mu[r, i * nu : (i + 1) * nu] += D
         Md[r, i * nd : (i + 1) * nd] += F
     return Mx, Mu, Md
-
-
-def stack_matrices(
-    A: Any, B: Any, C: Any, D: Any = None, E: Any = None, F: Any = None, *, s: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(Mx, Mu, Md)`` of [Wang2020, eq. (6)] for a time-invariant system (``D``, ``E``, ``F``
-    default to zero blocks of the right size)."""
-    A = np.atleast_2d(np.asarray(A, dtype=float))
-    C = np.atleast_2d(np.asarray(C, dtype=float))
-    nx, ny = A.shape[0], C.shape[0]
-    B = np.zeros((nx, 0)) if B is None else np.asarray(B, dtype=float).reshape(nx, -1)
-    nu = B.shape[1]
-    D = np.zeros((ny, nu)) if D is None else np.asarray(D, dtype=float).reshape(ny, nu)
-    if E is None and F is None:
-        E, F = np.zeros((nx, 0)), np.zeros((ny, 0))
-    elif E is None:
-        F = np.asarray(F, dtype=float).reshape(ny, -1)
-        E = np.zeros((nx, F.shape[1]))
-    else:
-        E = np.asarray(E, dtype=float).reshape(nx, -1)
-        F = np.zeros((ny, E.shape[1])) if F is None else np.asarray(F, dtype=float)
-    if int(s) < 0:
-        raise IvobsError(f"s: expected an integer >= 0, got {s}")
-    return stack_window([(A, B, C, D, E, F)] * (int(s) + 1))
 
 
 def pinv_perp(Mx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
