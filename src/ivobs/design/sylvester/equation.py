@@ -20,15 +20,7 @@ from ...linalg import (
     spectral_radius,
 )
 
-__all__ = ["check_target", "condition_number", "predicted_width", "solve_transform"]
-
-
-def condition_number(T: np.ndarray) -> float:
-    """``σ_max(T) / σ_min(T)`` (``inf`` when ``T`` is rank deficient)."""
-    s = np.linalg.svd(T, compute_uv=False)
-    if s.size == 0 or s[-1] <= 0 or not np.all(np.isfinite(s)):
-        return float("inf")
-    return float(s[0] / s[-1])
+__all__ = ["check_target", "predicted_width", "solve_transform"]
 
 
 def solve_transform(A: Any, C: Any, A_z: Any, B_z: Any) -> np.ndarray:

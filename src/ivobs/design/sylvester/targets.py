@@ -36,7 +36,7 @@ from ...linalg import (
     observability_indices,
     spectral_radius,
 )
-from .equation import condition_number, solve_transform
+from .equation import solve_transform
 from .flow import CT_RANGE, flow_cap
 
 __all__ = ["DT_RANGE", "TargetChoice", "block_target", "default_target"]
@@ -170,7 +170,7 @@ def _acceptable(
     except DesignError:
         return None
     norms = np.linalg.norm(T, axis=1)
-    if np.any(norms == 0) or condition_number(T / norms[:, None]) > max_cond:
+    if np.any(norms == 0) or np.linalg.cond(T / norms[:, None]) > max_cond:
         return None  # judged on unit rows: the final scaling of (T, B_z)
     return T
 
@@ -224,7 +224,7 @@ def default_target(
             if T is None:
                 continue
             s, _ = _score(np.concatenate([a, Bz.ravel()]), A, C, Ex, Fx, wt, continuous, False)
-            cond = condition_number(T / np.linalg.norm(T, axis=1)[:, None])
+            cond = np.linalg.cond(T / np.linalg.norm(T, axis=1)[:, None])
             least_cond = min(least_cond, cond)
             if start is None or s < start[0]:
                 start = (s, a, Bz, T)
