@@ -97,6 +97,8 @@ def width_lp(
     """The gain minimising the (balanced) steady-state width, by the LP of the module docstring
     (``nonnegative=True``: ``interval``'s ``A − LC >= 0``; else ``interval-split``'s
     ``|A − LC|`` Schur). The caller checks the gain it returns."""
+    from scipy.optimize import linprog
+
     A = np.asarray(A, dtype=float)
     C = np.asarray(C, dtype=float)
     E = np.asarray(E, dtype=float).reshape(A.shape[0], -1)
@@ -106,12 +108,20 @@ def width_lp(
     At = A * dv[None, :] / dv[:, None]
     Ct = C * dv[None, :]
     Et = E / dv[:, None]
-    res = _solve(At, Ct, Et, F, delta, nonnegative)
-    if res.status != "optimal":
-        return res
-    assert res.L is not None and res.q is not None
-    L = null_space_free(dv[:, None] * res.L, C, F, delta)
-    return WidthLP("optimal", res.message, L, res.q, res.value)
+    n, p = A.shape[0], C.shape[0]
+    A_ub, b_ub, obj, bounds = _constraints(At, Ct, Et, F, delta, nonnegative)
+    res = linprog(obj, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs", options=_OPTIONS)
+    if res.status == 2:
+        return WidthLP("infeasible", str(res.message))
+    if res.status != 0 or res.x is None:
+        return WidthLP("failed", f"status {res.status}: {res.message}")
+    x = res.x
+    q = x[:n]
+    if np.any(q <= 0.0) or not np.all(np.isfinite(x)):
+        return WidthLP("failed", "the LP returned a certificate q with a zero entry")
+    Lt = x[n : n + n * p].reshape(n, p) / q[:, None]
+    L = null_space_free(dv[:, None] * Lt, C, F, delta)
+    return WidthLP("optimal", str(res.message), L, q, float(res.fun))
 
 
 class _Cols:
@@ -205,26 +215,6 @@ _OPTIONS = {
     "dual_feasibility_tolerance": 1e-10,
     "time_limit": 300.0,  # beyond, the design is refused as undecided (solver failure)
 }
-
-
-def _solve(
-    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, delta: np.ndarray, nonneg: bool
-) -> WidthLP:
-    from scipy.optimize import linprog
-
-    n, p = A.shape[0], C.shape[0]
-    A_ub, b_ub, obj, bounds = _constraints(A, C, E, F, delta, nonneg)
-    res = linprog(obj, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs", options=_OPTIONS)
-    if res.status == 2:
-        return WidthLP("infeasible", str(res.message))
-    if res.status != 0 or res.x is None:
-        return WidthLP("failed", f"status {res.status}: {res.message}")
-    x = res.x
-    q = x[:n]
-    if np.any(q <= 0.0) or not np.all(np.isfinite(x)):
-        return WidthLP("failed", "the LP returned a certificate q with a zero entry")
-    L = x[n : n + n * p].reshape(n, p) / q[:, None]
-    return WidthLP("optimal", str(res.message), L, q, float(res.fun))
 
 
 # -- the design: existence decided, gain checked ---------------------------------------------
