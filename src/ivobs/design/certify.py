@@ -31,11 +31,6 @@ uses the ``ε`` of the format actually used, so it holds either way."""
 _EPS_WORK = float(np.finfo(_WORK).eps)
 
 
-def _gamma_work(n: int) -> float:
-    """``γ_n`` of the working precision (its ``ε``: twice its unit roundoff, conservative)."""
-    return gamma(n, _EPS_WORK)
-
-
 @dataclass(frozen=True)
 class ForwardWindow:
     """The window of the fixed-time estimator written *forward*, without any inverse.
@@ -190,7 +185,7 @@ def _residual(
     Gw = np.asarray(G, dtype=_WORK)
     n = fw.n_rounds + G.shape[1] + 2
     R = target - Gw @ fw.Z
-    B = np.abs(R) + _gamma_work(2 * n) * (np.abs(Gw) @ fw.Za + target_abs)
+    B = np.abs(R) + gamma(2 * n, _EPS_WORK) * (np.abs(Gw) @ fw.Za + target_abs)
     return R, up(B.astype(float))
 
 
