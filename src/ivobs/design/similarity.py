@@ -227,13 +227,16 @@ def place_real_poles(A: np.ndarray, C: np.ndarray, poles: np.ndarray, who: str) 
     return np.asarray(res.gain_matrix, dtype=float).T
 
 
-def transformed_width(M: np.ndarray, G: np.ndarray, delta: np.ndarray, S: np.ndarray) -> np.ndarray:
+def transformed_width(
+    M: np.ndarray, G: np.ndarray, delta: np.ndarray, S: np.ndarray, limit: float = 1.0
+) -> np.ndarray:
     """Steady-state width of the bounds of observer (42) for constant bounds:
-    ``|S⁻¹| (I − |R|)⁻¹ |S G| Δ`` with ``R = S M S⁻¹`` (``inf`` when ``|R|`` is not Schur)."""
+    ``|S⁻¹| (I − |R|)⁻¹ |S G| Δ`` with ``R = S M S⁻¹`` (``inf`` when ``ρ(|R|) >= limit``: for
+    ``limit = 1``, when ``|R|`` is not Schur)."""
     n = M.shape[0]
     Si = np.linalg.inv(S)
     Rabs = np.abs(S @ M @ Si)
-    if spectral_radius(Rabs) >= 1.0:
+    if spectral_radius(Rabs) >= limit:
         return np.full(n, np.inf)
     wz = np.linalg.solve(np.eye(n) - Rabs, np.abs(S @ G) @ delta)
     return np.abs(Si) @ wz
@@ -308,11 +311,7 @@ def design_width(
     Rs = S @ M @ Si
     if np.any(Rs < -1e-9 * max(1.0, float(np.max(np.abs(Rs))))):
         return np.inf
-    Rabs = np.abs(Rs)
-    if spectral_radius(Rabs) >= 0.995:
-        return np.inf
-    wz = np.linalg.solve(np.eye(M.shape[0]) - Rabs, np.abs(S @ G) @ delta)
-    w = np.abs(Si) @ wz
+    w = transformed_width(M, G, delta, S, 0.995)
     return float(w @ weights) if np.all(np.isfinite(w)) else np.inf
 
 

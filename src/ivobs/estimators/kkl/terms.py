@@ -70,12 +70,6 @@ def factor(n: int, m: int) -> float:
     return float(up(2.0 * gamma(n + 2) * (1.0 + 2.0 * gamma(m + 3))))
 
 
-def _outward(n: int) -> np.ndarray:
-    """``[-inf] * n + [inf] * n``: the directions of ``[lower; upper]`` bounds."""
-    inf = np.full(n, np.inf)
-    return np.concatenate((-inf, inf))
-
-
 def g_image(
     G: np.ndarray, Gerr: np.ndarray, dlo: np.ndarray, dhi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -321,5 +315,5 @@ def make_terms(
         c=c,
         eta=eta,
         check=check,
-        outward=_outward(nz),
+        outward=np.repeat([-np.inf, np.inf], nz),  # the directions of [lower; upper]
     )
