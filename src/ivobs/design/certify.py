@@ -79,7 +79,6 @@ def forward_window(
     *,
     centre: bool,
     lag: int | None = None,
-    missing: np.ndarray | None = None,
 ) -> ForwardWindow:
     """The forward map of one window (see :class:`ForwardWindow`), used to certify a computed
     window gain (:func:`window_bound`).
@@ -87,7 +86,7 @@ def forward_window(
     ``mats[i] = (A, B, C, D, E, F)`` of the *original* system at step ``k - i`` (no output
     injection, no inverse: ``x_{j+1} = A x_j + B u_j + E (c_j + δ_j)``,
     ``y_j = C x_j + D u_j + F (c_j + δ_j)``), ``i = 0 … s``; ``lag``: the anchor ``a``
-    (default ``s``); ``missing``: ``(s+1, ny)`` bool, those outputs are zero in ``w``.
+    (default ``s``); outputs missing from a window: :func:`drop_outputs`.
     ``n_rounds`` bounds the roundings along any product path of ``X`` and of the output rows
     of ``Z``: per step one product of inner size ``nx`` and one addition.
     """
@@ -132,12 +131,11 @@ def forward_window(
             P[:, cols_d] += EE
             if nc:
                 P[:, cols_c] += EE
-    X, Xa = P[:nx], P[nx:]
-    fw = ForwardWindow(
+    return ForwardWindow(
         Z=Z,
         Za=Za,
-        X=X,
-        Xa=Xa,
+        X=P[:nx],
+        Xa=P[nx:],
         lag=a,
         n_rounds=(a + 1) * (nx + 1),
         y_rows=np.array(y_rows, dtype=int),
@@ -148,7 +146,6 @@ def forward_window(
         d_slice=slice(d0, nxi),
         out_rows=np.arange(s + 1)[:, None] * nz + nu + np.arange(ny)[None, :],
     )
-    return fw if missing is None else drop_outputs(fw, missing)
 
 
 @dataclass(frozen=True)

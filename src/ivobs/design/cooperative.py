@@ -283,9 +283,7 @@ def _nearest_nonnegative_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np
     n, p = L.shape
     m = A.shape[1]
     # variables: L' (row-major, n p), t (n p) with |L' − L| <= t; rows (L' C)_ij <= A_ij
-    rows = np.zeros((n * m, 2 * n * p))
-    for i in range(n):
-        rows[i * m : (i + 1) * m, i * p : (i + 1) * p] = C.T
+    rows = np.hstack([np.kron(np.eye(n), C.T), np.zeros((n * m, n * p))])
     eye = np.eye(n * p)
     A_ub = np.vstack([rows, np.hstack([eye, -eye]), np.hstack([-eye, -eye])])
     c = np.concatenate([np.zeros(n * p), np.ones(n * p)])
@@ -310,9 +308,8 @@ def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     A1, b1 = abs_bound_rows(lp.lin(A, C), lp.aux("T", n * n))
     # (T v)_i − s v_i <= 0
     A2 = np.zeros((n, lp.size))
-    for i in range(n):
-        A2[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = v
-        A2[i, lp.offset["s"]] = -v[i]
+    A2[:, lp.offset["T"] : lp.offset["T"] + n * n] = np.kron(np.eye(n), v)
+    A2[:, lp.offset["s"]] = -v
     c_s = np.zeros(lp.size)
     c_s[lp.offset["s"]] = 1.0
     # tie-break among optimal gains: the smallest |A − LC| v (degenerate optima otherwise stall
@@ -418,9 +415,8 @@ def refine_width(
     for _ in range(iters):
         # one-step image  T w + TG Δ  (row i), constrained <= w, objective Σ_i image_i / w_i
         img = np.zeros((n, lp.size))
-        for i in range(n):
-            img[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = w
-            img[i, lp.offset["TG"] + i * m : lp.offset["TG"] + (i + 1) * m] = delta
+        img[:, lp.offset["T"] : lp.offset["T"] + n * n] = np.kron(np.eye(n), w)
+        img[:, lp.offset["TG"] : lp.offset["TG"] + n * m] = np.kron(np.eye(n), delta)
         scale = 1.0 / np.maximum(w, 1e-12 * max(1.0, float(w.max())))
         c = scale @ img
         x = solve_lp(

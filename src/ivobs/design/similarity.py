@@ -45,6 +45,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from ..errors import DesignError
 from ..linalg import is_observable, observability_matrix, spectral_radius
@@ -172,14 +173,9 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
         J = np.diag(np.full(int(c), max(float(v), 0.0))) + np.diag(np.ones(int(c) - 1), 1)
         blocks.append(J)
         starts.append(np.eye(int(c))[0])
-    R = np.zeros((n, n))
-    i = 0
-    for blk in blocks:
-        m = blk.shape[0]
-        R[i : i + m, i : i + m] = blk
-        i += m
+    R = block_diag(*blocks) if blocks else np.zeros((0, 0))
     R = np.where(np.abs(R) <= 1e-15 * scale, 0.0, R)
-    if i != n or np.any(R < -tol):  # pragma: no cover - construction invariant
+    if R.shape != (n, n) or np.any(R < -tol):  # pragma: no cover - construction invariant
         raise DesignError(f"{head}: internal construction failed")
     return np.maximum(R, 0.0), np.concatenate(starts)
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from ..._validate import as_matrix
 from ...errors import DesignError
@@ -296,16 +297,10 @@ def block_target(
     m = observability_indices(A_0, C_0)
     if sum(m) < n:
         m = [n] * p
-    nz = sum(m)
-    At = np.zeros((nz, nz))
-    Bt = np.zeros((nz, p))
-    r = 0
-    for i, mi in enumerate(m):
-        if continuous:
-            diag = -np.arange(1.0, mi + 1)
-        else:
-            diag = 0.1 * np.arange(1.0, mi + 1) if mi <= 9 else np.linspace(0.05, 0.95, mi)
-        At[r : r + mi, r : r + mi] = np.diag(diag)
-        Bt[r : r + mi, i] = 1.0
-        r += mi
-    return At, Bt, m
+    diag = []
+    for mi in m:
+        steps = np.arange(1.0, mi + 1)
+        diag.append(
+            -steps if continuous else 0.1 * steps if mi <= 9 else np.linspace(0.05, 0.95, mi)
+        )
+    return np.diag(np.concatenate(diag)), block_diag(*[np.ones((mi, 1)) for mi in m]), m
