@@ -342,35 +342,29 @@ def _perron_vector(M: np.ndarray) -> np.ndarray:
     return out
 
 
-def abs_schur_gain(
-    A: np.ndarray, C: np.ndarray, L0: np.ndarray | None = None, iters: int = 30
-) -> tuple[np.ndarray, float]:
+def abs_schur_gain(A: np.ndarray, C: np.ndarray, iters: int = 30) -> tuple[np.ndarray, float]:
     """Gain minimising (locally) ``ρ(|A − LC|)`` by the alternating LP of the module docstring.
 
-    Starts from ``v = 1`` and, if given, from the Perron vector of ``|A − L0 C|``. Returns
-    ``(L, ρ(|A − LC|))``; the caller decides whether ``ρ < 1`` is good enough.
+    Starts from ``L = 0`` and ``v = 1``. Returns ``(L, ρ(|A − LC|))``; the caller decides
+    whether ``ρ < 1`` is good enough.
     """
     n, p = A.shape[0], C.shape[0]
-    starts = [np.ones(n)]
-    if L0 is not None:
-        starts.append(_perron_vector(np.abs(A - L0 @ C)))
-    best_L = np.zeros((n, p)) if L0 is None else L0
-    best_rho = spectral_radius(np.abs(A - best_L @ C))
-    for v in starts:
-        prev = np.inf
-        for _ in range(iters):
-            out = _margin_lp(A, C, v)
-            if out is None:
-                break
-            L, _s = out
-            Dabs = np.abs(A - L @ C)
-            rho = spectral_radius(Dabs)
-            if rho < best_rho:
-                best_L, best_rho = L, rho
-            if rho > prev - 1e-9:
-                break
-            prev = rho
-            v = _perron_vector(Dabs)
+    v = np.ones(n)
+    best_L = np.zeros((n, p))
+    best_rho, prev = spectral_radius(np.abs(A)), np.inf
+    for _ in range(iters):
+        out = _margin_lp(A, C, v)
+        if out is None:
+            break
+        L, _s = out
+        Dabs = np.abs(A - L @ C)
+        rho = spectral_radius(Dabs)
+        if rho < best_rho:
+            best_L, best_rho = L, rho
+        if rho > prev - 1e-9:
+            break
+        prev = rho
+        v = _perron_vector(Dabs)
     return best_L, best_rho
 
 

@@ -82,18 +82,16 @@ def solve_lp(
     A_ub: np.ndarray,
     b_ub: np.ndarray,
     bounds: list[tuple[Any, Any]],
-    gain: tuple[int, np.ndarray] | None = None,
+    gain: tuple[int, np.ndarray],
     parts: list[np.ndarray] | None = None,
 ) -> np.ndarray | None:
-    """HiGHS; with ``gain = (n, w)`` (the first ``n·p`` columns are ``L``, row-major) the
+    """HiGHS, then (``gain = (n, w)``: the first ``n·p`` columns are ``L``, row-major) the
     regularising second stage of the module docstring, which keeps each objective part
     (``parts``, default ``[c]``; ``c`` is a weighted sum of them) at its optimal value."""
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
     if res.status != 0:
         return None
     x: np.ndarray = res.x
-    if gain is None:
-        return x
     parts = [c] if parts is None else parts
     best = np.array([float(q @ res.x) for q in parts])
     for tol in OPT_TOL:

@@ -260,17 +260,16 @@ def modal_width(
     G: np.ndarray,
     delta: np.ndarray,
     weights: np.ndarray | None = None,
-    gap: float = 1e-3,
 ) -> float:
     """``Σ_i weights_i w_i``, ``w`` the steady-state width of observer (42) with ``R = diag(λ)``,
     ``S = V⁻¹`` (modal coordinates); ``inf`` unless the eigenvalues of ``A − LC`` are real, in
-    ``[0, 0.99]`` and ``gap`` apart (then ``diag(λ)`` is a nonnegative realisation)."""
+    ``[0, 0.99]`` and ``1e-3`` apart (then ``diag(λ)`` is a nonnegative realisation)."""
     M = A - L @ C
     lam = np.linalg.eigvals(M)
     if np.any(lam.imag != 0) or np.any(lam.real < 0) or np.any(lam.real > 0.99):
         return np.inf
     lam = np.sort(lam.real)
-    if lam.size > 1 and np.min(np.diff(lam)) < gap:
+    if lam.size > 1 and np.min(np.diff(lam)) < 1e-3:
         return np.inf
     S = _modal_transform(M)
     if S is None:
