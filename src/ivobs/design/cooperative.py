@@ -180,8 +180,6 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
     :func:`~ivobs.design.cooperative_lp.copositive_lp` decides: its gain (checked) is returned,
     or :class:`DesignError` says what it proved (no gain exists, certified by its optimum) or
     that HiGHS failed."""
-    A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
     check_size(A.shape[0], f"{who}: LMI (41)")
     reason = _structural_obstruction(A, C)
     if reason:
@@ -388,8 +386,7 @@ def refine_width(
     refinement stops at the last gain that does)."""
     n, p = A.shape[0], C.shape[0]
     m = E.shape[1]
-    delta = np.asarray(delta, dtype=float)
-    L = np.asarray(L0, dtype=float)
+    L = L0
     gaps = missing_radius(A, C, L) < 1.0  # single-output gaps L0 rides out
     w = steady_width(A - L @ C, E - L @ F, delta)
     if m == 0 or not np.all(np.isfinite(w)) or not np.any(delta > 0):

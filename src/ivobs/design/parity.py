@@ -28,7 +28,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -148,7 +147,7 @@ def _check_full_rank(Mx: np.ndarray, rank: int) -> None:
         )
 
 
-def optimal_T(Mx: Any, Md: Any, W: Any = None) -> OptimalT:
+def optimal_T(Mx: np.ndarray, Md: np.ndarray, W: np.ndarray | None = None) -> OptimalT:
     """``T`` minimising ``‖T Md W‖_F`` subject to ``T Mx = I`` [Wang2020, Theorem 1, eq. (13)].
 
     ``T = Mx† - Mx† Md V1ᵀ S1⁻¹ U1ᵀ Mx⊥`` with ``Mx⊥ Md = U1 S1 V1`` the compact SVD
@@ -162,12 +161,10 @@ def optimal_T(Mx: Any, Md: Any, W: Any = None) -> OptimalT:
     The result is verified: ``T Mx = I`` to rounding and ``‖T Md‖ <= ‖Mx† Md‖`` (the ``S = 0``
     solution), else :class:`DesignError`.
     """
-    Mx = np.asarray(Mx, dtype=float)
-    Md = np.asarray(Md, dtype=float)
     m = Mx.shape[0]
     Mx_pinv, Mx_perp, N, rank = pinv_perp(Mx)
     _check_full_rank(Mx, rank)
-    Mdw = Md if W is None else Md * np.asarray(W, dtype=float)[None, :]
+    Mdw = Md if W is None else Md * W[None, :]
     if Mdw.shape[1] == 0 or N.shape[0] == 0:
         empty = np.zeros((m, 0))
         return OptimalT(
@@ -205,12 +202,10 @@ def _verify(T: np.ndarray, Mx: np.ndarray, Mdw: np.ndarray, Mx_pinv: np.ndarray)
         )
 
 
-def general_T(Mx: Any, S: Any) -> np.ndarray:
+def general_T(Mx: np.ndarray, S: np.ndarray) -> np.ndarray:
     """The general solution ``T = Mx† + S Mx⊥`` of ``T Mx = I`` [Wang2020, Lemmas 1 and 2]."""
-    Mx = np.asarray(Mx, dtype=float)
     Mx_pinv, Mx_perp, _, rank = pinv_perp(Mx)
     _check_full_rank(Mx, rank)
-    S = np.asarray(S, dtype=float)
     if S.shape != (Mx.shape[1], Mx.shape[0]):
         raise IvobsError(
             f"S: expected shape ({Mx.shape[1]}, {Mx.shape[0]}) (nx, (s+1)·ny), got {S.shape}"
@@ -219,7 +214,7 @@ def general_T(Mx: Any, S: Any) -> np.ndarray:
     return T
 
 
-def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
+def width_optimal_T(Mx: np.ndarray, Md: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
     """``T`` minimising each box width of eq. (11), ``Σ_j |(T Md Wd)_ij|``, s.t. ``T Mx = I``.
 
     Not in [Wang2020] (whose Theorem 1 minimises ``‖T Md‖_F``): one linear program per state
@@ -229,11 +224,9 @@ def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
     """
     from scipy.optimize import linprog
 
-    Mx = np.asarray(Mx, dtype=float)
-    Md = np.asarray(Md, dtype=float)
     Mx_pinv, _, _, rank = pinv_perp(Mx)
     _check_full_rank(Mx, rank)
-    P = Md if W is None else Md * np.asarray(W, dtype=float)[None, :]
+    P = Md if W is None else Md * W[None, :]
     m, nx = Mx.shape
     p = P.shape[1]
     if p == 0:

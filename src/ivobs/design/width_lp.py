@@ -99,11 +99,6 @@ def width_lp(
     ``|A − LC|`` Schur). The caller checks the gain it returns."""
     from scipy.optimize import linprog
 
-    A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
-    E = np.asarray(E, dtype=float).reshape(A.shape[0], -1)
-    F = np.asarray(F, dtype=float).reshape(C.shape[0], -1)
-    delta = np.asarray(delta, dtype=float).ravel()
     dv = state_scaling(A, C, E if E.size else None, F if E.size else None)
     At = A * dv[None, :] / dv[:, None]
     Ct = C * dv[None, :]
