@@ -16,12 +16,11 @@ general solution is ``T = Mx† + S Mx⊥`` (Lemmas 1 and 2), and Theorem 1 (eq.
 one minimising ``‖T Md‖_F``.
 
 Time-varying systems [Wang2020, Remark 4]: :func:`stack_window` takes the matrices of each step
-of the window. Non-invertible ``A`` [Wang2020, Remark 1]: :func:`injection_candidates` and
-:func:`invertible_injection` (:mod:`ivobs.design.injection`) find small gains ``L`` with
-``A - LC`` well-conditioned; ``L y`` then enters as a known input.
+of the window. Non-invertible ``A`` [Wang2020, Remark 1]: :mod:`ivobs.design.injection` finds
+small gains ``L`` with ``A - LC`` well-conditioned; ``L y`` then enters as a known input.
 
 Certification of a computed window gain (not in the paper): :mod:`ivobs.design.certify`
-(:func:`forward_window`, :func:`window_bound`, re-exported here).
+(:func:`~ivobs.design.certify.forward_window`, :func:`~ivobs.design.certify.window_bound`).
 """
 
 from __future__ import annotations
@@ -32,27 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DesignError, IvobsError
-from .certify import ForwardWindow, WindowBound, forward_window, window_bound
-from .injection import SINGULAR_RCOND, injection_candidates, invertible_injection, is_invertible
-from .injection import rcond as _rcond
+from .injection import is_invertible, rcond
 
 _EPS = np.finfo(float).eps
 
-__all__ = [
-    "SINGULAR_RCOND",
-    "ForwardWindow",
-    "OptimalT",
-    "WindowBound",
-    "forward_window",
-    "general_T",
-    "injection_candidates",
-    "invertible_injection",
-    "optimal_T",
-    "pinv_perp",
-    "stack_window",
-    "width_optimal_T",
-    "window_bound",
-]
+__all__ = ["OptimalT", "general_T", "optimal_T", "pinv_perp", "stack_window", "width_optimal_T"]
 
 
 def stack_window(
@@ -86,7 +69,7 @@ def stack_window(
             if not is_invertible(A_prev):
                 raise DesignError(
                     f"A at lag {i} of the window is not invertible (reciprocal condition number "
-                    f"{_rcond(A_prev):.1e}); the backward propagation ([Wang2020, eq. (4)]) "
+                    f"{rcond(A_prev):.1e}); the backward propagation ([Wang2020, eq. (4)]) "
                     "needs A⁻¹: use an output injection L ([Wang2020, Remark 1])"
                 )
             Ainv = np.linalg.inv(A_prev)
