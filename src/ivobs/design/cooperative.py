@@ -35,8 +35,8 @@ with every output present, but the estimators use ``L_k = L diag(observed)`` whe
 missing: ``|A − L_k C| ≈ 10⁶`` and the bounds explode (0.2 → 2·10¹⁷ in three steps). Each LP is
 therefore solved in two stages: after the optimum ``q_iᵀx*`` of each objective part ``q_i``, a
 second LP keeps ``q_iᵀx <= q_iᵀx* + τ·max(1, |q_iᵀx*|)`` (``τ = 1e-12``, or ``1e-9`` should HiGHS
-find that infeasible: :data:`OPT_TOL`; the tie-break of the margin LP is its own part) and minimises
-``max_j Σ_i w_j |L_ij| + REG_L1 Σ_ij w_j |L_ij|`` with ``w_j = ‖C_j‖₁``: since
+find that infeasible: :data:`.cooperative_lp.OPT_TOL`; the tie-break of the margin LP is its own
+part) and minimises ``max_j Σ_i w_j |L_ij| + REG_L1 Σ_ij w_j |L_ij|`` with ``w_j = ‖C_j‖₁``: since
 ``|A − L_(j) C| <= |A − LC| + |L_:j| |C_j|`` (``L_(j)``: column ``j`` zeroed), the largest
 weighted column norm bounds how much any single missing output can degrade the error
 dynamics; the weighted ℓ₁ term decides the remaining ties. On the redundant example the gain
@@ -62,8 +62,6 @@ from .cooperative_lp import (
     COPOSITIVE_TOL,
     L_BOUND,
     LP,
-    OPT_TOL,
-    REG_L1,
     abs_bound_rows,
     copositive_lp,
     output_weights,
@@ -72,15 +70,12 @@ from .cooperative_lp import (
 
 __all__ = [
     "NONNEG_TOL",
-    "OPT_TOL",
-    "REG_L1",
     "abs_schur_gain",
     "check_abs_schur",
     "check_nonnegative_schur",
     "fixed_radius",
     "missing_radius",
     "nonnegative_gain",
-    "output_weights",
     "refine_width",
     "steady_width",
 ]
