@@ -124,8 +124,7 @@ def _hinf_lmi(
         ]
     # cvxpy re-exports its (unannotated) atoms implicitly, which strict typing does not see
     lmi = sym(cp.bmat(blocks))  # type: ignore[attr-defined]
-    size = 2 * nx + nd
-    Dm = np.concatenate([dv, np.ones(nd), dv])[:size] if nd else np.concatenate([dv, dv])
+    Dm = np.concatenate([dv, np.ones(nd), dv])  # (the middle block is empty when nd = 0)
     cons = [lmi << -MARGIN * np.diag(Dm**2)]
     objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P / dv[:, None] / dv[None, :]))  # type: ignore[attr-defined]
 
