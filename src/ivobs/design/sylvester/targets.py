@@ -56,7 +56,6 @@ class TargetChoice:
     B_z: np.ndarray
     T: np.ndarray
     score: float
-    candidates: int
     tuned: bool
 
 
@@ -218,7 +217,7 @@ def default_target(
     # candidates with cond(T) <= max_cond; ill-conditioned ones only serve as starting points
     best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
     start: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
-    count, least_cond = 0, np.inf
+    least_cond = np.inf
     for a in _spreads(n, continuous, scale, cap):
         for Bz in _b_patterns(C, F, delta if delta.size else np.zeros(0), n):
             T = _acceptable(a, Bz, A, C, continuous, _RELAXED_COND, sep)
@@ -229,10 +228,8 @@ def default_target(
             least_cond = min(least_cond, cond)
             if start is None or s < start[0]:
                 start = (s, a, Bz, T)
-            if cond <= max_cond:
-                count += 1
-                if best is None or s < best[0]:
-                    best = (s, a, Bz, T)
+            if cond <= max_cond and (best is None or s < best[0]):
+                best = (s, a, Bz, T)
     tuned = False
     if tune and start is not None:
         from scipy.optimize import minimize
@@ -260,7 +257,6 @@ def default_target(
             s, _ = _score(res.x, A, C, Ex, Fx, wt, continuous, False)
             if best is None or s < best[0] - 1e-9:
                 best, tuned = (s, a.copy(), Bz.copy(), T), True
-                count += 1
     if best is None:
         raise DesignError(
             "kkl: no diagonal target (A_z, B_z) gave an invertible Sylvester solution T with "
@@ -270,9 +266,7 @@ def default_target(
     s, a, Bz, T = best
     norms = np.linalg.norm(T, axis=1)
     T, Bz = T / norms[:, None], Bz / norms[:, None]  # diagonal A_z commutes with the scaling
-    return TargetChoice(
-        A_z=np.diag(a), B_z=Bz, T=T, score=float(np.exp(s)), candidates=count, tuned=tuned
-    )
+    return TargetChoice(A_z=np.diag(a), B_z=Bz, T=T, score=float(np.exp(s)), tuned=tuned)
 
 
 # ------------------------------------------------------------------------------------------

@@ -41,7 +41,6 @@ __all__ = [
     "TransformSequence",
     "design_lti",
     "design_ltv",
-    "every",
     "finite",
     "left_inverse",
     "x0_required",
@@ -72,12 +71,6 @@ class KKLDesign(Design):
     gamma: float | None = None
     ell: float | None = None
     tuned: bool = False
-
-
-def every(mask: np.ndarray) -> bool:
-    """``mask.all()`` for a boolean array, without the Python wrapper of the reduction (the
-    per-step paths run it on arrays of a few entries)."""
-    return bool(np.count_nonzero(mask) == mask.size)
 
 
 def finite(v: np.ndarray) -> bool:
