@@ -67,10 +67,9 @@ _SQ3 = np.sqrt(3.0)
 
 
 def _fmt(lams: np.ndarray) -> str:
-    parts = []
-    for z in lams:
-        parts.append(f"{z.real:.4g}" if abs(z.imag) == 0 else f"{z.real:.4g}{z.imag:+.4g}j")
-    return "{" + ", ".join(parts) + "}"
+    return (
+        "{" + ", ".join(f"{z.real:.4g}" + (f"{z.imag:+.4g}j" if z.imag else "") for z in lams) + "}"
+    )
 
 
 def suleimanova_block(rho: float, negatives: list[float]) -> np.ndarray:

@@ -170,8 +170,6 @@ class ContinuousLTI(ContinuousObserver):
         Otherwise the state is returned unchanged.
         """
         Th = an.T
-        if T is Th:
-            return T, zlo, zhi
         if np.array_equal(T, Th):
             return Th, zlo, zhi
         if k == 1 and self.x0 is not None:
