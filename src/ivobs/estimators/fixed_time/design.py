@@ -174,12 +174,8 @@ def injection(A: np.ndarray, C: np.ndarray, L: np.ndarray | None, where: str) ->
 
 def _centre_size(sys: LinearSystem) -> int:
     """Columns of ``c`` (the centre of ``d``) in ``z``: 0 for symmetric constant bounds."""
-    if sys.nd == 0:
-        return 0
-    if sys.has_constant_bounds:
-        box = sys.d_at(0)
-        return 0 if np.all(box.lo == -box.hi) else int(sys.nd)
-    return int(sys.nd)
+    box = sys.d_at(0) if sys.has_constant_bounds else None
+    return 0 if box is not None and np.all(box.lo == -box.hi) else int(sys.nd)
 
 
 class WindowDesigner:
