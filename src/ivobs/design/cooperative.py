@@ -112,15 +112,14 @@ def missing_radius(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np.ndarray:
 
 def _structural_obstruction(A: np.ndarray, C: np.ndarray) -> str:
     """An entry of ``A − LC`` that is negative for every ``L`` (its column of ``C`` is zero)."""
-    zero_cols = np.flatnonzero(~np.any(C != 0.0, axis=0))
-    for j in zero_cols:
-        for i in range(A.shape[0]):
-            if A[i, j] < 0:
-                return (
-                    f"; entry ({i + 1}, {j + 1}) of A − LC equals A[{i + 1}, {j + 1}] = "
-                    f"{A[i, j]:g} < 0 for every L (column {j + 1} of C is zero)"
-                )
-    return ""
+    found = np.argwhere(((A < 0) & ~np.any(C != 0.0, axis=0)[None, :]).T)  # column by column
+    if not found.size:
+        return ""
+    j, i = found[0]
+    return (
+        f"; entry ({i + 1}, {j + 1}) of A − LC equals A[{i + 1}, {j + 1}] = "
+        f"{A[i, j]:g} < 0 for every L (column {j + 1} of C is zero)"
+    )
 
 
 def fixed_radius(A: np.ndarray, C: np.ndarray) -> float:

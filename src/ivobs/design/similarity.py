@@ -43,6 +43,7 @@ user-given nonnegative ``R`` (``R=`` option) is accepted instead.
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import pairwise
 
 import numpy as np
 from scipy.linalg import block_diag
@@ -125,9 +126,8 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
     )
     if len(pairs) != sum(1 for z in lams if z.imag < -tol):
         raise DesignError(f"{head}: complex eigenvalues do not come in conjugate pairs")
-    for i in range(len(pairs) - 1):
-        if abs(pairs[i] - pairs[i + 1]) <= tol:
-            raise DesignError(f"{head} is built by ivobs: repeated complex pairs are not supported")
+    if any(abs(a - b) <= tol for a, b in pairwise(pairs)):
+        raise DesignError(f"{head} is built by ivobs: repeated complex pairs are not supported")
     leaders = [float(x) for x in reals if x >= -tol]
     negatives = [float(x) for x in reals if x < -tol]
     # Complex pairs: smallest leader that dominates the pair in the circulant triangle.
@@ -165,8 +165,7 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
         if groups[i]:
             blocks.append(suleimanova_block(r, groups[i]))
             starts.append(np.eye(len(groups[i]) + 1)[0])
-    used = {i for i in groups if groups[i]}
-    alone = [leaders[i] for i in range(len(leaders)) if i not in used]
+    alone = [r for i, r in enumerate(leaders) if not groups[i]]
     lead_vals, lead_counts = _merge(alone, tol)
     for v, c in zip(lead_vals, lead_counts):
         J = np.diag(np.full(int(c), max(float(v), 0.0))) + np.diag(np.ones(int(c) - 1), 1)

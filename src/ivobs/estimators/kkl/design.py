@@ -213,9 +213,7 @@ def design_lti(
             f"{worst:.3e} > max_cond = {max_cond:.0e} ([Dinh2024, Proposition 1] needs T "
             "invertible); choose another (A_z, B_z)"
         )
-    pw = None
-    if not sys.bounds_depend_on_y:
-        pw = predicted_width(Tm, Az, Bz, E, F, delta, ct)
+    pw = None if sys.bounds_depend_on_y else predicted_width(Tm, Az, Bz, E, F, delta, ct)
     return KKLDesign(
         A_z=Az,
         B_z=Bz,
