@@ -84,13 +84,7 @@ def plot_estimates(
                 ax.plot(t, hi, ls, color=c, lw=1.2, label=label_m)
                 ax.plot(t, lo, ls, color=c, lw=1.2)
         if x is not None:
-            ax.plot(
-                t,
-                x[:, i] - (x[:, i] if relative else 0.0),
-                "k.",
-                ms=3,
-                label="true state" if j == 0 else None,
-            )
+            ax.plot(t, (x - shift)[:, i], "k.", ms=3, label="true state" if j == 0 else None)
         label = state_names[i] if state_names is not None else f"$x_{{{i + 1}}}$"
         if relative:
             label = f"bounds − {label}"
