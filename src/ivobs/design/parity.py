@@ -100,9 +100,7 @@ def pinv_perp(Mx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     tol = max(m, n) * _EPS * (sv[0] if sv.size else 0.0)
     rank = int(np.sum(sv > tol))
     r = min(rank, n)
-    with np.errstate(divide="ignore"):
-        inv = np.where(sv[:r] > 0, 1.0 / sv[:r], 0.0)
-    Mx_pinv = (Vt[:r].T * inv) @ U[:, :r].T
+    Mx_pinv = (Vt[:r].T * (1.0 / sv[:r])) @ U[:, :r].T  # (the kept singular values are > tol >= 0)
     U2 = U[:, r:]
     return Mx_pinv, U2 @ U2.T, U2.T.copy(), rank
 

@@ -77,10 +77,7 @@ def null_space_free(L: np.ndarray, C: np.ndarray, F: np.ndarray, delta: np.ndarr
         return L
     U, sv, _ = np.linalg.svd(M, full_matrices=True)
     tol = max(M.shape) * np.finfo(float).eps * (sv[0] if sv.size else 0.0)
-    r = int(np.sum(sv > tol))
-    if r == M.shape[0]:
-        return L
-    Nb = U[:, r:]
+    Nb = U[:, int(np.sum(sv > tol)) :]  # (no column: L itself)
     out: np.ndarray = L - (L @ Nb) @ Nb.T
     return out
 
