@@ -13,10 +13,10 @@ from ivobs.design.cooperative import (
     check_nonnegative_schur,
     missing_radius,
     nonnegative_gain,
-    output_weights,
     refine_width,
     steady_width,
 )
+from ivobs.design.cooperative_lp import output_weights
 from ivobs.linalg import spectral_radius
 
 

@@ -12,7 +12,8 @@ import pytest
 import ivobs
 from ivobs import Box, DesignError, LinearSystem
 from ivobs.design import width_lp
-from ivobs.estimators.fixed_time.design import observability_index, rank_advice
+from ivobs.estimators.fixed_time.design import rank_advice
+from ivobs.linalg import observability_index
 from ivobs.testing import random_system
 
 

@@ -584,7 +584,7 @@ def test_nearly_singular_A_is_sound_and_not_wider_than_an_injection():
         assert _max_excess(est.run(None, y[b], vectorize=False), x[b]) <= 0.0
     # the same widths as with a well-conditioned output injection (Remark 1), to 1e-9
     inj = ivobs.make_estimator(
-        "fixed-time", sys, L=ivobs.design.parity.invertible_injection(sys.A, sys.C)
+        "fixed-time", sys, L=ivobs.design.injection.invertible_injection(sys.A, sys.C)
     )
     np.testing.assert_allclose(res.width[:, 2:], inj.run(None, y).width[:, 2:], rtol=1e-9)
 
@@ -611,7 +611,7 @@ def test_output_injection_rounding_is_covered():
     for b in range(2):
         assert _max_excess(est.run(u[b], y[b], vectorize=False), x[b]) <= 0.0
     # the explicit large gain of the old design: sound too (its rounding is certified)
-    big = ivobs.design.parity.injection_candidates(sys.A, sys.C)[-1]
+    big = ivobs.design.injection.injection_candidates(sys.A, sys.C)[-1]
     assert np.abs(big).max() > 100
     res = ivobs.make_estimator("fixed-time", sys, L=big).run(u, y)
     assert _max_excess(res, x) <= 0.0

@@ -6,28 +6,23 @@ import pytest
 
 import ivobs
 from ivobs import DesignError, IvobsError
-from ivobs.design.parity import (
-    forward_window,
-    general_T,
-    injection_candidates,
-    invertible_injection,
-    is_invertible,
-    optimal_T,
-    pinv_perp,
-    stack_matrices,
-    stack_window,
-    width_optimal_T,
-    window_bound,
-)
+from ivobs.design.certify import forward_window, window_bound
+from ivobs.design.injection import injection_candidates, invertible_injection, is_invertible
+from ivobs.design.parity import general_T, optimal_T, pinv_perp, stack_window, width_optimal_T
 from ivobs.linalg import is_observable
 from ivobs.testing import random_system
+
+
+def _stack(sys, s):
+    """``(Mx, Mu, Md)`` of eq. (6) for a time-invariant system, window ``s``."""
+    return stack_window([sys.matrices_at(0)] * (s + 1))
 
 
 @pytest.fixture(scope="module")
 def paper():
     sc = ivobs.scenarios.get("dinh2019")
     sys = sc.system
-    Mx, Mu, Md = stack_matrices(sys.A, sys.B, sys.C, sys.D, sys.E, sys.F, s=2)
+    Mx, Mu, Md = _stack(sys, 2)
     return sc.reference, Mx, Mu, Md, optimal_T(Mx, Md)
 
 
@@ -67,7 +62,7 @@ def test_stack_identity_with_feedthrough(seed):
     rng = np.random.default_rng(seed)
     sys = random_system(seed, nx=3, ny=2, nu=2, feedthrough=True, symmetric_bounds=False)
     s = 3
-    Mx, Mu, Md = stack_matrices(sys.A, sys.B, sys.C, sys.D, sys.E, sys.F, s=s)
+    Mx, Mu, Md = _stack(sys, s)
     np.testing.assert_array_equal(Mu[:2, :2], sys.D)  # D u_k in the first block row
     np.testing.assert_array_equal(Mu[:2, 2:], 0.0)
     x, ys, us, ds = _simulate_window(sys, s, 10, rng)
@@ -102,7 +97,7 @@ def test_optimal_T_beats_every_general_solution():
     rng = np.random.default_rng(0)
     for seed in range(5):
         sys = random_system(seed, nx=3, ny=2, nu=1)
-        Mx, _, Md = stack_matrices(sys.A, sys.B, sys.C, sys.D, sys.E, sys.F, s=3)
+        Mx, _, Md = _stack(sys, 3)
         opt = optimal_T(Mx, Md)
         np.testing.assert_allclose(opt.T @ Mx, np.eye(3), atol=1e-10)
         best = np.linalg.norm(opt.T @ Md)
@@ -146,7 +141,7 @@ def test_rank_decision_ignores_rounding_level_singular_values():
 
 def test_weighted_and_width_criteria():
     sys = random_system(3, nx=3, ny=2, nu=1, nd=4)
-    Mx, _, Md = stack_matrices(sys.A, sys.B, sys.C, sys.D, sys.E, sys.F, s=3)
+    Mx, _, Md = _stack(sys, 3)
     W = np.tile(sys.d.radius, 4)
     Tf = optimal_T(Mx, Md).T
     Tw = optimal_T(Mx, Md, W).T
@@ -208,7 +203,8 @@ def test_injection_is_small_and_well_conditioned():
 def test_singular_A_in_window_is_a_design_error():
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     with pytest.raises(DesignError, match="not invertible"):
-        stack_matrices(A, None, [[1.0, 0.0]], s=1)
+        z = np.zeros((2, 0))
+        stack_window([(A, z, np.array([[1.0, 0.0]]), z[:1], z, z[:1])] * 2)
 
 
 # -- certification of a window gain on the forward form -------------------------------------

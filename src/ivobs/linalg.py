@@ -22,6 +22,7 @@ __all__ = [
     "is_nonnegative",
     "is_observable",
     "is_schur",
+    "observability_index",
     "observability_indices",
     "observability_matrix",
     "observability_rank",
@@ -135,6 +136,20 @@ def observability_indices(A: Any, C: Any) -> list[int]:
         if len(kept) == n:
             break
     return m
+
+
+def observability_index(A: np.ndarray, C: np.ndarray) -> int:
+    """The smallest ``ν`` with ``rank [C; CA; …; CA^(ν−1)] = nx`` (forward powers, which stay
+    well conditioned for a stable ``A``; ``nx + 1`` when the pair is not observable)."""
+    nx = int(A.shape[0])
+    rows = np.zeros((0, nx))
+    blk = C
+    for nu in range(1, nx + 1):
+        rows = np.vstack([rows, blk / max(float(np.abs(blk).max(initial=0.0)), 1e-300)])
+        if int(np.linalg.matrix_rank(rows)) == nx:
+            return nu
+        blk = blk @ A
+    return nx + 1
 
 
 def controllability_matrix(A: Any, B: Any) -> np.ndarray:

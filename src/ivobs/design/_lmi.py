@@ -65,14 +65,12 @@ def solve(problem: Any, what: str, certify: Callable[[], bool] | None = None) ->
                 statuses.append(f"{solver}: {exc}")
                 continue
         statuses.append(f"{solver}: {problem.status}")
-        if problem.status == cp.OPTIMAL and _finite(problem):
+        values = [v.value for v in problem.variables()]
+        if not all(x is not None and np.all(np.isfinite(x)) for x in values):
+            continue
+        if problem.status == cp.OPTIMAL:
             return solver
-        if (
-            certify is not None
-            and problem.status == cp.OPTIMAL_INACCURATE
-            and _finite(problem)
-            and certify()
-        ):
+        if certify is not None and problem.status == cp.OPTIMAL_INACCURATE and certify():
             return f"{solver} (inaccurate, certified)"
     raise DesignError(
         f"{what}: the LMI has no (accurate) solution ({'; '.join(statuses)}); a nearly "
@@ -80,10 +78,3 @@ def solve(problem: Any, what: str, certify: Callable[[], bool] | None = None) ->
         "(e.g. from scipy.signal.place_poles), or use another method ('kkl', 'interval-split', "
         "'fixed-time')"
     )
-
-
-def _finite(problem: Any) -> bool:
-    for v in problem.variables():
-        if v.value is None or not np.all(np.isfinite(v.value)):
-            return False
-    return True

@@ -31,11 +31,6 @@ uses the ``ε`` of the format actually used, so it holds either way."""
 _EPS_WORK = float(np.finfo(_WORK).eps)
 
 
-def _gamma_work(n: int) -> float:
-    """``γ_n`` of the working precision (its ``ε``: twice its unit roundoff, conservative)."""
-    return gamma(n, _EPS_WORK)
-
-
 @dataclass(frozen=True)
 class ForwardWindow:
     """The window of the fixed-time estimator written *forward*, without any inverse.
@@ -84,7 +79,6 @@ def forward_window(
     *,
     centre: bool,
     lag: int | None = None,
-    missing: np.ndarray | None = None,
 ) -> ForwardWindow:
     """The forward map of one window (see :class:`ForwardWindow`), used to certify a computed
     window gain (:func:`window_bound`).
@@ -92,7 +86,7 @@ def forward_window(
     ``mats[i] = (A, B, C, D, E, F)`` of the *original* system at step ``k - i`` (no output
     injection, no inverse: ``x_{j+1} = A x_j + B u_j + E (c_j + δ_j)``,
     ``y_j = C x_j + D u_j + F (c_j + δ_j)``), ``i = 0 … s``; ``lag``: the anchor ``a``
-    (default ``s``); ``missing``: ``(s+1, ny)`` bool, those outputs are zero in ``w``.
+    (default ``s``); outputs missing from a window: :func:`drop_outputs`.
     ``n_rounds`` bounds the roundings along any product path of ``X`` and of the output rows
     of ``Z``: per step one product of inner size ``nx`` and one addition.
     """
@@ -137,12 +131,11 @@ def forward_window(
             P[:, cols_d] += EE
             if nc:
                 P[:, cols_c] += EE
-    X, Xa = P[:nx], P[nx:]
-    fw = ForwardWindow(
+    return ForwardWindow(
         Z=Z,
         Za=Za,
-        X=X,
-        Xa=Xa,
+        X=P[:nx],
+        Xa=P[nx:],
         lag=a,
         n_rounds=(a + 1) * (nx + 1),
         y_rows=np.array(y_rows, dtype=int),
@@ -153,7 +146,6 @@ def forward_window(
         d_slice=slice(d0, nxi),
         out_rows=np.arange(s + 1)[:, None] * nz + nu + np.arange(ny)[None, :],
     )
-    return fw if missing is None else drop_outputs(fw, missing)
 
 
 @dataclass(frozen=True)
@@ -190,7 +182,7 @@ def _residual(
     Gw = np.asarray(G, dtype=_WORK)
     n = fw.n_rounds + G.shape[1] + 2
     R = target - Gw @ fw.Z
-    B = np.abs(R) + _gamma_work(2 * n) * (np.abs(Gw) @ fw.Za + target_abs)
+    B = np.abs(R) + gamma(2 * n, _EPS_WORK) * (np.abs(Gw) @ fw.Za + target_abs)
     return R, up(B.astype(float))
 
 

@@ -35,8 +35,8 @@ with every output present, but the estimators use ``L_k = L diag(observed)`` whe
 missing: ``|A − L_k C| ≈ 10⁶`` and the bounds explode (0.2 → 2·10¹⁷ in three steps). Each LP is
 therefore solved in two stages: after the optimum ``q_iᵀx*`` of each objective part ``q_i``, a
 second LP keeps ``q_iᵀx <= q_iᵀx* + τ·max(1, |q_iᵀx*|)`` (``τ = 1e-12``, or ``1e-9`` should HiGHS
-find that infeasible: :data:`OPT_TOL`; the tie-break of the margin LP is its own part) and minimises
-``max_j Σ_i w_j |L_ij| + REG_L1 Σ_ij w_j |L_ij|`` with ``w_j = ‖C_j‖₁``: since
+find that infeasible: :data:`.cooperative_lp.OPT_TOL`; the tie-break of the margin LP is its own
+part) and minimises ``max_j Σ_i w_j |L_ij| + REG_L1 Σ_ij w_j |L_ij|`` with ``w_j = ‖C_j‖₁``: since
 ``|A − L_(j) C| <= |A − LC| + |L_:j| |C_j|`` (``L_(j)``: column ``j`` zeroed), the largest
 weighted column norm bounds how much any single missing output can degrade the error
 dynamics; the weighted ℓ₁ term decides the remaining ties. On the redundant example the gain
@@ -62,8 +62,6 @@ from .cooperative_lp import (
     COPOSITIVE_TOL,
     L_BOUND,
     LP,
-    OPT_TOL,
-    REG_L1,
     abs_bound_rows,
     copositive_lp,
     output_weights,
@@ -72,15 +70,12 @@ from .cooperative_lp import (
 
 __all__ = [
     "NONNEG_TOL",
-    "OPT_TOL",
-    "REG_L1",
     "abs_schur_gain",
     "check_abs_schur",
     "check_nonnegative_schur",
     "fixed_radius",
     "missing_radius",
     "nonnegative_gain",
-    "output_weights",
     "refine_width",
     "steady_width",
 ]
@@ -117,15 +112,14 @@ def missing_radius(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np.ndarray:
 
 def _structural_obstruction(A: np.ndarray, C: np.ndarray) -> str:
     """An entry of ``A − LC`` that is negative for every ``L`` (its column of ``C`` is zero)."""
-    zero_cols = np.flatnonzero(~np.any(C != 0.0, axis=0))
-    for j in zero_cols:
-        for i in range(A.shape[0]):
-            if A[i, j] < 0:
-                return (
-                    f"; entry ({i + 1}, {j + 1}) of A − LC equals A[{i + 1}, {j + 1}] = "
-                    f"{A[i, j]:g} < 0 for every L (column {j + 1} of C is zero)"
-                )
-    return ""
+    found = np.argwhere(((A < 0) & ~np.any(C != 0.0, axis=0)[None, :]).T)  # column by column
+    if not found.size:
+        return ""
+    j, i = found[0]
+    return (
+        f"; entry ({i + 1}, {j + 1}) of A − LC equals A[{i + 1}, {j + 1}] = "
+        f"{A[i, j]:g} < 0 for every L (column {j + 1} of C is zero)"
+    )
 
 
 def fixed_radius(A: np.ndarray, C: np.ndarray) -> float:
@@ -180,8 +174,6 @@ def nonnegative_gain(A: np.ndarray, C: np.ndarray, who: str = "interval") -> np.
     :func:`~ivobs.design.cooperative_lp.copositive_lp` decides: its gain (checked) is returned,
     or :class:`DesignError` says what it proved (no gain exists, certified by its optimum) or
     that HiGHS failed."""
-    A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
     check_size(A.shape[0], f"{who}: LMI (41)")
     reason = _structural_obstruction(A, C)
     if reason:
@@ -283,9 +275,7 @@ def _nearest_nonnegative_gain(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> np
     n, p = L.shape
     m = A.shape[1]
     # variables: L' (row-major, n p), t (n p) with |L' − L| <= t; rows (L' C)_ij <= A_ij
-    rows = np.zeros((n * m, 2 * n * p))
-    for i in range(n):
-        rows[i * m : (i + 1) * m, i * p : (i + 1) * p] = C.T
+    rows = np.hstack([np.kron(np.eye(n), C.T), np.zeros((n * m, n * p))])
     eye = np.eye(n * p)
     A_ub = np.vstack([rows, np.hstack([eye, -eye]), np.hstack([-eye, -eye])])
     c = np.concatenate([np.zeros(n * p), np.ones(n * p)])
@@ -310,9 +300,8 @@ def _margin_lp(A: np.ndarray, C: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     A1, b1 = abs_bound_rows(lp.lin(A, C), lp.aux("T", n * n))
     # (T v)_i − s v_i <= 0
     A2 = np.zeros((n, lp.size))
-    for i in range(n):
-        A2[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = v
-        A2[i, lp.offset["s"]] = -v[i]
+    A2[:, lp.offset["T"] : lp.offset["T"] + n * n] = np.kron(np.eye(n), v)
+    A2[:, lp.offset["s"]] = -v
     c_s = np.zeros(lp.size)
     c_s[lp.offset["s"]] = 1.0
     # tie-break among optimal gains: the smallest |A − LC| v (degenerate optima otherwise stall
@@ -345,35 +334,29 @@ def _perron_vector(M: np.ndarray) -> np.ndarray:
     return out
 
 
-def abs_schur_gain(
-    A: np.ndarray, C: np.ndarray, L0: np.ndarray | None = None, iters: int = 30
-) -> tuple[np.ndarray, float]:
+def abs_schur_gain(A: np.ndarray, C: np.ndarray, iters: int = 30) -> tuple[np.ndarray, float]:
     """Gain minimising (locally) ``ρ(|A − LC|)`` by the alternating LP of the module docstring.
 
-    Starts from ``v = 1`` and, if given, from the Perron vector of ``|A − L0 C|``. Returns
-    ``(L, ρ(|A − LC|))``; the caller decides whether ``ρ < 1`` is good enough.
+    Starts from ``L = 0`` and ``v = 1``. Returns ``(L, ρ(|A − LC|))``; the caller decides
+    whether ``ρ < 1`` is good enough.
     """
     n, p = A.shape[0], C.shape[0]
-    starts = [np.ones(n)]
-    if L0 is not None:
-        starts.append(_perron_vector(np.abs(A - L0 @ C)))
-    best_L = np.zeros((n, p)) if L0 is None else L0
-    best_rho = spectral_radius(np.abs(A - best_L @ C))
-    for v in starts:
-        prev = np.inf
-        for _ in range(iters):
-            out = _margin_lp(A, C, v)
-            if out is None:
-                break
-            L, _s = out
-            Dabs = np.abs(A - L @ C)
-            rho = spectral_radius(Dabs)
-            if rho < best_rho:
-                best_L, best_rho = L, rho
-            if rho > prev - 1e-9:
-                break
-            prev = rho
-            v = _perron_vector(Dabs)
+    v = np.ones(n)
+    best_L = np.zeros((n, p))
+    best_rho, prev = spectral_radius(np.abs(A)), np.inf
+    for _ in range(iters):
+        out = _margin_lp(A, C, v)
+        if out is None:
+            break
+        L, _s = out
+        Dabs = np.abs(A - L @ C)
+        rho = spectral_radius(Dabs)
+        if rho < best_rho:
+            best_L, best_rho = L, rho
+        if rho > prev - 1e-9:
+            break
+        prev = rho
+        v = _perron_vector(Dabs)
     return best_L, best_rho
 
 
@@ -397,8 +380,7 @@ def refine_width(
     refinement stops at the last gain that does)."""
     n, p = A.shape[0], C.shape[0]
     m = E.shape[1]
-    delta = np.asarray(delta, dtype=float)
-    L = np.asarray(L0, dtype=float)
+    L = L0
     gaps = missing_radius(A, C, L) < 1.0  # single-output gaps L0 rides out
     w = steady_width(A - L @ C, E - L @ F, delta)
     if m == 0 or not np.all(np.isfinite(w)) or not np.any(delta > 0):
@@ -418,9 +400,8 @@ def refine_width(
     for _ in range(iters):
         # one-step image  T w + TG Δ  (row i), constrained <= w, objective Σ_i image_i / w_i
         img = np.zeros((n, lp.size))
-        for i in range(n):
-            img[i, lp.offset["T"] + i * n : lp.offset["T"] + (i + 1) * n] = w
-            img[i, lp.offset["TG"] + i * m : lp.offset["TG"] + (i + 1) * m] = delta
+        img[:, lp.offset["T"] : lp.offset["T"] + n * n] = np.kron(np.eye(n), w)
+        img[:, lp.offset["TG"] : lp.offset["TG"] + n * m] = np.kron(np.eye(n), delta)
         scale = 1.0 / np.maximum(w, 1e-12 * max(1.0, float(w.max())))
         c = scale @ img
         x = solve_lp(

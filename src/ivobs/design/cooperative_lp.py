@@ -47,11 +47,8 @@ class LP:
         """``A_ij − Σ_l L_il C_lj`` as rows ``(coef, const)``, row-major in ``(i, j)``: ``D = A −
         LC`` for ``(A, C)``, ``G = E − LF`` for ``(E, F)``."""
         n, p = self.n, self.p
-        m = A.shape[1]
-        coef = np.zeros((n * m, self.size))
-        for i in range(n):
-            for j in range(m):
-                coef[i * m + j, i * p : (i + 1) * p] = -C[:, j]
+        coef = np.zeros((n * A.shape[1], self.size))
+        coef[:, : n * p] = np.kron(np.eye(n), -C.T)
         return coef, A.ravel().copy()
 
     def aux(self, name: str, rows: int) -> np.ndarray:
@@ -85,18 +82,16 @@ def solve_lp(
     A_ub: np.ndarray,
     b_ub: np.ndarray,
     bounds: list[tuple[Any, Any]],
-    gain: tuple[int, np.ndarray] | None = None,
+    gain: tuple[int, np.ndarray],
     parts: list[np.ndarray] | None = None,
 ) -> np.ndarray | None:
-    """HiGHS; with ``gain = (n, w)`` (the first ``n·p`` columns are ``L``, row-major) the
+    """HiGHS, then (``gain = (n, w)``: the first ``n·p`` columns are ``L``, row-major) the
     regularising second stage of the module docstring, which keeps each objective part
     (``parts``, default ``[c]``; ``c`` is a weighted sum of them) at its optimal value."""
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
     if res.status != 0:
         return None
     x: np.ndarray = res.x
-    if gain is None:
-        return x
     parts = [c] if parts is None else parts
     best = np.array([float(q @ res.x) for q in parts])
     for tol in OPT_TOL:
@@ -133,8 +128,7 @@ def _smallest_gain(
         np.hstack([-eye, np.zeros((nL, N - nL)), -eye, np.zeros((nL, 1))]),
     ]
     col = np.zeros((p, size))  # Σ_i w_j U_ij − t <= 0
-    for j in range(p):
-        col[j, N + j : N + nL : p] = w[j]
+    col[:, N : N + nL] = np.tile(np.diag(w), n)
     col[:, -1] = -1.0
     rows.append(col)
     slack = tol * np.maximum(1.0, np.abs(best))
@@ -178,15 +172,12 @@ def copositive_lp(A: np.ndarray, C: np.ndarray) -> tuple[np.ndarray | None, floa
     size = n + nY + 1  # q, Y (row-major), s
     # −(q_i A_ij − Σ_l Y_il C_lj) <= 0
     nonneg = np.zeros((n * n, size))
-    for i in range(n):
-        for j in range(n):
-            nonneg[i * n + j, i] = -A[i, j]
-            nonneg[i * n + j, n + i * p : n + (i + 1) * p] = C[:, j]
+    nonneg[:, :n] = np.repeat(np.eye(n), n, axis=0) * -A.ravel()[:, None]
+    nonneg[:, n : n + nY] = np.kron(np.eye(n), C.T)
     # Σ_i q_i A_ij − Σ_i Σ_l Y_il C_lj − q_j + s <= 0
     decay = np.zeros((n, size))
     decay[:, :n] = A.T - np.eye(n)
-    for i in range(n):
-        decay[:, n + i * p : n + (i + 1) * p] = -C.T
+    decay[:, n : n + nY] = np.tile(-C.T, n)
     decay[:, -1] = 1.0
     c = np.zeros(size)
     c[-1] = -1.0

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linprog
 
-from ..linalg import UNIT_ROUNDOFF, gamma
+from ..linalg import UNIT_ROUNDOFF, gamma, observability_index
 from ..sets.rounding import ETA, down, up, upper
 
 __all__ = ["MAX_LP_STATES", "MAX_WINDOW_STATES", "WindowBound", "window_bound"]
@@ -121,8 +121,8 @@ def window_bound(
         return None
     if not all(np.all(np.isfinite(m)) for m in (A, B, C, Du, E, F, d_lo, d_hi)):
         return None
-    N = _index(A, C)
-    if N is None:
+    N = observability_index(A, C)
+    if N > n:
         return None
     powers = [np.eye(n)]
     for _ in range(N):
@@ -229,19 +229,6 @@ def _radius(
     r0 = upper(r0 + (L + 2) * ETA, 9)
     rw = upper(k * (eu + ex * (p_w * inv)) + h * s, 6)
     return upper(r0, 3), upper(rw, 3)
-
-
-def _index(A: np.ndarray, C: np.ndarray) -> int | None:
-    """The smallest ``N`` with ``rank [C; …; CA^(N−1)] = n`` (None: not observable)."""
-    n = A.shape[0]
-    blocks = [C]
-    for N in range(1, n + 1):
-        O = np.vstack(blocks)
-        s = np.linalg.svd(O, compute_uv=False)
-        if s.size >= n and s[n - 1] > s[0] * max(O.shape) * np.finfo(float).eps * 10:
-            return N
-        blocks.append(blocks[-1] @ A)
-    return None
 
 
 def _toeplitz(

@@ -56,7 +56,7 @@ MARGIN = 1e-8
 
 
 def hinf_gain(
-    A: Any, C: Any, E: Any, F: Any, *, margin: float = MARGIN, method: str = "riccati"
+    A: Any, C: Any, E: Any, F: Any, *, method: str = "riccati"
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """Observer gain minimising the H∞ norm from ``d`` to ``e`` [Tang2019, Theorem 1,
     problem (20)].
@@ -65,8 +65,6 @@ def hinf_gain(
     ----------
     A : (nx, nx), C : (ny, nx), E : (nx, nd), F : (ny, nd)
         The model ``x+ = A x + B u + E d``, ``y = C x + D u + F d`` (``B``, ``D`` play no role).
-    margin : float
-        The strict inequality (16) is imposed as ``≼ -margin I`` (``method="lmi"``).
     method : ``"riccati"`` (default) or ``"lmi"`` (module docstring)
 
     Returns
@@ -96,11 +94,11 @@ def hinf_gain(
         return hinf_riccati_gain(A, C, E, F)
     if method != "lmi":
         raise IvobsError(f"method: expected 'riccati' or 'lmi', got {method!r}")
-    return _hinf_lmi(A, C, E, F, float(margin))
+    return _hinf_lmi(A, C, E, F)
 
 
 def _hinf_lmi(
-    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, margin: float
+    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """Problem (20) by CVXPY (the LMI (16), balanced coordinates)."""
     import cvxpy as cp
@@ -126,9 +124,8 @@ def _hinf_lmi(
         ]
     # cvxpy re-exports its (unannotated) atoms implicitly, which strict typing does not see
     lmi = sym(cp.bmat(blocks))  # type: ignore[attr-defined]
-    size = 2 * nx + nd
-    Dm = np.concatenate([dv, np.ones(nd), dv])[:size] if nd else np.concatenate([dv, dv])
-    cons = [lmi << -margin * np.diag(Dm**2)]
+    Dm = np.concatenate([dv, np.ones(nd), dv])  # (the middle block is empty when nd = 0)
+    cons = [lmi << -MARGIN * np.diag(Dm**2)]
     objective = cp.Minimize(g) if nd else cp.Minimize(cp.trace(P / dv[:, None] / dv[None, :]))  # type: ignore[attr-defined]
 
     def extract() -> tuple[np.ndarray, float, np.ndarray]:

@@ -114,14 +114,6 @@ def injection_candidates(A: Any, C: Any) -> list[np.ndarray]:
     return [L for L in out if is_invertible(A - L @ C)]
 
 
-def _injection_score(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> float:
-    """``cond(A - LC) (1 + ‖L C‖₂ / ‖A‖₂)``: the inverse of eq. (4) stays accurate and the
-    known input ``L y`` stays small against the dynamics."""
-    Ap = A - L @ C
-    norm_A = float(np.linalg.norm(A, 2))
-    return float(np.linalg.cond(Ap) * (1.0 + np.linalg.norm(L @ C, 2) / max(norm_A, 1e-300)))
-
-
 def invertible_injection(A: Any, C: Any) -> np.ndarray:
     """A gain ``L`` with ``A - LC`` invertible [Wang2020, Remark 1]: among
     :func:`injection_candidates`, the one with the smallest ``cond(A - LC) (1 + ‖LC‖/‖A‖)``
@@ -138,4 +130,8 @@ def invertible_injection(A: Any, C: Any) -> np.ndarray:
             "output injection ([Wang2020, Remark 1]): found no L with A - LC invertible (is (A, C) "
             "observable?); pass an explicit L"
         )
-    return min(cands, key=lambda L: _injection_score(A, C, L))
+    norm_A = max(float(np.linalg.norm(A, 2)), 1e-300)
+    # the inverse of eq. (4) stays accurate and the known input L y small against the dynamics
+    return min(
+        cands, key=lambda L: np.linalg.cond(A - L @ C) * (1 + np.linalg.norm(L @ C, 2) / norm_A)
+    )

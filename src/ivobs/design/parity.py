@@ -16,45 +16,26 @@ general solution is ``T = Mx† + S Mx⊥`` (Lemmas 1 and 2), and Theorem 1 (eq.
 one minimising ``‖T Md‖_F``.
 
 Time-varying systems [Wang2020, Remark 4]: :func:`stack_window` takes the matrices of each step
-of the window. Non-invertible ``A`` [Wang2020, Remark 1]: :func:`injection_candidates` and
-:func:`invertible_injection` (:mod:`ivobs.design.injection`) find small gains ``L`` with
-``A - LC`` well-conditioned; ``L y`` then enters as a known input.
+of the window. Non-invertible ``A`` [Wang2020, Remark 1]: :mod:`ivobs.design.injection` finds
+small gains ``L`` with ``A - LC`` well-conditioned; ``L y`` then enters as a known input.
 
 Certification of a computed window gain (not in the paper): :mod:`ivobs.design.certify`
-(:func:`forward_window`, :func:`window_bound`, re-exported here).
+(:func:`~ivobs.design.certify.forward_window`, :func:`~ivobs.design.certify.window_bound`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from ..errors import DesignError, IvobsError
-from .certify import ForwardWindow, WindowBound, forward_window, window_bound
-from .injection import SINGULAR_RCOND, injection_candidates, invertible_injection, is_invertible
-from .injection import rcond as _rcond
+from .injection import is_invertible, rcond
 
 _EPS = np.finfo(float).eps
 
-__all__ = [
-    "SINGULAR_RCOND",
-    "ForwardWindow",
-    "OptimalT",
-    "WindowBound",
-    "forward_window",
-    "general_T",
-    "injection_candidates",
-    "invertible_injection",
-    "optimal_T",
-    "pinv_perp",
-    "stack_matrices",
-    "stack_window",
-    "width_optimal_T",
-    "window_bound",
-]
+__all__ = ["OptimalT", "general_T", "optimal_T", "pinv_perp", "stack_window", "width_optimal_T"]
 
 
 def stack_window(
@@ -88,7 +69,7 @@ def stack_window(
             if not is_invertible(A_prev):
                 raise DesignError(
                     f"A at lag {i} of the window is not invertible (reciprocal condition number "
-                    f"{_rcond(A_prev):.1e}); the backward propagation ([Wang2020, eq. (4)]) "
+                    f"{rcond(A_prev):.1e}); the backward propagation ([Wang2020, eq. (4)]) "
                     "needs A⁻¹: use an output injection L ([Wang2020, Remark 1])"
                 )
             Ainv = np.linalg.inv(A_prev)
@@ -105,30 +86,6 @@ def stack_window(
     return Mx, Mu, Md
 
 
-def stack_matrices(
-    A: Any, B: Any, C: Any, D: Any = None, E: Any = None, F: Any = None, *, s: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(Mx, Mu, Md)`` of [Wang2020, eq. (6)] for a time-invariant system (``D``, ``E``, ``F``
-    default to zero blocks of the right size)."""
-    A = np.atleast_2d(np.asarray(A, dtype=float))
-    C = np.atleast_2d(np.asarray(C, dtype=float))
-    nx, ny = A.shape[0], C.shape[0]
-    B = np.zeros((nx, 0)) if B is None else np.asarray(B, dtype=float).reshape(nx, -1)
-    nu = B.shape[1]
-    D = np.zeros((ny, nu)) if D is None else np.asarray(D, dtype=float).reshape(ny, nu)
-    if E is None and F is None:
-        E, F = np.zeros((nx, 0)), np.zeros((ny, 0))
-    elif E is None:
-        F = np.asarray(F, dtype=float).reshape(ny, -1)
-        E = np.zeros((nx, F.shape[1]))
-    else:
-        E = np.asarray(E, dtype=float).reshape(nx, -1)
-        F = np.zeros((ny, E.shape[1])) if F is None else np.asarray(F, dtype=float)
-    if int(s) < 0:
-        raise IvobsError(f"s: expected an integer >= 0, got {s}")
-    return stack_window([(A, B, C, D, E, F)] * (int(s) + 1))
-
-
 def pinv_perp(Mx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """``(Mx†, Mx⊥, N, rank)``: ``Mx† = (MxᵀMx)⁻¹Mxᵀ``, ``Mx⊥ = I - Mx Mx†`` ([Wang2020], Notation),
     and ``N`` an orthonormal basis of the left null space (``N Mx = 0``, ``NᵀN = Mx⊥``).
@@ -143,9 +100,7 @@ def pinv_perp(Mx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     tol = max(m, n) * _EPS * (sv[0] if sv.size else 0.0)
     rank = int(np.sum(sv > tol))
     r = min(rank, n)
-    with np.errstate(divide="ignore"):
-        inv = np.where(sv[:r] > 0, 1.0 / sv[:r], 0.0)
-    Mx_pinv = (Vt[:r].T * inv) @ U[:, :r].T
+    Mx_pinv = (Vt[:r].T * (1.0 / sv[:r])) @ U[:, :r].T  # (the kept singular values are > tol >= 0)
     U2 = U[:, r:]
     return Mx_pinv, U2 @ U2.T, U2.T.copy(), rank
 
@@ -173,7 +128,7 @@ def _check_full_rank(Mx: np.ndarray, rank: int) -> None:
         )
 
 
-def optimal_T(Mx: Any, Md: Any, W: Any = None) -> OptimalT:
+def optimal_T(Mx: np.ndarray, Md: np.ndarray, W: np.ndarray | None = None) -> OptimalT:
     """``T`` minimising ``‖T Md W‖_F`` subject to ``T Mx = I`` [Wang2020, Theorem 1, eq. (13)].
 
     ``T = Mx† - Mx† Md V1ᵀ S1⁻¹ U1ᵀ Mx⊥`` with ``Mx⊥ Md = U1 S1 V1`` the compact SVD
@@ -187,12 +142,10 @@ def optimal_T(Mx: Any, Md: Any, W: Any = None) -> OptimalT:
     The result is verified: ``T Mx = I`` to rounding and ``‖T Md‖ <= ‖Mx† Md‖`` (the ``S = 0``
     solution), else :class:`DesignError`.
     """
-    Mx = np.asarray(Mx, dtype=float)
-    Md = np.asarray(Md, dtype=float)
     m = Mx.shape[0]
     Mx_pinv, Mx_perp, N, rank = pinv_perp(Mx)
     _check_full_rank(Mx, rank)
-    Mdw = Md if W is None else Md * np.asarray(W, dtype=float)[None, :]
+    Mdw = Md if W is None else Md * W[None, :]
     if Mdw.shape[1] == 0 or N.shape[0] == 0:
         empty = np.zeros((m, 0))
         return OptimalT(
@@ -230,12 +183,10 @@ def _verify(T: np.ndarray, Mx: np.ndarray, Mdw: np.ndarray, Mx_pinv: np.ndarray)
         )
 
 
-def general_T(Mx: Any, S: Any) -> np.ndarray:
+def general_T(Mx: np.ndarray, S: np.ndarray) -> np.ndarray:
     """The general solution ``T = Mx† + S Mx⊥`` of ``T Mx = I`` [Wang2020, Lemmas 1 and 2]."""
-    Mx = np.asarray(Mx, dtype=float)
     Mx_pinv, Mx_perp, _, rank = pinv_perp(Mx)
     _check_full_rank(Mx, rank)
-    S = np.asarray(S, dtype=float)
     if S.shape != (Mx.shape[1], Mx.shape[0]):
         raise IvobsError(
             f"S: expected shape ({Mx.shape[1]}, {Mx.shape[0]}) (nx, (s+1)·ny), got {S.shape}"
@@ -244,7 +195,7 @@ def general_T(Mx: Any, S: Any) -> np.ndarray:
     return T
 
 
-def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
+def width_optimal_T(Mx: np.ndarray, Md: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
     """``T`` minimising each box width of eq. (11), ``Σ_j |(T Md Wd)_ij|``, s.t. ``T Mx = I``.
 
     Not in [Wang2020] (whose Theorem 1 minimises ``‖T Md‖_F``): one linear program per state
@@ -254,11 +205,9 @@ def width_optimal_T(Mx: Any, Md: Any, W: Any = None) -> np.ndarray:
     """
     from scipy.optimize import linprog
 
-    Mx = np.asarray(Mx, dtype=float)
-    Md = np.asarray(Md, dtype=float)
     Mx_pinv, _, _, rank = pinv_perp(Mx)
     _check_full_rank(Mx, rank)
-    P = Md if W is None else Md * np.asarray(W, dtype=float)[None, :]
+    P = Md if W is None else Md * W[None, :]
     m, nx = Mx.shape
     p = P.shape[1]
     if p == 0:

@@ -163,7 +163,7 @@ def radius_gain(
         )
     J0, L0 = best
     evals = int(WORK / max(1.0, 2.0 * K * n * n * (n + E.shape[1])))
-    if evals < 10 or not E.shape[1] or not np.isfinite(J0):
+    if evals < 10 or not np.isfinite(J0):
         return L0, J0
     eps = SMOOTH * max(float(np.abs((E - L0 @ F) * r).max()), 1e-300)
     res = minimize(

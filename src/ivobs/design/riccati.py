@@ -184,7 +184,7 @@ def bounded_real_certificate(M: np.ndarray, G: np.ndarray, gamma: float) -> np.n
 
 
 def hinf_riccati_gain(
-    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, *, rtol: float | None = None
+    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """The H∞ observer gain of [Tang2019, problem (20)] by bisection on ``γ`` with the Riccati
     equation of the module docstring; ``(L, γ, P)`` with ``P`` the bounded-real certificate of
@@ -192,8 +192,7 @@ def hinf_riccati_gain(
     smallest the bisection reaches. Raises :class:`DesignError` if no ``γ`` is attained (e.g.
     ``(A, C)`` not detectable) or no gain passes its certificate."""
     n = A.shape[0]
-    if rtol is None:
-        rtol = RTOL if n <= LARGE_N else RTOL_LARGE
+    rtol = RTOL if n <= LARGE_N else RTOL_LARGE
     if E.shape[1] == 0:  # no disturbance: any stabilising gain; the Kalman one with Q = I
         L = kalman_gain(A, C, np.eye(n), np.zeros((C.shape[0], n)), 1.0)
         return L, 0.0, np.eye(n)

@@ -81,9 +81,7 @@ def decay_kalman_gain(
         return None
     La = Aa @ P @ C.T @ np.linalg.inv(C @ P @ C.T + V)
     L: np.ndarray = alpha * La
-    if not np.all(np.isfinite(L)):
-        return None
-    return L
+    return L if np.all(np.isfinite(L)) else None
 
 
 def schur_transform(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

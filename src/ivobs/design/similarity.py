@@ -43,11 +43,13 @@ user-given nonnegative ``R`` (``R=`` option) is accepted instead.
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import pairwise
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from ..errors import DesignError
-from ..linalg import observability_matrix
+from ..linalg import is_observable, observability_matrix, spectral_radius
 
 __all__ = [
     "circulant_block",
@@ -66,10 +68,9 @@ _SQ3 = np.sqrt(3.0)
 
 
 def _fmt(lams: np.ndarray) -> str:
-    parts = []
-    for z in lams:
-        parts.append(f"{z.real:.4g}" if abs(z.imag) == 0 else f"{z.real:.4g}{z.imag:+.4g}j")
-    return "{" + ", ".join(parts) + "}"
+    return (
+        "{" + ", ".join(f"{z.real:.4g}" + (f"{z.imag:+.4g}j" if z.imag else "") for z in lams) + "}"
+    )
 
 
 def suleimanova_block(rho: float, negatives: list[float]) -> np.ndarray:
@@ -114,7 +115,7 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
     n = lams.size
     scale = max(1.0, float(np.max(np.abs(lams), initial=0.0)))
     tol = tol * scale
-    head = _Head(lams)
+    head = f"no nonnegative R with the spectrum {_fmt(lams)}"
     reason = _necessary(lams, tol)
     if reason:
         raise DesignError(f"{head} exists: {reason}")
@@ -125,9 +126,8 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
     )
     if len(pairs) != sum(1 for z in lams if z.imag < -tol):
         raise DesignError(f"{head}: complex eigenvalues do not come in conjugate pairs")
-    for i in range(len(pairs) - 1):
-        if abs(pairs[i] - pairs[i + 1]) <= tol:
-            raise DesignError(f"{head} is built by ivobs: repeated complex pairs are not supported")
+    if any(abs(a - b) <= tol for a, b in pairwise(pairs)):
+        raise DesignError(f"{head} is built by ivobs: repeated complex pairs are not supported")
     leaders = [float(x) for x in reals if x >= -tol]
     negatives = [float(x) for x in reals if x < -tol]
     # Complex pairs: smallest leader that dominates the pair in the circulant triangle.
@@ -165,35 +165,17 @@ def nonnegative_realization(eigs: np.ndarray, tol: float = 1e-9) -> tuple[np.nda
         if groups[i]:
             blocks.append(suleimanova_block(r, groups[i]))
             starts.append(np.eye(len(groups[i]) + 1)[0])
-    used = {i for i in groups if groups[i]}
-    alone = [leaders[i] for i in range(len(leaders)) if i not in used]
+    alone = [r for i, r in enumerate(leaders) if not groups[i]]
     lead_vals, lead_counts = _merge(alone, tol)
     for v, c in zip(lead_vals, lead_counts):
         J = np.diag(np.full(int(c), max(float(v), 0.0))) + np.diag(np.ones(int(c) - 1), 1)
         blocks.append(J)
         starts.append(np.eye(int(c))[0])
-    R = np.zeros((n, n))
-    i = 0
-    for blk in blocks:
-        m = blk.shape[0]
-        R[i : i + m, i : i + m] = blk
-        i += m
+    R = block_diag(*blocks) if blocks else np.zeros((0, 0))
     R = np.where(np.abs(R) <= 1e-15 * scale, 0.0, R)
-    if i != n or np.any(R < -tol):  # pragma: no cover - construction invariant
+    if R.shape != (n, n) or np.any(R < -tol):  # pragma: no cover - construction invariant
         raise DesignError(f"{head}: internal construction failed")
     return np.maximum(R, 0.0), np.concatenate(starts)
-
-
-class _Head:
-    """The start of the error messages (formatted only when an error is raised)."""
-
-    def __init__(self, lams: np.ndarray):
-        self.lams = lams
-
-    def __str__(self) -> str:
-        return f"no nonnegative R with the spectrum {_fmt(self.lams)}"
-
-    __format__ = lambda self, spec: str(self)  # noqa: E731
 
 
 def _merge(values: list[float], tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -239,13 +221,16 @@ def place_real_poles(A: np.ndarray, C: np.ndarray, poles: np.ndarray, who: str) 
     return np.asarray(res.gain_matrix, dtype=float).T
 
 
-def transformed_width(M: np.ndarray, G: np.ndarray, delta: np.ndarray, S: np.ndarray) -> np.ndarray:
+def transformed_width(
+    M: np.ndarray, G: np.ndarray, delta: np.ndarray, S: np.ndarray, limit: float = 1.0
+) -> np.ndarray:
     """Steady-state width of the bounds of observer (42) for constant bounds:
-    ``|S⁻¹| (I − |R|)⁻¹ |S G| Δ`` with ``R = S M S⁻¹`` (``inf`` when ``|R|`` is not Schur)."""
+    ``|S⁻¹| (I − |R|)⁻¹ |S G| Δ`` with ``R = S M S⁻¹`` (``inf`` when ``ρ(|R|) >= limit``: for
+    ``limit = 1``, when ``|R|`` is not Schur)."""
     n = M.shape[0]
     Si = np.linalg.inv(S)
     Rabs = np.abs(S @ M @ Si)
-    if n and np.max(np.abs(np.linalg.eigvals(Rabs))) >= 1.0:
+    if spectral_radius(Rabs) >= limit:
         return np.full(n, np.inf)
     wz = np.linalg.solve(np.eye(n) - Rabs, np.abs(S @ G) @ delta)
     return np.abs(Si) @ wz
@@ -273,17 +258,16 @@ def modal_width(
     G: np.ndarray,
     delta: np.ndarray,
     weights: np.ndarray | None = None,
-    gap: float = 1e-3,
 ) -> float:
     """``Σ_i weights_i w_i``, ``w`` the steady-state width of observer (42) with ``R = diag(λ)``,
     ``S = V⁻¹`` (modal coordinates); ``inf`` unless the eigenvalues of ``A − LC`` are real, in
-    ``[0, 0.99]`` and ``gap`` apart (then ``diag(λ)`` is a nonnegative realisation)."""
+    ``[0, 0.99]`` and ``1e-3`` apart (then ``diag(λ)`` is a nonnegative realisation)."""
     M = A - L @ C
     lam = np.linalg.eigvals(M)
     if np.any(lam.imag != 0) or np.any(lam.real < 0) or np.any(lam.real > 0.99):
         return np.inf
     lam = np.sort(lam.real)
-    if lam.size > 1 and np.min(np.diff(lam)) < gap:
+    if lam.size > 1 and np.min(np.diff(lam)) < 1e-3:
         return np.inf
     S = _modal_transform(M)
     if S is None:
@@ -292,13 +276,6 @@ def modal_width(
     if not np.all(np.isfinite(w)):
         return np.inf
     return float(np.sum(w if weights is None else w * weights))
-
-
-def _obs_rows(M: np.ndarray, e: np.ndarray) -> np.ndarray:
-    rows = [e]
-    for _ in range(M.shape[0] - 1):
-        rows.append(rows[-1] @ M)
-    return np.array(rows)
 
 
 def design_width(
@@ -320,18 +297,14 @@ def design_width(
         return np.inf
     try:
         R, e2 = nonnegative_realization(lam)
-        S = np.linalg.solve(_obs_rows(R, e2), _obs_rows(M, e1))
+        S = np.linalg.solve(observability_matrix(R, e2[None]), observability_matrix(M, e1[None]))
         Si = np.linalg.inv(S)
     except (DesignError, np.linalg.LinAlgError):
         return np.inf
     Rs = S @ M @ Si
     if np.any(Rs < -1e-9 * max(1.0, float(np.max(np.abs(Rs))))):
         return np.inf
-    Rabs = np.abs(Rs)
-    if np.max(np.abs(np.linalg.eigvals(Rabs))) >= 0.995:
-        return np.inf
-    wz = np.linalg.solve(np.eye(M.shape[0]) - Rabs, np.abs(S @ G) @ delta)
-    w = np.abs(Si) @ wz
+    w = transformed_width(M, G, delta, S, 0.995)
     return float(w @ weights) if np.all(np.isfinite(w)) else np.inf
 
 
@@ -377,11 +350,10 @@ def default_design(
         if val < best_val:
             best_L, best_val = L, val
     if best_L is None:
-        obs = np.vstack([C @ np.linalg.matrix_power(A, i) for i in range(n)])
         why = (
-            "(A, C) is not observable"
-            if np.linalg.matrix_rank(obs) < n
-            else f"(A, C) is observable; the last attempt said: {last_error}"
+            f"(A, C) is observable; the last attempt said: {last_error}"
+            if is_observable(A, C)
+            else "(A, C) is not observable"
         )
         raise DesignError(
             f"{who}: could not place distinct real poles in (0, 1) for A − LC: {why}; "
@@ -485,7 +457,7 @@ def check_transform(
             f"{who}: S does not transform A − LC into R: max |S (A − LC) S⁻¹ − R| = "
             f"{np.max(np.abs(Rs - R)):.3g}"
         )
-    rho = float(np.max(np.abs(np.linalg.eigvals(np.abs(Rs))))) if Rs.size else 0.0
+    rho = spectral_radius(np.abs(Rs))
     if rho >= 1.0:
         raise DesignError(
             f"{who}: R = S (A − LC) S⁻¹ is not Schur: spectral radius of |R| is {rho:.6g} >= 1"

@@ -77,10 +77,7 @@ def null_space_free(L: np.ndarray, C: np.ndarray, F: np.ndarray, delta: np.ndarr
         return L
     U, sv, _ = np.linalg.svd(M, full_matrices=True)
     tol = max(M.shape) * np.finfo(float).eps * (sv[0] if sv.size else 0.0)
-    r = int(np.sum(sv > tol))
-    if r == M.shape[0]:
-        return L
-    Nb = U[:, r:]
+    Nb = U[:, int(np.sum(sv > tol)) :]  # (no column: L itself)
     out: np.ndarray = L - (L @ Nb) @ Nb.T
     return out
 
@@ -97,42 +94,37 @@ def width_lp(
     """The gain minimising the (balanced) steady-state width, by the LP of the module docstring
     (``nonnegative=True``: ``interval``'s ``A − LC >= 0``; else ``interval-split``'s
     ``|A − LC|`` Schur). The caller checks the gain it returns."""
-    A = np.asarray(A, dtype=float)
-    C = np.asarray(C, dtype=float)
-    E = np.asarray(E, dtype=float).reshape(A.shape[0], -1)
-    F = np.asarray(F, dtype=float).reshape(C.shape[0], -1)
-    delta = np.asarray(delta, dtype=float).ravel()
+    from scipy.optimize import linprog
+
     dv = state_scaling(A, C, E if E.size else None, F if E.size else None)
     At = A * dv[None, :] / dv[:, None]
     Ct = C * dv[None, :]
     Et = E / dv[:, None]
-    res = _solve(At, Ct, Et, F, delta, nonnegative)
-    if res.status != "optimal":
-        return res
-    assert res.L is not None and res.q is not None
-    L = null_space_free(dv[:, None] * res.L, C, F, delta)
-    return WidthLP("optimal", res.message, L, res.q, res.value)
-
-
-class _Cols:
-    """Column layout: ``q`` (n), ``Y`` (n p, row-major), ``T`` (n n, split only), ``U``."""
-
-    def __init__(self, n: int, p: int, nT: int, nU: int):
-        self.q = 0
-        self.Y = n
-        self.T = n + n * p
-        self.U = self.T + nT
-        self.size = self.U + nU
+    n, p = A.shape[0], C.shape[0]
+    A_ub, b_ub, obj, bounds = _constraints(At, Ct, Et, F, delta, nonnegative)
+    res = linprog(obj, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs", options=_OPTIONS)
+    if res.status == 2:
+        return WidthLP("infeasible", str(res.message))
+    if res.status != 0 or res.x is None:
+        return WidthLP("failed", f"status {res.status}: {res.message}")
+    x = res.x
+    q = x[:n]
+    if np.any(q <= 0.0) or not np.all(np.isfinite(x)):
+        return WidthLP("failed", "the LP returned a certificate q with a zero entry")
+    Lt = x[n : n + n * p].reshape(n, p) / q[:, None]
+    L = null_space_free(dv[:, None] * Lt, C, F, delta)
+    return WidthLP("optimal", str(res.message), L, q, float(res.fun))
 
 
 def _lin_rows(
-    M: np.ndarray, K: np.ndarray, pairs: tuple[np.ndarray, np.ndarray], cols: _Cols, p: int
+    M: np.ndarray, K: np.ndarray, pairs: tuple[np.ndarray, np.ndarray], n: int, p: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """COO entries of ``q_i M_ij − Σ_l Y_il K_lj`` for the pairs ``(i, j)`` (one row each)."""
+    """COO entries of ``q_i M_ij − Σ_l Y_il K_lj`` for the pairs ``(i, j)`` (one row each;
+    columns: ``q`` first, then ``Y`` from column ``n``, row-major)."""
     ii, jj = pairs
     r = ii.size
     rows = np.repeat(np.arange(r), 1 + p)
-    cq = np.column_stack([cols.q + ii] + [cols.Y + ii * p + l for l in range(p)])
+    cq = np.column_stack([ii] + [n + ii * p + l for l in range(p)])
     vq = np.column_stack([M[ii, jj]] + [-K[l, jj] for l in range(p)])
     return rows, cq.ravel(), vq.ravel()
 
@@ -156,43 +148,46 @@ def _constraints(
     aux_j = np.flatnonzero(active & hasF)
     direct_j = np.flatnonzero(active & ~hasF)
     gi, gj = (a.ravel() for a in np.meshgrid(np.arange(n), aux_j, indexing="ij"))
+    # columns: q (n), Y (n p, row-major), T (n n, split only), U (one per entry of |G| Δ)
     nT = 0 if nonneg else n * n
-    cols = _Cols(n, p, nT, gi.size)
+    col_T = n + n * p
+    col_U = col_T + nT
+    size = col_U + gi.size
     di, dj = (a.ravel() for a in np.meshgrid(np.arange(n), np.arange(n), indexing="ij"))
     blocks, b_parts = [], []
-    r, c, v = _lin_rows(A, C, (di, dj), cols, p)
+    r, c, v = _lin_rows(A, C, (di, dj), n, p)
     if nonneg:  # −(q_i A_ij − Y_i C_j) <= 0
-        blocks.append(coo_matrix((-v, (r, c)), shape=(n * n, cols.size)))
+        blocks.append(coo_matrix((-v, (r, c)), shape=(n * n, size)))
         b_parts.append(np.zeros(n * n))
         # Σ_i (q_i A_ij − Y_i C_j) − q_j <= −1 : the column sums of the same entries
-        dec = coo_matrix((v, (dj[r], c)), shape=(n, cols.size)).tocsr()
+        dec = coo_matrix((v, (dj[r], c)), shape=(n, size)).tocsr()
     else:  # ±(q_i A_ij − Y_i C_j) − T_ij <= 0
-        t_col = cols.T + np.arange(n * n)
+        t_col = col_T + np.arange(n * n)
         for sgn in (1.0, -1.0):
             rr = np.concatenate([r, np.arange(n * n)])
             cc = np.concatenate([c, t_col])
             vv = np.concatenate([sgn * v, -np.ones(n * n)])
-            blocks.append(coo_matrix((vv, (rr, cc)), shape=(n * n, cols.size)))
+            blocks.append(coo_matrix((vv, (rr, cc)), shape=(n * n, size)))
             b_parts.append(np.zeros(n * n))
-        dec = coo_matrix((np.ones(n * n), (dj, t_col)), shape=(n, cols.size)).tocsr()
-    eye_q = coo_matrix((np.ones(n), (np.arange(n), cols.q + np.arange(n))), shape=(n, cols.size))
+        dec = coo_matrix((np.ones(n * n), (dj, t_col)), shape=(n, size)).tocsr()
+    eye_q = coo_matrix((np.ones(n), (np.arange(n), np.arange(n))), shape=(n, size))
     dec = dec - eye_q.tocsr()
     blocks.append(dec)
     b_parts.append(-np.ones(n))
     if gi.size:  # ±(q_i E_ij − Y_i F_j) − U_ij <= 0
-        r, c, v = _lin_rows(E, F, (gi, gj), cols, p)
-        u_col = cols.U + np.arange(gi.size)
+        r, c, v = _lin_rows(E, F, (gi, gj), n, p)
+        u_col = col_U + np.arange(gi.size)
         for sgn in (1.0, -1.0):
             rr = np.concatenate([r, np.arange(gi.size)])
             cc = np.concatenate([c, u_col])
             vv = np.concatenate([sgn * v, -np.ones(gi.size)])
-            blocks.append(coo_matrix((vv, (rr, cc)), shape=(gi.size, cols.size)))
+            blocks.append(coo_matrix((vv, (rr, cc)), shape=(gi.size, size)))
             b_parts.append(np.zeros(gi.size))
-    obj = np.zeros(cols.size)
+    obj = np.zeros(size)
     pos: tuple[float | None, float | None] = (0.0, None)
     free: tuple[float | None, float | None] = (None, None)
     bounds = [pos] * n + [free] * (n * p) + [pos] * (nT + gi.size)
-    obj[cols.U :] = delta[gj]
+    obj[col_U:] = delta[gj]
     if direct_j.size:
         obj[:n] += np.abs(E[:, direct_j]) @ delta[direct_j]
     if not np.any(obj):
@@ -205,26 +200,6 @@ _OPTIONS = {
     "dual_feasibility_tolerance": 1e-10,
     "time_limit": 300.0,  # beyond, the design is refused as undecided (solver failure)
 }
-
-
-def _solve(
-    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, delta: np.ndarray, nonneg: bool
-) -> WidthLP:
-    from scipy.optimize import linprog
-
-    n, p = A.shape[0], C.shape[0]
-    A_ub, b_ub, obj, bounds = _constraints(A, C, E, F, delta, nonneg)
-    res = linprog(obj, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs", options=_OPTIONS)
-    if res.status == 2:
-        return WidthLP("infeasible", str(res.message))
-    if res.status != 0 or res.x is None:
-        return WidthLP("failed", f"status {res.status}: {res.message}")
-    x = res.x
-    q = x[:n]
-    if np.any(q <= 0.0) or not np.all(np.isfinite(x)):
-        return WidthLP("failed", "the LP returned a certificate q with a zero entry")
-    L = x[n : n + n * p].reshape(n, p) / q[:, None]
-    return WidthLP("optimal", str(res.message), L, q, float(res.fun))
 
 
 # -- the design: existence decided, gain checked ---------------------------------------------

@@ -131,9 +131,8 @@ def compare(
                       lambda est: est.run(traj.u, traj.y, t=t))  # fmt: skip
         except IvobsError as exc:
             res.error = f"{type(exc).__name__}: {exc}"
-            out.append(res)
-            continue
-        res.measure(truth, burn)
+        else:
+            res.measure(truth, burn)
         out.append(res)
     for name in baselines:
         c0, t0 = time.process_time(), time.perf_counter()

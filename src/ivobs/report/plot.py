@@ -84,13 +84,7 @@ def plot_estimates(
                 ax.plot(t, hi, ls, color=c, lw=1.2, label=label_m)
                 ax.plot(t, lo, ls, color=c, lw=1.2)
         if x is not None:
-            ax.plot(
-                t,
-                x[:, i] - (x[:, i] if relative else 0.0),
-                "k.",
-                ms=3,
-                label="true state" if j == 0 else None,
-            )
+            ax.plot(t, (x - shift)[:, i], "k.", ms=3, label="true state" if j == 0 else None)
         label = state_names[i] if state_names is not None else f"$x_{{{i + 1}}}$"
         if relative:
             label = f"bounds − {label}"
@@ -105,17 +99,12 @@ def plot_estimates(
     return fig
 
 
-def figure_formats() -> list[str]:
-    """File extensions matplotlib can write (``png``, ``pdf``, ``svg``, ...)."""
-    from matplotlib.backend_bases import FigureCanvasBase
-
-    return sorted(FigureCanvasBase.get_supported_filetypes())
-
-
 def figure_path(path: str | os.PathLike[str], what: str | None = None) -> Path:
     """The file a figure for ``path`` is written to, checked before any work: ``.png`` is added
     when ``path`` has no extension; an unsupported extension or an unwritable place is an
     :class:`~ivobs.IvobsError` naming ``what`` (e.g. ``"--plot"``)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
     from ..io.atomic import check_output_path
 
     path = Path(path)
@@ -126,7 +115,7 @@ def figure_path(path: str | os.PathLike[str], what: str | None = None) -> Path:
     if not path.suffix:
         path = path.with_name(path.name + ".png")
     fmt = path.suffix[1:].lower()
-    formats = figure_formats()
+    formats = sorted(FigureCanvasBase.get_supported_filetypes())  # what matplotlib can write
     if fmt not in formats:
         raise IvobsError(
             f"{prefix}unsupported figure format {path.suffix!r} ({str(path)!r}); expected one "

@@ -17,7 +17,7 @@ are immediate ([Dinh2024, Proposition 1]). Nothing here loops over time.
   of time-varying systems.
 """
 
-from .equation import check_target, condition_number, predicted_width, solve_transform
+from .equation import check_target, predicted_width, solve_transform
 from .flow import CT_RANGE, FLOW_MARGIN, check_flow, flow_cap, flow_gap
 from .targets import DT_RANGE, TargetChoice, block_target, default_target
 
@@ -29,7 +29,6 @@ __all__ = [
     "block_target",
     "check_flow",
     "check_target",
-    "condition_number",
     "default_target",
     "flow_cap",
     "flow_gap",

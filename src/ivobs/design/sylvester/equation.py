@@ -20,18 +20,10 @@ from ...linalg import (
     spectral_radius,
 )
 
-__all__ = ["check_target", "condition_number", "predicted_width", "solve_transform"]
+__all__ = ["check_target", "predicted_width", "solve_transform"]
 
 
-def condition_number(T: np.ndarray) -> float:
-    """``σ_max(T) / σ_min(T)`` (``inf`` when ``T`` is rank deficient)."""
-    s = np.linalg.svd(T, compute_uv=False)
-    if s.size == 0 or s[-1] <= 0 or not np.all(np.isfinite(s)):
-        return float("inf")
-    return float(s[0] / s[-1])
-
-
-def solve_transform(A: Any, C: Any, A_z: Any, B_z: Any) -> np.ndarray:
+def solve_transform(A: np.ndarray, C: np.ndarray, A_z: np.ndarray, B_z: np.ndarray) -> np.ndarray:
     """``T`` with ``T A = A_z T + B_z C`` ([Dinh2024, eq. (4)]), by SciPy's Sylvester solver.
 
     Written as ``(-A_z) T + T A = B_z C`` for :func:`scipy.linalg.solve_sylvester`
@@ -39,10 +31,6 @@ def solve_transform(A: Any, C: Any, A_z: Any, B_z: Any) -> np.ndarray:
     :class:`DesignError` when the equation is singular (``A_z`` and ``A`` share an eigenvalue) or
     the computed solution does not satisfy it to working accuracy.
     """
-    A = as_matrix("A", A)
-    A_z = as_matrix("A_z", A_z)
-    C = as_matrix("C", C, cols=A.shape[0], vector="row")
-    B_z = as_matrix("B_z", B_z, rows=A_z.shape[0], cols=C.shape[0])
     Q = B_z @ C
     ez, ea = np.linalg.eigvals(A_z), np.linalg.eigvals(A)
     gap = float(np.min(np.abs(ez[:, None] - ea[None, :]))) if ez.size and ea.size else np.inf

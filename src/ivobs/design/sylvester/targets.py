@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from ..._validate import as_matrix
 from ...errors import DesignError
@@ -36,7 +37,7 @@ from ...linalg import (
     observability_indices,
     spectral_radius,
 )
-from .equation import condition_number, solve_transform
+from .equation import solve_transform
 from .flow import CT_RANGE, flow_cap
 
 __all__ = ["DT_RANGE", "TargetChoice", "block_target", "default_target"]
@@ -55,7 +56,6 @@ class TargetChoice:
     B_z: np.ndarray
     T: np.ndarray
     score: float
-    candidates: int
     tuned: bool
 
 
@@ -170,7 +170,7 @@ def _acceptable(
     except DesignError:
         return None
     norms = np.linalg.norm(T, axis=1)
-    if np.any(norms == 0) or condition_number(T / norms[:, None]) > max_cond:
+    if np.any(norms == 0) or np.linalg.cond(T / norms[:, None]) > max_cond:
         return None  # judged on unit rows: the final scaling of (T, B_z)
     return T
 
@@ -217,21 +217,19 @@ def default_target(
     # candidates with cond(T) <= max_cond; ill-conditioned ones only serve as starting points
     best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
     start: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
-    count, least_cond = 0, np.inf
+    least_cond = np.inf
     for a in _spreads(n, continuous, scale, cap):
         for Bz in _b_patterns(C, F, delta if delta.size else np.zeros(0), n):
             T = _acceptable(a, Bz, A, C, continuous, _RELAXED_COND, sep)
             if T is None:
                 continue
             s, _ = _score(np.concatenate([a, Bz.ravel()]), A, C, Ex, Fx, wt, continuous, False)
-            cond = condition_number(T / np.linalg.norm(T, axis=1)[:, None])
+            cond = np.linalg.cond(T / np.linalg.norm(T, axis=1)[:, None])
             least_cond = min(least_cond, cond)
             if start is None or s < start[0]:
                 start = (s, a, Bz, T)
-            if cond <= max_cond:
-                count += 1
-                if best is None or s < best[0]:
-                    best = (s, a, Bz, T)
+            if cond <= max_cond and (best is None or s < best[0]):
+                best = (s, a, Bz, T)
     tuned = False
     if tune and start is not None:
         from scipy.optimize import minimize
@@ -259,7 +257,6 @@ def default_target(
             s, _ = _score(res.x, A, C, Ex, Fx, wt, continuous, False)
             if best is None or s < best[0] - 1e-9:
                 best, tuned = (s, a.copy(), Bz.copy(), T), True
-                count += 1
     if best is None:
         raise DesignError(
             "kkl: no diagonal target (A_z, B_z) gave an invertible Sylvester solution T with "
@@ -269,9 +266,7 @@ def default_target(
     s, a, Bz, T = best
     norms = np.linalg.norm(T, axis=1)
     T, Bz = T / norms[:, None], Bz / norms[:, None]  # diagonal A_z commutes with the scaling
-    return TargetChoice(
-        A_z=np.diag(a), B_z=Bz, T=T, score=float(np.exp(s)), candidates=count, tuned=tuned
-    )
+    return TargetChoice(A_z=np.diag(a), B_z=Bz, T=T, score=float(np.exp(s)), tuned=tuned)
 
 
 # ------------------------------------------------------------------------------------------
@@ -296,16 +291,10 @@ def block_target(
     m = observability_indices(A_0, C_0)
     if sum(m) < n:
         m = [n] * p
-    nz = sum(m)
-    At = np.zeros((nz, nz))
-    Bt = np.zeros((nz, p))
-    r = 0
-    for i, mi in enumerate(m):
-        if continuous:
-            diag = -np.arange(1.0, mi + 1)
-        else:
-            diag = 0.1 * np.arange(1.0, mi + 1) if mi <= 9 else np.linspace(0.05, 0.95, mi)
-        At[r : r + mi, r : r + mi] = np.diag(diag)
-        Bt[r : r + mi, i] = 1.0
-        r += mi
-    return At, Bt, m
+    diag = []
+    for mi in m:
+        steps = np.arange(1.0, mi + 1)
+        diag.append(
+            -steps if continuous else 0.1 * steps if mi <= 9 else np.linspace(0.05, 0.95, mi)
+        )
+    return np.diag(np.concatenate(diag)), block_diag(*[np.ones((mi, 1)) for mi in m]), m

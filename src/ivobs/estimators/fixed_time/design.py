@@ -25,7 +25,7 @@ from ..._validate import as_int
 from ...design.injection import invertible_injection, is_invertible
 from ...design.parity import general_T, optimal_T, pinv_perp, stack_window, width_optimal_T
 from ...errors import DesignError, IvobsError
-from ...linalg import check_observable
+from ...linalg import check_observable, observability_index
 from ...model import LinearSystem
 from ..base import Design
 from .window import centre_radius
@@ -38,7 +38,6 @@ __all__ = [
     "check_design_options",
     "check_window",
     "injection",
-    "observability_index",
     "rank_advice",
 ]
 
@@ -86,20 +85,6 @@ class FixedTimeDesign(Design):
 # -- validation of the options ------------------------------------------------------------------
 PAPER_WINDOW_STATES = 10
 """Up to this many states the default window is ``s = nx − 1`` ([Wang2020, Lemma 2])."""
-
-
-def observability_index(A: np.ndarray, C: np.ndarray) -> int:
-    """The smallest ``ν`` with ``rank [C; CA; …; CA^(ν−1)] = nx`` (forward powers, which stay
-    well conditioned for a stable ``A``; ``nx + 1`` when the pair is not observable)."""
-    nx = int(A.shape[0])
-    rows = np.zeros((0, nx))
-    blk = C
-    for nu in range(1, nx + 1):
-        rows = np.vstack([rows, blk / max(float(np.abs(blk).max(initial=0.0)), 1e-300)])
-        if int(np.linalg.matrix_rank(rows)) == nx:
-            return nu
-        blk = blk @ A
-    return nx + 1
 
 
 def check_window(s: Any, nx: int, ny: int = 1, index: int | None = None) -> int:
@@ -189,12 +174,8 @@ def injection(A: np.ndarray, C: np.ndarray, L: np.ndarray | None, where: str) ->
 
 def _centre_size(sys: LinearSystem) -> int:
     """Columns of ``c`` (the centre of ``d``) in ``z``: 0 for symmetric constant bounds."""
-    if sys.nd == 0:
-        return 0
-    if sys.has_constant_bounds:
-        box = sys.d_at(0)
-        return 0 if np.all(box.lo == -box.hi) else int(sys.nd)
-    return int(sys.nd)
+    box = sys.d_at(0) if sys.has_constant_bounds else None
+    return 0 if box is not None and np.all(box.lo == -box.hi) else int(sys.nd)
 
 
 class WindowDesigner:

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..._validate import as_bool, as_int, as_matrix
 from ...errors import DesignError
+from ...linalg import observability_index
 from ...model import LinearSystem
 from ...sets import Box
 from ...sets.rounding import enclose
@@ -24,7 +25,6 @@ from .design import (
     WindowDesigner,
     check_design_options,
     check_window,
-    observability_index,
     rank_advice,
 )
 from .gains import WindowGain, WindowGains, choose_injection, evaluate

@@ -156,13 +156,21 @@ class FlowMatrices:
     the centres of ``[z̲'; z̄']`` and ``Ze [|z̲|; |z̄|; |x|; |v|; u_r; d_r]`` their error bounds
     (module docstring: ``e^{A_z h} >= 0`` on ``[z̲, z̄]``, its radius, ``|X| |x|``, the forcing,
     and ``2 γ_{n+2}`` times the magnitudes of the ``n`` terms of each centre for its rounding);
-    likewise ``Mx [x̲; x̄; v]`` and ``Me [|x|; |v|; u_r; d_r]`` for the model's prediction of
-    the box (the Lemma-1 image of ``Φ``)."""
+    likewise ``Z [x̲; x̄; v]`` and ``Ze [|x|; |v|; u_r; d_r]`` (one error row per state, for
+    both bounds) for the model's prediction of the box (the Lemma-1 image of ``Φ``)."""
 
     Z: np.ndarray
     Ze: np.ndarray
-    Mx: np.ndarray | None = None
-    Me: np.ndarray | None = None
+
+    def apply(
+        self, lo: np.ndarray, hi: np.ndarray, v: np.ndarray, mags: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The centres ``Z [lo; hi; v]`` less/plus the error bound of ``Ze mags`` (rounded up),
+        rounded outward."""
+        n = lo.size
+        out = self.Z @ np.concatenate((lo, hi, v))
+        err = upper(self.Ze @ mags, self.Ze.shape[1])
+        return down(out[:n] - err[:n]), up(out[n:] + err[-n:])
 
 
 def flow_matrices(ps: Passage, Xmag: np.ndarray, f: Forcing) -> FlowMatrices:
@@ -192,7 +200,7 @@ def model_matrices(ps: Passage, f: Forcing) -> FlowMatrices:
     Me = np.concatenate(
         (up(RPhi + fac * np.abs(Phi)), up(f.Lr + fac * np.abs(f.L)), f.Lu, f.W), axis=1
     )
-    return FlowMatrices(np.zeros((0, 0)), np.zeros((0, 0)), Mx, Me)
+    return FlowMatrices(Mx, Me)
 
 
 @dataclass(frozen=True)
@@ -369,18 +377,11 @@ class ContinuousObserver(Observer[ContinuousState]):
         xabs = np.maximum(np.abs(xlo), np.abs(xhi))
         v, ur = self.inputs(ps, span)
         mags = np.concatenate((np.abs(v), ur, span.dr))
-        nz = zlo.size
         # T' x(t1) = e^{A_z h} z + X x(t0) + T' ∫ Φ (B u + E d)
-        out = fm.Z @ np.concatenate((zlo, zhi, v))
-        err = upper(fm.Ze @ np.concatenate((np.abs(zlo), np.abs(zhi), xabs, mags)), fm.Ze.shape[1])
-        zlo1, zhi1 = down(out[:nz] - err[:nz]), up(out[nz:] + err[nz:])
+        zabs = np.concatenate((np.abs(zlo), np.abs(zhi), xabs, mags))
+        zlo1, zhi1 = fm.apply(zlo, zhi, v, zabs)
         # the model: x(t1) ∈ Φ [x̲, x̄] + ∫ Φ (B u + E d)
-        mm = self.model(ps)
-        assert mm.Mx is not None and mm.Me is not None
-        n = xlo.size
-        mo = mm.Mx @ np.concatenate((xlo, xhi, v))
-        me = upper(mm.Me @ np.concatenate((xabs, mags)), mm.Me.shape[1])
-        model = (down(mo[:n] - me), up(mo[n:] + me))
+        model = self.model(ps).apply(xlo, xhi, v, np.concatenate((xabs, mags)))
         return Tp, zlo1, zhi1, model, tag
 
     def step(

@@ -23,7 +23,6 @@ from ...design.sylvester import (
     block_target,
     check_flow,
     check_target,
-    condition_number,
     default_target,
     flow_cap,
     predicted_width,
@@ -42,7 +41,6 @@ __all__ = [
     "TransformSequence",
     "design_lti",
     "design_ltv",
-    "every",
     "finite",
     "left_inverse",
     "x0_required",
@@ -73,12 +71,6 @@ class KKLDesign(Design):
     gamma: float | None = None
     ell: float | None = None
     tuned: bool = False
-
-
-def every(mask: np.ndarray) -> bool:
-    """``mask.all()`` for a boolean array, without the Python wrapper of the reduction (the
-    per-step paths run it on arrays of a few entries)."""
-    return bool(np.count_nonzero(mask) == mask.size)
 
 
 def finite(v: np.ndarray) -> bool:
@@ -212,7 +204,7 @@ def design_lti(
                 f"({sys.nx}, {sys.ny}), got {Az.shape} and {Bz.shape}"
             )
         Tm = solve_transform(A, C, Az, Bz) if T is None else _checked_T(T, A, C, Az, Bz)
-    cond = condition_number(Tm)
+    cond = float(np.linalg.cond(Tm))
     # the recovery uses the row-normalised T (left_inverse): it must pass the threshold too
     worst = cond if cond > max_cond else left_inverse(Tm, max_cond).cond
     if not worst <= max_cond:
@@ -221,9 +213,7 @@ def design_lti(
             f"{worst:.3e} > max_cond = {max_cond:.0e} ([Dinh2024, Proposition 1] needs T "
             "invertible); choose another (A_z, B_z)"
         )
-    pw = None
-    if not sys.bounds_depend_on_y:
-        pw = predicted_width(Tm, Az, Bz, E, F, delta, ct)
+    pw = None if sys.bounds_depend_on_y else predicted_width(Tm, Az, Bz, E, F, delta, ct)
     return KKLDesign(
         A_z=Az,
         B_z=Bz,

@@ -29,7 +29,7 @@ from .continuous import (
     forcing,
     jump_matrices,
 )
-from .design import KKLDesign, Transform, every, left_inverse
+from .design import KKLDesign, Transform, left_inverse
 from .flow import Passage
 from .periods import Anchor, lti_passage, make_anchor, period_key
 
@@ -142,7 +142,7 @@ class ContinuousLTI(ContinuousObserver):
         CDF: tuple[np.ndarray, ...],
         tag: Any,
     ) -> JumpMatrices:
-        if not (isinstance(tag, Anchor) and every(obs)):
+        if not (isinstance(tag, Anchor) and obs.all()):
             return super().after_jump(ps, Tp, h, obs, CDF, tag)
         jm: JumpMatrices | None = ps.kept.get("anchored jump")
         if jm is None:  # B_o = fl(h B_z) of the period, T'' = T_h = fl(T' + B_o C) (make_anchor)
@@ -170,8 +170,6 @@ class ContinuousLTI(ContinuousObserver):
         Otherwise the state is returned unchanged.
         """
         Th = an.T
-        if T is Th:
-            return T, zlo, zhi
         if np.array_equal(T, Th):
             return Th, zlo, zhi
         if k == 1 and self.x0 is not None:

@@ -47,7 +47,7 @@ import numpy as np
 from ...sets import image_bounds
 from ...sets.rounding import ETA, down, gamma, product_error, up, upper
 
-__all__ = ["Consistency", "Terms", "combination", "consistency", "make_terms"]
+__all__ = ["Consistency", "Terms", "combination", "consistency", "factor", "make_terms"]
 
 _ONE = np.ones(1)
 
@@ -64,16 +64,10 @@ def combination(*pairs: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.n
     return M, product_error(np.asarray(s, dtype=float), n)
 
 
-def _factor(n: int, m: int) -> float:
+def factor(n: int, m: int) -> float:
     """``2 γ_{n+2} (1 + 2 γ_{m+3})``, rounded up: the factor of the magnitudes of a sum of ``n``
     products (any order of evaluation) in a bound evaluated as a sum of ``m`` products."""
     return float(up(2.0 * gamma(n + 2) * (1.0 + 2.0 * gamma(m + 3))))
-
-
-def _outward(n: int) -> np.ndarray:
-    """``[-inf] * n + [inf] * n``: the directions of ``[lower; upper]`` bounds."""
-    inf = np.full(n, np.inf)
-    return np.concatenate((-inf, inf))
 
 
 def g_image(
@@ -153,7 +147,7 @@ def consistency(
     no, nx = C.shape
     nu = D.shape[1]
     Cp, Cn = np.maximum(C, 0.0), np.maximum(-C, 0.0)
-    c = _factor(2 * nx + nu + 1, nx + nu + 1)
+    c = factor(2 * nx + nu + 1, nx + nu + 1)
     eta = (2 * (nx + nu) + 8) * ETA
     M = np.zeros((3 * no, 3 * nx + 2 * nu + (d is not None)))
     M[:no, :nx], M[:no, nx : 2 * nx], M[:no, 2 * nx : 2 * nx + nu] = Cp, -Cn, D
@@ -273,7 +267,7 @@ def make_terms(
     x_used = bool(np.any(Xh) or np.any(Xe))
     n = nz + no + nu + 3  # terms of each entry of (3.a): A_z z, B_o y_o, L̂ u, g, X̂ x
     m = nz + no + nu + nx + 2  # terms of each entry of ε
-    c = _factor(n, m)
+    c = factor(n, m)
     eta = (n + m + 8) * ETA
     if through is None:
         Zp, Zn, z_mag = A_z, np.zeros((nz, nz)), up(c * A_z)
@@ -321,5 +315,5 @@ def make_terms(
         c=c,
         eta=eta,
         check=check,
-        outward=_outward(nz),
+        outward=np.repeat([-np.inf, np.inf], nz),  # the directions of [lower; upper]
     )

@@ -34,15 +34,9 @@ from ...sets.rounding import ETA, UNIT_ROUNDOFF, DecayBound, gamma, mid_rad, up,
 from .._recursion import LinearFilter, abs_max, norm_inf, redo_streams
 from .discrete import Discrete
 from .observer import prior_box
-from .terms import g_image
+from .terms import factor, g_image
 
 __all__ = ["VectorisedLTI"]
-
-
-def _factor(n: int) -> float:
-    """``2 γ_{n+2} (1 + 2 γ_{n+4})``: a sum of ``n`` products in any order, and the rounding of
-    the bound itself."""
-    return float(up(2.0 * gamma(n + 2) * (1.0 + 2.0 * gamma(n + 4))))
 
 
 class VectorisedLTI:
@@ -122,7 +116,7 @@ class VectorisedLTI:
         prev = rhat[:-1] @ Az.T
         g = gr if const else gr[:-1]
         dfct = np.abs(nxt - prev - g)
-        dfct += _factor(nz + 2) * (np.abs(nxt) + np.abs(prev) + np.abs(g)) + (nz + 8) * ETA
+        dfct += factor(nz + 2, nz + 3) * (np.abs(nxt) + np.abs(prev) + np.abs(g)) + (nz + 8) * ETA
         rdef = np.max(dfct, axis=-1)  # ‖ρ̂[k]‖∞ + its evaluation error, k = 0..T-2
         rdef0 = float(np.max(np.abs(rhat[0] - r0)))
         rdef = np.concatenate(([rdef0], rdef))
@@ -168,12 +162,13 @@ class VectorisedLTI:
         mag = c_abs[..., 1:] + norm_inf(Az) * c_abs[..., :-1]
         mag += norm_inf(np.abs(Bz)) * abs_max(np.abs(y[..., :-1, :]))
         gmax = float(np.max(np.abs(gc)))
-        ue = norm_inf(up(_factor(nz + ny + nu + 2) * np.abs(Lu) + terms.Lerr)) if nu else 0.0
-        mag *= _factor(nz + ny + nu + 2) * (1.0 + 8.0 * gamma(8))
+        fac = factor(nz + ny + nu + 2, nz + ny + nu + 3)
+        ue = norm_inf(up(fac * np.abs(Lu) + terms.Lerr)) if nu else 0.0
+        mag *= fac * (1.0 + 8.0 * gamma(8))
         eta += mag
         if nu:
             eta += ue * (1.0 + 4.0 * gamma(4)) * abs_max(np.abs(u[..., :-1, :]))
-        eta += _factor(nz + ny + nu + 2) * gmax + (nz + ny + nu + 8) * ETA
+        eta += fac * gmax + (nz + ny + nu + 8) * ETA
         # |X| |x|: ‖x[k]‖∞ <= c_norm ‖|P| (|ĉ| + r̂ + q)‖∞ (recover); η = a + b q
         xr = float(upper(np.max(terms.xmag.sum(axis=1)), ob.sys.nx)) if terms.x_used else 0.0
         if xr:
@@ -249,6 +244,6 @@ class VectorisedLTI:
         mag += np.abs(fc)
         if nu:
             mag += np.abs(u) @ np.abs(D).T
-        band += _factor(nx + nu + nx + 2) * mag + (2 * (nx + nu) + 8) * ETA
+        band += factor(2 * nx + nu + 2, 2 * nx + nu + 3) * mag + (2 * (nx + nu) + 8) * ETA
         out: np.ndarray = np.any(e > np.nextafter(band, np.inf, out=band), axis=-1)
         return out

@@ -91,32 +91,27 @@ def dinh2024_fig1(
         sc = scenarios.get("kkl-random8", continuous=True, t_final=t_final, dt=dt)
     else:
         sc = scenarios.get("kkl-random8", horizon=horizon)
-    fig, axes = pyplot().subplots(4, 4, figsize=(13, 8.5), sharex=True)
+    kind = "continuous time" if continuous else "discrete time (ivobs' version)"
+    title = f"[Dinh2024] Fig. 1: Example 1, {kind}, observer (3)"
+    return _pair_figure(sc, range(8), 4, (13, 8.5), "$(d, w)$", title)
+
+
+def _pair_figure(
+    sc: scenarios.Scenario, states: Any, ncols: int, size: Any, what: str, title: str
+) -> Any:
+    """The ``states`` without (top rows) and with (bottom rows) disturbances, ``ncols`` panels
+    a row."""
+    per = -(-len(states) // ncols)  # rows of one block
+    fig, axes = pyplot().subplots(2 * per, ncols, figsize=size, sharex=True, squeeze=False)
     for block, (res, traj) in enumerate(_kkl_pair(sc)):
-        for i in range(8):
-            ax = axes[2 * block + i // 4, i % 4]
-            _kkl_panel(ax, res, traj, i, legend=(block, i) == (0, 0))
-        axes[2 * block, 0].set_title(
-            ("absence" if block == 0 else "presence") + " of $(d, w)$", loc="left", fontsize=9
+        for n, i in enumerate(states):
+            ax = axes[block * per + n // ncols, n % ncols]
+            _kkl_panel(ax, res, traj, i, legend=(block, n) == (0, 0))
+        axes[block * per, 0].set_title(
+            ("absence" if block == 0 else "presence") + f" of {what}", loc="left", fontsize=9
         )
     for ax in axes[-1]:
-        ax.set_xlabel("t" if continuous else "k")
-    kind = "continuous time" if continuous else "discrete time (ivobs' version)"
-    fig.suptitle(f"[Dinh2024] Fig. 1: Example 1, {kind}, observer (3)")
-    fig.tight_layout()
-    return fig
-
-
-def _x2_figure(sc: scenarios.Scenario, title: str) -> Any:
-    fig, axes = pyplot().subplots(2, 1, figsize=(7.5, 5.2), sharex=True)
-    for block, (res, traj) in enumerate(_kkl_pair(sc)):
-        _kkl_panel(axes[block], res, traj, 1, legend=block == 0)
-        axes[block].set_title(
-            ("absence" if block == 0 else "presence") + " of disturbances/noise",
-            loc="left",
-            fontsize=9,
-        )
-    axes[-1].set_xlabel("k" if sc.t is None else "t")
+        ax.set_xlabel("k" if sc.t is None else "t")
     fig.suptitle(title)
     fig.tight_layout()
     return fig
@@ -127,11 +122,13 @@ def dinh2024_fig4(t_final: float = 15.0, dt: float = 0.02) -> Any:
     observer (10) with ``Ã = diag(−1, −2)``, ``B̃ = (1, 1)``, ``ℓ = 2``; measurements every
     ``dt`` (the sampled-data form of (10), see :mod:`ivobs.estimators.kkl`)."""
     sc = scenarios.get("pendulum", t_final=t_final, dt=dt)
-    return _x2_figure(sc, "[Dinh2024] Fig. 4: pendulum (CT LTV), $x_2$, observer (10)")
+    title = "[Dinh2024] Fig. 4: pendulum (CT LTV), $x_2$, observer (10)"
+    return _pair_figure(sc, [1], 1, (7.5, 5.2), "disturbances/noise", title)
 
 
 def dinh2024_fig5(horizon: int = 30) -> Any:
     """[Dinh2024, Fig. 5] (Example 3): the discrete-time LTV system, state ``x2``, observer (15)
     with ``Ã = diag(0.1, 0.2)``, ``B̃ = (1, 1)``, ``γ = 1`` (bounds from ``k* = 2``)."""
     sc = scenarios.get("kkl-ltv-dt", horizon=horizon)
-    return _x2_figure(sc, "[Dinh2024] Fig. 5: DT LTV system, $x_2$, observer (15)")
+    title = "[Dinh2024] Fig. 5: DT LTV system, $x_2$, observer (15)"
+    return _pair_figure(sc, [1], 1, (7.5, 5.2), "disturbances/noise", title)

@@ -20,20 +20,16 @@ def efimov2013_fig1(horizon: int = 50) -> Any:
     r4 = run_checked("interval-transformed", sc, traj, "[Efimov2013] observer (4)")
     r5 = run_checked("interval-split", sc, traj, "[Efimov2013] observer (5)", L=sc.reference["L"])
     fig, axes = pyplot().subplots(2, 1, figsize=(8, 5.6), sharex=True)
-    plot_estimates(
-        {"observer (4), $z = Sx$ (ivobs' design)": r4},
-        truth=traj.x,
-        states=[1],
-        axes=axes[:1],
-        title="[Efimov2013] Fig. 1 (a): $x_2$ by observer (4)",
-    )
-    plot_estimates(
-        {"observer (5), $L = (0.3, 0.6)$": r5},
-        truth=traj.x,
-        states=[1],
-        axes=axes[1:],
-        title="(b): $x_2$ by observer (5)",
-    )
+    panels = [
+        (
+            "observer (4), $z = Sx$ (ivobs' design)",
+            r4,
+            "[Efimov2013] Fig. 1 (a): $x_2$ by observer (4)",
+        ),
+        ("observer (5), $L = (0.3, 0.6)$", r5, "(b): $x_2$ by observer (5)"),
+    ]
+    for ax, (label, res, title) in zip(axes, panels):
+        plot_estimates({label: res}, truth=traj.x, states=[1], axes=[ax], title=title)
     axes[0].set_xlabel("")
     fig.tight_layout()
     return fig

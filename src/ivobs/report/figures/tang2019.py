@@ -62,15 +62,20 @@ def _servo_runs(horizon: int) -> tuple[dict[str, Estimate], Any, scenarios.Scena
 
 
 def _compare(
-    ax: Any, res: dict[str, tuple[Estimate, dict[str, Any]]], truth: np.ndarray, i: int
+    ax: Any,
+    res: dict[str, tuple[Estimate, dict[str, Any]]],
+    truth: np.ndarray,
+    i: int,
+    shift: Any = 0.0,
 ) -> None:
     """Upper and lower bounds of state ``i`` for each method with its own line style (the
-    papers' legends distinguish methods by line style), the truth as asterisks."""
+    papers' legends distinguish methods by line style), the truth as asterisks; everything
+    minus ``shift``."""
     t = np.arange(truth.shape[0])
     for name, (est, style) in res.items():
-        ax.plot(t, est.upper[:, i], label=name, **style)
-        ax.plot(t, est.lower[:, i], **style)
-    ax.plot(t, truth[:, i], "k*", ms=3.5, label="true state", zorder=5)
+        ax.plot(t, est.upper[:, i] - shift, label=name, **style)
+        ax.plot(t, est.lower[:, i] - shift, **style)
+    ax.plot(t, truth[:, i] - shift, "k*", ms=3.5, label="true state", zorder=5)
     ax.grid(True, alpha=0.3)
 
 
@@ -126,12 +131,7 @@ def tang2019_fig1(horizon: int = 100, zoom: tuple[int, int] = (60, 64)) -> Any:
         ins.set_ylim(lo - pad, hi + pad)
         ins.tick_params(labelsize=7)
         top.indicate_inset_zoom(ins, edgecolor="0.3")
-    t = np.arange(traj.x.shape[0])
-    for label, (est, style) in styled.items():
-        err.plot(t, est.upper[:, 0] - traj.x[:, 0], label=label, **style)
-        err.plot(t, est.lower[:, 0] - traj.x[:, 0], **style)
-    err.plot(t, np.zeros_like(t, dtype=float), "k*", ms=3.5, label="true state", zorder=5)
-    err.grid(True, alpha=0.3)
+    _compare(err, styled, traj.x, 0, shift=traj.x[:, 0])
     err.set_ylabel(f"bounds minus {name}")
     err.set_xlabel("step k (Ts = 0.1 s)")
     err.set_title("the same bounds minus the true θ (estimation error bounds)", fontsize=10)
