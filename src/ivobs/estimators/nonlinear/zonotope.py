@@ -79,9 +79,9 @@ from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from ...sets.czonotope import reduce_generators
 from ...sets.rounding import ETA, mid_rad, product_error, up, upper
+from ...sets.strip import contract_box, section_hull
 from ...sets.zonotope import box_generators
 from .. import register
-from .._strip_hull import propagate_lists, section_hull
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
 from .meanvalue import contract_back, joint_box, linearise, measurement
@@ -159,11 +159,13 @@ class _Joint:
         s1 = float(_add(np.abs(s)))
         if abs(e) > upper(s1 + sigma_z, m + 1):  # |sᵀξ - e| > σ_z for every |ξ| <= 1
             return None
-        box = propagate_lists(h.tolist(), t, self.lo, self.hi, sigma)
-        if box is None:
+        box = np.array([self.lo, self.hi], dtype=np.float64)
+        hc = np.ascontiguousarray(h, dtype=np.float64)
+        if not contract_box(hc, float(t), float(sigma), box[0], box[1]):
             return None
-        lo, hi = box
-        sec_lo, sec_hi = section_hull(z[:nx], Hz[:nx], s, e, sigma_z, rs[:nx])
+        lo, hi = box.tolist()
+        Hx = np.ascontiguousarray(Hz[:nx])  # the compiled kernel's layout
+        sec_lo, sec_hi = section_hull(z[:nx], Hx, m, nx, s, e, sigma_z, rs[:nx])
         for j, a, p, q in zip(range(nx), acc.tolist(), sec_lo.tolist(), sec_hi.tolist()):
             lo[j] = max(lo[j], math.nextafter(p - a, -_INF))  # the hull plus the box aside
             hi[j] = min(hi[j], math.nextafter(q + a, _INF))
