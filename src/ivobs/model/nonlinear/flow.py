@@ -628,8 +628,10 @@ class FlowSystem(NonlinearSystem):
         return out
 
     def __reduce__(self) -> Any:
-        args = (self.continuous.spec(), self.dt, self.order, self.substeps, self.disturbances)
-        return (_rebuild_flow, args)
+        return (
+            FlowSystem,
+            (self.continuous, self.dt, self.order, self.substeps, self.disturbances),
+        )
 
     def _repr_html_(self) -> str:
         from ..._html import summary_html
@@ -701,12 +703,6 @@ def _check_smooth(f: list[Any], order: int) -> bool:
             "derivatives); f uses abs, min or max: use order=1 or 2 (and more substeps)"
         )
     return smooth
-
-
-def _rebuild_flow(
-    spec: dict[str, Any], Ts: float, order: int, substeps: int, disturbances: str = "varying"
-) -> FlowSystem:
-    return FlowSystem(NonlinearSystem(**spec), Ts, order, substeps, disturbances)
 
 
 def _mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
