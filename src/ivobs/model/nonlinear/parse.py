@@ -41,23 +41,7 @@ __all__ = [
     "parse_expression",
 ]
 
-FUNCTIONS = {
-    "sin": 1,
-    "cos": 1,
-    "tan": 1,
-    "exp": 1,
-    "log": 1,
-    "sqrt": 1,
-    "tanh": 1,
-    "sinh": 1,
-    "cosh": 1,
-    "atan": 1,
-    "asin": 1,
-    "acos": 1,
-    "abs": 1,
-    "min": -2,
-    "max": -2,
-}
+FUNCTIONS = {n.lower(): -2 if n in ("Min", "Max") else 1 for n in FLOAT_FUNCTIONS} | {"sqrt": 1}
 """Function name -> number of arguments (``-2``: two or more)."""
 
 RESERVED = frozenset(FUNCTIONS) | {"pi", "e"}
@@ -90,9 +74,7 @@ class _Reader:
         self.sp = sp
         self.text, self.names, self.where = text, names, where
         # FUNCTIONS by SymPy's names (Abs, Min, Max for abs, min, max)
-        self.funcs = {
-            n: getattr(sp, n.title() if n in ("abs", "min", "max") else n) for n in FUNCTIONS
-        }
+        self.funcs = {n.lower(): getattr(sp, n) for n in FLOAT_FUNCTIONS} | {"sqrt": sp.sqrt}
 
     def limit(self, node: ast.AST, value: Any) -> Any:
         """``value``, refused when it is an exact constant of more than

@@ -25,7 +25,8 @@ FLOAT_FUNCTIONS: dict[str, Any] = {
     "tanh": math.tanh, "sinh": math.sinh, "cosh": math.cosh, "atan": math.atan,
     "asin": math.asin, "acos": math.acos, "Abs": abs, "Min": min, "Max": max,
 }  # fmt: skip
-"""The functions of :data:`~.parse.FUNCTIONS` in floating point, by SymPy's name."""
+"""The functions of expressions (:data:`~.parse.FUNCTIONS`, but ``sqrt``: a power in SymPy) in
+floating point, by SymPy's name."""
 
 
 def _check(what: str, i: int, e: Any) -> Any:
