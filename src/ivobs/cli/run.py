@@ -11,7 +11,7 @@ file behind.
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -27,9 +27,6 @@ from . import (
     parse_options,
 )
 from ._plant import add_plant_options, add_truth_option, plant_inputs
-
-if TYPE_CHECKING:
-    pass
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:

@@ -26,6 +26,8 @@ __all__ = ["dumps_system", "equal_systems", "save_system"]
 def _same_value(a: Any, b: Any) -> bool:
     if a is None or b is None:
         return a is None and b is None
+    if isinstance(a, str) or isinstance(b, str):  # a callable's parameter
+        return bool(a == b)
     if callable(a) or callable(b):
         if not (callable(a) and callable(b)):
             return False
@@ -42,16 +44,7 @@ def _same_value(a: Any, b: Any) -> bool:
 
 
 def _same_params(a: dict[str, Any], b: dict[str, Any]) -> bool:
-    if set(a) != set(b):
-        return False
-    for key in a:
-        va, vb = a[key], b[key]
-        if isinstance(va, str) or isinstance(vb, str):
-            if va != vb:
-                return False
-        elif not _same_value(va, vb):
-            return False
-    return True
+    return set(a) == set(b) and all(_same_value(a[key], b[key]) for key in a)
 
 
 def equal_systems(a: Any, b: Any) -> bool:

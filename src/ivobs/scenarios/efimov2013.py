@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from functools import partial
 from typing import Any
 
@@ -10,6 +9,8 @@ import numpy as np
 
 from ..errors import IvobsError
 from ..model import LinearSystem
+from ..model.nonlinear._runtime import dn as _lo
+from ..model.nonlinear._runtime import up as _hi
 from ..sets import Box
 from ..simulate import _rng
 from .registry import Scenario, check_horizon, register_scenario
@@ -52,14 +53,6 @@ def _efimov_planar(horizon: int = 50) -> Scenario:
         "R = [[-0.5, 0], [1, 0]] is not nonnegative (no nonnegative matrix has the "
         "spectrum {0, -0.5}: its trace would be negative)",
     )
-
-
-def _lo(x: float) -> float:
-    return math.nextafter(x, -math.inf)
-
-
-def _hi(x: float) -> float:
-    return math.nextafter(x, math.inf)
 
 
 def henon_bounds(k: Any, y: Any, *, a_lo: float, a_hi: float, V: float, delta: float) -> Box:

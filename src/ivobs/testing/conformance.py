@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import DesignError, IvobsError
 from ..model import LinearSystem
 from ..sets import Box
+from ..simulate import vertex_disturbance
 from .exact import ExactStates, exact_misses, exact_run
 
 __all__ = ["CheckReport", "check_estimator", "conformance_plants"]
@@ -110,11 +111,6 @@ def conformance_plants(seed: int = 0) -> dict[str, tuple[LinearSystem, Box]]:
     return plants
 
 
-def _vertices(box: Box, T: int, rng: np.random.Generator) -> np.ndarray:
-    pick = rng.integers(0, 2, size=(T, box.dim)).astype(bool)
-    return np.where(pick, box.hi, box.lo)
-
-
 def _make(method: Any, sys: LinearSystem, x0: Box, options: dict[str, Any]) -> Any:
     from ..estimators import get
 
@@ -162,7 +158,7 @@ def check_estimator(
         T = steps
         x_true0 = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
         U = rng.uniform(-1, 1, size=(T, sys.nu))
-        Dv = _vertices(sys.d_at(0), T, rng) if sys.nd else np.zeros((T, 0))
+        Dv = vertex_disturbance(sys.d_at(0), T, rng) if sys.nd else np.zeros((T, 0))
         Y, X = exact_run(sys, x_true0, U, Dv)
         _check_record(est, partial(_make, method, sys, x0, options), plant, U, Y, X)
         _check_missing(est, plant, U, Y, X, rng)

@@ -252,24 +252,12 @@ class Emitter:
             return self._pow(e.base, e.exp)
         fn = type(e)
         a = self.emit(e.args[0])
-        simple = {
-            sp.sin: "_sin",
-            sp.cos: "_cos",
-            sp.tan: "_tan",
-            sp.exp: "_exp",
-            sp.tanh: "_tanh",
-            sp.sinh: "_sinh",
-            sp.cosh: "_cosh",
-            sp.atan: "_atan",
-            sp.Abs: "_abs",
-            sp.sign: "_sign",
-            sp.Heaviside: "_heaviside",
-        }
-        if fn in simple:
-            return self.assign(f"{simple[fn]}({a[0]}, {a[1]})")
-        checked = {sp.log: "_log", sp.asin: "_asin", sp.acos: "_acos"}
-        if fn in checked:
-            return self.assign(f"{checked[fn]}({a[0]}, {a[1]}, {self.site()})")
+        call = f"_{fn.__name__.lower()}"  # its function in the runtime (_runtime.NAMESPACE)
+        simple = (sp.sin, sp.cos, sp.tan, sp.exp, sp.tanh, sp.sinh, sp.cosh, sp.atan, sp.Abs)
+        if fn in simple or fn in (sp.sign, sp.Heaviside):
+            return self.assign(f"{call}({a[0]}, {a[1]})")
+        if fn in (sp.log, sp.asin, sp.acos):  # defined on part of the line: a site for errors
+            return self.assign(f"{call}({a[0]}, {a[1]}, {self.site()})")
         if fn in (sp.Min, sp.Max):
             parts = [a] + [self.emit(x) for x in e.args[1:]]
             which = "_min" if fn is sp.Min else "_max"

@@ -84,8 +84,9 @@ from ._runtime import dn as _dn
 from ._runtime import up as _up
 from .codegen import _enclose_fraction
 from .flowback import FlowBackContractor
+from .forms import Forms
 from .system import NonlinearSystem
-from .taylor import MAX_ORDER, build_taylor
+from .taylor import MAX_ORDER, TaylorCode
 
 __all__ = ["MAX_HALVINGS", "FlowSystem"]
 
@@ -111,19 +112,6 @@ def _count(what: str, v: Any, lo: int, hi: int) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
         raise IvobsError(f"{what}: expected an integer in [{lo}, {hi}], got {v!r}")
     return int(v)
-
-
-class _FlowForms:
-    """Stands for the ``Forms`` of ``f`` (``natural``, ``tight``, ``jacobian``, ``sites``) so
-    the nonlinear methods call the flow as they call a discrete map. Domain errors are turned
-    into :class:`~ivobs.IvobsError` inside, hence no sites."""
-
-    def __init__(self, flow: FlowSystem) -> None:
-        self.natural = self.tight = flow._enclose
-        self.jacobian = flow._enclose_jacobian
-        self.natjac = flow._enclose_natjac
-        self.sites: list[str] = []
-        self.source = flow._taylor.source
 
 
 class FlowSystem(NonlinearSystem):
@@ -158,7 +146,7 @@ class FlowSystem(NonlinearSystem):
             )
         self.disturbances = disturbances
         self.smooth: bool = _check_smooth(self.f_exprs, self.order)
-        self._taylor = build_taylor(self.f_exprs, self._groups(), self._consts, self.order)
+        self._taylor = TaylorCode(self.f_exprs, self._groups(), self._consts, self.order)
         # the signals d that f reads: only they vary between samples (module docstring)
         np_ = len(self.param_names)
         used = set().union(*(e.free_symbols for e in self.f_exprs)) if self.f_exprs else set()
@@ -185,7 +173,16 @@ class FlowSystem(NonlinearSystem):
         self._collect: list[tuple[Vec, Vec]] | None = None  # a priori boxes (period_box)
         self._h_step = _enclose_fraction(Fraction(self.dt) / self.substeps)
         self._back_cache: Any = None  # the step back's last linearisation (.flowback)
-        self._f = _FlowForms(self)  # type: ignore[assignment]
+        # the Forms of f are the flow's, so the nonlinear methods call it as a discrete map (no
+        # sites: domain errors become IvobsError inside)
+        self._f = Forms(
+            self._enclose,
+            self._enclose,
+            self._enclose_jacobian,
+            self._enclose_natjac,
+            [],
+            self._taylor.source,
+        )
 
     def f_contractor(self) -> tuple[Any, list[str]]:
         """Refused: ``f_exprs`` is the vector field, not the map of a step (the flow steps back
@@ -628,8 +625,10 @@ class FlowSystem(NonlinearSystem):
         return out
 
     def __reduce__(self) -> Any:
-        args = (self.continuous.spec(), self.dt, self.order, self.substeps, self.disturbances)
-        return (_rebuild_flow, args)
+        return (
+            FlowSystem,
+            (self.continuous, self.dt, self.order, self.substeps, self.disturbances),
+        )
 
     def _repr_html_(self) -> str:
         from ..._html import summary_html
@@ -701,12 +700,6 @@ def _check_smooth(f: list[Any], order: int) -> bool:
             "derivatives); f uses abs, min or max: use order=1 or 2 (and more substeps)"
         )
     return smooth
-
-
-def _rebuild_flow(
-    spec: dict[str, Any], Ts: float, order: int, substeps: int, disturbances: str = "varying"
-) -> FlowSystem:
-    return FlowSystem(NonlinearSystem(**spec), Ts, order, substeps, disturbances)
 
 
 def _mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

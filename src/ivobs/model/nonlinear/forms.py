@@ -17,6 +17,7 @@ All generated functions take Python lists ``(xl, xh, u, wl, wh)`` and return lis
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any
 
 from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
@@ -44,10 +45,7 @@ def _repeats(e: Any, z: list[Any]) -> bool:
     in the Hénon map) and the mean-value form cannot tighten it: it is skipped."""
     import sympy as sp
 
-    counts: dict[Any, int] = {}
-    for node in sp.preorder_traversal(e):
-        if node in z or (node.is_Symbol and node in set(z)):
-            counts[node] = counts.get(node, 0) + 1
+    counts = Counter(node for node in sp.preorder_traversal(e) if node in z)
     return any(c > 1 for c in counts.values())
 
 

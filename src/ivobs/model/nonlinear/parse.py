@@ -28,6 +28,7 @@ from fractions import Fraction
 from typing import Any
 
 from ...errors import IvobsError
+from .trace import FLOAT_FUNCTIONS, expression_text
 
 __all__ = [
     "FUNCTIONS",
@@ -40,23 +41,7 @@ __all__ = [
     "parse_expression",
 ]
 
-FUNCTIONS = {
-    "sin": 1,
-    "cos": 1,
-    "tan": 1,
-    "exp": 1,
-    "log": 1,
-    "sqrt": 1,
-    "tanh": 1,
-    "sinh": 1,
-    "cosh": 1,
-    "atan": 1,
-    "asin": 1,
-    "acos": 1,
-    "abs": 1,
-    "min": -2,
-    "max": -2,
-}
+FUNCTIONS = {n.lower(): -2 if n in ("Min", "Max") else 1 for n in FLOAT_FUNCTIONS} | {"sqrt": 1}
 """Function name -> number of arguments (``-2``: two or more)."""
 
 RESERVED = frozenset(FUNCTIONS) | {"pi", "e"}
@@ -80,28 +65,6 @@ MAX_LENGTH = 20_000
 """Longest expression text accepted."""
 
 
-def _sympy_functions() -> dict[str, Any]:
-    import sympy as sp
-
-    return {
-        "sin": sp.sin,
-        "cos": sp.cos,
-        "tan": sp.tan,
-        "exp": sp.exp,
-        "log": sp.log,
-        "sqrt": sp.sqrt,
-        "tanh": sp.tanh,
-        "sinh": sp.sinh,
-        "cosh": sp.cosh,
-        "atan": sp.atan,
-        "asin": sp.asin,
-        "acos": sp.acos,
-        "abs": sp.Abs,
-        "min": sp.Min,
-        "max": sp.Max,
-    }
-
-
 class _Reader:
     """One expression's AST -> SymPy, with errors that point into the text."""
 
@@ -110,7 +73,8 @@ class _Reader:
 
         self.sp = sp
         self.text, self.names, self.where = text, names, where
-        self.funcs = _sympy_functions()
+        # FUNCTIONS by SymPy's names (Abs, Min, Max for abs, min, max)
+        self.funcs = {n.lower(): getattr(sp, n) for n in FLOAT_FUNCTIONS} | {"sqrt": sp.sqrt}
 
     def limit(self, node: ast.AST, value: Any) -> Any:
         """``value``, refused when it is an exact constant of more than
@@ -267,8 +231,6 @@ def parse_expression(text: Any, names: dict[str, Any], where: str) -> Any:
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         text = repr(text)
     if type(text).__module__.startswith("sympy"):  # a SymPy expression: read as its text
-        from .trace import expression_text
-
         text = expression_text(text)
     if not isinstance(text, str):
         raise IvobsError(f"{where}: expected an expression (str), got {type(text).__name__}")
@@ -297,14 +259,6 @@ def parse_expression(text: Any, names: dict[str, Any], where: str) -> Any:
     return expr
 
 
-_FLOAT_FUNCTIONS: dict[str, Any] = {
-    "sin": math.sin, "cos": math.cos, "tan": math.tan, "exp": math.exp, "log": math.log,
-    "tanh": math.tanh, "sinh": math.sinh, "cosh": math.cosh, "atan": math.atan,
-    "asin": math.asin, "acos": math.acos, "Abs": abs, "Min": min, "Max": max,
-}  # fmt: skip
-"""The functions of :data:`FUNCTIONS` in floating point, by SymPy's name."""
-
-
 def _check_constants(expr: Any, what: str) -> None:
     """Refuse a constant subexpression beyond :data:`MAX_CONSTANT` in magnitude (or not real):
     each is evaluated once, bottom-up, in floating point (an overflow is an error at once,
@@ -328,8 +282,8 @@ def _check_constants(expr: Any, what: str) -> None:
                 v = math.prod(args)  # type: ignore[arg-type]
             elif e.is_Pow:
                 v = math.pow(args[0], args[1])  # type: ignore[arg-type]
-            elif type(e).__name__ in _FLOAT_FUNCTIONS:
-                v = _FLOAT_FUNCTIONS[type(e).__name__](*args)
+            elif type(e).__name__ in FLOAT_FUNCTIONS:
+                v = FLOAT_FUNCTIONS[type(e).__name__](*args)
             else:
                 raise ValueError(type(e).__name__)
         except OverflowError:

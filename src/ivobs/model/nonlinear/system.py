@@ -10,6 +10,7 @@ interval functions are generated once (:mod:`.forms`, :mod:`.contract`). docs/no
 
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 from collections.abc import Callable, Sequence
@@ -435,7 +436,7 @@ class NonlinearSystem(TimeBase):
         )
 
     def __reduce__(self) -> tuple[Callable[..., NonlinearSystem], tuple[Any, ...]]:
-        return (_rebuild, (self.spec(),))
+        return (functools.partial(NonlinearSystem, **self.spec()), ())
 
     def spec(self) -> dict[str, Any]:
         """The keyword arguments that rebuild this system (expressions as text)."""
@@ -451,7 +452,3 @@ class NonlinearSystem(TimeBase):
             "dt": self.dt,
             "outputs": list(self.output_names),
         }
-
-
-def _rebuild(spec: dict[str, Any]) -> NonlinearSystem:
-    return NonlinearSystem(**spec)

@@ -34,7 +34,7 @@ from typing import Any
 from .codegen import Emitter, Pair, compile_source, lower_of, upper_of
 from .forms import emit_arguments, emit_centre, emit_meet, emit_rows
 
-__all__ = ["MAX_ORDER", "TaylorCode", "build_taylor", "lie_coefficients"]
+__all__ = ["MAX_ORDER", "TaylorCode", "lie_coefficients"]
 
 MAX_ORDER = 12
 """Highest Taylor order accepted (the Lie derivatives grow fast with the order)."""
@@ -59,14 +59,17 @@ def lie_coefficients(f: list[Any], x: list[Any], order: int) -> list[list[Any]]:
 
 
 class TaylorCode:
-    """The compiled step ``step(xl, xh, u, wl, wh, bl, bh, hl, hh) -> (lo, hi)`` and, built on
-    first use, ``jac(...) -> (Pl, Ph, Ql, Qh)``: ``P = [I 0] + Σ_{1<=i<k} h^i ∂f^[i]/∂z([z])``
-    and ``Q = h^k ∂f^[k]/∂z(B, [w])`` flattened row-major ``(nx, nz)``; ``sites`` labels the
+    """The generated Taylor step of order ``order`` for ``x' = f`` over the symbol groups
+    ``syms`` (``"x"``, ``"u"``, ``"w"``; ``consts``: known parameters' enclosures): the
+    compiled ``step(xl, xh, u, wl, wh, bl, bh, hl, hh) -> (lo, hi)`` and, built on first use,
+    ``jac(...) -> (Pl, Ph, Ql, Qh)``: ``P = [I 0] + Σ_{1<=i<k} h^i ∂f^[i]/∂z([z])`` and
+    ``Q = h^k ∂f^[k]/∂z(B, [w])`` flattened row-major ``(nx, nz)``; ``sites`` labels the
     domain-checked calls."""
 
     def __init__(
-        self, coefs: list[list[Any]], syms: dict[str, list[Any]], consts: dict[Any, Pair]
+        self, f: list[Any], syms: dict[str, list[Any]], consts: dict[Any, Pair], order: int
     ) -> None:
+        coefs = lie_coefficients(f, syms["x"], order)
         self.coefs, self.syms, self.consts = coefs, syms, consts
         self.sites: list[str] = []
         self.step, self.source = _build_step(coefs, syms, consts, self.sites)
@@ -77,14 +80,6 @@ class TaylorCode:
         if self._jac is None:
             self._jac = _build_jac(self.coefs, self.syms, self.consts, self.sites)
         return self._jac
-
-
-def build_taylor(
-    f: list[Any], syms: dict[str, list[Any]], consts: dict[Any, Pair], order: int
-) -> TaylorCode:
-    """The generated Taylor step of order ``order`` for ``x' = f`` over the symbol groups
-    ``syms`` (``"x"``, ``"u"``, ``"w"``); ``consts``: known parameters' enclosures."""
-    return TaylorCode(lie_coefficients(f, syms["x"], order), syms, consts)
 
 
 _ARGS = "xl, xh, u, wl, wh, bl, bh, hl, hh"

@@ -9,6 +9,7 @@ exactly); the traced expression is checked against the same whitelist as text ex
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 from ...errors import IvobsError
@@ -19,25 +20,13 @@ if TYPE_CHECKING:
 __all__ = ["expression_text", "trace_callable"]
 
 
-def _allowed() -> tuple[Any, ...]:
-    import sympy as sp
-
-    return (
-        sp.sin,
-        sp.cos,
-        sp.tan,
-        sp.exp,
-        sp.log,
-        sp.tanh,
-        sp.sinh,
-        sp.cosh,
-        sp.atan,
-        sp.asin,
-        sp.acos,
-        sp.Abs,
-        sp.Min,
-        sp.Max,
-    )
+FLOAT_FUNCTIONS: dict[str, Any] = {
+    "sin": math.sin, "cos": math.cos, "tan": math.tan, "exp": math.exp, "log": math.log,
+    "tanh": math.tanh, "sinh": math.sinh, "cosh": math.cosh, "atan": math.atan,
+    "asin": math.asin, "acos": math.acos, "Abs": abs, "Min": min, "Max": max,
+}  # fmt: skip
+"""The functions of expressions (:data:`~.parse.FUNCTIONS`, but ``sqrt``: a power in SymPy) in
+floating point, by SymPy's name."""
 
 
 def _check(what: str, i: int, e: Any) -> Any:
@@ -52,7 +41,7 @@ def _check(what: str, i: int, e: Any) -> Any:
     e = sp.sympify(e) if isinstance(e, (int, float)) else e  # a number, not text
     floats = {a: sp.Rational(a) for a in e.atoms(sp.Float)}  # exact doubles
     e = e.xreplace(floats)
-    allowed = _allowed()
+    allowed = tuple(getattr(sp, name) for name in FLOAT_FUNCTIONS)
     for node in sp.preorder_traversal(e):
         ok = (
             node.is_Symbol
