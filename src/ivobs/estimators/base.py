@@ -116,27 +116,14 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
-def _loaded_with(flag: str) -> list[tuple[int, str]]:
-    """``(order, name)`` of the method classes imported so far whose ``flag`` is true."""
-    todo, seen, out = list(Estimator.__subclasses__()), set(), []
-    while todo:
-        cls = todo.pop()
-        if cls not in seen:
-            seen.add(cls)
-            todo += cls.__subclasses__()
-            if cls.name and getattr(cls, flag):
-                out.append((cls.order, cls.name))
-    return out
+def _unset(flag: str) -> list[str]:
+    return []
 
 
-def _loaded_names(flag: str) -> list[str]:
-    return [n for _, n in sorted(_loaded_with(flag))]
-
-
-methods_with: Callable[[str], list[str]] = _loaded_names
-"""Names of the registered methods whose class flag (``supports_nonlinear``, ...) is true; the
-registry (:mod:`ivobs.estimators`) replaces it by one that imports every method first (its
-imports are lazy, so the classes loaded so far are not all of them)."""
+methods_with: Callable[[str], list[str]] = _unset
+"""Names of the registered methods whose class flag (``supports_nonlinear``, ...) is true: set
+by the registry (:mod:`ivobs.estimators`, imported before this module), which imports every
+method first (its imports are lazy)."""
 
 
 def _refusal(name: str, sys: Any) -> str:
