@@ -269,8 +269,10 @@ class DualWindow(Estimator):
         self, state: DualWindowState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[DualWindowState]:
         k, lay = state.k, self.lay
-        data, x_lo, x_hi = _shifted(state.data), _shifted(state.x_lo), _shifted(state.x_hi)
-        y_rad = _shifted(state.y_rad)
+        # each ring moved one row up (new arrays; the last row is the old first one)
+        data, x_lo, x_hi, y_rad = (
+            np.roll(a, -1, axis=0) for a in (state.data, state.x_lo, state.x_hi, state.y_rad)
+        )
         W = lay.width
         if k == 0:
             assert self.x0 is not None
@@ -441,11 +443,3 @@ _NO_BASIS = np.zeros(0, dtype=np.int8)
 def _mag(lo: np.ndarray, hi: np.ndarray) -> float:
     """``max(‖lo‖_∞, ‖hi‖_∞)``."""
     return max(-float(lo.min()), float(hi.max()), 0.0)
-
-
-def _shifted(a: np.ndarray) -> np.ndarray:
-    """``a`` moved one row up (a new array; its last row is the old first one)."""
-    out = np.empty_like(a)
-    out[:-1] = a[1:]
-    out[-1] = a[0]
-    return out
