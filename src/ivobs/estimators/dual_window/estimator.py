@@ -17,6 +17,7 @@ from ...model import LinearSystem
 from ...sets import Box
 from ...sets.lp import basis_codes
 from .. import register
+from .._uncertain import magnitude as mag
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
 from .auto import choose_window
@@ -283,7 +284,7 @@ class DualWindow(Estimator):
                 state.x_lo[-1], state.x_hi[-1], state.data[-1, lay.ny : W],
                 0.5 * data[-2, W + 3], state.data[-1, W + 1],
             )  # fmt: skip
-        u_mag, p_mag = float(np.abs(u_k).max(initial=0.0)), _mag(p_lo, p_hi)
+        u_mag, p_mag = float(np.abs(u_k).max(initial=0.0)), float(mag(p_lo, p_hi).max(initial=0.0))
         y_rad[-1] = 0.0
         missing = inconsistent = False
         if not np.isfinite(y_k.sum()):  # missing (NaN) or absurd (inf) components: replaced
@@ -438,8 +439,3 @@ class DualWindow(Estimator):
 
 
 _NO_BASIS = np.zeros(0, dtype=np.int8)
-
-
-def _mag(lo: np.ndarray, hi: np.ndarray) -> float:
-    """``max(‖lo‖_∞, ‖hi‖_∞)``."""
-    return max(-float(lo.min()), float(hi.max()), 0.0)
