@@ -43,6 +43,10 @@ MAX_POWERS = 2000
 holds (wider for a slowly converging gain: about ``c`` times the first powers)."""
 
 
+MAX_NORMS = 100_000
+"""Most powers of ``M`` whose norms :func:`certified_norms` bounds before it gives up."""
+
+
 def difference(A: np.ndarray, L: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(M, ΔM)``: ``M = fl(A - fl(L C))`` and ``ΔM >= |A - L C - M|`` exactly: the product's
     error (``product_error(|L| |C|)``) plus the subtraction's (``u |M|``, doubled to cover the
@@ -52,7 +56,7 @@ def difference(A: np.ndarray, L: np.ndarray, C: np.ndarray) -> tuple[np.ndarray,
     return M, dM
 
 
-def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np.ndarray:
+def certified_norms(M: np.ndarray, theta: float) -> np.ndarray:
     """``N_0, ..., N_K``: proven ``‖Mⁱ‖∞ <= N_i`` for the exact powers of the float matrix
     ``M``, up to the first ``N_K <= θ``.
 
@@ -61,13 +65,14 @@ def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np
     already proven for the lower powers, ``‖M^i‖∞ <= N_i = ‖P_i‖∞ + Σ_{j<i} N_{i-1-j} e_j``
     (rounded up). Unlike enclosures propagated by ``|M|``, this grows only with the true
     powers, also when ``|M|`` is far from Schur (large gains). Raises
-    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within ``max_power`` powers."""
+    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within :data:`MAX_NORMS`
+    powers."""
     n = M.shape[0]
     absM = np.abs(M)
     P = np.eye(n)
-    norms, errs = np.empty(max_power + 1), np.empty(max_power)
+    norms, errs = np.empty(MAX_NORMS + 1), np.empty(MAX_NORMS)
     norms[0] = 1.0
-    for i in range(1, max_power + 1):
+    for i in range(1, MAX_NORMS + 1):
         errs[i - 1] = float(product_error(absM @ np.abs(P).sum(axis=1), n).max())
         P = M @ P
         drift = float(np.dot(norms[i - 1 :: -1] if i > 1 else norms[:1], errs[:i]))

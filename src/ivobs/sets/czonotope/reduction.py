@@ -134,16 +134,15 @@ def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
     return bool(np.where(M != 0, aS, np.inf).min(initial=np.inf) >= _TINY)
 
 
-def _absorb_in_basis(
-    L: np.ndarray, order: int, max_condition: float = MAX_BASIS_CONDITION
-) -> np.ndarray | None:
+def _absorb_in_basis(L: np.ndarray, order: int) -> np.ndarray | None:
     """``order >= N`` generators ``L'`` with ``<0, L> ⊆ <0, L'>`` in exact arithmetic, by a
     parallelotope enclosure ([Chisci1998]), or ``None`` when the basis is ill-conditioned.
 
     The basis ``P`` (``N`` generators) is chosen by QR with column pivoting; its condition
-    estimate ``|R_11| / |R_NN|`` must be at most ``max_condition``. Each generator ``l`` to
-    remove has coordinates ``α = P⁻¹ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``; those
-    with the smallest ``‖α‖₁`` are removed: ``<0, L> ⊆ <0, [P diag(s₀), L_kept]> ⊕ box(ρ)``
+    estimate ``|R_11| / |R_NN|`` must be at most
+    :data:`~ivobs.sets.zonotope.MAX_BASIS_CONDITION`. Each generator ``l`` to remove has
+    coordinates ``α = P⁻¹ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``; those with the
+    smallest ``‖α‖₁`` are removed: ``<0, L> ⊆ <0, [P diag(s₀), L_kept]> ⊕ box(ρ)``
     with ``s₀ >= 1 + Σ|α|`` (rounded up) and ``ρ >= Σ |l - P α|`` (evaluated, plus the bound
     ``γ_{N+2} (|l| + |P| |α|)`` of its rounding, [Higham2002, Lemma 3.1]). The box and the
     rounding of the product ``P diag(t)`` itself are then absorbed by the basis:
@@ -159,7 +158,7 @@ def _absorb_in_basis(
         return None
     R, jpvt = scipy.linalg.qr(L, mode="r", pivoting=True, check_finite=False)
     r_first, r_last = abs(float(R[0, 0])), abs(float(R[N - 1, N - 1]))
-    if not r_last * max_condition >= r_first > 0.0:
+    if not r_last * MAX_BASIS_CONDITION >= r_first > 0.0:
         return None
     basis, others = jpvt[:N], jpvt[N:]
     alpha = scipy.linalg.solve_triangular(R[:N, :N], R[:N, N:], check_finite=False)
