@@ -52,7 +52,7 @@ from ...model import LinearSystem
 from ...sets import Box, image_bounds
 from ...sets.rounding import down, up, upper
 from ..state import Step, evolve
-from .design import KKLDesign, Transform, TransformSequence, finite, left_inverse
+from .design import KKLDesign, Transform, TransformSequence, left_inverse
 from .observer import PATTERNS, Observer, ZState, prior_box, recover
 from .terms import Terms, combination, make_terms
 
@@ -166,7 +166,7 @@ class Discrete(Observer[DiscreteState]):
             if np.count_nonzero(nlo > nhi):  # data contradicting the model: keep (3.c-d)
                 return lo, hi, False
             lo, hi = nlo, nhi
-        if not tr.ok and k >= self.design.k_star and not (finite(lo) and finite(hi)):
+        if not tr.ok and k >= self.design.k_star and not np.isfinite((lo, hi)).all():
             raise IvobsError(
                 f"kkl: T[{k}] is not left-invertible (cond {tr.cond:.2e}) and no finite "
                 "prior is available; pass x0 so the observer can bridge such steps"
