@@ -8,8 +8,6 @@ step, go to a box ([Higham2002, Lemma 3.1] bounds).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import scipy.linalg
 
@@ -104,25 +102,18 @@ def _pow2_scaling(L: np.ndarray) -> np.ndarray | None:
     """Powers of two ``d`` with ``max_j |d_i L_ij|`` in ``[1, 2)`` (zero rows: 1), or ``None``
     when scaling an entry would leave the normal range (then it would not be exact)."""
     aL = np.abs(L)
-    d = []
-    for v in aL.max(axis=1).tolist():
-        if not v < math.inf:  # an inf or a NaN
-            return None
-        e = 1 - math.frexp(v)[1] if v > 0 else 0
-        if e > 1023:  # a subnormal row: its scale overflows
-            return None
-        d.append(math.ldexp(1.0, e))
-    scale = np.array(d)
+    v = aL.max(axis=1)
+    if not np.isfinite(v).all():  # an inf or a NaN
+        return None
+    e = np.where(v > 0, 1 - np.frexp(v)[1], 0)
+    if (e > 1023).any():  # a subnormal row: its scale overflows
+        return None
+    scale = np.ldexp(1.0, e)
     # no entry can overflow (the largest lands in [1, 2)); the smallest nonzero one of each
     # row must stay normal (rounding is monotone: the smallest scaled entry is the scaled
     # smallest one) — the same test as _exactly_scaled(L * d, L), without forming L * d
-    return scale if bool((_min_nonzero(aL) * scale >= _TINY).all()) else None
-
-
-def _min_nonzero(aM: np.ndarray) -> np.ndarray:
-    """The smallest nonzero entry of each row of ``aM >= 0`` (``inf`` for a zero row)."""
-    out: np.ndarray = np.where(aM > 0, aM, np.inf).min(axis=1)
-    return out
+    smallest = np.where(aL > 0, aL, np.inf).min(axis=1)
+    return scale if bool((smallest * scale >= _TINY).all()) else None
 
 
 def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
