@@ -126,18 +126,6 @@ by the registry (:mod:`ivobs.estimators`, imported before this module), which im
 method first (its imports are lazy)."""
 
 
-def _refusal(name: str, sys: Any) -> str:
-    """Why ``name`` refuses a system with interval matrices, and which methods accept it."""
-    which = ", ".join(sys.interval_matrices())
-    return (
-        f"sys: the {name} method needs exactly known matrices; this system has interval "
-        f"matrices ({which}). Methods that accept them: "
-        f"{', '.join(methods_with('supports_uncertain'))} "
-        "(docs/uncertain.md), or estimate the nominal system sys.nominal() (not guaranteed for "
-        "the uncertain plant)"
-    )
-
-
 def nonlinear_refusal(name: str) -> str:
     """The message refusing a :class:`~ivobs.NonlinearSystem` to a linear-only method, naming
     the methods that take one."""
@@ -192,7 +180,13 @@ def check_system(method: Any, sys: Any) -> None:
             "time-varying matrices. Use 'fixed-time', 'kkl' or 'exact'"
         )
     if getattr(sys, "is_uncertain", False) and not method.supports_uncertain:
-        raise IvobsError(_refusal(name, sys))
+        raise IvobsError(
+            f"sys: the {name} method needs exactly known matrices; this system has interval "
+            f"matrices ({', '.join(sys.interval_matrices())}). Methods that accept them: "
+            f"{', '.join(methods_with('supports_uncertain'))} "
+            "(docs/uncertain.md), or estimate the nominal system sys.nominal() (not guaranteed "
+            "for the uncertain plant)"
+        )
 
 
 class Estimator(Persistence):

@@ -98,18 +98,6 @@ MAX_CACHE_VALUES = 2**26
 """Most numbers the multiplier cache ``mu`` (2 nx, cache, window + 1, ny) may hold (512 MiB)."""
 
 
-def check_cache_size(design: DualWindowDesign, nx: int, ny: int) -> None:
-    """Refuse a ``cache`` or ``window`` whose multiplier cache would not fit in memory, before
-    allocating it."""
-    size = 2 * nx * design.cache * (design.window + 1) * ny
-    if size > MAX_CACHE_VALUES:
-        raise IvobsError(
-            f"cache, window: the multiplier cache holds 2 nx * cache * (window + 1) * ny = {size} "
-            f"numbers (cache = {design.cache}, window = {design.window}), more than the limit of "
-            f"{MAX_CACHE_VALUES}; give a smaller cache or window"
-        )
-
-
 @register
 class DualWindow(Estimator):
     """The moving-window exact hull, certified each step from a cache of LP multipliers.
@@ -197,7 +185,13 @@ class DualWindow(Estimator):
                                        influence=influence, refresh_tol=tol)  # fmt: skip
         self.window = N
         """The window ``N`` in use (chosen from the model or given)."""
-        check_cache_size(self.design, sys.nx, sys.ny)
+        size = 2 * sys.nx * cache * (N + 1) * sys.ny  # refused before it is allocated
+        if size > MAX_CACHE_VALUES:
+            raise IvobsError(
+                f"cache, window: the multiplier cache holds 2 nx * cache * (window + 1) * ny = "
+                f"{size} numbers (cache = {cache}, window = {N}), more than the limit of "
+                f"{MAX_CACHE_VALUES}; give a smaller cache or window"
+            )
         self.lay = Layout(sys.nx, sys.nu, sys.ny, sys.nd, self.design.window)
         work = 2 * sys.nx * (self.design.window + 1) * (sys.nx + sys.nd)
         self._min_period = min(refresh, max(1, -(-work // SOLVE_BUDGET)))
