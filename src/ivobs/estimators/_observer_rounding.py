@@ -5,9 +5,9 @@
   exact ``A - L C``;
 * :func:`rounding_matrix`: ``W``, the rounding of one observer step as a linear function of the
   magnitudes it involves ([Higham2002, eq. (3.5)]);
-* :func:`certified_norms`, :func:`decay_of`, :func:`envelope`: proven bounds of the powers of the
-  float ``M`` (``‖M^i‖∞``, ``|M^i X| 1 <= a λ^i``), computed from float powers and the bounds of
-  their own rounding;
+* :func:`envelope`: proven bounds ``|M^i X| 1 <= a λ^i`` of the powers of the float ``M``
+  (``‖M^i‖∞ <= c λ^i``: :func:`ivobs.sets.rounding.certified_norms`), computed from float
+  powers and the bounds of their own rounding;
 * :class:`Channels`: where the observer's rounding goes while ``M`` is the same at every step.
 """
 
@@ -20,12 +20,10 @@ import numpy as np
 
 from ..errors import DesignError
 from ..linalg import UNIT_ROUNDOFF, gamma
-from ..sets.rounding import ETA, DecayBound, product_error, up, upper
+from ..sets.rounding import ETA, DecayBound, certified_norms, decay_of, product_error, up, upper
 
 __all__ = [
     "Channels",
-    "certified_norms",
-    "decay_of",
     "difference",
     "envelope",
     "rounding_matrix",
@@ -50,53 +48,6 @@ def difference(A: np.ndarray, L: np.ndarray, C: np.ndarray) -> tuple[np.ndarray,
     M = A - L @ C
     dM = up(product_error(np.abs(L) @ np.abs(C), L.shape[1]) + 2.0 * UNIT_ROUNDOFF * np.abs(M))
     return M, dM
-
-
-def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np.ndarray:
-    """``N_0, ..., N_K``: proven ``‖Mⁱ‖∞ <= N_i`` for the exact powers of the float matrix
-    ``M``, up to the first ``N_K <= θ``.
-
-    ``P_{i+1} = fl(M P_i)`` differs from ``M^{i+1}`` by ``Σ_{j<=i} M^{i-j} E_j``, ``E_j =
-    M P_j - fl(M P_j)``, ``‖E_j‖∞ <= e_j = ‖product_error(|M| |P_j|)‖∞``; so, from the bounds
-    already proven for the lower powers, ``‖M^i‖∞ <= N_i = ‖P_i‖∞ + Σ_{j<i} N_{i-1-j} e_j``
-    (rounded up). Unlike enclosures propagated by ``|M|``, this grows only with the true
-    powers, also when ``|M|`` is far from Schur (large gains). Raises
-    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within ``max_power`` powers."""
-    n = M.shape[0]
-    absM = np.abs(M)
-    P = np.eye(n)
-    norms, errs = np.empty(max_power + 1), np.empty(max_power)
-    norms[0] = 1.0
-    for i in range(1, max_power + 1):
-        errs[i - 1] = float(product_error(absM @ np.abs(P).sum(axis=1), n).max())
-        P = M @ P
-        drift = float(np.dot(norms[i - 1 :: -1] if i > 1 else norms[:1], errs[:i]))
-        N = float(upper(float(upper(np.abs(P).sum(axis=1).max(), n)) + drift, i + 2))
-        norms[i] = N
-        if not N < 1e150:
-            break
-        if N <= theta:
-            return norms[: i + 1].copy()
-    raise DesignError(
-        "the rounding of the observer cannot be bounded: the powers of A - LC do not "
-        f"certifiably decay (‖M^i‖∞ after {i} powers: {norms[i]:.3g}); the matrix is not Schur "
-        "stable or too close to the unit circle"
-    )
-
-
-def decay_of(norms: np.ndarray, theta: float) -> DecayBound | None:
-    """``‖Mⁱ‖∞ <= c λⁱ`` for every ``i`` from :func:`certified_norms`: the first ``K`` with
-    ``N_K <= θ`` gives ``λ = θ^{1/K}`` and ``c = max_{j<K} N_j / λ^j`` (``i = q K + j``:
-    ``‖M^i‖ <= θ^q N_j``); None when no ``N_K <= θ``."""
-    reached = np.flatnonzero(norms <= theta)
-    if not reached.size or norms.shape[0] == 1:
-        return DecayBound(1.0, 0.0) if norms.shape[0] == 1 else None
-    K = int(max(reached[0], 1))
-    lam = float(up(theta ** (1.0 / K) * (1.0 + 1e-12)))
-    if not lam < 1.0:
-        return None
-    c = float(up(float(np.max(norms[:K] / lam ** np.arange(K))) * (1.0 + 1e-12)))
-    return DecayBound(max(c, 1.0), lam)
 
 
 def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:

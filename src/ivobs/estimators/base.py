@@ -116,39 +116,14 @@ def check_x0(x0: Any, nx: int, who: str, required: bool = True) -> Box | None:
     return x0
 
 
-def _loaded_with(flag: str) -> list[tuple[int, str]]:
-    """``(order, name)`` of the method classes imported so far whose ``flag`` is true."""
-    todo, seen, out = list(Estimator.__subclasses__()), set(), []
-    while todo:
-        cls = todo.pop()
-        if cls not in seen:
-            seen.add(cls)
-            todo += cls.__subclasses__()
-            if cls.name and getattr(cls, flag):
-                out.append((cls.order, cls.name))
-    return out
+def _unset(flag: str) -> list[str]:
+    return []
 
 
-def _loaded_names(flag: str) -> list[str]:
-    return [n for _, n in sorted(_loaded_with(flag))]
-
-
-methods_with: Callable[[str], list[str]] = _loaded_names
-"""Names of the registered methods whose class flag (``supports_nonlinear``, ...) is true; the
-registry (:mod:`ivobs.estimators`) replaces it by one that imports every method first (its
-imports are lazy, so the classes loaded so far are not all of them)."""
-
-
-def _refusal(name: str, sys: Any) -> str:
-    """Why ``name`` refuses a system with interval matrices, and which methods accept it."""
-    which = ", ".join(sys.interval_matrices())
-    return (
-        f"sys: the {name} method needs exactly known matrices; this system has interval "
-        f"matrices ({which}). Methods that accept them: "
-        f"{', '.join(methods_with('supports_uncertain'))} "
-        "(docs/uncertain.md), or estimate the nominal system sys.nominal() (not guaranteed for "
-        "the uncertain plant)"
-    )
+methods_with: Callable[[str], list[str]] = _unset
+"""Names of the registered methods whose class flag (``supports_nonlinear``, ...) is true: set
+by the registry (:mod:`ivobs.estimators`, imported before this module), which imports every
+method first (its imports are lazy)."""
 
 
 def nonlinear_refusal(name: str) -> str:
@@ -205,7 +180,13 @@ def check_system(method: Any, sys: Any) -> None:
             "time-varying matrices. Use 'fixed-time', 'kkl' or 'exact'"
         )
     if getattr(sys, "is_uncertain", False) and not method.supports_uncertain:
-        raise IvobsError(_refusal(name, sys))
+        raise IvobsError(
+            f"sys: the {name} method needs exactly known matrices; this system has interval "
+            f"matrices ({', '.join(sys.interval_matrices())}). Methods that accept them: "
+            f"{', '.join(methods_with('supports_uncertain'))} "
+            "(docs/uncertain.md), or estimate the nominal system sys.nominal() (not guaranteed "
+            "for the uncertain plant)"
+        )
 
 
 class Estimator(Persistence):

@@ -85,12 +85,6 @@ def scaled(A: Any, t: Any) -> IntervalMatrix:
     return M, R
 
 
-def _norm_inf(M: np.ndarray, R: np.ndarray) -> float:
-    """An upper bound of ``‖X‖∞`` over the interval matrix ``(M, R)``."""
-    n = M.shape[1]
-    return float(upper(np.max(np.sum(np.abs(M) + R, axis=1)), n + 1))
-
-
 def expm(M: Any, R: Any = None) -> IntervalMatrix:
     """An enclosure ``(E, R_E)`` of ``e^X`` for every ``X`` with ``|X − M| <= R`` (module
     docstring): ``|e^X − E| <= R_E`` elementwise. ``R`` None: the float matrix ``M`` itself.
@@ -104,7 +98,7 @@ def expm(M: Any, R: Any = None) -> IntervalMatrix:
         return M.copy(), R.copy()
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(R))):
         raise IvobsError("M: expected finite entries (and radii)")
-    nu = _norm_inf(M, R)
+    nu = float(upper(np.max(np.sum(np.abs(M) + R, axis=1)), n + 1))  # >= ‖X‖∞ over (M, R)
     s = 0 if nu <= THETA else math.ceil(math.log2(nu / THETA))
     if s > 1000:
         raise IvobsError(f"M: norm {nu:.3g} too large for an enclosure of its exponential")

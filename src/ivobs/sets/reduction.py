@@ -117,9 +117,7 @@ def _greedy_basis(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @jit
-def reduce_parallelotope(
-    G: np.ndarray, order: int, max_condition: float = MAX_BASIS_CONDITION
-) -> tuple[np.ndarray, np.ndarray]:
+def reduce_parallelotope(G: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
     """At most ``order`` generators, absorbed into a basis of ``n`` generators
     ([Chisci1998]); returns ``(G', ρ)`` with ``<0, G> ⊆ <0, G'> ⊕ box(ρ)`` exactly.
 
@@ -132,12 +130,12 @@ def reduce_parallelotope(
     scale factors are rounded up. The basis is picked among the generators, and the strip
     updates and the prediction can make it nearly dependent: the factors ``|α|`` then grow
     step after step (CORA's tank30 at ``order = 2 nx`` reached boxes of 10⁷), so a basis whose
-    ``|R_11| / |R_nn|`` exceeds ``max_condition`` is not used: Girard's box instead."""
+    ``|R_11| / |R_nn|`` exceeds :data:`MAX_BASIS_CONDITION` is not used: Girard's box instead."""
     n, m = G.shape
     if m <= order:
         return G, np.zeros(n)
     piv, R = _greedy_basis(G)
-    if not R[n - 1, n - 1] * max_condition >= R[0, 0] > 0.0:
+    if not R[n - 1, n - 1] * MAX_BASIS_CONDITION >= R[0, 0] > 0.0:
         return reduce_girard(G, order), np.zeros(n)
     n_oth = m - n
     alpha = R[:, n:].copy()  # R_11⁻¹ R_12 by back substitution

@@ -35,6 +35,8 @@ __all__ = [
     "ETA",
     "UNIT_ROUNDOFF",
     "DecayBound",
+    "certified_norms",
+    "decay_of",
     "down",
     "enclose",
     "gamma",
@@ -110,10 +112,9 @@ class DecayBound:
     up to ``Σ_j M^{k-1-j} r_j``, whose ∞-norm is at most ``q_k`` with ``q_{j+1} = λ q_j + c ‖r_j‖∞``
     (:meth:`next`): a scalar that stays bounded, also when ``|M|`` is not Schur.
 
-    Built by :meth:`of`: enclosures ``Pᵢ ± Rᵢ`` of the exact powers (``P_{i+1} = fl(M Pᵢ)``,
-    ``R_{i+1} >= |M| Rᵢ + |fl(M Pᵢ) − M Pᵢ|``) until ``‖|P_K| + R_K‖∞ <= θ < 1``; then for
-    ``i = q K + j``, ``‖Mⁱ‖ <= θ^q N_j`` (``N_j = ‖|P_j| + R_j‖∞``), so ``λ = θ^{1/K}`` (rounded up)
-    and ``c = max_j N_j / λ^j``.
+    Built by :meth:`of`: proven ``‖Mⁱ‖∞ <= N_i`` until ``N_K <= θ < 1``
+    (:func:`certified_norms`); then for ``i = q K + j``, ``‖Mⁱ‖ <= θ^q N_j``, so ``λ = θ^{1/K}``
+    (rounded up) and ``c = max_j N_j / λ^j`` (:func:`decay_of`).
     """
 
     c: float
@@ -124,32 +125,15 @@ class DecayBound:
         """The constants for ``M`` (:class:`~ivobs.DesignError` when its powers do not certify
         a decay below ``θ`` within ``max_power`` steps: ``M`` not Schur, or too close to it)."""
         M = np.asarray(M, dtype=float)
-        n = M.shape[0]
-        if n == 0:
+        if M.shape[0] == 0:
             return cls(1.0, 0.0)
-        absM = np.abs(M)
-        P, R = np.eye(n), np.zeros((n, n))
-        norms = [1.0]
-        for _ in range(max_power):
-            P, err = matvec(M, absM, P)
-            R = upper(absM @ R + err, n + 1)
-            N = float(upper(np.max(np.sum(np.abs(P) + R, axis=1)), n + 1))
-            if not N < 1e150:
-                break
-            if N <= theta:
-                K = len(norms)
-                lam = float(theta ** (1.0 / K)) * (1.0 + 1e-12)
-                if not lam < 1.0:
-                    break
-                powers = lam ** np.arange(K)
-                c = float(np.max(np.asarray(norms) / powers)) * (1.0 + 1e-12)
-                return cls(max(c, 1.0), lam)
-            norms.append(N)
-        raise DesignError(
-            "the rounding of the recursion cannot be bounded: the powers of its matrix do not "
-            f"certifiably decay (‖M^i‖∞ after {len(norms)} powers: {norms[-1]:.3g}); the matrix "
-            "is not Schur stable or too close to the unit circle"
-        )
+        decay = decay_of(certified_norms(M, theta, max_power), theta)
+        if decay is None:
+            raise DesignError(
+                "the rounding of the recursion cannot be bounded: the decay rate of its matrix "
+                f"is too close to 1 (θ = {theta} not reached soon enough)"
+            )
+        return decay
 
     @property
     def gain(self) -> float:
@@ -173,6 +157,54 @@ class DecayBound:
             0
         ]
         return out
+
+
+def certified_norms(M: np.ndarray, theta: float, max_power: int = 100_000) -> np.ndarray:
+    """``N_0, ..., N_K``: proven ``‖Mⁱ‖∞ <= N_i`` for the exact powers of the float matrix
+    ``M``, up to the first ``N_K <= θ``.
+
+    ``P_{i+1} = fl(M P_i)`` differs from ``M^{i+1}`` by ``Σ_{j<=i} M^{i-j} E_j``, ``E_j =
+    M P_j - fl(M P_j)``, ``‖E_j‖∞ <= e_j = ‖product_error(|M| |P_j|)‖∞``; so, from the bounds
+    already proven for the lower powers, ``‖M^i‖∞ <= N_i = ‖P_i‖∞ + Σ_{j<i} N_{i-1-j} e_j``
+    (rounded up). Unlike enclosures propagated by ``|M|``, this grows only with the true
+    powers, also when ``|M|`` is far from Schur (large gains). Raises
+    :class:`~ivobs.DesignError` when ``N_i`` does not reach ``θ`` within ``max_power``
+    powers."""
+    n = M.shape[0]
+    absM = np.abs(M)
+    P = np.eye(n)
+    norms, errs = np.empty(max_power + 1), np.empty(max_power)
+    norms[0] = 1.0
+    for i in range(1, max_power + 1):
+        errs[i - 1] = float(product_error(absM @ np.abs(P).sum(axis=1), n).max())
+        P = M @ P
+        drift = float(np.dot(norms[i - 1 :: -1] if i > 1 else norms[:1], errs[:i]))
+        N = float(upper(float(upper(np.abs(P).sum(axis=1).max(), n)) + drift, i + 2))
+        norms[i] = N
+        if not N < 1e150:
+            break
+        if N <= theta:
+            return norms[: i + 1].copy()
+    raise DesignError(
+        "the rounding of the recursion cannot be bounded: the powers of its matrix do not "
+        f"certifiably decay (‖M^i‖∞ after {i} powers: {norms[i]:.3g}); the matrix is not Schur "
+        "stable or too close to the unit circle"
+    )
+
+
+def decay_of(norms: np.ndarray, theta: float) -> DecayBound | None:
+    """``‖Mⁱ‖∞ <= c λⁱ`` for every ``i`` from :func:`certified_norms`: the first ``K`` with
+    ``N_K <= θ`` gives ``λ = θ^{1/K}`` and ``c = max_{j<K} N_j / λ^j`` (``i = q K + j``:
+    ``‖M^i‖ <= θ^q N_j``); None when no ``N_K <= θ``."""
+    reached = np.flatnonzero(norms <= theta)
+    if not reached.size or norms.shape[0] == 1:
+        return DecayBound(1.0, 0.0) if norms.shape[0] == 1 else None
+    K = int(max(reached[0], 1))
+    lam = float(up(theta ** (1.0 / K) * (1.0 + 1e-12)))
+    if not lam < 1.0:
+        return None
+    c = float(up(float(np.max(norms[:K] / lam ** np.arange(K))) * (1.0 + 1e-12)))
+    return DecayBound(max(c, 1.0), lam)
 
 
 _HUGE = 1e300

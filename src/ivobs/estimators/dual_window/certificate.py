@@ -61,7 +61,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..exact.safe import EPS, TINY, gamma_n, mag
+from .._uncertain import magnitude as mag
+from ..exact.safe import EPS, TINY, gamma_n
 
 __all__ = [
     "Coefficients",

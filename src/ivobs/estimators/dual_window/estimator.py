@@ -17,6 +17,7 @@ from ...model import LinearSystem
 from ...sets import Box
 from ...sets.lp import basis_codes
 from .. import register
+from .._uncertain import magnitude as mag
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
 from .auto import choose_window
@@ -95,18 +96,6 @@ tens of steps: every step)."""
 
 MAX_CACHE_VALUES = 2**26
 """Most numbers the multiplier cache ``mu`` (2 nx, cache, window + 1, ny) may hold (512 MiB)."""
-
-
-def check_cache_size(design: DualWindowDesign, nx: int, ny: int) -> None:
-    """Refuse a ``cache`` or ``window`` whose multiplier cache would not fit in memory, before
-    allocating it."""
-    size = 2 * nx * design.cache * (design.window + 1) * ny
-    if size > MAX_CACHE_VALUES:
-        raise IvobsError(
-            f"cache, window: the multiplier cache holds 2 nx * cache * (window + 1) * ny = {size} "
-            f"numbers (cache = {design.cache}, window = {design.window}), more than the limit of "
-            f"{MAX_CACHE_VALUES}; give a smaller cache or window"
-        )
 
 
 @register
@@ -196,7 +185,13 @@ class DualWindow(Estimator):
                                        influence=influence, refresh_tol=tol)  # fmt: skip
         self.window = N
         """The window ``N`` in use (chosen from the model or given)."""
-        check_cache_size(self.design, sys.nx, sys.ny)
+        size = 2 * sys.nx * cache * (N + 1) * sys.ny  # refused before it is allocated
+        if size > MAX_CACHE_VALUES:
+            raise IvobsError(
+                f"cache, window: the multiplier cache holds 2 nx * cache * (window + 1) * ny = "
+                f"{size} numbers (cache = {cache}, window = {N}), more than the limit of "
+                f"{MAX_CACHE_VALUES}; give a smaller cache or window"
+            )
         self.lay = Layout(sys.nx, sys.nu, sys.ny, sys.nd, self.design.window)
         work = 2 * sys.nx * (self.design.window + 1) * (sys.nx + sys.nd)
         self._min_period = min(refresh, max(1, -(-work // SOLVE_BUDGET)))
@@ -269,8 +264,10 @@ class DualWindow(Estimator):
         self, state: DualWindowState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> Step[DualWindowState]:
         k, lay = state.k, self.lay
-        data, x_lo, x_hi = _shifted(state.data), _shifted(state.x_lo), _shifted(state.x_hi)
-        y_rad = _shifted(state.y_rad)
+        # each ring moved one row up (new arrays; the last row is the old first one)
+        data, x_lo, x_hi, y_rad = (
+            np.roll(a, -1, axis=0) for a in (state.data, state.x_lo, state.x_hi, state.y_rad)
+        )
         W = lay.width
         if k == 0:
             assert self.x0 is not None
@@ -281,7 +278,7 @@ class DualWindow(Estimator):
                 state.x_lo[-1], state.x_hi[-1], state.data[-1, lay.ny : W],
                 0.5 * data[-2, W + 3], state.data[-1, W + 1],
             )  # fmt: skip
-        u_mag, p_mag = float(np.abs(u_k).max(initial=0.0)), _mag(p_lo, p_hi)
+        u_mag, p_mag = float(np.abs(u_k).max(initial=0.0)), float(mag(p_lo, p_hi).max(initial=0.0))
         y_rad[-1] = 0.0
         missing = inconsistent = False
         if not np.isfinite(y_k.sum()):  # missing (NaN) or absurd (inf) components: replaced
@@ -436,16 +433,3 @@ class DualWindow(Estimator):
 
 
 _NO_BASIS = np.zeros(0, dtype=np.int8)
-
-
-def _mag(lo: np.ndarray, hi: np.ndarray) -> float:
-    """``max(‖lo‖_∞, ‖hi‖_∞)``."""
-    return max(-float(lo.min()), float(hi.max()), 0.0)
-
-
-def _shifted(a: np.ndarray) -> np.ndarray:
-    """``a`` moved one row up (a new array; its last row is the old first one)."""
-    out = np.empty_like(a)
-    out[:-1] = a[1:]
-    out[-1] = a[0]
-    return out

@@ -177,7 +177,7 @@ class Exact(Estimator):
             meas = measurement(sys, k, u_k, y_k, False, p_lo, p_hi, d_k.lo, d_k.hi)
         lp.push(dyn, meas, (p_lo, p_hi), (d_k.lo, d_k.hi), 0.5 * (p_lo + p_hi))
         N = self.design.window
-        if N is not None and lp.n_blocks > N + 1:
+        if N is not None and len(lp.n_dyn) > N + 1:
             lp.pop_front()
         lo, hi, verdict = warm.last_x_box()
         used, inconsistent = True, False

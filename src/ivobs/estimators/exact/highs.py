@@ -37,15 +37,6 @@ OK, INFEASIBLE, UNSURE = "ok", "infeasible", "unsure"
 no certificate (the sample is dropped without a report)."""
 
 
-def _program() -> LinearProgram:
-    """A HiGHS model of the trajectory program. HiGHS's scaling is off: it would be kept from
-    the first solve and extended row by row as the program grows, so a program rebuilt after
-    ``restore()`` would be scaled (and solved) differently from the one built step by step; the
-    shift to the centres already scales the program. The iteration limit bounds a solve that
-    stalls (its last multipliers still give a safe bound)."""
-    return LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
-
-
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -196,7 +187,12 @@ class Chain:
 
     def __init__(self, lp: TrajectoryLP, sense: float):
         self.lp, self.sense = lp, sense
-        self.prog = _program()
+        # HiGHS's scaling is off: it would be kept from the first solve and extended row by
+        # row as the program grows, so a program rebuilt after ``restore()`` would be scaled
+        # (and solved) differently from the one built step by step; the shift to the centres
+        # already scales the program. The iteration limit bounds a solve that stalls (its last
+        # multipliers still give a safe bound).
+        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
         self._synced: tuple[np.ndarray, np.ndarray, np.ndarray, int, int] | None = None
         self._cost_col: int | None = None  # the one column with a nonzero cost in the model
         self.relaxed = lp.relaxed  # rows given to HiGHS as ranges (else equalities)

@@ -47,10 +47,6 @@ class TrajectoryLP:
         self.shift = np.zeros(0)
 
     @property
-    def n_blocks(self) -> int:
-        return len(self.n_dyn)
-
-    @property
     def last_x(self) -> slice:
         """The columns of ``x`` of the newest block."""
         first = self.lo.size - self.nb

@@ -25,7 +25,8 @@ import numpy as np
 
 from ...model import LinearSystem
 from ...sets import image_bounds
-from .safe import gamma_n, mag
+from .._uncertain import magnitude as mag
+from .safe import gamma_n
 
 __all__ = [
     "VAR_MARGIN",

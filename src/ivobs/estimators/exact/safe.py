@@ -27,8 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...linalg import gamma
+from .._uncertain import magnitude as mag
 
-__all__ = ["SafeBoundData", "bound_data", "certifies_infeasibility", "gamma_n", "mag", "safe_min"]
+__all__ = ["SafeBoundData", "bound_data", "certifies_infeasibility", "gamma_n", "safe_min"]
 
 EPS = float(np.finfo(float).eps)
 TINY = float(np.finfo(float).smallest_subnormal)
@@ -39,12 +40,6 @@ def gamma_n(n: int) -> float:
     [Higham2002, §3.1], ``ε = 2^-52`` (twice the unit roundoff, which also absorbs the
     rounding of the error terms themselves)."""
     return gamma(n, EPS)
-
-
-def mag(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """``max(|lo|, |hi|)``: a bound on the magnitude of every point of ``[lo, hi]``."""
-    out: np.ndarray = np.maximum(np.abs(lo), np.abs(hi))
-    return out
 
 
 @dataclass(frozen=True)

@@ -39,10 +39,9 @@ __all__ = [
     "IntervalDesign",
     "SplitDesign",
     "check_design_size",
-    "interval_design",
+    "gain_design",
     "sparse_gain_check",
     "sparse_radius",
-    "split_design",
 ]
 
 
@@ -172,101 +171,78 @@ def given_gain(
     return L, D, spectral_radius(np.abs(D))
 
 
-def _steady(sys: LinearSystem, D: Any, L: np.ndarray) -> np.ndarray | None:
-    """``(I − |D|)⁻¹ |E − LF| Δ`` (a sparse solve for sparse systems); None for callable
-    bounds."""
-    if sys.bounds_depend_on_y:
-        return None
+D = TypeVar("D", bound=_GainDesign)
+
+_GAINS = {True: ("width", "lmi+width", "lmi"), False: ("width", "margin+width", "margin", "lmi")}
+"""The ``gain=`` designs of ``interval`` (``A − LC`` nonnegative) and ``interval-split``."""
+
+
+def gain_design(kind: type[D], sys: LinearSystem, L: Any, gain: str, who: str) -> D:
+    """The design of ``interval`` (``kind`` :class:`IntervalDesign`: ``A − LC`` nonnegative and
+    Schur) or ``interval-split`` (:class:`SplitDesign`: ``|A − LC|`` Schur): a given gain, the
+    steady-state-width-optimal gain of one linear program (``gain="width"``,
+    :func:`ivobs.design.width_lp.width_gain`), LMI (41) of [Tang2019] (= LMIs (7)–(8) of
+    [Efimov2013], ``"lmi"``), the smallest ``ρ(|A − LC|)`` found (``"margin"``, split only),
+    or either refined by the local width LPs (``"lmi+width"``, ``"margin+width"``);
+    :class:`DesignError` when no such gain is found. With the design: the steady-state width
+    ``(I − |D|)⁻¹ |E − LF| Δ`` (a sparse solve for sparse systems; None for callable bounds)
+    and the growth rates during single-output gaps (None for sparse systems)."""
+    nonnegative = kind is IntervalDesign
+    if L is None:
+        names = _GAINS[nonnegative]
+        if gain not in names:
+            listed = ", ".join(map(repr, names[:-1]))
+            raise IvobsError(f"gain: expected {listed} or {names[-1]!r}, got {gain!r}")
+        A, _, C, _, E, F = sys.matrices_at(0)
+        if gain == "width":
+            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
+            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=nonnegative, who=who)
+        else:
+            what = "LMI (41)" if nonnegative else "LMIs (7)-(8)"
+            what = what if gain.startswith("lmi") else "linear programs on |A − LC|"
+            check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
+            L = nonnegative_gain(A, C, who) if gain.startswith("lmi") else _margin_gain(A, C, who)
+            if gain.endswith("+width"):
+                L = refine_width(A, C, E, F, sys.d_widths(), L, nonnegative=nonnegative)
+    else:
+        gain = "given"
+    L, D_, rho = given_gain(sys, L, who, nonnegative)
     G = sys.E_at(0) - L @ sys.F_at(0)
-    if sys.is_sparse:
+    if sys.bounds_depend_on_y:
+        steady = None
+    elif sys.is_sparse:
         from scipy.sparse import identity
         from scipy.sparse.linalg import spsolve
 
-        M = (identity(D.shape[0], format="csc") - abs(D)).tocsc()
-        return np.atleast_1d(spsolve(M, np.abs(G) @ sys.d_widths()))
-    return steady_width(D, G, sys.d_widths())
-
-
-def _missing_radius(sys: LinearSystem, L: np.ndarray) -> np.ndarray | None:
-    if sys.is_sparse:
-        return None
-    return missing_radius(sys.A_at(0), sys.C_at(0), L)
-
-
-def interval_design(sys: LinearSystem, L: Any, gain: str, who: str) -> IntervalDesign:
-    """The design of ``interval``: a given gain, the steady-state-width-optimal gain of one
-    linear program (``gain="width"``, :func:`ivobs.design.width_lp.width_gain`), LMI (41) of
-    [Tang2019] (``"lmi"``) or that gain refined by the local width LPs (``"lmi+width"``);
-    :class:`DesignError` when no gain makes ``A − LC`` nonnegative and Schur."""
-    if L is None:
-        if gain not in ("lmi", "width", "lmi+width"):
-            raise IvobsError(f"gain: expected 'width', 'lmi+width' or 'lmi', got {gain!r}")
-        A, _, C, _, E, F = sys.matrices_at(0)
-        if gain == "width":
-            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
-            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=True, who=who)
-        else:
-            check_design_size(sys, who, f"the gain design gain={gain!r} (LMI (41))")
-            L = nonnegative_gain(A, C, who)
-            if gain == "lmi+width":
-                L = refine_width(A, C, E, F, sys.d_widths(), L, nonnegative=True)
+        M = (identity(D_.shape[0], format="csc") - abs(D_)).tocsc()
+        steady = np.atleast_1d(spsolve(M, np.abs(G) @ sys.d_widths()))
     else:
-        gain = "given"
-    return _checked(IntervalDesign, sys, L, gain, who, nonnegative=True)
-
-
-def split_design(sys: LinearSystem, L: Any, gain: str, who: str) -> SplitDesign:
-    """The design of ``interval-split``: a given gain, LMIs (7)–(8) of [Efimov2013]
-    (``"lmi"``), the smallest ``ρ(|A − LC|)`` found (``"margin"``), then refined for width
-    (``"width"``); :class:`DesignError` when no gain with ``|A − LC|`` Schur is found."""
-    if L is None:
-        if gain not in ("lmi", "margin", "width", "margin+width"):
-            raise IvobsError(
-                f"gain: expected 'width', 'margin+width', 'margin' or 'lmi', got {gain!r}"
-            )
-        A, _, C, _, E, F = sys.matrices_at(0)
-        if gain == "width":
-            check_design_size(sys, who, "the width linear program", MAX_LP_STATES)
-            L = width_gain(A, C, E, F, sys.d_widths(), nonnegative=False, who=who)
-            return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
-        what = "LMIs (7)-(8)" if gain == "lmi" else "linear programs on |A − LC|"
-        check_design_size(sys, who, f"the gain design gain={gain!r} ({what})")
-        if gain == "lmi":
-            L = nonnegative_gain(A, C, who)
-        else:
-            L, rho = abs_schur_gain(A, C)
-            if rho >= 1.0:
-                low = fixed_radius(A, C)
-                why = (
-                    f"; no gain can do better than {low:.6g}: the unmeasured states (zero "
-                    "columns of C) keep |A| on their block"
-                    if low >= 1.0
-                    else ""
-                )
-                raise DesignError(
-                    f"{who}: no gain found with |A − LC| Schur: the best spectral "
-                    f"radius of |A − LC| found is {rho:.6g} >= 1 ([Efimov2013, Theorem 3]){why}; "
-                    "try 'interval-transformed' (needs only A − LC Schur)"
-                )
-            if gain == "margin+width":
-                L = refine_width(A, C, E, F, sys.d_widths(), L, nonnegative=False)
-    else:
-        gain = "given"
-    return _checked(SplitDesign, sys, L, gain, who, nonnegative=False)
-
-
-D = TypeVar("D", IntervalDesign, SplitDesign)
-
-
-def _checked(kind: type[D], sys: LinearSystem, L: Any, gain: str, who: str, nonnegative: bool) -> D:
-    """The design of a gain (:func:`given_gain`) with its steady-state width and the growth
-    rates during single-output gaps."""
-    L, D_, rho = given_gain(sys, L, who, nonnegative)
+        steady = steady_width(D_, G, sys.d_widths())
     return kind(
         L=L,
         D=D_,
         spectral_radius=rho,
         gain=gain,
-        steady_width=_steady(sys, D_, L),
-        missing_radius=_missing_radius(sys, L),
+        steady_width=steady,
+        missing_radius=None if sys.is_sparse else missing_radius(sys.A_at(0), sys.C_at(0), L),
     )
+
+
+def _margin_gain(A: np.ndarray, C: np.ndarray, who: str) -> np.ndarray:
+    """The gain of the smallest ``ρ(|A − LC|)`` found (:func:`abs_schur_gain`), or a
+    :class:`DesignError` when it is not below 1."""
+    L, rho = abs_schur_gain(A, C)
+    if rho >= 1.0:
+        low = fixed_radius(A, C)
+        why = (
+            f"; no gain can do better than {low:.6g}: the unmeasured states (zero "
+            "columns of C) keep |A| on their block"
+            if low >= 1.0
+            else ""
+        )
+        raise DesignError(
+            f"{who}: no gain found with |A − LC| Schur: the best spectral "
+            f"radius of |A − LC| found is {rho:.6g} >= 1 ([Efimov2013, Theorem 3]){why}; "
+            "try 'interval-transformed' (needs only A − LC Schur)"
+        )
+    return L

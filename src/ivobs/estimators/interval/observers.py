@@ -16,12 +16,7 @@ from .. import register
 from .._uncertain import growth_radius
 from ..base import Estimator
 from ..state import Step
-from .design import (
-    IntervalDesign,
-    SplitDesign,
-    interval_design,
-    split_design,
-)
+from .design import IntervalDesign, SplitDesign, gain_design
 from .operators import Operators
 from .recursion import (
     CooperativeState,
@@ -103,7 +98,9 @@ class CooperativeObserver(Estimator, Generic[S]):
 
 class _GainObserver(CooperativeObserver[S]):
     """``interval`` and ``interval-split``: ``S = I``, the design is the gain ``L`` (given, or
-    designed as ``gain=`` says)."""
+    designed as ``gain=`` says: :func:`.design.gain_design` of ``design_type``)."""
+
+    design_type: ClassVar[type[IntervalDesign] | type[SplitDesign]]
 
     def __init__(
         self,
@@ -116,12 +113,9 @@ class _GainObserver(CooperativeObserver[S]):
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
-        design = self._design(L, gain)
+        design = gain_design(self.design_type, sys, L, gain, self.name)
         self._build(design.L, design.D, finite_memory=finite_memory)
         self.design: IntervalDesign | SplitDesign = design
-
-    def _design(self, L: Any, gain: str) -> IntervalDesign | SplitDesign:
-        raise NotImplementedError
 
 
 @register
@@ -174,9 +168,7 @@ class IntervalObserver(_GainObserver[IntervalState]):
     summary = "interval observer, A − LC nonnegative and Schur ([Tang2019, eq. (36)])"
     reference = "[Tang2019, Section V.A, eqs. (36)-(41)]; [Efimov2013, Theorem 1, eq. (3)]"
     state_type = IntervalState
-
-    def _design(self, L: Any, gain: str) -> IntervalDesign:
-        return interval_design(self.sys, L, gain, self.name)
+    design_type = IntervalDesign
 
 
 @register
@@ -211,9 +203,7 @@ class SplitIntervalObserver(_GainObserver[SplitState]):
     summary = "interval observer with D⁺/D⁻, |A − LC| Schur ([Efimov2013, Theorem 3, eq. (5)])"
     reference = "[Efimov2013, Theorem 3, eqs. (5)-(8), Corollary 1]"
     state_type = SplitState
-
-    def _design(self, L: Any, gain: str) -> SplitDesign:
-        return split_design(self.sys, L, gain, self.name)
+    design_type = SplitDesign
 
 
 @register

@@ -60,7 +60,7 @@ from ...sets import Box
 from ...sets.expm import IntervalMatrix, interval_product
 from ...sets.rounding import ETA, UNIT_ROUNDOFF, down, mid_rad, product_error, up, upper
 from ..state import Step
-from .design import KKLDesign, Transform, finite, left_inverse
+from .design import KKLDesign, Transform, left_inverse
 from .flow import K, Passage, ltv_passage, minus, target_exponential
 from .observer import Observer, ZState, prior_box, recover
 from .periods import mismatch, period_key
@@ -457,7 +457,7 @@ class ContinuousObserver(Observer[ContinuousState]):
         obs = ~np.isnan(y_k)
         lo, hi = box
         xabs = np.maximum(np.abs(lo), np.abs(hi))
-        if not finite(xabs):
+        if not np.isfinite(xabs).all():
             return None
         y_o = y_k[obs]
         slack = up(UNIT_ROUNDOFF * np.abs(y_o) + ETA)  # y_o: the double nearest to the exact

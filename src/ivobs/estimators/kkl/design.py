@@ -41,7 +41,6 @@ __all__ = [
     "TransformSequence",
     "design_lti",
     "design_ltv",
-    "finite",
     "left_inverse",
     "x0_required",
 ]
@@ -71,11 +70,6 @@ class KKLDesign(Design):
     gamma: float | None = None
     ell: float | None = None
     tuned: bool = False
-
-
-def finite(v: np.ndarray) -> bool:
-    """Whether every entry of ``v`` is finite (``np.isfinite(v).all()``)."""
-    return bool(np.count_nonzero(np.isfinite(v)) == v.size)
 
 
 @dataclass(frozen=True)
@@ -123,7 +117,7 @@ def left_inverse(T: np.ndarray, max_cond: float) -> Transform:
     """
     norms = np.linalg.norm(T, axis=1)
     nz, nx = T.shape
-    if np.count_nonzero(norms == 0) or not finite(norms):
+    if np.count_nonzero(norms == 0) or not np.isfinite(norms).all():
         return _singular(T, float("inf"))
     U, s, Vt = np.linalg.svd(T / norms[:, None], full_matrices=False)
     cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
@@ -378,7 +372,7 @@ class TransformSequence:
     def _extend(self) -> None:
         j = len(self._seq) - 1
         Aj, Cj = self.sys.A_at(j), self.sys.C_at(j)
-        if not finite(Aj) or np.linalg.cond(Aj) > 1e13:
+        if not np.isfinite(Aj).all() or np.linalg.cond(Aj) > 1e13:
             raise DesignError(
                 f"A[{j}] is singular (cond {np.linalg.cond(Aj):.2e}); the time-varying "
                 "KKL observer (15.b) needs invertible A[k] ([Dinh2024, Assumption 3 (VIII)])"

@@ -50,9 +50,9 @@ import numpy as np
 from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box, image_bounds
-from ...sets.rounding import down, product_error, up, upper
+from ...sets.rounding import down, up, upper
 from ..state import Step, evolve
-from .design import KKLDesign, Transform, TransformSequence, finite, left_inverse
+from .design import KKLDesign, Transform, TransformSequence, left_inverse
 from .observer import PATTERNS, Observer, ZState, prior_box, recover
 from .terms import Terms, combination, make_terms
 
@@ -166,7 +166,7 @@ class Discrete(Observer[DiscreteState]):
             if np.count_nonzero(nlo > nhi):  # data contradicting the model: keep (3.c-d)
                 return lo, hi, False
             lo, hi = nlo, nhi
-        if not tr.ok and k >= self.design.k_star and not (finite(lo) and finite(hi)):
+        if not tr.ok and k >= self.design.k_star and not np.isfinite((lo, hi)).all():
             raise IvobsError(
                 f"kkl: T[{k}] is not left-invertible (cond {tr.cond:.2e}) and no finite "
                 "prior is available; pass x0 so the observer can bridge such steps"
@@ -215,17 +215,11 @@ class Discrete(Observer[DiscreteState]):
     def predict(
         self, k: int, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, d: Box
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``x[k+1] ∈ A [x̲, x̄] + B u + E [d̲, d̄]`` (Lemma 1, proven images; ``B u`` with its
-        product bound; each sum rounded outward)."""
+        """``x[k+1] ∈ [A B E] [[x̲, x̄]; u; [d̲, d̄]]`` (Lemma 1: the proven image of
+        :func:`~ivobs.sets.image_bounds`, its rounding included)."""
         A, B, _, _, E, _ = self.sys.matrices_at(k)
-        Bu = B @ u
-        e = product_error(np.abs(B) @ np.abs(u), B.shape[1])
-        plo, phi = image_bounds(A, lo, hi)
-        plo, phi = down(plo + down(Bu - e)), up(phi + up(Bu + e))
-        if E.shape[1]:
-            elo, ehi = image_bounds(E, d.lo, d.hi)
-            plo, phi = down(plo + elo), up(phi + ehi)
-        return plo, phi
+        M = np.hstack((A, B, E))
+        return image_bounds(M, np.concatenate((lo, u, d.lo)), np.concatenate((hi, u, d.hi)))
 
     def intersect_z(
         self, k: int, zlo: np.ndarray, zhi: np.ndarray, plo: np.ndarray, phi: np.ndarray

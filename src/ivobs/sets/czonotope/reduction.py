@@ -8,8 +8,6 @@ step, go to a box ([Higham2002, Lemma 3.1] bounds).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import scipy.linalg
 
@@ -104,25 +102,18 @@ def _pow2_scaling(L: np.ndarray) -> np.ndarray | None:
     """Powers of two ``d`` with ``max_j |d_i L_ij|`` in ``[1, 2)`` (zero rows: 1), or ``None``
     when scaling an entry would leave the normal range (then it would not be exact)."""
     aL = np.abs(L)
-    d = []
-    for v in aL.max(axis=1).tolist():
-        if not v < math.inf:  # an inf or a NaN
-            return None
-        e = 1 - math.frexp(v)[1] if v > 0 else 0
-        if e > 1023:  # a subnormal row: its scale overflows
-            return None
-        d.append(math.ldexp(1.0, e))
-    scale = np.array(d)
+    v = aL.max(axis=1)
+    if not np.isfinite(v).all():  # an inf or a NaN
+        return None
+    e = np.where(v > 0, 1 - np.frexp(v)[1], 0)
+    if (e > 1023).any():  # a subnormal row: its scale overflows
+        return None
+    scale = np.ldexp(1.0, e)
     # no entry can overflow (the largest lands in [1, 2)); the smallest nonzero one of each
     # row must stay normal (rounding is monotone: the smallest scaled entry is the scaled
     # smallest one) — the same test as _exactly_scaled(L * d, L), without forming L * d
-    return scale if bool((_min_nonzero(aL) * scale >= _TINY).all()) else None
-
-
-def _min_nonzero(aM: np.ndarray) -> np.ndarray:
-    """The smallest nonzero entry of each row of ``aM >= 0`` (``inf`` for a zero row)."""
-    out: np.ndarray = np.where(aM > 0, aM, np.inf).min(axis=1)
-    return out
+    smallest = np.where(aL > 0, aL, np.inf).min(axis=1)
+    return scale if bool((smallest * scale >= _TINY).all()) else None
 
 
 def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
@@ -134,16 +125,15 @@ def _exactly_scaled(S: np.ndarray, M: np.ndarray) -> bool:
     return bool(np.where(M != 0, aS, np.inf).min(initial=np.inf) >= _TINY)
 
 
-def _absorb_in_basis(
-    L: np.ndarray, order: int, max_condition: float = MAX_BASIS_CONDITION
-) -> np.ndarray | None:
+def _absorb_in_basis(L: np.ndarray, order: int) -> np.ndarray | None:
     """``order >= N`` generators ``L'`` with ``<0, L> ⊆ <0, L'>`` in exact arithmetic, by a
     parallelotope enclosure ([Chisci1998]), or ``None`` when the basis is ill-conditioned.
 
     The basis ``P`` (``N`` generators) is chosen by QR with column pivoting; its condition
-    estimate ``|R_11| / |R_NN|`` must be at most ``max_condition``. Each generator ``l`` to
-    remove has coordinates ``α = P⁻¹ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``; those
-    with the smallest ``‖α‖₁`` are removed: ``<0, L> ⊆ <0, [P diag(s₀), L_kept]> ⊕ box(ρ)``
+    estimate ``|R_11| / |R_NN|`` must be at most
+    :data:`~ivobs.sets.zonotope.MAX_BASIS_CONDITION`. Each generator ``l`` to remove has
+    coordinates ``α = P⁻¹ l`` and ``<0, [P, l]> ⊆ <0, P diag(1 + |α|)>``; those with the
+    smallest ``‖α‖₁`` are removed: ``<0, L> ⊆ <0, [P diag(s₀), L_kept]> ⊕ box(ρ)``
     with ``s₀ >= 1 + Σ|α|`` (rounded up) and ``ρ >= Σ |l - P α|`` (evaluated, plus the bound
     ``γ_{N+2} (|l| + |P| |α|)`` of its rounding, [Higham2002, Lemma 3.1]). The box and the
     rounding of the product ``P diag(t)`` itself are then absorbed by the basis:
@@ -159,7 +149,7 @@ def _absorb_in_basis(
         return None
     R, jpvt = scipy.linalg.qr(L, mode="r", pivoting=True, check_finite=False)
     r_first, r_last = abs(float(R[0, 0])), abs(float(R[N - 1, N - 1]))
-    if not r_last * max_condition >= r_first > 0.0:
+    if not r_last * MAX_BASIS_CONDITION >= r_first > 0.0:
         return None
     basis, others = jpvt[:N], jpvt[N:]
     alpha = scipy.linalg.solve_triangular(R[:N, :N], R[:N, N:], check_finite=False)
