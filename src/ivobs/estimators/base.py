@@ -245,6 +245,12 @@ class Estimator(Persistence):
         (:mod:`ivobs.estimators.measured`): by default for the filter-form methods."""
         self._strips = MeasurementStrips.of(sys) if self.strips else None
         self.sys = sys
+        if self.supports_nonlinear:  # a linear model is converted; self.sys stays as given
+            self.model: NonlinearSystem = (
+                sys
+                if isinstance(sys, NonlinearSystem)
+                else NonlinearSystem.from_linear(sys, who=self.name)
+            )
         self.x0 = check_x0(x0, sys.nx, self.name, self.needs_x0)
         self.on_inconsistent = on_inconsistent
         self.design: Design = Design()
