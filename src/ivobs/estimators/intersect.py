@@ -116,10 +116,9 @@ class Intersect(Estimator):
         x0: Box | None = None,
         *,
         methods: Any = None,
-        on_inconsistent: str = "warn",
-        strips: bool | None = None,
+        **options: Any,
     ):
-        super().__init__(sys, x0, on_inconsistent=on_inconsistent, strips=strips)
+        super().__init__(sys, x0, **options)
         if methods is None:
             self.members, skipped = self._default_members()
         else:
