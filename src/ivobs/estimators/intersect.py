@@ -116,9 +116,10 @@ class Intersect(Estimator):
         x0: Box | None = None,
         *,
         methods: Any = None,
-        **options: Any,
+        on_inconsistent: str = "warn",
+        strips: bool | None = None,
     ):
-        super().__init__(sys, x0, **options)
+        super().__init__(sys, x0, on_inconsistent=on_inconsistent, strips=strips)
         if methods is None:
             self.members, skipped = self._default_members()
         else:
