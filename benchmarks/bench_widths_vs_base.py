@@ -252,14 +252,18 @@ def spawn(
 def _linear_only(scenario: str, method: str) -> dict[str, Any] | None:
     """The refusal ``make_estimator`` gives a linear-only method on a nonlinear scenario, found
     in this process without starting one (the same check, the same message); None otherwise."""
-    from ivobs import NonlinearSystem, scenarios
+    from ivobs import IvobsError, NonlinearSystem, scenarios
     from ivobs.estimators import base, get
 
-    if not isinstance(scenarios.get(scenario).system, NonlinearSystem):
+    system = scenarios.get(scenario).system
+    if not isinstance(system, NonlinearSystem) or get(method).supports_nonlinear:
         return None
-    if get(method).supports_nonlinear:
+    try:
+        base.check_system(get(method), system)  # refuses it first
+    except IvobsError as e:
+        reason = f"IvobsError: {e}"
+    else:
         return None
-    reason = f"IvobsError: {base.nonlinear_refusal(get(method).name)}"
     return {
         "scenario": scenario,
         "method": method,

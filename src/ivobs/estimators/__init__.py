@@ -18,7 +18,7 @@ from ..model import LinearSystem, NonlinearSystem
 from ..model.statespace import is_statespace
 from . import base
 from ._inputs import check_option_types
-from .base import Design, Estimator, nonlinear_refusal
+from .base import Design, Estimator
 
 __all__ = [
     "METHODS",
@@ -121,8 +121,6 @@ def make_estimator(
     cls = get(name)
     if is_statespace(sys):  # every input of a StateSpace is then a known input u
         sys = LinearSystem.from_statespace(sys)
-    if isinstance(sys, NonlinearSystem) and not cls.supports_nonlinear:
-        raise IvobsError(nonlinear_refusal(cls.name))
     return cls(sys, x0, **checked_options(cls, options))
 
 

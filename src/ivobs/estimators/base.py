@@ -63,7 +63,6 @@ __all__ = [
     "check_size",
     "check_system",
     "check_x0",
-    "nonlinear_refusal",
 ]
 
 
@@ -126,16 +125,6 @@ by the registry (:mod:`ivobs.estimators`, imported before this module), which im
 method first (its imports are lazy)."""
 
 
-def nonlinear_refusal(name: str) -> str:
-    """The message refusing a :class:`~ivobs.NonlinearSystem` to a linear-only method, naming
-    the methods that take one."""
-    can = ", ".join(repr(n) for n in methods_with("supports_nonlinear")) or "(none installed)"
-    return (
-        f"sys: the {name} method is for linear systems (ivobs.LinearSystem); this one is an "
-        f"ivobs.NonlinearSystem. Methods for nonlinear systems: {can}"
-    )
-
-
 def _arrays(state: OnlineState) -> list[np.ndarray]:
     """The float arrays of a state (to tell an overflow from a bug)."""
     out = []
@@ -151,8 +140,14 @@ def check_system(method: Any, sys: Any) -> None:
     flags) cannot handle, with the reason and what can."""
     name = method.name
     if isinstance(sys, NonlinearSystem):
-        if not method.supports_nonlinear:
-            raise IvobsError(nonlinear_refusal(name))
+        if not method.supports_nonlinear:  # naming the methods that take one
+            can = (
+                ", ".join(repr(n) for n in methods_with("supports_nonlinear")) or "(none installed)"
+            )
+            raise IvobsError(
+                f"sys: the {name} method is for linear systems (ivobs.LinearSystem); this one is "
+                f"an ivobs.NonlinearSystem. Methods for nonlinear systems: {can}"
+            )
     elif not isinstance(sys, LinearSystem):
         raise IvobsError(
             "sys: expected an ivobs.LinearSystem or ivobs.NonlinearSystem, got "
@@ -245,6 +240,12 @@ class Estimator(Persistence):
         (:mod:`ivobs.estimators.measured`): by default for the filter-form methods."""
         self._strips = MeasurementStrips.of(sys) if self.strips else None
         self.sys = sys
+        if self.supports_nonlinear:  # a linear model is converted; self.sys stays as given
+            self.model: NonlinearSystem = (
+                sys
+                if isinstance(sys, NonlinearSystem)
+                else NonlinearSystem.from_linear(sys, who=self.name)
+            )
         self.x0 = check_x0(x0, sys.nx, self.name, self.needs_x0)
         self.on_inconsistent = on_inconsistent
         self.design: Design = Design()

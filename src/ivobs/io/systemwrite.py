@@ -180,10 +180,23 @@ def dumps_system(
     description: str = "",
 ) -> str:
     """The TOML text of a system file (see :func:`save_system`)."""
+    from ..scenarios import Scenario
+
     x0_step = int(getattr(system, "x0_step", 0))  # a loaded system file's [x0] step
-    system, x0, method, options, name, description = _unpack(
-        system, x0, method, options, name, description
-    )
+    if isinstance(system, SystemFile):
+        method = system.method if method is None else method
+        options = system.options if options is None else options
+    if isinstance(system, (SystemFile, Scenario)):
+        x0 = system.x0 if x0 is None else x0
+        name = name or system.name
+        description = description or system.description
+        system = system.system
+    if not isinstance(system, (LinearSystem, NonlinearSystem)):
+        raise IvobsError(
+            f"system: expected a LinearSystem, a NonlinearSystem, a SystemFile or a Scenario, got "
+            f"{type(system).__name__}"
+        )
+    options, name, description = dict(options or {}), str(name), str(description)
     nonlinear = isinstance(system, NonlinearSystem)
     model = (
         [
@@ -201,7 +214,7 @@ def dumps_system(
         out.append(f"name = {_scalar(name)}")
     if description:
         out.append(f"description = {_scalar(description)}")
-    if nonlinear:
+    if isinstance(system, NonlinearSystem):
         out += ["", *dump_nonlinear(system, _scalar, _value)]
         if system.names.units:
             out += ["", "[names]", f"units = {_value(list(system.names.units))}"]
@@ -254,27 +267,6 @@ def _tail(x0: Any, method: str | None, options: dict[str, Any], x0_step: int = 0
     elif options:
         raise IvobsError("save_system: options were given without a method")
     return out
-
-
-def _unpack(
-    system: Any, x0: Any, method: Any, options: Any, name: str, description: str
-) -> tuple[Any, Box | None, str | None, dict[str, Any], str, str]:
-    from ..scenarios import Scenario
-
-    if isinstance(system, SystemFile):
-        method = system.method if method is None else method
-        options = system.options if options is None else options
-    if isinstance(system, (SystemFile, Scenario)):
-        x0 = system.x0 if x0 is None else x0
-        name = name or system.name
-        description = description or system.description
-        system = system.system
-    if not isinstance(system, (LinearSystem, NonlinearSystem)):
-        raise IvobsError(
-            f"system: expected a LinearSystem, a NonlinearSystem, a SystemFile or a Scenario, got "
-            f"{type(system).__name__}"
-        )
-    return system, x0, method, dict(options or {}), str(name), str(description)
 
 
 def save_system(

@@ -10,6 +10,7 @@ import numpy as np
 from .._validate import as_float_array, as_signal
 from ..errors import IvobsError
 from ..estimators import Estimator, make_estimator
+from ..estimators._inputs import check_y_k
 from ..estimators.measured import FILTERED
 from ..io.systemwrite import equal_systems
 from ..model import LinearSystem, NonlinearSystem
@@ -150,7 +151,7 @@ class Monitor:
         if sys.is_continuous and t is None:
             raise IvobsError("t: a continuous-time system needs the sample time of each step")
         u = np.zeros(0) if (u_k is None and sys.nu == 0) else _vector("u_k", u_k, sys.nu)
-        y = self._check_y(y_k)
+        y = check_y_k(sys, y_k).copy()
         k, st = self._k, self._est
         u_e = u if sys.nu else None
         reasons: list[str] = []
@@ -547,16 +548,6 @@ class Monitor:
         return u, y, tt
 
     # -- the consistency test ------------------------------------------------------------
-    def _check_y(self, y_k: Any) -> np.ndarray:
-        if y_k is None:
-            return np.full(self.sys.ny, np.nan)
-        y = as_float_array("y_k", y_k).ravel().copy()
-        if y.shape[0] != self.sys.ny:
-            raise IvobsError(f"y_k: expected {self.sys.ny} measurement value(s), got {y.shape[0]}")
-        if np.any(np.isinf(y)):
-            raise IvobsError("y_k: infinite measurement; use NaN for a missing sample")
-        return y
-
     def _predict(self, k: int, prev: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray] | None:
         """The model's one-step prediction of ``x[k]`` from the box of ``x[k-1]``
         (:mod:`ivobs.monitor.bands`), or the prior box at ``k = 0``."""

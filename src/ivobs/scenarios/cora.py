@@ -19,6 +19,7 @@ k = 217 for V; by at most 3.2e-3), so a guaranteed method may legitimately miss 
 
 from __future__ import annotations
 
+import functools
 from importlib import resources
 
 import numpy as np
@@ -86,11 +87,5 @@ def _build(name: str) -> Scenario:
     )
 
 
-def _register(name: str) -> None:
-    @register_scenario(name, _FILES[name][1])
-    def builder() -> Scenario:
-        return _build(name)
-
-
-for _name in _FILES:
-    _register(_name)
+for _name in _FILES:  # a builder without options (options(name) == [])
+    register_scenario(_name, _FILES[_name][1])(functools.partial(_build, _name))

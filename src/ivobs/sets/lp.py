@@ -60,10 +60,11 @@ def csc(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 class LinearProgram:
     """A HiGHS model (simplex, one thread, no presolve unless asked), changed in place.
 
+    Feasibility tolerances ``1e-9`` (primal), ``1e-10`` (dual): tighter than HiGHS's ``1e-7``,
+    as a certified bound is only as tight as the multipliers it is evaluated at.
+
     Parameters
     ----------
-    primal_tol, dual_tol : HiGHS's feasibility tolerances. Tighter than HiGHS's ``1e-7``: a
-        certified bound is only as tight as the multipliers it is evaluated at.
     presolve : HiGHS's presolve (off: the basis of one solve warm-starts the next).
     iteration_limit : simplex iterations per solve (None: HiGHS's); a solve stopped by it
         reports ``"limit"`` and its last multipliers.
@@ -76,8 +77,6 @@ class LinearProgram:
     def __init__(
         self,
         *,
-        primal_tol: float = 1e-9,
-        dual_tol: float = 1e-10,
         presolve: bool = False,
         iteration_limit: int | None = None,
         scale: bool = True,
@@ -89,8 +88,8 @@ class LinearProgram:
         h.setOptionValue("presolve", "on" if presolve else "off")
         if ipm:
             h.setOptionValue("solver", "ipm")
-        h.setOptionValue("primal_feasibility_tolerance", primal_tol)
-        h.setOptionValue("dual_feasibility_tolerance", dual_tol)
+        h.setOptionValue("primal_feasibility_tolerance", 1e-9)
+        h.setOptionValue("dual_feasibility_tolerance", 1e-10)
         if iteration_limit is not None:
             h.setOptionValue("simplex_iteration_limit", int(iteration_limit))
         if not scale:

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ...model._matrix import is_scipy_sparse
 from ...sets.rounding import upper
 
 __all__ = [
@@ -44,14 +45,6 @@ def scratch(owner: Any, name: str, shape: tuple[int, ...], dtype: Any = float) -
     return a
 
 
-def _issparse(M: Any) -> bool:
-    try:
-        from scipy.sparse import issparse
-    except ImportError:  # pragma: no cover
-        return False
-    return bool(issparse(M))
-
-
 def _matrix(a: Any, rows: int | None, cols: int | None) -> np.ndarray:
     """A 2-D float array of the given shape (a vector is a column when ``rows`` is known)."""
     m = np.asarray(a, dtype=float)
@@ -77,7 +70,7 @@ def matrix_product(X: np.ndarray, Mt: Any) -> np.ndarray:
     with ``kron(I_8, Mt)`` on rows of 8 samples: BLAS is slow on a very tall, 3-wide product."""
     lead = X.shape[:-1]
     m, p = Mt.shape
-    if _issparse(Mt):
+    if is_scipy_sparse(Mt):
         return np.asarray((Mt.T @ X.reshape(-1, m).T).T).reshape(*lead, p)
     rows = int(np.prod(lead)) if lead else 1
     out = np.empty((*lead, p))

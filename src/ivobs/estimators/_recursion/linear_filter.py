@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import _issparse, _matrix, matrix_product, scratch
+from ...model._matrix import is_scipy_sparse
+from .kernels import _matrix, matrix_product, scratch
 
 __all__ = ["BLOCK_MAX_STATES", "LinearFilter"]
 
@@ -33,7 +34,7 @@ class LinearFilter:
     """
 
     def __init__(self, M: Any, W: Sequence[np.ndarray], g: np.ndarray | None = None):
-        self.sparse = _issparse(M)
+        self.sparse = is_scipy_sparse(M)
         self.M = M.tocsr() if self.sparse else np.asarray(M, dtype=float)
         n: int = self.M.shape[0]
         self.n = n

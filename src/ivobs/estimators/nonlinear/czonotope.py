@@ -56,7 +56,6 @@ from typing import Any
 import numpy as np
 
 from ..._validate import as_int
-from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from ...sets.czonotope import (
     eliminate_constraints,
@@ -172,10 +171,7 @@ class NonlinearConstrainedZonotopeEstimator(Estimator):
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
-        # a linear model is converted; self.sys stays the model given (the monitor reads it)
-        if isinstance(sys, LinearSystem):
-            sys = NonlinearSystem.from_linear(sys, who=self.name)
-        self.model: NonlinearSystem = sys
+        sys = self.model  # (a linear model converted: Estimator.__init__)
         check_size(self.name, sys.nx, "reduces a constrained zonotope and solves 2 nx LPs")
         nc_def, ng_def = default_limits(sys.nx)
         nc = nc_def if max_constraints is None else as_int("max_constraints", max_constraints, 0)

@@ -105,7 +105,7 @@ import numpy as np
 
 from ..._validate import as_int
 from ...errors import IvobsError
-from ...model import LinearSystem, NonlinearSystem
+from ...model import NonlinearSystem
 from ...model.nonlinear.flow import FlowSystem
 from ...sets import Box
 from .. import register
@@ -258,10 +258,7 @@ class NonlinearIntervalEstimator(Estimator):
         **options: Any,
     ):
         super().__init__(sys, x0, **options)
-        # a linear model is converted; self.sys stays the model given (the monitor reads it)
-        if isinstance(sys, LinearSystem):
-            sys = NonlinearSystem.from_linear(sys, who=self.name)
-        self.model: NonlinearSystem = sys
+        sys = self.model  # (a linear model converted: Estimator.__init__)
         lag = as_int("lag", lag, minimum=0)
         if lag > MAX_LAG:
             raise IvobsError(f"lag: expected 0 to {MAX_LAG} steps back, got {lag}")

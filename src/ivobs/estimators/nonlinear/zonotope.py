@@ -75,7 +75,6 @@ from typing import Any
 import numpy as np
 
 from ..._validate import as_bool, as_int
-from ...model import LinearSystem, NonlinearSystem
 from ...sets import Box
 from ...sets.czonotope import reduce_generators
 from ...sets.rounding import ETA, mid_rad, product_error, up, upper
@@ -236,10 +235,7 @@ class NonlinearZonotopeEstimator(Estimator):
         **options: Any,
     ) -> None:
         super().__init__(sys, x0, **options)
-        # a linear model is converted; self.sys stays the model given (the monitor reads it)
-        if isinstance(sys, LinearSystem):
-            sys = NonlinearSystem.from_linear(sys, who=self.name)
-        self.model: NonlinearSystem = sys
+        sys = self.model  # (a linear model converted: Estimator.__init__)
         check_size(self.name, sys.nx, "multiplies and reduces a dense nx x q generator matrix")
         q = 10 * sys.nx if order is None else as_int("order", order, sys.nx)  # nx at least
         box_strips = as_bool("box_strips", box_strips)

@@ -247,10 +247,9 @@ def _backward(em: Emitter, nd: _Node) -> None:
 def build_contractor(
     name: str, expr: Any, label: str, leaves: list[Any], inputs: list[Any], consts: dict[Any, Any]
 ) -> tuple[Any, list[str]]:
-    """Compile ``name(vl, vh, u, ylo, yhi=None) -> bool`` contracting the boxes of ``leaves``
-    (the lists ``vl``, ``vh``) with ``expr in [ylo, yhi]`` (``yhi`` omitted: ``[ylo, ylo]``);
-    ``inputs`` read from ``u`` (thin)."""
-    head = [f"def {name}(vl, vh, u, ylo, yhi=None):", "    if yhi is None: yhi = ylo"]
+    """Compile ``name(vl, vh, u, ylo, yhi) -> bool`` contracting the boxes of ``leaves`` (the
+    lists ``vl``, ``vh``) with ``expr in [ylo, yhi]``; ``inputs`` read from ``u`` (thin)."""
+    head = [f"def {name}(vl, vh, u, ylo, yhi):"]
     return _compile(name, [expr], [label], leaves, inputs, consts, head, lambda i: ("ylo", "yhi"))
 
 

@@ -37,14 +37,14 @@ def _sub(al: float, ah: float, bl: float, bh: float) -> tuple[float, float]:
 
 
 class FlowBackContractor:
-    """``fn(vl, vh, u, ylo, yhi=None) -> bool`` for output ``i`` of ``flow``: leaves ``vl``,
+    """``fn(vl, vh, u, ylo, yhi) -> bool`` for output ``i`` of ``flow``: leaves ``vl``,
     ``vh`` = ``x' + w' + w`` (narrowed in place), inputs ``u = u' + u`` (module docstring)."""
 
     def __init__(self, flow: Any, i: int) -> None:
         self.flow, self.i = flow, i
 
     def __call__(
-        self, vl: list[float], vh: list[float], u: list[float], ylo: float, yhi: Any = None
+        self, vl: list[float], vh: list[float], u: list[float], ylo: float, yhi: float
     ) -> bool:
         fs = self.flow
         nx, nw, nu = fs.nx, fs.nw, fs.nu
@@ -56,7 +56,7 @@ class FlowBackContractor:
         x1l, x1h = fs._enclose(zl[:nx], zh[:nx], up, zl[nx:], zh[nx:])
         al, ah = list(x1l) + vl[nz:], list(x1h) + vh[nz:]
         fn, sites = fs._hc[self.i]
-        if not fs._call(fn, sites, al, ah, uk, ylo, ylo if yhi is None else yhi):
+        if not fs._call(fn, sites, al, ah, uk, ylo, yhi):
             return False
         vl[nz:], vh[nz:] = al[nx:], ah[nx:]
         if not self._backward(zl, zh, up, al[:nx], ah[:nx], list(x1l), list(x1h)):
