@@ -198,12 +198,9 @@ class Zonotope:
         """Whether ``x`` lies in the zonotope (one LP with HiGHS, ``min ‖ξ‖∞`` with ``G ξ = x -
         c``: the constrained zonotope's membership test with no constraint; for checks, not hot
         loops)."""
-        from .czonotope.hull import radius_certificate
+        from .czonotope.hull import reaches
 
-        d = as_vector("x", x, self.dim) - self.c
-        if self.num_generators == 0:
-            return bool(np.all(np.abs(d) <= tol))
-        return radius_certificate(self.G, d)[0] <= 1.0 + tol
+        return reaches(self.G, as_vector("x", x, self.dim) - self.c, tol)
 
     def sample(self, size: int, rng: Any = None, *, vertices: bool = False) -> np.ndarray:
         """Points ``c + G b`` with ``b`` uniform in the cube (or on its vertices)."""

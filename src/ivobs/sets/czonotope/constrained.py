@@ -21,7 +21,7 @@ from ..lp import LinearProgram, csc
 from ..rounding import UNIT_ROUNDOFF, product_error, up
 from ..zonotope import Zonotope, box_generators, center_and_generators
 from .elimination import Reduced, eliminate_constraints, rescale_factors
-from .hull import certified_empty, hull_bounds, radius_certificate
+from .hull import certified_empty, hull_bounds, reaches
 from .reduction import reduce_generators
 
 __all__ = ["ConstrainedZonotope"]
@@ -210,11 +210,7 @@ class ConstrainedZonotope:
     def contains(self, x: Any, tol: float = 1e-9) -> bool:
         """Whether ``x`` is in the set (one LP: ``min ‖ξ‖∞`` with ``G ξ = x - c``, ``A ξ = b``)."""
         x = as_vector("x", x, self.dim)
-        Aeq = np.vstack([self.G, self.A])
-        beq = np.concatenate([x - self.c, self.b])
-        if self.num_generators == 0:
-            return bool(np.all(np.abs(beq) <= tol))
-        return radius_certificate(Aeq, beq)[0] <= 1.0 + tol
+        return reaches(np.vstack([self.G, self.A]), np.concatenate([x - self.c, self.b]), tol)
 
     # -- reduction ([Scott2016, Section 4]) ---------------------------------------------------
     def rescale(self) -> ConstrainedZonotope:

@@ -31,6 +31,7 @@ __all__ = [
     "hull_bounds",
     "hull_certificates",
     "radius_certificate",
+    "reaches",
     "soften",
 ]
 
@@ -55,6 +56,15 @@ def dual_bounds(
     e_b = product_error(am @ np.abs(b), nc)
     out: np.ndarray = down(mu @ b - up(e_b + up(radius * l1)))
     return out
+
+
+def reaches(A: np.ndarray, b: np.ndarray, tol: float) -> bool:
+    """Whether ``A ξ = b`` has a solution with ``‖ξ‖∞ <= 1 + tol`` by HiGHS's optimum of
+    :func:`radius_certificate` (the membership test of a point in a (constrained) zonotope: for
+    checks, not a proof); with no column, whether ``|b| <= tol``."""
+    if A.shape[1] == 0:
+        return bool(np.all(np.abs(b) <= tol))
+    return radius_certificate(A, b)[0] <= 1.0 + tol
 
 
 def radius_certificate(A: np.ndarray, b: np.ndarray) -> tuple[float, float]:
