@@ -282,7 +282,7 @@ def test_step_reproduces_run_and_state_restores():
     y = tr.y.copy()
     y[20:24] = np.nan
     est = ivobs.make_estimator("fixed-time", sys)
-    res = est.run(tr.u, y)
+    res = est.run(tr.u, y, vectorize=False)  # the loop: step()'s recursion
     est.reset()
     for k in range(60):
         box = est.step(tr.u[k], None if np.isnan(y[k]).all() else y[k])

@@ -202,7 +202,7 @@ def test_vectorised_run_and_batches_match_the_loop():
     sc = scenarios.get("servo-motor", horizon=50)
     est = intersect(sc.system, sc.x0, methods=["reachability", OpenLoop(sc.system, sc.x0)])
     trs = [sc.simulate("vertex", seed=s) for s in range(3)]
-    loop = [est.run(tr.u, tr.y) for tr in trs]
+    loop = [est.run(tr.u, tr.y, vectorize=False) for tr in trs]
     vec = est.run(trs[0].u, trs[0].y, vectorize=True)
     np.testing.assert_allclose(vec.lower, loop[0].lower, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(vec.upper, loop[0].upper, rtol=1e-9, atol=1e-12)

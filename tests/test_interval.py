@@ -56,7 +56,7 @@ def test_servo_with_the_papers_lmi41_gain():
         assert np.all(np.isfinite(res.lower))
     # the interval observer is a cooperative special case of the split one: same numbers
     split = ivobs.make_estimator("interval-split", sc.system, x0=sc.x0, L=sc.reference["L2"])
-    res_s = split.run(tr.u, tr.y)
+    res_s = split.run(tr.u, tr.y, vectorize=False)
     np.testing.assert_array_equal(res_s.upper, res.upper)
 
 
@@ -265,7 +265,7 @@ def test_time_varying_bounds_vectorised_equals_loop():
 def test_step_reproduces_run_and_state_restores(method):
     sc, est = servo(method)
     tr = sc.simulate("vertex", seed=8)
-    res = est.run(tr.u[:60], tr.y[:60])
+    res = est.run(tr.u[:60], tr.y[:60], vectorize=False)  # the loop: step()'s recursion
     est.reset()
     for k in range(30):
         box = est.step(tr.u[k], tr.y[k])
