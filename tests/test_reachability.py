@@ -215,6 +215,30 @@ def test_vectorised_path_equals_the_loop_on_random_systems_of_several_sizes(meth
     assert batch.contains(np.stack([t.x for t in trs])).all()
 
 
+@pytest.mark.parametrize("method", ["reachability", "zonotope"])
+def test_vectorised_path_equals_the_loop_on_a_badly_scaled_plant(method):
+    """States of magnitudes 1e6, 1, 1e-3: the rounding is measured in the scaled norm of
+    ``Channels`` on both paths, so the vectorised boxes contain the exact state and have the
+    loop's widths (an ∞-norm would let the large state's rounding widen the small ones)."""
+    from ivobs.simulate import vertex_disturbance
+    from ivobs.testing.conformance import conformance_plants
+    from ivobs.testing.exact import exact_misses, exact_run
+
+    sys, x0 = conformance_plants()["scaled"]
+    rng = np.random.default_rng(0)
+    T = 150
+    start = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
+    U = rng.uniform(-1, 1, size=(T, sys.nu))
+    Y, X = exact_run(sys, start, U, vertex_disturbance(sys.d_at(0), T, rng))
+    est = make_estimator(method, sys, x0=x0)
+    vec = est.run(U, Y, vectorize=True)
+    loop = est.run(U, Y, vectorize=False)
+    assert not exact_misses(vec.lower, vec.upper, X).size
+    assert not exact_misses(loop.lower, loop.upper, X).size
+    widths = [np.mean(r.upper - r.lower, axis=0) for r in (vec, loop)]
+    np.testing.assert_allclose(widths[0], widths[1], rtol=1e-6, atol=0)
+
+
 @pytest.mark.parametrize("case", CASES[:4])
 def test_missing_samples_random_and_gap(case):
     sys, x0 = _system(case)

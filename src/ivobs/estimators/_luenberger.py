@@ -30,14 +30,40 @@ one linear function of the magnitudes ``z = [|x̂|, |u|, |c|, |y|, |ν|, 1]``, `
 
 two errors per step that each method propagates with its set: as generators, ``L diag(e_ν)``
 and ``diag(ε + ...)`` (through ``L``: with a large gain, ``|M^i L|`` is far smaller than
-``|M^i| |L|``), or, where ``M`` is the same at every step, by two scalars: with proven
-envelopes ``|M^i L| 1 <= a_L λ^i`` and ``|M^i| 1 <= a_x λ^i`` (``Channels``), the errors of all
-steps so far are within ``a_L q_L + a_x q_x``, ``q_L+ = λ q_L + ‖e_ν‖∞``, ``q_x+ = λ q_x +
-‖ε + ...‖∞`` (:meth:`~ivobs.sets.rounding.DecayBound.next`, rounded up). The vectorised run
-evaluates ``x̂`` by another algorithm (a linear filter over the record) and bounds the exact
-residual of the computed sequence, ``x̃[k+1] - (A x̃[k] + B u + E c + L ν[k])``, by the same
-``W`` plus the computed residual: any sequence of floats is an observer with that error, so its
-bounds are proven the same way.
+``|M^i| |L|``), or, where ``M`` is the same at every step, by two scalars (``Channels``).
+
+*The two scalars.* Let ``S = diag(s)``, ``s > 0`` powers of two that balance ``M`` (a badly
+scaled plant: states of magnitudes ``1e6`` and ``1e-3`` round at those magnitudes), and
+``‖v‖_s = ‖S⁻¹ v‖∞``, so that ``|v| <= ‖v‖_s s``. ``M̃ = S⁻¹ M S`` and ``L̃ = S⁻¹ L`` are
+computed exactly (products by powers of two, none under- or overflowing; else ``s = 1``), and
+``M^i L = S M̃^i L̃``, ``|M^i| s = S |M̃^i| 1`` exactly; so proven envelopes of the powers of
+``M̃``, ``|M̃^i L̃| 1 <= ã_L λ^i`` and ``|M̃^i| 1 <= ã_x λ^i``, give
+
+    |M^i L| 1 <= a_L λ^i,   |M^i| s <= a_x λ^i,   a_L = s ⊙ ã_L,  a_x = s ⊙ ã_x
+
+(rounded up). The part of the error that the rounding makes, ``ω[k+1] = M ω[k] + ξ_k - L η_k``,
+``ω[0] = 0``, is ``ω[k] = Σ_{j<k} M^{k-1-j} (ξ_j - L η_j)``, so
+
+    |ω[k]| <= Σ_{j<k} (|M^{k-1-j} L| 1 ‖η_j‖∞ + |M^{k-1-j}| s ‖ξ_j‖_s)
+           <= a_L Σ_{j<k} λ^{k-1-j} ‖e_ν,j‖∞ + a_x Σ_{j<k} λ^{k-1-j} ‖ξ_j‖_s.
+
+``ξ_j`` holds ``ΔM`` acting on ``ω[j]`` itself: ``‖ξ_j‖_s <= σ_j + ‖ΔM |ω[j]|‖_s``, ``σ_j`` the
+rest (``ε_j``, ``ΔG r``, ``ΔM`` on the method's own set). By induction on ``k``, ``|ω[k]| <=
+a_L q_L[k] + a_x q_x[k]`` with
+
+    q_L+ = λ q_L + ‖e_ν‖∞,     q_x+ = (λ + β_x) q_x + σ + β_L q_L,     q_L[0] = q_x[0] = 0,
+
+``β_L = ‖ΔM a_L‖_s``, ``β_x = ‖ΔM a_x‖_s``: for ``j < k`` the hypothesis gives ``‖ΔM |ω[j]|‖_s
+<= β_L q_L[j] + β_x q_x[j]``, so ``q_x[k] = Σ_{j<k} λ^{k-1-j} (σ_j + β_L q_L[j] + β_x q_x[j])``
+is at least the second sum (:meth:`~ivobs.sets.rounding.DecayBound.next`, rounded up; ``λ +
+β_x < 1``, else the design is refused). Its image in ``y``: ``|C ω[k]| <= c_L q_L + c_x q_x``,
+``c = |C| a``. With ``s = 1`` the norm is ``‖·‖∞`` and the envelopes are those of ``M``.
+
+The vectorised run evaluates ``x̂`` by another algorithm (a linear filter over the record) and
+bounds the exact residual of the computed sequence, ``x̃[k+1] - (A x̃[k] + B u + E c + L
+ν[k])``, by the same ``W`` plus the computed residual: any sequence of floats is an observer
+with that error, so its bounds are proven the same way, with the same ``s``, envelopes and
+recursions.
 
 **Consistency.** A measurement is inconsistent when ``|ν_i| > ȳ_i`` for an observed output,
 ``ȳ`` the radius of ``y - C x̂ - D u - F c`` the model and the error set allow; it is flagged
@@ -290,7 +316,7 @@ class ObserverEstimator(Estimator):
         # |x̃[k+1] - x̃+_exact| <= |fl(x̃[k+1] - ...)| (one rounding) + ε: the state's channel
         np.abs(res, out=res)
         res[..., :-1, :] += err[..., :-1, :nx]
-        sigma = upper(abs_max(res[..., :-1, :]) + e_free[:-1], 3)
+        sigma = upper(ch.norms(res[..., :-1, :]) + e_free[:-1], 3)
         mu = abs_max(err[..., :-1, nx:])
         qL = np.zeros((*sigma.shape[:-1], T))
         qx = np.zeros_like(qL)

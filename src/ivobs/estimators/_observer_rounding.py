@@ -8,6 +8,8 @@
 * :func:`envelope`: proven bounds ``|M^i X| 1 <= a λ^i`` of the powers of the float ``M``
   (``‖M^i‖∞ <= c λ^i``: :func:`ivobs.sets.rounding.certified_norms`), computed from float
   powers and the bounds of their own rounding;
+* :func:`scaling`: a diagonal scaling ``s`` of powers of two that balances ``M``, in whose
+  norm ``‖v‖_s = ‖S⁻¹ v‖∞`` the rounding of a badly scaled state is measured;
 * :class:`Channels`: where the observer's rounding goes while ``M`` is the same at every step.
 """
 
@@ -21,6 +23,7 @@ import numpy as np
 from ..errors import DesignError
 from ..linalg import UNIT_ROUNDOFF, gamma
 from ..sets.rounding import ETA, DecayBound, certified_norms, decay_of, product_error, up, upper
+from ._recursion import abs_max
 
 __all__ = [
     "Channels",
@@ -83,14 +86,67 @@ def envelope(M: np.ndarray, X: np.ndarray, decay: DecayBound) -> np.ndarray:
     return out
 
 
+MAX_EXPONENT = 500
+"""The scaling ``s`` of :class:`Channels` is ``2^e`` with ``|e| <=`` this: ``s``, ``1 / s`` and
+``s_j / s_i`` are exact floats."""
+
+NORMAL = 2.0**-1021
+"""A nonzero product of a float by a power of two that is at least this in magnitude was exact
+(had its exact value been below the smallest normal ``2^-1022``, the rounded one would be at
+most ``2^-1022``)."""
+
+
+def scaling(M: np.ndarray) -> np.ndarray:
+    """``s``: powers of two, ``2^e`` with ``|e| <=`` :data:`MAX_EXPONENT`, that balance ``M``
+    (:func:`ivobs.design.balance.state_scaling`: LAPACK ``gebal`` of ``|M|``, ``S⁻¹ M S`` with
+    rows and columns of similar norms, ``S = diag(s)``); ones when ``M`` is already balanced."""
+    n = M.shape[0]
+    if not n:
+        return np.ones(0)
+    from ..design.balance import state_scaling
+
+    _, e = np.frexp(state_scaling(M, np.zeros((0, n))))  # gebal's s: 2^(e - 1)
+    out: np.ndarray = np.ldexp(1.0, np.clip(e - 1, -MAX_EXPONENT, MAX_EXPONENT))
+    return out
+
+
+def _exactly_scaled(X: np.ndarray, f: np.ndarray) -> np.ndarray | None:
+    """``X f`` (``f`` powers of two, broadcast), or None when a product may have been rounded
+    (below :data:`NORMAL` or not finite where ``f != 1``)."""
+    out: np.ndarray = X * f
+    inexact = (f != 1.0) & (X != 0.0) & ~(np.abs(out) >= NORMAL)
+    return None if inexact.any() or not np.isfinite(out).all() else out
+
+
+def _times(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """``>= v f`` for ``v >= 0`` and ``f`` powers of two: exact, but where ``f < 1`` it may
+    underflow, so rounded up there."""
+    out = v * f
+    rounded: np.ndarray = np.where(f < 1.0, up(out), out)
+    return rounded
+
+
+def _norm(v: np.ndarray, inv: np.ndarray) -> float:
+    """``>= max_i v_i inv_i`` (``v >= 0``, ``inv`` powers of two)."""
+    return float(max(_times(v, inv).tolist(), default=0.0))
+
+
 @dataclass(frozen=True)
 class Channels:
-    """Where the observer's rounding goes while ``M`` is the same at every step (module
-    docstring): ``|M^i L| 1 <= a_L λ^i``, ``|M^i| 1 <= a_x λ^i`` (:func:`envelope`); the rounding
-    of all steps so far is within ``a_L q_L + a_x q_x``. ``L``, ``x``: the scalar recursions of
-    ``q_L`` (rate ``λ``) and ``q_x`` (rate ``λ + β_x``: ``ΔM`` acting on that part, ``β_x =
-    ‖ΔM a_x‖∞``; ``β_L = ‖ΔM a_L‖∞`` multiplies ``q_L`` into ``q_x``'s input); ``cL``, ``cx``:
-    ``|C| a_L``, ``|C| a_x``, their image in ``y``; ``K = [[a_L, a_x], [c_L, c_x]]``."""
+    """Where the observer's rounding goes while ``M`` is the same at every step (the proof: the
+    module docstring of :mod:`ivobs.estimators._luenberger`), measured in the scaled norm
+    ``‖v‖_s = ‖S⁻¹ v‖∞`` (``S = diag(s)``, :func:`scaling`; ``inv = 1 / s``).
+
+    With ``M̃ = S⁻¹ M S`` and ``L̃ = S⁻¹ L`` (exact: powers of two), ``|M̃^i L̃| 1 <= ã_L λ^i``
+    and ``|M̃^i| 1 <= ã_x λ^i`` (:func:`envelope`), so ``|M^i L| 1 = S |M̃^i L̃| 1 <= a_L λ^i``
+    and ``|M^i| s = S |M̃^i| 1 <= a_x λ^i`` with ``a_L = s ⊙ ã_L``, ``a_x = s ⊙ ã_x``. The
+    rounding of all steps so far is within ``a_L q_L + a_x q_x``; ``L``, ``x``: the scalar
+    recursions of ``q_L`` (rate ``λ``, input ``‖e_ν‖∞``) and ``q_x`` (input ``‖ξ‖_s``; rate
+    ``λ + β_x``: ``ΔM`` acting on that part, ``β_x = ‖ΔM a_x‖_s``; ``β_L = ‖ΔM a_L‖_s``
+    multiplies ``q_L`` into ``q_x``'s input); ``cL``, ``cx``: ``|C| a_L``, ``|C| a_x``, their
+    image in ``y``; ``K = [[a_L, a_x], [c_L, c_x]]``. ``down``: some ``s_i > 1`` (a product
+    by ``1 / s_i`` may underflow, so it is rounded up). ``s = 1`` (a balanced ``M``): the
+    ∞-norm, the envelopes of ``M`` itself."""
 
     aL: np.ndarray
     ax: np.ndarray
@@ -100,25 +156,35 @@ class Channels:
     betaL: float
     L: DecayBound
     x: DecayBound
+    inv: np.ndarray
+    down: bool
 
     @classmethod
     def of(cls, M: np.ndarray, dM: np.ndarray, L: np.ndarray, C: np.ndarray) -> Channels:
-        """The envelopes for ``M`` (its rate chosen among :data:`THETAS`)."""
+        """The envelopes for ``M`` (its rate chosen among :data:`THETAS`), in the scaling of
+        :func:`scaling` (ones if ``M̃`` or ``L̃`` would not be exact)."""
+        n = M.shape[0]
+        s = scaling(M)
+        inv = 1.0 / s  # exact: powers of two
+        Ms = _exactly_scaled(M, s[None, :] * inv[:, None])  # M̃ = S⁻¹ M S
+        Ls = _exactly_scaled(L, inv[:, None])  # L̃ = S⁻¹ L
+        if Ms is None or Ls is None:
+            s, inv, Ms, Ls = np.ones(n), np.ones(n), M, L
         best: tuple[float, np.ndarray, np.ndarray, float] | None = None
-        norms = certified_norms(M, min(THETAS)) if M.shape[0] else np.ones(1)
+        norms = certified_norms(Ms, min(THETAS)) if n else np.ones(1)
         for theta in THETAS:
             decay = decay_of(norms, theta)
             if decay is None:
                 continue
-            aL, ax = envelope(M, L, decay), envelope(M, np.eye(M.shape[0]), decay)
+            aL, ax = envelope(Ms, Ls, decay), envelope(Ms, np.eye(n), decay)
             score = float(aL.max() + ax.max()) / (1.0 - decay.lam)
             if best is None or score < best[0]:
                 best = (score, aL, ax, decay.lam)
         assert best is not None
         _, aL, ax, lam = best
-        n = M.shape[0]
-        betaL = float(upper(dM @ aL, n).max())
-        lam_x = float(up(lam + float(upper(dM @ ax, n).max())))
+        aL, ax = _times(aL, s), _times(ax, s)  # a = s ⊙ ã
+        betaL = _norm(upper(dM @ aL, n), inv)
+        lam_x = float(up(lam + _norm(upper(dM @ ax, n), inv)))
         if not lam_x < 1.0:
             raise DesignError(
                 "the rounding of the observer cannot be bounded: the decay rate of A - LC with "
@@ -126,7 +192,20 @@ class Channels:
             )
         cL, cx = upper(np.abs(C) @ aL, n), upper(np.abs(C) @ ax, n)
         K = np.vstack([np.column_stack([aL, ax]), np.column_stack([cL, cx])])
-        return cls(aL, ax, cL, cx, K, betaL, DecayBound(1.0, lam), DecayBound(1.0, lam_x))
+        rates = DecayBound(1.0, lam), DecayBound(1.0, lam_x)
+        return cls(aL, ax, cL, cx, K, betaL, *rates, inv, bool((inv < 1.0).any()))
+
+    def norm(self, v: np.ndarray) -> float:
+        """``>= ‖v‖_s = max_i v_i / s_i`` for ``v >= 0`` (``nx,``): the input of ``q_x``. The
+        products by ``1 / s_i`` are exact unless they underflow (error below ``2^-1075``), so
+        the largest computed one, one ulp up where some ``s_i > 1``, bounds the exact maximum."""
+        m: float = max((v * self.inv).tolist(), default=0.0)
+        return math.nextafter(m, math.inf) if self.down else m
+
+    def norms(self, v: np.ndarray) -> np.ndarray:
+        """``>= ‖v‖_s`` over the last axis of ``v >= 0`` (as :meth:`norm`)."""
+        out: np.ndarray = abs_max(v * self.inv)
+        return up(out) if self.down else out
 
     def widen(self, s: np.ndarray, qL: float, qx: float) -> np.ndarray:
         """``>= s + K [q_L; q_x]`` for ``s = [ρ; ȳ]`` (or its first rows, ``ρ``)."""

@@ -103,12 +103,13 @@ class Reachability(ObserverEstimator):
 
     **Rounding, proven** (the observer's: :mod:`~ivobs.estimators._luenberger`). ``X_{k+1} =
     fl(M X_k)`` differs from ``M X_k`` by ``E_k``, ``|E_k| <= product_error(|M| |X_k|)``. Those
-    errors enter the error set as ``Σ_j M^{k-1-j} ξ_j`` with ``‖ξ_j‖∞ <= ‖|E_j^H| 1‖∞ +
-    Σ_{i<j} ‖|E_i^G| 1‖∞`` (a term ``|M^a G R|`` of the sum is computed with ``a`` roundings; the
+    errors enter the error set as ``Σ_j M^{k-1-j} ξ_j`` with ``‖ξ_j‖_s <= ‖|E_j^H| 1‖_s +
+    Σ_{i<j} ‖|E_i^G| 1‖_s`` (a term ``|M^a G R|`` of the sum is computed with ``a`` roundings; the
     ones of the same age are the same matrix), plus the exact matrices' difference
-    ``ΔM ρ + ΔG r``, plus the observer's rounding ``ε``. Their sum is the ball ``q`` of
-    :class:`~ivobs.sets.rounding.DecayBound` (``‖M^i‖∞ <= c λ^i``, the exact powers of the float
-    ``M``): ``x[k] ∈ x̂[k] ± (ρ[k] + q[k])``, every sum rounded up. Where ``X_k`` is dropped
+    ``ΔM ρ + ΔG r``, plus the observer's rounding ``ε``; ``‖v‖_s = ‖S⁻¹ v‖∞`` is the scaled norm
+    of :class:`~ivobs.estimators._observer_rounding.Channels`. Their sum is its ball ``a_L q_L +
+    a_x q_x`` (``|M^i| s <= a_x λ^i``, the exact powers of the float ``M``): ``x[k] ∈ x̂[k] ±
+    (ρ[k] + a_L q_L[k] + a_x q_x[k])``, every sum rounded up. Where ``X_k`` is dropped
     (negligible), its remainder ``M X_k`` is one more such ``E_k``.
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``
@@ -194,8 +195,9 @@ class Reachability(ObserverEstimator):
         if self._const is not None:
             r = self._const[1]
             X0 = np.hstack([np.diag(self._h0), self._full.G * r])
-            e0 = float(up(UNIT_ROUNDOFF * upper(np.abs(X0[:, self.sys.nx :]).sum(axis=1).max(), 2)))
-            start = (X0, np.zeros(self.sys.nx), e0, 0)  # (X_k, s_k, Σ_{i<k} ‖E_i^G‖, k)
+            rows = upper(np.abs(X0[:, self.sys.nx :]).sum(axis=1), 2)
+            e0 = float(up(UNIT_ROUNDOFF * self._channels.norm(rows)))
+            start = (X0, np.zeros(self.sys.nx), e0, 0)  # (X_k, s_k, Σ_{i<k} ‖E_i^G‖_s, k)
             self._free = DataFreeBounds(start, self._algorithm1, self._xc)
 
     def _algorithm1(self, state: Any) -> tuple[np.ndarray, np.ndarray, float, Any]:
@@ -203,13 +205,13 @@ class Reachability(ObserverEstimator):
         ``yb = |C| ρ + |F| r`` and the rounding ``e[k]`` it adds (class docstring), then
         ``X_{k+1} = M X_k``, ``s_{k+1} = s_k + |X_k^G| 1``."""
         X, s, cum, k = state
-        g, r = self._full, self._const[1]  # type: ignore[index]
+        g, r, ch = self._full, self._const[1], self._channels  # type: ignore[index]
         C, nx, nd = self._mats[2], self.sys.nx, r.shape[0]
         aH = upper(np.abs(X[:, :nx]).sum(axis=1), nx)
         aG = upper(np.abs(X[:, nx:]).sum(axis=1), nd)
         rho = up(aH + s)  # [Tang2019, eq. (21)]
         yb = upper(np.abs(C) @ rho + self._absF @ r, nx + nd)
-        mismatch = float(upper(g.dM @ rho + g.dG @ r, nx + nd).max())  # (A - LC - M) e, ...
+        mismatch = ch.norm(upper(g.dM @ rho + g.dG @ r, nx + nd))  # (A - LC - M) e, ...
         if not X.any():  # M^k X0 is gone: ρ stays
             return rho, yb, float(upper(cum + mismatch, 2)), None
         X_next = g.M @ X
@@ -221,8 +223,8 @@ class Reachability(ObserverEstimator):
             eH = eH + upper(np.abs(X_next[:, :nx]).sum(axis=1), nx)  # dropped: M X_k is its error
             eG = eG + upper(np.abs(X_next[:, nx:]).sum(axis=1), nd)
             X_next = np.zeros_like(X)
-        e = float(upper(eH.max() + cum + mismatch, 3))
-        return rho, yb, e, (X_next, s_next, float(up(cum + upper(eG.max(), 2))), k + 1)
+        e = float(upper(ch.norm(upper(eH, 2)) + cum + mismatch, 3))
+        return rho, yb, e, (X_next, s_next, float(up(cum + ch.norm(upper(eG, 2)))), k + 1)
 
     # -- online --------------------------------------------------------------------------------
     def _initial_state(self) -> ReachabilityState:
@@ -254,7 +256,7 @@ class Reachability(ObserverEstimator):
         xh_next, eps, e_nu, inconsistent, gain = self._observe(xh, u_k, y_k, c, ybound)
         if state.mode == EXACT and gain is self._full:  # the rounding joins q_L, q_x
             qL = ch.L.next(state.qL, max(e_nu.tolist()))
-            sigma = (max(eps.tolist()) + e + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+            sigma = (ch.norm(eps) + e + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
             return Step(evolve(state, xh=xh_next, qL=qL, qx=ch.x.next(state.qx, sigma)), lo, hi)
         xi = upper(eps + gain.dM @ rho + gain.dG @ r, rho.shape[0] + r.shape[0] + 2)
         rounding = np.hstack([gain.L * e_nu, np.diag(xi)])  # L_k η + ξ_k

@@ -438,7 +438,7 @@ class ZonotopeEstimator(ObserverEstimator):
             if H_next is None:
                 H_next = self._predict(H, gain, r, radH)  # (34b)
             qL = ch.L.next(state.qL, max(e_nu.tolist()))
-            sigma = (max(eps.tolist()) + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
+            sigma = (ch.norm(eps) + ch.betaL * state.qL) * (1.0 + 4.0 * UNIT_ROUNDOFF)
             new = evolve(state, p=p_next, H=H_next, qL=qL, qx=ch.x.next(state.qx, sigma))
             return Step(new, lo, hi, inconsistent)
         # another gain: the rounding so far becomes a box of generators, this step's too
