@@ -16,7 +16,8 @@ from ivobs import Box, IvobsError, LinearSystem, image_bounds, scenarios
 from ivobs.estimators import Estimator
 from ivobs.estimators.intersect import DEFAULT_METHODS
 from ivobs.estimators.state import OnlineState, Step
-from ivobs.testing import adversarial_run, assert_contains, random_system
+from ivobs.testing import adversarial_run, assert_contains, exact_misses, exact_run, random_system
+from ivobs.testing.conformance import conformance_plants, vertex_disturbance
 
 RTOL = 1e-12  # "contained in a member": up to the rounding margin of a crossing
 
@@ -215,6 +216,31 @@ def test_vectorised_run_and_batches_match_the_loop():
     for k in range(50):
         box = est.step(trs[0].u[k], trs[0].y[k])
         assert np.array_equal(box.lo, loop[0].lower[k]) and np.array_equal(box.hi, loop[0].upper[k])
+
+
+def test_vectorised_path_adds_nothing_to_the_members_on_a_badly_scaled_plant():
+    """The 'scaled' conformance plant (states of magnitude 1e6, 1 and 1e-3), vertex disturbances,
+    exact states. On either path the box is the members' boxes of that path intersected and met
+    with the strips, bit for bit: intersect's own part is exact and the same on both paths, so
+    where the paths differ, a member's paths do. Both hold the state; with members whose
+    vectorised path is their loop's within rounding, the widths are the loop's."""
+    need("reachability")
+    sys, x0 = conformance_plants()["scaled"]
+    rng, T = np.random.default_rng(0), 100
+    x_true0 = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
+    u = rng.uniform(-1.0, 1.0, size=(T, sys.nu))
+    y, x = exact_run(sys, x_true0, u, vertex_disturbance(sys.d_at(0), T, rng))
+    est = intersect(sys, x0)
+    vf = est.valid_from
+    for vectorize in (False, True):
+        res = est.run(u, y, vectorize=vectorize)
+        assert exact_misses(res.lower, res.upper, x).size == 0 and not res.inconsistent.any()
+        members = [m.run(u, y, vectorize=vectorize) for m in est.members]
+        lo = np.fmax.reduce([m.lower for m in members])
+        hi = np.fmin.reduce([m.upper for m in members])
+        est._strips.meet(lo[vf:], hi[vf:], u[vf:], y[vf:], np.arange(vf, T))
+        np.testing.assert_array_equal(res.lower[vf:], lo[vf:])
+        np.testing.assert_array_equal(res.upper[vf:], hi[vf:])
 
 
 def test_state_and_restore_nest_the_members():

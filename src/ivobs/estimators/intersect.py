@@ -237,7 +237,14 @@ class Intersect(Estimator):
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """Members' own (vectorised where they have it) runs, intersected. Falls back to the
         loop (returns None) when anything needs reporting: a member's inconsistency or an empty
-        intersection."""
+        intersection.
+
+        Given the same members' boxes, the loop's boxes bit for bit: :meth:`_combine` compares
+        floats (exact, step by step on either path), and the strips are met step by step by the
+        one kernel (:func:`ivobs.sets.strip.meet_strips`; :mod:`ivobs.estimators.record` here,
+        :meth:`~ivobs.estimators.base.Estimator.advance` in the loop). So this path is as sound
+        as the members' vectorised paths, and where it is wider than the loop, a member's
+        vectorised path is wider than its loop."""
         los, his = [], []
         for m in self.members:
             out = _member_run(m, u, y, t)
@@ -279,7 +286,7 @@ class Intersect(Estimator):
 def _member_run(
     m: Estimator, u: np.ndarray, y: np.ndarray, t: np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """A member's own run (its vectorised path where it has one), rounded by its own margin, NaN
+    """A member's own run (its vectorised path where it has one), rounded by its own rules, NaN
     before its ``valid_from``; None when anything needs the loop: a sample the member flags (the
     loop reports it once, as the intersection's) or bounds that left the float range (the other
     members may still bound the state)."""
