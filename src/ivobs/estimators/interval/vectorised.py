@@ -96,7 +96,8 @@ def scalings(
     ``D⁻¹|Q|D`` and a score of the gain ``c / (1 − λ)`` of its decay bound: none (``d = 1``),
     and ``w = (I − |Q|)⁻¹ (g + r_0)`` (the steady radius with the disturbance radius ``g`` and
     the prior radius ``r_0`` as a constant input, each entry at least ``2⁻³⁰`` times the
-    largest, rounded to a power of two within ``2^±400``). The score is the mean over the
+    largest, rounded to a power of two within ``2^±400``) when its entries spread over more
+    than ``2¹⁰``. The score is the mean over the
     states of the predicted excess ``d_i (c / (1 − λ)) max_j a_j / d_j`` over the loop's
     ``((I − |Q|)⁻¹ a)_i`` for a rounding ``a = ex ‖w‖ + u (|Q| w + w)`` of every row (the
     step's rounding per state, :mod:`.rounding`): the scaling that costs least against the
@@ -127,7 +128,7 @@ def scalings(
     out.append((one, aQ, score(one)))
     d = np.ldexp(1.0, np.clip(np.frexp(w)[1], -400, 400))
     Qd = _scaled(aQ, d)
-    if Qd is not None:
+    if Qd is not None and float(np.max(d)) > 1024.0 * float(np.min(d)):
         out.append((d, Qd, score(d)))
     return out
 
@@ -152,6 +153,8 @@ class VectorPath:
         self._decay: tuple[DecayBound, np.ndarray] | bool | None = False  # False: not computed
         self._radius: tuple[int, np.ndarray, np.ndarray] | None = None
         self._filter: SplitFilter | None = None
+        self._coef: tuple[Any, ...] | None = None
+        self._unit = True  # d = 1 (set with the decay bound)
 
     def _decay_bound(self) -> tuple[DecayBound, np.ndarray] | None:
         """The scaling ``d`` (:func:`scalings`) and ``c``, ``λ`` of ``D⁻¹|Q|D`` with the matrix
@@ -161,6 +164,7 @@ class VectorPath:
             ops, m = self.ops, self.ops.full
             aQ = np.abs(m.Q)
             kx = 1.0 if ops.tr is None else ops.tr.kx
+            de = np.ones(ops.nx) if ops.scale is None else ops.scale
             w = np.abs(m.G) @ (0.5 * ops.sys.d_widths())
             best: tuple[float, DecayBound, np.ndarray] | None = None
             for d, Qd, score in scalings(aQ, w, ops.initial_bounds(), kx * m.err.ex):
@@ -168,12 +172,13 @@ class VectorPath:
                     db = DecayBound.of(Qd)
                 except DesignError:
                     continue
-                ex = (float(np.max(m.err.ex / d, initial=0.0)) + ETA) * float(np.max(d))
+                ex = (float(np.max(m.err.ex / d, initial=0.0)) + ETA) * float(np.max(d / de))
                 lam = float(up(db.lam + db.c * float(upper(kx * ex, 4))))
                 cost = score(db.c / (1.0 - lam)) if lam < 1.0 else np.inf
                 if lam < 1.0 and (best is None or cost < best[0]):
                     best = (cost, DecayBound(db.c, lam), d)
             self._decay = None if best is None else best[1:]
+            self._unit = best is None or bool(np.all(best[2] == 1.0))
         return self._decay if isinstance(self._decay, tuple) else None
 
     def run(self, est: Any, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> Bounds | None:
@@ -238,7 +243,16 @@ class VectorPath:
         rmax = abs_max(rad)  # (T,)
         # -- the defect of the centres: whole (contiguous) arrays, then the rows k < T − 1 -------
         cmax, ymax = abs_max(c), abs_max(y)
-        cs = abs_max(c * di)  # ‖D⁻¹ ĉ_k‖∞ (exact but for underflow: + η below)
+        unit = self._unit
+        cs = cmax if unit else abs_max(c * di)  # ‖D⁻¹ ĉ_k‖∞ (exact but for underflow: + η)
+        # the norms of ĉ_k, r̂_k on which the matrix errors act (:mod:`.rounding`: ‖D_e⁻¹ x‖∞)
+        if ops.scale is None:
+            ce, re, de_max = cmax, rmax, float(np.max(d, initial=1.0))
+        else:
+            dei = 1.0 / ops.scale
+            de_max = float(np.max(d * dei, initial=1.0))
+            ce = cs if np.array_equal(ops.scale, d) else abs_max(c * dei)
+            re = abs_max(rad * dei)
         umax: Any = abs_max(u) if nu else 0.0
         pred = matrix_product(c, m.Q.T)
         pred += matrix_product(y, m.Lz.T)
@@ -247,7 +261,8 @@ class VectorPath:
         pred += gc if tv else gc[0]
         defect = pred[..., :-1, :]
         defect -= c[..., 1:, :]
-        defect *= di
+        if not unit:
+            defect *= di
         ge = 2.0 * gamma(n + ny + nu + 4)
 
         def row(v: np.ndarray) -> float:  # max_i v_i / d_i, rounded up (v >= 0, upper bounds)
@@ -256,17 +271,27 @@ class VectorPath:
         def rows(M: np.ndarray) -> np.ndarray:  # row sums of |M|, rounded up
             return np.asarray(upper(np.abs(M).sum(axis=1), max(M.shape[-1], 1)))
 
-        nQ = float(upper(row(upper(np.abs(m.Q) @ d, n)), 1))  # max_i (|Q| d)_i / d_i
-        nL, nB = row(rows(m.Lz)), row(rows(m.Bz))
+        if self._coef is None:  # data-free: once
+            self._coef = (
+                float(upper(row(upper(np.abs(m.Q) @ d, n)), 1)),  # max_i (|Q| d)_i / d_i
+                row(rows(m.Lz)),
+                row(rows(m.Bz)),
+                (ops.tr.kx if ops.tr is not None else 1.0) * row(m.err.ex),
+                row(m.err.eu),
+                row(m.err.ey),
+                row(m.err.ed),
+                upper(np.abs(m.Cz) @ d, n),
+                None if ops.tr is None else upper(np.abs(ops.tr.Si) @ d, n),
+                None if ops.tr is None else rows(ops.tr.Si),
+            )
+        nQ, nL, nB, ex, eu, ey, ed, Cd, Sid, sr = self._coef
         nG = row(abs_max(np.abs(gc.T)))
         e = ops.tr.kx if ops.tr is not None else 1.0
-        ex, eu = e * row(m.err.ex), row(m.err.eu)
-        ey, ed = row(m.err.ey), row(m.err.ed)
         cs0, ym = cs[..., :-1], ymax[..., :-1]
         um = umax[..., :-1] if nu else 0.0
         beta = (1.0 + _U2) * abs_max(defect) + ETA
         del pred, defect
-        beta += ge * nQ * cs0 + ex * (cmax[..., :-1] + rmax[:-1]) + ge * cs[..., 1:]
+        beta += ge * nQ * cs0 + ex * (ce[..., :-1] + re[:-1] + 2.0 * ETA) + ge * cs[..., 1:]
         beta += (ge * nL + ey) * ym + (ge * nB + eu) * um
         beta += ge * nG + (n + ny + nu + 4) * ETA * dimax + 2.0 * ETA + tau
         beta += ed * (d_mag[:-1] if tv else d_mag[0]) + (g_err[:-1] if tv else g_err[0])
@@ -275,9 +300,8 @@ class VectorPath:
             beta = upper(beta, 14)
             for out, b in zip(s.reshape(-1, T), beta.reshape(-1, T - 1)):
                 out[1:] = db.accumulate(b)
-        # |z_k − ĉ_k| <= r̂_k + d s_k; ‖z_k‖ <= zmax
-        dmax = float(np.max(d, initial=1.0))
-        zmax = upper(cmax + rmax + s * dmax, 3)
+        # |z_k − ĉ_k| <= r̂_k + d s_k; ‖D_e⁻¹ z_k‖∞ <= zmax (the norm of :mod:`.rounding`)
+        zmax = upper(ce + re + s * de_max + 2.0 * ETA, 4)
         # -- consistency of y[k] with C x + D_u u + F d (the loop's test rows) ----------------
         Du = ops.mats[3]
         yc = matrix_product(c, m.Cz.T)
@@ -293,7 +317,7 @@ class VectorPath:
         nf = float(np.max(abs_max(fc)))
         slack = 2.0 * gamma(n + nu + 3) * (nC * cmax + nD * umax + nf) + f_err
         slack += pz * zmax + _U2 * ymax + (n + nu + 3) * ETA
-        slack = upper(slack, 8)[..., None] + upper(s[..., None] * upper(aC @ d, n), 1)
+        slack = upper(slack, 8)[..., None] + upper(s[..., None] * Cd, 1)
         slack += yr
         bad = yc > upper(slack, 4)
         del yc, slack
@@ -304,15 +328,15 @@ class VectorPath:
             fail = bad.reshape(bad.shape[0], -1).any(axis=1)
         # -- the boxes ---------------------------------------------------------------------------
         if ops.tr is None:
-            lo, hi = _enclose(c, rad, s[..., None] * d + ETA)  # (s d: exact but for underflow)
+            sd = s[..., None] if unit else s[..., None] * d + ETA  # (exact but for underflow)
+            lo, hi = _enclose(c, rad, sd)
         else:
             Si = ops.tr.Si
             aSi = np.abs(Si)
             xc = matrix_product(c, Si.T)
             xr = upper(matrix_product(rad, aSi.T), n)  # (T, n): data-free
-            sr = rows(Si)
             extra = (2.0 * gamma(n + 2) * cmax)[..., None] * sr + (e * zmax)[..., None] * ops.tr.rs
-            extra = upper(extra, 3) + upper(s[..., None] * upper(aSi @ d, n), 1)
+            extra = upper(extra, 3) + upper(s[..., None] * Sid, 1)
             lo, hi = _enclose(xc, xr, extra)
             lo[..., 0, :] = ops.x0.lo  # [Tang2019, eq. (42)]: the prior box at k = 0
             hi[..., 0, :] = ops.x0.hi
