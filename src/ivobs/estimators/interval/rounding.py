@@ -247,7 +247,7 @@ def row_bounds(
             w = d if b in (0, 1) else None  # the z blocks: on ‖D⁻¹ z‖∞
             a = np.zeros(rows) if s is None else _rows(s, w)
             c = (ge + 4.0 * UNIT_ROUNDOFF) * a  # (+ the last addition: 2u |fl(W v)|, doubled)
-            if b in (0, 1):  # ‖x‖ <= kx ‖z‖ <= kx (‖z̄‖ + ‖z̲‖)
+            if b in (0, 1):  # ‖Dx⁻¹ x‖ <= kx ‖Dz⁻¹ z‖ <= kx (‖Dz⁻¹ z̄‖ + ‖Dz⁻¹ z̲‖)
                 c = c + kx * on_x
                 if name == "p":
                     c = c + err.pz[obs]

@@ -13,8 +13,9 @@ the computed centres ``ĉ_k`` are, ``e_k = z_k − ĉ_k`` obeys
 
     e+ = Q e + G (d − d_c) + β,    β_k = (G d_c − fl(G d_c)) + δ_k − ρ_k,
 
-with ``δ_k`` the matrix errors of :mod:`.rounding` (row ``i``: ``ex_i ‖x_k‖∞ + eu_i ‖u_k‖∞ +
-ey_i ‖y_k‖∞ + ed_i ‖d_k‖∞``) and ``ρ_k = ĉ_{k+1} − (Q ĉ_k + L_z y_k + B_z u_k + fl(G d_c))`` the
+with ``δ_k`` the matrix errors of :mod:`.rounding` (row ``i``: ``ex_i ‖D_x⁻¹ x_k‖∞ +
+eu_i ‖u_k‖∞ + ey_i ‖y_k‖∞ + ed_i ‖d_k‖∞`` in its scaled norms ``D_x``, ``D_z``) and
+``ρ_k = ĉ_{k+1} − (Q ĉ_k + L_z y_k + B_z u_k + fl(G d_c))`` the
 *defect* of the computed sequence, evaluated afterwards by one product over the record, each
 row with its rounding ([Higham2002, §3.1]: row ``i`` off by at most ``2γ (Σ_j |Q_ij| |ĉ_j| +
 |ĉ_{k+1,i}| + …)``). Split ``e = a + b``: ``a+ = Q a + G (d − d_c)``, ``|a_0| <= r_0`` gives
@@ -32,8 +33,9 @@ d_i`` on ``‖D⁻¹ ĉ_k‖∞`` and ``max_i ex_i / d_i`` (and alike) on the no
 rounding counts relative to its own scale, not to the largest state. ``‖D⁻¹ Q^i D‖∞ <=
 ‖(D⁻¹|Q|D)^i‖∞ <= c λ^i`` (:class:`~ivobs.sets.rounding.DecayBound` of ``D⁻¹|Q|D``), so
 ``‖D⁻¹ b_k‖∞ + ‖D⁻¹ p_k‖∞ <= s_k``, ``s+ = λ s + c (‖D⁻¹ β‖∞ + ‖D⁻¹ τ‖∞)``: one more linear
-filter (:meth:`~ivobs.sets.rounding.DecayBound.accumulate`; ``δ_k`` depends on ``‖x_k‖∞ <=
-k_x ‖z_k‖∞ <= k_x (‖ĉ_k‖∞ + ‖r̂_k‖∞ + max(d) s_k)``, whose last term goes into ``λ``). Hence,
+filter (:meth:`~ivobs.sets.rounding.DecayBound.accumulate`; ``δ_k`` depends on
+``‖D_x⁻¹ x_k‖∞ <= k_x ‖D_z⁻¹ z_k‖∞ <= k_x (‖D_z⁻¹ ĉ_k‖∞ + ‖D_z⁻¹ r̂_k‖∞ + max(d / d_z) s_k)``,
+whose last term goes into ``λ``). Hence,
 componentwise, ``z_k ∈ ĉ_k ± (r̂_k + d s_k)``, rounded outwards; ``s_k`` is of the order of
 the scaled rounding of the data times ``c / (1 − λ)``. The box of ``x`` (``S ≠ I``: its rows
 add ``s_k |Si| d``) and the consistency test of ``y[k]`` (``s_k |C_z| d``) are evaluated from
