@@ -31,7 +31,7 @@ from ...errors import DesignError
 from ...linalg import spectral_radius
 from ...model import LinearSystem
 from ...sets import Box, image_bounds, neg, pos
-from ...sets.rounding import upper
+from ...sets.rounding import ETA, upper
 from .rounding import RowErrors, Transform, pattern_errors, row_bounds, transform
 
 __all__ = ["Operators", "StepOperator"]
@@ -67,16 +67,43 @@ class StepOperator:
     Cz: np.ndarray
     err: RowErrors
     rho: float
+    weights: np.ndarray | None = None
 
     def bounds(self, v: np.ndarray) -> np.ndarray:
         """The upper rows (the first :attr:`h`) and the lower rows of one step, each rounded to
         the safe side of the exact Lemma-1 bound (:mod:`.rounding`): ``fl(W v) ± (R b + e0)``,
-        with the rounding of that last addition covered."""
+        with the rounding of that last addition covered. ``weights``: ``1 / d`` on the ``z``
+        blocks, 1 elsewhere (powers of two: ``|v| w`` is exact but for underflow, less than
+        ``η`` per entry, added)."""
         out: np.ndarray = self.W @ v
-        e = self.R @ np.maximum.reduceat(np.abs(v), self.starts)  # (R, e0: signed per side)
+        a = np.abs(v)
+        if self.weights is not None:
+            a *= self.weights
+            a += ETA
+        e = self.R @ np.maximum.reduceat(a, self.starts)  # (R, e0: signed per side)
         e += self.e0
         out += e if self.rows is None else np.repeat(e, self.rows)
         return out
+
+
+def state_scale(x0: Box, E: np.ndarray, dw: np.ndarray) -> np.ndarray:
+    """The scaling ``d`` of the states (powers of two within ``2^±400``): the magnitude of the
+    prior box plus one step's disturbance radius ``|E| Δ / 2``, each at least ``2⁻³⁰`` times
+    the largest; ones when they are all within a factor ``2¹⁰`` (:mod:`.rounding`: any
+    positive ``d`` is sound; this one weighs each state's rounding by its own magnitude, not
+    the largest state's, where they differ by orders of magnitude)."""
+    n = len(x0.lo)
+    with np.errstate(all="ignore"):
+        m = np.maximum(np.abs(x0.lo), np.abs(x0.hi)) + np.abs(E) @ (0.5 * dw)
+    m = np.where(np.isfinite(m) & (m > 0.0), m, 0.0)
+    top = float(np.max(m, initial=0.0))
+    if not top > 0.0:
+        return np.ones(n)
+    m = np.maximum(m, top * 2.0**-30)
+    if top <= 1024.0 * float(np.min(m)):  # magnitudes within 2^10: the plain ∞-norm
+        return np.ones(n)
+    d: np.ndarray = np.ldexp(1.0, np.clip(np.frexp(m)[1], -400, 400))
+    return d
 
 
 class Operators:
@@ -101,7 +128,13 @@ class Operators:
         self.sparse: bool = sys.is_sparse and S is None
         A = sys.sparse("A") if self.sparse else sys.A_at(0)
         self.mats = (A, sys.B_at(0), sys.C_at(0), sys.D_at(0), sys.E_at(0), sys.F_at(0))
-        self.tr: Transform | None = None if S is None else transform(S, who)
+        self.tr: Transform | None = None
+        if S is not None:
+            dw = sys.d_widths()
+            dx = state_scale(x0, self.mats[4], dw)
+            zlo, zhi = image_bounds(S, x0.lo, x0.hi)
+            dz = state_scale(Box(zlo, zhi), np.abs(S) @ np.abs(self.mats[4]), dw)
+            self.tr = transform(S, who, dx, dz)
         self.xrows = 0 if S is None else sys.nx
         """Rows of the box of ``x`` in a step's bounds (``S ≠ I``)."""
         self.unc = sys.uncertainty
@@ -111,6 +144,20 @@ class Operators:
         ends = np.cumsum(self.sizes)
         self.starts = np.array([e - s for e, s in zip(ends, self.sizes, strict=True) if s])
         self._patterns: dict[bytes, StepOperator] = {}
+        self.scale: np.ndarray | None = None
+        """The scaling ``d`` of ``z`` (powers of two) in which the step's rounding is measured
+        (:mod:`.rounding`; ``S ≠ I``: ``tr.dz``); None: unscaled (sparse systems, or states of
+        magnitudes within ``2¹⁰``)."""
+        self.weights: np.ndarray | None = None
+        if self.tr is not None or not self.sparse:
+            self.scale = (
+                state_scale(x0, self.mats[4], sys.d_widths()) if self.tr is None else self.tr.dz
+            )
+            if np.all(self.scale == 1.0):  # the plain ∞-norm: no weights in the step
+                self.scale = None
+            else:
+                one = np.ones(nu + ny + 2 * nd)
+                self.weights = np.concatenate((1.0 / self.scale, 1.0 / self.scale, one))
         self.d_const: tuple[np.ndarray, np.ndarray] | None = None
         if sys.has_constant_bounds:
             box = sys.d_at(0)
@@ -184,13 +231,13 @@ class Operators:
             Q, Bz, Lz, G, Cz = SM @ tr.Si, tr.S @ Bh, tr.S @ Lk, tr.S @ Gh, C @ tr.Si
             mats.update(SM=SM, Q=Q)
             Lmag = upper(np.abs(tr.S) @ np.abs(Lk), self.nx)
-        err = pattern_errors(mats, Lk, tr, self.mats)
+        err = pattern_errors(mats, Lk, tr, self.mats, self.scale)
         W, sums = self._rows(Q, Bz, Lz, G, Cz, obs)
         m = self.nx * 2 + self.nu + self.ny + 2 * self.nd
         if self.sparse:
             m = int(np.max(np.diff(W.indptr), initial=1))
         kx = 1.0 if tr is None else tr.kx
-        R1, e01 = row_bounds(sums, err, kx, self.sizes, tr is not None, m, obs)
+        R1, e01 = row_bounds(sums, err, kx, self.sizes, tr is not None, m, obs, self.scale)
         rho = np.nan if self.sparse else spectral_radius(np.abs(Q))
         h = R1.shape[0]
         lows = h - 2 * int(obs.sum())  # the lower rows: [z̲+; x̲]
@@ -222,6 +269,7 @@ class Operators:
             Cz=Cz,
             err=err,
             rho=float(rho),
+            weights=self.weights,
         )
 
     def _rows(

@@ -13,23 +13,37 @@ the computed centres ``ĉ_k`` are, ``e_k = z_k − ĉ_k`` obeys
 
     e+ = Q e + G (d − d_c) + β,    β_k = (G d_c − fl(G d_c)) + δ_k − ρ_k,
 
-with ``δ_k`` the matrix errors of :mod:`.rounding` (on ``‖x_k‖``, ``‖u_k‖``, ``‖y_k‖``,
-``‖d_k‖``) and ``ρ_k = ĉ_{k+1} − (Q ĉ_k + L_z y_k + B_z u_k + fl(G d_c))`` the *defect* of the
-computed sequence, evaluated afterwards by one product over the record and bounded with its
-rounding ([Higham2002, §3.1], norm-wise). Split ``e = a + b``: ``a+ = Q a + G (d − d_c)``,
-``|a_0| <= r_0`` gives ``|a_k| <= r_k`` (the exact radius recursion), and ``b+ = Q b + β``,
-``b_0 = 0``. The computed radii ``r̂`` fall short of the exact ones by at most ``p_k``,
-``p+ = |Q| p + τ`` with ``τ_k`` the (evaluated) deficit ``|Q| r̂_k + |G| d_r − r̂_{k+1}``.
-``‖Q^i‖∞ <= ‖|Q|^i‖∞ <= c λ^i`` (:class:`~ivobs.sets.rounding.DecayBound` of ``|Q|``), so
-``‖b_k‖∞ + ‖p_k‖∞ <= s_k``, ``s+ = λ s + c (‖β‖ + ‖τ‖)``: one more linear filter
-(:meth:`~ivobs.sets.rounding.DecayBound.accumulate`; ``δ_k`` depends on ``‖z_k‖ <= ‖ĉ_k‖ +
-‖r̂_k‖ + s_k``, whose last term goes into ``λ``). Hence ``z_k ∈ ĉ_k ± (r̂_k + s_k)``, rounded
-outwards; ``s_k`` is of the order of the rounding of the data times ``c / (1 − λ)``. The box of
-``x`` (``S ≠ I``) and the consistency test of ``y[k]`` are evaluated from it with their rounding
-bounds, as in the loop; a measurement found inconsistent sends the record (or that stream of a
-batch) to the loop, which reports it. Each box of ``x[k]``, ``k >= N``, is then met with the
-finite-memory bound of the ``N`` steps before it, as in the loop (:mod:`.window`: the bounds of
-every window of the record in one product; they do not feed back into the recursion).
+with ``δ_k`` the matrix errors of :mod:`.rounding` (row ``i``: ``ex_i ‖D_x⁻¹ x_k‖∞ +
+eu_i ‖u_k‖∞ + ey_i ‖y_k‖∞ + ed_i ‖d_k‖∞`` in its scaled norms ``D_x``, ``D_z``) and
+``ρ_k = ĉ_{k+1} − (Q ĉ_k + L_z y_k + B_z u_k + fl(G d_c))`` the
+*defect* of the computed sequence, evaluated afterwards by one product over the record, each
+row with its rounding ([Higham2002, §3.1]: row ``i`` off by at most ``2γ (Σ_j |Q_ij| |ĉ_j| +
+|ĉ_{k+1,i}| + …)``). Split ``e = a + b``: ``a+ = Q a + G (d − d_c)``, ``|a_0| <= r_0`` gives
+``|a_k| <= r_k`` (the exact radius recursion), and ``b+ = Q b + β``, ``b_0 = 0``. The computed
+radii ``r̂`` fall short of the exact ones by at most ``p_k``, ``p+ = |Q| p + τ`` with ``τ_k``
+the (evaluated) deficit ``|Q| r̂_k + |G| d_r − r̂_{k+1}``.
+
+**The scaled norm.** Every such bound is measured in ``‖v‖_D = ‖D⁻¹ v‖∞``, ``D = diag(d)``
+with ``d`` powers of two (:func:`scalings`: the steady radius of each state, or ``d = 1``,
+whichever predicts the bound closer to the loop's; the choice does not enter the proof), so
+``D⁻¹|Q|D``, ``D⁻¹ v`` and ``d s`` are exact (a scaled entry outside the normal range rejects
+the scaling; an underflowed ``D⁻¹ v`` is short by less than ``η``, added). Row ``i`` of ``β``
+divided by ``d_i`` is at most the same expression with the coefficients ``max_i (|Q| d)_i /
+d_i`` on ``‖D⁻¹ ĉ_k‖∞`` and ``max_i ex_i / d_i`` (and alike) on the norms: each state's
+rounding counts relative to its own scale, not to the largest state. ``‖D⁻¹ Q^i D‖∞ <=
+‖(D⁻¹|Q|D)^i‖∞ <= c λ^i`` (:class:`~ivobs.sets.rounding.DecayBound` of ``D⁻¹|Q|D``), so
+``‖D⁻¹ b_k‖∞ + ‖D⁻¹ p_k‖∞ <= s_k``, ``s+ = λ s + c (‖D⁻¹ β‖∞ + ‖D⁻¹ τ‖∞)``: one more linear
+filter (:meth:`~ivobs.sets.rounding.DecayBound.accumulate`; ``δ_k`` depends on
+``‖D_x⁻¹ x_k‖∞ <= k_x ‖D_z⁻¹ z_k‖∞ <= k_x (‖D_z⁻¹ ĉ_k‖∞ + ‖D_z⁻¹ r̂_k‖∞ + max(d / d_z) s_k)``,
+whose last term goes into ``λ``). Hence,
+componentwise, ``z_k ∈ ĉ_k ± (r̂_k + d s_k)``, rounded outwards; ``s_k`` is of the order of
+the scaled rounding of the data times ``c / (1 − λ)``. The box of ``x`` (``S ≠ I``: its rows
+add ``s_k |Si| d``) and the consistency test of ``y[k]`` (``s_k |C_z| d``) are evaluated from
+it with their rounding bounds, as in the loop; a measurement found inconsistent sends the
+record (or that stream of a batch) to the loop, which reports it. Each box of ``x[k]``, ``k
+>= N``, is then met with the finite-memory bound of the ``N`` steps before it, as in the loop
+(:mod:`.window`: the bounds of every window of the record in one product; they do not feed back
+into the recursion).
 """
 
 from __future__ import annotations
@@ -64,17 +78,73 @@ _BLOCK = 1 << 15
 
 def _enclose(c: np.ndarray, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(lo, hi)`` with ``[c − ρ, c + ρ] ⊆ [lo, hi]`` exactly for ``ρ = r + s`` (``r``
-    ``(T, n)`` shared by the streams, ``s`` ``(..., T)`` one number per step), in
-    round-to-nearest: ``ρ' = 2u (1 + 8u) |c| + (r + s)(1 + 8u) + η`` evaluated in three rounded
-    operations (after the factors) is at least ``(ρ + u |c|) / (1 − u)``, and
-    ``fl(c + ρ') >= c + ρ' − u (|c| + ρ') >= c + ρ`` (the same below; a result in the
-    subnormal range is exact)."""
+    ``(T, n)`` shared by the streams, ``s`` ``(..., T, n)`` or ``(..., T, 1)``, both upper
+    bounds of their exact values), in round-to-nearest: ``ρ' = 2u (1 + 8u) |c| + (r + s)(1 +
+    8u) + η`` evaluated in three rounded operations (after the factors) is at least ``(ρ + u
+    |c|) / (1 − u)``, and ``fl(c + ρ') >= c + ρ' − u (|c| + ρ') >= c + ρ`` (the same below; a
+    result in the subnormal range is exact)."""
     k = 1.0 + 8.0 * UNIT_ROUNDOFF
     r2 = np.abs(c)
     r2 *= 2.0 * UNIT_ROUNDOFF * k
     r2 += r * k + ETA
-    r2 += (s * k)[..., None]
+    r2 += s * k
     return c - r2, c + r2
+
+
+def scalings(
+    aQ: np.ndarray, g: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], ex: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray, Any]]:
+    """The candidate scalings ``d`` of the states (powers of two; module docstring), each with
+    ``D⁻¹|Q|D`` and a score of the gain ``c / (1 − λ)`` of its decay bound: none (``d = 1``),
+    and ``w = (I − |Q|)⁻¹ (g + r_0)`` (the steady radius with the disturbance radius ``g`` and
+    the prior radius ``r_0`` as a constant input, each entry at least ``2⁻³⁰`` times the
+    largest, rounded to a power of two within ``2^±400``) when its entries spread over more
+    than ``2¹⁰``. The score is the mean over the
+    states of the predicted excess ``d_i (c / (1 − λ)) max_j a_j / d_j`` over the loop's
+    ``((I − |Q|)⁻¹ a)_i`` for a rounding ``a = ex ‖w‖ + u (|Q| w + w)`` of every row (the
+    step's rounding per state, :mod:`.rounding`): the scaling that costs least against the
+    loop's componentwise bound. No choice enters the proof (any positive ``d`` is sound)."""
+    n = aQ.shape[0]
+    one = np.ones(n)
+    out: list[tuple[np.ndarray, np.ndarray, Any]] = []
+    lo, hi = bounds
+    v = np.nan_to_num(g + 0.5 * (hi - lo), nan=1.0, posinf=1.0)
+    try:
+        w = np.linalg.solve(np.eye(n) - aQ, v)
+    except np.linalg.LinAlgError:
+        w = np.full(n, np.nan)
+    w = np.where(np.isfinite(w) & (w > 0.0), w, 0.0)
+    top = float(np.max(w, initial=0.0))
+    if not top > 0.0:
+        return [(one, aQ, lambda gain: 0.0)]
+    w = np.maximum(w, top * 2.0**-30)
+    a = ex * top + UNIT_ROUNDOFF * (aQ @ w + w)
+    with np.errstate(all="ignore"):
+        loop = np.linalg.solve(np.eye(n) - aQ, a)
+    loop = np.maximum(np.nan_to_num(loop, nan=np.inf), a)
+
+    def score(d: np.ndarray) -> Any:
+        excess = d * float(np.max(a / d))
+        return lambda gain: float(np.mean(excess * gain / loop))
+
+    out.append((one, aQ, score(one)))
+    d = np.ldexp(1.0, np.clip(np.frexp(w)[1], -400, 400))
+    Qd = _scaled(aQ, d)
+    if Qd is not None and float(np.max(d)) > 1024.0 * float(np.min(d)):
+        out.append((d, Qd, score(d)))
+    return out
+
+
+def _scaled(aQ: np.ndarray, d: np.ndarray) -> np.ndarray | None:
+    """``D⁻¹ |Q| D`` for the powers of two ``d``, exact (None when an entry would leave the
+    normal range: a scaling by ``2^e`` is exact there, and the round trip tells)."""
+    e = np.frexp(d)[1]
+    Qd: np.ndarray = np.ldexp(aQ, e[None, :] - e[:, None])
+    if not np.isfinite(Qd).all():
+        return None
+    if not np.array_equal(np.ldexp(Qd, e[:, None] - e[None, :]), aQ):
+        return None
+    return Qd
 
 
 class VectorPath:
@@ -82,24 +152,36 @@ class VectorPath:
 
     def __init__(self, ops: Operators):
         self.ops = ops
-        self._decay: DecayBound | bool | None = False  # False: not yet computed
+        self._decay: tuple[DecayBound, np.ndarray] | bool | None = False  # False: not computed
         self._radius: tuple[int, np.ndarray, np.ndarray] | None = None
         self._filter: SplitFilter | None = None
+        self._coef: tuple[Any, ...] | None = None
+        self._unit = True  # d = 1 (set with the decay bound)
 
-    def _decay_bound(self) -> DecayBound | None:
-        """``c``, ``λ`` of ``|Q|`` with the matrix errors' feedback (module docstring); None
-        when they cannot be certified (then the loop runs)."""
+    def _decay_bound(self) -> tuple[DecayBound, np.ndarray] | None:
+        """The scaling ``d`` (:func:`scalings`) and ``c``, ``λ`` of ``D⁻¹|Q|D`` with the matrix
+        errors' feedback (module docstring); None when they cannot be certified (then the loop
+        runs)."""
         if self._decay is False:
             ops, m = self.ops, self.ops.full
-            try:
-                db = DecayBound.of(np.abs(m.Q))
-            except DesignError:
-                self._decay = None
-                return None
+            aQ = np.abs(m.Q)
             kx = 1.0 if ops.tr is None else ops.tr.kx
-            lam = float(up(db.lam + db.c * float(upper(kx * np.max(m.err.ex, initial=0.0), 2))))
-            self._decay = DecayBound(db.c, lam) if lam < 1.0 else None
-        return self._decay if isinstance(self._decay, DecayBound) else None
+            de = np.ones(ops.nx) if ops.scale is None else ops.scale
+            w = np.abs(m.G) @ (0.5 * ops.sys.d_widths())
+            best: tuple[float, DecayBound, np.ndarray] | None = None
+            for d, Qd, score in scalings(aQ, w, ops.initial_bounds(), kx * m.err.ex):
+                try:
+                    db = DecayBound.of(Qd)
+                except DesignError:
+                    continue
+                ex = (float(np.max(m.err.ex / d, initial=0.0)) + ETA) * float(np.max(d / de))
+                lam = float(up(db.lam + db.c * float(upper(kx * ex, 4))))
+                cost = score(db.c / (1.0 - lam)) if lam < 1.0 else np.inf
+                if lam < 1.0 and (best is None or cost < best[0]):
+                    best = (cost, DecayBound(db.c, lam), d)
+            self._decay = None if best is None else best[1:]
+            self._unit = best is None or bool(np.all(best[2] == 1.0))
+        return self._decay if isinstance(self._decay, tuple) else None
 
     def run(self, est: Any, u: np.ndarray, y: np.ndarray, t: np.ndarray | None) -> Bounds | None:
         """The bounds of the record or batch; ``None`` (the loop) for sparse systems (one
@@ -128,7 +210,7 @@ class VectorPath:
     def _run(
         self,
         est: Any,
-        decay: DecayBound,
+        decay: tuple[DecayBound, np.ndarray],
         u: np.ndarray,
         y: np.ndarray,
         t: np.ndarray | None,
@@ -138,11 +220,15 @@ class VectorPath:
         ops, m = self.ops, self.ops.full
         n, ny, nu, nd = ops.nx, ops.ny, ops.nu, ops.nd
         T = y.shape[-2]
+        db, d = decay
+        di = 1.0 / d  # exact (powers of two)
+        dimax = float(np.max(di, initial=1.0))
         tv = dlo.shape[0] > 1  # time-varying bounds: (T, nd); constant: (1, nd)
         dc, dr = mid_rad(dlo, dhi)
         aG, aF = np.abs(m.G), np.abs(ops.mats[5])
         gc = dc @ m.G.T  # (1 or T, n)
-        g_err = abs_max(upper(aG @ np.abs(dc).T, nd).T) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
+        g_err = abs_max(upper(np.abs(dc) @ aG.T, nd) * di) * (2.0 * gamma(nd + 2))
+        g_err += (nd + 2) * ETA * dimax + ETA
         gr = upper(dr @ aG.T, nd)
         fc = dc @ ops.mats[5].T
         f_err = abs_max(upper(np.abs(dc) @ aF.T, nd)) * (2.0 * gamma(nd + 2)) + (nd + 2) * ETA
@@ -155,10 +241,20 @@ class VectorPath:
         c = self._centre(u, y, c0, gc if tv else gc[0], tv)
         c[..., 0, :] = c0
         # -- the radius (data-free) and its deficit --------------------------------------------
-        rad, tau = self._radius_of(T, r0, gr if tv else gr[0])
+        rad, tau = self._radius_of(T, r0, gr if tv else gr[0], di)
         rmax = abs_max(rad)  # (T,)
         # -- the defect of the centres: whole (contiguous) arrays, then the rows k < T − 1 -------
         cmax, ymax = abs_max(c), abs_max(y)
+        unit = self._unit
+        cs = cmax if unit else abs_max(c * di)  # ‖D⁻¹ ĉ_k‖∞ (exact but for underflow: + η)
+        # the norms of ĉ_k, r̂_k on which the matrix errors act (:mod:`.rounding`: ‖D_e⁻¹ x‖∞)
+        if ops.scale is None:
+            ce, re, de_max = cmax, rmax, float(np.max(d, initial=1.0))
+        else:
+            dei = 1.0 / ops.scale
+            de_max = float(np.max(d * dei, initial=1.0))
+            ce = cs if np.array_equal(ops.scale, d) else abs_max(c * dei)
+            re = abs_max(rad * dei)
         umax: Any = abs_max(u) if nu else 0.0
         pred = matrix_product(c, m.Q.T)
         pred += matrix_product(y, m.Lz.T)
@@ -167,26 +263,47 @@ class VectorPath:
         pred += gc if tv else gc[0]
         defect = pred[..., :-1, :]
         defect -= c[..., 1:, :]
-        nQ, nL, nB, nG = norm_inf(m.Q), norm_inf(m.Lz), norm_inf(m.Bz), float(np.max(abs_max(gc)))
+        if not unit:
+            defect *= di
         ge = 2.0 * gamma(n + ny + nu + 4)
+
+        def row(v: np.ndarray) -> float:  # max_i v_i / d_i, rounded up (v >= 0, upper bounds)
+            return float(np.max(v * di, initial=0.0)) + ETA
+
+        def rows(M: np.ndarray) -> np.ndarray:  # row sums of |M|, rounded up
+            return np.asarray(upper(np.abs(M).sum(axis=1), max(M.shape[-1], 1)))
+
+        if self._coef is None:  # data-free: once
+            self._coef = (
+                float(upper(row(upper(np.abs(m.Q) @ d, n)), 1)),  # max_i (|Q| d)_i / d_i
+                row(rows(m.Lz)),
+                row(rows(m.Bz)),
+                (ops.tr.kx if ops.tr is not None else 1.0) * row(m.err.ex),
+                row(m.err.eu),
+                row(m.err.ey),
+                row(m.err.ed),
+                upper(np.abs(m.Cz) @ d, n),
+                None if ops.tr is None else upper(np.abs(ops.tr.Si) @ d, n),
+                None if ops.tr is None else rows(ops.tr.Si),
+            )
+        nQ, nL, nB, ex, eu, ey, ed, Cd, Sid, sr = self._coef
+        nG = row(abs_max(np.abs(gc.T)))
         e = ops.tr.kx if ops.tr is not None else 1.0
-        ex, eu = e * float(np.max(m.err.ex, initial=0.0)), float(np.max(m.err.eu, initial=0.0))
-        ey, ed = float(np.max(m.err.ey, initial=0.0)), float(np.max(m.err.ed, initial=0.0))
-        cm0, ym = cmax[..., :-1], ymax[..., :-1]
+        cs0, ym = cs[..., :-1], ymax[..., :-1]
         um = umax[..., :-1] if nu else 0.0
-        beta = (1.0 + _U2) * abs_max(defect)
+        beta = (1.0 + _U2) * abs_max(defect) + ETA
         del pred, defect
-        beta += (ge * nQ + ex) * cm0 + ge * cmax[..., 1:] + (ge * nL + ey) * ym
-        beta += (ge * nB + eu) * um
-        beta += ge * nG + (n + ny + nu + 4) * ETA + ex * rmax[:-1] + tau
+        beta += ge * nQ * cs0 + ex * (ce[..., :-1] + re[:-1] + 2.0 * ETA) + ge * cs[..., 1:]
+        beta += (ge * nL + ey) * ym + (ge * nB + eu) * um
+        beta += ge * nG + (n + ny + nu + 4) * ETA * dimax + 2.0 * ETA + tau
         beta += ed * (d_mag[:-1] if tv else d_mag[0]) + (g_err[:-1] if tv else g_err[0])
         s = np.zeros(cmax.shape)
         if T > 1:  # per stream (identical streams, identical bounds)
-            beta = upper(beta, 12)
+            beta = upper(beta, 14)
             for out, b in zip(s.reshape(-1, T), beta.reshape(-1, T - 1)):
-                out[1:] = decay.accumulate(b)
-        # z_k ∈ ĉ_k ± (r̂_k + s_k); ‖z_k‖ <= zmax
-        zmax = upper(cmax + rmax + s, 3)
+                out[1:] = db.accumulate(b)
+        # |z_k − ĉ_k| <= r̂_k + d s_k; ‖D_e⁻¹ z_k‖∞ <= zmax (the norm of :mod:`.rounding`)
+        zmax = upper(ce + re + s * de_max + 2.0 * ETA, 4)
         # -- consistency of y[k] with C x + D_u u + F d (the loop's test rows) ----------------
         Du = ops.mats[3]
         yc = matrix_product(c, m.Cz.T)
@@ -202,7 +319,7 @@ class VectorPath:
         nf = float(np.max(abs_max(fc)))
         slack = 2.0 * gamma(n + nu + 3) * (nC * cmax + nD * umax + nf) + f_err
         slack += pz * zmax + _U2 * ymax + (n + nu + 3) * ETA
-        slack = upper(slack, 8)[..., None] + upper(s[..., None] * aC.sum(axis=1), n)
+        slack = upper(slack, 8)[..., None] + upper(s[..., None] * Cd, 1)
         slack += yr
         bad = yc > upper(slack, 4)
         del yc, slack
@@ -213,14 +330,15 @@ class VectorPath:
             fail = bad.reshape(bad.shape[0], -1).any(axis=1)
         # -- the boxes ---------------------------------------------------------------------------
         if ops.tr is None:
-            lo, hi = _enclose(c, rad, s)
+            sd = s[..., None] if unit else s[..., None] * d + ETA  # (exact but for underflow)
+            lo, hi = _enclose(c, rad, sd)
         else:
             Si = ops.tr.Si
             aSi = np.abs(Si)
             xc = matrix_product(c, Si.T)
             xr = upper(matrix_product(rad, aSi.T), n)  # (T, n): data-free
-            extra = 2.0 * gamma(n + 2) * norm_inf(Si) * cmax + float(np.max(ops.tr.rs)) * e * zmax
-            extra = upper(extra, 3) + upper(s * float(np.max(aSi.sum(axis=1))), 2)
+            extra = (2.0 * gamma(n + 2) * cmax)[..., None] * sr + (e * zmax)[..., None] * ops.tr.rs
+            extra = upper(extra, 3) + upper(s[..., None] * Sid, 1)
             lo, hi = _enclose(xc, xr, extra)
             lo[..., 0, :] = ops.x0.lo  # [Tang2019, eq. (42)]: the prior box at k = 0
             hi[..., 0, :] = ops.x0.hi
@@ -262,10 +380,12 @@ class VectorPath:
             c += shared[0]
         return c
 
-    def _radius_of(self, T: int, r0: np.ndarray, gr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(r̂, ‖τ‖)``: the computed radii ``(T, n)`` from ``r̂_0 = r0`` and the norms of
-        their deficits ``(T − 1,)`` (module docstring); kept for the next record of the same
-        length (constant bounds)."""
+    def _radius_of(
+        self, T: int, r0: np.ndarray, gr: np.ndarray, di: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(r̂, ‖D⁻¹ τ‖∞)``: the computed radii ``(T, n)`` from ``r̂_0 = r0`` and the scaled
+        norms of their deficits ``(T − 1,)`` (module docstring; ``di = 1 / d``); kept for the
+        next record of the same length (constant bounds)."""
         tv = gr.ndim == 2
         if not tv and self._radius is not None and self._radius[0] == T:
             return self._radius[1], self._radius[2]
@@ -278,9 +398,10 @@ class VectorPath:
         rad[0] = r0
         nxt = matrix_product(rad[:-1], aQ.T)
         nxt += gr[:-1] if tv else gr
-        ev = 2.0 * gamma(n + 3) * abs_max(nxt) + (n + 3) * ETA
-        nxt -= rad[1:]
-        tau = upper((1.0 + _U2) * abs_max(np.maximum(nxt, 0.0)) + ev, 3)
+        nxt *= di
+        ev = 2.0 * gamma(n + 3) * abs_max(nxt) + (n + 3) * ETA * float(np.max(di, initial=1.0))
+        nxt -= rad[1:] * di
+        tau = upper((1.0 + _U2) * abs_max(np.maximum(nxt, 0.0)) + ev + 2.0 * ETA, 4)
         if not tv:
             self._radius = (T, rad, tau)
         return rad, tau
