@@ -183,3 +183,33 @@ def test_missing_samples_and_gaps_contain_the_exact_trajectory():
     est = ivobs.make_estimator("kkl", ltv, x0=x0, on_inconsistent="raise")
     res = est.run(rec.U, y)
     _assert_contains(res.lower, res.upper, rec, est.valid_from)
+
+
+def test_badly_scaled_plant_vectorised_run_contains_the_truth_and_matches_the_loop():
+    """The 'scaled' conformance plant (states of 1e6, 1 and 1e-3) with vertex disturbances: the
+    vectorised run bounds its rounding entry by entry (in a diagonally scaled norm), so it
+    contains the exact states and its per-state mean widths are the loop's within 1e-6 (a
+    scalar ∞-norm bound let the big state's residual widen the small ones some 60 times)."""
+    from ivobs.testing.conformance import conformance_plants, exact_run, vertex_disturbance
+
+    sys_, x0 = conformance_plants()["scaled"]
+    rng = np.random.default_rng(0)
+    T = 150
+    start = np.where(rng.integers(0, 2, sys_.nx).astype(bool), x0.hi, x0.lo)
+    U = rng.uniform(-1, 1, size=(T, sys_.nu))
+    Y, X = exact_run(sys_, start, U, vertex_disturbance(sys_.d_at(0), T, rng))
+    est = ivobs.make_estimator("kkl", sys_, x0=x0)
+    vec = est.run(U, Y, vectorize=True)
+    loop = est.run(U, Y, vectorize=False)
+    for res in (vec, loop):
+        assert np.all(res.lower <= X.lo) and np.all(res.upper >= X.hi)
+    ratio = vec.width.mean(axis=0) / loop.width.mean(axis=0)
+    np.testing.assert_allclose(ratio, 1.0, rtol=1e-6)
+    # a batch of the same record and a shifted one: each stream contains its truth
+    Y2, X2 = exact_run(sys_, -start, -U, vertex_disturbance(sys_.d_at(0), T, rng))
+    batch = est.run(np.stack((U, -U)), np.stack((Y, Y2)), vectorize=True)
+    for b, Xb in enumerate((X, X2)):
+        assert np.all(batch.lower[b] <= Xb.lo) and np.all(batch.upper[b] >= Xb.hi)
+    np.testing.assert_allclose(
+        batch.width[0].mean(axis=0) / loop.width.mean(axis=0), 1.0, rtol=1e-6
+    )
