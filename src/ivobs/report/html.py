@@ -17,22 +17,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import IvobsError
+from ..frames import _import
 from .compare_figure import reference_trajectory
 
 if TYPE_CHECKING:
     from ..result import Estimate
 
 __all__ = ["html_report"]
-
-
-def _plotly() -> Any:
-    try:
-        import plotly.graph_objects as go
-    except ImportError:
-        raise IvobsError(
-            'html reports need plotly; install it with: pip install "ivobs[html]"'
-        ) from None
-    return go
 
 
 def _values(a: np.ndarray) -> list[float | None]:
@@ -101,7 +92,9 @@ def html_report(
     methods; ``alarms``: steps flagged inconsistent; ``notes``: lines printed under the title;
     ``episodes``: one line per fault episode (its steps, the outputs blamed and isolated, the
     estimated bias), listed under the alarms."""
-    go = _plotly()
+    _import("plotly", "html")  # refused with the extra to install
+    import plotly.graph_objects as go
+
     if not estimates:
         raise IvobsError("html report: no estimate to show")
     first = next(iter(estimates.values()))
