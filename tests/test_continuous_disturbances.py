@@ -249,7 +249,7 @@ def test_nonlinear_options_round_trip(tmp_path) -> None:
     assert loaded.disturbances == "held"
     bad = text.replace('disturbances = "held"', 'disturbances = "often"')
     (tmp_path / "bad.toml").write_text(bad)
-    with pytest.raises(IvobsError, match="expected 'varying' or 'held'"):
+    with pytest.raises(IvobsError, match="system.discretize: disturbances: expected 'varying'"):
         ivobs.load_system(tmp_path / "bad.toml")
     with pytest.raises(IvobsError, match="disturbances: expected 'varying'"):
         nl_vdp().discretize(0.1, disturbances="sometimes")

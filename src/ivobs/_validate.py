@@ -80,9 +80,7 @@ def as_matrix(
     return arr
 
 
-def as_vector(
-    name: str, value: Any, n: int | None = None, *, allow_inf: bool = False
-) -> np.ndarray:
+def as_vector(name: str, value: Any, n: int | None = None) -> np.ndarray:
     """Return a finite 1-D float vector of length ``n`` (scalars are broadcast when ``n``)."""
     arr = as_float_array(name, value)
     if arr.ndim == 0 and n is not None:
@@ -93,7 +91,7 @@ def as_vector(
         raise IvobsError(f"{name}: expected a vector, got an array of shape {arr.shape}")
     if n is not None and arr.shape[0] != n:
         raise IvobsError(f"{name}: expected a vector of length {n}, got length {arr.shape[0]}")
-    return check_finite(name, arr, allow_inf=allow_inf)
+    return check_finite(name, arr)
 
 
 def as_signal(

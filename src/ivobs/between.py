@@ -75,8 +75,7 @@ def between_samples(
         sampled = system if flow else system.discretize(period, disturbances=disturbances)
         wl, wh = sampled.w_box.lo, sampled.w_box.hi
         for k in np.flatnonzero(valid):
-            bl, bh = sampled.period_box(lo[k], hi[k], U[k], wl, wh)
-            out_lo[k], out_hi[k] = bl, bh
+            out_lo[k], out_hi[k] = sampled.period_box(lo[k], hi[k], U[k], wl, wh)
     return Estimate(
         out_lo,
         out_hi,

@@ -127,8 +127,7 @@ def using(method: str, **options: Any) -> Iterator[dict[str, Any]]:
     """:func:`set_defaults` for the ``with`` block only: on leaving it (an exception too) the
     method's defaults are what they were before. Yields the method's defaults in effect."""
     cls = get(method)
-    before = OVERRIDES.get(cls.name)
-    saved = None if before is None else dict(before)
+    saved = dict(OVERRIDES[cls.name]) if cls.name in OVERRIDES else None
     set_defaults(cls.name, **options)
     try:
         yield defaults(cls.name)

@@ -142,7 +142,7 @@ def _png(est: Estimate) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def estimate_html(est: Estimate, figure: bool = True) -> str:
+def estimate_html(est: Estimate) -> str:
     """A short HTML summary (method, sizes, mean widths, flags) and an inline width figure."""
     assert est.missing is not None and est.inconsistent is not None
     mean = est.mean_width(burn_in=est.valid_from) if est.T > est.valid_from else None
@@ -158,6 +158,6 @@ def estimate_html(est: Estimate, figure: bool = True) -> str:
         shown = ", ".join(f"{w:.4g}" for w in np.ravel(mean)[:8])
         rows.append(("mean width", shown + (" …" if est.nx > 8 else "")))
     img = ""
-    if figure and est.T > est.valid_from:
+    if est.T > est.valid_from:
         img = f"<img alt='widths over time' src='data:image/png;base64,{_png(est)}'/>"
     return summary_html("ivobs Estimate", rows, img)

@@ -73,9 +73,7 @@ def _signal(what: str, sig: Any, box: Box, T: int, seed: Any) -> np.ndarray:
 
 
 def _param_box(sys: NonlinearSystem) -> Box:
-    pairs = [sys.param_bounds[n] for n in sys.param_names]
-    lo = np.array([p[0] for p in pairs], dtype=float)
-    hi = np.array([p[1] for p in pairs], dtype=float)
+    lo, hi = np.array([sys.param_bounds[n] for n in sys.param_names], dtype=float).reshape(-1, 2).T
     return Box(lo, hi)
 
 
@@ -136,6 +134,4 @@ def simulate_nonlinear(
             ) from None
         if not all(np.isfinite(xk)):
             raise IvobsError(f"simulate: the state diverged to non-finite values at step {k + 1}")
-    traj = Trajectory(x=x, y=y, u=u_arr, d=d_arr, t=np.arange(T) * sys.sampling_period)
-    traj.p = p_arr
-    return traj
+    return Trajectory(x=x, y=y, u=u_arr, d=d_arr, t=np.arange(T) * sys.sampling_period, p=p_arr)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Any
 
@@ -27,15 +27,7 @@ class Job:
 
     def params(self) -> dict[str, Any]:
         """Everything that determines the result (``imports`` only make names available)."""
-        return {
-            "scenario": self.scenario,
-            "scenario_options": self.scenario_options,
-            "disturbance": self.disturbance,
-            "method": self.method,
-            "options": self.options,
-            "seed": self.seed,
-            "burn_in": self.burn_in,
-        }
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "imports"}
 
     @cached_property
     def id(self) -> str:

@@ -115,11 +115,9 @@ def run_campaign(
                     if on_row is not None:
                         on_row(row)
 
-                if not todo:
-                    pass
-                elif client is not None:
+                if client is not None and todo:
                     run_dask(todo, client, emit)
-                elif n == 0:
+                elif n == 0:  # this process (no job left: nothing)
                     run_here(todo, emit)
                 else:
                     run_local(todo, n, emit)

@@ -149,11 +149,7 @@ def run_job(job: Job | dict[str, Any]) -> dict[str, Any]:
 
 
 def _job_columns(job: Job) -> dict[str, Any]:
-    return {
-        "job_id": job.id, "scenario": job.scenario, "scenario_options": job.scenario_options,
-        "disturbance": job.disturbance, "method": job.method, "options": job.options,
-        "seed": job.seed, "burn_in": job.burn_in,
-    }  # fmt: skip
+    return {"job_id": job.id, **job.params()}
 
 
 def error_row(job: Job, exc: BaseException) -> dict[str, Any]:

@@ -124,16 +124,11 @@ def parse_states(text: str, nx: int) -> list[int]:
     return out
 
 
-def use_agg() -> Any:
+def use_agg() -> None:
     """Headless figures."""
     import matplotlib
 
     matplotlib.use("Agg")
-    return matplotlib
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
 
 
 def add_option_argument(p: argparse.ArgumentParser, *, per_method: bool) -> None:

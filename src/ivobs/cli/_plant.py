@@ -12,17 +12,14 @@ from ..errors import IvobsError
 __all__ = ["add_plant_options", "add_truth_option", "plant_inputs", "plant_scenario"]
 
 
-def add_plant_options(
-    p: argparse.ArgumentParser, *, log: bool = True, horizon: bool = True
-) -> None:
+def add_plant_options(p: argparse.ArgumentParser, *, horizon: bool = True) -> None:
     """``--system``, ``--log``, ``--horizon`` (a simulation when there is no log; ``horizon``
     False: the command needs the log), ``--discretize`` and ``--held-disturbances``."""
     p.add_argument(
         "--system", "-s", metavar="FILE", help="system file (TOML) instead of a scenario"
     )
-    if log:
-        p.add_argument("--log", "-l", metavar="FILE", help="measurement log (CSV) for --system")
-    if log and horizon:
+    p.add_argument("--log", "-l", metavar="FILE", help="measurement log (CSV) for --system")
+    if horizon:
         p.add_argument(
             "--horizon",
             type=int,
@@ -36,8 +33,8 @@ def add_plant_options(
         metavar="TS",
         default=None,
         help="--system: discretise a continuous-time system (inputs held over each period "
-        "TS; disturbances vary between samples unless --held-disturbances)"
-        + ("; the log's time column must then be sampled every TS" if log else ""),
+        "TS; disturbances vary between samples unless --held-disturbances); the log's time "
+        "column must then be sampled every TS",
     )
     p.add_argument(
         "--held-disturbances",

@@ -100,9 +100,7 @@ def main(args: argparse.Namespace) -> int:
     jobs = spec.jobs()
     title = f"campaign {spec.name!r}" if spec.name else f"campaign {args.spec}"
     if args.dry_run:
-        done = set()
-        if output.is_file():
-            done = {r["job_id"] for r in campaign.read_results(output)}
+        done = {r["job_id"] for r in campaign.read_results(output)} if output.is_file() else set()
         n_done = sum(j.id in done for j in jobs)
         declined = campaign.check_designs(spec)
         settings = sum(len(e.option_sets()) for e in spec.methods)

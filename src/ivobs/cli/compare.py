@@ -206,29 +206,30 @@ def main(args: argparse.Namespace) -> int:
         from ..report.compare_figure import comparison_figure
         from ..report.plot import save_figure
 
-        good = _estimates(results)
-        if not good:
-            raise IvobsError("--plot: no method gave an estimate; nothing to plot")
         truth = traj.x if traj.has_truth else None
         fig = comparison_figure(
-            good,
+            _estimates(results, "--plot"),
             truth=truth,
             states=states,
             t=traj.t if sc.system.sampling_period != 1 or sc.t is not None else None,
             state_names=sc.state_names,
-            title=f"{sc.name}",
+            title=sc.name,
         )
         print(f"\nfigure: {save_figure(fig, args.plot)}")
     return 1 if any(r.ok and r.guaranteed and r.contains is False for r in results) else 0
 
 
-def _estimates(results: Any) -> dict[str, Any]:
-    """The estimates to draw, by label: a baseline's says it is not guaranteed."""
-    return {
+def _estimates(results: Any, what: str) -> dict[str, Any]:
+    """The estimates to draw, by label (a baseline's says it is not guaranteed); none at all
+    is an error of the option ``what``."""
+    good = {
         r.method if r.guaranteed else f"{r.method} (NOT guaranteed)": r.estimate
         for r in results
         if r.estimate is not None
     }
+    if not good:
+        raise IvobsError(f"{what}: no method gave an estimate; nothing to draw")
+    return good
 
 
 def _options(args: argparse.Namespace, names: list[str]) -> dict[str, dict[str, Any]]:
@@ -250,12 +251,9 @@ def _options(args: argparse.Namespace, names: list[str]) -> dict[str, dict[str, 
 def _write_html(path: str, sc: Any, traj: Any, results: Any) -> None:
     from ..report.html import html_report, results_table
 
-    good = _estimates(results)
-    if not good:
-        raise IvobsError("--html: no method gave an estimate; nothing to show")
     page = html_report(
         path,
-        good,
+        _estimates(results, "--html"),
         title=f"ivobs compare: {sc.name}",
         truth=traj.x if traj.has_truth else None,
         t=traj.t,

@@ -65,5 +65,4 @@ def main(args: argparse.Namespace) -> int:
         )
         path = save_figure(fig, os.path.join(args.out, f"{sc.name}.png"))
         print(f"\nfigure: {path}")
-    bad = [r.method for r in results if r.ok and r.contains is False]
-    return 1 if bad else 0
+    return 1 if any(r.ok and r.contains is False for r in results) else 0

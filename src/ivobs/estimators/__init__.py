@@ -77,27 +77,22 @@ def register(cls: type[Estimator]) -> type[Estimator]:
     return cls
 
 
-def _normalise(name: Any) -> str:
-    if not isinstance(name, str):
-        raise IvobsError(f"method: expected a method name (str), got {name!r}")
-    return name.strip().lower().replace("_", "-")
-
-
-def _order(name: str) -> int:
-    cls = _REGISTRY.get(name)
-    return cls.order if cls is not None else METHODS[name].order
-
-
 def methods() -> list[str]:
     """Names of the available methods, in the order their classes declare (``order``: the
     papers' order), then by name."""
-    return sorted(set(METHODS) | set(_REGISTRY), key=lambda name: (_order(name), name))
+    order = {
+        **{n: e.order for n, e in METHODS.items()},
+        **{n: c.order for n, c in _REGISTRY.items()},
+    }
+    return sorted(order, key=lambda name: (order[name], name))
 
 
 def get(name: str) -> type[Estimator]:
     """The estimator class registered as ``name`` (its module is imported here the first
     time)."""
-    key = _normalise(name)
+    if not isinstance(name, str):
+        raise IvobsError(f"method: expected a method name (str), got {name!r}")
+    key = name.strip().lower().replace("_", "-")
     if key not in _REGISTRY and key in METHODS:
         importlib.import_module(f"{__name__}.{METHODS[key].module}")
     if key not in _REGISTRY:

@@ -127,12 +127,8 @@ method first (its imports are lazy)."""
 
 def _arrays(state: OnlineState) -> list[np.ndarray]:
     """The float arrays of a state (to tell an overflow from a bug)."""
-    out = []
-    for f in dataclasses.fields(state):
-        v = getattr(state, f.name)
-        if isinstance(v, np.ndarray) and v.dtype.kind == "f":
-            out.append(v)
-    return out
+    values = (getattr(state, f.name) for f in dataclasses.fields(state))
+    return [v for v in values if isinstance(v, np.ndarray) and v.dtype.kind == "f"]
 
 
 def check_system(method: Any, sys: Any) -> None:

@@ -52,6 +52,8 @@ import numpy as np
 
 from ..linalg import UNIT_ROUNDOFF, gamma
 from ..model import LinearSystem
+from ..model.nonlinear._runtime import dn as _down
+from ..model.nonlinear._runtime import up as _up
 from ..sets import Box
 from ..sets.rounding import down, mid_rad, up, upper
 from . import register
@@ -62,16 +64,6 @@ __all__ = ["EllipsoidDesign", "EllipsoidEstimator", "EllipsoidState", "box_ellip
 
 GRID = np.linspace(0.0, 1.0, 66)[1:-1] ** 0.5
 """Values of ``λ`` tried before the golden-section refinement (denser towards 1)."""
-
-
-def _up(x: float) -> float:
-    """The next float above ``x``: an upper bound of the one rounded operation that gave it
-    (:func:`ivobs.sets.rounding.up` for one Python float)."""
-    return math.nextafter(x, math.inf)
-
-
-def _down(x: float) -> float:
-    return math.nextafter(x, -math.inf)
 
 
 def _frobenius(M: np.ndarray) -> float:

@@ -82,16 +82,11 @@ class Persistence:
                 f"members); it can only be restored into the same method ({self.name!r}) with "
                 "the same design"
             )
-        check_version(state)
+        version = state.get("version", 1)  # a state saved before typed states has none
+        if version != STATE_VERSION:
+            raise IvobsError(
+                f"state: saved in state format version {version!r}; this ivobs reads version "
+                f"{STATE_VERSION} (typed states). Re-run from the start of the record, or load "
+                "it with the ivobs version that saved it"
+            )
         return self._load(state["state"])
-
-
-def check_version(state: dict[str, Any]) -> None:
-    """Refuse, by its version, a state saved in another layout (before typed states: none)."""
-    version = state.get("version", 1)
-    if version != STATE_VERSION:
-        raise IvobsError(
-            f"state: saved in state format version {version!r}; this ivobs reads version "
-            f"{STATE_VERSION} (typed states). Re-run from the start of the record, or load it "
-            "with the ivobs version that saved it"
-        )

@@ -115,12 +115,6 @@ class Reachability(ObserverEstimator):
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``
     (the paper's convention); ``y[k]`` enters the box of ``x[k+1]``.
 
-    **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
-    :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
-    (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
-    docs/gains.md. Or ``L=`` gives it explicitly (the papers' comparisons "with the same
-    gain"); ``A - LC`` must be Schur.
-
     **Time-varying or measurement-dependent bounds ``r[k]``, missing samples:** with missing
     components of ``y[k]`` the step uses the gain of the outputs present
     (:func:`~ivobs.estimators._luenberger.pattern_gain`: ``L_k``, ``M_k = A - L_k C``,
@@ -152,9 +146,12 @@ class Reachability(ObserverEstimator):
     ----------
     sys : time-invariant discrete-time :class:`~ivobs.LinearSystem`
     x0 : Box, prior box on ``x[0]`` ([Tang2019]: ``x0 ∈ <p0, H0>``)
-    L : (nx, ny) observer gain, optional (default: designed, see ``gain``)
-    gain : ``"radius"`` (default), ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not
-        given (docs/gains.md)
+    L : (nx, ny) observer gain, ``A - LC`` Schur, optional (the papers' comparisons "with the
+        same gain"; default: designed, see ``gain``)
+    gain : ``"radius"`` (default; the gain minimising the steady-state box,
+        :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
+        (20)] by Riccati equations) or ``"hinf-lmi"`` (the same problem by its LMI, as the
+        paper): the design when ``L`` is not given (docs/gains.md)
     memory : window ``K`` for time-varying bounds / missing samples (default: smallest ``K``
         with ``‖ |M^K| ‖∞ <= 1e-3``, at most 500). Larger: tighter after a missing sample for a
         slowly converging gain, at ``O(K nx^2 (nx + nd))`` work per step

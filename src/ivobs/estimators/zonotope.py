@@ -141,12 +141,6 @@ class ZonotopeEstimator(ObserverEstimator):
 
     **Data used (prediction form):** the box of ``x[k]`` uses ``u[0..k-1]``, ``y[0..k-1]``.
 
-    **Gain.** ``gain=``: ``"radius"`` (default; the gain minimising the steady-state box,
-    :mod:`ivobs.design.radius`), ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem
-    (20)] by Riccati equations), ``"hinf-lmi"`` (the same problem by its LMI, as the paper);
-    docs/gains.md. Or ``L=`` explicitly (e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the
-    reachability box is inside this one with the same gain); ``A - LC`` must be Schur.
-
     **Missing samples** (NaN components of ``y[k]``): that step uses the gain of the outputs
     present (:func:`~ivobs.estimators._luenberger.pattern_gain`: ``A - L_k C`` Schur whenever
     those outputs detect the plant; designed once per pattern), and (34) uses ``A - L_k C``,
@@ -172,31 +166,30 @@ class ZonotopeEstimator(ObserverEstimator):
     ----------
     sys : time-invariant discrete-time :class:`~ivobs.LinearSystem`
     x0 : Box, prior box on ``x[0]``
-    L : (nx, ny) observer gain, optional (default: designed, see ``gain``)
-    gain : ``"radius"``, ``"hinf"`` or ``"hinf-lmi"``: the design when ``L`` is not given
-        (docs/gains.md). Default: the radius gain, or the H∞ gain when ``|A - LC|`` is not
-        Schur and the H∞ gain's reduced zonotope is narrower over 60 steps of (34b) (more when
-        ``A - LC`` contracts slowly)
+    L : (nx, ny) observer gain, ``A - LC`` Schur, optional (default: designed, see ``gain``;
+        e.g. the paper's ``L1`` for [Tang2019, Theorem 6]: the reachability box is inside this
+        one with the same gain)
+    gain : ``"radius"`` (the gain minimising the steady-state box, :mod:`ivobs.design.radius`),
+        ``"hinf"`` (the H∞ gain of [Tang2019, Theorem 1, problem (20)] by Riccati equations) or
+        ``"hinf-lmi"`` (the same problem by its LMI, as the paper): the design when ``L`` is not
+        given (docs/gains.md). Default: the radius gain, or the H∞ gain when ``|A - LC|`` is not
+        Schur and the H∞ gain's reduced zonotope is narrower over :data:`WIDTH_STEPS` steps of
+        (34b) (more when ``A - LC`` contracts slowly)
     order : ``q >= nx``, generators kept by the reduction (default ``10 nx``: on the paper's
         servo motor the widths are within a few per mille of much larger orders from ``q = 10 nx``
         on, while the cost per step grows with ``q``). Larger ``q`` approaches Algorithm 1
         ([Tang2019, Theorem 6]: it is never tighter). The part the reduction boxes is
         propagated like ``|A - LC|``: when ``|A - LC|`` is Schur every order keeps the widths
         bounded; otherwise a small order may not (the servo motor with ``q = 4``: summed width
-        44.7 at k = 50, 1,518 at k = 2,000). So, for constant bounds, the design iterates the
-        data-independent recursion (34b), exactly as the run computes it, for 2,000 steps (up
-        to 40,000 when ``A - LC`` converges slowly; systems too large for 2e9 multiply-adds are
-        not checked) and accepts ``q`` when ``H`` repeats an earlier value (a fixed point or a
-        cycle: the recursion then repeats itself forever) or its widths stopped growing (the
-        last no larger than the largest of the second quarter: a sign, not a proof); otherwise
-        it raises ``DesignError`` with the widths seen and the next order that settles.
-        ``q = nx`` (a box at every step, propagated by ``|A - LC|``) is refused when
-        ``|A - LC|`` is not Schur. An explicit order that is accepted but boxes generators
-        that still matter (``A - LC`` contracts slowly, ``ρ^50 > 0.01``, and more than
-        ``q - nx`` generators of the unreduced (34b) stay above 1 % of the largest new one:
-        :func:`generators_that_matter`) gets a :class:`~ivobs.DesignWarning` naming the order
-        that keeps them; the default order is not checked (a larger default would slow every
-        system)
+        44.7 at k = 50, 1,518 at k = 2,000). So, for constant bounds, the design iterates
+        (34b) as the run computes it (:data:`SETTLE_STEPS` steps, more when ``A - LC``
+        converges slowly, within :data:`SETTLE_WORK`) and accepts ``q`` when ``H`` repeats an
+        earlier value (the recursion then repeats itself forever) or its widths stopped growing
+        (a sign, not a proof); otherwise it raises ``DesignError`` naming the next order that
+        settles. ``q = nx`` is refused when ``|A - LC|`` is not Schur. An explicit order (not the
+        default) that boxes generators that still matter (:func:`generators_that_matter`, when
+        ``A - LC`` contracts slowly) gets a :class:`~ivobs.DesignWarning` naming the order that
+        keeps them
     weight : (nx, nx) positive definite ``W`` of the reduction (default identity)
     """
 

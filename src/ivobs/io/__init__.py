@@ -85,27 +85,17 @@ __all__ = [
 ]
 
 _WHERE = {
-    "atomic_path": "atomic",
-    "check_output_path": "atomic",
-    "check_distinct": "atomic",
-    "same_file": "atomic",
-    "write_text_atomic": "atomic",
-    "callable_ref": "callables",
-    "Log": "logs",
-    "LogParser": "logs",
-    "LogRow": "logs",
-    "not_utf8": "logs",
-    "read_log": "logs",
-    "log_from_frame": "logs",
-    "write_log": "logs",
-    "KeyLines": "reader",
-    "SystemFile": "systemfile",
-    "load_system": "systemfile",
-    "loads_system": "systemfile",
-    "dumps_system": "systemwrite",
-    "equal_systems": "systemwrite",
-    "save_system": "systemwrite",
-    "read_truth": "truth",
+    name: module
+    for module, names in (
+        ("atomic", "atomic_path check_output_path check_distinct same_file write_text_atomic"),
+        ("callables", "callable_ref"),
+        ("logs", "Log LogParser LogRow not_utf8 read_log log_from_frame write_log"),
+        ("reader", "KeyLines"),
+        ("systemfile", "SystemFile load_system loads_system"),
+        ("systemwrite", "dumps_system equal_systems save_system"),
+        ("truth", "read_truth"),
+    )
+    for name in names.split()
 }
 
 

@@ -259,11 +259,6 @@ def not_utf8(source: str, exc: UnicodeDecodeError) -> IvobsError:
     )
 
 
-def _is_skipped(text: str) -> bool:
-    s = text.strip()
-    return not s or s.startswith("#")
-
-
 @dataclass
 class Log:
     """A measurement record: ``u`` ``(T, nu)``, ``y`` ``(T, ny)`` (NaN = missing), one row per
@@ -347,7 +342,7 @@ def read_rows(
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             for i, text in enumerate(fh, start=1):
-                if _is_skipped(text):
+                if not text.strip() or text.lstrip().startswith("#"):
                     continue
                 if not parser.columns:
                     parser.header(text, i)

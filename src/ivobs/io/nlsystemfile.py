@@ -99,7 +99,8 @@ def read_nonlinear(reader: Any, sysd: dict[str, Any], dt: bool | float) -> Nonli
 
 
 def _discretized(reader: Any, model: NonlinearSystem, table: Any) -> NonlinearSystem:
-    """``model`` (continuous-time) sampled as ``[system.discretize]`` says."""
+    """``model`` (continuous-time) sampled as ``[system.discretize]`` says (the values are
+    checked by :meth:`NonlinearSystem.discretize <ivobs.NonlinearSystem.discretize>`)."""
     key = ("system", "discretize")
     spec = _table(reader, key, table)
     other = sorted(set(spec) - set(DISCRETIZE_KEYS))
@@ -113,19 +114,9 @@ def _discretized(reader: Any, model: NonlinearSystem, table: Any) -> NonlinearSy
         raise reader.fail(
             key, f"only a continuous-time model (dt = 0) is discretised; dt = {model.dt}"
         )
-    if spec.get("disturbances", "varying") not in ("varying", "held"):
-        raise reader.fail(
-            (*key, "disturbances"), f"expected 'varying' or 'held', got {spec['disturbances']!r}"
-        )
-    for k in ("order", "substeps"):
-        if k in spec and (isinstance(spec[k], bool) or not isinstance(spec[k], int)):
-            raise reader.fail((*key, k), f"expected an integer, got {spec[k]!r}")
-    ts = spec["Ts"]
-    if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not ts > 0 or ts == float("inf"):
-        raise reader.fail((*key, "Ts"), f"expected a finite sampling period > 0, got {ts!r}")
     try:
         return model.discretize(
-            float(ts),
+            spec["Ts"],
             order=spec.get("order", 4),
             substeps=spec.get("substeps", 1),
             disturbances=spec.get("disturbances", "varying"),

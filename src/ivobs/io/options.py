@@ -9,15 +9,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from ..errors import IvobsError
 from ..sets import Box
 
 if TYPE_CHECKING:
     from .reader import TomlReader
 
-__all__ = ["method_class", "plain_option", "read_method", "read_option", "same_method"]
+__all__ = ["method_class", "read_method", "read_option", "same_method"]
 
 
 def method_class(reader: TomlReader, key: tuple[str, ...], name: str) -> Any:
@@ -76,13 +74,6 @@ def read_option(reader: TomlReader, key: tuple[str, ...], v: Any) -> Any:
         and all(isinstance(x, (int, float, list)) and not isinstance(x, bool) for x in v)
     ):
         return reader.numbers(key, v, (1, 2, 3))
-    return v
-
-
-def plain_option(v: Any) -> Any:
-    """An option value as a file writes it (NumPy scalars as Python numbers)."""
-    if isinstance(v, np.generic):
-        return v.item()
     return v
 
 

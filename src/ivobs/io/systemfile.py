@@ -31,7 +31,6 @@ from .._validate import as_bool
 from ..errors import IvobsError
 from ..model import LinearSystem
 from ..model.statespace import SignalNames
-from ..model.uncertain import INTERVAL_MATRICES
 from ..sets import Box
 from .boundsfile import read_bounds_csv
 from .callables import make_callable
@@ -157,13 +156,8 @@ class _SystemReader(TomlReader):
 
     def interval(self, key: tuple[str, ...], spec: dict[str, Any]) -> Box:
         """An interval matrix ``{ lower = [[...]], upper = [[...]] }`` (A, B, C, D only): the
-        plant may use any matrix between the two at every step (docs/uncertain.md)."""
-        if key[-1] not in INTERVAL_MATRICES:
-            raise self.fail(
-                key,
-                "an interval matrix (lower, upper) is accepted for A, B, C and D only; an "
-                f"uncertain {key[-1]} is a wider box of the disturbance d",
-            )
+        plant may use any matrix between the two at every step (docs/uncertain.md; one given
+        for ``E`` or ``F`` is refused by :class:`~ivobs.LinearSystem`)."""
         unknown = sorted(set(spec) - {"lower", "upper"})
         if unknown:
             raise self.fail(

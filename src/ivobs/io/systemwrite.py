@@ -17,7 +17,6 @@ from ..sets import Box
 from .atomic import write_text_atomic
 from .callables import callable_ref
 from .nlsystemfile import dump_nonlinear
-from .options import plain_option
 from .systemfile import FORMAT, MATRICES, SystemFile
 
 __all__ = ["dumps_system", "equal_systems", "save_system"]
@@ -263,7 +262,7 @@ def _tail(x0: Any, method: str | None, options: dict[str, Any], x0_step: int = 0
         out += ["", "[method]", f"name = {_scalar(method)}"]
         if options:
             out += ["", "[method.options]"]
-            out += [f"{_key(k)} = {_value(plain_option(v))}" for k, v in options.items()]
+            out += [f"{_key(k)} = {_value(v)}" for k, v in options.items()]
     elif options:
         raise IvobsError("save_system: options were given without a method")
     return out

@@ -29,7 +29,7 @@ class Matrix:
     """A constant, stacked, callable or sparse matrix with a checked shape; :meth:`at` gives it
     at a step as a dense array (a sparse one densified once, on demand)."""
 
-    __slots__ = ("_dense", "const", "fn", "given", "name", "shape", "sp", "stack", "vector")
+    __slots__ = ("const", "fn", "given", "name", "shape", "sp", "stack", "vector")
 
     def __init__(
         self, name: str, value: MatrixLike, rows: int | None, cols: int | None, vector: str

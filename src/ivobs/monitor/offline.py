@@ -55,10 +55,7 @@ def check_record(
     f_lo, f_hi = _disturbance_images(sys, "F", steps, y)
     du = _products(sys, "D", keys, u)
     b_lo, b_hi = c_lo + du + f_lo, c_hi + du + f_hi
-    b_lo, b_hi = (
-        b_lo - margin * (1 + np.abs(b_lo)),
-        b_hi + margin * (1 + np.abs(b_hi)),
-    )
+    b_lo, b_hi = b_lo - margin * (1 + np.abs(b_lo)), b_hi + margin * (1 + np.abs(b_hi))
     b_lo, b_hi = np.nan_to_num(b_lo, nan=-np.inf), np.nan_to_num(b_hi, nan=np.inf)
     out = (y < b_lo) | (y > b_hi)
     with np.errstate(invalid="ignore"):
@@ -140,7 +137,8 @@ def _disturbance_images(
     get = sys.E_at if name == "E" else sys.F_at
     n = sys.nx if name == "E" else sys.ny
     if sys.is_time_varying or callable(sys.d):
-        pairs = [image_bounds(get(k), *_bounds(sys.d_at(k, y[i]))) for i, k in enumerate(steps)]
+        boxes = [sys.d_at(k, y[i]) for i, k in enumerate(steps)]
+        pairs = [image_bounds(get(k), b.lo, b.hi) for k, b in zip(steps, boxes)]
         return (
             np.array([p[0] for p in pairs]).reshape(-1, n),
             np.array([p[1] for p in pairs]).reshape(-1, n),
@@ -153,7 +151,3 @@ def _disturbance_images(
         return image_bounds(get(0), d.lo[steps], d.hi[steps])
     lo, hi = image_bounds(get(0), d.lo, d.hi)
     return np.broadcast_to(lo, (steps.size, n)), np.broadcast_to(hi, (steps.size, n))
-
-
-def _bounds(box: Box) -> tuple[np.ndarray, np.ndarray]:
-    return box.lo, box.hi

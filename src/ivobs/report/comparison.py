@@ -81,8 +81,8 @@ def applicable_methods(system: Any) -> tuple[list[str], list[str]]:
             check_system(get_method(name), system)
         except IvobsError:
             refused.append(name)
-            continue
-        ok.append(name)
+        else:
+            ok.append(name)
     return ok, refused
 
 

@@ -17,22 +17,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import IvobsError
-from .compare_figure import check_states, reference_trajectory
+from ..frames import _import
+from .compare_figure import reference_trajectory
 
 if TYPE_CHECKING:
     from ..result import Estimate
 
 __all__ = ["html_report"]
-
-
-def _plotly() -> Any:
-    try:
-        import plotly.graph_objects as go
-    except ImportError:
-        raise IvobsError(
-            'html reports need plotly; install it with: pip install "ivobs[html]"'
-        ) from None
-    return go
 
 
 def _values(a: np.ndarray) -> list[float | None]:
@@ -101,11 +92,12 @@ def html_report(
     methods; ``alarms``: steps flagged inconsistent; ``notes``: lines printed under the title;
     ``episodes``: one line per fault episode (its steps, the outputs blamed and isolated, the
     estimated bias), listed under the alarms."""
-    go = _plotly()
+    _import("plotly", "html")  # refused with the extra to install
+    import plotly.graph_objects as go
+
     if not estimates:
         raise IvobsError("html report: no estimate to show")
     first = next(iter(estimates.values()))
-    idx = check_states(None, first.nx)
     ref, ref_name = reference_trajectory(estimates, truth)
     time = np.asarray(np.arange(first.T) if t is None else t, dtype=float)
     parts = [f"<h1>{html.escape(title)}</h1>"]
@@ -118,11 +110,11 @@ def html_report(
     if episodes:
         items = "".join(f"<li>{html.escape(e)}</li>" for e in episodes)
         parts.append(f"<p class='faults'><b>Fault episodes</b></p><ul class='faults'>{items}</ul>")
-    for n, i in enumerate(idx):
+    for i in range(first.nx):
         label = state_names[i] if state_names is not None else f"x{i + 1}"
         fig = _state_figure(go, estimates, i, time, ref, ref_name, label)
         parts.append(
-            fig.to_html(full_html=False, include_plotlyjs=(n == 0), div_id=f"state-{i + 1}")
+            fig.to_html(full_html=False, include_plotlyjs=(i == 0), div_id=f"state-{i + 1}")
         )
     page = (
         "<!DOCTYPE html><html><head><meta charset='utf-8'>"
@@ -152,9 +144,9 @@ def results_table(results: Sequence[Any], state_names: Sequence[str] | None = No
         else:
             widths = "".join(f"<td>{w:.4g}</td>" for w in np.ravel(r.mean_width))
             seen = {True: "yes", False: "NO", None: "n/a"}[r.contains]
-            times = (r.design_time, r.run_time, getattr(r, "cpu_time", float("nan")))
+            times = (r.design_time, r.run_time, r.cpu_time)
             cells = f"{widths}<td>{seen}</td>" + "".join(f"<td>{v:.3g}</td>" for v in times)
-        label = r.method if getattr(r, "guaranteed", True) else f"{r.method} (NOT guaranteed)"
+        label = r.method if r.guaranteed else f"{r.method} (NOT guaranteed)"
         rows.append(f"<tr><td>{html.escape(label)}</td>{cells}</tr>")
     return (
         f"<table class='methods'><tr><th>method</th>{head}<th>contains truth</th>"

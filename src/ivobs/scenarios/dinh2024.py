@@ -62,7 +62,7 @@ def _kkl_random8(
             "d = 0.5(sin 2t, cos t), w = 0.3 sin t",
             t=t,
             _disturbance=factory,
-            _u_fn=lambda tt: np.ones(8),
+            u_fn=lambda tt: np.ones(8),
             notes=f"random integer matrices (seed {seed}) shifted to be Hurwitz by ivobs",
         )
     else:
@@ -139,7 +139,7 @@ def _pendulum(
         t=t,
         state_names=("θ", "θ'"),
         _disturbance=factory,
-        _u_fn=u_fn,
+        u_fn=u_fn,
         notes=f"L0 = {L0}, L1 = {L1}, ω = {omega}, θ(0) = 0.5 and the prior box chosen by ivobs "
         "(the paper gives none)",
     )

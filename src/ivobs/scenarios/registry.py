@@ -66,17 +66,13 @@ class Scenario:
     t: np.ndarray | None = None
     state_names: tuple[str, ...] | None = None
     _disturbance: DisturbanceFactory | None = None
-    _u_fn: Callable[[float], np.ndarray] | None = None
+    u_fn: Callable[[float], np.ndarray] | None = None
+    """Continuous time: the known input as a function of ``t`` (between samples too), when
+    the scenario defines one (``u`` holds its samples on the grid ``t``)."""
     recorded: Trajectory | None = None
     _matrices: DisturbanceFactory | None = None
     """Systems with interval matrices: ``(kind, seed, T) -> {name: (T, r, c)}``, the matrices
     the plant uses at each step under a disturbance of that kind (``simulate(matrices=)``)."""
-
-    @property
-    def u_fn(self) -> Callable[[float], np.ndarray] | None:
-        """Continuous time: the known input as a function of ``t`` (between samples too), when
-        the scenario defines one (``u`` holds its samples on the grid ``t``)."""
-        return self._u_fn
 
     @property
     def d(self) -> Any:
@@ -119,7 +115,7 @@ class Scenario:
                 self.system, self.x_true0, self.u, d, p=kind, T=self.horizon, seed=seed
             )
         if self.system.is_continuous:
-            u = self._u_fn if self._u_fn is not None else self.u
+            u = self.u_fn if self.u_fn is not None else self.u
             return simulate(self.system, self.x_true0, u, d, t=self.t)
         kw = {}
         if self._matrices is not None:  # interval matrices: the plant's at each step
@@ -174,9 +170,9 @@ def get(name: str, **options: Any) -> Scenario:
     except TypeError as exc:
         import inspect
 
-        params = [p for p in inspect.signature(fn).parameters]
         raise IvobsError(
-            f"scenario {name!r}: bad options {sorted(options)} ({exc}); accepted: {params}"
+            f"scenario {name!r}: bad options {sorted(options)} ({exc}); accepted: "
+            f"{list(inspect.signature(fn).parameters)}"
         ) from None
 
 

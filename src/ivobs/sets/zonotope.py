@@ -31,9 +31,7 @@ def _sum_error(c: np.ndarray) -> np.ndarray:
 def box_generators(r: np.ndarray) -> np.ndarray:
     """The box ``[-r, r]`` as generator columns ``diag(r)``, only the nonzero ones (a box of
     rounding errors appended to a zonotope's generators)."""
-    nz = np.flatnonzero(r > 0)
-    out = np.zeros((r.shape[0], nz.size))
-    out[nz, np.arange(nz.size)] = r[nz]
+    out: np.ndarray = np.diag(r)[:, r > 0]
     return out
 
 

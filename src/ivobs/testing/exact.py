@@ -118,7 +118,7 @@ class ExactLinear:
     Parameters
     ----------
     sys : a discrete-time :class:`~ivobs.LinearSystem` (time-varying matrices are evaluated at
-        each step; an interval-matrix system takes its matrices per step in :meth:`step`)
+        each step)
     x0 : the true initial state (doubles, taken exactly)
     """
 
@@ -128,9 +128,7 @@ class ExactLinear:
         self.x: Dyadic = _dyadic(np.asarray(x0, dtype=float).tolist())
         self._cache: dict[int, tuple[Any, ...]] = {}
 
-    def _mats(self, matrices: Sequence[np.ndarray] | None) -> tuple[Any, ...]:
-        if matrices is not None:
-            return tuple(_matrix(np.atleast_2d(M)) for M in matrices)
+    def _mats(self) -> tuple[Any, ...]:
         key = 0 if not self.sys.is_time_varying else self.k
         if key not in self._cache:
             if len(self._cache) > 4:
@@ -141,13 +139,10 @@ class ExactLinear:
             )
         return self._cache[key]
 
-    def step(
-        self, u: Any = None, d: Any = None, matrices: Sequence[np.ndarray] | None = None
-    ) -> np.ndarray:
+    def step(self, u: Any = None, d: Any = None) -> np.ndarray:
         """Advance one step with input ``u[k]`` and disturbance ``d[k]`` (doubles, exact);
-        returns ``y[k]`` rounded to the nearest doubles. ``matrices``: ``(A, B, C, D, E, F)``
-        of this step (an interval-matrix plant's realisation)."""
-        A, B, C, D, E, F = self._mats(matrices)
+        returns ``y[k]`` rounded to the nearest doubles."""
+        A, B, C, D, E, F = self._mats()
         sys = self.sys
         uu = _dyadic(np.zeros(sys.nu).tolist() if u is None else np.ravel(u).tolist())
         dd = _dyadic(np.zeros(sys.nd).tolist() if d is None else np.ravel(d).tolist())
@@ -156,11 +151,6 @@ class ExactLinear:
         self.k += 1
         return np.array([_nearest(v, y[1]) for v in y[0]], dtype=float).reshape(sys.ny)
 
-    def state(self) -> np.ndarray:
-        """The current state rounded to the nearest doubles (for plots, not for checks)."""
-        N, s = self.x
-        return np.array([_nearest(v, s) for v in N], dtype=float)
-
     def around(self) -> tuple[list[float], list[float]]:
         """The doubles next to each component of the current state, below and above
         (:class:`ExactStates`)."""
@@ -168,23 +158,8 @@ class ExactLinear:
         pairs = [_around(v, s) for v in N]
         return [a for a, _ in pairs], [b for _, b in pairs]
 
-    def contains(self, lo: Any, hi: Any) -> np.ndarray:
-        """Per component, whether ``lo <= x <= hi`` holds exactly for the current state."""
-        N, s = self.x
-        out = [
-            _sign(float(a), v, s) <= 0 <= _sign(float(b), v, s)
-            for a, b, v in zip(np.ravel(lo), np.ravel(hi), N)
-        ]
-        return np.array(out, dtype=bool)
 
-
-def exact_run(
-    sys: Any,
-    x0: Any,
-    u: np.ndarray,
-    d: np.ndarray,
-    matrices: Sequence[Sequence[np.ndarray]] | None = None,
-) -> tuple[np.ndarray, ExactStates]:
+def exact_run(sys: Any, x0: Any, u: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, ExactStates]:
     """A whole record: the measurements ``y`` ``(T, ny)`` (nearest doubles) and the exact
     states ``x[0..T-1]`` (for :func:`exact_misses`)."""
     sim = ExactLinear(sys, x0)
@@ -193,11 +168,7 @@ def exact_run(
     lo, hi = np.empty((T, sys.nx)), np.empty((T, sys.nx))
     for k in range(T):
         lo[k], hi[k] = sim.around()
-        Y[k] = sim.step(
-            None if u is None else u[k],
-            None if d is None else d[k],
-            None if matrices is None else matrices[k],
-        )
+        Y[k] = sim.step(None if u is None else u[k], None if d is None else d[k])
     return Y, ExactStates(lo, hi)
 
 

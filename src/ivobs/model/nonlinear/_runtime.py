@@ -330,32 +330,9 @@ def heaviside(al: float, ah: float) -> tuple[float, float]:
 
 
 NAMESPACE = {
-    "_nx": _nx,
-    "_NI": NINF,
-    "_PI": INF,
-    "_mul": mul,
-    "_div": div,
-    "_recip": recip,
-    "_ipow": ipow,
-    "_sqr": sqr,
-    "_sqrt": sqrt,
-    "_exp": exp,
-    "_log": log,
-    "_rpow": rpow,
-    "_atan": atan,
-    "_tanh": tanh,
-    "_sinh": sinh,
-    "_cosh": cosh,
-    "_asin": asin,
-    "_acos": acos,
-    "_sin": sin,
-    "_cos": cos,
-    "_tan": tan,
-    "_abs": iabs,
-    "_sign": sign,
-    "_heaviside": heaviside,
-    "_min": min,
-    "_max": max,
-    "_math": math,
-}
+    **{f"_{f.__name__}": f for f in (mul, div, recip, ipow, sqr, sqrt, exp, log, rpow, atan, tanh,
+                                     sinh, cosh, asin, acos, sin, cos, tan, sign, heaviside, min,
+                                     max)},
+    "_abs": iabs, "_nx": _nx, "_NI": NINF, "_PI": INF, "_math": math,
+}  # fmt: skip
 """Names the generated code may use (its only globals)."""

@@ -98,9 +98,9 @@ TRIES = 8
 """Inflate-and-retry rounds of one a priori enclosure."""
 INFLATE_REL, INFLATE_ABS = 0.1, 1e-9
 SPREAD_PIECES = 8
+"""Pieces of a substep over which the magnitude of ``e^{J_c s}`` is integrated (the spread)."""
 MEAN_PIECES = 16
 """Pieces of the period over which ``e^{J_c s}`` is integrated (the mean form's spread)."""
-"""Pieces of a substep over which the magnitude of ``e^{J_c s}`` is integrated (the spread)."""
 
 Vec = list[float]
 
@@ -155,9 +155,6 @@ class FlowSystem(NonlinearSystem):
             for j, n in enumerate(self.signal_names)
             if disturbances == "varying" and self._sym[n] in used
         ]
-        # no symbolic h∘Φ: one step back through the flow's mean-value form, per output (it
-        # needs the flow's Jacobian: a non-smooth f has none here, its contractors do nothing)
-        back = self.smooth
         # the mean form (module docstring): d's column in w is its mean over the period, which
         # h must not read (h sees d at the sampling instant, another value)
         in_h = set().union(*(e.free_symbols for e in self.h_exprs)) if self.h_exprs else set()
@@ -166,8 +163,11 @@ class FlowSystem(NonlinearSystem):
             and self.smooth
             and not any(self._sym[self.signal_names[j - np_]] in in_h for j in self._varying)
         )
+        # no symbolic h∘Φ: one step back through the flow's mean-value form, per output (it
+        # needs the flow's Jacobian: a non-smooth f has none here, its contractors do nothing)
         self._hf = [
-            (FlowBackContractor(self, i) if back else _no_contraction, []) for i in range(self.ny)
+            (FlowBackContractor(self, i) if self.smooth else _no_contraction, [])
+            for i in range(self.ny)
         ]
         self._spread_cache: list[tuple[tuple[float, ...], list[float]]] = []
         self._collect: list[tuple[Vec, Vec]] | None = None  # a priori boxes (period_box)

@@ -54,19 +54,15 @@ def capable_methods(sys: Any) -> list[str]:
     return [m for m in applicable_methods(sys)[0] if m != "intersect"]
 
 
-def _check_name(name: str) -> str:
-    if name not in SCENARIO_FIGURES:
-        raise IvobsError(f"scenario: expected one of {', '.join(SCENARIO_FIGURES)}, got {name!r}")
-    return name
-
-
 def scenario_runs(
     name: str, horizon: int | None = None, methods: list[str] | None = None
 ) -> tuple[Any, Any, dict[str, Estimate]]:
     """``(scenario, trajectory, {method: estimate})``: the scenario's ``paper`` trajectory
     (seed 0) over ``horizon`` steps (default: :data:`SCENARIO_FIGURES`) and each method's run
     on it (default: :func:`capable_methods`), each checked to contain the true state."""
-    sc = scenarios.get(_check_name(name), horizon=horizon or SCENARIO_FIGURES[name])
+    if name not in SCENARIO_FIGURES:
+        raise IvobsError(f"scenario: expected one of {', '.join(SCENARIO_FIGURES)}, got {name!r}")
+    sc = scenarios.get(name, horizon=horizon or SCENARIO_FIGURES[name])
     traj = sc.simulate("paper", seed=0)
     names = capable_methods(sc.system) if methods is None else list(methods)
     runs = {m: run_checked(m, sc, traj, f"{name}: {m}") for m in names}
