@@ -76,8 +76,12 @@ def test_large_states_and_gains_step_with_state_round_trips(level, gain):
     kw = {"A_z": ref.A_z, "B_z": gain * ref.B_z, "T": gain * ref.T}  # (4) is linear in B_z
     est = ivobs.make_estimator("kkl", sys_, x0=x0, on_inconsistent="raise", **kw)
     assert np.abs(rec.X_lo).max() > 0.5 * level
-    res = est.run(rec.U, rec.Y)
+    vec = est.run(rec.U, rec.Y, vectorize=True)
+    _assert_contains(vec.lower, vec.upper, rec)
+    res = est.run(rec.U, rec.Y, vectorize=False)  # the loop: step()'s recursion
     _assert_contains(res.lower, res.upper, rec)
+    # two algorithms: the same widths up to rounding at the states' magnitude
+    np.testing.assert_allclose(vec.width, res.width, rtol=1e-6, atol=1e-12 * level)
     lo, hi = np.empty_like(res.lower), np.empty_like(res.upper)
     other = ivobs.make_estimator("kkl", sys_, x0=x0, on_inconsistent="raise", **kw)
     est.reset()
