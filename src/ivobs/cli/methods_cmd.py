@@ -77,22 +77,19 @@ def rows() -> list[dict[str, str]]:
     """One row per method, in ``ivobs.methods()`` order, read from the estimator classes."""
     from ..estimators import get, methods
 
-    out = []
-    for name in methods():
-        cls = get(name)
-        out.append(
-            {
-                "method": name,
-                "summary": cls.summary,
-                "paper": paper_keys(cls.reference),
-                "reference": cls.reference,
-                "data used": cls.data_used,
-                "needs x0": _yes(cls.needs_x0),
-                "time-varying": _yes(cls.supports_time_varying),
-                "continuous": _yes(cls.supports_continuous),
-            }
-        )
-    return out
+    return [
+        {
+            "method": name,
+            "summary": cls.summary,
+            "paper": paper_keys(cls.reference),
+            "reference": cls.reference,
+            "data used": cls.data_used,
+            "needs x0": _yes(cls.needs_x0),
+            "time-varying": _yes(cls.supports_time_varying),
+            "continuous": _yes(cls.supports_continuous),
+        }
+        for name, cls in ((name, get(name)) for name in methods())
+    ]
 
 
 def markdown_table() -> str:

@@ -32,6 +32,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..errors import IvobsError
+from ..model.protocol import SystemModel
 from .atomic import write_text_atomic
 from .fingerprint import canonical_json
 
@@ -52,15 +53,6 @@ STATE_VERSION = 2
 
 MAX_STATE_BYTES = 1 << 30
 """Largest state file read (the largest methods' states are a few megabytes)."""
-
-
-class _Dims(Protocol):
-    @property
-    def nx(self) -> int: ...
-    @property
-    def nu(self) -> int: ...
-    @property
-    def ny(self) -> int: ...
 
 
 class _StateChecker(Protocol):
@@ -145,7 +137,7 @@ def _count(name: str, key: str, v: Any) -> int:
 
 
 def check_monitor_state(
-    data: dict[str, Any], sys: _Dims, estimator: _StateChecker, name: str, start: int
+    data: dict[str, Any], sys: SystemModel, estimator: _StateChecker, name: str, start: int
 ) -> None:
     """Check the entries of a state file read by :func:`read_state_file` for a monitor of the
     system ``sys`` running ``estimator`` on a stream that starts at step ``start`` (the prior
@@ -200,7 +192,7 @@ def check_stream(stream: Any, k: int, name: str, start: int) -> None:
             raise malformed(name, f"stream.{key}", "expected a digest (text)")
 
 
-def _check_prev(prev: Any, sys: _Dims, name: str) -> None:
+def _check_prev(prev: Any, sys: SystemModel, name: str) -> None:
     """The monitor's box of the previous step, with its input and measurement."""
     if prev is None:
         return
