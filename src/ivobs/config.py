@@ -72,10 +72,7 @@ def defaults(method: str | None = None) -> dict[str, Any]:
     imports every method's module). ``None`` as a value usually means "chosen by the design"
     (:func:`describe` says how)."""
     if method is None:
-        out: dict[str, Any] = {}
-        for name in methods():
-            out.update({f"{name}.{k}": v for k, v in defaults(name).items()})
-        return out
+        return {f"{name}.{k}": v for name in methods() for k, v in defaults(name).items()}
     cls = get(method)
     return {**cls.option_defaults(), **OVERRIDES.get(cls.name, {})}
 
@@ -151,16 +148,9 @@ def describe(method: str | None = None) -> list[OptionDoc]:
         cls = get(name)
         for option, default in cls.option_defaults().items():
             text = note(name, option)
-            out.append(
-                OptionDoc(
-                    method=name,
-                    option=option,
-                    default=default,
-                    what=text.what if text else "",
-                    when=text.when if text else "",
-                    common=option in base and _declared_by(cls, option) is Estimator,
-                )
-            )
+            what, when = (text.what, text.when) if text else ("", "")
+            common = option in base and _declared_by(cls, option) is Estimator
+            out.append(OptionDoc(name, option, default, what, when, common))
     return out
 
 
