@@ -146,10 +146,7 @@ def options_markdown(method: str | None = None) -> str:
     for name in dict.fromkeys(d.method for d in docs):
         own = [d for d in docs if d.method == name and not d.common]
         lines += ["", f"## `{name}`", ""]
-        if own:
-            lines += _table(own)
-        else:
-            lines.append("No options of its own (those of every method only).")
+        lines += _table(own) if own else ["No options of its own (those of every method only)."]
         shared = [d.option for d in docs if d.method == name and d.common]
         if own and shared:
             lines += ["", f"And those of every method: {', '.join(f'`{o}`' for o in shared)}."]
