@@ -98,6 +98,16 @@ class MatrixUncertainty:
     RC: np.ndarray
     RD: np.ndarray
 
+    @property
+    def acts_on_state(self) -> bool:
+        """Whether ``w = ΔA x + ΔB u`` can be nonzero."""
+        return bool(self.RA.any() or self.RB.any())
+
+    @property
+    def acts_on_output(self) -> bool:
+        """Whether ``v = ΔC x + ΔD u`` can be nonzero."""
+        return bool(self.RC.any() or self.RD.any())
+
     def exact_rows(self) -> np.ndarray:
         """Outputs whose rows of ``C`` and ``D`` are exact (no ``v`` in them)."""
         out = ~(self.RC.any(axis=1) | self.RD.any(axis=1))
