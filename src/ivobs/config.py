@@ -2,28 +2,13 @@
 is the model).
 
 Each method's options and their defaults are those of its class's ``__init__`` signature (the
-one source: nothing here copies them); :func:`defaults` lists them. A default can be changed
-for the whole process (a session, a campaign, a test) without passing the option at every
-call::
-
-    import ivobs
-
-    ivobs.config.defaults("dual-window")          # {'window': 'auto', 'cache': 16, ...}
-    ivobs.config.set_defaults("zonotope", order=40)
-    est = ivobs.make_estimator("zonotope", sys, x0=x0)          # est.design.order == 40
-    with ivobs.config.using("nl-interval", lag=3):              # only inside the block
-        est = ivobs.make_estimator("nl-interval", nl_sys, x0=x0)
-    ivobs.config.reset_defaults()
-
-A changed default applies wherever the option is not passed: :func:`ivobs.make_estimator`, a
-class called directly (``ivobs.estimators.get(name)(sys, x0)``), the members of
-``intersect``, ``ivobs.report.compare``, the commands run from Python and the jobs of a
-campaign (listed with the defaults in effect, which they carry to the worker processes). An
-option passed explicitly always wins, also where a command passes one itself (``strips=True``
-in comparisons, campaigns and the monitor). Options declared by the base class
-(``on_inconsistent``, ``strips``) are set per method like the others. Values are checked by
-the method when it is built, as if passed there. The registry belongs to the process (not to
-a thread): ``using`` in one thread changes the defaults of the others too.
+one source: nothing here copies them); :func:`defaults` lists them. :func:`set_defaults`
+changes a default for the whole process (a session, a campaign, a test), :func:`using` for a
+``with`` block, :func:`reset_defaults` undoes them. A changed default applies wherever the
+option is not passed (``make_estimator``, a class called directly, ``intersect``'s members,
+``ivobs.report.compare``, the commands run from Python, a campaign's jobs); an option passed
+explicitly always wins. Values are checked by the method when it is built, as if passed there.
+The registry belongs to the process (not to a thread). Examples: docs/options.md.
 
 What each option does and when to change it: :func:`describe`, ``ivobs methods --options``
 and docs/options.md (one text, :mod:`ivobs.estimators.option_notes`).
@@ -72,10 +57,7 @@ def defaults(method: str | None = None) -> dict[str, Any]:
     imports every method's module). ``None`` as a value usually means "chosen by the design"
     (:func:`describe` says how)."""
     if method is None:
-        out: dict[str, Any] = {}
-        for name in methods():
-            out.update({f"{name}.{k}": v for k, v in defaults(name).items()})
-        return out
+        return {f"{name}.{k}": v for name in methods() for k, v in defaults(name).items()}
     cls = get(method)
     return {**cls.option_defaults(), **OVERRIDES.get(cls.name, {})}
 
@@ -151,16 +133,9 @@ def describe(method: str | None = None) -> list[OptionDoc]:
         cls = get(name)
         for option, default in cls.option_defaults().items():
             text = note(name, option)
-            out.append(
-                OptionDoc(
-                    method=name,
-                    option=option,
-                    default=default,
-                    what=text.what if text else "",
-                    when=text.when if text else "",
-                    common=option in base and _declared_by(cls, option) is Estimator,
-                )
-            )
+            what, when = (text.what, text.when) if text else ("", "")
+            common = option in base and _declared_by(cls, option) is Estimator
+            out.append(OptionDoc(name, option, default, what, when, common))
     return out
 
 

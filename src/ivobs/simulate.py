@@ -74,11 +74,9 @@ class Trajectory:
         pd = _import("pandas", "pandas")
         if self.x.ndim != 2:
             raise IvobsError("to_pandas: a batch of records; take one, e.g. Trajectory of x[b]")
-        cols: dict[str, Any] = {"t": self.t}
-        for name, arr in (("x", self.x), ("y", self.y), ("u", self.u), ("d", self.d)):
-            for i in range(arr.shape[-1]):
-                cols[f"{name}{i + 1}"] = arr[:, i]
-        return pd.DataFrame(cols, index=pd.RangeIndex(self.T, name="k"))
+        signals = (("x", self.x), ("y", self.y), ("u", self.u), ("d", self.d))
+        cols = {f"{name}{i + 1}": arr[:, i] for name, arr in signals for i in range(arr.shape[-1])}
+        return pd.DataFrame({"t": self.t, **cols}, index=pd.RangeIndex(self.T, name="k"))
 
 
 def _bounds_rows(box: Box, T: int) -> tuple[np.ndarray, np.ndarray]:

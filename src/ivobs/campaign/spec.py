@@ -70,17 +70,14 @@ class CampaignSpec:
         method (:func:`ivobs.config.set_defaults`): the worker processes do not share them, so
         the jobs carry them (and their ids differ from those of the classes' defaults)."""
         session = {e.name: session_options(e.name) for e in self.methods}
-        out = []
-        for sc, dist, entry in itertools.product(self.scenarios, self.disturbances, self.methods):
-            for opts in entry.option_sets():
-                for seed in self.seeds:
-                    out.append(Job(
-                        scenario=sc, method=entry.name, seed=seed, disturbance=dist,
-                        options={**session[entry.name], **opts},
-                        scenario_options=dict(self.scenario_options.get(sc, {})),
-                        burn_in=self.burn_in, imports=tuple(self.imports),
-                    ))  # fmt: skip
-        return out
+        grid = itertools.product(self.scenarios, self.disturbances, self.methods)
+        return [
+            Job(scenario=sc, method=entry.name, seed=seed, disturbance=dist,
+                options={**session[entry.name], **opts},
+                scenario_options=dict(self.scenario_options.get(sc, {})),
+                burn_in=self.burn_in, imports=tuple(self.imports))
+            for sc, dist, entry in grid for opts in entry.option_sets() for seed in self.seeds
+        ]  # fmt: skip
 
 
 def session_options(method: str) -> dict[str, Any]:

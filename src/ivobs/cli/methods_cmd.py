@@ -77,22 +77,19 @@ def rows() -> list[dict[str, str]]:
     """One row per method, in ``ivobs.methods()`` order, read from the estimator classes."""
     from ..estimators import get, methods
 
-    out = []
-    for name in methods():
-        cls = get(name)
-        out.append(
-            {
-                "method": name,
-                "summary": cls.summary,
-                "paper": paper_keys(cls.reference),
-                "reference": cls.reference,
-                "data used": cls.data_used,
-                "needs x0": _yes(cls.needs_x0),
-                "time-varying": _yes(cls.supports_time_varying),
-                "continuous": _yes(cls.supports_continuous),
-            }
-        )
-    return out
+    return [
+        {
+            "method": name,
+            "summary": cls.summary,
+            "paper": paper_keys(cls.reference),
+            "reference": cls.reference,
+            "data used": cls.data_used,
+            "needs x0": _yes(cls.needs_x0),
+            "time-varying": _yes(cls.supports_time_varying),
+            "continuous": _yes(cls.supports_continuous),
+        }
+        for name, cls in ((name, get(name)) for name in methods())
+    ]
 
 
 def markdown_table() -> str:
@@ -149,10 +146,7 @@ def options_markdown(method: str | None = None) -> str:
     for name in dict.fromkeys(d.method for d in docs):
         own = [d for d in docs if d.method == name and not d.common]
         lines += ["", f"## `{name}`", ""]
-        if own:
-            lines += _table(own)
-        else:
-            lines.append("No options of its own (those of every method only).")
+        lines += _table(own) if own else ["No options of its own (those of every method only)."]
         shared = [d.option for d in docs if d.method == name and d.common]
         if own and shared:
             lines += ["", f"And those of every method: {', '.join(f'`{o}`' for o in shared)}."]

@@ -109,13 +109,6 @@ def _lines(fh: TextIO, follow: bool, poll: float) -> Iterator[str]:
             pending = ""
 
 
-def _row_digest(row: Any) -> str:
-    """The digest of one row's values (step, time, inputs, measurements)."""
-    y = [None if np.isnan(v) else float(v) for v in row.y]
-    values = [row.step, row.t, [float(v) for v in row.u], y]
-    return hashlib.sha256(canonical_json(values).encode()).hexdigest()[:32]
-
-
 class _Stream:
     """Where the stream stands: the step of its first row, the rows consumed, the last step and
     time, the columns, and the digests of all rows and of the last one (what a restarted
@@ -129,7 +122,9 @@ class _Stream:
         self.digest, self.last = "", ""
 
     def consume(self, row: Any) -> None:
-        d = _row_digest(row)
+        y = [None if np.isnan(v) else float(v) for v in row.y]
+        values = [row.step, row.t, [float(v) for v in row.u], y]  # the digest of the row's values
+        d = hashlib.sha256(canonical_json(values).encode()).hexdigest()[:32]
         self.rows, self.step, self.t = self.rows + 1, row.step, row.t
         self.digest = hashlib.sha256((self.digest + d).encode()).hexdigest()[:32]  # all so far
         self.last = d

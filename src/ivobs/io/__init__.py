@@ -2,23 +2,7 @@
 
 * **System files** (TOML, :mod:`ivobs.io.systemfile`, :mod:`ivobs.io.systemwrite`): the model
   ``x[k+1] = A x[k] + B u[k] + E d[k]``, ``y[k] = C x[k] + D u[k] + F d[k]``, the disturbance
-  bounds, the prior box on ``x[0]`` and a method with its options (:mod:`ivobs.io.options`)::
-
-      name = "servo-motor"
-
-      [system]
-      dt = 0.1
-      A = [[1.0, 0.1, 0.0], [0.0, 0.8495, 0.4977], [0.0, -0.0357, 0.9995]]
-      B = [[0.0], [0.0], [0.0729]]
-      C = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
-
-      [x0]
-      lower = [-0.2, -0.2, -0.2]
-      upper = [0.2, 0.2, 0.2]
-
-      [method]
-      name = "interval-split"
-
+  bounds, the prior box on ``x[0]`` and a method with its options (:mod:`ivobs.io.options`).
   Every rejected file raises :class:`~ivobs.IvobsError` naming the file, the line and the key
   (:mod:`ivobs.io.reader`). The format is documented in ``docs/operating.md``.
 * **Logs** (CSV, :mod:`ivobs.io.logs`): a step or time column, ``u1, u2, ...`` and

@@ -4,29 +4,10 @@ tables ``[system.params]`` (a number: known; ``[lo, hi]``: unknown) and ``[syste
 (``name = [lo, hi]``). Expressions are read by a whitelist, never executed: loading a
 nonlinear system file runs no code.
 
-::
-
-    [system]
-    states = ["x1", "x2"]
-    f = ["1 - a*x1**2 + x2 + w1", "b*x1"]
-    h = ["x1 + v1"]
-
-    [system.params]
-    a = [1.39, 1.41]
-    b = 0.3
-
-    [system.d]
-    w1 = [-0.005, 0.005]
-    v1 = [-0.02, 0.02]
-
-A continuous-time model (``dt = 0``) may carry its guaranteed discretisation, the arguments of
-:meth:`~ivobs.NonlinearSystem.discretize`, so that a saved sampled model loads as it was saved::
-
-    [system.discretize]
-    Ts = 0.1
-    order = 4
-    substeps = 1
-    disturbances = "varying"    # or "held" (docs/continuous.md)
+A continuous-time model (``dt = 0``) may carry its guaranteed discretisation in
+``[system.discretize]`` (``Ts``, ``order``, ``substeps``, ``disturbances``: the arguments of
+:meth:`~ivobs.NonlinearSystem.discretize`), so that a saved sampled model loads as it was saved.
+Examples of both: docs/nonlinear.md, "System files".
 """
 
 from __future__ import annotations

@@ -1,21 +1,12 @@
 """Monitor state files (``ivobs monitor --state FILE``): JSON, written atomically, checked
 entry by entry when read back, locked while a monitor uses them.
 
-A state file holds the monitor's state (:meth:`ivobs.monitor.Monitor.state`: its counters, the
-previous box, the estimator's saved state and the fingerprint of the model, prior box and
-settings) and where the stream stopped: the step of its first row, the rows consumed, the last
-step and time, the columns and a digest of the rows, so that a restarted monitor continues
-with the same boxes from the right row of the same stream. A checksum covers all of it: a file
-edited by hand (``stream.step`` moved forward, the ``stream`` entry removed) is refused.
-
-Reading one checks, after the model's fingerprint (:mod:`ivobs.monitor.persist`), what
-``Monitor.restore`` takes on trust (lengths, NaN, ``lo <= hi``, types), the estimator's entries
-(:meth:`ivobs.Estimator.check_state`) and the stream's against the monitor's step count; a
-malformed file is refused with the key that is wrong.
-
-**Lock**: while a monitor runs, it holds an exclusive lock on ``FILE.lock`` (``fcntl.flock``:
-released by the operating system when the process ends, however it ends); a second monitor on
-the same state file is refused, naming the process that holds it.
+A state file holds the monitor's state (:meth:`ivobs.monitor.Monitor.state`, with the
+fingerprint of its model) and where the stream stopped (its first step, the rows consumed, the
+last step and time, the columns, digests of the rows), under a checksum: a file edited by hand
+is refused, and so is a malformed one, naming the key. While a monitor runs it holds an
+exclusive lock on ``FILE.lock`` (``fcntl.flock``). What is checked and why: docs/operating.md,
+"One monitor per state file" and "A state belongs to one model and one stream".
 """
 
 from __future__ import annotations
@@ -32,6 +23,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..errors import IvobsError
+from ..model.protocol import SystemModel
 from .atomic import write_text_atomic
 from .fingerprint import canonical_json
 
@@ -52,15 +44,6 @@ STATE_VERSION = 2
 
 MAX_STATE_BYTES = 1 << 30
 """Largest state file read (the largest methods' states are a few megabytes)."""
-
-
-class _Dims(Protocol):
-    @property
-    def nx(self) -> int: ...
-    @property
-    def nu(self) -> int: ...
-    @property
-    def ny(self) -> int: ...
 
 
 class _StateChecker(Protocol):
@@ -145,7 +128,7 @@ def _count(name: str, key: str, v: Any) -> int:
 
 
 def check_monitor_state(
-    data: dict[str, Any], sys: _Dims, estimator: _StateChecker, name: str, start: int
+    data: dict[str, Any], sys: SystemModel, estimator: _StateChecker, name: str, start: int
 ) -> None:
     """Check the entries of a state file read by :func:`read_state_file` for a monitor of the
     system ``sys`` running ``estimator`` on a stream that starts at step ``start`` (the prior
@@ -200,7 +183,7 @@ def check_stream(stream: Any, k: int, name: str, start: int) -> None:
             raise malformed(name, f"stream.{key}", "expected a digest (text)")
 
 
-def _check_prev(prev: Any, sys: _Dims, name: str) -> None:
+def _check_prev(prev: Any, sys: SystemModel, name: str) -> None:
     """The monitor's box of the previous step, with its input and measurement."""
     if prev is None:
         return

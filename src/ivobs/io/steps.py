@@ -1,23 +1,11 @@
 """Which step each row of a log holds: the step column ``k`` honoured.
 
-A log with a step column numbers its rows: the row with ``k = 7`` holds ``u[7]`` and ``y[7]``.
-Every reader of logs places rows with a :class:`StepClock` (:func:`~ivobs.io.read_log` for
-``ivobs run``, ``ivobs compare`` and :meth:`Monitor.check <ivobs.monitor.Monitor.check>` on
-what it reads, :func:`~ivobs.io.log_from_frame`, and the streaming ``ivobs monitor``), so
-they all agree on it:
-
-* the first row is the step of the prior box (``x[0]``, or the system file's ``[x0] step``): a
-  log that starts at another step is refused, since numbering its rows from the prior's step
-  would start ``x[1000]`` from the prior of ``x[0]``;
-* a gap (``k`` jumps by more than one) is a run of steps whose measurements are missing: the
-  clock gives each of them a row of NaN measurements, which every estimator predicts through.
-  Their inputs are unknown, so a gap is refused for a system with inputs (rows with the inputs
-  and empty measurement cells say what is missing), and for a continuous-time system (whose
-  clock is the time column);
-* at most :data:`MAX_MISSING_STEPS` steps of a log may be missing in all: a bound on what a
-  few characters of a step column can make ivobs allocate.
-
-Without a step column the rows are consecutive steps from the prior's.
+Every reader of logs places its rows with a :class:`StepClock`, so they all agree: the first
+row is the step of the prior box (``x[0]``, or the system file's ``[x0] step``), a gap in ``k``
+is a run of missing samples (refused for a system with inputs, whose inputs there are unknown,
+and for a continuous-time one, clocked by its time column), and at most
+:data:`MAX_MISSING_STEPS` steps may be missing in all; without a step column the rows are
+consecutive steps from the prior's. docs/operating.md, "Steps, gaps and where a log starts".
 """
 
 from __future__ import annotations

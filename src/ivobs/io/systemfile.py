@@ -286,16 +286,7 @@ class _SystemReader(TomlReader):
                     )
         dt = self.dt(sysd)
         try:
-            system = LinearSystem(
-                mats["A"],
-                mats.get("B"),
-                mats["C"],
-                D=mats.get("D"),
-                E=mats.get("E"),
-                F=mats.get("F"),
-                d=d,
-                dt=dt,
-            )
+            system = LinearSystem(**mats, d=d, dt=dt)  # mats: A and C, and B, D, E, F if given
         except IvobsError as exc:
             arg = re.match(r"^([A-F]|d|dt)\b", str(exc))
             key = (

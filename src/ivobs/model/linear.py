@@ -130,12 +130,9 @@ class LinearSystem(IntervalMatrices, TimeBase):
     Notes
     -----
     **Interval matrices** (:mod:`ivobs.model.uncertain`, docs/uncertain.md): a :class:`~ivobs.Box`
-    in the place of ``A``, ``B``, ``C`` or ``D`` (in any other place a Box with 2-D bounds is a
-    time-varying box of vectors; here it is a box of matrices) makes the system *uncertain*
-    (:attr:`is_uncertain`). ``sys.A`` etc. are then the nominal (midpoint) matrices, which every
-    design uses; :attr:`A_box` etc. the interval matrices; :attr:`uncertainty` their radii. Such
-    a system is discrete-time with constant, dense matrices; the methods that accept it say so
-    (``supports_uncertain``), the others refuse it.
+    in the place of ``A``, ``B``, ``C`` or ``D`` makes the system *uncertain*
+    (:attr:`is_uncertain`): ``sys.A`` etc. are then the nominal (midpoint) matrices, which every
+    design uses, :attr:`A_box` etc. the interval matrices, :attr:`uncertainty` their radii.
 
     Raises
     ------
@@ -451,9 +448,9 @@ class LinearSystem(IntervalMatrices, TimeBase):
         disturbances: Any = (),
     ) -> LinearSystem:
         """From a ``control.StateSpace`` (python-control): ``disturbances`` names the inputs of
-        ``ss`` that are bounded unknown disturbances (indices or labels) with bounds ``d``, or
-        ``E``, ``F``, ``d`` give disturbances outside ``ss``; names are kept in ``sys.names``
-        (:func:`ivobs.model.statespace.from_statespace`)."""
+        ``ss`` that are bounded unknown disturbances (indices or labels) with bounds ``d`` (a
+        Box of that many components), the other inputs are the known ``u``; or ``E``, ``F``,
+        ``d`` give disturbances outside ``ss``. Names are kept in ``sys.names``."""
         sys: LinearSystem = from_statespace(cls, ss, disturbances=disturbances, d=d, E=E, F=F)
         return sys
 

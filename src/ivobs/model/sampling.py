@@ -234,10 +234,9 @@ def _kernel(A: np.ndarray, E: np.ndarray, Ts: float) -> np.ndarray:
     n = 128
     step = _expm(A * (Ts / n))
     K = _expm(A * (Ts / (2 * n))) @ E
-    out = []
-    for _ in range(n):
-        out.append(K)
-        K = step @ K
+    out = [K]
+    for _ in range(n - 1):
+        out.append(step @ out[-1])
     return np.array(out)
 
 

@@ -78,15 +78,7 @@ def from_statespace(
     E: Any = None,
     F: Any = None,
 ) -> Any:
-    """An ivobs system (of class ``cls``, :class:`~ivobs.LinearSystem`) from a
-    ``control.StateSpace``.
-
-    ``disturbances``: which of ``ss``'s inputs are unknown bounded disturbances (indices or
-    labels); ``d``: their bounds (a :class:`~ivobs.Box` of that many components). The remaining
-    inputs are the known ``u``. Alternatively give ``E``, ``F`` and ``d`` for disturbances that
-    are not inputs of ``ss`` (the earlier form). Names of states, inputs and outputs are kept in
-    ``sys.names``.
-    """
+    """:meth:`ivobs.LinearSystem.from_statespace`, building a ``cls``."""
     if not is_statespace(ss) and not all(hasattr(ss, k) for k in "ABCD"):
         raise IvobsError(
             f"ss: expected a control.StateSpace (with A, B, C, D), got {type(ss).__name__}"

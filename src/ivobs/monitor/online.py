@@ -236,22 +236,10 @@ class Monitor:
         self._history.push(k, u, y, t)
         self._est, self._prev, self._k = new, prev, k + 1
         return MonitorStep(
-            k,
-            lo,
-            hi,
-            alarm,
-            "; ".join(reasons),
-            band_lo,
-            band_hi,
-            evidence,
-            tuple(sorted(bad)),
-            self.latch.start,
-            self.latch.outputs if alarm else (),
-            b_lo,
-            b_hi,
-            () if iso is None else iso.candidates,
-            "" if iso is None else iso.text,
-        )
+            k, lo, hi, alarm, "; ".join(reasons), band_lo, band_hi, evidence, tuple(sorted(bad)),
+            self.latch.start, self.latch.outputs if alarm else (), b_lo, b_hi,
+            () if iso is None else iso.candidates, "" if iso is None else iso.text,
+        )  # fmt: skip
 
     def _isolate(
         self, k: int, u: np.ndarray, y: np.ndarray, t: float | None, reasons: list[str]

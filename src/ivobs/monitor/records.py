@@ -158,16 +158,8 @@ def stack_steps(steps: list[MonitorStep], sys: SystemModel) -> MonitorRecord:
     nan = np.full(sys.ny, np.nan)
     for s in steps:
         if s.alarm and s.fault_start is not None:
-            f = Fault(
-                s.fault_start,
-                s.outputs,
-                None,
-                s.step,
-                s.bias_lower,
-                s.bias_upper,
-                s.isolated,
-                s.isolation,
-            )
+            f = Fault(s.fault_start, s.outputs, None, s.step, s.bias_lower, s.bias_upper,
+                      s.isolated, s.isolation)  # fmt: skip
             if faults and faults[-1].start == s.fault_start and faults[-1].end is None:
                 faults[-1] = f
             else:

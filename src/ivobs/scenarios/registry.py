@@ -160,19 +160,14 @@ def summaries() -> dict[str, str]:
     return {k: v[1] for k, v in _BUILDERS.items()}
 
 
-def get(name: str, **options: Any) -> Scenario:
+def get(name: str, **opts: Any) -> Scenario:
     """The scenario ``name`` (options such as ``horizon=`` or ``seed=`` where supported)."""
-    if name not in _BUILDERS:
-        raise IvobsError(f"scenario: unknown scenario {name!r}; known: {', '.join(names())}")
-    fn = _BUILDERS[name][0]
+    accepted = options(name)  # refuses an unknown name
     try:
-        return fn(**options)
+        return _BUILDERS[name][0](**opts)
     except TypeError as exc:
-        import inspect
-
         raise IvobsError(
-            f"scenario {name!r}: bad options {sorted(options)} ({exc}); accepted: "
-            f"{list(inspect.signature(fn).parameters)}"
+            f"scenario {name!r}: bad options {sorted(opts)} ({exc}); accepted: {accepted}"
         ) from None
 
 

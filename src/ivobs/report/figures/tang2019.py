@@ -324,19 +324,16 @@ def _check_error_sets(sets: ErrorSets, r_res: Estimate, t_res: Estimate, xhat: n
     p_lo, p_hi = image_bounds(np.linalg.inv(sets.S), sets.pz_lo, sets.pz_hi)  # Box(P̃)
     scale = 1e-9 * (1.0 + np.abs(t_res.upper[:, k]).max())
     Sv = zonotope_polygon(sets.omega) @ sets.S.T  # S times the vertices of Ω_k
+
+    def is_box(res: Estimate, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """Whether every run's box at step ``k``, minus ``x̂_k``, is ``[lo, hi]``."""
+        got = np.stack([res.lower[:, k] - xhat, res.upper[:, k] - xhat])
+        want = np.stack([np.broadcast_to(lo, xhat.shape), np.broadcast_to(hi, xhat.shape)])
+        return bool(np.allclose(got, want, rtol=0.0, atol=scale))
+
     checks = {
-        "Algorithm 1's box is Box(Ω_k) (eq. 26)": np.allclose(
-            np.stack([r_res.lower[:, k] - xhat, r_res.upper[:, k] - xhat]),
-            np.stack([np.broadcast_to(hull.lo, xhat.shape), np.broadcast_to(hull.hi, xhat.shape)]),
-            rtol=0.0,
-            atol=scale,
-        ),
-        "observer (42)'s box is Box(P̃) (eq. 79)": np.allclose(
-            np.stack([t_res.lower[:, k] - xhat, t_res.upper[:, k] - xhat]),
-            np.stack([np.broadcast_to(p_lo, xhat.shape), np.broadcast_to(p_hi, xhat.shape)]),
-            rtol=0.0,
-            atol=scale,
-        ),
+        "Algorithm 1's box is Box(Ω_k) (eq. 26)": is_box(r_res, hull.lo, hull.hi),
+        "observer (42)'s box is Box(P̃) (eq. 79)": is_box(t_res, p_lo, p_hi),
         "every sampled e_k lies in Ω_k": bool(in_planar_zonotope(sets.omega, sets.samples).all()),
         "Ω_k ⊆ P̃ (eq. 74)": bool(np.all((Sv >= sets.pz_lo - scale) & (Sv <= sets.pz_hi + scale))),
     }
@@ -364,13 +361,8 @@ def tang2019_fig5(k: int = 40, runs: int = 1000, seed: int = 0) -> Any:
     par = s.parallelotope()
     ax.plot(*np.vstack([par, par[:1]]).T, "-.", color="C3", lw=1.3, label=r"$\tilde P$ (72)")
     ax.plot(*_box_xy(s.box_reach), "--", color="C0", lw=1.1, label=r"$[\underline{e}_k, \bar e_k]$")
-    ax.plot(
-        *_box_xy(s.box_transformed),
-        ":",
-        color="C3",
-        lw=1.4,
-        label=r"$[\underline{e}^t_k, \bar e^t_k]$ of (42)",
-    )
+    label = r"$[\underline{e}^t_k, \bar e^t_k]$ of (42)"
+    ax.plot(*_box_xy(s.box_transformed), ":", color="C3", lw=1.4, label=label)
     ax.set_xlabel("$e_1$")
     ax.set_ylabel("$e_2$")
     ax.grid(True, alpha=0.3)
