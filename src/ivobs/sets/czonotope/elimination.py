@@ -298,15 +298,26 @@ def _hausdorff(G: np.ndarray, A: np.ndarray, R: np.ndarray) -> np.ndarray:
 def _choose_factor(
     G: np.ndarray, A: np.ndarray, b: np.ndarray, cert: Certificates | None
 ) -> tuple[int, int] | None:
-    """The factor ``j`` to eliminate and its pivot row ``p`` (largest ``|a_pj|``).
+    """The factor ``j`` to eliminate and its pivot row ``p``.
 
     With certificates: the least weighted loosening of the certified bounds, ties broken by the
     Hausdorff estimate; without: that estimate alone (or, when ``A`` has no null space, the
-    overshoot ``R_j`` times ``‖G e_j‖``)."""
+    overshoot ``R_j`` times ``‖G e_j‖``).
+
+    The pivot row of ``ξ_j`` is the one with the largest ``|a_pj|``; without certificates,
+    relative to the row's largest coefficient, ``|a_pj| / max_l |a_pl|`` (the rows are scaled
+    by powers of two, their largest coefficient anywhere in ``[1, 2)``, so the absolute
+    ``|a_pj|`` would prefer a row for its scale, not for ``ξ_j``'s weight in it: on
+    ``cora-pedestrian4`` that choice alone widens the ``nl-constrained-zonotope`` boxes by
+    about 2 %). With certificates the loss of each pair ``(j, p)`` is measured and the
+    absolute rule is kept. Only the choice changes: every pivot gives a superset."""
     m = A.shape[1]
     R = _overshoot(A, b)
-    piv = np.argmax(np.abs(A), axis=0)
-    cand = np.isfinite(R) & (np.abs(A[piv, np.arange(m)]) >= PIVOT_TOL)
+    absA = np.abs(A)
+    if cert is None:  # the rows are normalised: none is zero
+        absA = absA / absA.max(axis=1)[:, None]
+    piv = np.argmax(absA, axis=0)
+    cand = np.isfinite(R) & (absA[piv, np.arange(m)] >= PIVOT_TOL)
     if not cand.any():
         return None
     if cert is not None:
