@@ -93,13 +93,7 @@ from ._observer_rounding import Channels, difference, rounding_matrix
 from ._recursion import LinearFilter, abs_max, redo_streams
 from .base import Design, Estimator
 
-__all__ = [
-    "DataFreeBounds",
-    "Gain",
-    "ObserverDesign",
-    "ObserverEstimator",
-    "pattern_gain",
-]
+__all__ = ["DataFreeBounds", "Gain", "ObserverDesign", "ObserverEstimator", "pattern_gain"]
 
 _ONE = np.ones(1)
 
