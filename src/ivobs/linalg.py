@@ -73,8 +73,7 @@ def is_nonnegative(M: Any, tol: float = 0.0) -> bool:
 def is_metzler(M: Any, tol: float = 0.0) -> bool:
     """Every off-diagonal entry ``>= -tol`` (cooperativity in continuous time)."""
     M = np.asarray(M, dtype=float)
-    off = M - np.diag(np.diag(M))
-    return bool(np.all(off >= -tol))
+    return bool(np.all(M - np.diag(np.diag(M)) >= -tol))
 
 
 def _rank_tol(M: np.ndarray) -> float:

@@ -75,10 +75,7 @@ def drop_outputs(fw: ForwardWindow, missing: np.ndarray) -> ForwardWindow:
 
 
 def forward_window(
-    mats: Sequence[tuple[np.ndarray, ...]],
-    *,
-    centre: bool,
-    lag: int | None = None,
+    mats: Sequence[tuple[np.ndarray, ...]], *, centre: bool, lag: int | None = None
 ) -> ForwardWindow:
     """The forward map of one window (see :class:`ForwardWindow`), used to certify a computed
     window gain (:func:`window_bound`).
@@ -258,10 +255,5 @@ def window_bound(
         if cost(Bd2) < cost(Bd):
             G, Bd = G2, Bd2
     return WindowBound(
-        G=G,
-        Rx=Bd[:, fw.x_cols],
-        Rv=Bd[:, fw.v_slice],
-        Rd=Bd[:, fw.d_slice],
-        kappa=kappa,
-        nu=nu,
+        G=G, Rx=Bd[:, fw.x_cols], Rv=Bd[:, fw.v_slice], Rd=Bd[:, fw.d_slice], kappa=kappa, nu=nu
     )

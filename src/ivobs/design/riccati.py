@@ -164,15 +164,11 @@ def bounded_real_certificate(M: np.ndarray, G: np.ndarray, gamma: float) -> np.n
     Pt = 0.5 * (Pt + Pt.T)
     if not np.all(np.isfinite(Pt)):
         return None
-    lmi = np.zeros((2 * n + nd, 2 * n + nd))
     PM, PG = Pt @ Mt, Pt @ Gt
-    lmi[:n, :n] = D2 - Pt
-    lmi[n : n + nd, n : n + nd] = -(gamma**2) * np.eye(nd)
-    lmi[n + nd :, :n] = PM
-    lmi[n + nd :, n : n + nd] = PG
-    lmi[:n, n + nd :] = PM.T
-    lmi[n : n + nd, n + nd :] = PG.T
-    lmi[n + nd :, n + nd :] = -Pt
+    lmi = np.block(
+        [[D2 - Pt, np.zeros((n, nd)), PM.T], [np.zeros((nd, n)), -(gamma**2) * np.eye(nd), PG.T],
+         [PM, PG, -Pt]]
+    )  # fmt: skip
     diag = np.diag(lmi)
     if not np.all(diag < 0.0):
         return None

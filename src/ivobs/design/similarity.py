@@ -430,11 +430,7 @@ def default_e1(
 
 
 def check_transform(
-    M: np.ndarray,
-    S: np.ndarray,
-    who: str,
-    R: np.ndarray | None = None,
-    nonnegative: bool = True,
+    M: np.ndarray, S: np.ndarray, who: str, R: np.ndarray | None = None, nonnegative: bool = True
 ) -> np.ndarray:
     """Return ``S M S⁻¹`` after checking that ``S`` is invertible, that it is nonnegative (up to
     round-off, ``1e-9`` relative; not with ``nonnegative=False``: Schur coordinates, where the

@@ -46,13 +46,7 @@ import numpy as np
 
 from .balance import state_scaling
 
-__all__ = [
-    "WidthLP",
-    "kernel_obstruction",
-    "null_space_free",
-    "width_gain",
-    "width_lp",
-]
+__all__ = ["WidthLP", "kernel_obstruction", "null_space_free", "width_gain", "width_lp"]
 
 
 @dataclass(frozen=True)
@@ -130,12 +124,7 @@ def _lin_rows(
 
 
 def _constraints(
-    A: np.ndarray,
-    C: np.ndarray,
-    E: np.ndarray,
-    F: np.ndarray,
-    delta: np.ndarray,
-    nonneg: bool,
+    A: np.ndarray, C: np.ndarray, E: np.ndarray, F: np.ndarray, delta: np.ndarray, nonneg: bool
 ) -> tuple[Any, np.ndarray, np.ndarray, list[tuple[float | None, float | None]]]:
     """``(A_ub, b_ub, objective, bounds)`` of the width LP (module docstring)."""
     from scipy.sparse import coo_matrix, vstack

@@ -69,16 +69,6 @@ def check_y_k(sys: Any, y_k: Any) -> np.ndarray:
     return arr
 
 
-def _discrete_t(sys: Any, what: str) -> IvobsError:
-    """The error of a sample time given to a discrete-time system (it would be ignored)."""
-    dt_ = getattr(sys, "dt", True)
-    dt = "" if dt_ is True else f" (dt = {dt_})"
-    return IvobsError(
-        f"t: this system is discrete-time{dt}: its steps are counted by k, and t, the sample "
-        f"time{what}, applies to continuous-time systems (dt = 0) only; leave t out"
-    )
-
-
 def check_t_k(sys: Any, t: Any) -> float | None:
     """The sample time of one step: needed in continuous time, refused in discrete time (the
     step counter ``k`` is the time there)."""
@@ -86,8 +76,12 @@ def check_t_k(sys: Any, t: Any) -> float | None:
         if sys.is_continuous:
             raise IvobsError("t: continuous-time estimation needs the sample time of each step")
         return None
-    if not sys.is_continuous:
-        raise _discrete_t(sys, " of the step")
+    if not sys.is_continuous:  # (it would be ignored)
+        dt = "" if getattr(sys, "dt", True) is True else f" (dt = {sys.dt})"
+        raise IvobsError(
+            f"t: this system is discrete-time{dt}: its steps are counted by k, and t, the sample "
+            "time of the step, applies to continuous-time systems (dt = 0) only; leave t out"
+        )
     arr = as_float_array("t", t)
     if arr.size != 1 or not np.isfinite(arr).all():
         raise IvobsError(f"t: expected one finite sample time, got {t!r}")

@@ -93,13 +93,7 @@ from ._observer_rounding import Channels, difference, rounding_matrix
 from ._recursion import LinearFilter, abs_max, redo_streams
 from .base import Design, Estimator
 
-__all__ = [
-    "DataFreeBounds",
-    "Gain",
-    "ObserverDesign",
-    "ObserverEstimator",
-    "pattern_gain",
-]
+__all__ = ["DataFreeBounds", "Gain", "ObserverDesign", "ObserverEstimator", "pattern_gain"]
 
 _ONE = np.ones(1)
 
@@ -461,11 +455,7 @@ class DataFreeBounds:
         hit = self._arrays
         if hit is None or hit[0].shape[0] != T:
             n = len(self.rho)
-            parts: tuple[np.ndarray, ...] = (
-                np.array(self.rho),
-                np.array(self.yb),
-                np.array(self.e),
-            )
+            parts = tuple(np.array(a) for a in (self.rho, self.yb, self.e))
             if n < T:  # settled: the entries from `settled` on repeat with their period
                 s = self.settled
                 assert s is not None

@@ -25,12 +25,7 @@ from ..linalg import UNIT_ROUNDOFF, gamma
 from ..sets.rounding import ETA, DecayBound, certified_norms, decay_of, product_error, up, upper
 from ._recursion import abs_max
 
-__all__ = [
-    "Channels",
-    "difference",
-    "envelope",
-    "rounding_matrix",
-]
+__all__ = ["Channels", "difference", "envelope", "rounding_matrix"]
 
 THETAS = (0.5, 0.25, 0.1)
 """Decay targets ``θ`` tried for the rate ``λ`` of the envelopes (:func:`decay_of`): the one

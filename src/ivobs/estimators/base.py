@@ -331,11 +331,7 @@ class Estimator(Persistence):
         return new, self._box(state.k, lo, hi, new, finite)
 
     def _advance(
-        self,
-        state: OnlineState,
-        u_k: np.ndarray,
-        y_k: np.ndarray,
-        t_k: float | None,
+        self, state: OnlineState, u_k: np.ndarray, y_k: np.ndarray, t_k: float | None
     ) -> tuple[OnlineState, Bound, Bound, bool]:
         """One step: the method's recursion, then the counters."""
         new, lo, hi, flag = self._step(state, u_k, y_k, t_k)

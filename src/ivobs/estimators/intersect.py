@@ -205,10 +205,8 @@ class Intersect(Estimator):
         with np.errstate(invalid="ignore"):
             empty = np.any(lo > hi, axis=-1)
         if np.any(empty):
-            hull_lo = np.fmin.reduce(los, axis=0)
-            hull_hi = np.fmax.reduce(his, axis=0)
-            lo = np.where(empty[..., None], hull_lo, lo)
-            hi = np.where(empty[..., None], hull_hi, hi)
+            lo = np.where(empty[..., None], np.fmin.reduce(los, axis=0), lo)
+            hi = np.where(empty[..., None], np.fmax.reduce(his, axis=0), hi)
         return lo, hi, empty
 
     # -- online ---------------------------------------------------------------------------
@@ -245,17 +243,15 @@ class Intersect(Estimator):
         :meth:`~ivobs.estimators.base.Estimator.advance` in the loop). So this path is as sound
         as the members' vectorised paths, and where it is wider than the loop, a member's
         vectorised path is wider than its loop."""
-        los, his = [], []
+        outs = []
         for m in self.members:
             out = _member_run(m, u, y, t)
             if out is None:
                 return None
-            los.append(out[0])
-            his.append(out[1])
+            outs.append(out)
+        los, his = zip(*outs, strict=True)
         lo, hi, empty = self._combine(np.array(los), np.array(his))
-        if np.any(empty):
-            return None
-        return lo, hi
+        return None if np.any(empty) else (lo, hi)
 
     # -- persistence ----------------------------------------------------------------------
     def fingerprint(self) -> str:

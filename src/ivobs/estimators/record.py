@@ -91,13 +91,7 @@ def _block(
 
 
 def _with_strips(
-    est: Estimator,
-    lo: Any,
-    hi: Any,
-    inc: np.ndarray,
-    u: np.ndarray,
-    y: np.ndarray,
-    t: Any,
+    est: Estimator, lo: Any, hi: Any, inc: np.ndarray, u: np.ndarray, y: np.ndarray, t: Any
 ) -> Arrays:
     """Either path's bounds met with the measurement strips (when the method uses them), once
     per record: the method's recursion may itself run the loop for some streams."""

@@ -40,7 +40,6 @@ __all__ = [
     "down",
     "enclose",
     "gamma",
-    "matvec",
     "mid_rad",
     "overflowed",
     "product_error",
@@ -78,13 +77,6 @@ def product_error(s: Any, n: int) -> Any:
     dimension ``n``: ``γ_n`` times the exact ``|A| |B|``, plus underflow; also for the
     matrix-vector and vector forms. ``2 γ_{n+2} s + (n + 2) ETA``."""
     return (2.0 * gamma(n + 2)) * s + (n + 2) * ETA
-
-
-def matvec(M: np.ndarray, absM: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(y, e)``: ``y = fl(M x)`` and ``e >= |y − M x|`` (exact), ``absM = |M|``; ``x`` may be a
-    matrix (columns), ``e`` is then elementwise."""
-    y = M @ x
-    return y, product_error(absM @ np.abs(x), M.shape[1])
 
 
 def mid_rad(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -241,18 +241,14 @@ def weighted_quantiles(
             base, lo = upto, gt
         else:  # the thresholds part here (or both hit the pivot): each finished alone
             v1 = v2 = float(piv)
-            if side1 != 1:
-                v1 = (
-                    _select(b, w, lo, lt, base, t1, piv)
-                    if side1 == 0
-                    else _select(b, w, gt, hi, upto, t1, piv)
-                )
-            if side2 != 1:
-                v2 = (
-                    _select(b, w, lo, lt, base, t2, piv)
-                    if side2 == 0
-                    else _select(b, w, gt, hi, upto, t2, piv)
-                )
+            if side1 == 0:
+                v1 = _select(b, w, lo, lt, base, t1, piv)
+            elif side1 == 2:
+                v1 = _select(b, w, gt, hi, upto, t1, piv)
+            if side2 == 0:
+                v2 = _select(b, w, lo, lt, base, t2, piv)
+            elif side2 == 2:
+                v2 = _select(b, w, gt, hi, upto, t2, piv)
             return v1, v2
     return float(piv), float(piv)
 

@@ -113,13 +113,6 @@ def conformance_plants(seed: int = 0) -> dict[str, tuple[LinearSystem, Box]]:
     return plants
 
 
-def _make(method: Any, sys: LinearSystem, x0: Box, options: dict[str, Any]) -> Any:
-    from ..estimators import get
-
-    cls = get(method) if isinstance(method, str) else method
-    return cls(sys, x0, **options)
-
-
 def _close(a: np.ndarray, b: np.ndarray) -> bool:
     """Equal within rounding relative to each state's own magnitude over the record (columns of
     ``a``, ``b``; NaN where both are NaN): a badly scaled plant's small states are compared at
@@ -148,28 +141,30 @@ def check_estimator(
 
     ``steps`` per plant and path; ``options`` passed to the method; ``plants`` replaces the
     seeded ones (:func:`conformance_plants`) with your own ``{name: (system, x0)}``."""
+    from ..estimators import get
+
     options = dict(options or {})
     plants = conformance_plants(seed) if plants is None else plants
     name = method if isinstance(method, str) else getattr(method, "name", repr(method))
     report = CheckReport(str(name))
-    _check_metadata(method, report.method)
+    cls = get(method) if isinstance(method, str) else method
+    _check_metadata(cls, report.method)
     rng = np.random.default_rng(seed)
     for plant, (sys, x0) in plants.items():
         try:
-            est = _make(method, sys, x0, options)
+            est = cls(sys, x0, **options)
         except (DesignError, IvobsError) as exc:
             report.skipped[plant] = str(exc).splitlines()[0]
             continue
-        T = steps
         x_true0 = np.where(rng.integers(0, 2, sys.nx).astype(bool), x0.hi, x0.lo)
-        U = rng.uniform(-1, 1, size=(T, sys.nu))
-        Dv = vertex_disturbance(sys.d_at(0), T, rng) if sys.nd else np.zeros((T, 0))
+        U = rng.uniform(-1, 1, size=(steps, sys.nu))
+        Dv = vertex_disturbance(sys.d_at(0), steps, rng) if sys.nd else np.zeros((steps, 0))
         Y, X = exact_run(sys, x_true0, U, Dv)
-        _check_record(est, partial(_make, method, sys, x0, options), plant, U, Y, X)
+        _check_record(est, partial(cls, sys, x0, **options), plant, U, Y, X)
         _check_missing(est, plant, U, Y, X, rng)
         _check_bad_input(est, plant, sys)
         report.checked.append(plant)
-        report.steps += 3 * T
+        report.steps += 3 * steps
     if not report.checked:
         raise AssertionError(
             f"{report.method}: no conformance plant was accepted: {report.skipped}"
@@ -177,10 +172,7 @@ def check_estimator(
     return report
 
 
-def _check_metadata(method: Any, name: str) -> None:
-    from ..estimators import get
-
-    cls = get(method) if isinstance(method, str) else method
+def _check_metadata(cls: Any, name: str) -> None:
     for attr in ("name", "summary", "reference"):
         if not isinstance(getattr(cls, attr, None), str) or not getattr(cls, attr):
             raise AssertionError(f"{name}: class attribute {attr!r} must be a non-empty string")

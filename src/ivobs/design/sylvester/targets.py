@@ -31,12 +31,7 @@ from scipy.linalg import block_diag
 
 from ..._validate import as_matrix
 from ...errors import DesignError
-from ...linalg import (
-    is_controllable,
-    is_observable,
-    observability_indices,
-    spectral_radius,
-)
+from ...linalg import is_controllable, is_observable, observability_indices, spectral_radius
 from .equation import solve_transform
 from .flow import CT_RANGE, flow_cap
 

@@ -12,14 +12,7 @@ import numpy as np
 from ...model._matrix import is_scipy_sparse
 from ...sets.rounding import upper
 
-__all__ = [
-    "abs_max",
-    "is_shared",
-    "matrix_product",
-    "norm_inf",
-    "redo_streams",
-    "scratch",
-]
+__all__ = ["abs_max", "is_shared", "matrix_product", "norm_inf", "redo_streams", "scratch"]
 
 SCRATCH_MAX = 1 << 22
 """Temporaries up to this many elements are reused between calls (:func:`scratch`)."""

@@ -21,14 +21,7 @@ from .._uncertain import magnitude as mag
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
 from .auto import choose_window
-from .certificate import (
-    Coefficients,
-    Layout,
-    Predictor,
-    coefficients,
-    data_vector,
-    upper_bounds,
-)
+from .certificate import Coefficients, Layout, Predictor, coefficients, data_vector, upper_bounds
 from .refresh import WindowLP
 
 __all__ = ["DualWindow", "DualWindowDesign", "DualWindowState"]

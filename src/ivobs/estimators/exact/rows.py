@@ -137,11 +137,7 @@ def prediction(
 
 
 def outside_prediction(
-    meas: Measurement,
-    p_lo: np.ndarray,
-    p_hi: np.ndarray,
-    d_lo: np.ndarray,
-    d_hi: np.ndarray,
+    meas: Measurement, p_lo: np.ndarray, p_hi: np.ndarray, d_lo: np.ndarray, d_hi: np.ndarray
 ) -> bool:
     """A measurement row certainly violated over the interval prediction of ``x[k]`` (which
     contains every state consistent with the model and the past data) and the box of ``d[k]``:

@@ -25,12 +25,7 @@ def centre_radius(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def predict(
-    M: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    u: np.ndarray,
-    dlo: np.ndarray,
-    dhi: np.ndarray,
+    M: np.ndarray, lo: np.ndarray, hi: np.ndarray, u: np.ndarray, dlo: np.ndarray, dhi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """``x_k ∈ [A B E] [x_{k-1}; u_{k-1}; d_{k-1}]`` for ``M = [A B E]`` of step ``k - 1``: the
     interval image of the previous box, the input (a point) and the bounds of ``d``

@@ -18,13 +18,7 @@ from ..base import Estimator
 from ..state import Step
 from .design import IntervalDesign, SplitDesign, gain_design
 from .operators import Operators
-from .recursion import (
-    CooperativeState,
-    IntervalState,
-    SplitState,
-    TransformedState,
-    interval_step,
-)
+from .recursion import CooperativeState, IntervalState, SplitState, TransformedState, interval_step
 from .transformed import TransformedDesign, transformed_design
 from .vectorised import VectorPath
 from .window import empty_window

@@ -22,13 +22,7 @@ from ..state import Step, evolve
 from .operators import Operators
 from .window import CooperativeState, memory_box, remember
 
-__all__ = [
-    "CooperativeState",
-    "IntervalState",
-    "SplitState",
-    "TransformedState",
-    "interval_step",
-]
+__all__ = ["CooperativeState", "IntervalState", "SplitState", "TransformedState", "interval_step"]
 
 
 @dataclass(frozen=True)

@@ -55,14 +55,7 @@ import numpy as np
 from ...errors import DesignError, IvobsError
 from ...linalg import UNIT_ROUNDOFF
 from ...sets.rounding import ETA, DecayBound, gamma, mid_rad, up, upper
-from .._recursion import (
-    LinearFilter,
-    SplitFilter,
-    abs_max,
-    matrix_product,
-    norm_inf,
-    redo_streams,
-)
+from .._recursion import LinearFilter, SplitFilter, abs_max, matrix_product, norm_inf, redo_streams
 from .operators import Operators
 from .window import meet
 

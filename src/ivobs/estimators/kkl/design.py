@@ -158,14 +158,7 @@ def x0_required(x0: Box | None, why: str) -> Box:
 
 # -- time-invariant ----------------------------------------------------------------------------
 def design_lti(
-    sys: LinearSystem,
-    x0: Box | None,
-    A_z: Any,
-    B_z: Any,
-    T: Any,
-    *,
-    tune: bool,
-    max_cond: float,
+    sys: LinearSystem, x0: Box | None, A_z: Any, B_z: Any, T: Any, *, tune: bool, max_cond: float
 ) -> KKLDesign:
     """The target pair and ``T`` of (4) for a time-invariant system ([Dinh2024, Algorithm 1])."""
     ct = sys.is_continuous

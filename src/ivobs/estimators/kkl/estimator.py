@@ -105,15 +105,7 @@ class KKL(Estimator):
                 sys, self.x0, A_z, B_z, T0, gamma=gamma, ell=ell, max_cond=self.max_cond
             )
         else:
-            self.design = design_lti(
-                sys,
-                self.x0,
-                A_z,
-                B_z,
-                T,
-                tune=tune,
-                max_cond=self.max_cond,
-            )
+            self.design = design_lti(sys, self.x0, A_z, B_z, T, tune=tune, max_cond=self.max_cond)
         self.valid_from = self.design.k_star
         self._vector: VectorisedLTI | None = None
         self._observer = self._choose(seq, input_hold)

@@ -48,10 +48,7 @@ def prior_box(x0: Box | None, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarra
 
 
 def recover(
-    tr: Transform,
-    zlo: np.ndarray,
-    zhi: np.ndarray,
-    zabs: np.ndarray | None = None,
+    tr: Transform, zlo: np.ndarray, zhi: np.ndarray, zabs: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """(3.c-d)/(10.d)/(15.d): a box certain to contain ``x`` when ``z̲ <= T x <= z̄``.
 

@@ -277,11 +277,7 @@ class NonlinearIntervalEstimator(Estimator):
         w = sys.w_box
         digest = hashlib.sha256(repr(sorted(sys.spec().items())).encode()).hexdigest()
         self.design = NonlinearIntervalDesign(
-            lag=lag,
-            window=window,
-            w_lo=w.lo.copy(),
-            w_hi=w.hi.copy(),
-            model=int(digest[:12], 16),
+            lag=lag, window=window, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
         )
         self._f_evals = sys.evaluators("f") if window else None
         self._flow = isinstance(sys, FlowSystem)
@@ -495,12 +491,7 @@ class NonlinearIntervalEstimator(Estimator):
         return wf.Rows(lo, hi, wf.Transition(*(getattr(st, f"win_{f}") for f in _STEP_FIELDS)))
 
     def _slide(
-        self,
-        win: _Form,
-        lo: np.ndarray,
-        hi: np.ndarray,
-        u_k: np.ndarray,
-        ny: int,
+        self, win: _Form, lo: np.ndarray, hi: np.ndarray, u_k: np.ndarray, ny: int
     ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray] | None]:
         """The window-centred form's part of the next state: the box of ``x[k]`` and the
         transition ``k -> k + 1`` appended (the oldest dropped past ``window`` steps), and the

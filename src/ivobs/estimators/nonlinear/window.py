@@ -378,13 +378,7 @@ def filter_gain(
 
 
 def predictor(
-    P: np.ndarray,
-    g: Gains | None,
-    J: np.ndarray,
-    rho: np.ndarray,
-    dw: np.ndarray,
-    nx: int,
-    ny: int,
+    P: np.ndarray, g: Gains | None, J: np.ndarray, rho: np.ndarray, dw: np.ndarray, nx: int, ny: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(L, P+)``: the gain of the transition (the predictor form of the same Kalman filter,
     ``w`` shared by ``f`` and ``h``) and the next prior covariance, from ``f`` linearised as
