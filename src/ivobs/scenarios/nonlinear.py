@@ -7,6 +7,8 @@
   data ([Althoff2021]; src/ivobs/data/cora_tank6_nl.npz);
 - ``cstr``: a continuous stirred-tank reactor (first-order exothermic reaction);
 - ``unicycle-range``: a 2-D unicycle measured by its ranges to three beacons and a compass;
+- ``range-only``: a vehicle of unknown speed and turn rate measured by its range to one beacon
+  and its heading (weakly observable: ``nl-horizon``, docs/nonlinear.md);
 - ``chain10-nl``: ten states coupled by ``tanh`` and ``sin`` terms (scale).
 
 The continuous-time plants (pendulum, CSTR, unicycle, chain) are **defined by their explicit
@@ -248,6 +250,49 @@ def _unicycle(horizon: int = 200) -> Scenario:
         _disturbance=paper_signal("uniform", sys),
         notes="speed 1 m/s, turn rate 0.2 + 0.05 sin(0.007k) rad/s (it circles around the beacon "
         "at (0, 10)); the model is the Euler map",
+    )
+
+
+RANGE_BEACON = (8.0, -3.0)
+RANGE_STEP = 0.1
+
+
+def range_only_system() -> NonlinearSystem:
+    """The model of ``range-only``: ``p+ = p + h v (cos th, sin th)``, ``v+ = v + w1`` (a slow
+    random walk), ``th+ = th + h om + w2`` with the turn rate ``om ∈ [0.15, 0.25]`` an unknown
+    parameter; ``y = (|p - b| + v1, th + v2)``."""
+    h = RANGE_STEP
+    bx, by = RANGE_BEACON
+    return NonlinearSystem(
+        f=[f"px + {h}*v*cos(th)", f"py + {h}*v*sin(th)", "v + w1", f"th + {h}*om + w2"],
+        h=[f"sqrt((px - {bx})**2 + (py - {by})**2) + v1", "th + v2"],
+        states=["px", "py", "v", "th"],
+        params={"om": (0.15, 0.25)},
+        d={"w1": (-0.002, 0.002), "w2": (-0.002, 0.002), "v1": (-0.05, 0.05),
+           "v2": (-0.02, 0.02)},
+        dt=h,
+    )  # fmt: skip
+
+
+@register_scenario("range-only", "vehicle of unknown speed and turn rate, one range and a compass")
+def _range_only(horizon: int = 1000) -> Scenario:
+    T = check_horizon(horizon)
+    sys = range_only_system()
+    return Scenario(
+        name="range-only",
+        system=sys,
+        x0=Box([-0.1, -0.1, 0.95, -0.02], [0.1, 0.1, 1.05, 0.02]),
+        x_true0=np.array([0.0, 0.0, 1.0, 0.0]),
+        u=np.zeros((T, 0)),
+        horizon=T,
+        source="ivobs (a weakly observable plant for nl-horizon, not from a paper)",
+        description="p+ = p + h v (cos th, sin th), v+ = v + w1, th+ = th + h om + w2, om in "
+        "[0.15, 0.25], |w| <= 0.002; y = |p - (8, -3)| + v1 (|v1| <= 0.05) and th + v2 "
+        "(|v2| <= 0.02); h = 0.1 s",
+        _disturbance=paper_signal("uniform", sys),
+        notes="speed and position are seen only through the history of one range (and the "
+        "heading): a recursive filter drifts where a window of ranges pins them "
+        "(docs/nonlinear.md, 'Moving-horizon estimation'); the model is the Euler map",
     )
 
 
