@@ -429,6 +429,20 @@ NOTES: dict[str, dict[str, Note]] = {
             "Raise it for tighter boxes, lower it for cheaper steps.",
         ),
     },
+    "nl-horizon": {
+        "window": Note(
+            "The past steps N kept in the program, each linearised over the box proven for its "
+            "state. None: 20.",
+            "Raise it on plants whose slow states are seen only over many samples (each step "
+            "costs linear programs over N + 1 blocks); lower it for cheaper steps.",
+        ),
+        "passes": Note(
+            "Re-linearisations of the newest measurement over the box just proven, per step "
+            "(each stops early when no bound moves by 1 % of its width). None: 2.",
+            "0 for the cheapest step; more rarely helps (the remainder shrinks with the square "
+            "of the box: the first pass gains most).",
+        ),
+    },
 }
 """Method name -> option -> :class:`Note`, for the options each method declares itself."""
 
