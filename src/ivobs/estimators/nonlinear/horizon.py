@@ -64,6 +64,11 @@ the width falls with ``N`` and levels off once the window spans what the data ca
 is 1.24 times that at ``N = 20``, at ``N = 10`` 1.09 times, and ``N = 40`` gains 0.4 % over
 ``N = 20``: the default is 20.
 
+**The passes.** Step 4 matters where the prediction ``P_k`` is wide against the curvature of
+``h``. On the scenarios' late steps it changes the widths by at most 0.3 % (``unicycle-range``;
+nothing to four digits on ``range-only``, ``henon-nl``, ``pendulum-nl``, ``cstr``): the default
+is one pass, a second one rarely runs (the 1 % rule), and ``passes=0`` is the cheaper step.
+
 Data used: ``x0``, ``W``, ``u[0..k]``, ``y[0..k]`` (filtered).
 """
 
@@ -98,8 +103,9 @@ __all__ = ["NonlinearHorizonDesign", "NonlinearHorizonEstimator", "NonlinearHori
 DEFAULT_WINDOW = 20
 """The window ``N`` when none is given (module docstring, "The window")."""
 
-DEFAULT_PASSES = 2
-"""Re-linearisations of the newest measurement over the box just proven, per step."""
+DEFAULT_PASSES = 1
+"""Re-linearisations of the newest measurement over the box just proven, per step (module
+docstring, "The passes")."""
 
 GAIN = 0.01
 """A pass that moves no bound by more than this fraction of the width ends the step."""
@@ -231,7 +237,7 @@ class NonlinearHorizonEstimator(Estimator):
     x0 : Box, the prior box on ``x[0]``
     window : int >= 1, the steps ``N`` kept (default 20: module docstring)
     passes : int >= 0, re-linearisations of the newest measurement over the box just proven
-        (default 2; each stops early when no bound moves by 1 % of its width)
+        (default 1; more stop early when no bound moves by 1 % of its width)
     on_inconsistent : 'warn', 'raise' or 'ignore'
     """
 
