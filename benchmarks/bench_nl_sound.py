@@ -40,7 +40,8 @@ import ivobs
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-SCENARIOS = ["henon-nl", "pendulum-nl", "cora-tank6-nl", "cstr", "unicycle-range", "chain10-nl"]
+SCENARIOS = ["henon-nl", "pendulum-nl", "cora-tank6-nl", "cstr", "unicycle-range", "range-only",
+             "chain10-nl"]  # fmt: skip
 METHODS = ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"]
 
 

@@ -218,7 +218,8 @@ def test_compare_lists_only_the_methods_that_accept_the_model():
 
     nl = ivobs.scenarios.get("pendulum-nl")
     names, left_out = default_methods(nl)
-    assert names == ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"] and not left_out
+    assert names == ["nl-interval", "nl-zonotope", "nl-constrained-zonotope", "nl-horizon"]
+    assert not left_out
     assert "reachability" in applicable_methods(nl.system)[1]
     ct = ivobs.scenarios.get("servo-motor").system
     ct = ivobs.LinearSystem(ct.A - np.eye(3), ct.B, ct.C, E=ct.E, F=ct.F, d=ct.d, dt=0)

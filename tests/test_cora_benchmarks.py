@@ -69,6 +69,11 @@ LONG = {
     ("cora-slip4", "nl-constrained-zonotope"),
     ("cora-vehicle6", "nl-constrained-zonotope"),
     ("cora-pedestrian4", "intersect"),
+    # nl-horizon: its own soundness tests and benchmarks/bench_nl_sound.py
+    ("cora-tank30", "nl-horizon"),
+    ("cora-slip4", "nl-horizon"),
+    ("cora-vehicle6", "nl-horizon"),
+    ("cora-pedestrian4", "nl-horizon"),
 }
 """(benchmark, method) pairs over 20 s on the development machine (2 cores)."""
 

@@ -21,15 +21,17 @@ from ivobs.simulate import simulate, vertex_disturbance
 from ivobs.testing import adversarial_run, random_system
 
 METHODS = ivobs.methods()
-SLOW = {"exact", "constrained-zonotope"}  # one optimisation per step: shorter records
+SLOW = {"exact", "constrained-zonotope", "nl-horizon"}  # optimisations per step: shorter records
 # no vectorised run: shorter here; 10,000 online steps in bench_fault_detection.py --fault-free
-ONLINE_STEPS = {"strip": 200, "intersect": 200, "exact": 40, "constrained-zonotope": 30}
+ONLINE_STEPS = {"strip": 200, "intersect": 200, "exact": 40, "constrained-zonotope": 30,
+                "nl-horizon": 30}  # fmt: skip
 LONG_STEPS = {
     "strip": 1000,
     "intersect": 1000,
     "exact": 150,
     "constrained-zonotope": 60,
     "nl-constrained-zonotope": 1000,
+    "nl-horizon": 150,
     "nl-zonotope": 3000,
     "nl-interval": 3000,
     "ellipsoid": 3000,

@@ -52,7 +52,7 @@ others run 20,000. ``IVOBS_CAMPAIGN_STEPS=N`` runs N steps for every method (the
 of 100,000 steps per method is recorded in BENCHMARKS.md)."""
 
 
-STALLS_WHEN_BADLY_SCALED = {"exact", "dual-window"}
+STALLS_WHEN_BADLY_SCALED = {"exact", "dual-window", "nl-horizon"}
 """Their window programs, on coordinates 1e16 apart, make HiGHS's simplex run to its iteration
 limit (still sound): minutes per plant, run only with ``IVOBS_CAMPAIGN_STEPS`` (docs/exact.md)."""
 

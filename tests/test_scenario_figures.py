@@ -25,7 +25,7 @@ from ivobs.report.figures.scenario_figures import (
 )
 from ivobs.scenarios.efimov2013 import henon_remark1_system
 
-NL = ["nl-interval", "nl-zonotope", "nl-constrained-zonotope"]
+NL = ["nl-interval", "nl-zonotope", "nl-constrained-zonotope", "nl-horizon"]
 UNCERTAIN = ["reachability", "zonotope", "interval", "interval-transformed", "interval-split",
              "strip", "constrained-zonotope"]  # fmt: skip
 SHORT = 25  # steps: enough for every method's transient, short for the test

@@ -61,6 +61,7 @@ METHODS: dict[str, Entry] = {
     "nl-constrained-zonotope": Entry(
         "nonlinear.czonotope", "NonlinearConstrainedZonotopeEstimator", 920
     ),
+    "nl-horizon": Entry("nonlinear.horizon", "NonlinearHorizonEstimator", 930),
 }
 """The built-in methods, imported on first use (see the module docstring)."""
 

@@ -12,7 +12,7 @@ The registry (:class:`Scenario`, :func:`register_scenario`, :func:`get`, :func:`
 - :mod:`~ivobs.scenarios.quadtank`: ``quadruple-tank`` ([Johansson2000]);
 - :mod:`~ivobs.scenarios.uncertain`: ``servo-uncertain`` (interval matrices, docs/uncertain.md);
 - :mod:`~ivobs.scenarios.nonlinear`: ``henon-nl``, ``pendulum-nl``, ``cora-tank6-nl``, ``cstr``,
-  ``unicycle-range``, ``chain10-nl`` (NonlinearSystem, docs/nonlinear.md).
+  ``unicycle-range``, ``range-only``, ``chain10-nl`` (NonlinearSystem, docs/nonlinear.md).
 
 They are imported below in that order, which is the order of :func:`names`.
 """

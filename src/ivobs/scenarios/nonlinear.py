@@ -7,6 +7,8 @@
   data ([Althoff2021]; src/ivobs/data/cora_tank6_nl.npz);
 - ``cstr``: a continuous stirred-tank reactor (first-order exothermic reaction);
 - ``unicycle-range``: a 2-D unicycle measured by its ranges to three beacons and a compass;
+- ``range-only``: a vehicle of unknown speed and turn rate measured by its ranges to two
+  beacons and its heading (weakly observable: ``nl-horizon``, docs/nonlinear.md);
 - ``chain10-nl``: ten states coupled by ``tanh`` and ``sin`` terms (scale).
 
 The continuous-time plants (pendulum, CSTR, unicycle, chain) are **defined by their explicit
@@ -248,6 +250,60 @@ def _unicycle(horizon: int = 200) -> Scenario:
         _disturbance=paper_signal("uniform", sys),
         notes="speed 1 m/s, turn rate 0.2 + 0.05 sin(0.007k) rad/s (it circles around the beacon "
         "at (0, 10)); the model is the Euler map",
+    )
+
+
+RANGE_BEACONS = ((8.0, -3.0), (12.0, 3.0))
+RANGE_STEP = 0.1
+
+
+def range_only_system(
+    beacons: tuple[tuple[float, float], ...] = RANGE_BEACONS,
+    speed_walk: float = 0.002,
+    noise: float = 0.01,
+) -> NonlinearSystem:
+    """The model of ``range-only``: ``p+ = p + h v (cos th, sin th)``, ``v+ = v + w1`` (a slow
+    random walk, ``|w1| <= speed_walk``), ``th+ = th + h om + w2`` (``|w2| <= 0.002``) with the
+    turn rate ``om ∈ [0.15, 0.25]`` an unknown parameter; ``y = (|p - b_i| + r_i, th + c)``,
+    one range per beacon (``|r_i| <= noise``) and a compass (``|c| <= 0.02``)."""
+    h = RANGE_STEP
+    n = len(beacons)
+    ranges = [f"sqrt((px - {bx})**2 + (py - {by})**2) + r{i + 1}" for i, (bx, by) in
+              enumerate(beacons)]  # fmt: skip
+    d: dict[str, Any] = {"w1": (-speed_walk, speed_walk), "w2": (-0.002, 0.002)}
+    d.update({f"r{i + 1}": (-noise, noise) for i in range(n)})
+    d["c"] = (-0.02, 0.02)
+    return NonlinearSystem(
+        f=[f"px + {h}*v*cos(th)", f"py + {h}*v*sin(th)", "v + w1", f"th + {h}*om + w2"],
+        h=[*ranges, "th + c"],
+        states=["px", "py", "v", "th"],
+        params={"om": (0.15, 0.25)},
+        d=d,
+        dt=h,
+    )
+
+
+@register_scenario("range-only", "vehicle of unknown speed and turn rate, two ranges, a compass")
+def _range_only(horizon: int = 1000) -> Scenario:
+    T = check_horizon(horizon)
+    sys = range_only_system()
+    return Scenario(
+        name="range-only",
+        system=sys,
+        x0=Box([-0.1, -0.1, 0.95, -0.02], [0.1, 0.1, 1.05, 0.02]),
+        x_true0=np.array([0.0, 0.0, 1.0, 0.0]),
+        u=np.zeros((T, 0)),
+        horizon=T,
+        source="ivobs (a weakly observable plant for nl-horizon, not from a paper)",
+        description="p+ = p + h v (cos th, sin th), v+ = v + w1, th+ = th + h om + w2, om in "
+        "[0.15, 0.25], |w| <= 0.002; y = the ranges |p - b_i| + r_i to beacons at (8, -3) and "
+        "(12, 3) (|r_i| <= 0.01) and a compass th + c (|c| <= 0.02); h = 0.1 s",
+        _disturbance=paper_signal("uniform", sys),
+        notes="the speed is seen only through the history of the ranges, from two beacons close "
+        "together (a weak geometry); the start is a position fix. A recursive filter loses part "
+        "of what a window of ranges pins (docs/nonlinear.md, 'Moving-horizon estimation'). "
+        "With one beacon (range_only_system(((8.0, -3.0),))) the window's first-order "
+        "remainders outgrow the range noise and every method drifts. The model is the Euler map",
     )
 
 

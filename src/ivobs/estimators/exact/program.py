@@ -112,6 +112,17 @@ class TrajectoryLP:
         self.row_lo[-self.ny :] = -np.inf
         self.row_hi[-self.ny :] = np.inf
 
+    def replace_last_measurement(self, measurement: Measurement) -> None:
+        """Replace the measurement rows of the newest block (the last ``ny`` rows) by
+        ``measurement``: a row rebuilt over a tighter box of its state (``nl-horizon``)."""
+        first = self.row_lo.size - self.ny
+        keep = self.rows < first
+        self.rows, self.cols, self.vals = self.rows[keep], self.cols[keep], self.vals[keep]
+        self.rhs, self.row_shift = self.rhs[:first], self.row_shift[:first]
+        self.row_lo, self.row_hi = self.row_lo[:first], self.row_hi[:first]
+        C, F, rhs, tau = measurement
+        self._append_rows(np.hstack([C, F]), self.lo.size - self.nb, rhs, tau)
+
     def tighten_last_x(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Intersect the bounds of ``x`` of the newest block with ``[lo, hi]`` (the box just
         proven for it, widened) and return the new bounds. Intersecting (rather than replacing)

@@ -2,12 +2,13 @@
 bounds, one panel per state (``ivobs figures --scenario henon-nl``).
 
 The scenarios are those of docs/nonlinear.md (``henon-nl``, ``pendulum-nl``, ``cora-tank6-nl``,
-``cstr``, ``unicycle-range``, ``chain10-nl``) and docs/uncertain.md (``servo-uncertain``). The
-methods drawn are those that accept the scenario's system: for a
+``cstr``, ``unicycle-range``, ``range-only``, ``chain10-nl``) and docs/uncertain.md
+(``servo-uncertain``). The methods drawn are those that accept the scenario's system: for a
 :class:`~ivobs.NonlinearSystem` the methods with ``supports_nonlinear`` (``nl-interval``,
-``nl-zonotope``, ``nl-constrained-zonotope``); for a linear system with interval matrices those
-with ``supports_uncertain`` (docs/uncertain.md), ``intersect`` left out (it combines other
-methods). Each run is checked to contain the true state (:class:`FigureCheckError` otherwise).
+``nl-zonotope``, ``nl-constrained-zonotope``, ``nl-horizon``); for a linear system with
+interval matrices those with ``supports_uncertain`` (docs/uncertain.md), ``intersect`` left out
+(it combines other methods). Each run is checked to contain the true state
+(:class:`FigureCheckError` otherwise).
 """
 
 from __future__ import annotations
@@ -36,12 +37,12 @@ SCENARIO_FIGURES: dict[str, int] = {
     "cora-tank6-nl": 20,
     "cstr": 150,
     "unicycle-range": 100,
+    "range-only": 200,
     "chain10-nl": 40,
     "servo-uncertain": 100,
 }
 """The scenarios drawn by :func:`scenario_figure`, with the horizon of their figure (steps):
-long enough to show the transient and the steady widths, short enough that the seven (and the
-Hénon comparison) take about 13 s of CPU time together (measured: docs/figures.md)."""
+long enough to show the transient and the steady widths (docs/figures.md has the CPU times)."""
 
 
 def capable_methods(sys: Any) -> list[str]:
