@@ -19,7 +19,7 @@ OTHER = {
     35: "6182783 cb635e7 3740ac5 798aef6 c2ae480 d9e159f 110c6a0",  # proven rounding
     34: "1d89e2c",  # data integrity
     30: "dd906f3 7d20092 8f3dde8 958b3ce eb5920e 6571625 0e49be8 c53d5ac faefa67 af1fe54 f9c64f3 "
-    "845f00d e52e395 e8d96b7 d420575 6788a6f 7423d57",  # continuous-time and nonlinear plants
+    "845f00d e52e395 e8d96b7 d420575 6788a6f 7423d57 b82b293",  # continuous-time, nonlinear
     31: "09cd69a f286dda d6c0bb4 03d1807 c59de05 bc97e12",  # the monitor on every model class
     32: "aadbbcc cb265bc cb9f293 f924cc5 f6715d8 a5bf917 ffee6c9 7d32c50 ec3e3e3 1ba2339 49927e5 "
     "86e477f",  # your own plant
