@@ -15,15 +15,36 @@ from ..._validate import as_int
 from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box
-from ...sets.lp import basis_codes, basis_of
 from .. import register
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
-from .highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts
+from .highs import (
+    INFEASIBLE,
+    OK,
+    WarmStartedLP,
+    WarmStarts,
+    check_basis_codes,
+    with_saved_bases,
+)
 from .program import TrajectoryLP
 from .rows import dynamics, measurement, outside_prediction, prediction, widen
 
-__all__ = ["Exact", "ExactDesign", "ExactState"]
+__all__ = ["Exact", "ExactDesign", "ExactState", "appended"]
+
+
+def appended(
+    state: Any, rows: dict[str, np.ndarray], used: bool, window: int | None
+) -> dict[str, Any]:
+    """The history arrays of ``state`` with step ``k``'s ``rows`` and ``used`` flag appended,
+    the oldest beyond ``window`` steps dropped (None: all kept): new arrays, the old ones are
+    untouched."""
+    new: dict[str, Any] = {}
+    for key, val in rows.items():
+        hist = np.vstack([getattr(state, key), np.asarray(val, dtype=float)[None, :]])
+        new[key] = hist if window is None else hist[-window:]
+    used_hist = np.append(state.used, used)
+    new["used"] = used_hist if window is None else used_hist[-window:]
+    return new
 
 
 @dataclass(frozen=True)
@@ -212,14 +233,7 @@ class Exact(Estimator):
     ) -> ExactState:
         """The state with step ``k``'s rows appended to the history (the oldest dropped in a
         moving window): new arrays, the old ones are untouched."""
-        N = self.design.window
-        new: dict[str, Any] = {}
-        for key, val in rows.items():
-            hist = np.vstack([getattr(state, key), np.asarray(val, dtype=float)[None, :]])
-            new[key] = hist if N is None else hist[-N:]
-        used_hist = np.append(state.used, used)
-        new["used"] = used_hist if N is None else used_hist[-N:]
-        return replace(state, relaxed=relaxed, **new)
+        return replace(state, relaxed=relaxed, **appended(state, rows, used, self.design.window))
 
     def _rebuild(self, state: ExactState) -> WarmStartedLP:
         """The program of the kept history (empty at step 0; after ``restore()`` the same
@@ -245,34 +259,22 @@ class Exact(Estimator):
     def _bases(self, state: ExactState) -> tuple[Any, Any] | None:
         """The bases the next step of ``state`` starts from: saved with it, or those of its
         warm-started program; None if neither (a cold start)."""
-        if state.basis_min.size and state.basis_max.size:
-            # the chain's program: the kept steps, and in a full moving window the one before
-            N = self.design.window
-            n_col = (state.k if N is None else min(state.k, N + 1)) * (self.sys.nx + self.sys.nd)
-            return basis_of(state.basis_min, n_col), basis_of(state.basis_max, n_col)
-        bases = self._warm.bases(state.history, (state.k, state.relaxed))
-        return None if bases is None else (bases[0], bases[1])
+        # the chain's program: the kept steps, and in a full moving window the one before
+        N = self.design.window
+        n_col = (state.k if N is None else min(state.k, N + 1)) * (self.sys.nx + self.sys.nd)
+        return self._warm.start_of(state, (state.k, state.relaxed), n_col)
 
     def save_state(self, st: Any) -> dict[str, Any]:
         """The state with the bases of its warm-started program (see :class:`ExactState`)."""
-        if isinstance(st, ExactState) and not st.basis_min.size:
-            bases = self._bases(st)
-            if bases is not None and all(b.valid for b in bases):
-                st = replace(st, basis_min=basis_codes(bases[0]), basis_max=basis_codes(bases[1]))
+        if isinstance(st, ExactState):
+            st = with_saved_bases(st, self._bases)
         return super().save_state(st)
 
     def check_state(self, state: Any) -> ExactState:
         """As :meth:`Estimator.check_state`, and the bases are checked (status codes 0-4)."""
         st = super().check_state(state)
         assert isinstance(st, ExactState)
-        for key in ("basis_min", "basis_max"):
-            codes = getattr(st, key)
-            if codes.ndim != 1 or (codes.size and (codes.min() < 0 or codes.max() > 4)):
-                raise IvobsError(
-                    f"state: entry {key!r}: expected HiGHS basis status codes 0-4, got "
-                    f"{codes[:8]!r}; the state was altered or is not from Estimator.state() "
-                    "of this estimator"
-                )
+        check_basis_codes(st)
         return st
 
     # -- offline loop with a progress bar --------------------------------------------------

@@ -14,15 +14,27 @@ from __future__ import annotations
 import os
 import weakref
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from ...sets.lp import LinearProgram
+from ...errors import IvobsError
+from ...sets.lp import LinearProgram, basis_codes, basis_of
 from .program import TrajectoryLP
 from .safe import SafeBoundData, certifies_infeasibility, safe_min
 
-__all__ = ["INFEASIBLE", "OK", "PARALLEL", "UNSURE", "Chain", "WarmStartedLP", "WarmStarts"]
+__all__ = [
+    "INFEASIBLE",
+    "OK",
+    "PARALLEL",
+    "UNSURE",
+    "Chain",
+    "WarmStartedLP",
+    "WarmStarts",
+    "check_basis_codes",
+    "with_saved_bases",
+]
 
 PARALLEL = (os.cpu_count() or 1) > 1
 """Solve the min and the max programs in two threads."""
@@ -150,6 +162,15 @@ class WarmStarts:
         """The bases the next step from these arrays and tag starts from; None if unknown."""
         entry = self._find(arrays, tag)
         return None if entry is None else entry[3]
+
+    def start_of(self, state: Any, tag: tuple[object, ...], n_col: int) -> tuple[Any, Any] | None:
+        """The bases the next step of ``state`` (a state with ``history``, ``basis_min`` and
+        ``basis_max``) starts from: those saved with it (``n_col`` columns: its program's), or
+        those of its warm-started program; None if neither (a cold start)."""
+        if state.basis_min.size and state.basis_max.size:
+            return basis_of(state.basis_min, n_col), basis_of(state.basis_max, n_col)
+        bases = self.bases(state.history, tag)
+        return None if bases is None else (bases[0], bases[1])
 
     def put(
         self, arrays: tuple[np.ndarray, ...], tag: tuple[object, ...], warm: WarmStartedLP
@@ -322,3 +343,27 @@ class Chain:
         prog.add_rows((starts, idx, vals), rlo, rhi)
         prog.set_basis(basis)  # same shape (time-varying window): a good start
         self._cost_col = None
+
+
+def with_saved_bases(state: Any, find: Any) -> Any:
+    """``state`` with the bases its next step starts from (``find(state)``) written as status
+    codes, when it has none yet and both are valid (what :meth:`Estimator.state` saves)."""
+    if state.basis_min.size:
+        return state
+    bases = find(state)
+    if bases is None or not all(b.valid for b in bases):
+        return state
+    return replace(state, basis_min=basis_codes(bases[0]), basis_max=basis_codes(bases[1]))
+
+
+def check_basis_codes(state: Any) -> None:
+    """Refuse a restored state whose ``basis_min``/``basis_max`` are not HiGHS basis status
+    codes (0-4)."""
+    for key in ("basis_min", "basis_max"):
+        codes = getattr(state, key)
+        if codes.ndim != 1 or (codes.size and (codes.min() < 0 or codes.max() > 4)):
+            raise IvobsError(
+                f"state: entry {key!r}: expected HiGHS basis status codes 0-4, got "
+                f"{codes[:8]!r}; the state was altered or is not from Estimator.state() "
+                "of this estimator"
+            )

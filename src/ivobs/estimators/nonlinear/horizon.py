@@ -83,11 +83,18 @@ from ..._validate import as_int
 from ...errors import IvobsError
 from ...linalg import gamma
 from ...sets import Box
-from ...sets.lp import basis_codes, basis_of
 from ...sets.rounding import ETA, UNIT_ROUNDOFF, down, up
 from .. import register
 from ..base import Design, Estimator, check_size
-from ..exact.highs import INFEASIBLE, OK, WarmStartedLP, WarmStarts
+from ..exact.estimator import appended
+from ..exact.highs import (
+    INFEASIBLE,
+    OK,
+    WarmStartedLP,
+    WarmStarts,
+    check_basis_codes,
+    with_saved_bases,
+)
 from ..exact.program import TrajectoryLP
 from ..exact.rows import Dynamics, Measurement, widen
 from ..state import OnlineState, Step, dump_state, load_state
@@ -355,12 +362,7 @@ class NonlinearHorizonEstimator(Estimator):
         inner: NonlinearConstrainedZonotopeState,
     ) -> NonlinearHorizonState:
         """The state with step ``k``'s rows appended (the oldest beyond ``N`` dropped)."""
-        N = self.design.window
-        new: dict[str, Any] = {}
-        for key, val in rows.items():
-            hist = np.vstack([getattr(state, key), np.asarray(val, dtype=float)[None, :]])
-            new[key] = hist[-N:]
-        new["used"] = np.append(state.used, used)[-N:]
+        new = appended(state, rows, used, self.design.window)
         empty = np.zeros(0, dtype=np.int8)
         return replace(state, inner=inner, basis_min=empty, basis_max=empty, **new)
 
@@ -387,21 +389,14 @@ class NonlinearHorizonEstimator(Estimator):
     def _bases(self, state: NonlinearHorizonState) -> tuple[Any, Any] | None:
         """The bases the next step of ``state`` starts from: saved with it, or those of its
         warm-started program; None if neither (a cold start)."""
-        if state.basis_min.size and state.basis_max.size:
-            n_col = min(state.k, self.design.window + 1) * (self.model.nx + self.model.nw)
-            return basis_of(state.basis_min, n_col), basis_of(state.basis_max, n_col)
-        bases = self._warm.bases(state.history, (state.k, state.inner.k))
-        return None if bases is None else (bases[0], bases[1])
+        n_col = min(state.k, self.design.window + 1) * (self.model.nx + self.model.nw)
+        return self._warm.start_of(state, (state.k, state.inner.k), n_col)
 
     # -- persistence ----------------------------------------------------------------------
     def _dump(self, st: Any) -> dict[str, Any]:
         """The window with the bases of its warm-started program, and the inner filter's state
         in its own envelope."""
-        if not st.basis_min.size:
-            bases = self._bases(st)
-            if bases is not None and all(b.valid for b in bases):
-                st = replace(st, basis_min=basis_codes(bases[0]), basis_max=basis_codes(bases[1]))
-        out = dump_state(st)
+        out = dump_state(with_saved_bases(st, self._bases))
         out["inner"] = self.inner.save_state(st.inner)
         return out
 
@@ -420,12 +415,5 @@ class NonlinearHorizonEstimator(Estimator):
                 "state: the kept window does not match the step count and the window; the "
                 "state was altered or is not from Estimator.state() of this estimator"
             )
-        for key in ("basis_min", "basis_max"):
-            codes = getattr(st, key)
-            if codes.ndim != 1 or (codes.size and (codes.min() < 0 or codes.max() > 4)):
-                raise IvobsError(
-                    f"state: entry {key!r}: expected HiGHS basis status codes 0-4, got "
-                    f"{codes[:8]!r}; the state was altered or is not from Estimator.state() "
-                    "of this estimator"
-                )
+        check_basis_codes(st)
         return replace(st, inner=inner)
