@@ -314,6 +314,8 @@ SLOW = (
     "tests/test_missing_samples.py::test_online_steps_predict_through_missing_samples_like_run[nl-constrained-zonotope]",
     "tests/test_missing_samples.py::test_online_steps_predict_through_missing_samples_like_run[nl-horizon]",
     "tests/test_missing_samples.py::test_remaining_components_are_used[nl-horizon]",
+    "tests/test_nl_horizon.py::test_late_widths_within_a_stated_ratio_of_the_linearised_exact_hull[vertex]",
+    "tests/test_nl_horizon.py::test_late_widths_within_a_stated_ratio_of_the_linearised_exact_hull[uniform]",
     "tests/test_missing_samples.py::test_online_steps_predict_through_missing_samples_like_run[zonotope]",
     "tests/test_missing_samples.py::test_random_missing_samples_and_a_gap_of_twenty_steps[constrained-zonotope-servo]",
     "tests/test_missing_samples.py::test_random_missing_samples_and_a_gap_of_twenty_steps[dual-window-random]",

@@ -1,5 +1,6 @@
 """nl-horizon: containment on range-only, never wider than its inner nl-constrained-zonotope,
-tighter late in the run, state round trip, options, and the rows' inequalities themselves."""
+tighter late in the run, within a stated ratio of the linearised exact hull over 320 steps, state
+round trip, options, and the rows' inequalities themselves."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from ivobs.errors import IvobsError
 from ivobs.estimators.nonlinear.horizon import dynamics_row, measurement_row
 from ivobs.scenarios import registry
 from ivobs.scenarios.nonlinear import RANGE_BEACONS, RANGE_STEP
+from linearised import linearised_along
 
 H = RANGE_STEP
 
@@ -73,6 +75,23 @@ def test_tighter_than_nl_constrained_zonotope_late_in_the_run(run120):
     ratio = (hi - lo)[late].mean(axis=0) / (cz_hi - cz_lo)[late].mean(axis=0)
     assert ratio[0] < 0.5
     assert np.all(ratio < 0.85)
+
+
+@pytest.mark.parametrize("kind", ["vertex", "uniform"])
+def test_late_widths_within_a_stated_ratio_of_the_linearised_exact_hull(kind):
+    """Over 320 steps (window 20), the mean width of every state over the second half is at most
+    1.25 times that of the exact hull of the model linearised along the true trajectory
+    (measured 1.00-1.15), and the boxes contain the state throughout."""
+    T = 320
+    sc = registry.get("range-only", horizon=T)
+    tr = sc.simulate(kind, seed=1)
+    res = ivobs.make_estimator("nl-horizon", sc.system, x0=sc.x0).run(tr.u, tr.y)
+    assert res.contains(tr.x).all()
+    lin, u_lin = linearised_along(sc.system, tr)
+    ref = ivobs.make_estimator("exact", lin, x0=sc.x0, window=20).run(u_lin, tr.y)
+    late = slice(T // 2, None)
+    ratio = res.width[late].mean(axis=0) / ref.width[late].mean(axis=0)
+    assert np.all(ratio <= 1.25), ratio
 
 
 def test_state_round_trip_through_json_continues_identically():
