@@ -7,6 +7,8 @@ bad input."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -262,6 +264,55 @@ def test_mean_value_form_encloses_every_point():
                     assert mpf(float(lin.nat_lo[i])) <= g[i] <= mpf(float(lin.nat_hi[i]))
                     worst = max(worst, float(dev / mpf(float(lin.rho[i]))) if lin.rho[i] else 0.0)
     assert 0.01 < worst <= 1.0  # the remainder bound is not vacuous
+
+
+def test_the_centred_contractor_keeps_every_point_that_meets_its_target():
+    """contract_centred(): for random boxes and random points ``z`` of them (a third on the
+    vertices), with a target that holds the exact ``g(z)`` (mpmath, 100 bits) and is as thin
+    as one ulp, ``z`` stays in the contracted box; and on the tanks' row ``x1 - c sqrt(x1)``,
+    where the forward-backward contractor loses, the box narrows."""
+    from mpmath import mp, mpf, sqrt
+
+    from ivobs.estimators.nonlinear.meanvalue import contract_centred, linearise
+
+    sys = ivobs.NonlinearSystem(
+        f=["x1 - a*sqrt(x1) + w1", "x2 + 0.5*(sqrt(x1) - sqrt(x2))*x2"],
+        h=["x1"],
+        states=["x1", "x2"],
+        params={"a": (1.0, 1.1)},
+        d={"w1": (-0.01, 0.01)},
+    )
+
+    def exact(z):
+        x1, x2, a, w1 = (mpf(float(v)) for v in z)
+        return [x1 - a * sqrt(x1) + w1, x2 + mpf(0.5) * (sqrt(x1) - sqrt(x2)) * x2]
+
+    rng = np.random.default_rng(1)
+    u = np.zeros(0)
+    shrink = []
+    with mp.workprec(100):
+        for trial in range(200):
+            width = 10.0 ** rng.uniform(-10, 0.5)
+            c = np.array([rng.uniform(5, 30), rng.uniform(5, 30), 1.05, 0.0])
+            lo = c - width * rng.uniform(0, 1, 4)
+            hi = c + width * rng.uniform(0, 1, 4)
+            lo[2:], hi[2:] = np.maximum(lo[2:], [1.0, -0.01]), np.minimum(hi[2:], [1.1, 0.01])
+            lin = linearise(sys.evaluators("f"), lo, hi, 0.5 * lo + 0.5 * hi, u, 2, False)
+            z = rng.uniform(lo, hi)
+            if trial % 3 == 0:  # a vertex
+                z = np.where(rng.random(4) < 0.5, lo, hi)
+            g = exact(z)
+            pad = [0.0, 1e-12, 1e-3 * width][trial % 3]
+            tl = [math.nextafter(float(v) - pad, -math.inf) for v in g]
+            th = [math.nextafter(float(v) + pad, math.inf) for v in g]
+            assert all(mpf(a) <= v <= mpf(b) for a, v, b in zip(tl, g, th))
+            bl, bh = lo.tolist(), hi.tolist()
+            assert contract_centred(lin, bl, bh, tl, th, [0, 1]), trial
+            assert all(a <= v <= b for a, v, b in zip(bl, z.tolist(), bh)), trial
+            if trial % 3 == 1 and width > 1e-6:
+                shrink.append((bh[0] - bl[0]) / (hi[0] - lo[0]))
+    # a target one point thin pins x1 to within the other unknowns' share of the row
+    assert np.median(shrink) < 0.5
 
 
 def test_box_strips_option_sound_and_tighter_on_henon():

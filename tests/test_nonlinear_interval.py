@@ -234,8 +234,11 @@ def test_a_window_of_steps_back_contains_the_exact_state_and_is_no_wider(lag: in
     # the window only contracts more: never wider (up to the rounding of a different path)
     w1, wl = one.upper - one.lower, win.upper - win.lower
     assert np.all(wl <= w1 * (1 + 1e-9) + 1e-12)
-    # and much narrower on the first tank, seen only through the dynamics
-    assert wl[10:, 0].mean() < 0.85 * w1[10:, 0].mean()
+    # the first tank, seen only through the dynamics, is bounded to 0.0110 by both (the
+    # forward-backward contractors alone gave 0.0209 with lag 1, 0.0143-0.0159 with lags 2-4:
+    # the level occurs twice in its row, x1 - c sqrt(x1), and the centred form back through f
+    # does not lose it twice)
+    assert wl[10:, 0].mean() < 0.0115 and w1[10:, 0].mean() < 0.0115
 
 
 def test_the_window_on_henon_with_y_x2_is_sound_over_long_runs() -> None:

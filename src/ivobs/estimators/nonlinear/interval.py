@@ -8,9 +8,11 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
 1. **Correction** (forward-backward contractor, HC4-revise [Jaulin2001, Ch. 4]): contract
    ``([x]_k^-, [w])`` with ``h(x, u_k, w) ∈ [y_k]`` -> ``([x]_k, [w]_k)``;
 2. **One step back** (``lag=1``): contract ``([x]_{k-1}, [w]_{k-1}, [w]_k)`` with
-   ``h(f(x', u_{k-1}, w'), u_k, w) ∈ [y_k]``, then ``[x]_k <- [x]_k ∩ F([x]_{k-1}, u_{k-1},
-   [w]_{k-1})`` and contract with ``[y_k]`` again. This bounds states the output sees only
-   through the dynamics (the Hénon map with ``y = x2``: ``x1[k-1] = x2[k]/b``);
+   ``h(f(x', u_{k-1}, w'), u_k, w) ∈ [y_k]``, then ``([x]_{k-1}, [w]_{k-1})`` with
+   ``f(x', u_{k-1}, w') ∈ [x]_k`` by the centred form (below), then ``[x]_k <- [x]_k ∩
+   F([x]_{k-1}, u_{k-1}, [w]_{k-1})`` and contract with ``[y_k]`` again. This bounds states
+   the output sees only through the dynamics (the Hénon map with ``y = x2``: ``x1[k-1] =
+   x2[k]/b``);
 3. **Prediction**: ``[x]_{k+1}^- = F([x]_k, u_k, [w]_k)`` with ``F`` the natural inclusion
    intersected with the mean-value form ``f(c) + J([x],[w]) ([x, w] - c)`` (with the
    window-centred form, step 4, from its own linearisation of ``f`` over the same box:
@@ -20,13 +22,24 @@ the predicted box ``[x]_k^-`` of ``x[k]``:
 2'. **Further back** (``lag = L >= 2``, in place of step 2): the boxes of ``(x[j], w[j])``
    for the ``L`` steps ``j = k-L..k-1`` are kept; each is contracted with ``f(x[j], u[j],
    w[j]) ∈ [x]_{j+1}`` (one contractor for all the states, :meth:`~ivobs.NonlinearSystem.
-   f_contractor`) and with its own measurement ``h(x[j], u[j], w[j]) ∈ [y_j]``, newest first,
+   f_contractor`, then the centred form) and with its own measurement ``h(x[j], u[j], w[j]) ∈
+   [y_j]``, newest first,
    then ``[x]_{j+1} <- [x]_{j+1} ∩ F([x]_j, u_j, [w]_j)`` and the measurement of ``j + 1``
    again, oldest first: the contractor network of the last ``L`` steps [Jaulin2001, Ch. 4
    and 6]. What ``y_k`` says about earlier states thus reaches ``x[k]`` through them. Its
    newest step does the work of step 2 (``[x]_k``, contracted by ``[y_k]``, narrows
    ``(x[k-1], w[k-1])`` through ``f``), so step 2 is skipped: through ``h∘f`` it narrowed no
    more on the scenarios measured (BENCHMARKS.md), for a second set of contractors per sweep.
+
+**The centred form back through f.** The forward-backward contractors (HC4-revise) give
+the hull of a row's constraint where each variable occurs once in its expression; where one
+occurs twice they lose (CORA's tanks: ``x1 + Ts (u - k sqrt(x1))``, each occurrence bounded
+as if it were another variable). On the rows of ``f`` where a state or unknown occurs more
+than once (:meth:`~ivobs.NonlinearSystem.f_repeated_rows`), ``(x[j], w[j])`` is also
+contracted with ``f ∈ [x]_{j+1}`` through the mean-value form of ``f`` over its box
+(:func:`~ivobs.estimators.nonlinear.meanvalue.contract_centred`; codac's ``CtcInverse`` has
+the same centred form), which sees the two occurrences as one. Not for validated flows (their
+Jacobian is a flow of its own).
 
 After step 1, step 2 or 2' (each ends with the contraction by ``[y_k]``) repeats, starting
 from the boxes the last sweep left, until a sweep narrows no state's width by
@@ -112,7 +125,7 @@ from .. import register
 from ..base import Design, Estimator
 from ..state import OnlineState, Step, evolve
 from . import window as wf
-from .meanvalue import Linearisation, measurement
+from .meanvalue import Linearisation, contract_centred, linearise, measurement
 
 __all__ = [
     "WINDOW",
@@ -280,6 +293,9 @@ class NonlinearIntervalEstimator(Estimator):
             lag=lag, window=window, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
         )
         self._f_evals = sys.evaluators("f") if window else None
+        # the centred form back through f, on the rows where HC4 is not already the tightest
+        self._fb_rows = sys.f_repeated_rows() if lag and not isinstance(sys, FlowSystem) else []
+        self._fb_evals = sys.evaluators("f") if self._fb_rows else None
         self._flow = isinstance(sys, FlowSystem)
         self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
@@ -590,6 +606,8 @@ class NonlinearIntervalEstimator(Estimator):
             tl, th = (vl, vh) if j == len(chain) - 1 else (chain[j + 1].lo, chain[j + 1].hi)
             if not sys._call(fc, sites, c.lo, c.hi, c.u, tl, th):  # f(x[j], ·) ∈ [x]_{j+1}
                 return False
+            if not self._centred_back(c.lo, c.hi, c.u, tl[:nx], th[:nx]):
+                return False
             if any(v == v for v in c.ylo) and not sys.contract_lists(c.lo, c.hi, c.u, c.ylo, c.yhi):
                 return False
         for j, c in enumerate(chain):  # oldest first
@@ -603,6 +621,18 @@ class NonlinearIntervalEstimator(Estimator):
             if any(v == v for v in ml) and not sys.contract_lists(nl, nh, nu, ml, mh):
                 return False
         return True
+
+    def _centred_back(
+        self, zl: list[float], zh: list[float], u: list[float], tl: list[float], th: list[float]
+    ) -> bool:
+        """The box ``[zl, zh]`` of ``(x[j], w[j])`` contracted in place with ``f(x[j], u[j],
+        w[j]) ∈ [tl, th]`` by the centred form of ``f`` over it
+        (:func:`~.meanvalue.contract_centred`); False when it becomes empty."""
+        if self._fb_evals is None or not all(map(math.isfinite, zl + zh)):
+            return True
+        c = np.array([0.5 * a + 0.5 * b for a, b in zip(zl, zh)])
+        lin = linearise(self._fb_evals, zl, zh, c, np.array(u, dtype=float), self.model.nx, False)
+        return contract_centred(lin, zl, zh, tl, th, self._fb_rows)
 
     def _back(
         self,
@@ -628,6 +658,10 @@ class NonlinearIntervalEstimator(Estimator):
             if a == a and not sys._call(fn, sites, bl, bh, pu + u, a, b):
                 return False, None
         m = nx + nw
+        zl, zh = bl[:m], bh[:m]
+        if not self._centred_back(zl, zh, pu, vl[:nx], vh[:nx]):  # f(ζ_{k-1}) ∈ [x]_k
+            return False, None
+        bl[:m], bh[:m] = zl, zh
         f = sys._f
         fl, fh = sys._call(f.tight, f.sites, bl[:nx], bh[:nx], pu, bl[nx:m], bh[nx:m])
         if not _meet(vl, vh, fl, fh):  # [x]_k ∩ F([x]_{k-1}, u_{k-1}, [w]_{k-1})

@@ -409,6 +409,22 @@ class NonlinearSystem(TimeBase):
             )
         return self._fc
 
+    def f_repeated_rows(self) -> list[int]:
+        """The rows of ``f`` in whose expression some state or unknown occurs more than once
+        (``x1 - k sqrt(x1)``). Elsewhere the forward-backward contractor of a row is already
+        its tightest: HC4-revise on an expression where every variable occurs once gives the
+        hull of the constraint's projection [Jaulin2001, Ch. 4]."""
+        import sympy as sp
+
+        g = self._groups()
+        leaves = set(g["x"] + g["w"])
+        rows = []
+        for i, e in enumerate(self.f_exprs):
+            seen = [t for t in sp.preorder_traversal(e) if t in leaves]
+            if len(seen) > len(set(seen)):
+                rows.append(i)
+        return rows
+
     # -- conversions ---------------------------------------------------------------------
     @classmethod
     def from_linear(cls, lin: Any, who: str = "NonlinearSystem.from_linear") -> NonlinearSystem:
