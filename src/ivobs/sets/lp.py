@@ -72,6 +72,10 @@ class LinearProgram:
         way as one extended row by row).
     ipm : the interior-point method instead of the simplex (a second opinion when the simplex
         fails on an ill-conditioned program).
+    devex : the dual simplex prices by Devex instead of dual steepest edge. Steepest-edge
+        weights cost a solve per row to set up after a cold start, and once they exist the
+        primal simplex keeps them up to date at a solve per iteration; for a chain of short
+        warm-started solves (each a few dozen iterations) that is most of the work.
     """
 
     def __init__(
@@ -81,6 +85,7 @@ class LinearProgram:
         iteration_limit: int | None = None,
         scale: bool = True,
         ipm: bool = False,
+        devex: bool = False,
     ) -> None:
         self._hs = _highspy()
         h = self.h = _quiet_highs()()
@@ -94,6 +99,8 @@ class LinearProgram:
             h.setOptionValue("simplex_iteration_limit", int(iteration_limit))
         if not scale:
             h.setOptionValue("simplex_scale_strategy", 0)
+        if devex:
+            h.setOptionValue("simplex_dual_edge_weight_strategy", 1)
         status = self._hs.HighsModelStatus
         self._status = {
             status.kOptimal: "optimal",

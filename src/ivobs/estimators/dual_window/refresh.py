@@ -49,8 +49,9 @@ class WindowLP:
         self.M.eliminate_zeros()
         self.n_col, self.n_row, self.n_meas = blocks * nb, self.M.shape[0], blocks * ny
         # as the exact method's models: no scaling, bounded iterations (the duals only go to
-        # the cache; any of them certifies)
-        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
+        # the cache; any of them certifies); Devex pricing: a refresh is one dual solve from
+        # the last refresh's basis, then a chain of short primal ones
+        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False, devex=True)
         inf, rinf = np.full(self.n_col, np.inf), np.full(self.n_row, np.inf)
         self.prog.add_cols(-inf, inf)
         self.prog.add_rows((self.M.indptr, self.M.indices, self.M.data), -rinf, rinf)
