@@ -224,8 +224,13 @@ class DualWindow(Estimator):
         """The coefficients of the cached multipliers (kept for the last ``mu`` array)."""
         if self._coef is None or self._coef[0] is not mu:
             flat = mu.reshape(-1, self.lay.N + 1, self.lay.ny)
-            coef = coefficients(self.mats, self.d_lo, self.d_hi, self.c, flat, self.lay)
-            self._coef = (mu, coef)
+            # a row repeated in the cache is computed once: the initial cache holds ``cache``
+            # copies of each bound's zero multiplier
+            key = np.concatenate([self.c, flat.reshape(flat.shape[0], -1)], axis=1)
+            _, first, copy = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            part = coefficients(self.mats, self.d_lo, self.d_hi, self.c[first], flat[first],
+                                self.lay)  # fmt: skip
+            self._coef = (mu, Coefficients(*(a[copy.ravel()] for a in part)))
         return self._coef[1]
 
     def save_state(self, st: Any) -> dict[str, Any]:
