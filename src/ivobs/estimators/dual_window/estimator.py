@@ -416,7 +416,9 @@ class DualWindow(Estimator):
         return mu, used, _NO_BASIS
 
     def _update_coefficients(self, old: np.ndarray, mu: np.ndarray, rows: list[int]) -> None:
-        """The coefficients of ``mu`` from those of ``old`` (if kept) with ``rows`` redone."""
+        """The coefficients of ``mu`` from those of ``old`` (if kept) with ``rows`` redone, in
+        place: only the newest ``mu``'s are kept, so those of ``old`` are not looked up again
+        (a state that still holds ``old`` has them recomputed)."""
         if self._coef is None or self._coef[0] is not old:
             self._coef = None
             return
@@ -424,7 +426,6 @@ class DualWindow(Estimator):
         if rows:
             flat = mu.reshape(-1, lay.N + 1, lay.ny)[rows]
             part = coefficients(self.mats, self.d_lo, self.d_hi, self.c[rows], flat, lay)
-            coef = Coefficients(*(a.copy() for a in coef))
             for whole, new in zip(coef, part, strict=True):
                 whole[rows] = new
         self._coef = (mu, coef)
