@@ -49,9 +49,8 @@ class WindowLP:
         self.M.eliminate_zeros()
         self.n_col, self.n_row, self.n_meas = blocks * nb, self.M.shape[0], blocks * ny
         # as the exact method's models: no scaling, bounded iterations (the duals only go to
-        # the cache; any of them certifies); Devex pricing: a refresh is one dual solve from
-        # the last refresh's basis, then a chain of short primal ones
-        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False, devex=True)
+        # the cache; any of them certifies)
+        self.prog = LinearProgram(iteration_limit=ITERATION_LIMIT, scale=False)
         inf, rinf = np.full(self.n_col, np.inf), np.full(self.n_row, np.inf)
         self.prog.add_cols(-inf, inf)
         self.prog.add_rows((self.M.indptr, self.M.indices, self.M.data), -rinf, rinf)
@@ -115,7 +114,13 @@ class WindowLP:
                 prog.set_cost(np.array([last]), np.zeros(1))
             prog.set_cost(np.array([col]), np.array([sense]))
             last = col
-            lam = prog.row_duals() if prog.solve(primal=r > 0) == "optimal" else None
+            # the first program from the last refresh's basis: by Devex (LinearProgram.solve),
+            # and, should that fail, again from scratch
+            status = prog.solve(primal=r > 0, devex=r == 0 and start is not None)
+            if r == 0 and start is not None and status != "optimal":
+                prog.cold()
+                status = prog.solve()
+            lam = prog.row_duals() if status == "optimal" else None
             if lam is None:
                 continue
             # HiGHS: sense e_i − M^T λ = reduced costs; c = −sense e_i gives μ = −λ
