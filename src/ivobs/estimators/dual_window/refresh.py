@@ -13,7 +13,9 @@ The solver's answer is never used as a bound: its measurement duals ``μ`` go in
 and every bound is the certified evaluation of :mod:`.certificate`, valid for any ``μ``
 [Neumaier2004]. The ``2 nx`` programs of one refresh are solved one after the other, each
 warm-started from the previous optimum; the first starts from the basis saved in the state (so
-that a restored state continues with the same solves).
+that a restored state continues with the same solves), by the dual simplex with Devex pricing
+(:meth:`ivobs.sets.lp.LinearProgram.solve`: steepest-edge weights would cost a solve per row to
+set up there, and a solve per iteration to keep up through the primal chain that follows).
 """
 
 from __future__ import annotations
