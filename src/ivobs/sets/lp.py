@@ -163,11 +163,18 @@ class LinearProgram:
         self.h.changeRowsBounds(n, np.arange(n, dtype=_I32), _f(row_lo), _f(row_hi))
 
     # -- solving --------------------------------------------------------------------------------
-    def solve(self, primal: bool = False) -> str:
+    def solve(self, primal: bool = False, devex: bool = False) -> str:
         """Solve from the current basis (dual simplex; ``primal``: the primal simplex, for a
         changed objective whose last basis is still feasible): ``"optimal"``, ``"infeasible"``,
-        ``"limit"`` (iteration limit) or ``"failed"``."""
+        ``"limit"`` (iteration limit) or ``"failed"``.
+
+        ``devex``: the dual simplex prices by Devex instead of dual steepest edge. From a basis
+        that is not the slack basis, steepest-edge weights cost a solve per row to set up, and
+        once they exist the primal simplex keeps them up to date at a solve per iteration: for
+        one dual solve from a given basis followed by a chain of short primal ones, that is
+        most of the work. (From the slack basis Devex can fail where steepest edge does not.)"""
         self.h.setOptionValue("simplex_strategy", 4 if primal else 1)
+        self.h.setOptionValue("simplex_dual_edge_weight_strategy", 1 if devex else -1)
         self.h.run()
         return self._status.get(self.h.getModelStatus(), "failed")
 

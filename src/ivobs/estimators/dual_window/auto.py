@@ -84,8 +84,9 @@ def choose_window(
     free = (np.full(nx, -np.inf), np.full(nx, np.inf))
     boxed = (-0.5 * x0_width, 0.5 * x0_width)
     replaced = np.zeros((n_max + 1, ny), dtype=bool)
+    start = None  # the boxed programs start from the free ones' last basis
     for prior in (free, boxed):
-        mu, ok, _ = lp.solve(y, u, replaced, 0, prior, x, None, count=nx)
+        mu, ok, start = lp.solve(y, u, replaced, 0, prior, x, start, count=nx)
         if ok[:nx].all():
             break
     else:

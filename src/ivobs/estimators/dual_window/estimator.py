@@ -224,8 +224,13 @@ class DualWindow(Estimator):
         """The coefficients of the cached multipliers (kept for the last ``mu`` array)."""
         if self._coef is None or self._coef[0] is not mu:
             flat = mu.reshape(-1, self.lay.N + 1, self.lay.ny)
-            coef = coefficients(self.mats, self.d_lo, self.d_hi, self.c, flat, self.lay)
-            self._coef = (mu, coef)
+            # a row repeated in the cache is computed once: the initial cache holds ``cache``
+            # copies of each bound's zero multiplier
+            key = np.concatenate([self.c, flat.reshape(flat.shape[0], -1)], axis=1)
+            _, first, copy = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            part = coefficients(self.mats, self.d_lo, self.d_hi, self.c[first], flat[first],
+                                self.lay)  # fmt: skip
+            self._coef = (mu, Coefficients(*(a[copy.ravel()] for a in part)))
         return self._coef[1]
 
     def save_state(self, st: Any) -> dict[str, Any]:
@@ -411,7 +416,9 @@ class DualWindow(Estimator):
         return mu, used, _NO_BASIS
 
     def _update_coefficients(self, old: np.ndarray, mu: np.ndarray, rows: list[int]) -> None:
-        """The coefficients of ``mu`` from those of ``old`` (if kept) with ``rows`` redone."""
+        """The coefficients of ``mu`` from those of ``old`` (if kept) with ``rows`` redone, in
+        place: only the newest ``mu``'s are kept, so those of ``old`` are not looked up again
+        (a state that still holds ``old`` has them recomputed)."""
         if self._coef is None or self._coef[0] is not old:
             self._coef = None
             return
@@ -419,7 +426,6 @@ class DualWindow(Estimator):
         if rows:
             flat = mu.reshape(-1, lay.N + 1, lay.ny)[rows]
             part = coefficients(self.mats, self.d_lo, self.d_hi, self.c[rows], flat, lay)
-            coef = Coefficients(*(a.copy() for a in coef))
             for whole, new in zip(coef, part, strict=True):
                 whole[rows] = new
         self._coef = (mu, coef)

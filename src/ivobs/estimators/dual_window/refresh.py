@@ -13,7 +13,9 @@ The solver's answer is never used as a bound: its measurement duals ``μ`` go in
 and every bound is the certified evaluation of :mod:`.certificate`, valid for any ``μ``
 [Neumaier2004]. The ``2 nx`` programs of one refresh are solved one after the other, each
 warm-started from the previous optimum; the first starts from the basis saved in the state (so
-that a restored state continues with the same solves).
+that a restored state continues with the same solves), by the dual simplex with Devex pricing
+(:meth:`ivobs.sets.lp.LinearProgram.solve`: steepest-edge weights would cost a solve per row to
+set up there, and a solve per iteration to keep up through the primal chain that follows).
 """
 
 from __future__ import annotations
@@ -114,7 +116,13 @@ class WindowLP:
                 prog.set_cost(np.array([last]), np.zeros(1))
             prog.set_cost(np.array([col]), np.array([sense]))
             last = col
-            lam = prog.row_duals() if prog.solve(primal=r > 0) == "optimal" else None
+            # the first program from the last refresh's basis: by Devex (LinearProgram.solve),
+            # and, should that fail, again from scratch
+            status = prog.solve(primal=r > 0, devex=r == 0 and start is not None)
+            if r == 0 and start is not None and status != "optimal":
+                prog.cold()
+                status = prog.solve()
+            lam = prog.row_duals() if status == "optimal" else None
             if lam is None:
                 continue
             # HiGHS: sense e_i − M^T λ = reduced costs; c = −sense e_i gives μ = −λ
