@@ -22,7 +22,16 @@ import numpy as np
 
 from ..errors import DesignError
 from ..linalg import UNIT_ROUNDOFF, gamma
-from ..sets.rounding import ETA, DecayBound, certified_norms, decay_of, product_error, up, upper
+from ..sets.rounding import (
+    ETA,
+    DecayBound,
+    certified_norms,
+    decay_of,
+    exactly_scaled,
+    product_error,
+    up,
+    upper,
+)
 from ._recursion import abs_max
 
 __all__ = ["Channels", "difference", "envelope", "rounding_matrix"]
@@ -85,11 +94,6 @@ MAX_EXPONENT = 500
 """The scaling ``s`` of :class:`Channels` is ``2^e`` with ``|e| <=`` this: ``s``, ``1 / s`` and
 ``s_j / s_i`` are exact floats."""
 
-NORMAL = 2.0**-1021
-"""A nonzero product of a float by a power of two that is at least this in magnitude was exact
-(had its exact value been below the smallest normal ``2^-1022``, the rounded one would be at
-most ``2^-1022``)."""
-
 
 def scaling(M: np.ndarray) -> np.ndarray:
     """``s``: powers of two, ``2^e`` with ``|e| <=`` :data:`MAX_EXPONENT`, that balance ``M``
@@ -103,14 +107,6 @@ def scaling(M: np.ndarray) -> np.ndarray:
     _, e = np.frexp(state_scaling(M, np.zeros((0, n))))  # gebal's s: 2^(e - 1)
     out: np.ndarray = np.ldexp(1.0, np.clip(e - 1, -MAX_EXPONENT, MAX_EXPONENT))
     return out
-
-
-def _exactly_scaled(X: np.ndarray, f: np.ndarray) -> np.ndarray | None:
-    """``X f`` (``f`` powers of two, broadcast), or None when a product may have been rounded
-    (below :data:`NORMAL` or not finite where ``f != 1``)."""
-    out: np.ndarray = X * f
-    inexact = (f != 1.0) & (X != 0.0) & ~(np.abs(out) >= NORMAL)
-    return None if inexact.any() or not np.isfinite(out).all() else out
 
 
 def _times(v: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -161,8 +157,8 @@ class Channels:
         n = M.shape[0]
         s = scaling(M)
         inv = 1.0 / s  # exact: powers of two
-        Ms = _exactly_scaled(M, s[None, :] * inv[:, None])  # M̃ = S⁻¹ M S
-        Ls = _exactly_scaled(L, inv[:, None])  # L̃ = S⁻¹ L
+        Ms = exactly_scaled(M, s[None, :] * inv[:, None])  # M̃ = S⁻¹ M S
+        Ls = exactly_scaled(L, inv[:, None])  # L̃ = S⁻¹ L
         if Ms is None or Ls is None:
             s, inv, Ms, Ls = np.ones(n), np.ones(n), M, L
         best: tuple[float, np.ndarray, np.ndarray, float] | None = None

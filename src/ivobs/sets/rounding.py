@@ -39,6 +39,7 @@ __all__ = [
     "decay_of",
     "down",
     "enclose",
+    "exactly_scaled",
     "gamma",
     "mid_rad",
     "overflowed",
@@ -51,6 +52,20 @@ ETA = 2.0**-1074
 """The smallest positive subnormal double (``2η``): a product's underflow error is below it."""
 
 _INF = np.inf
+
+
+NORMAL = 2.0**-1021
+"""A nonzero product of a float by a power of two that is at least this in magnitude was exact
+(had its exact value been below the smallest normal ``2^-1022``, the rounded one would be at
+most ``2^-1022``)."""
+
+
+def exactly_scaled(X: np.ndarray, f: np.ndarray) -> np.ndarray | None:
+    """``X f`` (``f`` powers of two, broadcast), or None when a product may have been rounded
+    (below :data:`NORMAL` or not finite where ``f != 1``)."""
+    out: np.ndarray = X * f
+    inexact = (f != 1.0) & (X != 0.0) & ~(np.abs(out) >= NORMAL)
+    return None if inexact.any() or not np.isfinite(out).all() else out
 
 
 def up(x: Any) -> Any:

@@ -56,8 +56,8 @@ blocks; of an evaluation: ``2 nx cache (N + 1)(ny + nu)`` numbers)."""
 
 MAX_COLUMNS = 5_800
 """Largest program of the choice, in columns ``(N_max + 1)(nx + nd)``: the cost budget that
-bounds ``N_max`` on large systems, so that the 235 steps of that record run in about 5 CPU
-seconds (CORA's 30-tank system, 81 columns a block: ``N_max = 70``)."""
+bounds ``N_max`` on large systems (CORA's 30-tank system, 81 columns a block: ``N_max = 70``;
+its cost per record in BENCHMARKS.md)."""
 
 
 def max_window(nx: int, nd: int) -> int:

@@ -26,7 +26,7 @@ from .highs import (
     check_basis_codes,
     with_saved_bases,
 )
-from .program import TrajectoryLP
+from .program import TrajectoryLP, program_scale
 from .rows import dynamics, measurement, outside_prediction, prediction, widen
 
 __all__ = ["Exact", "ExactDesign", "ExactState", "appended"]
@@ -155,6 +155,7 @@ class Exact(Estimator):
         self.progress = progress
         self.valid_from = 0
         self._warm = WarmStarts()
+        self._x_scale = program_scale(sys.A_at(0), sys.C_at(0), sys.E_at(0), sys.F_at(0))
 
     # -- state ----------------------------------------------------------------------------
     def _initial_state(self) -> ExactState:
@@ -239,7 +240,7 @@ class Exact(Estimator):
         """The program of the kept history (empty at step 0; after ``restore()`` the same
         program), with new HiGHS models."""
         sys, k = self.sys, state.k
-        lp = TrajectoryLP(sys.nx, sys.nd, sys.ny)
+        lp = TrajectoryLP(sys.nx, sys.nd, sys.ny, self._x_scale)
         warm = WarmStartedLP(lp)
         lp.relaxed = bool(state.relaxed)
         m = state.x_lo.shape[0]

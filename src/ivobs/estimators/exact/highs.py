@@ -263,6 +263,7 @@ class Chain:
             # (multipliers of another program, e.g. one whose rows did not fit the model after
             # data beyond the float range, give no bound: the variable bound stays)
             if lam is not None and lam.shape == data.free.shape:
+                lam = self.lp.duals(lam, col)  # of the original rows (HiGHS sees them scaled)
                 out[i] = safe_min(np.where(data.free, 0.0, lam), data, col, self.sense)
         return out, OK
 
@@ -294,7 +295,9 @@ class Chain:
 
     def _certified(self, data: SafeBoundData) -> bool:
         ray = self.prog.dual_ray()
-        return ray is not None and certifies_infeasibility(ray, data)
+        if ray is None or ray.shape != self.lp.row_scale.shape:
+            return False
+        return certifies_infeasibility(self.lp.duals(ray), data)
 
     def sync(self) -> None:
         """Bring the HiGHS model up to date with the program."""
@@ -309,7 +312,7 @@ class Chain:
                 prefix = (
                     np.array_equal(lp.rows[:n], o_rows)
                     and np.array_equal(lp.cols[:n], o_cols)
-                    and np.array_equal(lp.vals[:n], o_vals)
+                    and np.array_equal(lp.hvals[:n], o_vals)
                 )
                 same = prefix and (n_row, n_col, lp.rows.size) == (o_nrow, o_ncol, n)
                 extends = prefix and not same and bool(np.all(lp.rows[n:] >= o_nrow))
@@ -321,7 +324,7 @@ class Chain:
         lo, hi, rlo, rhi = lp.shifted(self.relaxed)
         self.prog.set_bounds(lo, hi)
         self.prog.set_row_bounds(rlo, rhi)
-        self._synced = (lp.rows.copy(), lp.cols.copy(), lp.vals.copy(), n_row, n_col)
+        self._synced = (lp.rows.copy(), lp.cols.copy(), lp.hvals.copy(), n_row, n_col)
 
     def _append(self, o_nrow: int, o_ncol: int) -> None:
         lp = self.lp

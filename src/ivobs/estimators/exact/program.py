@@ -10,12 +10,29 @@ it live in :mod:`~ivobs.estimators.exact.highs`.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from ...design.balance import state_scaling
 from .rows import Dynamics, Measurement
 from .safe import SafeBoundData, bound_data
 
-__all__ = ["TrajectoryLP"]
+__all__ = ["TrajectoryLP", "program_scale"]
+
+
+def program_scale(A: Any, C: Any, E: Any, F: Any) -> np.ndarray:
+    """The state scaling ``x_scale`` of :class:`TrajectoryLP` for a model ``(A, C, E, F)``: the
+    balancing of :func:`~ivobs.design.balance.state_scaling` (powers of two), divided by the
+    power of two nearest its geometric mean (a balanced model keeps the scale 1); ones where
+    the matrices are not finite."""
+    mats = [np.asarray(m.toarray() if hasattr(m, "toarray") else m, dtype=float)
+            for m in (A, C, E, F)]  # fmt: skip
+    dv = state_scaling(*mats)
+    if not np.all(np.isfinite(dv)) or not np.all(dv > 0.0):
+        return np.ones(mats[0].shape[0])
+    out: np.ndarray = dv / np.exp2(np.round(np.mean(np.log2(dv))))
+    return out
 
 
 class TrajectoryLP:
@@ -29,10 +46,24 @@ class TrajectoryLP:
     program HiGHS sees (``z = m + z'``: ``m`` the centre of the interval prediction of ``x[j]``
     and of the box of ``d[j]``, so that HiGHS's absolute tolerances act at the scale of the
     widths, not of ``|x|``).
+
+    HiGHS also sees the program scaled by powers of two, ``z' = S z''`` and each row multiplied
+    by ``r_i``: ``S`` the state scaling ``x_scale`` (the balancing of the model,
+    :func:`~ivobs.design.balance.state_scaling`, so that states of magnitudes ``1e6`` and
+    ``1e-3`` reach it as numbers of the same size) and ``r_i`` the power of two nearest the
+    inverse of the row's largest scaled entry. Its row duals ``λ''`` are those of the original
+    rows times ``r``; :meth:`duals` maps them back. The bounds are the safe bounds (S) of the
+    original program for whatever multipliers come back, so the scaling changes how well HiGHS
+    solves, never what is proven. The scaling is fixed per state (not per step), so that a
+    moving window of a time-invariant system keeps one matrix and its basis.
     """
 
-    def __init__(self, nx: int, nd: int, ny: int):
+    def __init__(self, nx: int, nd: int, ny: int, x_scale: np.ndarray | None = None):
         self.nx, self.nd, self.ny, self.nb = nx, nd, ny, nx + nd
+        self.x_scale = np.ones(nx) if x_scale is None else np.asarray(x_scale, dtype=float)
+        self.col_scale = np.zeros(0)  # S, per column (x: x_scale, d: 1)
+        self.row_scale = np.zeros(0)  # r, per row
+        self.hvals = np.zeros(0)  # the entries HiGHS sees, r_i M_ij S_j
         self.n_dyn: list[int] = []  # dynamics rows of each block
         self.rows = np.zeros(0, dtype=np.int64)
         self.cols = np.zeros(0, dtype=np.int64)
@@ -71,6 +102,7 @@ class TrajectoryLP:
         self.hi = np.concatenate([self.hi, x_bounds[1], d_bounds[1]])
         d_centre = 0.5 * (d_bounds[0] + d_bounds[1])
         self.shift = np.concatenate([self.shift, x_centre, d_centre])
+        self.col_scale = np.concatenate([self.col_scale, self.x_scale, np.ones(nd)])
         if dynamics is not None:
             A, E, bu, tau = dynamics
             dense = np.hstack([-A, -E, np.eye(nx), np.zeros((nx, nd))])
@@ -82,9 +114,16 @@ class TrajectoryLP:
     def _append_rows(self, dense: np.ndarray, col0: int, rhs: np.ndarray, tau: np.ndarray) -> None:
         r, c = np.nonzero(dense)
         free = np.isnan(rhs)
+        scaled = dense * self.col_scale[col0 : col0 + dense.shape[1]]
+        big = np.abs(scaled).max(axis=1, initial=0.0)
+        with np.errstate(divide="ignore"):
+            e = np.where(big > 0.0, np.clip(-np.round(np.log2(big)), -500, 500), 0.0)
+        row_scale = np.exp2(e)
         self.rows = np.concatenate([self.rows, r + self.row_lo.size])
         self.cols = np.concatenate([self.cols, c + col0])
         self.vals = np.concatenate([self.vals, dense[r, c]])
+        self.hvals = np.concatenate([self.hvals, scaled[r, c] * row_scale[r]])
+        self.row_scale = np.concatenate([self.row_scale, row_scale])
         self.rhs = np.concatenate([self.rhs, rhs])
         self.row_lo = np.concatenate([self.row_lo, np.where(free, -np.inf, rhs - tau)])
         self.row_hi = np.concatenate([self.row_hi, np.where(free, np.inf, rhs + tau)])
@@ -97,12 +136,12 @@ class TrajectoryLP:
         keep = self.rows >= n_del
         self.rows = self.rows[keep] - n_del
         self.cols = self.cols[keep] - self.nb
-        self.vals = self.vals[keep]
+        self.vals, self.hvals = self.vals[keep], self.hvals[keep]
         self.row_lo, self.row_hi = self.row_lo[n_del:], self.row_hi[n_del:]
         self.rhs = self.rhs[n_del:]
-        self.row_shift = self.row_shift[n_del:]
+        self.row_shift, self.row_scale = self.row_shift[n_del:], self.row_scale[n_del:]
         self.lo, self.hi = self.lo[self.nb :], self.hi[self.nb :]
-        self.shift = self.shift[self.nb :]
+        self.shift, self.col_scale = self.shift[self.nb :], self.col_scale[self.nb :]
         self.n_dyn.pop(0)
         self.n_dyn[0] = 0
 
@@ -118,7 +157,9 @@ class TrajectoryLP:
         first = self.row_lo.size - self.ny
         keep = self.rows < first
         self.rows, self.cols, self.vals = self.rows[keep], self.cols[keep], self.vals[keep]
+        self.hvals = self.hvals[keep]
         self.rhs, self.row_shift = self.rhs[:first], self.row_shift[:first]
+        self.row_scale = self.row_scale[:first]
         self.row_lo, self.row_hi = self.row_lo[:first], self.row_hi[:first]
         C, F, rhs, tau = measurement
         self._append_rows(np.hstack([C, F]), self.lo.size - self.nb, rhs, tau)
@@ -143,15 +184,24 @@ class TrajectoryLP:
         self, relaxed: bool, col0: int = 0, row0: int = 0
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Variable bounds (from column ``col0``) and row bounds (from row ``row0``) of the
-        program HiGHS sees, ``z' = z - m``: the equalities ``a_i^T z = rhs_i`` (ranged rows
-        slow the simplex down by a third), or the ranges ``rhs_i ± tau_i`` if ``relaxed``."""
+        program HiGHS sees, ``z'' = S⁻¹ (z - m)``, rows times ``r``: the equalities ``a_i^T z
+        = rhs_i`` (ranged rows slow the simplex down by a third), or the ranges ``rhs_i ±
+        tau_i`` if ``relaxed``."""
         s, rs = self.shift[col0:], self.row_shift[row0:]
-        lo, hi = self.lo[col0:] - s, self.hi[col0:] - s
+        cs, r = self.col_scale[col0:], self.row_scale[row0:]
+        lo, hi = (self.lo[col0:] - s) / cs, (self.hi[col0:] - s) / cs
         if relaxed:
-            return lo, hi, self.row_lo[row0:] - rs, self.row_hi[row0:] - rs
-        mid = self.rhs[row0:] - rs
+            return lo, hi, (self.row_lo[row0:] - rs) * r, (self.row_hi[row0:] - rs) * r
+        mid = (self.rhs[row0:] - rs) * r
         free = np.isnan(mid)
         return lo, hi, np.where(free, -np.inf, mid), np.where(free, np.inf, mid)
+
+    def duals(self, lam: np.ndarray, col: int | None = None) -> np.ndarray:
+        """Multipliers of the original rows from the row duals (or a dual ray) of the program
+        HiGHS sees: ``r λ''``, times the scale of the objective's column ``col`` (the scaled
+        program's objective is ``z''_col = z_col / S_col`` up to a constant)."""
+        out: np.ndarray = lam * self.row_scale
+        return out if col is None else out * self.col_scale[col]
 
     def csr(self, start: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         """Rows ``start..`` of the matrix in CSR form: ``(number of rows, starts, columns,
@@ -160,4 +210,4 @@ class TrajectoryLP:
         r = self.rows[sel] - start
         m = self.row_lo.size - start
         starts = np.searchsorted(r, np.arange(m)).astype(np.int32)
-        return m, starts, self.cols[sel].astype(np.int32), self.vals[sel]
+        return m, starts, self.cols[sel].astype(np.int32), self.hvals[sel]

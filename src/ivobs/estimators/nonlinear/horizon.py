@@ -95,7 +95,7 @@ from ..exact.highs import (
     check_basis_codes,
     with_saved_bases,
 )
-from ..exact.program import TrajectoryLP
+from ..exact.program import TrajectoryLP, program_scale
 from ..exact.rows import Dynamics, Measurement, widen
 from ..state import OnlineState, Step, dump_state, load_state
 from .czonotope import (
@@ -276,6 +276,7 @@ class NonlinearHorizonEstimator(Estimator):
         self.inner = NonlinearConstrainedZonotopeEstimator(model, self.x0, on_inconsistent="ignore")
         self._wlo, self._whi = model.w_box.lo.copy(), model.w_box.hi.copy()
         self._warm = WarmStarts()
+        self._x_scale = _scale_at_prior(model, self.x0)
 
     # -- state ----------------------------------------------------------------------------
     def _initial_state(self) -> NonlinearHorizonState:
@@ -369,7 +370,7 @@ class NonlinearHorizonEstimator(Estimator):
     def _rebuild(self, state: NonlinearHorizonState) -> WarmStartedLP:
         """The program of the kept window (empty at step 0), with new HiGHS models."""
         sys = self.model
-        lp = TrajectoryLP(sys.nx, sys.nw, sys.ny)
+        lp = TrajectoryLP(sys.nx, sys.nw, sys.ny, self._x_scale)
         lp.relaxed = True  # the rows are ranges of linearisation remainders, not roundings
         warm = WarmStartedLP(lp)
         wlo, whi = self._wlo, self._whi
@@ -417,3 +418,22 @@ class NonlinearHorizonEstimator(Estimator):
             )
         check_basis_codes(st)
         return replace(st, inner=inner)
+
+
+def _scale_at_prior(sys: Any, x0: Box | None) -> np.ndarray | None:
+    """The state scaling of the window program HiGHS sees
+    (:class:`~ivobs.estimators.exact.program.TrajectoryLP`): the balancing of the model's
+    Jacobians at the centre of the prior box and of the unknowns' box (None: where they are not
+    finite, or cannot be evaluated)."""
+    if x0 is None or not (np.isfinite(x0.lo).all() and np.isfinite(x0.hi).all()):
+        return None
+    c = 0.5 * x0.lo + 0.5 * x0.hi
+    w = 0.5 * sys.w_box.lo + 0.5 * sys.w_box.hi
+    u = np.zeros(sys.nu)
+    try:
+        f, h = sys.f_jac_box(c, c, u, w, w), sys.h_jac_box(c, c, u, w, w)
+    except IvobsError:
+        return None
+    A, E, C, F = (0.5 * lo + 0.5 * hi for lo, hi in ((f[0], f[1]), (f[2], f[3]), (h[0], h[1]),
+                                                      (h[2], h[3])))  # fmt: skip
+    return program_scale(A, C, E, F)
