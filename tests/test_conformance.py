@@ -13,29 +13,27 @@ import pytest
 import ivobs
 from ivobs.testing import check_estimator, conformance_plants, exact_misses, exact_run
 
-UNSCALED = {"ellipsoid"}
-"""Methods that lose their tightness on the badly scaled plant (coordinates 1e6 and 1e-3), a
-documented limitation tested below: the ellipsoid's trace criterion is not invariant under a
-scaling of the coordinates (it diverges: docs/ellipsoid.md)."""
-
 
 @pytest.mark.parametrize("method", ivobs.methods())
 def test_every_method_passes_the_conformance_checks(method):
     plants = conformance_plants(0)
-    if method in UNSCALED:
-        del plants["scaled"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         report = check_estimator(method, steps=80, plants=plants)
     assert report.checked and report.steps >= 80 * 3
 
 
-@pytest.mark.parametrize("method", ["exact", "dual-window", "nl-horizon"])
-def test_the_lp_methods_stay_tight_on_badly_scaled_coordinates(method):
-    # the programs HiGHS sees are scaled by the model's balancing (exact, nl-horizon) and
-    # dual-window works in the balanced coordinates: without that, exact kept its wrapping
-    # fallback (4e6, 4, 4e-3 wide after 15 steps), dual-window's certificates put the large
-    # state's rounding on the small ones (1e282 wide after 200 steps)
+@pytest.mark.parametrize(
+    ("method", "limit"),
+    [("exact", 1.01), ("dual-window", 1.01), ("nl-horizon", 1.01), ("ellipsoid", 3.5)],
+)
+def test_the_norm_and_lp_methods_stay_tight_on_badly_scaled_coordinates(method, limit):
+    # the programs HiGHS sees are scaled by the model's balancing (exact, nl-horizon);
+    # dual-window and ellipsoid work in the balanced coordinates. Without that, exact kept its
+    # wrapping fallback (4e6, 4, 4e-3 wide after 15 steps), dual-window's certificates put the
+    # large state's rounding on the small ones (1e282 wide after 200 steps), nl-horizon's
+    # HiGHS solves stalled for minutes and the ellipsoid's trace, weighing the large state
+    # alone, overflowed
     sys, x0 = conformance_plants(0)["scaled"]
     T = 60
     rng = np.random.default_rng(1)
@@ -47,23 +45,10 @@ def test_the_lp_methods_stay_tight_on_badly_scaled_coordinates(method):
         res = ivobs.make_estimator(method, sys, x0=x0).run(U, Y)
         cz = ivobs.make_estimator("constrained-zonotope", sys, x0=x0).run(U, Y)
     assert exact_misses(res.lower, res.upper, X).size == 0
-    # per state, late: each within 1 % of constrained-zonotope's (which is within 1e-3 of the
-    # exact hull here; measured 1.000-1.003)
+    # per state, late, against constrained-zonotope's (within 1e-3 of the exact hull here):
+    # measured 1.000 for the LP methods, 2.5-2.9 for the ellipsoid
     ratio = res.width[T // 2 :].mean(axis=0) / cz.width[T // 2 :].mean(axis=0)
-    assert np.all(ratio < 1.01), ratio
-
-
-def test_the_ellipsoid_on_badly_scaled_coordinates_stops_with_a_clear_error():
-    sys, x0 = conformance_plants(0)["scaled"]
-    T = 150
-    rng = np.random.default_rng(1)
-    d = np.where(rng.integers(0, 2, size=(T, sys.nd)).astype(bool), sys.d.hi, sys.d.lo)
-    tr = ivobs.simulate(sys, x0.hi, u=np.zeros((T, sys.nu)), d=d)
-    est = ivobs.make_estimator("ellipsoid", sys, x0=x0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with pytest.raises(ivobs.IvobsError, match="overflowed"):
-            est.run(tr.u, tr.y)
+    assert np.all(ratio < limit), ratio
 
 
 def test_a_method_that_misses_is_caught():

@@ -57,6 +57,7 @@ from ..model.nonlinear._runtime import up as _up
 from ..sets import Box
 from ..sets.rounding import down, mid_rad, up, upper
 from . import register
+from ._balanced import balanced, unbalanced
 from .base import Design, Estimator, check_size
 from .state import OnlineState, Step, evolve
 
@@ -140,9 +141,11 @@ def box_ellipsoid(G: np.ndarray, r: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class EllipsoidDesign(Design):
     """``Q_w``: the ellipsoid of the process disturbance ``E d`` (constant bounds; ``None``
-    when the bounds vary with ``k``)."""
+    when the bounds vary with ``k``); ``x_scale``: the balanced coordinates ``x = diag(x_scale)
+    x̃`` the filter works in (None: ``x`` itself)."""
 
     Q_w: np.ndarray | None
+    x_scale: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -200,6 +203,11 @@ class EllipsoidEstimator(Estimator):
     ----------
     sys : LinearSystem (discrete time, time-invariant matrices; bounds may vary with ``k``)
     x0 : Box, the prior box on ``x[0]``
+
+    The filter works in the model's balanced coordinates (:mod:`ivobs.estimators._balanced`):
+    the trace it minimises is not invariant under a change of units, and on states near
+    ``1e6`` and ``1e-3`` it would weigh the large one alone (the ellipsoid then grew until it
+    overflowed).
     """
 
     name = "ellipsoid"
@@ -213,20 +221,20 @@ class EllipsoidEstimator(Estimator):
     def __init__(self, sys: LinearSystem, x0: Box | None = None, **options: Any) -> None:
         super().__init__(sys, x0, **options)
         check_size(self.name, sys.nx, "multiplies dense nx x nx matrices (O(nx^3) work)")
-        self._mats = sys.matrices_at(0)
+        assert self.x0 is not None
+        self._mats, self._x0s, self._scale = balanced(sys.matrices_at(0), self.x0)
         self._abs = tuple(np.abs(M) for M in self._mats)
         Q_w, self._d = None, None
         if sys.has_constant_bounds and sys.nd:
             self._d = mid_rad(sys.d_at(0).lo, sys.d_at(0).hi)
             Q_w = box_ellipsoid(self._mats[4], self._d[1])
-        self.design = EllipsoidDesign(Q_w=Q_w)
+        self.design = EllipsoidDesign(Q_w=Q_w, x_scale=self._scale)
         # a float64 evaluation of either equation: dot products of nx + nu + nd terms
         self._g_plant = gamma(sys.nx + sys.nu + sys.nd + 1)
 
     # -- online ----------------------------------------------------------------------------
     def _initial_state(self) -> EllipsoidState:
-        assert self.x0 is not None
-        c, r = mid_rad(self.x0.lo, self.x0.hi)  # the box is inside c ± r: c is exact
+        c, r = mid_rad(self._x0s.lo, self._x0s.hi)  # the box is inside c ± r: c is exact
         return EllipsoidState(c=c, Q=box_ellipsoid(np.eye(self.sys.nx), r))
 
     def _disturbance(
@@ -248,7 +256,7 @@ class EllipsoidEstimator(Estimator):
         cd, rd, Q_w = self._disturbance(state.k, y_k)
         c, Q, inconsistent = self._update(state.c, state.Q, u_k, y_k, cd, rd)
         rad = up(np.sqrt(np.maximum(np.diag(Q), 0.0)))
-        lo, hi = down(c - rad), up(c + rad)
+        lo, hi = unbalanced(down(c - rad), up(c + rad), self._scale)
         c_next, Q_next = self._predict(c, Q, rad, u_k, cd, rd, Q_w)
         return Step(evolve(state, c=c_next, Q=Q_next), lo, hi, inconsistent)
 

@@ -16,11 +16,10 @@ from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box
 from ...sets.lp import basis_codes
-from ...sets.rounding import down, exactly_scaled, up
 from .. import register
+from .._balanced import balanced, unbalanced
 from .._uncertain import magnitude as mag
 from ..base import Design, Estimator, check_size
-from ..exact.program import program_scale
 from ..state import OnlineState, Step
 from .auto import choose_window
 from .certificate import Coefficients, Layout, Predictor, coefficients, data_vector, upper_bounds
@@ -136,13 +135,8 @@ class DualWindow(Estimator):
 
     **Scaling.** The certificate bounds its rounding through norms of the data and of the
     states (:mod:`ivobs.estimators.dual_window.certificate`), which would put the rounding of a
-    state of magnitude ``1e6`` on a state of magnitude ``1e-3``. The method therefore works in
-    the model's balanced coordinates ``x = S x̃`` (``S`` the powers of two of
-    :func:`~ivobs.estimators.exact.program.program_scale`): ``Ã = S⁻¹ A S``, ``B̃ = S⁻¹ B``,
-    ``C̃ = C S``, ``Ẽ = S⁻¹ E``, the prior ``S⁻¹ x0``, each a product by powers of two that is
-    exact (checked; where it is not, ``S = I``), and returns ``S x̃``'s box, rounded outward
-    where a product by ``S`` may underflow. The model is the same, so every bound holds as
-    before.
+    state of magnitude ``1e6`` on a state of magnitude ``1e-3``: the method works in the
+    model's balanced coordinates (:mod:`ivobs.estimators._balanced`).
     """
 
     name = "dual-window"
@@ -183,7 +177,7 @@ class DualWindow(Estimator):
         d = sys.d_at(0)
         self.d_lo, self.d_hi = np.asarray(d.lo, dtype=float), np.asarray(d.hi, dtype=float)
         assert self.x0 is not None
-        self.mats, x0s, scale = _balanced(mats, self.x0)
+        self.mats, x0s, scale = balanced(mats, self.x0)
         self._x0s, self._scale = x0s, scale
         if isinstance(window, str) and window == "auto":
             N, eta = choose_window(self.mats, self.d_lo, self.d_hi, x0s.hi - x0s.lo)
@@ -322,8 +316,7 @@ class DualWindow(Estimator):
         x_lo[-1], x_hi[-1] = lo, hi
         new = DualWindowState(data=data, y_rad=y_rad, x_lo=x_lo, x_hi=x_hi, mu=mu, used=used,
                               since=since, basis=basis, period=period)  # fmt: skip
-        if self._scale is not None:  # back to x = S x̃ (class docstring, "Scaling")
-            lo, hi = _times(lo, self._scale, down), _times(hi, self._scale, up)
+        lo, hi = unbalanced(lo, hi, self._scale)  # x = S x̃ (class docstring, "Scaling")
         return Step(new, lo, hi, inconsistent and not missing)
 
     def _adapt(self, period: int, stale: np.ndarray, fresh: np.ndarray) -> int:
@@ -451,36 +444,3 @@ class DualWindow(Estimator):
 
 
 _NO_BASIS = np.zeros(0, dtype=np.int8)
-
-
-def _balanced(
-    mats: tuple[np.ndarray, ...], x0: Box
-) -> tuple[tuple[np.ndarray, ...], Box, np.ndarray | None]:
-    """The model and the prior in the balanced coordinates ``x = S x̃`` (class docstring,
-    "Scaling"), and ``s``; the given ones and None where ``S = I`` or a product by ``S`` would
-    not be exact."""
-    A, B, C, D, E, F = mats
-    s = program_scale(A, C, E, F)
-    if np.all(s == 1.0):
-        return mats, x0, None
-    inv = 1.0 / s
-    parts = (
-        exactly_scaled(A, inv[:, None] * s[None, :]),
-        exactly_scaled(B, inv[:, None]),
-        exactly_scaled(C, s[None, :]),
-        exactly_scaled(E, inv[:, None]),
-        exactly_scaled(x0.lo, inv),
-        exactly_scaled(x0.hi, inv),
-    )
-    As, Bs, Cs, Es, lo, hi = parts
-    if As is None or Bs is None or Cs is None or Es is None or lo is None or hi is None:
-        return mats, x0, None
-    return (As, Bs, Cs, D, Es, F), Box(lo, hi), s
-
-
-def _times(v: np.ndarray, s: np.ndarray, outward: Any) -> np.ndarray:
-    """``v s`` for ``s`` powers of two: exact, but where ``s < 1`` it may underflow, so
-    rounded ``outward`` there."""
-    out = v * s
-    rounded: np.ndarray = np.where(s < 1.0, outward(out), out)
-    return rounded
