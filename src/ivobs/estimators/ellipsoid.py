@@ -204,6 +204,8 @@ class EllipsoidEstimator(Estimator):
     sys : LinearSystem (discrete time, time-invariant matrices; bounds may vary with ``k``)
     x0 : Box, the prior box on ``x[0]``
 
+    Notes
+    -----
     The filter works in the model's balanced coordinates (:mod:`ivobs.estimators._balanced`):
     the trace it minimises is not invariant under a change of units, and on states near
     ``1e6`` and ``1e-3`` it would weigh the large one alone (the ellipsoid then grew until it
