@@ -7,7 +7,9 @@ E_k w_k`` an input with ``B = I`` (and the same for ``h``), the same bounds on `
 hull a method that knew the linearisation points exactly would give from the same data: the
 reference the window's linearisation over proven boxes tends to.
 
-Run: ``python benchmarks/bench_nl_horizon.py [--steps 1000] [--scenarios range-only ...]``.
+Run: ``python benchmarks/bench_nl_horizon.py [--steps 1000] [--scenarios range-only ...]``;
+``--one-beacon``: ``range-only`` with its first beacon alone (the weakly observable case where
+every method drifts, docs/nonlinear.md).
 Prints, per scenario: the mean width per state over the late half, the ratios, the misses
 (true state outside the box) and the steps per second.
 """
@@ -15,6 +17,7 @@ Prints, per scenario: the mean width per state over the late half, the ratios, t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -25,6 +28,7 @@ import numpy as np
 
 import ivobs
 from ivobs.scenarios import registry
+from ivobs.scenarios.nonlinear import RANGE_BEACONS, range_only_system
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from linearised import linearised_along
@@ -49,10 +53,14 @@ def main() -> None:
     ap.add_argument("--kinds", nargs="+", default=["vertex", "uniform"])
     ap.add_argument("--window", type=int, default=None)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--one-beacon", action="store_true", help="range-only with one beacon")
     args = ap.parse_args()
     for scen in args.scenarios:
         for kind in args.kinds:
             sc = registry.get(scen, horizon=args.steps)
+            if args.one_beacon and scen == "range-only":
+                one = range_only_system(beacons=RANGE_BEACONS[:1])
+                sc = dataclasses.replace(sc, system=one)
             tr = sc.simulate(kind, seed=args.seed)
             sys = sc.system
             win = {} if args.window is None else {"window": args.window}
