@@ -28,7 +28,8 @@ def program_scale(A: Any, C: Any, E: Any, F: Any) -> np.ndarray:
     the matrices are not finite."""
     mats = [np.asarray(m.toarray() if hasattr(m, "toarray") else m, dtype=float)
             for m in (A, C, E, F)]  # fmt: skip
-    dv = state_scaling(*mats)
+    with np.errstate(all="ignore"):  # (gebal on extreme entries: checked below)
+        dv = state_scaling(*mats)
     if not np.all(np.isfinite(dv)) or not np.all(dv > 0.0):
         return np.ones(mats[0].shape[0])
     out: np.ndarray = dv / np.exp2(np.round(np.mean(np.log2(dv))))
