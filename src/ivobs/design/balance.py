@@ -40,6 +40,9 @@ def state_scaling(
             M[n + m :, n : n + m] = np.abs(F)
     if not np.all(np.isfinite(M)) or not np.any(M):
         return np.ones(n)
-    _, (scale, _perm) = matrix_balance(M, permute=False, separate=True)
+    with np.errstate(all="ignore"):  # gebal on entries near the float range: checked below
+        _, (scale, _perm) = matrix_balance(M, permute=False, separate=True)
     dv: np.ndarray = np.asarray(scale[:n], dtype=float)
+    if not (np.all(np.isfinite(dv)) and np.all(dv > 0.0)):
+        return np.ones(n)
     return dv

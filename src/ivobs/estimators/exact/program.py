@@ -24,14 +24,12 @@ __all__ = ["TrajectoryLP", "program_scale"]
 def program_scale(A: Any, C: Any, E: Any, F: Any) -> np.ndarray:
     """The state scaling ``x_scale`` of :class:`TrajectoryLP` for a model ``(A, C, E, F)``: the
     balancing of :func:`~ivobs.design.balance.state_scaling` (powers of two), divided by the
-    power of two nearest its geometric mean (a balanced model keeps the scale 1); ones where
-    the matrices are not finite."""
+    power of two nearest its geometric mean (a balanced model keeps the scale 1)."""
     mats = [np.asarray(m.toarray() if hasattr(m, "toarray") else m, dtype=float)
             for m in (A, C, E, F)]  # fmt: skip
-    with np.errstate(all="ignore"):  # (gebal on extreme entries: checked below)
-        dv = state_scaling(*mats)
-    if not np.all(np.isfinite(dv)) or not np.all(dv > 0.0):
-        return np.ones(mats[0].shape[0])
+    dv = state_scaling(*mats)
+    if not dv.size:
+        return dv
     out: np.ndarray = dv / np.exp2(np.round(np.mean(np.log2(dv))))
     return out
 
