@@ -1,14 +1,13 @@
-"""The balanced coordinates of ivobs.estimators._balanced and the scaled program of
-ivobs.estimators.exact.program: exact products by powers of two, a fallback where they would
-not be exact, and the box of x from that of the balanced state rounded outward."""
+"""The balanced coordinates of ivobs.estimators._balanced: exact products by powers of two, a
+fallback where they would not be exact, and the box of x from that of the balanced state
+rounded outward."""
 
 from __future__ import annotations
 
 import numpy as np
 
 import ivobs
-from ivobs.estimators._balanced import balanced, unbalanced
-from ivobs.estimators.exact.program import program_scale
+from ivobs.estimators._balanced import balanced, balancing, unbalanced
 from ivobs.testing import conformance_plants
 
 
@@ -54,7 +53,7 @@ def test_a_balanced_model_and_an_inexact_scaling_keep_the_coordinates():
     A = np.array([[0.5, 1e-300], [1e300, 0.5]])
     tiny = (A, np.zeros((2, 1)), np.array([[1.0, 1.0]]), np.zeros((1, 1)), np.eye(2),
             np.zeros((1, 2)))  # fmt: skip
-    assert np.any(program_scale(A, tiny[2], tiny[4], tiny[5]) != 1.0)
+    assert np.any(balancing(A, tiny[2], tiny[4], tiny[5]) != 1.0)
     assert balanced(tiny, ivobs.Box([-1.0, -1.0], [1.0, 1.0]))[2] is not None
     # ... but the prior's 1e-300 would leave the normal range: the coordinates are kept
     _, b1, s1 = balanced(tiny, ivobs.Box([-1.0, 1e-300], [1.0, 1.0]))

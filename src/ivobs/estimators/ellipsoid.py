@@ -224,13 +224,13 @@ class EllipsoidEstimator(Estimator):
         super().__init__(sys, x0, **options)
         check_size(self.name, sys.nx, "multiplies dense nx x nx matrices (O(nx^3) work)")
         assert self.x0 is not None
-        self._mats, self._x0s, self._scale = balanced(sys.matrices_at(0), self.x0)
+        self._mats, self._x0s, scale = balanced(sys.matrices_at(0), self.x0)
         self._abs = tuple(np.abs(M) for M in self._mats)
         Q_w, self._d = None, None
         if sys.has_constant_bounds and sys.nd:
             self._d = mid_rad(sys.d_at(0).lo, sys.d_at(0).hi)
             Q_w = box_ellipsoid(self._mats[4], self._d[1])
-        self.design = EllipsoidDesign(Q_w=Q_w, x_scale=self._scale)
+        self.design = EllipsoidDesign(Q_w=Q_w, x_scale=scale)
         # a float64 evaluation of either equation: dot products of nx + nu + nd terms
         self._g_plant = gamma(sys.nx + sys.nu + sys.nd + 1)
 
@@ -258,7 +258,7 @@ class EllipsoidEstimator(Estimator):
         cd, rd, Q_w = self._disturbance(state.k, y_k)
         c, Q, inconsistent = self._update(state.c, state.Q, u_k, y_k, cd, rd)
         rad = up(np.sqrt(np.maximum(np.diag(Q), 0.0)))
-        lo, hi = unbalanced(down(c - rad), up(c + rad), self._scale)
+        lo, hi = unbalanced(down(c - rad), up(c + rad), self.design.x_scale)
         c_next, Q_next = self._predict(c, Q, rad, u_k, cd, rd, Q_w)
         return Step(evolve(state, c=c_next, Q=Q_next), lo, hi, inconsistent)
 

@@ -177,10 +177,9 @@ class DualWindow(Estimator):
         d = sys.d_at(0)
         self.d_lo, self.d_hi = np.asarray(d.lo, dtype=float), np.asarray(d.hi, dtype=float)
         assert self.x0 is not None
-        self.mats, x0s, scale = balanced(mats, self.x0)
-        self._x0s, self._scale = x0s, scale
+        self.mats, self._x0s, scale = balanced(mats, self.x0)
         if isinstance(window, str) and window == "auto":
-            N, eta = choose_window(self.mats, self.d_lo, self.d_hi, x0s.hi - x0s.lo)
+            N, eta = choose_window(self.mats, self.d_lo, self.d_hi, self._x0s.hi - self._x0s.lo)
             rule, influence = "auto", (eta if np.isfinite(eta) else None)
         else:  # (as_int refuses any other string)
             N, rule, influence = as_int("window", window, 1), "given", None
@@ -316,7 +315,7 @@ class DualWindow(Estimator):
         x_lo[-1], x_hi[-1] = lo, hi
         new = DualWindowState(data=data, y_rad=y_rad, x_lo=x_lo, x_hi=x_hi, mu=mu, used=used,
                               since=since, basis=basis, period=period)  # fmt: skip
-        lo, hi = unbalanced(lo, hi, self._scale)  # x = S x̃ (class docstring, "Scaling")
+        lo, hi = unbalanced(lo, hi, self.design.x_scale)  # x = S x̃ (class docstring, "Scaling")
         return Step(new, lo, hi, inconsistent and not missing)
 
     def _adapt(self, period: int, stale: np.ndarray, fresh: np.ndarray) -> int:

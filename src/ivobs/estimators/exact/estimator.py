@@ -16,6 +16,7 @@ from ...errors import IvobsError
 from ...model import LinearSystem
 from ...sets import Box
 from .. import register
+from .._balanced import balancing
 from ..base import Design, Estimator, check_size
 from ..state import OnlineState, Step
 from .highs import (
@@ -26,7 +27,7 @@ from .highs import (
     check_basis_codes,
     with_saved_bases,
 )
-from .program import TrajectoryLP, program_scale
+from .program import TrajectoryLP
 from .rows import dynamics, measurement, outside_prediction, prediction, widen
 
 __all__ = ["Exact", "ExactDesign", "ExactState", "appended"]
@@ -155,7 +156,7 @@ class Exact(Estimator):
         self.progress = progress
         self.valid_from = 0
         self._warm = WarmStarts()
-        self._x_scale = program_scale(sys.A_at(0), sys.C_at(0), sys.E_at(0), sys.F_at(0))
+        self._x_scale = balancing(sys.A_at(0), sys.C_at(0), sys.E_at(0), sys.F_at(0))
 
     # -- state ----------------------------------------------------------------------------
     def _initial_state(self) -> ExactState:

@@ -10,28 +10,12 @@ it live in :mod:`~ivobs.estimators.exact.highs`.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from ...design.balance import state_scaling
 from .rows import Dynamics, Measurement
 from .safe import SafeBoundData, bound_data
 
-__all__ = ["TrajectoryLP", "program_scale"]
-
-
-def program_scale(A: Any, C: Any, E: Any, F: Any) -> np.ndarray:
-    """The state scaling ``x_scale`` of :class:`TrajectoryLP` for a model ``(A, C, E, F)``: the
-    balancing of :func:`~ivobs.design.balance.state_scaling` (powers of two), divided by the
-    power of two nearest its geometric mean (a balanced model keeps the scale 1)."""
-    mats = [np.asarray(m.toarray() if hasattr(m, "toarray") else m, dtype=float)
-            for m in (A, C, E, F)]  # fmt: skip
-    dv = state_scaling(*mats)
-    if not dv.size:
-        return dv
-    out: np.ndarray = dv / np.exp2(np.round(np.mean(np.log2(dv))))
-    return out
+__all__ = ["TrajectoryLP"]
 
 
 class TrajectoryLP:
@@ -48,7 +32,7 @@ class TrajectoryLP:
 
     HiGHS also sees the program scaled by powers of two, ``z' = S z''`` and each row multiplied
     by ``r_i``: ``S`` the state scaling ``x_scale`` (the balancing of the model,
-    :func:`~ivobs.design.balance.state_scaling`, so that states of magnitudes ``1e6`` and
+    :func:`~ivobs.estimators._balanced.balancing`, so that states of magnitudes ``1e6`` and
     ``1e-3`` reach it as numbers of the same size) and ``r_i`` the power of two nearest the
     inverse of the row's largest scaled entry. Its row duals ``λ''`` are those of the original
     rows times ``r``; :meth:`duals` maps them back. The bounds are the safe bounds (S) of the

@@ -85,6 +85,7 @@ from ...linalg import gamma
 from ...sets import Box
 from ...sets.rounding import ETA, UNIT_ROUNDOFF, down, up
 from .. import register
+from .._balanced import balancing
 from ..base import Design, Estimator, check_size
 from ..exact.estimator import appended
 from ..exact.highs import (
@@ -95,7 +96,7 @@ from ..exact.highs import (
     check_basis_codes,
     with_saved_bases,
 )
-from ..exact.program import TrajectoryLP, program_scale
+from ..exact.program import TrajectoryLP
 from ..exact.rows import Dynamics, Measurement, widen
 from ..state import OnlineState, Step, dump_state, load_state
 from .czonotope import (
@@ -436,4 +437,4 @@ def _scale_at_prior(sys: Any, x0: Box | None) -> np.ndarray | None:
         return None
     A, E, C, F = (0.5 * lo + 0.5 * hi for lo, hi in ((f[0], f[1]), (f[2], f[3]), (h[0], h[1]),
                                                       (h[2], h[3])))  # fmt: skip
-    return program_scale(A, C, E, F)
+    return balancing(A, C, E, F)

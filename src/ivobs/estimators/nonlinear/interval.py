@@ -292,11 +292,10 @@ class NonlinearIntervalEstimator(Estimator):
         self.design = NonlinearIntervalDesign(
             lag=lag, window=window, w_lo=w.lo.copy(), w_hi=w.hi.copy(), model=int(digest[:12], 16)
         )
-        self._f_evals = sys.evaluators("f") if window else None
-        # the centred form back through f, on the rows where HC4 is not already the tightest
-        self._fb_rows = sys.f_repeated_rows() if lag and not isinstance(sys, FlowSystem) else []
-        self._fb_evals = sys.evaluators("f") if self._fb_rows else None
         self._flow = isinstance(sys, FlowSystem)
+        # the centred form back through f, on the rows where HC4 is not already the tightest
+        self._fb_rows = sys.f_repeated_rows() if lag and not self._flow else []
+        self._f_evals = sys.evaluators("f") if window or self._fb_rows else None
         self._h_evals = sys.evaluators("h") if window and sys.ny else None
         self._wl, self._wh = w.lo.tolist(), w.hi.tolist()
         self._hf = sys.hf_contractors() if lag == 1 and sys.ny else None
@@ -628,10 +627,11 @@ class NonlinearIntervalEstimator(Estimator):
         """The box ``[zl, zh]`` of ``(x[j], w[j])`` contracted in place with ``f(x[j], u[j],
         w[j]) ∈ [tl, th]`` by the centred form of ``f`` over it
         (:func:`~.meanvalue.contract_centred`); False when it becomes empty."""
-        if self._fb_evals is None or not all(map(math.isfinite, zl + zh)):
+        if not self._fb_rows or not all(map(math.isfinite, zl + zh)):
             return True
+        assert self._f_evals is not None
         c = np.array([0.5 * a + 0.5 * b for a, b in zip(zl, zh)])
-        lin = linearise(self._fb_evals, zl, zh, c, np.array(u, dtype=float), self.model.nx, False)
+        lin = linearise(self._f_evals, zl, zh, c, np.array(u, dtype=float), self.model.nx, False)
         return contract_centred(lin, zl, zh, tl, th, self._fb_rows)
 
     def _back(
