@@ -40,11 +40,11 @@ _COUNT = {"solves": 0}
 def _counting_solve() -> Any:
     original = lp_module.LinearProgram.solve
 
-    def solve(self: lp_module.LinearProgram, primal: bool = False) -> str:
+    def solve(self: lp_module.LinearProgram, primal: bool = False, devex: bool = False) -> str:
         # a block program of K copies (the constrained zonotope's small hulls) counts K
         n_obj = max(1, int(getattr(self, "_objectives", 1)))
         _COUNT["solves"] += n_obj
-        return original(self, primal)
+        return original(self, primal, devex)
 
     return solve
 

@@ -239,6 +239,48 @@ def test_hull_with_extra_objectives_matches_linprog_and_certifies_them(seed: int
     assert np.all(after[6:8] <= opt2 + 1e-9)
 
 
+@pytest.mark.parametrize("seed", range(2))
+def test_prediction_bounds_combined_from_the_box_are_sound_and_near_their_optimum(
+    monkeypatch, seed: int
+) -> None:
+    """On a set too large for one block program, the bounds of ``P = M G + Q`` are first
+    certified by combining the box's multipliers: every one is below the optimum of its
+    program and none is further from it than ``COMBINED_GAP`` of ``P``'s width. Rows of ``M``
+    with one entry (``Q`` in factors of no constraint) combine exactly and are not solved for;
+    rows that mix the coordinates combine loosely (10-50 % of the width here) and are."""
+    from scipy.optimize import linprog
+
+    from ivobs.sets.czonotope import hull
+
+    rng = np.random.default_rng(400 + seed)
+    n, m, nc, half = 6, 180, 110, 3
+    z = random_cz(rng, n=n, m=m, nc=nc)
+    G = np.hstack([z.G, np.zeros((n, 8))])  # 8 new factors, in P only (the E R of a filter)
+    A = np.hstack([z.A, np.zeros((nc, 8))])
+    M = np.diag(rng.uniform(-2.0, 2.0, n))
+    M[half:] = rng.normal(size=(n - half, n))
+    P = M @ G + np.hstack([np.zeros((n, m)), 0.05 * rng.normal(size=(n, 8))])
+    assert 2 * n * (m + 8) > hull.BLOCK_SIZE  # the regime where each bound is a solve
+    solved = []
+    real = hull._certified_mins
+
+    def counting(Gs, A_, b_, radius, chains, warm=False, points=False):
+        solved.append(Gs.shape[0])
+        return real(Gs, A_, b_, radius, chains, warm, points)
+
+    monkeypatch.setattr(hull, "_certified_mins", counting)
+    lo, _, cert = hull.hull_certificates(z.c, G, A, z.b, P, M)
+    assert solved == [2 * n, 2 * (n - half)]  # the box, then the mixing rows of ±P
+    D = np.vstack([G, -G, P, -P])
+    opt = np.array([linprog(g, A_eq=A, b_eq=z.b, bounds=(-1, 1), method="highs").fun for g in D])
+    bound = cert.mu @ z.b - np.abs(cert.D - cert.mu @ A).sum(axis=1)
+    assert np.all(bound <= opt + 1e-9 * (1 + np.abs(opt)))
+    width = -(opt[2 * n : 3 * n] + opt[3 * n :])
+    gap = opt[2 * n :] - bound[2 * n :]
+    assert np.all(gap <= hull.COMBINED_GAP * np.tile(width, 2) + 1e-7)
+    np.testing.assert_allclose(lo, z.c + opt[:n], atol=1e-7)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_reduced_costs_follow_each_elimination(seed: int) -> None:
     """The certificates' reduced costs ``D − μ A``, updated by a rank-one term per elimination
@@ -282,7 +324,8 @@ def test_a_set_the_solver_calls_infeasible_is_relaxed_row_by_row(monkeypatch) ->
     def refuses_the_set_as_given(Gs, A, b, radius, chains):
         calls.append(A.shape)
         if A.shape == z.A.shape:  # the solver's false "infeasible" on the set itself
-            return np.full(Gs.shape[0], np.nan), np.zeros((Gs.shape[0], A.shape[0])), False
+            nan = np.full(Gs.shape[0], np.nan)
+            return nan, np.zeros((Gs.shape[0], A.shape[0])), False, np.full(Gs.shape, np.nan)
         return real(Gs, A, b, radius, chains)
 
     monkeypatch.setattr(hull, "_certified_mins", refuses_the_set_as_given)

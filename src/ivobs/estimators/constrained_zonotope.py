@@ -24,7 +24,9 @@ with ``X_k = <c, G, A_c, b>`` the set of ``x[k]`` predicted from ``y[0..k-1]`` a
 Which factor to eliminate is not chosen by the paper's shape heuristic (an estimate of the
 Hausdorff distance) but by what the box needs: the LPs of the box give dual certificates of its
 ``2 nx`` bounds and of the ``2 nx`` bounds of the prediction ``[A G, E R]`` (without these, a
-factor free for the box of ``x[k]`` could triple a predicted width: cora-vehicle6), the
+factor free for the box of ``x[k]`` could triple a predicted width: cora-vehicle6; on large
+sets most of the latter are combinations of the box's certificates, solved for only where
+that combination is not within a few percent of their optimum), the
 prediction keeps the same factors, and every elimination changes the certificates in closed
 form; the factor whose elimination loosens the certified bounds least (relative to the widths)
 is eliminated, the Hausdorff estimate breaking ties
@@ -391,11 +393,12 @@ class ConstrainedZonotopeEstimator(Estimator):
         pred = None
         if self.design.elimination != "hausdorff":
             pred = np.concatenate([data.mats[0] @ G, ER], axis=1)
-        hull = None if status == "empty" else hull_certificates(c, G_aug, A_new, b_new, pred)
+        pmap = data.mats[0]  # pred = A G + (E R on the new factors)
+        hull = None if status == "empty" else hull_certificates(c, G_aug, A_new, b_new, pred, pmap)
         inconsistent = hull is None
         if hull is None:  # certainly inconsistent: report, predict without y_k
             A_new, b_new = np.concatenate([Ac, np.zeros((Ac.shape[0], p))], axis=1), b
-            hull = hull_certificates(c, G_aug, A_new, b_new, pred)
+            hull = hull_certificates(c, G_aug, A_new, b_new, pred, pmap)
         cert: Certificates | None = None
         er_err = np.zeros(nx)
         if hull is None:  # pragma: no cover - the prior set is never certainly empty
