@@ -540,20 +540,24 @@ class Certificates:
         m = A.shape[1]
         Rc = self.reduced_costs(A)
         apj = A[piv, np.arange(m)]
-        t = Rc / np.where(apj != 0, apj, 1.0)  # (K, m): multiplier change per candidate
-        bound = self.weight @ np.abs(t) * (np.abs(A).sum(axis=1)[piv] + np.abs(b[piv]))
+        apj = np.where(apj != 0, apj, 1.0)
+        row_size = np.abs(A).sum(axis=1) + np.abs(b)
+        bound = (self.weight @ np.abs(Rc)) / np.abs(apj) * row_size[piv]
         idx = cand.nonzero()[0]
         if idx.size > LOSS_CANDIDATES:
             idx = idx[np.argsort(bound[idx], kind="stable")[:LOSS_CANDIDATES]]
         out = np.full(m, np.inf)
+        t = Rc[:, idx] / apj[idx]  # (K, c): multiplier change per candidate
         # only the columns where the pivot row is nonzero change: Σ over them of
-        # |R_k - t_k a_p| - |R_k|, the candidates' supports side by side
-        tj, rows = t[:, idx], A[piv[idx]]
-        which, col = np.nonzero(rows)
-        starts = np.searchsorted(which, np.arange(idx.size))
-        diff = np.abs(Rc[:, col] - tj[:, which] * rows[which, col]) - np.abs(Rc[:, col])
-        change = np.add.reduceat(diff, starts, axis=1) if col.size else np.zeros_like(tj)
-        out[idx] = self.weight @ (change - tj * b[piv[idx]])
+        # |R_k - t_k a_p| - |R_k|, for the candidates of each pivot row at once
+        rows = piv[idx]
+        for p in np.unique(rows):
+            sel = np.flatnonzero(rows == p)
+            cols = np.flatnonzero(A[p])
+            R = Rc[:, cols]
+            moved = np.abs(R[:, None, :] - t[:, sel, None] * A[p, cols]).sum(axis=2)
+            change = moved - np.abs(R).sum(axis=1)[:, None] - t[:, sel] * b[p]
+            out[idx[sel]] = self.weight @ change
         return out
 
     def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
