@@ -472,7 +472,7 @@ class Certificates:
     Hausdorff heuristic of [Scott2016, Section 4.2], which only breaks ties here.
     """
 
-    __slots__ = ("D", "_rc", "mu", "radius", "slack", "weight")
+    __slots__ = ("_dt", "_rct", "mu", "radius", "slack", "weight")
 
     def __init__(
         self,
@@ -482,9 +482,17 @@ class Certificates:
         radius: float = 1.0,
         slack: np.ndarray | None = None,
     ):
-        self.D, self.mu, self.weight, self.radius = D, mu, weight, radius
+        self.mu, self.weight, self.radius = mu, weight, radius
         self.slack = slack  # the rows' slack factors of a relaxed set (hull_certificates)
-        self._rc: np.ndarray | None = None  # D - mu A, once asked for (reduced_costs)
+        # D and the reduced costs are kept by factor (m, K): an elimination removes a factor
+        # and the losses gather the factors of a pivot row, both contiguous that way
+        self._dt = np.ascontiguousarray(D.T)
+        self._rct: np.ndarray | None = None  # (D - mu A)ᵀ, once asked for (reduced_costs)
+
+    @property
+    def D(self) -> np.ndarray:
+        """The objectives ``D`` (K, m) in the current factors."""
+        return self._dt.T
 
     @property
     def softened(self) -> bool:
@@ -497,24 +505,28 @@ class Certificates:
         rank-one term, where recomputing it costs ``K nc m``). Coefficients that the
         elimination moves to a slack as noise (below ``ZERO_TOL`` of their row) are not taken
         out of it: these reduced costs only guide the choice of factor."""
-        if self._rc is None:
-            self._rc = self.D - self.mu @ A
-        return self._rc
+        return self._reduced_t(A).T
+
+    def _reduced_t(self, A: np.ndarray) -> np.ndarray:
+        """:meth:`reduced_costs` by factor (m, K)."""
+        if self._rct is None:
+            self._rct = self._dt - A.T @ self.mu.T
+        return self._rct
 
     def keep(self, rows: np.ndarray, cols: np.ndarray) -> None:
         """Constraints ``rows`` and factors ``cols`` are kept (masks; the others were zero)."""
         if not rows.all():
             self.mu = self.mu[:, rows]
-            self._rc = None
+            self._rct = None
         if not cols.all():
-            self.D = self.D[:, cols]
-            if self._rc is not None:
-                self._rc = self._rc[:, cols]
+            self._dt = self._dt[cols]
+            if self._rct is not None:
+                self._rct = self._rct[cols]
 
     def pad(self, n_cols: int) -> None:
         """``n_cols`` new factors, in no objective."""
-        self.D = np.concatenate([self.D, np.zeros((self.D.shape[0], n_cols))], axis=1)
-        self._rc = None
+        self._dt = np.concatenate([self._dt, np.zeros((n_cols, self._dt.shape[1]))])
+        self._rct = None
 
     def scale_rows(self, s: np.ndarray) -> None:
         """Constraint ``r`` was divided by ``s_r`` (the reduced costs do not change)."""
@@ -522,9 +534,9 @@ class Certificates:
 
     def scale_factors(self, rad: np.ndarray) -> None:
         """Factor ``j`` was rescaled, ``ξ_j = m_j + rad_j ξ'_j`` (offsets go to constants)."""
-        self.D = self.D * rad
-        if self._rc is not None:
-            self._rc = self._rc * rad
+        self._dt = self._dt * rad[:, None]
+        if self._rct is not None:
+            self._rct = self._rct * rad[:, None]
 
     def elimination_loss(
         self, A: np.ndarray, b: np.ndarray, piv: np.ndarray, cand: np.ndarray
@@ -538,34 +550,37 @@ class Certificates:
         :data:`LOSS_CANDIDATES` candidates with the smallest upper bound
         ``Σ_k w_k |t_kj| (‖A_p‖₁ + |b_p|)`` (``|r - t a| - |r| <= |t| |a|``)."""
         m = A.shape[1]
-        Rc = self.reduced_costs(A)
+        RT = self._reduced_t(A)  # (m, K)
         apj = A[piv, np.arange(m)]
         apj = np.where(apj != 0, apj, 1.0)
         row_size = np.abs(A).sum(axis=1) + np.abs(b)
-        bound = (self.weight @ np.abs(Rc)) / np.abs(apj) * row_size[piv]
+        bound = (np.abs(RT) @ self.weight) / np.abs(apj) * row_size[piv]
         idx = cand.nonzero()[0]
         if idx.size > LOSS_CANDIDATES:
             idx = idx[np.argsort(bound[idx], kind="stable")[:LOSS_CANDIDATES]]
         out = np.full(m, np.inf)
-        t = Rc[:, idx] / apj[idx]  # (K, c): multiplier change per candidate
-        # only the columns where the pivot row is nonzero change: Σ over them of
-        # |R_k - t_k a_p| - |R_k|, for the candidates of each pivot row at once
-        rows = piv[idx]
-        for p in np.unique(rows):
-            sel = np.flatnonzero(rows == p)
-            cols = np.flatnonzero(A[p])
-            R = Rc[:, cols]
-            moved = np.abs(R[:, None, :] - t[:, sel, None] * A[p, cols]).sum(axis=2)
-            change = moved - np.abs(R).sum(axis=1)[:, None] - t[:, sel] * b[p]
-            out[idx[sel]] = self.weight @ change
+        t = RT[idx] / apj[idx, None]  # (c, K): multiplier change per candidate
+        # only the factors where the pivot row is nonzero change: Σ over them of
+        # |R_k - t_k a_p| - |R_k|, the candidates' supports side by side
+        which, col = np.nonzero(A[piv[idx]])
+        starts = np.searchsorted(which, np.arange(idx.size))
+        R = RT[col]
+        moved = t[which]
+        moved *= A[piv[idx][which], col, None]
+        np.subtract(R, moved, out=moved)
+        np.abs(moved, out=moved)
+        moved -= np.abs(R, out=R)
+        change = np.add.reduceat(moved, starts, axis=0) - t * b[piv[idx], None]
+        out[idx] = change @ self.weight
         return out
 
     def eliminate(self, A: np.ndarray, j: int, p: int) -> None:
         """Factor ``j`` eliminated with row ``p``; both are removed here. The objectives
         become ``D − D_j A_p / a_pj`` and the reduced costs ``r − (r_j / a_pj) A_p``; row ``p``
         is zero after the elimination, so its multiplier no longer matters."""
-        rc = self.reduced_costs(A)
+        rct = self._reduced_t(A)
         rows, cols = np.arange(A.shape[0]) != p, np.arange(A.shape[1]) != j
-        self.D = (self.D - np.outer(self.D[:, j] / A[p, j], A[p]))[:, cols]
-        self._rc = (rc - np.outer(rc[:, j] / A[p, j], A[p]))[:, cols]
+        row = A[p, cols, None] / A[p, j]
+        self._dt = self._dt[cols] - row * self._dt[j]
+        self._rct = rct[cols] - row * rct[j]
         self.mu = self.mu[:, rows]
