@@ -263,9 +263,9 @@ def _overshoot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     exact). A score, not a bound: no rounding to bound."""
     m = A.shape[1]
     absA = np.abs(A)
-    row_l1 = absA.sum(axis=1)
     ent = _Entries.of(np.where(absA > ZERO_TOL, A, 0.0))
     absa = np.abs(ent.a)
+    row_l1 = absA.sum(axis=1)
     spread = (row_l1[ent.r] - absa) / absa
     mid = b[ent.r] / ent.a
     rho_lo = ent.col_max(mid - spread, m)
